@@ -1,0 +1,403 @@
+//! The sensor description (CONTRACTS.md section 1): a rectangle with electrodes on its boundary
+//! and a named measurement protocol.
+//!
+//! Frame and units: millimetres, origin at the sensor centre, x right, y up. Electrodes are
+//! numbered from 0, counter-clockwise starting at the bottom side; each electrode's `start` is
+//! the end met first when walking the boundary counter-clockwise. A measurement is the ordered
+//! pair of drive electrodes plus the ordered pair of sense electrodes: current `+I` enters at
+//! `drive.0` and leaves at `drive.1`, the value is `V[sense.0] - V[sense.1]` in volts.
+
+use serde::Deserialize;
+use thiserror::Error;
+
+/// Errors from parsing or validating a sensor description.
+#[derive(Debug, Error)]
+pub enum SensorError {
+    /// The TOML text did not parse or has unknown or mistyped keys.
+    #[error("sensor TOML: {0}")]
+    Toml(#[from] toml::de::Error),
+    /// A value is out of range.
+    #[error("sensor: {field}: {problem}")]
+    Invalid { field: String, problem: String },
+}
+
+fn invalid(field: impl Into<String>, problem: impl Into<String>) -> SensorError {
+    SensorError::Invalid {
+        field: field.into(),
+        problem: problem.into(),
+    }
+}
+
+/// Measurement protocol. Each has a name used in TOML.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Protocol {
+    /// The paper's two-terminal scheme: all pairs (i, j), i < j, in lexicographic order;
+    /// current in at i, out at j, value V_i - V_j (includes the contact-impedance drop).
+    Pairwise,
+    /// Four-terminal adjacent drive, adjacent sense: for each drive pair (i, i+1) every sense pair
+    /// (j, j+1) that shares no electrode with it; indices modulo L, drive-major order.
+    Adjacent,
+}
+
+impl Protocol {
+    pub fn name(self) -> &'static str {
+        match self {
+            Protocol::Pairwise => "pairwise",
+            Protocol::Adjacent => "adjacent",
+        }
+    }
+}
+
+/// One measurement: drive pair and sense pair (electrode indices).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Measurement {
+    /// Current enters at `.0`, leaves at `.1`.
+    pub drive: (usize, usize),
+    /// Value is `V[.0] - V[.1]`.
+    pub sense: (usize, usize),
+}
+
+/// An electrode as a straight boundary segment, in mm.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Electrode {
+    pub start_mm: [f64; 2],
+    pub end_mm: [f64; 2],
+}
+
+impl Electrode {
+    pub fn length_mm(&self) -> f64 {
+        let dx = self.end_mm[0] - self.start_mm[0];
+        let dy = self.end_mm[1] - self.start_mm[1];
+        (dx * dx + dy * dy).sqrt()
+    }
+
+    pub fn centre_mm(&self) -> [f64; 2] {
+        [
+            0.5 * (self.start_mm[0] + self.end_mm[0]),
+            0.5 * (self.start_mm[1] + self.end_mm[1]),
+        ]
+    }
+}
+
+/// A validated sensor.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Sensor {
+    pub name: String,
+    pub width_mm: f64,
+    pub height_mm: f64,
+    pub electrodes: Vec<Electrode>,
+    pub protocol: Protocol,
+    /// The TOML text this sensor was parsed from (or generated for it), kept verbatim so
+    /// recordings can store it and caches can hash it.
+    pub toml: String,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SensorFile {
+    sensor: SensorSection,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SensorSection {
+    #[serde(default = "default_name")]
+    name: String,
+    #[serde(default = "default_side")]
+    width_mm: f64,
+    #[serde(default = "default_side")]
+    height_mm: f64,
+    #[serde(default = "default_per_side")]
+    electrodes_per_side: usize,
+    #[serde(default = "default_el_len")]
+    electrode_length_mm: f64,
+    #[serde(default = "default_protocol")]
+    protocol: Protocol,
+    #[serde(default)]
+    electrode: Vec<ElectrodeEntry>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ElectrodeEntry {
+    start_mm: [f64; 2],
+    end_mm: [f64; 2],
+}
+
+fn default_name() -> String {
+    "paper-100mm".into()
+}
+fn default_side() -> f64 {
+    100.0
+}
+fn default_per_side() -> usize {
+    4
+}
+fn default_el_len() -> f64 {
+    5.0
+}
+fn default_protocol() -> Protocol {
+    Protocol::Pairwise
+}
+
+/// TOML text of the default sensor, `paper-100mm`.
+pub const PAPER_100MM_TOML: &str = r#"[sensor]
+name = "paper-100mm"
+width_mm = 100.0
+height_mm = 100.0
+electrodes_per_side = 4
+electrode_length_mm = 5.0
+protocol = "pairwise"
+"#;
+
+/// Tolerance, in mm, for "this point lies on the boundary": explicit electrodes are checked
+/// against it. Generous enough for coordinates typed with 0.1 mm precision.
+pub const ON_BOUNDARY_TOL_MM: f64 = 1e-6;
+
+impl Sensor {
+    /// The default sensor of CONTRACTS.md section 1.
+    pub fn paper_100mm() -> Sensor {
+        Sensor::from_toml(PAPER_100MM_TOML).expect("built-in sensor description is valid")
+    }
+
+    /// Parses and validates a sensor description (a TOML document with a `[sensor]` table).
+    pub fn from_toml(text: &str) -> Result<Sensor, SensorError> {
+        let file: SensorFile = toml::from_str(text)?;
+        let s = file.sensor;
+        let ok = |x: f64| x.is_finite() && x > 0.0;
+        if !ok(s.width_mm) {
+            return Err(invalid("width_mm", format!("must be finite and > 0 (got {})", s.width_mm)));
+        }
+        if !ok(s.height_mm) {
+            return Err(invalid("height_mm", format!("must be finite and > 0 (got {})", s.height_mm)));
+        }
+        let (hw, hh) = (0.5 * s.width_mm, 0.5 * s.height_mm);
+        let electrodes = if s.electrode.is_empty() {
+            if s.electrodes_per_side == 0 {
+                return Err(invalid("electrodes_per_side", "must be >= 1 (got 0)"));
+            }
+            let n = s.electrodes_per_side;
+            let len = s.electrode_length_mm;
+            let min_side = s.width_mm.min(s.height_mm);
+            if !ok(len) || len * n as f64 >= min_side {
+                return Err(invalid(
+                    "electrode_length_mm",
+                    format!("must be > 0 and leave gaps between {n} electrodes on a {min_side} mm side (got {len})"),
+                ));
+            }
+            generate(hw, hh, n, len)
+        } else {
+            let mut v = Vec::with_capacity(s.electrode.len());
+            for (i, e) in s.electrode.iter().enumerate() {
+                for (what, p) in [("start_mm", e.start_mm), ("end_mm", e.end_mm)] {
+                    if !on_boundary(p, hw, hh) {
+                        return Err(invalid(
+                            format!("electrode[{i}].{what}"),
+                            format!("({}, {}) is not on the boundary of the {} x {} mm rectangle", p[0], p[1], s.width_mm, s.height_mm),
+                        ));
+                    }
+                }
+                let el = Electrode { start_mm: e.start_mm, end_mm: e.end_mm };
+                if !(el.length_mm() > 0.0) {
+                    return Err(invalid(format!("electrode[{i}]"), "has zero length"));
+                }
+                if side_of(e.start_mm, hw, hh) != side_of(e.end_mm, hw, hh)
+                    && !is_corner(e.start_mm, hw, hh)
+                    && !is_corner(e.end_mm, hw, hh)
+                {
+                    return Err(invalid(format!("electrode[{i}]"), "must lie on one side (it may not wrap a corner)"));
+                }
+                v.push(el);
+            }
+            v
+        };
+        if electrodes.len() < 3 {
+            return Err(invalid("electrode", format!("at least 3 electrodes are needed (got {})", electrodes.len())));
+        }
+        if s.protocol == Protocol::Adjacent && electrodes.len() < 4 {
+            return Err(invalid("protocol", "adjacent needs at least 4 electrodes"));
+        }
+        Ok(Sensor {
+            name: s.name,
+            width_mm: s.width_mm,
+            height_mm: s.height_mm,
+            electrodes,
+            protocol: s.protocol,
+            toml: text.to_owned(),
+        })
+    }
+
+    pub fn electrode_count(&self) -> usize {
+        self.electrodes.len()
+    }
+
+    /// Half extents (x, y) in mm: the domain is [-hx, hx] x [-hy, hy].
+    pub fn half_extents_mm(&self) -> (f64, f64) {
+        (0.5 * self.width_mm, 0.5 * self.height_mm)
+    }
+
+    /// The measurements of the sensor's protocol, in protocol order.
+    pub fn measurements(&self) -> Vec<Measurement> {
+        protocol_measurements(self.protocol, self.electrode_count())
+    }
+
+    /// Number of values per frame (M): 120 for the default sensor.
+    pub fn measurement_count(&self) -> usize {
+        let l = self.electrode_count();
+        match self.protocol {
+            Protocol::Pairwise => l * (l - 1) / 2,
+            Protocol::Adjacent => l * (l - 3),
+        }
+    }
+
+    /// Whether a point (mm) lies inside the sensor or on its boundary.
+    pub fn contains_mm(&self, x: f64, y: f64) -> bool {
+        let (hx, hy) = self.half_extents_mm();
+        x.abs() <= hx && y.abs() <= hy
+    }
+}
+
+/// The measurement list of a protocol for `l` electrodes.
+pub fn protocol_measurements(protocol: Protocol, l: usize) -> Vec<Measurement> {
+    let mut out = Vec::new();
+    match protocol {
+        Protocol::Pairwise => {
+            for i in 0..l {
+                for j in (i + 1)..l {
+                    out.push(Measurement { drive: (i, j), sense: (i, j) });
+                }
+            }
+        }
+        Protocol::Adjacent => {
+            for i in 0..l {
+                let d = (i, (i + 1) % l);
+                for j in 0..l {
+                    let s = (j, (j + 1) % l);
+                    let shares = s.0 == d.0 || s.0 == d.1 || s.1 == d.0 || s.1 == d.1;
+                    if !shares {
+                        out.push(Measurement { drive: d, sense: s });
+                    }
+                }
+            }
+        }
+    }
+    out
+}
+
+/// Generated layout: `n` electrodes per side, centred in `n` equal segments of each side,
+/// numbered counter-clockwise from the bottom side.
+fn generate(hw: f64, hh: f64, n: usize, len: f64) -> Vec<Electrode> {
+    let mut v = Vec::with_capacity(4 * n);
+    let centre = |half: f64, k: usize| -half + (2.0 * half) * (k as f64 + 0.5) / n as f64;
+    // bottom: left to right
+    for k in 0..n {
+        let c = centre(hw, k);
+        v.push(Electrode { start_mm: [c - len / 2.0, -hh], end_mm: [c + len / 2.0, -hh] });
+    }
+    // right: bottom to top
+    for k in 0..n {
+        let c = centre(hh, k);
+        v.push(Electrode { start_mm: [hw, c - len / 2.0], end_mm: [hw, c + len / 2.0] });
+    }
+    // top: right to left
+    for k in 0..n {
+        let c = -centre(hw, k);
+        v.push(Electrode { start_mm: [c + len / 2.0, hh], end_mm: [c - len / 2.0, hh] });
+    }
+    // left: top to bottom
+    for k in 0..n {
+        let c = -centre(hh, k);
+        v.push(Electrode { start_mm: [-hw, c + len / 2.0], end_mm: [-hw, c - len / 2.0] });
+    }
+    v
+}
+
+fn on_boundary(p: [f64; 2], hw: f64, hh: f64) -> bool {
+    let t = ON_BOUNDARY_TOL_MM;
+    let inside = p[0].abs() <= hw + t && p[1].abs() <= hh + t;
+    inside && ((p[0].abs() - hw).abs() <= t || (p[1].abs() - hh).abs() <= t)
+}
+
+fn is_corner(p: [f64; 2], hw: f64, hh: f64) -> bool {
+    let t = ON_BOUNDARY_TOL_MM;
+    (p[0].abs() - hw).abs() <= t && (p[1].abs() - hh).abs() <= t
+}
+
+/// 0 bottom, 1 right, 2 top, 3 left.
+fn side_of(p: [f64; 2], hw: f64, hh: f64) -> u8 {
+    let t = ON_BOUNDARY_TOL_MM;
+    if (p[1] + hh).abs() <= t {
+        0
+    } else if (p[0] - hw).abs() <= t {
+        1
+    } else if (p[1] - hh).abs() <= t {
+        2
+    } else {
+        3
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn default_sensor_matches_contract_numbering() {
+        let s = Sensor::paper_100mm();
+        assert_eq!(s.electrode_count(), 16);
+        assert_eq!(s.measurement_count(), 120);
+        let c: Vec<[f64; 2]> = s.electrodes.iter().map(|e| e.centre_mm()).collect();
+        assert_eq!(c[0], [-37.5, -50.0]);
+        assert_eq!(c[3], [37.5, -50.0]);
+        assert_eq!(c[4], [50.0, -37.5]);
+        assert_eq!(c[7], [50.0, 37.5]);
+        assert_eq!(c[8], [37.5, 50.0]);
+        assert_eq!(c[11], [-37.5, 50.0]);
+        assert_eq!(c[12], [-50.0, 37.5]);
+        assert_eq!(c[15], [-50.0, -37.5]);
+        for e in &s.electrodes {
+            assert!((e.length_mm() - 5.0).abs() < 1e-12);
+        }
+    }
+
+    #[test]
+    fn pairwise_order_is_lexicographic() {
+        let m = protocol_measurements(Protocol::Pairwise, 16);
+        assert_eq!(m.len(), 120);
+        assert_eq!(m[0].drive, (0, 1));
+        assert_eq!(m[1].drive, (0, 2));
+        assert_eq!(m[14].drive, (0, 15));
+        assert_eq!(m[15].drive, (1, 2));
+        assert_eq!(m[119].drive, (14, 15));
+        assert!(m.iter().all(|x| x.drive == x.sense));
+    }
+
+    #[test]
+    fn adjacent_has_l_times_l_minus_3() {
+        let m = protocol_measurements(Protocol::Adjacent, 16);
+        assert_eq!(m.len(), 208);
+        assert_eq!(m[0], Measurement { drive: (0, 1), sense: (2, 3) });
+    }
+
+    #[test]
+    fn unknown_keys_and_bad_values_are_rejected() {
+        assert!(Sensor::from_toml("[sensor]\nwidht_mm = 3.0\n").is_err());
+        let e = Sensor::from_toml("[sensor]\nwidth_mm = -1.0\n").unwrap_err();
+        assert!(e.to_string().contains("width_mm"), "{e}");
+        let e = Sensor::from_toml("[sensor]\n[[sensor.electrode]]\nstart_mm=[0.0,0.0]\nend_mm=[1.0,0.0]\n").unwrap_err();
+        assert!(e.to_string().contains("not on the boundary"), "{e}");
+    }
+
+    #[test]
+    fn explicit_electrodes_override_generated() {
+        let text = "[sensor]\nwidth_mm = 20.0\nheight_mm = 10.0\n\
+            [[sensor.electrode]]\nstart_mm = [-5.0, -5.0]\nend_mm = [-3.0, -5.0]\n\
+            [[sensor.electrode]]\nstart_mm = [10.0, -1.0]\nend_mm = [10.0, 1.0]\n\
+            [[sensor.electrode]]\nstart_mm = [1.0, 5.0]\nend_mm = [-1.0, 5.0]\n\
+            [[sensor.electrode]]\nstart_mm = [-10.0, 1.0]\nend_mm = [-10.0, -1.0]\n";
+        let s = Sensor::from_toml(text).unwrap();
+        assert_eq!(s.electrode_count(), 4);
+        assert_eq!(s.measurement_count(), 6);
+    }
+}

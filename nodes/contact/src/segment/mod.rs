@@ -1,0 +1,309 @@
+//! Segmentation of a conductivity-change image into contacts (paper §II-B).
+//!
+//! Contacts are conductivity DECREASES: the reconstructor's image is negative where pressed.
+//! Per frame, [`Segmenter::segment_into`] works on `d = -image` (the decrease): normalize d
+//! to [0, 1] over the image, Otsu threshold, keep pixels with `d_norm >= t*` AND `d >= floor`
+//! (absolute floor, image units, so noise alone never makes a contact), opening then closing
+//! with a disk of radius `radius_frac * max(width, height)` pixels, 8-connected components,
+//! and per component the intensity-weighted centroid (mm), the decrease sum `C` (image units
+//! summed over ROI pixels, weights `max(d, 0)`), area (mm^2) and peak decrease. Pixel grid
+//! convention: see [`grid`]. No allocation after [`Segmenter::new`].
+
+pub mod grid;
+pub mod label;
+pub mod morphology;
+pub mod otsu;
+
+use grid::{GridError, ImageGrid};
+use morphology::Disk;
+use serde::{Deserialize, Serialize};
+
+/// Segmentation parameters (the segmenter node's TOML table).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SegmentParams {
+    /// Absolute floor on the conductivity decrease (image units, > 0): a pixel is foreground
+    /// only if its decrease is at least this, and an image whose largest decrease is below it
+    /// has no contact. Set it a few times above the peak decrease of no-load frames
+    /// (see [`peak_decrease`]).
+    pub floor: f64,
+    /// Disk radius of the opening/closing as a fraction of max(width, height); paper: 0.02.
+    #[serde(default = "default_radius_frac")]
+    pub radius_frac: f64,
+    /// Most contacts reported per frame; extra components (smallest sums) are counted as dropped.
+    #[serde(default = "default_max_contacts")]
+    pub max_contacts: usize,
+}
+
+fn default_radius_frac() -> f64 {
+    0.02
+}
+
+fn default_max_contacts() -> usize {
+    8
+}
+
+impl SegmentParams {
+    /// Paper defaults with the given absolute floor.
+    pub fn with_floor(floor: f64) -> Self {
+        Self { floor, radius_frac: default_radius_frac(), max_contacts: default_max_contacts() }
+    }
+
+    /// Checks every field; run at load.
+    pub fn validate(&self) -> Result<(), SegmentError> {
+        if !(self.floor.is_finite() && self.floor > 0.0) {
+            return Err(SegmentError::Param { name: "floor", expected: "finite and > 0", got: self.floor });
+        }
+        if !(self.radius_frac.is_finite() && (0.0..0.5).contains(&self.radius_frac)) {
+            return Err(SegmentError::Param {
+                name: "radius_frac",
+                expected: "finite and in [0, 0.5)",
+                got: self.radius_frac,
+            });
+        }
+        if self.max_contacts == 0 {
+            return Err(SegmentError::Param { name: "max_contacts", expected: ">= 1", got: 0.0 });
+        }
+        Ok(())
+    }
+}
+
+/// Why a segmenter could not be built or run.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum SegmentError {
+    /// A parameter out of range.
+    #[error("segment: param \"{name}\": must be {expected} (got {got})")]
+    Param { name: &'static str, expected: &'static str, got: f64 },
+    /// The grid is invalid.
+    #[error("segment: {0}")]
+    Grid(#[from] GridError),
+    /// The image has the wrong number of pixels.
+    #[error("segment: image has {got} pixels, grid {width} x {height} needs {expected}")]
+    ImageSize { got: usize, expected: usize, width: usize, height: usize },
+}
+
+/// One segmented contact (ROI).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Contact {
+    /// Intensity-weighted centroid, mm (CONTRACTS.md §1 frame).
+    pub x_mm: f64,
+    /// Intensity-weighted centroid, mm.
+    pub y_mm: f64,
+    /// C: sum of the conductivity decrease over the ROI pixels (>= 0, image units x pixels).
+    pub sum: f64,
+    /// ROI area, mm^2.
+    pub area_mm2: f64,
+    /// Largest decrease in the ROI, image units.
+    pub peak: f64,
+    /// The component's label in [`Segmenter::labels`].
+    pub label: u32,
+}
+
+/// Fixed-capacity per-frame output of the segmenter.
+#[derive(Debug, Clone)]
+pub struct Contacts {
+    items: Vec<Contact>,
+    /// Otsu threshold on the normalized decrease, `None` when no threshold was computed.
+    pub threshold_norm: Option<f64>,
+    /// The same threshold as a decrease in image units, `None` likewise.
+    pub threshold: Option<f64>,
+    /// Largest decrease in the image (image units; <= 0 when nothing decreased).
+    pub peak_decrease: f64,
+    /// Components found beyond `max_contacts` and not reported.
+    pub dropped: usize,
+}
+
+impl Contacts {
+    /// Empty output able to hold `capacity` contacts without reallocating.
+    pub fn with_capacity(capacity: usize) -> Self {
+        Self {
+            items: Vec::with_capacity(capacity),
+            threshold_norm: None,
+            threshold: None,
+            peak_decrease: 0.0,
+            dropped: 0,
+        }
+    }
+
+    /// The contacts of the last frame.
+    pub fn as_slice(&self) -> &[Contact] {
+        &self.items
+    }
+
+    /// Number of contacts.
+    pub fn len(&self) -> usize {
+        self.items.len()
+    }
+
+    /// True when no contact was found.
+    pub fn is_empty(&self) -> bool {
+        self.items.is_empty()
+    }
+
+    fn reset(&mut self) {
+        self.items.clear();
+        self.threshold_norm = None;
+        self.threshold = None;
+        self.peak_decrease = 0.0;
+        self.dropped = 0;
+    }
+
+    /// Adds a contact; when full, keeps the largest sums and counts the rest as dropped.
+    fn offer(&mut self, c: Contact) {
+        if self.items.len() < self.items.capacity() {
+            self.items.push(c);
+            return;
+        }
+        self.dropped += 1;
+        let weakest = self.items.iter().enumerate().min_by(|a, b| a.1.sum.total_cmp(&b.1.sum)).map(|(i, _)| i);
+        if let Some(i) = weakest
+            && self.items[i].sum < c.sum
+        {
+            self.items[i] = c;
+        }
+    }
+}
+
+/// Largest conductivity decrease (`max(-image)`, non-finite pixels skipped); 0 when none.
+pub fn peak_decrease(image: &[f64]) -> f64 {
+    let peak = image.iter().filter(|v| v.is_finite()).fold(f64::NEG_INFINITY, |m, &v| m.max(-v));
+    if peak.is_finite() { peak } else { 0.0 }
+}
+
+#[derive(Clone, Copy, Default)]
+struct Accum {
+    w: f64,
+    wx: f64,
+    wy: f64,
+    x: f64,
+    y: f64,
+    n: usize,
+    peak: f64,
+}
+
+/// The segmenter: owns its parameters and every buffer it writes.
+#[derive(Debug, Clone)]
+pub struct Segmenter {
+    // Configuration
+    grid: ImageGrid,
+    params: SegmentParams,
+    disk: Disk,
+    // Internal state (scratch, overwritten every frame)
+    hist: Box<[u32; otsu::BINS]>,
+    mask: Vec<u8>,
+    scratch: Vec<u8>,
+    labels: Vec<u32>,
+    stack: Vec<u32>,
+}
+
+impl Segmenter {
+    /// Validates the grid and parameters and allocates all per-frame buffers.
+    pub fn new(grid: ImageGrid, params: &SegmentParams) -> Result<Self, SegmentError> {
+        grid.validate()?;
+        params.validate()?;
+        let n = grid.len();
+        let radius_px = params.radius_frac * grid.width.max(grid.height) as f64;
+        Ok(Self {
+            grid,
+            params: params.clone(),
+            disk: Disk::new(radius_px),
+            hist: Box::new([0; otsu::BINS]),
+            mask: vec![0; n],
+            scratch: vec![0; n],
+            labels: vec![0; n],
+            stack: vec![0; n],
+        })
+    }
+
+    /// An output buffer sized for this segmenter's `max_contacts`.
+    pub fn new_contacts(&self) -> Contacts {
+        Contacts::with_capacity(self.params.max_contacts)
+    }
+
+    /// The pixel grid.
+    pub fn grid(&self) -> &ImageGrid {
+        &self.grid
+    }
+
+    /// The final mask of the last frame (row-major, 0/1), for plotting.
+    pub fn mask(&self) -> &[u8] {
+        &self.mask
+    }
+
+    /// Component labels of the last frame (0 = background), for plotting.
+    pub fn labels(&self) -> &[u32] {
+        &self.labels
+    }
+
+    /// Segments one image (row-major, row 0 = bottom, negative = conductivity decrease) into
+    /// `out`. Never allocates if `out` came from [`Segmenter::new_contacts`].
+    pub fn segment_into(&mut self, image: &[f64], out: &mut Contacts) -> Result<(), SegmentError> {
+        let g = self.grid;
+        if image.len() != g.len() {
+            return Err(SegmentError::ImageSize { got: image.len(), expected: g.len(), width: g.width, height: g.height });
+        }
+        out.reset();
+        self.mask.fill(0);
+        self.labels.fill(0);
+        let (mut d_min, mut d_max) = (f64::INFINITY, f64::NEG_INFINITY);
+        for &v in image.iter().filter(|v| v.is_finite()) {
+            d_min = d_min.min(-v);
+            d_max = d_max.max(-v);
+        }
+        if d_max.is_finite() {
+            out.peak_decrease = d_max;
+        }
+        // No pixel reaches the floor: no contact, and no division by a zero range below.
+        if !(d_max >= self.params.floor) || d_max <= d_min {
+            return Ok(());
+        }
+        let range = d_max - d_min;
+        self.hist.fill(0);
+        for &v in image.iter().filter(|v| v.is_finite()) {
+            self.hist[otsu::bin_of((-v - d_min) / range)] += 1;
+        }
+        let Some(t_norm) = otsu::otsu_threshold(&self.hist) else {
+            return Ok(());
+        };
+        out.threshold_norm = Some(t_norm);
+        out.threshold = Some(d_min + t_norm * range);
+        let floor = self.params.floor;
+        for (m, &v) in self.mask.iter_mut().zip(image) {
+            // NaN compares false: pixels outside the domain never become foreground.
+            *m = u8::from((-v - d_min) / range >= t_norm && -v >= floor);
+        }
+        morphology::open_then_close(&self.disk, g.width, g.height, &mut self.mask, &mut self.scratch);
+        let mut acc = Accum::default();
+        let pixel_area = g.pixel_area_mm2();
+        label::label_components(
+            g.width,
+            g.height,
+            &self.mask,
+            &mut self.labels,
+            &mut self.stack,
+            |label, visit| match visit {
+                label::Visit::Pixel(p) => {
+                    let d = image[p];
+                    let d = if d.is_finite() { (-d).max(0.0) } else { 0.0 };
+                    let (x, y) = (g.x_mm(p % g.width), g.y_mm(p / g.width));
+                    acc.w += d;
+                    acc.wx += d * x;
+                    acc.wy += d * y;
+                    acc.x += x;
+                    acc.y += y;
+                    acc.n += 1;
+                    acc.peak = acc.peak.max(d);
+                }
+                label::Visit::End => {
+                    let a = std::mem::take(&mut acc);
+                    let n = a.n as f64;
+                    // Weights are > 0 in practice (every component keeps pixels >= floor > 0);
+                    // the geometric centroid is the guard against an all-zero component.
+                    let (x_mm, y_mm) = if a.w > 0.0 { (a.wx / a.w, a.wy / a.w) } else { (a.x / n, a.y / n) };
+                    out.offer(Contact { x_mm, y_mm, sum: a.w, area_mm2: n * pixel_area, peak: a.peak, label });
+                }
+            },
+        );
+        Ok(())
+    }
+}

@@ -1,0 +1,146 @@
+//! Segmentation on synthetic conductivity images: Gaussian "contacts" (negative blobs) on a
+//! 64 x 64 grid over the 100 mm paper sensor, with seeded white noise where stated.
+
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, Normal};
+use skinflow_contact::{ImageGrid, SegmentParams, Segmenter};
+
+const N: usize = 64;
+
+fn grid() -> ImageGrid {
+    ImageGrid::centred(N, N, 100.0, 100.0)
+}
+
+/// Image with blobs (x_mm, y_mm, amplitude, sigma_mm): value = -sum A exp(-r^2 / 2 s^2).
+fn image(blobs: &[(f64, f64, f64, f64)], noise_sd: f64, seed: u64) -> Vec<f64> {
+    let g = grid();
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let normal = Normal::new(0.0, 1.0).unwrap();
+    let mut img = vec![0.0; g.len()];
+    for row in 0..g.height {
+        for col in 0..g.width {
+            let (x, y) = (g.x_mm(col), g.y_mm(row));
+            let mut v = 0.0;
+            for &(bx, by, a, s) in blobs {
+                v -= a * (-((x - bx).powi(2) + (y - by).powi(2)) / (2.0 * s * s)).exp();
+            }
+            img[row * g.width + col] = v + noise_sd * normal.sample(&mut rng);
+        }
+    }
+    img
+}
+
+fn segment(img: &[f64], floor: f64) -> Vec<skinflow_contact::Contact> {
+    let mut seg = Segmenter::new(grid(), &SegmentParams::with_floor(floor)).unwrap();
+    let mut out = seg.new_contacts();
+    seg.segment_into(img, &mut out).unwrap();
+    out.as_slice().to_vec()
+}
+
+#[test]
+fn gaussian_blob_gives_one_contact_within_a_pixel() {
+    let pitch = grid().dx_mm();
+    for &(x, y) in &[(0.0, 0.0), (12.3, -7.9), (-20.0, 25.0)] {
+        let c = segment(&image(&[(x, y, 1.0, 8.0)], 0.0, 1), 0.05);
+        assert_eq!(c.len(), 1, "blob at ({x}, {y})");
+        let err = ((c[0].x_mm - x).powi(2) + (c[0].y_mm - y).powi(2)).sqrt();
+        assert!(err < pitch, "centroid error {err} mm >= one pixel ({pitch} mm)");
+        assert!(c[0].sum > 0.0 && c[0].area_mm2 > 0.0);
+        assert!((c[0].peak - 1.0).abs() < 0.05, "peak {}", c[0].peak);
+    }
+}
+
+#[test]
+fn row_zero_is_the_bottom_of_the_sensor() {
+    // A blob in the lower-left quadrant must come out with negative x and y.
+    let c = segment(&image(&[(-25.0, -30.0, 1.0, 6.0)], 0.0, 1), 0.05);
+    assert_eq!(c.len(), 1);
+    assert!(c[0].x_mm < -20.0 && c[0].y_mm < -25.0, "{:?}", c[0]);
+}
+
+#[test]
+fn two_separated_blobs_give_two_contacts_with_proportional_sums() {
+    let c = segment(&image(&[(-25.0, 0.0, 1.0, 6.0), (25.0, 10.0, 2.0, 6.0)], 0.0, 1), 0.05);
+    assert_eq!(c.len(), 2);
+    let (left, right) = if c[0].x_mm < c[1].x_mm { (c[0], c[1]) } else { (c[1], c[0]) };
+    assert!((left.x_mm + 25.0).abs() < 1.6 && left.y_mm.abs() < 1.6);
+    assert!((right.x_mm - 25.0).abs() < 1.6 && (right.y_mm - 10.0).abs() < 1.6);
+    // Same shape, twice the amplitude: the stronger ROI is larger (lower relative
+    // threshold) and sums more than twice the weaker one.
+    assert!(right.sum > 2.0 * left.sum, "{} vs {}", right.sum, left.sum);
+}
+
+#[test]
+fn empty_image_has_no_contact_and_no_nan() {
+    let mut seg = Segmenter::new(grid(), &SegmentParams::with_floor(0.05)).unwrap();
+    let mut out = seg.new_contacts();
+    seg.segment_into(&vec![0.0; N * N], &mut out).unwrap();
+    assert!(out.is_empty());
+    assert_eq!(out.threshold_norm, None);
+    assert_eq!(out.peak_decrease, 0.0);
+    // An all-NaN image (nothing inside the domain) likewise.
+    seg.segment_into(&vec![f64::NAN; N * N], &mut out).unwrap();
+    assert!(out.is_empty());
+}
+
+#[test]
+fn noise_only_image_has_no_contact_because_of_the_floor() {
+    let sd = 0.01;
+    let img = image(&[], sd, 7);
+    // Otsu alone always splits noise into two classes: with a negligible floor it invents contacts.
+    assert!(!segment(&img, 1e-9).is_empty());
+    // The absolute floor (6 sd; the max of 4096 normal samples is ~3.9 sd) rejects them.
+    assert!(segment(&img, 6.0 * sd).is_empty());
+}
+
+#[test]
+fn noisy_blob_is_still_found_once() {
+    let c = segment(&image(&[(10.0, 10.0, 1.0, 8.0)], 0.02, 3), 0.15);
+    assert_eq!(c.len(), 1);
+    assert!(((c[0].x_mm - 10.0).powi(2) + (c[0].y_mm - 10.0).powi(2)).sqrt() < 2.0 * grid().dx_mm());
+}
+
+#[test]
+fn corner_contact_is_found_and_pulled_inward_by_truncation() {
+    let (x, y) = (-45.0, 45.0);
+    let c = segment(&image(&[(x, y, 1.0, 8.0)], 0.0, 1), 0.05);
+    assert_eq!(c.len(), 1);
+    // Half the blob lies outside the sensor, so the centroid moves towards the centre
+    // but stays in the corner region (well inside the 15 mm matching radius).
+    assert!(c[0].x_mm > x && c[0].y_mm < y, "{:?}", c[0]);
+    let err = ((c[0].x_mm - x).powi(2) + (c[0].y_mm - y).powi(2)).sqrt();
+    assert!(err < 10.0, "corner centroid error {err} mm");
+}
+
+#[test]
+fn contacts_14mm_apart_merge_at_paper_blur_and_separate_when_sharp() {
+    // Paper-like blur: RES50 ~ 70 % means a half-maximum area of ~9 % of the sensor,
+    // i.e. sigma ~ 14 mm; even sigma = 8 mm (14 mm < 2 sigma) has a single maximum.
+    let merged = segment(&image(&[(-7.0, 0.0, 1.0, 8.0), (7.0, 0.0, 1.0, 8.0)], 0.0, 1), 0.05);
+    assert_eq!(merged.len(), 1, "two blobs 14 mm apart at sigma 8 mm merge into one ROI");
+    assert!(merged[0].x_mm.abs() < 0.5, "merged centroid at the midpoint: {:?}", merged[0]);
+    // A sharp reconstruction (sigma = 3 mm) resolves them.
+    let sharp = segment(&image(&[(-7.0, 0.0, 1.0, 3.0), (7.0, 0.0, 1.0, 3.0)], 0.0, 1), 0.05);
+    assert_eq!(sharp.len(), 2);
+}
+
+#[test]
+fn more_components_than_capacity_keep_the_strongest() {
+    let blobs = [(-30.0, -30.0, 0.5, 4.0), (30.0, -30.0, 1.0, 4.0), (0.0, 30.0, 0.8, 4.0)];
+    let params = SegmentParams { max_contacts: 2, ..SegmentParams::with_floor(0.05) };
+    let mut seg = Segmenter::new(grid(), &params).unwrap();
+    let mut out = seg.new_contacts();
+    seg.segment_into(&image(&blobs, 0.0, 1), &mut out).unwrap();
+    assert_eq!((out.len(), out.dropped), (2, 1));
+    assert!(out.as_slice().iter().all(|c| c.y_mm > 0.0 || c.x_mm > 0.0), "weakest (-30, -30) dropped");
+}
+
+#[test]
+fn wrong_image_size_and_bad_params_are_errors() {
+    let mut seg = Segmenter::new(grid(), &SegmentParams::with_floor(0.05)).unwrap();
+    let mut out = seg.new_contacts();
+    assert!(seg.segment_into(&[0.0; 10], &mut out).is_err());
+    assert!(Segmenter::new(grid(), &SegmentParams::with_floor(0.0)).is_err());
+    assert!(Segmenter::new(grid(), &SegmentParams::with_floor(f64::NAN)).is_err());
+}

@@ -1,1 +1,17 @@
-//! placeholder
+//! skinflow-serial: the skin's boards on serial ports, and emulators that stand in for them.
+//!
+//! Data flows bytes -> [`decode`] (pure incremental decoders with exact drop counters) ->
+//! [`read::SerialReader`] (a port with host time stamps, reconnect and backoff) -> records.
+//! [`emulate::Emulator`] speaks the same protocols on pseudo-terminals, with fault injection,
+//! so everything above can be tested without hardware. Wire formats: `PROTOCOLS.md`.
+
+pub mod crc16;
+pub mod decode;
+pub mod encode;
+pub mod error;
+
+pub use decode::{
+    Decode, DecodeStats, EitDecoder, EitFrame, ForceDecoder, ForceReading, PressureDecoder,
+    PressureReading, Step, StreamMismatch, decode_all,
+};
+pub use error::ParamError;

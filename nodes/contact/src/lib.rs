@@ -11,3 +11,8 @@ pub mod segment;
 
 pub use segment::grid::ImageGrid;
 pub use segment::{Contact, Contacts, SegmentError, SegmentParams, Segmenter};
+pub mod correct;
+pub mod split;
+
+pub use correct::{CalibSample, Calibration, ForceEstimate, ForceFlags, Strategy, StrategyKind};
+pub use split::{SensitivityField, Splitter};

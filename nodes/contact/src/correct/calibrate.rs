@@ -1,0 +1,426 @@
+//! Fitting a [`Calibration`] from single-contact samples (paper §III).
+//!
+//! Input: one [`CalibSample`] per EIT frame with a detected contact and ground truth. Frames of
+//! one hold (consecutive frames with identical truth) are averaged ([`average_holds`], the
+//! paper's 6-frame means), outliers are rejected (non-finite, C <= 0, F <= 0, centroid farther
+//! than `max_location_error_mm` from the truth), then per signal: f by least squares over all
+//! locations, and g, b by ridge towards alpha0 = [1,0,0,0,0,0], beta = 0 with (lambda_g,
+//! lambda_b) = grid x T chosen by inner k-fold CV. Degenerate data (too few samples or
+//! locations, a region narrower than `min_span_mm`) keep the prior, with a warning.
+
+use super::calibration::{
+    AreaAware, Calibration, FORMAT, FORMAT_VERSION, LocAware, Provenance, R2Table, SignalCalibration, TrainingSummary,
+};
+use super::field::{NPHI, QuadField, Region, phi};
+use super::fit::{CvSearch, RidgeProblem, cross_validate, fit_quadratic, r_squared};
+use super::map::SignalMap;
+use super::strategy::{Strategy, StrategyKind};
+use crate::segment::Contact;
+use crate::split::SensitivityField;
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+
+/// One calibration frame (or hold average): EIT contact, pneumatic share and ground truth.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct CalibSample {
+    /// EIT centroid, mm.
+    pub x_mm: f64,
+    /// EIT centroid, mm.
+    pub y_mm: f64,
+    /// True indenter centre, mm.
+    pub true_x_mm: f64,
+    /// True indenter centre, mm.
+    pub true_y_mm: f64,
+    /// True normal force, N.
+    pub force_n: f64,
+    /// Tared pressure change, kPa.
+    pub dp_kpa: f64,
+    /// Conductivity decrease sum C of the contact.
+    pub cond_sum: f64,
+    /// ROI area, mm^2.
+    pub area_mm2: f64,
+    /// Indenter diameter, mm.
+    pub diameter_mm: f64,
+}
+
+impl CalibSample {
+    fn contact(&self) -> Contact {
+        Contact { x_mm: self.x_mm, y_mm: self.y_mm, sum: self.cond_sum, area_mm2: self.area_mm2, peak: 0.0, label: 0 }
+    }
+}
+
+/// Fitting options (the `calibrate` command's knobs).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct CalibParams {
+    /// Average consecutive frames with identical truth before fitting.
+    pub average_holds: bool,
+    /// Folds of the inner cross-validation.
+    pub folds: usize,
+    /// Ridge weights searched, relative to the number of samples T (weight = rel x T).
+    pub lambda_grid_rel: Vec<f64>,
+    /// Fewer samples than this keep the prior fields.
+    pub min_samples: usize,
+    /// Fewer distinct true locations than this keep the prior fields.
+    pub min_locations: usize,
+    /// A centroid spread narrower than this (mm, either axis) keeps the prior fields.
+    pub min_span_mm: f64,
+    /// True positions closer than this (mm) are the same location.
+    pub location_tolerance_mm: f64,
+    /// Samples whose centroid is farther than this from the truth (mm) are rejected.
+    pub max_location_error_mm: f64,
+}
+
+impl Default for CalibParams {
+    fn default() -> Self {
+        Self {
+            average_holds: true,
+            folds: 5,
+            lambda_grid_rel: (0..=16).map(|i| 10f64.powf(-4.0 + 0.5 * i as f64)).collect(),
+            min_samples: 4 * NPHI,
+            min_locations: NPHI,
+            min_span_mm: 5.0,
+            location_tolerance_mm: 2.0,
+            max_location_error_mm: 15.0,
+        }
+    }
+}
+
+/// Something the fit noticed; the calibration is still usable.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum CalibWarning {
+    /// Samples dropped by the quality filter.
+    #[error("rejected {count} of {total} samples (non-finite, C <= 0, F <= 0 or centroid > {max_error_mm} mm from truth)")]
+    Rejected { count: usize, total: usize, max_error_mm: f64 },
+    /// Too few samples for the fields.
+    #[error("only {samples} samples (need {min}): location fields fall back to the prior g = 1, b = 0")]
+    TooFewSamples { samples: usize, min: usize },
+    /// Too few locations for the fields.
+    #[error("only {locations} distinct locations (need {min}): location fields fall back to the prior g = 1, b = 0")]
+    TooFewLocations { locations: usize, min: usize },
+    /// Centroids span too small a region.
+    #[error("centroids span {span_x_mm:.1} x {span_y_mm:.1} mm (need {min_mm} mm): location fields fall back to the prior")]
+    NarrowRegion { span_x_mm: f64, span_y_mm: f64, min_mm: f64 },
+    /// A ridge fit could not be solved; its prior is used.
+    #[error("{what}: ridge fit failed, prior kept")]
+    FitFailed { what: &'static str },
+    /// The sensitivity field could not be fitted; the compensated split is proportional.
+    #[error("eit sensitivity field not fitted: sensitivity-compensated split equals proportional")]
+    UniformSensitivity,
+    /// No centre location: the R^2 table's centre column is empty.
+    #[error("no location with >= 3 distinct forces near the centre: centre R^2 not computed")]
+    NoCenter,
+}
+
+/// Why no calibration could be fitted at all.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum CalibrateError {
+    /// Too few usable samples for even the signal-to-force quadratic.
+    #[error("calibrate: {usable} usable samples (of {frames} frames); the {signal} force map needs >= 3 with 3 distinct signal values")]
+    SignalFit { signal: &'static str, usable: usize, frames: usize },
+    /// A parameter out of range.
+    #[error("calibrate: param \"{name}\": {problem}")]
+    Param { name: &'static str, problem: &'static str },
+}
+
+/// A fitted calibration and the warnings raised on the way.
+#[derive(Debug, Clone)]
+pub struct Calibrated {
+    /// The calibration (its `warnings` hold the same messages as text).
+    pub calibration: Calibration,
+    /// Warnings as data.
+    pub warnings: Vec<CalibWarning>,
+}
+
+/// Averages of the holds and the mean within-hold spread.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Holds {
+    /// One averaged sample per hold, in order.
+    pub samples: Vec<CalibSample>,
+    /// Mean within-hold standard deviation of dP, kPa.
+    pub sd_dp_kpa: f64,
+    /// Mean within-hold standard deviation of C.
+    pub sd_cond_sum: f64,
+}
+
+/// Averages runs of consecutive frames with identical truth (x, y, force, diameter).
+pub fn average_holds(frames: &[CalibSample]) -> Holds {
+    let same = |a: &CalibSample, b: &CalibSample| {
+        a.true_x_mm == b.true_x_mm && a.true_y_mm == b.true_y_mm && a.force_n == b.force_n && a.diameter_mm == b.diameter_mm
+    };
+    let (mut samples, mut sd_dp, mut sd_c) = (Vec::new(), 0.0, 0.0);
+    let mut start = 0;
+    while start < frames.len() {
+        let mut end = start + 1;
+        while end < frames.len() && same(&frames[start], &frames[end]) {
+            end += 1;
+        }
+        let run = &frames[start..end];
+        let n = run.len() as f64;
+        let mean = |f: fn(&CalibSample) -> f64| run.iter().map(f).sum::<f64>() / n;
+        let sd = |f: fn(&CalibSample) -> f64, m: f64| {
+            if run.len() < 2 { 0.0 } else { (run.iter().map(|s| (f(s) - m).powi(2)).sum::<f64>() / (n - 1.0)).sqrt() }
+        };
+        let avg = CalibSample {
+            x_mm: mean(|s| s.x_mm),
+            y_mm: mean(|s| s.y_mm),
+            dp_kpa: mean(|s| s.dp_kpa),
+            cond_sum: mean(|s| s.cond_sum),
+            area_mm2: mean(|s| s.area_mm2),
+            ..run[0]
+        };
+        sd_dp += sd(|s| s.dp_kpa, avg.dp_kpa);
+        sd_c += sd(|s| s.cond_sum, avg.cond_sum);
+        samples.push(avg);
+        start = end;
+    }
+    let holds = samples.len().max(1) as f64;
+    Holds { samples, sd_dp_kpa: sd_dp / holds, sd_cond_sum: sd_c / holds }
+}
+
+/// Distinct true locations (greedy clustering within `tol_mm`) and each sample's location.
+fn locations(samples: &[CalibSample], tol_mm: f64) -> (Vec<(f64, f64)>, Vec<usize>) {
+    let (mut locs, mut of): (Vec<(f64, f64)>, Vec<usize>) = (Vec::new(), Vec::new());
+    for s in samples {
+        let near = locs.iter().position(|l| (l.0 - s.true_x_mm).hypot(l.1 - s.true_y_mm) <= tol_mm);
+        of.push(near.unwrap_or_else(|| {
+            locs.push((s.true_x_mm, s.true_y_mm));
+            locs.len() - 1
+        }));
+    }
+    (locs, of)
+}
+
+fn fit_map(signal: &[f64], force: &[f64]) -> Option<SignalMap> {
+    let quadratic = fit_quadratic(signal, force)?;
+    let lo = signal.iter().copied().fold(f64::INFINITY, f64::min);
+    let hi = signal.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    Some(SignalMap { quadratic, signal_min: lo, signal_max: hi })
+}
+
+fn quad_r2(signal: &[f64], force: &[f64]) -> Option<f64> {
+    let q = fit_quadratic(signal, force)?;
+    let pred: Vec<f64> = signal.iter().map(|&s| q.at(s)).collect();
+    r_squared(force, &pred)
+}
+
+fn split_fields(coeffs: &[f64]) -> (QuadField, QuadField) {
+    let (mut a, mut b) = ([0.0; NPHI], [0.0; NPHI]);
+    a.copy_from_slice(&coeffs[..NPHI]);
+    b.copy_from_slice(&coeffs[NPHI..2 * NPHI]);
+    (QuadField { coeffs: a }, QuadField { coeffs: b })
+}
+
+/// Rows [f(s) Phi, Phi] (plus [f(s) a, a] when `rel_area` is given).
+fn design(samples: &[CalibSample], region: &Region, fs: &[f64], rel_area: Option<&[f64]>) -> Vec<f64> {
+    let mut d = Vec::new();
+    for (t, s) in samples.iter().enumerate() {
+        let n = region.normalize(s.x_mm, s.y_mm);
+        let p = phi(n.u, n.v);
+        d.extend(p.iter().map(|v| v * fs[t]));
+        d.extend_from_slice(&p);
+        if let Some(a) = rel_area {
+            d.extend_from_slice(&[fs[t] * a[t], a[t]]);
+        }
+    }
+    d
+}
+
+fn prior_vec(p: usize) -> Vec<f64> {
+    let mut v = vec![0.0; p];
+    v[0] = 1.0;
+    v
+}
+
+/// Fits the calibration. See the module doc for the procedure.
+pub fn calibrate(frames: &[CalibSample], params: &CalibParams, provenance: Provenance) -> Result<Calibrated, CalibrateError> {
+    if params.folds < 2 {
+        return Err(CalibrateError::Param { name: "folds", problem: "must be >= 2" });
+    }
+    if params.lambda_grid_rel.is_empty() || params.lambda_grid_rel.iter().any(|l| !(l.is_finite() && *l > 0.0)) {
+        return Err(CalibrateError::Param { name: "lambda_grid_rel", problem: "must be non-empty, finite and > 0" });
+    }
+    let mut warnings = Vec::new();
+    let holds = if params.average_holds {
+        average_holds(frames)
+    } else {
+        Holds { samples: frames.to_vec(), sd_dp_kpa: 0.0, sd_cond_sum: 0.0 }
+    };
+    let total = holds.samples.len();
+    let ok = |s: &CalibSample| {
+        [s.x_mm, s.y_mm, s.true_x_mm, s.true_y_mm, s.force_n, s.dp_kpa, s.cond_sum, s.area_mm2].iter().all(|v| v.is_finite())
+            && s.cond_sum > 0.0
+            && s.force_n > 0.0
+            && (s.x_mm - s.true_x_mm).hypot(s.y_mm - s.true_y_mm) <= params.max_location_error_mm
+    };
+    let samples: Vec<CalibSample> = holds.samples.iter().copied().filter(ok).collect();
+    if samples.len() < total {
+        warnings.push(CalibWarning::Rejected {
+            count: total - samples.len(),
+            total,
+            max_error_mm: params.max_location_error_mm,
+        });
+    }
+    let t = samples.len();
+    let force: Vec<f64> = samples.iter().map(|s| s.force_n).collect();
+    let dp: Vec<f64> = samples.iter().map(|s| s.dp_kpa).collect();
+    let cond: Vec<f64> = samples.iter().map(|s| s.cond_sum).collect();
+    let err = |signal| CalibrateError::SignalFit { signal, usable: t, frames: frames.len() };
+    let map_p = fit_map(&dp, &force).ok_or(err("pneumatic"))?;
+    let map_c = fit_map(&cond, &force).ok_or(err("eit"))?;
+
+    // Region and degeneracy.
+    let raw = Region::bounding(samples.iter().map(|s| (s.x_mm, s.y_mm)), 0.0).ok_or(err("pneumatic"))?;
+    let region = Region::bounding(samples.iter().map(|s| (s.x_mm, s.y_mm)), params.min_span_mm).ok_or(err("pneumatic"))?;
+    let (locs, loc_of) = locations(&samples, params.location_tolerance_mm);
+    let mut degenerate = false;
+    if t < params.min_samples {
+        warnings.push(CalibWarning::TooFewSamples { samples: t, min: params.min_samples });
+        degenerate = true;
+    }
+    if locs.len() < params.min_locations {
+        warnings.push(CalibWarning::TooFewLocations { locations: locs.len(), min: params.min_locations });
+        degenerate = true;
+    }
+    let (sx, sy) = raw.span_mm();
+    if sx < params.min_span_mm || sy < params.min_span_mm {
+        warnings.push(CalibWarning::NarrowRegion { span_x_mm: sx, span_y_mm: sy, min_mm: params.min_span_mm });
+        degenerate = true;
+    }
+
+    // R^2 table: centre = the true location nearest the origin.
+    let centre = (0..locs.len()).min_by(|&a, &b| locs[a].0.hypot(locs[a].1).total_cmp(&locs[b].0.hypot(locs[b].1)));
+    let at_centre: Vec<usize> = (0..t).filter(|&i| Some(loc_of[i]) == centre).collect();
+    let pick = |v: &[f64]| at_centre.iter().map(|&i| v[i]).collect::<Vec<f64>>();
+    let r2 = R2Table {
+        eit_center: quad_r2(&pick(&cond), &pick(&force)),
+        eit_all: quad_r2(&cond, &force),
+        pneumatic_center: quad_r2(&pick(&dp), &pick(&force)),
+        pneumatic_all: quad_r2(&dp, &force),
+    };
+    if r2.pneumatic_center.is_none() {
+        warnings.push(CalibWarning::NoCenter);
+    }
+
+    let grid: Vec<f64> = params.lambda_grid_rel.iter().map(|l| l * t as f64).collect();
+    let search = |blocks| CvSearch { blocks, grid: &grid, folds: params.folds };
+    let fit_locaware = |map: &SignalMap, signal: &[f64], what: &'static str, warnings: &mut Vec<CalibWarning>| {
+        if degenerate {
+            return LocAware::prior();
+        }
+        let fs: Vec<f64> = signal.iter().map(|&s| map.eval(s).0).collect();
+        let d = design(&samples, &region, &fs, None);
+        let prior = prior_vec(2 * NPHI);
+        let problem = RidgeProblem { design: &d, y: &force, p: 2 * NPHI, prior: &prior, base_penalty: &[0.0; 2 * NPHI] };
+        match cross_validate(&problem, &search(&[0..NPHI, NPHI..2 * NPHI])) {
+            Some(cv) => {
+                let (gain, offset) = split_fields(&cv.coeffs);
+                LocAware {
+                    gain,
+                    offset,
+                    lambda_g: Some(cv.lambdas[0]),
+                    lambda_b: Some(cv.lambdas[1]),
+                    cv_rmse_n: Some(cv.cv_mse.sqrt()),
+                    prior_fallback: false,
+                }
+            }
+            None => {
+                warnings.push(CalibWarning::FitFailed { what });
+                LocAware::prior()
+            }
+        }
+    };
+    let pneumatic = SignalCalibration { map: map_p, locaware: fit_locaware(&map_p, &dp, "pneumatic fields", &mut warnings) };
+    let eit = SignalCalibration { map: map_c, locaware: fit_locaware(&map_c, &cond, "eit fields", &mut warnings) };
+
+    // Area-aware: the pneumatic fields' weights are kept; only the area weight is searched.
+    let area_ref_mm2 = samples.iter().map(|s| s.area_mm2).sum::<f64>() / t as f64;
+    let rel: Vec<f64> = samples.iter().map(|s| s.area_mm2 / area_ref_mm2 - 1.0).collect();
+    let rel_min = rel.iter().copied().fold(f64::INFINITY, f64::min);
+    let rel_max = rel.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let mut area_aware = AreaAware {
+        fields: LocAware::prior(),
+        area_gain: 0.0,
+        area_offset: 0.0,
+        area_ref_mm2,
+        rel_area_min: rel_min,
+        rel_area_max: rel_max,
+        lambda_a: None,
+    };
+    if let (false, Some(lg), Some(lb)) = (degenerate, pneumatic.locaware.lambda_g, pneumatic.locaware.lambda_b) {
+        let fs: Vec<f64> = dp.iter().map(|&s| map_p.eval(s).0).collect();
+        let d = design(&samples, &region, &fs, Some(&rel));
+        let p = 2 * NPHI + 2;
+        let prior = prior_vec(p);
+        let mut base = vec![lg; p];
+        base[NPHI..2 * NPHI].fill(lb);
+        base[2 * NPHI..].fill(0.0);
+        let problem = RidgeProblem { design: &d, y: &force, p, prior: &prior, base_penalty: &base };
+        match cross_validate(&problem, &search(&[2 * NPHI..p])) {
+            Some(cv) => {
+                let (gain, offset) = split_fields(&cv.coeffs);
+                area_aware.fields = LocAware {
+                    gain,
+                    offset,
+                    lambda_g: Some(lg),
+                    lambda_b: Some(lb),
+                    cv_rmse_n: Some(cv.cv_mse.sqrt()),
+                    prior_fallback: false,
+                };
+                area_aware.area_gain = cv.coeffs[2 * NPHI];
+                area_aware.area_offset = cv.coeffs[2 * NPHI + 1];
+                area_aware.lambda_a = Some(cv.lambdas[0]);
+            }
+            None => warnings.push(CalibWarning::FitFailed { what: "area-aware fields" }),
+        }
+    }
+
+    let quads: Vec<(f64, f64, f64, f64)> = samples.iter().map(|s| (s.x_mm, s.y_mm, s.cond_sum, s.force_n)).collect();
+    let sensitivity = if degenerate { None } else { SensitivityField::fit(region, &quads, &grid, params.folds) };
+    let sensitivity = sensitivity.unwrap_or_else(|| {
+        warnings.push(CalibWarning::UniformSensitivity);
+        SensitivityField::uniform(region)
+    });
+
+    let mut diameters: Vec<f64> = samples.iter().map(|s| s.diameter_mm).filter(|d| d.is_finite()).collect();
+    diameters.sort_by(f64::total_cmp);
+    diameters.dedup();
+    let training = TrainingSummary {
+        frames: frames.len(),
+        samples: t,
+        rejected: total - t,
+        locations: locs.len(),
+        force_min_n: force.iter().copied().fold(f64::INFINITY, f64::min),
+        force_max_n: force.iter().copied().fold(f64::NEG_INFINITY, f64::max),
+        diameters_mm: diameters,
+        center_location_mm: centre.map(|c| [locs[c].0, locs[c].1]),
+        center_samples: at_centre.len(),
+        hold_sd_dp_kpa: holds.sd_dp_kpa,
+        hold_sd_cond_sum: holds.sd_cond_sum,
+        lambda_grid_rel: params.lambda_grid_rel.clone(),
+        folds: params.folds,
+        train_rmse_n: BTreeMap::new(),
+    };
+    let mut calibration = Calibration {
+        format: FORMAT.to_string(),
+        format_version: FORMAT_VERSION,
+        provenance,
+        region,
+        pneumatic,
+        eit,
+        area_aware,
+        sensitivity,
+        r2,
+        training,
+        warnings: warnings.iter().map(|w| w.to_string()).collect(),
+    };
+    for kind in StrategyKind::ALL {
+        let strategy = Strategy::new(&calibration, kind);
+        let sse: f64 = samples.iter().map(|s| (strategy.estimate(&s.contact(), s.dp_kpa).force_n - s.force_n).powi(2)).sum();
+        calibration.training.train_rmse_n.insert(kind.name().to_string(), (sse / t as f64).sqrt());
+    }
+    for w in &warnings {
+        tracing::warn!(target: "skinflow::calibrate", "{w}");
+    }
+    Ok(Calibrated { calibration, warnings })
+}

@@ -1,0 +1,231 @@
+//! The force calibration file: every fitted coefficient, the normalization, the chosen ridge
+//! weights, a training summary and provenance, as TOML (`skinflow calibrate --out`).
+//!
+//! Units: forces N, pressures kPa, conductivity sums in image units x pixels (see
+//! [`crate::segment`]), coordinates mm; the fields take coordinates normalized by `region`.
+//! [`R2Table`] prints the paper's Table II layout. Loading checks `format`/`format_version`.
+
+use super::field::{QuadField, Region};
+use super::map::SignalMap;
+use crate::split::SensitivityField;
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use std::fmt;
+use std::path::Path;
+
+/// Value of the `format` key.
+pub const FORMAT: &str = "skinflow-calibration";
+/// Current `format_version`.
+pub const FORMAT_VERSION: u32 = 1;
+
+/// Where a calibration came from (all given by the caller).
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Provenance {
+    /// Path of the recording the samples came from.
+    pub recording: String,
+    /// Content hash of that recording (e.g. "sha256:...").
+    pub recording_hash: String,
+    /// Version of the software that fitted it.
+    pub software_version: String,
+}
+
+/// Location-aware gain and offset fields F = g(u, v) f(s) + b(u, v) (paper eq. 12-14).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LocAware {
+    /// Gain field g (dimensionless), coefficients alpha.
+    pub gain: QuadField,
+    /// Offset field b (N), coefficients beta.
+    pub offset: QuadField,
+    /// Ridge weight on ||alpha - alpha0||^2 (absent when the prior was used).
+    pub lambda_g: Option<f64>,
+    /// Ridge weight on ||beta||^2 (absent when the prior was used).
+    pub lambda_b: Option<f64>,
+    /// Cross-validated RMSE of the fit, N (absent when the prior was used).
+    pub cv_rmse_n: Option<f64>,
+    /// True when the data were degenerate and the prior g = 1, b = 0 was kept.
+    pub prior_fallback: bool,
+}
+
+impl LocAware {
+    /// The prior: g = 1, b = 0.
+    pub fn prior() -> Self {
+        Self {
+            gain: QuadField::constant(1.0),
+            offset: QuadField::constant(0.0),
+            lambda_g: None,
+            lambda_b: None,
+            cv_rmse_n: None,
+            prior_fallback: true,
+        }
+    }
+}
+
+/// Area-aware extension: F = g f + b + a (k_gain f + k_offset), a = area / area_ref - 1
+/// (clamped to the calibrated range of a).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct AreaAware {
+    /// Location fields fitted jointly with the area terms.
+    pub fields: LocAware,
+    /// Coefficient of a * f(dP) (dimensionless).
+    pub area_gain: f64,
+    /// Coefficient of a (N).
+    pub area_offset: f64,
+    /// Reference area: mean ROI area of the calibration samples, mm^2.
+    pub area_ref_mm2: f64,
+    /// Calibrated range of a = area / area_ref - 1.
+    pub rel_area_min: f64,
+    /// Calibrated range of a.
+    pub rel_area_max: f64,
+    /// Ridge weight on the two area coefficients (absent when the prior was used).
+    pub lambda_a: Option<f64>,
+}
+
+/// One force signal's calibration: its map f and its location-aware fields.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SignalCalibration {
+    /// f(signal) fitted on all locations.
+    pub map: SignalMap,
+    /// g and b fitted on f(signal).
+    pub locaware: LocAware,
+}
+
+/// Signal-force R^2 of quadratic fits (paper Table II); absent where not computable.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct R2Table {
+    /// EIT conductivity change sum, centre location.
+    pub eit_center: Option<f64>,
+    /// EIT conductivity change sum, all locations.
+    pub eit_all: Option<f64>,
+    /// Pneumatic pressure, centre location.
+    pub pneumatic_center: Option<f64>,
+    /// Pneumatic pressure, all locations.
+    pub pneumatic_all: Option<f64>,
+}
+
+impl fmt::Display for R2Table {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let cell = |v: Option<f64>| v.map_or_else(|| "-".to_string(), |v| format!("{v:.3}"));
+        writeln!(f, "Signal-force correlation (R^2)")?;
+        writeln!(f, "{:<30} {:>16} {:>14}", "Signal", "Center location", "All locations")?;
+        writeln!(f, "{:<30} {:>16} {:>14}", "EIT conductivity change sum", cell(self.eit_center), cell(self.eit_all))?;
+        write!(f, "{:<30} {:>16} {:>14}", "Pneumatic pressure", cell(self.pneumatic_center), cell(self.pneumatic_all))
+    }
+}
+
+/// What the calibration was fitted on.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TrainingSummary {
+    /// Frames given to the calibration (before averaging holds).
+    pub frames: usize,
+    /// Samples used in the fits (after averaging holds and rejection).
+    pub samples: usize,
+    /// Samples rejected by the quality filter.
+    pub rejected: usize,
+    /// Distinct true locations.
+    pub locations: usize,
+    /// Range of true forces, N.
+    pub force_min_n: f64,
+    /// Range of true forces, N.
+    pub force_max_n: f64,
+    /// Indenter diameters seen, mm.
+    pub diameters_mm: Vec<f64>,
+    /// The location used as "centre" in the R^2 table, mm.
+    pub center_location_mm: Option<[f64; 2]>,
+    /// Samples at that location.
+    pub center_samples: usize,
+    /// Mean within-hold standard deviation of dP, kPa (0 when holds had one frame).
+    pub hold_sd_dp_kpa: f64,
+    /// Mean within-hold standard deviation of C, image units.
+    pub hold_sd_cond_sum: f64,
+    /// Relative ridge grid (weights searched = grid x samples).
+    pub lambda_grid_rel: Vec<f64>,
+    /// Folds of the inner cross-validation.
+    pub folds: usize,
+    /// RMSE on the training samples per strategy, N.
+    pub train_rmse_n: BTreeMap<String, f64>,
+}
+
+/// A complete force calibration.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Calibration {
+    /// Always [`FORMAT`].
+    pub format: String,
+    /// [`FORMAT_VERSION`] of the writer.
+    pub format_version: u32,
+    /// Where it came from.
+    pub provenance: Provenance,
+    /// The calibrated region; field coordinates are normalized to it and clamped outside.
+    pub region: Region,
+    /// Pneumatic pressure signal (dP share, kPa).
+    pub pneumatic: SignalCalibration,
+    /// EIT conductivity sum signal (C).
+    pub eit: SignalCalibration,
+    /// Area-aware pneumatic model.
+    pub area_aware: AreaAware,
+    /// EIT sensitivity for the compensated splitter.
+    pub sensitivity: SensitivityField,
+    /// Paper Table II.
+    pub r2: R2Table,
+    /// Training-set summary.
+    pub training: TrainingSummary,
+    /// Warnings raised while fitting (also returned as data by `calibrate`).
+    pub warnings: Vec<String>,
+}
+
+/// Why a calibration file could not be read or written.
+#[derive(Debug, thiserror::Error)]
+pub enum CalibrationFileError {
+    /// File system error.
+    #[error("{path}: {source}")]
+    Io { path: String, source: std::io::Error },
+    /// Not valid TOML for a calibration.
+    #[error("{path}: {message}")]
+    Parse { path: String, message: String },
+    /// Wrong `format` or a newer `format_version`.
+    #[error("{path}: not a skinflow calibration (format \"{format}\", version {version}; expected \"{FORMAT}\" <= {FORMAT_VERSION})")]
+    Format { path: String, format: String, version: u32 },
+    /// Serialization failed.
+    #[error("calibration: cannot serialize: {0}")]
+    Serialize(String),
+}
+
+impl Calibration {
+    /// TOML text of the calibration.
+    pub fn to_toml_string(&self) -> Result<String, CalibrationFileError> {
+        toml::to_string_pretty(self).map_err(|e| CalibrationFileError::Serialize(e.to_string()))
+    }
+
+    /// Parses TOML text; `origin` names the source in errors (a path, or "<string>").
+    pub fn from_toml_str(text: &str, origin: &str) -> Result<Self, CalibrationFileError> {
+        let cal: Calibration = toml::from_str(text)
+            .map_err(|e| CalibrationFileError::Parse { path: origin.to_string(), message: e.to_string().replace('\n', " ") })?;
+        if cal.format != FORMAT || cal.format_version > FORMAT_VERSION {
+            return Err(CalibrationFileError::Format {
+                path: origin.to_string(),
+                format: cal.format,
+                version: cal.format_version,
+            });
+        }
+        Ok(cal)
+    }
+
+    /// Reads a calibration file.
+    pub fn read(path: &Path) -> Result<Self, CalibrationFileError> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|source| CalibrationFileError::Io { path: path.display().to_string(), source })?;
+        Self::from_toml_str(&text, &path.display().to_string())
+    }
+
+    /// Writes a calibration file.
+    pub fn write(&self, path: &Path) -> Result<(), CalibrationFileError> {
+        std::fs::write(path, self.to_toml_string()?)
+            .map_err(|source| CalibrationFileError::Io { path: path.display().to_string(), source })
+    }
+}

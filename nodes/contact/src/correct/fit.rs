@@ -1,0 +1,325 @@
+//! Least-squares fits used by the calibration: the quadratic signal-to-force map (paper eq. 11),
+//! ridge regression towards a prior (the location-aware fields), and k-fold cross-validation
+//! of one ridge weight per block of columns over a log grid.
+//!
+//! Design matrices are row-major `T x p` slices. Systems are solved by Cholesky on the
+//! `p x p` normal equations (p <= ~14 here); columns are not rescaled, so callers keep
+//! their regressors O(1) (normalized coordinates, forces in N). Folds are a fixed-seed
+//! shuffle of the sample indices, so results are deterministic.
+
+use std::ops::Range;
+
+/// `y = a0 + a1 s + a2 s^2`.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Quadratic {
+    /// Constant term.
+    pub a0: f64,
+    /// Linear coefficient.
+    pub a1: f64,
+    /// Quadratic coefficient.
+    pub a2: f64,
+}
+
+impl Quadratic {
+    /// Value at `s`.
+    pub fn at(&self, s: f64) -> f64 {
+        self.a0 + s * (self.a1 + s * self.a2)
+    }
+
+    /// Derivative at `s`.
+    pub fn slope(&self, s: f64) -> f64 {
+        self.a1 + 2.0 * self.a2 * s
+    }
+}
+
+/// Least-squares quadratic through `(s, y)`; `None` with fewer than 3 points or fewer than
+/// 3 distinct `s` (the fit would be singular). `s` is scaled by its largest magnitude
+/// internally so kPa and conductivity sums of any size condition alike.
+pub fn fit_quadratic(s: &[f64], y: &[f64]) -> Option<Quadratic> {
+    let scale = s.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
+    if s.len() < 3 || s.len() != y.len() || scale == 0.0 || !scale.is_finite() {
+        return None;
+    }
+    let mut distinct = s.to_vec();
+    distinct.sort_by(f64::total_cmp);
+    distinct.dedup();
+    if distinct.len() < 3 {
+        return None;
+    }
+    let design: Vec<f64> = s.iter().flat_map(|&v| [1.0, v / scale, (v / scale).powi(2)]).collect();
+    let c = ridge(&design, y, 3, &[0.0; 3], &[0.0; 3])?;
+    Some(Quadratic { a0: c[0], a1: c[1] / scale, a2: c[2] / scale / scale })
+}
+
+/// Coefficient of determination of predictions `pred` for observations `y`
+/// (1 - SS_res / SS_tot); `None` when `y` has no spread or fewer than 2 points.
+pub fn r_squared(y: &[f64], pred: &[f64]) -> Option<f64> {
+    if y.len() < 2 || y.len() != pred.len() {
+        return None;
+    }
+    let mean = y.iter().sum::<f64>() / y.len() as f64;
+    let ss_tot: f64 = y.iter().map(|v| (v - mean).powi(2)).sum();
+    let ss_res: f64 = y.iter().zip(pred).map(|(a, b)| (a - b).powi(2)).sum();
+    (ss_tot > 0.0).then(|| 1.0 - ss_res / ss_tot)
+}
+
+/// In-place Cholesky solve of the SPD system `m x = b` (`m` is `p x p` row-major, only the
+/// lower triangle is read, and is overwritten). Returns false if a pivot is not positive.
+pub fn solve_spd(m: &mut [f64], b: &mut [f64], p: usize) -> bool {
+    for j in 0..p {
+        let mut d = m[j * p + j];
+        for k in 0..j {
+            d -= m[j * p + k] * m[j * p + k];
+        }
+        if !(d > 0.0 && d.is_finite()) {
+            return false;
+        }
+        let d = d.sqrt();
+        m[j * p + j] = d;
+        for i in j + 1..p {
+            let mut v = m[i * p + j];
+            for k in 0..j {
+                v -= m[i * p + k] * m[j * p + k];
+            }
+            m[i * p + j] = v / d;
+        }
+    }
+    for i in 0..p {
+        let mut v = b[i];
+        for k in 0..i {
+            v -= m[i * p + k] * b[k];
+        }
+        b[i] = v / m[i * p + i];
+    }
+    for i in (0..p).rev() {
+        let mut v = b[i];
+        for k in i + 1..p {
+            v -= m[k * p + i] * b[k];
+        }
+        b[i] = v / m[i * p + i];
+    }
+    true
+}
+
+/// Normal equations `X^T X` and `X^T y` of the rows in `rows`.
+fn gram(design: &[f64], y: &[f64], p: usize, rows: impl Iterator<Item = usize>) -> (Vec<f64>, Vec<f64>) {
+    let (mut g, mut r) = (vec![0.0; p * p], vec![0.0; p]);
+    for t in rows {
+        let x = &design[t * p..(t + 1) * p];
+        for i in 0..p {
+            r[i] += x[i] * y[t];
+            for j in 0..=i {
+                g[i * p + j] += x[i] * x[j];
+            }
+        }
+    }
+    (g, r)
+}
+
+fn solve_penalized(g: &[f64], r: &[f64], p: usize, penalty: &[f64], prior: &[f64]) -> Option<Vec<f64>> {
+    let mut m = g.to_vec();
+    let mut b = r.to_vec();
+    for i in 0..p {
+        m[i * p + i] += penalty[i];
+        b[i] += penalty[i] * prior[i];
+    }
+    solve_spd(&mut m, &mut b, p).then_some(b)
+}
+
+/// Ridge regression: argmin ||X c - y||^2 + sum_i penalty_i (c_i - prior_i)^2.
+/// `None` if the penalized normal matrix is not positive definite.
+pub fn ridge(design: &[f64], y: &[f64], p: usize, penalty: &[f64], prior: &[f64]) -> Option<Vec<f64>> {
+    let (g, r) = gram(design, y, p, 0..y.len());
+    solve_penalized(&g, &r, p, penalty, prior)
+}
+
+/// The fold (0..k) of every sample: a fixed-seed Fisher-Yates shuffle dealt round-robin, so
+/// samples recorded in order (location by location, force by force) mix across folds.
+pub fn fold_of(n: usize, k: usize) -> Vec<usize> {
+    let mut idx: Vec<usize> = (0..n).collect();
+    let mut state = 0x5eed_5eed_5eed_5eed_u64;
+    let mut next = || {
+        // splitmix64
+        state = state.wrapping_add(0x9e37_79b9_7f4a_7c15);
+        let mut z = state;
+        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        z ^ (z >> 31)
+    };
+    for i in (1..n).rev() {
+        idx.swap(i, (next() % (i as u64 + 1)) as usize);
+    }
+    let mut fold = vec![0; n];
+    for (pos, &i) in idx.iter().enumerate() {
+        fold[i] = pos % k.max(1);
+    }
+    fold
+}
+
+/// Result of a cross-validated ridge fit.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CvFit {
+    /// Coefficients refitted on all samples with the chosen weights.
+    pub coeffs: Vec<f64>,
+    /// Chosen ridge weight of each block.
+    pub lambdas: Vec<f64>,
+    /// Mean squared held-out error at the chosen weights.
+    pub cv_mse: f64,
+    /// Number of folds used.
+    pub folds: usize,
+}
+
+/// A ridge problem: argmin ||X c - y||^2 + sum_i penalty_i (c_i - prior_i)^2.
+#[derive(Debug, Clone, Copy)]
+pub struct RidgeProblem<'a> {
+    /// `X`, row-major `T x p`.
+    pub design: &'a [f64],
+    /// `y`, length `T`.
+    pub y: &'a [f64],
+    /// Number of columns.
+    pub p: usize,
+    /// Prior the penalty pulls towards, length `p`.
+    pub prior: &'a [f64],
+    /// Fixed penalty per column (0 = free), added to the searched block weights.
+    pub base_penalty: &'a [f64],
+}
+
+/// What [`cross_validate`] searches: one weight per column block, each from `grid`.
+#[derive(Debug, Clone, Copy)]
+pub struct CvSearch<'a> {
+    /// Column blocks sharing one weight.
+    pub blocks: &'a [Range<usize>],
+    /// Candidate weights (the full grid is searched for every block).
+    pub grid: &'a [f64],
+    /// Number of folds (clamped to [2, T]).
+    pub folds: usize,
+}
+
+/// Chooses one ridge weight per column block by k-fold CV (held-out MSE; on a tie the larger
+/// weights win), then refits on all samples. `None` when no weight combination gives a
+/// solvable system.
+pub fn cross_validate(problem: &RidgeProblem, search: &CvSearch) -> Option<CvFit> {
+    let RidgeProblem { design, y, p, prior, base_penalty } = *problem;
+    let CvSearch { blocks, grid, folds } = *search;
+    let n = y.len();
+    let k = folds.clamp(2, n.max(2));
+    let fold = fold_of(n, k);
+    let (g_all, r_all) = gram(design, y, p, 0..n);
+    // Training normal equations of fold f = all minus the held-out rows.
+    let train: Vec<(Vec<f64>, Vec<f64>)> = (0..k)
+        .map(|f| {
+            let (g, r) = gram(design, y, p, (0..n).filter(|&t| fold[t] == f));
+            (g_all.iter().zip(&g).map(|(a, b)| a - b).collect(), r_all.iter().zip(&r).map(|(a, b)| a - b).collect())
+        })
+        .collect();
+    let combos = grid.len().pow(blocks.len() as u32);
+    let mut best: Option<(f64, Vec<f64>)> = None;
+    let mut penalty = vec![0.0; p];
+    for combo in 0..combos {
+        let mut c = combo;
+        let lambdas: Vec<f64> = blocks
+            .iter()
+            .map(|_| {
+                let l = grid[c % grid.len()];
+                c /= grid.len();
+                l
+            })
+            .collect();
+        penalty.copy_from_slice(base_penalty);
+        for (block, &l) in blocks.iter().zip(&lambdas) {
+            penalty[block.clone()].iter_mut().for_each(|v| *v += l);
+        }
+        let mut sse = 0.0;
+        let mut ok = true;
+        for (f, (g, r)) in train.iter().enumerate() {
+            let Some(coef) = solve_penalized(g, r, p, &penalty, prior) else {
+                ok = false;
+                break;
+            };
+            for t in (0..n).filter(|&t| fold[t] == f) {
+                let x = &design[t * p..(t + 1) * p];
+                let pred: f64 = x.iter().zip(&coef).map(|(a, b)| a * b).sum();
+                sse += (pred - y[t]).powi(2);
+            }
+        }
+        if !ok || !sse.is_finite() {
+            continue;
+        }
+        let mse = sse / n as f64;
+        let better = match &best {
+            None => true,
+            Some((b, bl)) => {
+                let tol = 1e-12 * b.abs().max(f64::MIN_POSITIVE);
+                mse < b - tol || (mse <= b + tol && lambdas.iter().sum::<f64>() > bl.iter().sum::<f64>())
+            }
+        };
+        if better {
+            best = Some((mse, lambdas));
+        }
+    }
+    let (cv_mse, lambdas) = best?;
+    penalty.copy_from_slice(base_penalty);
+    for (block, &l) in blocks.iter().zip(&lambdas) {
+        penalty[block.clone()].iter_mut().for_each(|v| *v += l);
+    }
+    let coeffs = solve_penalized(&g_all, &r_all, p, &penalty, prior)?;
+    Some(CvFit { coeffs, lambdas, cv_mse, folds: k })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn quadratic_fit_recovers_exact_coefficients() {
+        let s: Vec<f64> = (0..10).map(|i| i as f64 * 0.7).collect();
+        let y: Vec<f64> = s.iter().map(|v| 0.3 + 2.0 * v - 0.1 * v * v).collect();
+        let q = fit_quadratic(&s, &y).unwrap();
+        assert!((q.a0 - 0.3).abs() < 1e-9 && (q.a1 - 2.0).abs() < 1e-9 && (q.a2 + 0.1).abs() < 1e-9);
+        let pred: Vec<f64> = s.iter().map(|&v| q.at(v)).collect();
+        assert!((r_squared(&y, &pred).unwrap() - 1.0).abs() < 1e-12);
+        assert!((q.slope(1.0) - 1.8).abs() < 1e-9);
+    }
+
+    #[test]
+    fn quadratic_fit_rejects_too_few_distinct_signals() {
+        assert!(fit_quadratic(&[1.0, 1.0, 2.0, 2.0], &[1.0, 1.0, 2.0, 2.0]).is_none());
+        assert!(fit_quadratic(&[1.0, 2.0], &[1.0, 2.0]).is_none());
+    }
+
+    #[test]
+    fn r_squared_by_hand() {
+        // y = [1, 2, 3], mean 2, SS_tot = 2; pred = [1, 2, 4], SS_res = 1 -> R^2 = 0.5
+        assert_eq!(r_squared(&[1.0, 2.0, 3.0], &[1.0, 2.0, 4.0]), Some(0.5));
+        assert_eq!(r_squared(&[1.0, 1.0], &[1.0, 1.0]), None);
+    }
+
+    #[test]
+    fn cholesky_solves_a_known_system() {
+        // m = [[4, 2], [2, 3]], x = [1, -1] -> b = [2, -1]
+        let mut m = [4.0, 2.0, 2.0, 3.0];
+        let mut b = [2.0, -1.0];
+        assert!(solve_spd(&mut m, &mut b, 2));
+        assert!((b[0] - 1.0).abs() < 1e-12 && (b[1] + 1.0).abs() < 1e-12);
+        assert!(!solve_spd(&mut [1.0, 1.0, 1.0, 1.0], &mut [1.0, 1.0], 2));
+    }
+
+    #[test]
+    fn ridge_with_huge_penalty_returns_the_prior() {
+        let design = [1.0, 0.0, 0.0, 1.0, 1.0, 1.0];
+        let y = [5.0, 6.0, 7.0];
+        let c = ridge(&design, &y, 2, &[1e12, 1e12], &[1.0, -2.0]).unwrap();
+        assert!((c[0] - 1.0).abs() < 1e-6 && (c[1] + 2.0).abs() < 1e-6);
+    }
+
+    #[test]
+    fn folds_are_balanced_and_deterministic() {
+        let f = fold_of(23, 5);
+        assert_eq!(f, fold_of(23, 5));
+        for k in 0..5 {
+            let n = f.iter().filter(|&&x| x == k).count();
+            assert!(n == 4 || n == 5);
+        }
+    }
+}

@@ -15,3 +15,15 @@ pub use decode::{
     PressureReading, Step, StreamMismatch, decode_all,
 };
 pub use error::ParamError;
+pub mod read;
+
+pub use read::{
+    EitReader, ForceReader, LinkStats, PressureReader, ReaderConfig, Reading, SerialError,
+    SerialReader,
+};
+pub mod emulate;
+
+pub use emulate::{
+    Device, DeviceStats, EmulateError, Emulator, EmulatorConfig, EmulatorFeed, Fault, FaultPlan,
+    Pacing, TimedForce, TimedFrame, TimedPressure,
+};

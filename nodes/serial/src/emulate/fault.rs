@@ -1,0 +1,146 @@
+//! Fault injection: what goes wrong, and at which record of which device.
+//!
+//! Faults are keyed by the 0-based index of the record in the device's feed. Link faults
+//! (unplug, stall) and garbage happen before that record is sent; byte faults change that
+//! record's encoding. Offsets wrap around the record's length, so one plan fits any width.
+
+use super::Device;
+use crate::error::ParamError;
+
+/// One fault.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Fault {
+    /// These bytes are sent before the record.
+    Garbage(Vec<u8>),
+    /// `len` bytes from `offset` of the record are not sent (cut at the record's end).
+    DropBytes { offset: usize, len: usize },
+    /// EIT only: one bit of the record's CRC is flipped.
+    CorruptCrc,
+    /// The record's byte at `offset` is XORed with `mask`.
+    FlipBits { offset: usize, mask: u8 },
+    /// Only the first `keep` bytes of the record are sent.
+    Truncate { keep: usize },
+    /// The record is not sent at all (the device lost it; its counter still advances).
+    Skip,
+    /// Before the record, the device disappears for `down_s` seconds and then returns at the
+    /// same path. Bytes already sent are given up to 1 s to be read before the link drops.
+    Unplug { down_s: f64 },
+    /// Before the record, the device is silent for `silent_s` seconds; the port stays.
+    Stall { silent_s: f64 },
+}
+
+impl Fault {
+    pub(super) fn validate(&self, device: Device, index: usize) -> Result<(), FaultError> {
+        let seconds = |param, got: f64| {
+            if got.is_finite() && (0.0..1e6).contains(&got) {
+                Ok(())
+            } else {
+                Err(FaultError::Param {
+                    device,
+                    index,
+                    source: ParamError::Seconds {
+                        param,
+                        rule: "in [0, 1e6)",
+                        got,
+                    },
+                })
+            }
+        };
+        match self {
+            Self::CorruptCrc if device != Device::Eit => {
+                Err(FaultError::NotApplicable { device, index })
+            }
+            Self::Unplug { down_s } => seconds("down_s", *down_s),
+            Self::Stall { silent_s } => seconds("silent_s", *silent_s),
+            _ => Ok(()),
+        }
+    }
+}
+
+/// Faults per device, as `(record index, fault)`; several faults may share an index and are
+/// applied in the order given.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct FaultPlan {
+    /// Faults of the EIT board.
+    pub eit: Vec<(usize, Fault)>,
+    /// Faults of the pressure board.
+    pub pressure: Vec<(usize, Fault)>,
+    /// Faults of the load cell.
+    pub force: Vec<(usize, Fault)>,
+}
+
+/// A fault plan that cannot be carried out.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum FaultError {
+    /// The fault does not exist for this protocol (a CRC on an ASCII line).
+    #[error("fault plan: {device} record {index}: fault applies to the eit board only")]
+    NotApplicable { device: Device, index: usize },
+    /// A fault parameter is out of range.
+    #[error("fault plan: {device} record {index}: {source}")]
+    Param {
+        device: Device,
+        index: usize,
+        source: ParamError,
+    },
+}
+
+/// Applies the byte faults at one record to its encoding; returns false if it must not be sent.
+pub(super) fn corrupt(record: &mut Vec<u8>, fault: &Fault) -> bool {
+    let len = record.len();
+    if len == 0 {
+        return !matches!(fault, Fault::Skip);
+    }
+    match *fault {
+        Fault::DropBytes { offset, len: n } => {
+            let start = offset % len;
+            record.drain(start..(start.saturating_add(n)).min(len));
+        }
+        Fault::CorruptCrc => record[len - 1] ^= 0x01,
+        Fault::FlipBits { offset, mask } => record[offset % len] ^= mask,
+        Fault::Truncate { keep } => record.truncate(keep),
+        Fault::Skip => return false,
+        Fault::Garbage(_) | Fault::Unplug { .. } | Fault::Stall { .. } => {}
+    }
+    true
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn byte_faults_by_hand() {
+        let mut r = vec![0, 1, 2, 3, 4];
+        assert!(corrupt(&mut r, &Fault::DropBytes { offset: 7, len: 2 }));
+        assert_eq!(r, vec![0, 1, 4]);
+        assert!(corrupt(
+            &mut r,
+            &Fault::FlipBits {
+                offset: 1,
+                mask: 0x80
+            }
+        ));
+        assert_eq!(r, vec![0, 0x81, 4]);
+        assert!(corrupt(&mut r, &Fault::CorruptCrc));
+        assert_eq!(r, vec![0, 0x81, 5]);
+        assert!(corrupt(&mut r, &Fault::Truncate { keep: 1 }));
+        assert_eq!(r, vec![0]);
+        assert!(!corrupt(&mut r, &Fault::Skip));
+    }
+
+    #[test]
+    fn crc_fault_on_a_line_protocol_is_rejected() {
+        assert_eq!(
+            Fault::CorruptCrc.validate(Device::Pressure, 3),
+            Err(FaultError::NotApplicable {
+                device: Device::Pressure,
+                index: 3
+            })
+        );
+        assert!(
+            Fault::Unplug { down_s: f64::NAN }
+                .validate(Device::Eit, 0)
+                .is_err()
+        );
+    }
+}

@@ -1,0 +1,138 @@
+//! A pseudo-terminal behind a stable path: `dir/eit -> /dev/pts/N`, recreated on replug.
+//!
+//! The kernel picks pty numbers, so the emulator publishes a symlink and replaces its target
+//! atomically (link to a temporary name, then rename) when the device is replugged. Both ends are
+//! raw (cfmakeraw), so binary frames pass unmangled. The emulator keeps its own slave descriptor
+//! open: writes are buffered while no reader is attached, and a reader's close does not hang up
+//! the master. The master is non-blocking so a writer can honour a stop request.
+
+use std::io;
+use std::os::fd::{AsFd, AsRawFd, OwnedFd};
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+use nix::errno::Errno;
+use nix::fcntl::{FcntlArg, OFlag, fcntl};
+use nix::poll::{PollFd, PollFlags, PollTimeout, poll};
+use nix::pty::openpty;
+use nix::sys::termios::{SetArg, cfmakeraw, tcgetattr, tcsetattr};
+
+/// How often blocked writes and drains look at the stop flag.
+const STOP_POLL: Duration = Duration::from_millis(20);
+
+nix::ioctl_read_bad!(bytes_queued, nix::libc::FIONREAD, nix::libc::c_int);
+
+struct PtyPair {
+    master: OwnedFd,
+    slave: OwnedFd,
+}
+
+/// A pty pair published at a stable symlink path.
+pub(super) struct StablePty {
+    link: PathBuf,
+    pair: Option<PtyPair>,
+}
+
+fn raw(fd: impl AsFd) -> nix::Result<()> {
+    let mut t = tcgetattr(&fd)?;
+    cfmakeraw(&mut t);
+    tcsetattr(&fd, SetArg::TCSANOW, &t)
+}
+
+fn open_pair(link: &Path) -> io::Result<PtyPair> {
+    let pty = openpty(None, None)?;
+    raw(&pty.slave)?;
+    raw(&pty.master)?;
+    let flags = OFlag::from_bits_truncate(fcntl(&pty.master, FcntlArg::F_GETFL)?);
+    fcntl(&pty.master, FcntlArg::F_SETFL(flags | OFlag::O_NONBLOCK))?;
+    let slave_path = nix::unistd::ttyname(&pty.slave)?;
+    let mut tmp = link.as_os_str().to_owned();
+    tmp.push(".new");
+    let tmp = PathBuf::from(tmp);
+    let _ = std::fs::remove_file(&tmp);
+    std::os::unix::fs::symlink(&slave_path, &tmp)?;
+    std::fs::rename(&tmp, link)?;
+    Ok(PtyPair {
+        master: pty.master,
+        slave: pty.slave,
+    })
+}
+
+impl StablePty {
+    /// Opens a pty pair and publishes its slave at `link`.
+    pub(super) fn create(link: PathBuf) -> io::Result<Self> {
+        let pair = open_pair(&link)?;
+        Ok(Self {
+            link,
+            pair: Some(pair),
+        })
+    }
+
+    /// The device disappears: the link is removed first (so a reader cannot reopen the dying
+    /// pty), then both ends are closed, which hangs up any reader.
+    pub(super) fn unplug(&mut self) -> io::Result<()> {
+        match std::fs::remove_file(&self.link) {
+            Err(e) if e.kind() != io::ErrorKind::NotFound => return Err(e),
+            _ => {}
+        }
+        self.pair = None;
+        Ok(())
+    }
+
+    /// The device returns at the same path, on a new pty.
+    pub(super) fn replug(&mut self) -> io::Result<()> {
+        self.pair = Some(open_pair(&self.link)?);
+        Ok(())
+    }
+
+    /// Writes all of `bytes`, waiting for room; returns false if `stop` was raised first.
+    pub(super) fn write_all(&mut self, mut bytes: &[u8], stop: &AtomicBool) -> io::Result<bool> {
+        let pair = self
+            .pair
+            .as_ref()
+            .ok_or_else(|| io::Error::other("pty is unplugged"))?;
+        while !bytes.is_empty() {
+            if stop.load(Ordering::Relaxed) {
+                return Ok(false);
+            }
+            match nix::unistd::write(&pair.master, bytes) {
+                Ok(n) => bytes = &bytes[n..],
+                Err(Errno::EAGAIN | Errno::EINTR) => {
+                    let mut fds = [PollFd::new(pair.master.as_fd(), PollFlags::POLLOUT)];
+                    poll(
+                        &mut fds,
+                        PollTimeout::try_from(STOP_POLL).unwrap_or(PollTimeout::NONE),
+                    )?;
+                }
+                Err(e) => return Err(e.into()),
+            }
+        }
+        Ok(true)
+    }
+
+    /// Waits until a reader has taken every written byte, `timeout` passed, or `stop` was raised.
+    pub(super) fn wait_drained(&self, timeout: Duration, stop: &AtomicBool) -> io::Result<()> {
+        let Some(pair) = self.pair.as_ref() else {
+            return Ok(());
+        };
+        let until = Instant::now() + timeout;
+        loop {
+            let mut queued: nix::libc::c_int = 0;
+            // SAFETY: FIONREAD writes one c_int through the pointer, which points to a live local;
+            // the descriptor is an open tty owned by `pair`.
+            unsafe { bytes_queued(pair.slave.as_raw_fd(), &mut queued) }?;
+            if queued == 0 || Instant::now() >= until || stop.load(Ordering::Relaxed) {
+                return Ok(());
+            }
+            std::thread::sleep(STOP_POLL / 4);
+        }
+    }
+}
+
+impl Drop for StablePty {
+    fn drop(&mut self) {
+        // Best effort: the link may already be gone (unplugged, or removed by the user).
+        let _ = std::fs::remove_file(&self.link);
+    }
+}

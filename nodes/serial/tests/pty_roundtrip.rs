@@ -1,0 +1,152 @@
+//! Emulator -> pseudo-terminal -> reader, clean streams: every record arrives intact, in order.
+
+mod feeds;
+
+use std::time::{Duration, Instant};
+
+use skinflow_serial::read::{ReaderConfig, SerialReader};
+use skinflow_serial::{
+    Device, EitDecoder, Emulator, EmulatorConfig, EmulatorFeed, FaultPlan, ForceDecoder, Pacing,
+    PressureDecoder, SerialError,
+};
+
+const LIMIT: Duration = Duration::from_secs(30);
+
+#[test]
+fn three_devices_fast_roundtrip_exact() {
+    let m = 120;
+    let frames = feeds::busy_frames(m, 150, 0.77);
+    let pressures = feeds::pressures(400, 0.05);
+    let forces = feeds::forces(300, 0.1);
+    let feed = EmulatorFeed::default()
+        .with_eit(frames.clone())
+        .with_pressure(pressures.clone())
+        .with_force(forces.clone());
+    let config = EmulatorConfig {
+        pacing: Pacing::AsFastAsPossible,
+        first_counter: u32::MAX - 70,
+        ..Default::default()
+    };
+    let emulator = Emulator::spawn(config, feed, FaultPlan::default()).expect("spawn");
+    let origin = Instant::now();
+
+    let path = emulator.path(Device::Eit).expect("eit path");
+    assert!(
+        std::fs::read_link(path)
+            .expect("a symlink")
+            .starts_with("/dev/pts")
+    );
+    let mut eit =
+        SerialReader::open(ReaderConfig::new(path), EitDecoder::new(m), origin).expect("open eit");
+    let mut k = 0usize;
+    let got = feeds::read_n(&mut eit, frames.len(), LIMIT, |r| {
+        assert_eq!(r.record.counter, (u32::MAX - 70).wrapping_add(k as u32));
+        for (got, sent) in r.record.volts.iter().zip(&frames[k].volts) {
+            assert_eq!(*got, f64::from(*sent as f32));
+        }
+        assert!((r.record.device_t_s - frames[k].t_s).abs() <= 0.5e-6);
+        assert!(r.host_t_s >= 0.0);
+        k += 1;
+    });
+    assert_eq!(got, frames.len());
+    let s = eit.decode_stats();
+    assert_eq!(
+        (
+            s.frames,
+            s.discarded_bytes,
+            s.lost_frames,
+            s.crc_errors,
+            s.counter_resets
+        ),
+        (150, 0, 0, 0, 0)
+    );
+
+    let path = emulator.path(Device::Pressure).expect("pressure path");
+    let mut pressure = SerialReader::open(
+        ReaderConfig::new(path),
+        PressureDecoder::try_new(Some(50)).unwrap(),
+        origin,
+    )
+    .unwrap();
+    let mut k = 0usize;
+    let got = feeds::read_n(&mut pressure, pressures.len(), LIMIT, |r| {
+        // Four decimals on the wire.
+        assert!((r.record.kpa - pressures[k].kpa).abs() <= 0.5e-4 + 1e-12);
+        assert_eq!(
+            r.record.device_time_ms,
+            (pressures[k].t_s * 1e3).round() as u32
+        );
+        k += 1;
+    });
+    assert_eq!(got, pressures.len());
+    assert_eq!(
+        (
+            pressure.decode_stats().lost_frames,
+            pressure.decode_stats().bad_lines
+        ),
+        (0, 0)
+    );
+
+    let path = emulator.path(Device::Loadcell).expect("loadcell path");
+    let mut force =
+        SerialReader::open(ReaderConfig::new(path), ForceDecoder::new(), origin).unwrap();
+    let mut k = 0usize;
+    let got = feeds::read_n(&mut force, forces.len(), LIMIT, |r| {
+        assert!((r.record.force_n - forces[k].force_n).abs() <= 0.5e-3 + 1e-12);
+        k += 1;
+    });
+    assert_eq!(got, forces.len());
+    assert_eq!(force.decode_stats().bad_lines, 0);
+
+    assert!(emulator.wait_finished(LIMIT));
+    assert_eq!(emulator.stats(Device::Eit).unwrap().records_sent, 150);
+    let dir = emulator.dir().to_path_buf();
+    emulator.stop().expect("clean stop");
+    assert!(!dir.exists(), "emulator directory removed on stop");
+}
+
+#[test]
+fn real_time_pacing_delivers_every_frame() {
+    // 20 frames at 100 Hz: paced by the samples' times, still every frame arrives in order.
+    let frames = feeds::busy_frames(8, 20, 0.01);
+    let emulator = Emulator::spawn(
+        EmulatorConfig::default(),
+        EmulatorFeed::default().with_eit(frames),
+        FaultPlan::default(),
+    )
+    .unwrap();
+    let path = emulator.path(Device::Eit).unwrap();
+    let mut eit =
+        SerialReader::open(ReaderConfig::new(path), EitDecoder::new(8), Instant::now()).unwrap();
+    let mut counters = Vec::new();
+    feeds::read_n(&mut eit, 20, LIMIT, |r| counters.push(r.record.counter));
+    assert_eq!(counters, (0..20).collect::<Vec<u32>>());
+}
+
+#[test]
+fn missing_port_is_a_clear_error_at_start() {
+    let path = std::env::temp_dir().join("skinflow-no-such-board");
+    let err = SerialReader::open(
+        ReaderConfig::new(&path),
+        EitDecoder::new(120),
+        Instant::now(),
+    )
+    .unwrap_err();
+    assert!(
+        matches!(&err, SerialError::PortNotFound { path: p } if *p == path),
+        "{err}"
+    );
+    let msg = err.to_string();
+    assert!(
+        msg.contains("skinflow-no-such-board") && msg.contains("does not exist"),
+        "{msg}"
+    );
+}
+
+#[test]
+fn bad_reader_params_are_rejected() {
+    let mut config = ReaderConfig::new("/dev/null");
+    config.backoff_max_s = f64::NAN;
+    let err = SerialReader::open(config, ForceDecoder::new(), Instant::now()).unwrap_err();
+    assert!(err.to_string().contains("backoff_max_s"), "{err}");
+}

@@ -12,6 +12,7 @@ pub mod segment;
 pub use segment::grid::ImageGrid;
 pub use segment::{Contact, Contacts, SegmentError, SegmentParams, Segmenter};
 pub mod correct;
+pub mod eval;
 pub mod split;
 
 pub use correct::{CalibSample, Calibration, ForceEstimate, ForceFlags, Strategy, StrategyKind};

@@ -1,0 +1,239 @@
+//! The EIT channel: one frame = the sensor's protocol measured in sequence over the acquisition
+//! window [t - T/2, t + T/2). Values are the full nonlinear CEM forward solve (skinflow-eit) of
+//! the conductivity that `compress` derives from the contacts, on the simulator's own mesh
+//! (finer than, and generated differently from, any reconstruction mesh: no inverse crime).
+//!
+//! The window is split into `EIT_BLOCKS` blocks acquired at their mid-times; a block whose
+//! contact state equals a recently solved one reuses it, so a static hold costs one solve and
+//! afterwards only fresh noise. Drift scales all values by 1 / (1 + d(t)) (liquid conductivity
+//! and electrode impedance drift together with temperature); noise is Gaussian with standard
+//! deviation rel * |v| + abs. Volts, protocol order (CONTRACTS.md section 1).
+
+use crate::compress::Compressor;
+use crate::profile::Profile;
+use crate::randomness::{Drift, Stream, normal, stream};
+use crate::timeline::{Load, Timeline};
+use rand_chacha::ChaCha8Rng;
+use skinflow_eit::{CemParams, EitError, ForwardModel, Measurement, Mesh, MeshParams, Sensor};
+
+/// Blocks per acquisition window: measurements in block b see the contacts at the block's
+/// mid-time (4 resolves a ramp within a frame to a quarter frame).
+pub const EIT_BLOCKS: usize = 4;
+/// Solved contact states kept for reuse.
+const CACHE_STATES: usize = 4;
+/// Minimum angle of the simulation mesh, degrees: differs from the reconstruction default (28)
+/// so the two meshes never coincide even at equal element counts.
+const SIM_MESH_MIN_ANGLE_DEG: f64 = 25.0;
+/// Electrode edge ratio of the simulation mesh (reconstruction default: 0.3).
+const SIM_MESH_ELECTRODE_RATIO: f64 = 0.5;
+
+/// Element count of the simulation mesh for the smallest indenter of a scene: equilateral
+/// triangles of edge `mesh_edge_per_diameter * d_min`, clamped to the profile's bounds.
+pub fn sim_mesh_elements(
+    profile: &Profile,
+    sensor: &Sensor,
+    smallest_diameter_mm: Option<f64>,
+) -> usize {
+    let Some(d) = smallest_diameter_mm else {
+        return profile.mesh_min_elements;
+    };
+    let edge = profile.mesh_edge_per_diameter * d;
+    let triangle_area = 3f64.sqrt() / 4.0 * edge * edge;
+    let n = (sensor.width_mm * sensor.height_mm / triangle_area).ceil() as usize;
+    n.clamp(profile.mesh_min_elements, profile.mesh_max_elements)
+}
+
+/// Whether two contact sets load the foam identically (indentation and level ids aside).
+fn same_state(a: &[Load], b: &[Load]) -> bool {
+    a.len() == b.len()
+        && a.iter().zip(b).all(|(p, q)| {
+            p.x_mm == q.x_mm
+                && p.y_mm == q.y_mm
+                && p.diameter_mm == q.diameter_mm
+                && p.force_n == q.force_n
+        })
+}
+
+#[derive(Debug, Clone)]
+struct CachedState {
+    loads: Vec<Load>,
+    values: Vec<f64>,
+    last_used: u64,
+}
+
+/// The simulated EIT acquisition.
+#[derive(Debug)]
+pub struct EitChannel {
+    // Configuration
+    forward: ForwardModel,
+    measurements: Vec<Measurement>,
+    compressor: Compressor,
+    noise_rel: f64,
+    noise_abs_v: f64,
+    // Internal state
+    drift: Drift,
+    noise: ChaCha8Rng,
+    cache: Vec<CachedState>,
+    clock: u64,
+    solves: u64,
+    // Scratch
+    sigma: Vec<f64>,
+    block_loads: Vec<Load>,
+}
+
+impl EitChannel {
+    /// Meshes the sensor for the timeline's smallest indenter and prepares the forward model.
+    pub fn new(
+        profile: &Profile,
+        sensor: &Sensor,
+        timeline: &Timeline,
+        seed: u64,
+    ) -> Result<EitChannel, EitError> {
+        let elements = sim_mesh_elements(profile, sensor, timeline.smallest_diameter_mm());
+        let mesh = Mesh::generate(
+            sensor,
+            &MeshParams {
+                elements,
+                min_angle_deg: SIM_MESH_MIN_ANGLE_DEG,
+                electrode_size_ratio: SIM_MESH_ELECTRODE_RATIO,
+                ..MeshParams::default()
+            },
+        )?;
+        let mut zrng = stream(seed, Stream::ContactImpedance);
+        let z = (0..sensor.electrode_count())
+            .map(|_| {
+                profile.contact_impedance_ohm_mm2
+                    * (1.0 + profile.contact_impedance_spread * normal(&mut zrng)).max(0.1)
+            })
+            .collect();
+        let cem = CemParams {
+            background_s_per_m: profile.sigma0_s_per_m,
+            thickness_mm: profile.foam_thickness_mm,
+            contact_impedance_ohm_mm2: profile.contact_impedance_ohm_mm2,
+            electrode_contact_impedance_ohm_mm2: z,
+            current_ua: profile.current_ua,
+        };
+        let forward = ForwardModel::new(sensor, &mesh, &cem)?;
+        let mut diameters: Vec<f64> = timeline
+            .segments
+            .iter()
+            .flat_map(|s| s.contacts.iter().map(|c| c.diameter_mm))
+            .collect();
+        diameters.sort_by(f64::total_cmp);
+        diameters.dedup();
+        let foam = crate::randomness::SmoothField::new(
+            &mut stream(seed, Stream::FoamField),
+            profile.foam_heterogeneity,
+            profile.foam_heterogeneity_length_mm,
+        );
+        let compressor = Compressor::new(profile, mesh.element_centroids_mm(), &diameters, &foam);
+        let n = compressor.element_count();
+        let max_contacts = timeline.max_contacts();
+        Ok(EitChannel {
+            measurements: sensor.measurements(),
+            forward,
+            compressor,
+            noise_rel: profile.eit_noise_rel,
+            noise_abs_v: profile.eit_noise_abs_v,
+            drift: Drift::new(
+                stream(seed, Stream::EitDrift),
+                profile.eit_drift_rel,
+                profile.eit_drift_tau_s,
+            ),
+            noise: stream(seed, Stream::EitNoise),
+            cache: Vec::with_capacity(CACHE_STATES),
+            clock: 0,
+            solves: 0,
+            sigma: vec![0.0; n],
+            block_loads: Vec::with_capacity(max_contacts),
+        })
+    }
+
+    /// Values per frame (M).
+    pub fn measurement_count(&self) -> usize {
+        self.measurements.len()
+    }
+
+    /// Elements of the simulation mesh.
+    pub fn element_count(&self) -> usize {
+        self.compressor.element_count()
+    }
+
+    /// Forward solves done so far (cache misses).
+    pub fn solve_count(&self) -> u64 {
+        self.solves
+    }
+
+    /// The frame whose window is centred on `t_s` and lasts `period_s`, into `out` (M values).
+    pub fn frame_into(
+        &mut self,
+        timeline: &Timeline,
+        t_s: f64,
+        period_s: f64,
+        out: &mut [f64],
+    ) -> Result<(), EitError> {
+        let m = self.measurements.len();
+        if out.len() != m {
+            return Err(EitError::Length {
+                what: "eit frame buffer",
+                expected: m,
+                got: out.len(),
+            });
+        }
+        let start = t_s - 0.5 * period_s;
+        let mut hint = 0;
+        for b in 0..EIT_BLOCKS {
+            let tb = start + (b as f64 + 0.5) * period_s / EIT_BLOCKS as f64;
+            hint = timeline.loads_into(tb, hint, &mut self.block_loads);
+            let slot = self.solved()?;
+            let (lo, hi) = (b * m / EIT_BLOCKS, (b + 1) * m / EIT_BLOCKS);
+            out[lo..hi].copy_from_slice(&self.cache[slot].values[lo..hi]);
+        }
+        let scale = 1.0 / (1.0 + self.drift.at(t_s));
+        for v in out.iter_mut() {
+            let clean = *v * scale;
+            let sd = self.noise_rel * clean.abs() + self.noise_abs_v;
+            *v = if sd > 0.0 {
+                clean + sd * normal(&mut self.noise)
+            } else {
+                clean
+            };
+        }
+        Ok(())
+    }
+
+    /// Cache slot holding the noiseless values of `self.block_loads`, solving on a miss.
+    fn solved(&mut self) -> Result<usize, EitError> {
+        self.clock += 1;
+        if let Some(i) = self
+            .cache
+            .iter()
+            .position(|c| same_state(&c.loads, &self.block_loads))
+        {
+            self.cache[i].last_used = self.clock;
+            return Ok(i);
+        }
+        self.compressor
+            .conductivity_into(&self.block_loads, &mut self.sigma);
+        let solution = self.forward.solve(&self.sigma)?;
+        self.solves += 1;
+        let slot = if self.cache.len() < CACHE_STATES {
+            self.cache.push(CachedState {
+                loads: Vec::with_capacity(self.block_loads.capacity()),
+                values: vec![0.0; self.measurements.len()],
+                last_used: 0,
+            });
+            self.cache.len() - 1
+        } else {
+            (0..self.cache.len())
+                .min_by_key(|&i| self.cache[i].last_used)
+                .expect("cache is not empty")
+        };
+        let entry = &mut self.cache[slot];
+        entry.loads.clear();
+        entry.loads.extend_from_slice(&self.block_loads);
+        entry.last_used = self.clock;
+        solution.measurements_into(&self.measurements, &mut entry.values);
+        Ok(slot)
+    }
+}

@@ -1,0 +1,231 @@
+//! The pneumatic layer: a sealed, gyroid-filled TPE chamber under the foam, read by a gauge
+//! pressure sensor at 20 Hz. Each contact adds
+//! dP_i = S(footprint) * g_level * F / (1 + F / F_nl(d)), where S is the local sensitivity
+//! (kPa/N, lower near the stiff boundary, with smooth random infill irregularity, 0 outside the
+//! sensor where the frame takes the load) averaged over the indenter footprint, g_level the
+//! seating variability of the load level, and F_nl(d) = F_nl min(1, (d_ref/d)^q) the mild
+//! saturation that larger indenters reach sooner. The sum passes a play operator (hysteresis)
+//! that relaxes towards the load (creep), then P0, slow drift and sensor noise are added.
+//!
+//! Units: kPa (gauge), N, mm, s. Samples must be requested in non-decreasing time.
+
+use crate::profile::Profile;
+use crate::randomness::{Drift, SmoothField, Stream, normal, stream};
+use crate::timeline::Load;
+use rand_chacha::ChaCha8Rng;
+use skinflow_eit::Sensor;
+
+/// Footprint quadrature: rings of points at these fractions of the radius, with these counts
+/// (equal-area rings, so the points carry equal weight together with the centre).
+const FOOTPRINT_RINGS: [(f64, usize); 3] = [(0.408, 6), (0.707, 12), (0.913, 18)];
+
+/// The pressure channel.
+#[derive(Debug, Clone)]
+pub struct Pneumatic {
+    // Configuration
+    p0_kpa: f64,
+    sensitivity_kpa_per_n: f64,
+    edge_stiffening: f64,
+    edge_length_mm: f64,
+    nonlinearity_force_n: f64,
+    reference_diameter_mm: f64,
+    area_exponent: f64,
+    hysteresis_kpa: f64,
+    hysteresis_tau_s: f64,
+    seating_jitter: f64,
+    noise_kpa: f64,
+    half_extents_mm: (f64, f64),
+    heterogeneity: SmoothField,
+    seed: u64,
+    // Internal state
+    /// Output of the play operator (hysteresis), kPa above P0.
+    play_kpa: f64,
+    last_t_s: f64,
+    drift: Drift,
+    noise: ChaCha8Rng,
+}
+
+impl Pneumatic {
+    pub fn new(profile: &Profile, sensor: &Sensor, seed: u64) -> Pneumatic {
+        let heterogeneity = SmoothField::new(
+            &mut stream(seed, Stream::SensitivityField),
+            profile.sensitivity_heterogeneity,
+            profile.sensitivity_heterogeneity_length_mm,
+        );
+        Pneumatic {
+            p0_kpa: profile.p0_kpa,
+            sensitivity_kpa_per_n: profile.sensitivity_kpa_per_n,
+            edge_stiffening: profile.edge_stiffening,
+            edge_length_mm: profile.edge_length_mm,
+            nonlinearity_force_n: profile.nonlinearity_force_n,
+            reference_diameter_mm: profile.reference_diameter_mm,
+            area_exponent: profile.area_exponent,
+            hysteresis_kpa: profile.hysteresis_kpa,
+            hysteresis_tau_s: profile.hysteresis_tau_s,
+            seating_jitter: profile.seating_jitter,
+            noise_kpa: profile.pressure_noise_kpa,
+            half_extents_mm: sensor.half_extents_mm(),
+            heterogeneity,
+            seed,
+            play_kpa: 0.0,
+            last_t_s: 0.0,
+            drift: Drift::new(
+                stream(seed, Stream::PressureDrift),
+                profile.pressure_drift_kpa,
+                profile.pressure_drift_tau_s,
+            ),
+            noise: stream(seed, Stream::PressureNoise),
+        }
+    }
+
+    /// Local sensitivity at a point, kPa/N (0 outside the sensor).
+    pub fn sensitivity_kpa_per_n(&self, x_mm: f64, y_mm: f64) -> f64 {
+        let (hx, hy) = self.half_extents_mm;
+        let (dx, dy) = (hx - x_mm.abs(), hy - y_mm.abs());
+        if dx < 0.0 || dy < 0.0 {
+            return 0.0;
+        }
+        let l = self.edge_length_mm;
+        let interior = (1.0 - (-dx / l).exp()) * (1.0 - (-dy / l).exp());
+        let edge = 1.0 - interior;
+        self.sensitivity_kpa_per_n
+            * (1.0 - self.edge_stiffening * edge)
+            * (1.0 + self.heterogeneity.at(x_mm, y_mm)).max(0.0)
+    }
+
+    /// Sensitivity averaged over a disc footprint, kPa/N.
+    pub fn footprint_sensitivity_kpa_per_n(&self, x_mm: f64, y_mm: f64, diameter_mm: f64) -> f64 {
+        let r = 0.5 * diameter_mm;
+        let mut sum = self.sensitivity_kpa_per_n(x_mm, y_mm);
+        let mut count = 1usize;
+        for (frac, n) in FOOTPRINT_RINGS {
+            for k in 0..n {
+                let a = std::f64::consts::TAU * (k as f64 + 0.5) / n as f64;
+                sum += self
+                    .sensitivity_kpa_per_n(x_mm + frac * r * a.cos(), y_mm + frac * r * a.sin());
+                count += 1;
+            }
+        }
+        sum / count as f64
+    }
+
+    /// Seating gain of a load level: 1 + jitter * N(0, 1), a pure function of (seed, level).
+    fn seating_gain(&self, level: u32) -> f64 {
+        if self.seating_jitter == 0.0 {
+            return 1.0;
+        }
+        let mut rng = stream(self.seed ^ (u64::from(level) << 20), Stream::Seating);
+        (1.0 + self.seating_jitter * normal(&mut rng)).max(0.0)
+    }
+
+    /// Pressure change of the loads with no history (quasi-static, noiseless), kPa.
+    pub fn static_dp_kpa(&self, loads: &[Load]) -> f64 {
+        loads
+            .iter()
+            .map(|l| {
+                let s = self.footprint_sensitivity_kpa_per_n(l.x_mm, l.y_mm, l.diameter_mm);
+                let area = (self.reference_diameter_mm / l.diameter_mm)
+                    .powf(self.area_exponent)
+                    .min(1.0);
+                let f_nl = self.nonlinearity_force_n * area;
+                s * self.seating_gain(l.level) * l.force_n / (1.0 + l.force_n / f_nl)
+            })
+            .sum()
+    }
+
+    /// One gauge-pressure sample at `t_s` under `loads`, kPa: advances hysteresis and drift.
+    pub fn sample(&mut self, t_s: f64, loads: &[Load]) -> f64 {
+        let x = self.static_dp_kpa(loads);
+        let dt = (t_s - self.last_t_s).max(0.0);
+        self.last_t_s = t_s;
+        let h = self.hysteresis_kpa;
+        // play operator: the output moves only when the input leaves the band of half-width h
+        if x > self.play_kpa + h {
+            self.play_kpa = x - h;
+        } else if x < self.play_kpa - h {
+            self.play_kpa = x + h;
+        }
+        // and creeps towards the input (viscoelastic relaxation of the shell)
+        self.play_kpa += (x - self.play_kpa) * (1.0 - (-dt / self.hysteresis_tau_s).exp());
+        let noise = if self.noise_kpa > 0.0 {
+            self.noise_kpa * normal(&mut self.noise)
+        } else {
+            0.0
+        };
+        self.p0_kpa + self.play_kpa + self.drift.at(t_s) + noise
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn load(x: f64, y: f64, d: f64, f: f64) -> Load {
+        Load {
+            x_mm: x,
+            y_mm: y,
+            diameter_mm: d,
+            force_n: f,
+            press: 0,
+            level: 0,
+        }
+    }
+
+    #[test]
+    fn ideal_pressure_is_p0_plus_a_monotone_mildly_saturating_response() {
+        let p = Profile::ideal();
+        let mut pn = Pneumatic::new(&p, &Sensor::paper_100mm(), 7);
+        assert_eq!(pn.sample(0.0, &[]), p.p0_kpa);
+        let dps: Vec<f64> = (1..=10)
+            .map(|f| pn.static_dp_kpa(&[load(0.0, 0.0, 15.0, f as f64)]))
+            .collect();
+        assert!(dps.windows(2).all(|w| w[1] > w[0]));
+        // mild: slope at 10 N is within 25 % of the slope at 1 N
+        let (s1, s10) = (dps[1] - dps[0], dps[9] - dps[8]);
+        assert!(s10 < s1 && s10 > 0.75 * s1, "{s1} {s10}");
+        // centre slope close to the nominal sensitivity (edge term ~ 2 exp(-50/18) at the centre)
+        assert!(
+            (dps[0] / p.sensitivity_kpa_per_n - 1.0).abs() < 0.15,
+            "{}",
+            dps[0]
+        );
+        assert!((pn.sample(1.0, &[load(0.0, 0.0, 15.0, 5.0)]) - p.p0_kpa - dps[4]).abs() < 1e-12);
+    }
+
+    #[test]
+    fn boundary_is_stiffer_and_large_indenters_saturate_sooner() {
+        let pn = Pneumatic::new(&Profile::ideal(), &Sensor::paper_100mm(), 7);
+        let centre = pn.static_dp_kpa(&[load(0.0, 0.0, 15.0, 5.0)]);
+        let edge = pn.static_dp_kpa(&[load(45.0, 0.0, 15.0, 5.0)]);
+        let corner = pn.static_dp_kpa(&[load(45.0, 45.0, 15.0, 5.0)]);
+        assert!(centre > edge && edge > corner, "{centre} {edge} {corner}");
+        let ratio = |d: f64, f: f64| {
+            pn.static_dp_kpa(&[load(0.0, 0.0, d, f)]) / pn.static_dp_kpa(&[load(0.0, 0.0, 15.0, f)])
+        };
+        assert!(ratio(25.0, 10.0) < ratio(25.0, 1.0));
+        assert!(ratio(25.0, 10.0) < 0.95);
+        // two contacts add
+        let both = pn.static_dp_kpa(&[load(-20.0, 0.0, 10.0, 2.0), load(20.0, 0.0, 10.0, 3.0)]);
+        let sum = pn.static_dp_kpa(&[load(-20.0, 0.0, 10.0, 2.0)])
+            + pn.static_dp_kpa(&[load(20.0, 0.0, 10.0, 3.0)]);
+        assert!((both - sum).abs() < 1e-12);
+    }
+
+    #[test]
+    fn hysteresis_lags_loading_and_relaxes() {
+        let p = Profile {
+            hysteresis_kpa: 0.05,
+            hysteresis_tau_s: 2.0,
+            ..Profile::ideal()
+        };
+        let mut pn = Pneumatic::new(&p, &Sensor::paper_100mm(), 1);
+        let target = pn.static_dp_kpa(&[load(0.0, 0.0, 15.0, 5.0)]);
+        let first = pn.sample(0.05, &[load(0.0, 0.0, 15.0, 5.0)]) - p.p0_kpa;
+        assert!(first < target && first > target - 0.05);
+        let later = pn.sample(20.0, &[load(0.0, 0.0, 15.0, 5.0)]) - p.p0_kpa;
+        assert!((later - target).abs() < 1e-4, "{later} {target}");
+        // unloading leaves a residual that then relaxes
+        let after = pn.sample(20.05, &[]) - p.p0_kpa;
+        assert!(after > 0.0 && after < 0.05 + 1e-12);
+    }
+}

@@ -1,0 +1,141 @@
+//! Scene files (TOML, `graphs/scenes/`): which sensor, which profile, which rates, and a list
+//! of `[[step]]`s (rests, holds and ramps of contacts, over grids and repetitions) that
+//! `expand` turns into a `Timeline`. Every error names the file, line and column.
+//!
+//! Units: mm, N, s, frames/s, Hz (CONTRACTS.md section 1). `hold_frames` converts to seconds
+//! with the scene's EIT frame rate. The format is documented in MODEL.md, "Scene files".
+
+mod expand;
+mod parse;
+
+use crate::profile::Profile;
+use crate::timeline::Timeline;
+use parse::RawScene;
+use skinflow_eit::Sensor;
+use std::ops::Range;
+use std::path::Path;
+use thiserror::Error;
+
+/// Errors from reading, parsing or validating a scene.
+#[derive(Debug, Error)]
+pub enum SceneError {
+    /// The file could not be read.
+    #[error("{file}: {cause}")]
+    Read { file: String, cause: String },
+    /// Parsing or validation failed at a place in the file (1-based line and column).
+    #[error("{file}:{line}:{column}: {problem}")]
+    At {
+        file: String,
+        line: usize,
+        column: usize,
+        problem: String,
+    },
+}
+
+/// Whether a live source paces events to the clock or emits them as fast as possible.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Pacing {
+    /// Emit each event when the wall clock reaches its time (a stand-in for hardware).
+    Realtime,
+    /// Emit events as fast as they are computed (batch generation, tests).
+    Fast,
+}
+
+/// Sample rates of the two channels and the pacing of a live source.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Rates {
+    /// EIT frames per second (the paper's board: 1.3).
+    pub eit_fps: f64,
+    /// Pressure samples per second (the paper: 20).
+    pub pressure_hz: f64,
+    pub pacing: Pacing,
+}
+
+/// Which channels the scene asks for; the others are not computed at all.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Channels {
+    pub eit: bool,
+    pub pressure: bool,
+}
+
+/// A validated scene.
+#[derive(Debug, Clone)]
+pub struct Scene {
+    /// The scene's name (`[scene] name`, or the file stem).
+    pub name: String,
+    /// Where it came from, as used in error messages.
+    pub source: String,
+    pub sensor: Sensor,
+    pub profile: Profile,
+    /// Name of the preset the profile started from.
+    pub profile_name: String,
+    pub rates: Rates,
+    pub channels: Channels,
+    pub timeline: Timeline,
+    /// The scene's TOML text, verbatim (recordings may store it).
+    pub toml: String,
+}
+
+impl Scene {
+    /// Reads and validates a scene file.
+    pub fn from_file(path: impl AsRef<Path>) -> Result<Scene, SceneError> {
+        let path = path.as_ref();
+        let file = path.display().to_string();
+        let text = std::fs::read_to_string(path).map_err(|e| SceneError::Read {
+            file: file.clone(),
+            cause: e.to_string(),
+        })?;
+        let mut scene = Scene::from_str(&text, &file)?;
+        if scene.name.is_empty() {
+            scene.name = path
+                .file_stem()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_default();
+        }
+        Ok(scene)
+    }
+
+    /// Parses and validates scene text; `file` names it in errors.
+    #[allow(clippy::should_implement_trait)] // needs the file name, FromStr cannot take it
+    pub fn from_str(text: &str, file: &str) -> Result<Scene, SceneError> {
+        let at = Locator { text, file };
+        let raw: RawScene =
+            toml::from_str(text).map_err(|e| at.error(e.span(), e.message().to_owned()))?;
+        expand::validate(raw, text, &at)
+    }
+
+    /// Scene duration, s.
+    pub fn duration_s(&self) -> f64 {
+        self.timeline.duration_s()
+    }
+}
+
+/// Turns byte spans into `file:line:column` errors.
+pub(crate) struct Locator<'a> {
+    text: &'a str,
+    file: &'a str,
+}
+
+impl Locator<'_> {
+    pub(crate) fn error(&self, span: Option<Range<usize>>, problem: String) -> SceneError {
+        let (line, column) = span.map_or((1, 1), |s| line_column(self.text, s.start));
+        SceneError::At {
+            file: self.file.to_owned(),
+            line,
+            column,
+            problem,
+        }
+    }
+}
+
+/// 1-based line and column (in characters) of a byte offset.
+pub(crate) fn line_column(text: &str, offset: usize) -> (usize, usize) {
+    let offset = offset.min(text.len());
+    let before = &text[..text.floor_char_boundary(offset)];
+    let line = before.matches('\n').count() + 1;
+    let line_start = before.rfind('\n').map_or(0, |i| i + 1);
+    (line, before[line_start..].chars().count() + 1)
+}
+
+#[cfg(test)]
+mod tests;

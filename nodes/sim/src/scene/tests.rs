@@ -1,0 +1,187 @@
+use super::*;
+
+fn parse(text: &str) -> Result<Scene, SceneError> {
+    Scene::from_str(text, "t.toml")
+}
+
+/// The error's `file:line:column` prefix and message.
+fn fails(text: &str) -> (usize, usize, String) {
+    match parse(text).unwrap_err() {
+        SceneError::At {
+            file,
+            line,
+            column,
+            problem,
+        } => {
+            assert_eq!(file, "t.toml");
+            (line, column, problem)
+        }
+        e => panic!("unexpected {e}"),
+    }
+}
+
+const HEAD: &str = "[scene]\nname = \"t\"\nprofile = \"ideal\"\n\n[[step]]\nrest_s = 2.0\n\n";
+
+#[test]
+fn line_column_counts_from_one() {
+    let t = "ab\ncd\n";
+    assert_eq!(line_column(t, 0), (1, 1));
+    assert_eq!(line_column(t, 4), (2, 2));
+    assert_eq!(line_column(t, 99), (3, 1));
+}
+
+#[test]
+fn staircase_grid_expands_to_holds_and_ramps() {
+    let text = format!(
+        "{HEAD}[[step]]\ngrid = {{ x_mm = [-20.0, 20.0], y_mm = [-20.0, 20.0], n = [2, 2] }}\n\
+         diameter_mm = 15.0\nforces_n = {{ from = 1.0, to = 3.0, n = 3 }}\nloading = \"staircase\"\n\
+         hold_s = 2.0\nramp_s = 0.5\nrelease_s = 0.25\nrest_s = 1.0\n"
+    );
+    let s = parse(&text).unwrap();
+    assert_eq!(s.rates.eit_fps, 1.3);
+    assert_eq!(s.rates.pressure_hz, 20.0);
+    let tl = &s.timeline;
+    // rest + 4 positions x (3 x (ramp + hold) + release + rest)
+    assert_eq!(tl.segments.len(), 1 + 4 * 8);
+    let per_position = 3.0 * 2.5 + 0.25 + 1.0;
+    assert!((tl.duration_s() - (2.0 + 4.0 * per_position)).abs() < 1e-9);
+    let first = &tl.segments[1].contacts[0];
+    assert_eq!((first.x_mm, first.y_mm), (-20.0, -20.0));
+    assert_eq!((first.start_force_n, first.end_force_n), (0.0, 1.0));
+    let second_hold = &tl.segments[4].contacts[0];
+    assert_eq!(
+        (second_hold.start_force_n, second_hold.end_force_n),
+        (2.0, 2.0)
+    );
+    // the second position is to the right of the first (raster scan from the bottom left)
+    let second_pos = &tl.segments[9].contacts[0];
+    assert_eq!((second_pos.x_mm, second_pos.y_mm), (20.0, -20.0));
+    assert_ne!(first.press, second_pos.press);
+    assert_eq!(tl.smallest_diameter_mm(), Some(15.0));
+}
+
+#[test]
+fn separate_indentations_repeat_at_each_position() {
+    let text = format!(
+        "{HEAD}[[step]]\nat_mm = [[0.0, 0.0], [10.0, 5.0]]\ndiameter_mm = 10.0\nforces_n = [5.0]\nhold_frames = 6\nrepeat = 3\nrest_s = 0.5\n"
+    );
+    let s = parse(&text).unwrap();
+    let presses: std::collections::BTreeSet<u32> = s
+        .timeline
+        .segments
+        .iter()
+        .flat_map(|g| g.contacts.iter().map(|c| c.press))
+        .collect();
+    assert_eq!(presses.len(), 6);
+    let hold = &s.timeline.segments[2];
+    assert!((hold.end_s - hold.start_s - 6.0 / 1.3).abs() < 1e-12);
+    // the first three indentations are at the first position
+    assert_eq!(s.timeline.segments[1 + 3 * 4].contacts[0].x_mm, 10.0);
+}
+
+#[test]
+fn multi_contact_and_profile_steps() {
+    let text = format!(
+        "{HEAD}[[step]]\ncontacts = [{{ x_mm = -30.0, y_mm = 0.0, diameter_mm = 10.0, force_n = 0.98 }},\n\
+         {{ x_mm = 30.0, y_mm = 0.0, diameter_mm = 10.0, force_n = 1.96 }}]\nhold_frames = 6\nrest_s = 1.0\n\n\
+         [[step]]\nat_mm = [[0.0, 0.0]]\ndiameter_mm = 15.0\nforce_profile = [[0.0, 0.0], [2.0, 4.0], [3.0, 4.0]]\nramp_s = 0.0\nrelease_s = 0.5\n"
+    );
+    let s = parse(&text).unwrap();
+    assert_eq!(s.timeline.max_contacts(), 2);
+    let hold = &s.timeline.segments[2];
+    assert_eq!(hold.contacts[1].end_force_n, 1.96);
+    let last_ramp = s
+        .timeline
+        .segments
+        .iter()
+        .rev()
+        .find(|g| !g.is_static())
+        .unwrap();
+    assert_eq!(last_ramp.contacts[0].start_force_n, 4.0);
+}
+
+#[test]
+fn contact_outside_sensor_is_rejected_at_its_line() {
+    let text = format!(
+        "{HEAD}[[step]]\ncontacts = [\n  {{ x_mm = 60.0, y_mm = 0.0, diameter_mm = 10.0, force_n = 1.0 }},\n]\nhold_s = 1.0\n"
+    );
+    let (line, col, msg) = fails(&text);
+    assert_eq!((line, col), (10, 3), "{msg}");
+    assert!(msg.contains("outside the sensor"), "{msg}");
+}
+
+#[test]
+fn negative_force_and_diameter_are_rejected() {
+    let (line, _, msg) = fails(&format!(
+        "{HEAD}[[step]]\nat_mm = [[0.0, 0.0]]\ndiameter_mm = 10.0\nforces_n = [1.0, -2.0]\nhold_s = 1.0\n"
+    ));
+    assert_eq!(line, 11);
+    assert!(msg.contains("forces_n") && msg.contains("-2"), "{msg}");
+    let (line, col, msg) = fails(&format!(
+        "{HEAD}[[step]]\nat_mm = [[0.0, 0.0]]\ndiameter_mm = -10.0\nforces_n = [1.0]\nhold_s = 1.0\n"
+    ));
+    assert_eq!((line, col), (10, 15));
+    assert!(msg.contains("diameter_mm") && msg.contains("> 0"), "{msg}");
+}
+
+#[test]
+fn empty_timeline_is_rejected() {
+    let (_, _, msg) = fails("[scene]\nname = \"x\"\n");
+    assert!(msg.contains("empty timeline"), "{msg}");
+    let (_, _, msg) = fails("[scene]\n[[step]]\nrest_s = 0.0\n");
+    assert!(msg.contains("empty timeline"), "{msg}");
+}
+
+#[test]
+fn first_step_must_be_no_load() {
+    let (line, _, msg) = fails(
+        "[scene]\n[[step]]\nat_mm = [[0.0, 0.0]]\ndiameter_mm = 10.0\nforces_n = [1.0]\nhold_s = 1.0\n",
+    );
+    assert_eq!(line, 2);
+    assert!(msg.contains("no-load"), "{msg}");
+}
+
+#[test]
+fn syntax_and_unknown_keys_name_line_and_column() {
+    let (line, col, msg) = fails("[scene]\nname = \"x\"\n[[step]]\nrest_s = 1.0\nrestt_s = 2.0\n");
+    assert_eq!((line, col), (5, 1), "{msg}");
+    assert!(msg.contains("restt_s"), "{msg}");
+    let (line, _, _) = fails("[scene]\nname = \"x\n");
+    assert_eq!(line, 2);
+    let (line, _, msg) = fails("[scene]\nprofile = \"perfect\"\n[[step]]\nrest_s = 1.0\n");
+    assert_eq!(line, 2);
+    assert!(msg.contains("perfect"), "{msg}");
+}
+
+#[test]
+fn model_overrides_and_rates() {
+    let text = "[scene]\nchannels = [\"pressure\"]\n[rates]\npacing = \"fast\"\npressure_hz = 50\n[model]\np0_kpa = 1\npressure_noise_kpa = 0.05\n[[step]]\nrest_s = 1.0\n";
+    let s = parse(text).unwrap();
+    assert_eq!(s.profile.p0_kpa, 1.0);
+    assert_eq!(s.profile.pressure_noise_kpa, 0.05);
+    assert_eq!(s.profile_name, "paper");
+    assert_eq!(s.rates.pacing, Pacing::Fast);
+    assert_eq!(s.rates.pressure_hz, 50.0);
+    assert_eq!(
+        s.channels,
+        Channels {
+            eit: false,
+            pressure: true
+        }
+    );
+    let (line, _, msg) = fails("[scene]\n[model]\nbogus = 1.0\n[[step]]\nrest_s = 1.0\n");
+    assert_eq!(line, 2);
+    assert!(msg.contains("bogus"), "{msg}");
+    let (_, _, msg) = fails("[scene]\n[model]\nstrain_max = 2.0\n[[step]]\nrest_s = 1.0\n");
+    assert!(msg.contains("strain_max"), "{msg}");
+}
+
+#[test]
+fn inline_sensor_is_used() {
+    let text = "[scene]\n[sensor]\nname = \"small\"\nwidth_mm = 60.0\nheight_mm = 60.0\n[[step]]\nrest_s = 1.0\n[[step]]\nat_mm = [[35.0, 0.0]]\ndiameter_mm = 10.0\nforces_n = [1.0]\nhold_s = 1.0\n";
+    let (line, _, msg) = fails(text);
+    assert_eq!(line, 9);
+    assert!(msg.contains("outside"), "{msg}");
+    let s = parse(&text.replace("35.0", "25.0")).unwrap();
+    assert_eq!(s.sensor.width_mm, 60.0);
+}

@@ -1,0 +1,229 @@
+//! The simulator: walks a scene's timeline and emits its events in time order (ties: truth,
+//! then pressure, then EIT). EIT frame k covers [k T, (k+1) T) and is stamped at its middle
+//! (k + 0.5) T, T = 1 / eit_fps; pressure sample j is at j / pressure_hz; truth rows at their
+//! times (see `truth`). Time starts at 0; only events before the scene's end are emitted, and
+//! only the channels the scene asks for are computed.
+//!
+//! `next_into` writes an EIT frame into a caller's buffer (no allocation on static holds);
+//! `next_event` and the `Iterator` impl return owned events for convenience.
+
+use crate::acquire::EitChannel;
+use crate::pneumatic::Pneumatic;
+use crate::scene::{Rates, Scene};
+use crate::timeline::{Load, Timeline};
+use crate::truth::{TruthContact, TruthRow, truth_rows};
+use skinflow_eit::{EitError, Sensor};
+use thiserror::Error;
+
+/// Errors from building or running a simulation.
+#[derive(Debug, Error)]
+pub enum SimError {
+    /// The simulation mesh or forward model could not be built, or a solve failed.
+    #[error("scene \"{scene}\": eit channel: {source}")]
+    Eit { scene: String, source: EitError },
+}
+
+/// One event of the simulated skin.
+#[derive(Debug, Clone, PartialEq)]
+pub enum SimEvent {
+    /// An EIT frame: time (s, middle of the acquisition window), device frame counter, and
+    /// values in protocol order (V).
+    Eit { t_s: f64, seq: u64, v: Vec<f64> },
+    /// A gauge-pressure sample, kPa (includes the no-load offset P0).
+    Pressure { t_s: f64, kpa: f64 },
+    /// A ground-truth row: these contacts hold from `t_s` until the next row (empty: none).
+    Truth {
+        t_s: f64,
+        contacts: Vec<TruthContact>,
+    },
+}
+
+/// What `next_into` produced; EIT values and truth contacts are in the caller's buffers.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum EventKind {
+    Eit { t_s: f64, seq: u64 },
+    Pressure { t_s: f64, kpa: f64 },
+    Truth { t_s: f64 },
+}
+
+/// A running simulation of one scene with one seed.
+#[derive(Debug)]
+pub struct Simulator {
+    // Configuration
+    sensor: Sensor,
+    rates: Rates,
+    timeline: Timeline,
+    duration_s: f64,
+    scene: String,
+    eit: Option<EitChannel>,
+    pneumatic: Option<Pneumatic>,
+    truth: Vec<TruthRow>,
+    // Internal state
+    next_frame: u64,
+    next_sample: u64,
+    next_truth: usize,
+    hint: usize,
+    loads: Vec<Load>,
+}
+
+impl Simulator {
+    /// Prepares the channels the scene asks for (meshing and symbolic factorization happen here).
+    pub fn new(scene: &Scene, seed: u64) -> Result<Simulator, SimError> {
+        let eit = if scene.channels.eit {
+            Some(
+                EitChannel::new(&scene.profile, &scene.sensor, &scene.timeline, seed).map_err(
+                    |source| SimError::Eit {
+                        scene: scene.name.clone(),
+                        source,
+                    },
+                )?,
+            )
+        } else {
+            None
+        };
+        let pneumatic = scene
+            .channels
+            .pressure
+            .then(|| Pneumatic::new(&scene.profile, &scene.sensor, seed));
+        Ok(Simulator {
+            sensor: scene.sensor.clone(),
+            rates: scene.rates,
+            truth: truth_rows(&scene.timeline, scene.rates.pressure_hz),
+            timeline: scene.timeline.clone(),
+            duration_s: scene.duration_s(),
+            scene: scene.name.clone(),
+            eit,
+            pneumatic,
+            next_frame: 0,
+            next_sample: 0,
+            next_truth: 0,
+            hint: 0,
+            loads: Vec::with_capacity(scene.timeline.max_contacts()),
+        })
+    }
+
+    pub fn sensor(&self) -> &Sensor {
+        &self.sensor
+    }
+
+    pub fn rates(&self) -> Rates {
+        self.rates
+    }
+
+    /// Scene duration, s: every event is earlier.
+    pub fn duration_s(&self) -> f64 {
+        self.duration_s
+    }
+
+    /// Values per EIT frame (M), 0 when the scene has no EIT channel.
+    pub fn measurement_count(&self) -> usize {
+        self.eit.as_ref().map_or(0, |e| e.measurement_count())
+    }
+
+    /// Most contacts at once in the scene (the truth width C of a recording).
+    pub fn max_contacts(&self) -> usize {
+        self.timeline.max_contacts()
+    }
+
+    /// Elements of the simulation mesh (0 without EIT).
+    pub fn sim_mesh_elements(&self) -> usize {
+        self.eit.as_ref().map_or(0, |e| e.element_count())
+    }
+
+    /// Forward solves done so far.
+    pub fn solve_count(&self) -> u64 {
+        self.eit.as_ref().map_or(0, |e| e.solve_count())
+    }
+
+    fn frame_period_s(&self) -> f64 {
+        1.0 / self.rates.eit_fps
+    }
+
+    /// Time of the next EIT frame, if it completes before the end.
+    fn next_frame_t(&self) -> Option<f64> {
+        let t = self
+            .eit
+            .as_ref()
+            .map(|_| (self.next_frame as f64 + 0.5) * self.frame_period_s())?;
+        ((self.next_frame + 1) as f64 * self.frame_period_s() <= self.duration_s).then_some(t)
+    }
+
+    fn next_sample_t(&self) -> Option<f64> {
+        let t = self
+            .pneumatic
+            .as_ref()
+            .map(|_| self.next_sample as f64 / self.rates.pressure_hz)?;
+        (t < self.duration_s).then_some(t)
+    }
+
+    fn next_truth_t(&self) -> Option<f64> {
+        self.truth
+            .get(self.next_truth)
+            .map(|r| r.t_s)
+            .filter(|&t| t < self.duration_s)
+    }
+
+    /// The next event; an EIT frame's values go into `eit_v` (length M), a truth row's
+    /// contacts into `truth` (cleared first). None at the end of the scene.
+    pub fn next_into(
+        &mut self,
+        eit_v: &mut [f64],
+        truth: &mut Vec<TruthContact>,
+    ) -> Result<Option<EventKind>, SimError> {
+        let (tt, tp, te) = (
+            self.next_truth_t(),
+            self.next_sample_t(),
+            self.next_frame_t(),
+        );
+        let first = [tt, tp, te].into_iter().flatten().reduce(f64::min);
+        let Some(t) = first else { return Ok(None) };
+        if tt == Some(t) {
+            truth.clear();
+            truth.extend_from_slice(&self.truth[self.next_truth].contacts);
+            self.next_truth += 1;
+            return Ok(Some(EventKind::Truth { t_s: t }));
+        }
+        if tp == Some(t) {
+            self.hint = self.timeline.loads_into(t, self.hint, &mut self.loads);
+            let pn = self
+                .pneumatic
+                .as_mut()
+                .expect("a sample time implies the pressure channel");
+            let kpa = pn.sample(t, &self.loads);
+            self.next_sample += 1;
+            return Ok(Some(EventKind::Pressure { t_s: t, kpa }));
+        }
+        let period = self.frame_period_s();
+        let eit = self
+            .eit
+            .as_mut()
+            .expect("a frame time implies the eit channel");
+        eit.frame_into(&self.timeline, t, period, eit_v)
+            .map_err(|source| SimError::Eit {
+                scene: self.scene.clone(),
+                source,
+            })?;
+        let seq = self.next_frame;
+        self.next_frame += 1;
+        Ok(Some(EventKind::Eit { t_s: t, seq }))
+    }
+
+    /// The next event as an owned value (allocates for EIT frames and truth rows).
+    pub fn next_event(&mut self) -> Result<Option<SimEvent>, SimError> {
+        let mut v = vec![0.0; self.measurement_count()];
+        let mut contacts = Vec::new();
+        Ok(self.next_into(&mut v, &mut contacts)?.map(|k| match k {
+            EventKind::Eit { t_s, seq } => SimEvent::Eit { t_s, seq, v },
+            EventKind::Pressure { t_s, kpa } => SimEvent::Pressure { t_s, kpa },
+            EventKind::Truth { t_s } => SimEvent::Truth { t_s, contacts },
+        }))
+    }
+}
+
+impl Iterator for Simulator {
+    type Item = Result<SimEvent, SimError>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        self.next_event().transpose()
+    }
+}

@@ -1,1 +1,63 @@
-fn main(){}
+//! Per-frame cost of the contact stages on a 64 x 64 image (setup outside the timed loop).
+//! `segment_64x64_*`: the segmenter alone; `chain_64x64_*`: segment -> split -> correct for
+//! every strategy (what the engine runs per frame after reconstruction).
+
+#[path = "../tests/synth/mod.rs"]
+mod synth;
+
+use criterion::{Criterion, criterion_group, criterion_main};
+use skinflow_contact::correct::calibrate::{CalibParams, calibrate};
+use skinflow_contact::correct::calibration::Provenance;
+use skinflow_contact::{
+    ForceEstimate, ImageGrid, SegmentParams, Segmenter, Strategy, StrategyKind,
+};
+use std::hint::black_box;
+
+fn bench(c: &mut Criterion) {
+    let grid = ImageGrid::centred(64, 64, 100.0, 100.0);
+    let mut seg = Segmenter::new(grid, &SegmentParams::with_floor(synth::FLOOR)).unwrap();
+    let mut contacts = seg.new_contacts();
+    let one = synth::image(&[(10.0, -5.0, 4.0)]);
+    let three = synth::image(&[(-30.0, 0.0, 2.0), (30.0, 20.0, 6.0), (0.0, -35.0, 3.0)]);
+    let empty = synth::image(&[]);
+    for (name, img) in [
+        ("segment_64x64_empty", &empty),
+        ("segment_64x64_1contact", &one),
+        ("segment_64x64_3contacts", &three),
+    ] {
+        c.bench_function(name, |b| {
+            b.iter(|| seg.segment_into(black_box(img), &mut contacts).unwrap())
+        });
+    }
+    let cal = calibrate(
+        &synth::paper_like(1),
+        &CalibParams::default(),
+        Provenance::default(),
+    )
+    .unwrap()
+    .calibration;
+    let proposed = Strategy::new(&cal, StrategyKind::PneumaticLocAware);
+    let all = Strategy::all(&cal);
+    let mut forces = [ForceEstimate::default(); 8];
+    c.bench_function("chain_64x64_3contacts_pneumatic_locaware", |b| {
+        b.iter(|| {
+            seg.segment_into(black_box(&three), &mut contacts).unwrap();
+            let n = contacts.len();
+            proposed.estimate_frame_into(black_box(1.2), contacts.as_slice(), &mut forces[..n]);
+            black_box(&forces);
+        })
+    });
+    c.bench_function("chain_64x64_3contacts_all_strategies", |b| {
+        b.iter(|| {
+            seg.segment_into(black_box(&three), &mut contacts).unwrap();
+            let n = contacts.len();
+            for s in &all {
+                s.estimate_frame_into(black_box(1.2), contacts.as_slice(), &mut forces[..n]);
+            }
+            black_box(&forces);
+        })
+    });
+}
+
+criterion_group!(benches, bench);
+criterion_main!(benches);

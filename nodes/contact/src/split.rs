@@ -27,7 +27,11 @@ pub struct SensitivityField {
 impl SensitivityField {
     /// Uniform sensitivity 1 (makes the compensated splitter proportional).
     pub fn uniform(region: Region) -> Self {
-        Self { region, field: QuadField::constant(1.0), floor: 0.1 }
+        Self {
+            region,
+            field: QuadField::constant(1.0),
+            floor: 0.1,
+        }
     }
 
     /// Sensitivity at a point (mm), floored.
@@ -39,8 +43,16 @@ impl SensitivityField {
     /// Fits s to C / F over single-contact samples `(x_mm, y_mm, cond_sum, force_n)` by ridge
     /// (constant unpenalized, spatial terms shrunk to 0, weight chosen by CV over `grid`).
     /// `None` with fewer than 2 * 6 usable samples (F > 0, C > 0).
-    pub fn fit(region: Region, samples: &[(f64, f64, f64, f64)], grid: &[f64], folds: usize) -> Option<Self> {
-        let used: Vec<_> = samples.iter().filter(|s| s.2 > 0.0 && s.3 > 0.0 && s.2.is_finite()).collect();
+    pub fn fit(
+        region: Region,
+        samples: &[(f64, f64, f64, f64)],
+        grid: &[f64],
+        folds: usize,
+    ) -> Option<Self> {
+        let used: Vec<_> = samples
+            .iter()
+            .filter(|s| s.2 > 0.0 && s.3 > 0.0 && s.2.is_finite())
+            .collect();
         if used.len() < 2 * NPHI {
             return None;
         }
@@ -53,11 +65,28 @@ impl SensitivityField {
             y.push(s.2 / s.3 / mean);
         }
         let prior = [1.0, 0.0, 0.0, 0.0, 0.0, 0.0];
-        let problem = RidgeProblem { design: &design, y: &y, p: NPHI, prior: &prior, base_penalty: &[0.0; NPHI] };
-        let cv = cross_validate(&problem, &CvSearch { blocks: &[1..NPHI], grid, folds })?;
+        let problem = RidgeProblem {
+            design: &design,
+            y: &y,
+            p: NPHI,
+            prior: &prior,
+            base_penalty: &[0.0; NPHI],
+        };
+        let cv = cross_validate(
+            &problem,
+            &CvSearch {
+                blocks: std::slice::from_ref(&(1..NPHI)),
+                grid,
+                folds,
+            },
+        )?;
         let mut coeffs = [0.0; NPHI];
         coeffs.copy_from_slice(&cv.coeffs);
-        Some(Self { region, field: QuadField { coeffs }, floor: 0.1 })
+        Some(Self {
+            region,
+            field: QuadField { coeffs },
+            floor: 0.1,
+        })
     }
 }
 
@@ -82,7 +111,11 @@ impl Splitter {
 
     /// Unnormalized weight of one contact (>= 0).
     pub fn weight(&self, c: &Contact) -> f64 {
-        let sum = if c.sum.is_finite() { c.sum.max(0.0) } else { 0.0 };
+        let sum = if c.sum.is_finite() {
+            c.sum.max(0.0)
+        } else {
+            0.0
+        };
         match self {
             Splitter::Proportional => sum,
             Splitter::SensitivityCompensated(s) => sum / s.at(c.x_mm, c.y_mm),
@@ -95,7 +128,11 @@ impl Splitter {
         let total: f64 = contacts.iter().map(|c| self.weight(c)).sum();
         let n = contacts.len() as f64;
         for (o, c) in out.iter_mut().zip(contacts) {
-            *o = if total > 0.0 { self.weight(c) / total * dp_kpa } else { dp_kpa / n };
+            *o = if total > 0.0 {
+                self.weight(c) / total * dp_kpa
+            } else {
+                dp_kpa / n
+            };
         }
     }
 }
@@ -105,11 +142,23 @@ mod tests {
     use super::*;
 
     fn contact(x_mm: f64, sum: f64) -> Contact {
-        Contact { x_mm, y_mm: 0.0, sum, area_mm2: 100.0, peak: 1.0, label: 1 }
+        Contact {
+            x_mm,
+            y_mm: 0.0,
+            sum,
+            area_mm2: 100.0,
+            peak: 1.0,
+            label: 1,
+        }
     }
 
     fn region() -> Region {
-        Region { x_min_mm: -40.0, x_max_mm: 40.0, y_min_mm: -40.0, y_max_mm: 40.0 }
+        Region {
+            x_min_mm: -40.0,
+            x_max_mm: 40.0,
+            y_min_mm: -40.0,
+            y_max_mm: 40.0,
+        }
     }
 
     #[test]
@@ -131,7 +180,9 @@ mod tests {
         // the right at u = 1, and the compensated split must be equal again.
         let field = SensitivityField {
             region: region(),
-            field: QuadField { coeffs: [1.0, 1.0, 0.0, 0.0, 0.0, 0.0] },
+            field: QuadField {
+                coeffs: [1.0, 1.0, 0.0, 0.0, 0.0, 0.0],
+            },
             floor: 0.1,
         };
         let cs = [contact(0.0, 1.0), contact(40.0, 2.0)];

@@ -111,9 +111,25 @@ impl fmt::Display for R2Table {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let cell = |v: Option<f64>| v.map_or_else(|| "-".to_string(), |v| format!("{v:.3}"));
         writeln!(f, "Signal-force correlation (R^2)")?;
-        writeln!(f, "{:<30} {:>16} {:>14}", "Signal", "Center location", "All locations")?;
-        writeln!(f, "{:<30} {:>16} {:>14}", "EIT conductivity change sum", cell(self.eit_center), cell(self.eit_all))?;
-        write!(f, "{:<30} {:>16} {:>14}", "Pneumatic pressure", cell(self.pneumatic_center), cell(self.pneumatic_all))
+        writeln!(
+            f,
+            "{:<30} {:>16} {:>14}",
+            "Signal", "Center location", "All locations"
+        )?;
+        writeln!(
+            f,
+            "{:<30} {:>16} {:>14}",
+            "EIT conductivity change sum",
+            cell(self.eit_center),
+            cell(self.eit_all)
+        )?;
+        write!(
+            f,
+            "{:<30} {:>16} {:>14}",
+            "Pneumatic pressure",
+            cell(self.pneumatic_center),
+            cell(self.pneumatic_all)
+        )
     }
 }
 
@@ -184,13 +200,22 @@ pub struct Calibration {
 pub enum CalibrationFileError {
     /// File system error.
     #[error("{path}: {source}")]
-    Io { path: String, source: std::io::Error },
+    Io {
+        path: String,
+        source: std::io::Error,
+    },
     /// Not valid TOML for a calibration.
     #[error("{path}: {message}")]
     Parse { path: String, message: String },
     /// Wrong `format` or a newer `format_version`.
-    #[error("{path}: not a skinflow calibration (format \"{format}\", version {version}; expected \"{FORMAT}\" <= {FORMAT_VERSION})")]
-    Format { path: String, format: String, version: u32 },
+    #[error(
+        "{path}: not a skinflow calibration (format \"{format}\", version {version}; expected \"{FORMAT}\" <= {FORMAT_VERSION})"
+    )]
+    Format {
+        path: String,
+        format: String,
+        version: u32,
+    },
     /// Serialization failed.
     #[error("calibration: cannot serialize: {0}")]
     Serialize(String),
@@ -204,8 +229,10 @@ impl Calibration {
 
     /// Parses TOML text; `origin` names the source in errors (a path, or "<string>").
     pub fn from_toml_str(text: &str, origin: &str) -> Result<Self, CalibrationFileError> {
-        let cal: Calibration = toml::from_str(text)
-            .map_err(|e| CalibrationFileError::Parse { path: origin.to_string(), message: e.to_string().replace('\n', " ") })?;
+        let cal: Calibration = toml::from_str(text).map_err(|e| CalibrationFileError::Parse {
+            path: origin.to_string(),
+            message: e.to_string().replace('\n', " "),
+        })?;
         if cal.format != FORMAT || cal.format_version > FORMAT_VERSION {
             return Err(CalibrationFileError::Format {
                 path: origin.to_string(),
@@ -218,14 +245,18 @@ impl Calibration {
 
     /// Reads a calibration file.
     pub fn read(path: &Path) -> Result<Self, CalibrationFileError> {
-        let text = std::fs::read_to_string(path)
-            .map_err(|source| CalibrationFileError::Io { path: path.display().to_string(), source })?;
+        let text = std::fs::read_to_string(path).map_err(|source| CalibrationFileError::Io {
+            path: path.display().to_string(),
+            source,
+        })?;
         Self::from_toml_str(&text, &path.display().to_string())
     }
 
     /// Writes a calibration file.
     pub fn write(&self, path: &Path) -> Result<(), CalibrationFileError> {
-        std::fs::write(path, self.to_toml_string()?)
-            .map_err(|source| CalibrationFileError::Io { path: path.display().to_string(), source })
+        std::fs::write(path, self.to_toml_string()?).map_err(|source| CalibrationFileError::Io {
+            path: path.display().to_string(),
+            source,
+        })
     }
 }

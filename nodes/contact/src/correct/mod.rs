@@ -12,6 +12,8 @@ pub mod fit;
 pub mod map;
 pub mod strategy;
 
-pub use calibrate::{CalibParams, CalibSample, CalibWarning, CalibrateError, Calibrated, average_holds, calibrate};
+pub use calibrate::{
+    CalibParams, CalibSample, CalibWarning, CalibrateError, Calibrated, average_holds, calibrate,
+};
 pub use calibration::{Calibration, CalibrationFileError, Provenance, R2Table};
 pub use strategy::{ForceEstimate, ForceFlags, Strategy, StrategyKind};

@@ -71,7 +71,12 @@ pub struct MatchRecord {
 pub enum EvalError {
     /// Force or latency arrays do not match the strategies or detections.
     #[error("eval: frame {frame}: {what} has {got} entries, expected {expected}")]
-    Shape { frame: usize, what: &'static str, got: usize, expected: usize },
+    Shape {
+        frame: usize,
+        what: &'static str,
+        got: usize,
+        expected: usize,
+    },
 }
 
 /// Accumulates frames for a fixed list of strategies.
@@ -123,7 +128,18 @@ impl Evaluator {
     /// Adds one evaluated frame; returns its matches.
     pub fn push(&mut self, f: &FrameInput) -> Result<Vec<Pair>, EvalError> {
         let frame = self.frames;
-        let shape = |what, got, expected| if got == expected { Ok(()) } else { Err(EvalError::Shape { frame, what, got, expected }) };
+        let shape = |what, got, expected| {
+            if got == expected {
+                Ok(())
+            } else {
+                Err(EvalError::Shape {
+                    frame,
+                    what,
+                    got,
+                    expected,
+                })
+            }
+        };
         shape("forces_n", f.forces_n.len(), self.names.len())?;
         shape("latency_us", f.latency_us.len(), self.names.len())?;
         for forces in f.forces_n {
@@ -204,18 +220,27 @@ pub fn percentile(values: &[f64], q: f64) -> Option<f64> {
 /// pixels whose decrease `-image` is at least t x peak, A counts all finite pixels (the
 /// sensing area on the image grid). `None` when nothing decreased.
 pub fn resolution_pct(image: &[f64], fraction: f64) -> Option<f64> {
-    let peak = image.iter().filter(|v| v.is_finite()).fold(f64::NEG_INFINITY, |m, &v| m.max(-v));
-    if !(peak > 0.0) {
+    let peak = image
+        .iter()
+        .filter(|v| v.is_finite())
+        .fold(f64::NEG_INFINITY, |m, &v| m.max(-v));
+    if peak.is_nan() || peak <= 0.0 {
         return None;
     }
     let total = image.iter().filter(|v| v.is_finite()).count();
-    let above = image.iter().filter(|v| v.is_finite() && -**v >= fraction * peak).count();
+    let above = image
+        .iter()
+        .filter(|v| v.is_finite() && -**v >= fraction * peak)
+        .count();
     Some(100.0 * (1.0 - (above as f64 / total as f64).sqrt()))
 }
 
 /// RES50 and RES75 of one image.
 pub fn resolution(image: &[f64]) -> Option<Resolution> {
-    Some(Resolution { res50_pct: resolution_pct(image, 0.5)?, res75_pct: resolution_pct(image, 0.75)? })
+    Some(Resolution {
+        res50_pct: resolution_pct(image, 0.5)?,
+        res75_pct: resolution_pct(image, 0.75)?,
+    })
 }
 
 #[cfg(test)]
@@ -256,18 +281,41 @@ mod tests {
     #[test]
     fn missed_spurious_and_shapes() {
         let mut e = Evaluator::new(&[("a", "A")]);
-        let truth = [TruthContact { x_mm: 0.0, y_mm: 0.0, force_n: 2.0, diameter_mm: 10.0 }];
+        let truth = [TruthContact {
+            x_mm: 0.0,
+            y_mm: 0.0,
+            force_n: 2.0,
+            diameter_mm: 10.0,
+        }];
         let det = [(1.0, 0.0), (40.0, 0.0)];
         let pairs = e
-            .push(&FrameInput { truth: &truth, detected_mm: &det, forces_n: &[&[2.5, 1.0]], latency_us: &[10.0], resolution: None })
+            .push(&FrameInput {
+                truth: &truth,
+                detected_mm: &det,
+                forces_n: &[&[2.5, 1.0]],
+                latency_us: &[10.0],
+                resolution: None,
+            })
             .unwrap();
         assert_eq!(pairs.len(), 1);
         assert_eq!((e.spurious, e.missed), (1, 0));
         // A frame without contact counts spurious detections only.
-        e.push(&FrameInput { truth: &[], detected_mm: &det[..1], forces_n: &[&[0.3]], latency_us: &[9.0], resolution: None })
-            .unwrap();
+        e.push(&FrameInput {
+            truth: &[],
+            detected_mm: &det[..1],
+            forces_n: &[&[0.3]],
+            latency_us: &[9.0],
+            resolution: None,
+        })
+        .unwrap();
         assert_eq!((e.spurious, e.missed, e.frames), (2, 0, 2));
-        let bad = FrameInput { truth: &[], detected_mm: &det, forces_n: &[&[1.0]], latency_us: &[1.0], resolution: None };
+        let bad = FrameInput {
+            truth: &[],
+            detected_mm: &det,
+            forces_n: &[&[1.0]],
+            latency_us: &[1.0],
+            resolution: None,
+        };
         assert!(e.push(&bad).is_err());
     }
 }

@@ -11,5 +11,8 @@ pub mod plots;
 pub mod report;
 
 pub use matching::{Pair, match_contacts};
-pub use metrics::{EvalError, Evaluator, FrameInput, MatchRecord, Resolution, TruthContact, resolution, resolution_pct};
+pub use metrics::{
+    EvalError, Evaluator, FrameInput, MatchRecord, Resolution, TruthContact, resolution,
+    resolution_pct,
+};
 pub use report::EvalReport;

@@ -81,7 +81,13 @@ pub fn dilate(disk: &Disk, width: usize, height: usize, src: &[u8], dst: &mut [u
 }
 
 /// In place: `mask = ((mask o disk) . disk)`, opening then closing; `scratch` has the mask's size.
-pub fn open_then_close(disk: &Disk, width: usize, height: usize, mask: &mut [u8], scratch: &mut [u8]) {
+pub fn open_then_close(
+    disk: &Disk,
+    width: usize,
+    height: usize,
+    mask: &mut [u8],
+    scratch: &mut [u8],
+) {
     erode(disk, width, height, mask, scratch);
     dilate(disk, width, height, scratch, mask);
     dilate(disk, width, height, mask, scratch);

@@ -12,7 +12,11 @@ pub const BINS: usize = 256;
 /// Bin index of a normalized value (values outside [0, 1] are clamped into range).
 pub fn bin_of(v: f64) -> usize {
     let k = (v * BINS as f64).floor();
-    if k.is_nan() || k < 0.0 { 0 } else { (k as usize).min(BINS - 1) }
+    if k.is_nan() || k < 0.0 {
+        0
+    } else {
+        (k as usize).min(BINS - 1)
+    }
 }
 
 /// Otsu threshold in [0, 1] from a histogram; `None` when fewer than two bins are occupied.
@@ -21,7 +25,11 @@ pub fn otsu_threshold(hist: &[u32; BINS]) -> Option<f64> {
     if total == 0.0 {
         return None;
     }
-    let sum_all: f64 = hist.iter().enumerate().map(|(k, &c)| k as f64 * c as f64).sum();
+    let sum_all: f64 = hist
+        .iter()
+        .enumerate()
+        .map(|(k, &c)| k as f64 * c as f64)
+        .sum();
     let (mut w0, mut sum0) = (0.0, 0.0);
     let mut best = -1.0_f64;
     let (mut first, mut last) = (0usize, 0usize);

@@ -1,0 +1,80 @@
+//! Per-frame stages allocate nothing: a counting global allocator (own test binary, so no
+//! other test's allocations interfere) wraps segment -> split -> correct on a warm pipeline.
+
+mod synth;
+
+use skinflow_contact::correct::calibrate::{CalibParams, calibrate};
+use skinflow_contact::correct::calibration::Provenance;
+use skinflow_contact::{ForceEstimate, ImageGrid, SegmentParams, Segmenter, Splitter, Strategy};
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+struct Counting;
+
+static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
+
+// SAFETY: forwards every call unchanged to the system allocator; it only counts calls.
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
+        // SAFETY: same contract as the caller's.
+        unsafe { System.alloc(layout) }
+    }
+
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        // SAFETY: `ptr` came from `System.alloc` above with this layout.
+        unsafe { System.dealloc(ptr, layout) }
+    }
+
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
+        // SAFETY: `ptr` came from this allocator with `layout`.
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+#[test]
+fn segment_split_and_correct_do_not_allocate_per_frame() {
+    let cal = calibrate(
+        &synth::paper_like(1),
+        &CalibParams::default(),
+        Provenance::default(),
+    )
+    .unwrap()
+    .calibration;
+    let strategies = Strategy::all(&cal);
+    let grid = ImageGrid::centred(64, 64, 100.0, 100.0);
+    let mut seg = Segmenter::new(grid, &SegmentParams::with_floor(synth::FLOOR)).unwrap();
+    let mut contacts = seg.new_contacts();
+    let images = [
+        synth::image(&[(10.0, -5.0, 4.0)]),
+        synth::image(&[(-30.0, 0.0, 2.0), (30.0, 20.0, 6.0), (0.0, -35.0, 3.0)]),
+        synth::image(&[]),
+    ];
+    let mut shares = [0.0; 8];
+    let mut forces = [ForceEstimate::default(); 8];
+    // Warm-up pass (nothing lazily allocated should remain after it).
+    seg.segment_into(&images[0], &mut contacts).unwrap();
+    let before = ALLOCATIONS.load(Ordering::SeqCst);
+    for _ in 0..3 {
+        for img in &images {
+            seg.segment_into(img, &mut contacts).unwrap();
+            let n = contacts.len();
+            Splitter::Proportional.split_into(1.2, contacts.as_slice(), &mut shares[..n]);
+            for s in &strategies {
+                s.estimate_frame_into(1.2, contacts.as_slice(), &mut forces[..n]);
+            }
+        }
+    }
+    let after = ALLOCATIONS.load(Ordering::SeqCst);
+    assert_eq!(
+        after - before,
+        0,
+        "per-frame path allocated {} times",
+        after - before
+    );
+    assert_eq!(contacts.len(), 0, "last image is empty");
+}

@@ -1,0 +1,135 @@
+//! Errors of the recording writer and reader: one enum, every variant names the file and,
+//! where there is one, the HDF5 path inside it (`/eit/v`, `/` for root attributes).
+//!
+//! Display is one lower-case line: `rec.h5: /eit/v: width 119 disagrees with ...`.
+
+use std::path::PathBuf;
+
+use thiserror::Error;
+
+/// What is wrong with a file's content (CONTRACTS.md section 2 and the documented extras).
+#[derive(Debug, Clone, PartialEq, Error)]
+pub enum SchemaProblem {
+    #[error("is missing")]
+    Missing,
+    #[error("format is {found:?}, expected \"skinflow-recording\"")]
+    WrongFormat { found: String },
+    #[error("format_version {found} is newer than the supported {supported}")]
+    NewerVersion { found: i64, supported: i64 },
+    #[error("format_version {found} is not a valid version (expected an integer >= 1)")]
+    BadVersion { found: String },
+    #[error("is not a string attribute (found {found})")]
+    NotString { found: String },
+    #[error("string is not valid UTF-8")]
+    NotUtf8,
+    #[error("is not a numeric attribute (found {found})")]
+    NotNumeric { found: String },
+    #[error("has rank {found}, expected {expected}")]
+    WrongRank { found: usize, expected: usize },
+    #[error("has {found} rows, but {other} has {expected}")]
+    LengthMismatch {
+        found: usize,
+        other: String,
+        expected: usize,
+    },
+    #[error("has {found} columns, but {other} has {expected}")]
+    ColumnMismatch {
+        found: usize,
+        other: String,
+        expected: usize,
+    },
+    #[error(
+        "width {found} disagrees with the sensor's protocol {protocol:?} ({expected} measurements)"
+    )]
+    WidthMismatch {
+        found: usize,
+        expected: usize,
+        protocol: String,
+    },
+    #[error("is not a valid sensor description: {reason}")]
+    BadSensor { reason: String },
+    #[error("time {t_s} is not finite")]
+    NonFiniteTime { t_s: f64 },
+    #[error("has element type {found}, expected a number")]
+    NotNumericData { found: String },
+}
+
+/// Error of the recording writer or reader.
+#[derive(Debug, Error)]
+pub enum RecordError {
+    /// The file's content violates the format.
+    #[error("{}: {path}: {problem}", file.display())]
+    Schema {
+        file: PathBuf,
+        path: String,
+        problem: SchemaProblem,
+    },
+    /// The HDF5 library failed (file missing, truncated, corrupt, disk full...).
+    #[error("{}: {path}: {source}", file.display())]
+    Hdf5 {
+        file: PathBuf,
+        path: String,
+        #[source]
+        source: hdf5::Error,
+    },
+    /// A writer option is out of range.
+    #[error("writer option {name:?}: {problem}")]
+    InvalidOption { name: &'static str, problem: String },
+    /// A row handed to the writer has the wrong number of values.
+    #[error("{}: {path}: row has {found} values, expected {expected}", file.display())]
+    RowWidth {
+        file: PathBuf,
+        path: String,
+        found: usize,
+        expected: usize,
+    },
+    /// A truth row has more contacts than `truth_max_contacts` allows.
+    #[error(
+        "{}: /truth: row has {found} contacts, more than truth_max_contacts = {max} \
+         (hint: raise truth_max_contacts)",
+        file.display()
+    )]
+    TooManyTruthContacts {
+        file: PathBuf,
+        found: usize,
+        max: usize,
+    },
+    /// An append to a stream that was not declared in `WriterOptions::streams`.
+    #[error("{}: {path}: stream was not declared in the writer options", file.display())]
+    NotDeclared { file: PathBuf, path: String },
+    /// `set_reference` after SWMR writing started (no new datasets are allowed then).
+    #[error(
+        "{}: /eit/reference: cannot be created after SWMR writing started \
+         (hint: call set_reference before the first flush)",
+        file.display()
+    )]
+    ReferenceAfterSwmr { file: PathBuf },
+    /// A stream that a caller needs is absent from the file.
+    #[error("{}: {path}: stream is required here but absent", file.display())]
+    MissingStream { file: PathBuf, path: String },
+    /// A file system operation failed (file not found, listing rotated parts).
+    #[error("{}: {source}", path.display())]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+}
+
+impl RecordError {
+    pub(crate) fn schema(file: &std::path::Path, path: &str, problem: SchemaProblem) -> Self {
+        RecordError::Schema {
+            file: file.to_path_buf(),
+            path: path.to_owned(),
+            problem,
+        }
+    }
+
+    pub(crate) fn hdf5(file: &std::path::Path, path: &str, source: hdf5::Error) -> Self {
+        RecordError::Hdf5 {
+            file: file.to_path_buf(),
+            path: path.to_owned(),
+            source,
+        }
+    }
+}

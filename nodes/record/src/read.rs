@@ -1,0 +1,341 @@
+//! The reader: `Recording::open` validates a format-v1 file (written by skinflow, h5py, MATLAB)
+//! and loads its streams whole as flat row-major vectors. Streams are `None` when their group
+//! is absent; each present stream has consistent lengths and widths, and EIT frames have the
+//! width M of the sensor's protocol. Times are seconds, EIT volts, pressure kPa, truth mm/N.
+
+mod attr;
+mod data;
+mod derived;
+
+use std::path::{Path, PathBuf};
+
+use hdf5::{File, OpenMode};
+use skinflow_eit::Sensor;
+
+use crate::error::{RecordError, SchemaProblem};
+use crate::layout::{self, FORMAT, FORMAT_VERSION};
+use crate::write::TruthContact;
+pub use derived::{ContactsStream, Derived, ForceStream, ImageStream};
+
+/// `/eit/*`: n frames of M values.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EitStream {
+    pub t_s: Vec<f64>,
+    pub seq: Vec<u64>,
+    /// Row-major [n, M], volts.
+    pub v: Vec<f64>,
+    /// M.
+    pub width: usize,
+}
+
+impl EitStream {
+    pub fn len(&self) -> usize {
+        self.t_s.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.t_s.is_empty()
+    }
+
+    /// Frame `i` (M values). Panics if `i >= len()`.
+    pub fn frame(&self, i: usize) -> &[f64] {
+        &self.v[i * self.width..(i + 1) * self.width]
+    }
+}
+
+/// `/pressure/*`: m gauge pressure samples.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PressureStream {
+    pub t_s: Vec<f64>,
+    pub kpa: Vec<f64>,
+}
+
+impl PressureStream {
+    pub fn len(&self) -> usize {
+        self.t_s.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.t_s.is_empty()
+    }
+}
+
+/// `/truth/*`: k rows of up to C contacts, NaN-padded, as stored.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TruthStream {
+    pub t_s: Vec<f64>,
+    /// C, the columns of each array.
+    pub max_contacts: usize,
+    /// Row-major [k, C] each.
+    pub x_mm: Vec<f64>,
+    pub y_mm: Vec<f64>,
+    pub force_n: Vec<f64>,
+    pub diameter_mm: Vec<f64>,
+}
+
+/// One truth row: the contacts present (columns whose `x_mm` is not NaN).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TruthRow<'a> {
+    pub x_mm: &'a [f64],
+    pub y_mm: &'a [f64],
+    pub force_n: &'a [f64],
+    pub diameter_mm: &'a [f64],
+}
+
+impl<'a> TruthRow<'a> {
+    pub fn contacts(&self) -> impl Iterator<Item = TruthContact> + 'a {
+        let row = *self;
+        (0..row.x_mm.len())
+            .filter(move |&j| !row.x_mm[j].is_nan())
+            .map(move |j| TruthContact {
+                x_mm: row.x_mm[j],
+                y_mm: row.y_mm[j],
+                force_n: row.force_n[j],
+                diameter_mm: row.diameter_mm[j],
+            })
+    }
+
+    pub fn contact_count(&self) -> usize {
+        self.x_mm.iter().filter(|x| !x.is_nan()).count()
+    }
+}
+
+impl TruthStream {
+    pub fn len(&self) -> usize {
+        self.t_s.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.t_s.is_empty()
+    }
+
+    /// Row `i`. Panics if `i >= len()`.
+    pub fn row(&self, i: usize) -> TruthRow<'_> {
+        let r = i * self.max_contacts..(i + 1) * self.max_contacts;
+        TruthRow {
+            x_mm: &self.x_mm[r.clone()],
+            y_mm: &self.y_mm[r.clone()],
+            force_n: &self.force_n[r.clone()],
+            diameter_mm: &self.diameter_mm[r],
+        }
+    }
+
+    /// The row in effect at `t_s`: the last row whose time is <= `t_s` (CONTRACTS.md), if any.
+    /// Assumes times in non-decreasing order.
+    pub fn index_at(&self, t_s: f64) -> Option<usize> {
+        self.t_s.partition_point(|&t| t <= t_s).checked_sub(1)
+    }
+}
+
+/// A recording file, validated and loaded.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Recording {
+    pub path: PathBuf,
+    pub format_version: i64,
+    /// Root attribute `sensor`, verbatim.
+    pub sensor_toml: String,
+    pub sensor: Sensor,
+    pub created: Option<String>,
+    pub graph_toml: Option<String>,
+    pub software_version: Option<String>,
+    /// 1-based part index of a rotated recording.
+    pub part: Option<i64>,
+    pub eit: Option<EitStream>,
+    /// `/eit/reference` [M], the no-load frame, when present.
+    pub reference: Option<Vec<f64>>,
+    pub pressure: Option<PressureStream>,
+    pub truth: Option<TruthStream>,
+    pub derived: Derived,
+}
+
+/// Opens read-only; a file left open for SWMR writing (a live writer, or one that was killed)
+/// carries a "file is open" mark that plain opening refuses, so that case retries in SWMR-read
+/// mode, which HDF5 allows on such files.
+fn open_file(path: &Path) -> Result<File, RecordError> {
+    if let Err(source) = std::fs::metadata(path) {
+        return Err(RecordError::Io {
+            path: path.to_path_buf(),
+            source,
+        });
+    }
+    match File::open(path) {
+        Ok(f) => Ok(f),
+        Err(first) => {
+            File::open_as(path, OpenMode::ReadSWMR).map_err(|_| RecordError::hdf5(path, "/", first))
+        }
+    }
+}
+
+impl Recording {
+    /// Opens and validates `path` (CONTRACTS.md section 2), then reads every stream.
+    pub fn open(path: impl AsRef<Path>) -> Result<Recording, RecordError> {
+        let fpath = path.as_ref();
+        let file = open_file(fpath)?;
+        let root = |name: &str| format!("/ attr {name}");
+        let format = attr::read_string(&file, fpath, layout::ATTR_FORMAT)?.ok_or_else(|| {
+            RecordError::schema(fpath, &root(layout::ATTR_FORMAT), SchemaProblem::Missing)
+        })?;
+        if format != FORMAT {
+            let problem = SchemaProblem::WrongFormat { found: format };
+            return Err(RecordError::schema(
+                fpath,
+                &root(layout::ATTR_FORMAT),
+                problem,
+            ));
+        }
+        let version_path = root(layout::ATTR_FORMAT_VERSION);
+        let format_version = attr::read_integer(&file, fpath, layout::ATTR_FORMAT_VERSION)?
+            .ok_or_else(|| RecordError::schema(fpath, &version_path, SchemaProblem::Missing))?;
+        if format_version > FORMAT_VERSION {
+            let problem = SchemaProblem::NewerVersion {
+                found: format_version,
+                supported: FORMAT_VERSION,
+            };
+            return Err(RecordError::schema(fpath, &version_path, problem));
+        }
+        if format_version < 1 {
+            let problem = SchemaProblem::BadVersion {
+                found: format_version.to_string(),
+            };
+            return Err(RecordError::schema(fpath, &version_path, problem));
+        }
+        let sensor_path = root(layout::ATTR_SENSOR);
+        let sensor_toml = attr::read_string(&file, fpath, layout::ATTR_SENSOR)?
+            .ok_or_else(|| RecordError::schema(fpath, &sensor_path, SchemaProblem::Missing))?;
+        let sensor = Sensor::from_toml(&sensor_toml).map_err(|e| {
+            RecordError::schema(
+                fpath,
+                &sensor_path,
+                SchemaProblem::BadSensor {
+                    reason: e.to_string(),
+                },
+            )
+        })?;
+        let eit = read_eit(&file, fpath, &sensor)?;
+        let reference = match eit.as_ref() {
+            Some(eit) if file.link_exists(layout::EIT_REFERENCE) => {
+                let r = data::read::<f64>(&file, fpath, layout::EIT_REFERENCE, 1)?;
+                if r.rows() != eit.width {
+                    let problem = SchemaProblem::ColumnMismatch {
+                        found: r.rows(),
+                        other: layout::EIT_V.into(),
+                        expected: eit.width,
+                    };
+                    return Err(RecordError::schema(fpath, layout::EIT_REFERENCE, problem));
+                }
+                Some(r.values)
+            }
+            _ => None,
+        };
+        Ok(Recording {
+            path: fpath.to_path_buf(),
+            format_version,
+            created: attr::read_string(&file, fpath, layout::ATTR_CREATED)?,
+            graph_toml: attr::read_string(&file, fpath, layout::ATTR_GRAPH)?,
+            software_version: attr::read_string(&file, fpath, layout::ATTR_SOFTWARE_VERSION)?,
+            part: attr::read_integer(&file, fpath, layout::ATTR_PART)?,
+            sensor_toml,
+            sensor,
+            eit,
+            reference,
+            pressure: read_pressure(&file, fpath)?,
+            truth: read_truth(&file, fpath)?,
+            derived: derived::read(&file, fpath)?,
+        })
+    }
+
+    /// The EIT stream, or an error naming the file when it has none.
+    pub fn require_eit(&self) -> Result<&EitStream, RecordError> {
+        self.eit.as_ref().ok_or_else(|| self.missing("/eit"))
+    }
+
+    pub fn require_pressure(&self) -> Result<&PressureStream, RecordError> {
+        self.pressure
+            .as_ref()
+            .ok_or_else(|| self.missing("/pressure"))
+    }
+
+    pub fn require_truth(&self) -> Result<&TruthStream, RecordError> {
+        self.truth.as_ref().ok_or_else(|| self.missing("/truth"))
+    }
+
+    fn missing(&self, path: &str) -> RecordError {
+        RecordError::MissingStream {
+            file: self.path.clone(),
+            path: path.to_owned(),
+        }
+    }
+}
+
+fn read_eit(file: &File, fpath: &Path, sensor: &Sensor) -> Result<Option<EitStream>, RecordError> {
+    if !file.link_exists("/eit") {
+        return Ok(None);
+    }
+    let t = data::read::<f64>(file, fpath, layout::EIT_T, 1)?;
+    let seq = data::read::<u64>(file, fpath, layout::EIT_SEQ, 1)?;
+    let v = data::read::<f64>(file, fpath, layout::EIT_V, 2)?;
+    data::expect_rows(fpath, layout::EIT_SEQ, &seq, layout::EIT_T, t.rows())?;
+    data::expect_rows(fpath, layout::EIT_V, &v, layout::EIT_T, t.rows())?;
+    let expected = sensor.measurement_count();
+    if v.width() != expected {
+        let problem = SchemaProblem::WidthMismatch {
+            found: v.width(),
+            expected,
+            protocol: sensor.protocol.name().to_owned(),
+        };
+        return Err(RecordError::schema(fpath, layout::EIT_V, problem));
+    }
+    Ok(Some(EitStream {
+        width: v.width(),
+        t_s: t.values,
+        seq: seq.values,
+        v: v.values,
+    }))
+}
+
+fn read_pressure(file: &File, fpath: &Path) -> Result<Option<PressureStream>, RecordError> {
+    if !file.link_exists("/pressure") {
+        return Ok(None);
+    }
+    let t = data::read::<f64>(file, fpath, layout::PRESSURE_T, 1)?;
+    let kpa = data::read::<f64>(file, fpath, layout::PRESSURE_KPA, 1)?;
+    data::expect_rows(
+        fpath,
+        layout::PRESSURE_KPA,
+        &kpa,
+        layout::PRESSURE_T,
+        t.rows(),
+    )?;
+    Ok(Some(PressureStream {
+        t_s: t.values,
+        kpa: kpa.values,
+    }))
+}
+
+fn read_truth(file: &File, fpath: &Path) -> Result<Option<TruthStream>, RecordError> {
+    if !file.link_exists("/truth") {
+        return Ok(None);
+    }
+    let t = data::read::<f64>(file, fpath, layout::TRUTH_T, 1)?;
+    let x = data::read::<f64>(file, fpath, layout::TRUTH_X_MM, 2)?;
+    data::expect_rows(fpath, layout::TRUTH_X_MM, &x, layout::TRUTH_T, t.rows())?;
+    let column = |path: &str| -> Result<Vec<f64>, RecordError> {
+        let d = data::read::<f64>(file, fpath, path, 2)?;
+        data::expect_rows(fpath, path, &d, layout::TRUTH_T, t.rows())?;
+        data::expect_width(fpath, path, &d, layout::TRUTH_X_MM, x.width())?;
+        Ok(d.values)
+    };
+    let (y_mm, force_n, diameter_mm) = (
+        column(layout::TRUTH_Y_MM)?,
+        column(layout::TRUTH_FORCE_N)?,
+        column(layout::TRUTH_DIAMETER_MM)?,
+    );
+    Ok(Some(TruthStream {
+        max_contacts: x.width(),
+        t_s: t.values,
+        x_mm: x.values,
+        y_mm,
+        force_n,
+        diameter_mm,
+    }))
+}

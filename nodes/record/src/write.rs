@@ -1,0 +1,732 @@
+//! The HDF5 logger's writer: `RecordingWriter` appends rows of the declared streams to
+//! in-memory buffers (one per dataset, sized one chunk) and writes a table to the file when its
+//! chunk is full or when `flush_interval_s` has passed since the last flush (checked on every
+//! append; there is no thread inside). After each write the file is flushed, so a killed
+//! process leaves a file that opens with every row up to the last flush. Optional rotation
+//! starts a new part (`rotate::part_path`) before the row that crosses `rotate_mb` or
+//! `rotate_s`. Times are seconds on the recording clock, EIT values volts, pressure kPa.
+
+mod column;
+mod create;
+
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant, SystemTime};
+
+use hdf5::File;
+use skinflow_eit::Sensor;
+
+use crate::error::{RecordError, SchemaProblem};
+use crate::layout;
+use crate::rotate::part_path;
+use crate::timestamp::iso8601_utc;
+use column::{ColumnSpec, Storage, Table};
+use create::{RootAttrs, create_file, ensure_parent_groups, write_reference, write_root_attrs};
+
+/// One contact of the ground truth (CONTRACTS.md section 2, `/truth/*`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TruthContact {
+    pub x_mm: f64,
+    pub y_mm: f64,
+    pub force_n: f64,
+    pub diameter_mm: f64,
+}
+
+/// One segmented contact of the pipeline (`/derived/contacts/*`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ContactRow {
+    pub x_mm: f64,
+    pub y_mm: f64,
+    /// Sum of the contact's conductivity change over its pixels (image units).
+    pub sum: f64,
+    pub area_mm2: f64,
+}
+
+/// Which streams a recording holds. All datasets are created empty when a file (or part) is
+/// created, so SWMR readers see the full layout and appends never create objects.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Streams {
+    pub eit: bool,
+    pub pressure: bool,
+    pub truth: bool,
+    /// Reconstructed image size `[H, W]` in pixels, when images are logged.
+    pub image_hw: Option<[usize; 2]>,
+    pub contacts: bool,
+    /// Names of the force strategies logged under `/derived/forces/<name>`.
+    pub force_strategies: Vec<String>,
+}
+
+impl Default for Streams {
+    /// EIT and pressure, nothing else.
+    fn default() -> Self {
+        Streams {
+            eit: true,
+            pressure: true,
+            truth: false,
+            image_hw: None,
+            contacts: false,
+            force_strategies: Vec::new(),
+        }
+    }
+}
+
+/// Options of `RecordingWriter::create`. Start from `WriterOptions::new(sensor_toml)`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct WriterOptions {
+    /// Sensor description (TOML, CONTRACTS.md section 1); fixes the EIT width M.
+    pub sensor_toml: String,
+    /// TOML of the graph that writes the file (root attribute `graph`).
+    pub graph_toml: Option<String>,
+    /// Root attribute `created`; `None` stamps each part with the current UTC time.
+    pub created: Option<String>,
+    /// Root attribute `software_version`, e.g. `skinflow 0.1.0`.
+    pub software_version: String,
+    pub streams: Streams,
+    /// Longest time, in wall-clock seconds, that appended rows stay only in memory. Default 1.
+    pub flush_interval_s: f64,
+    /// Start a new part once the current one reaches this size, in MB (10^6 bytes).
+    pub rotate_mb: Option<f64>,
+    /// Start a new part before the first row whose time is this many seconds (recording
+    /// clock) after the part's first row.
+    pub rotate_s: Option<f64>,
+    /// Single-writer/multiple-reader mode, so `h5py`/`ReadSWMR` readers can follow the file live.
+    pub swmr: bool,
+    /// Largest number of rows per chunk (also capped so a chunk of the widest column of a
+    /// stream stays near 1 MiB). Default 1024.
+    pub chunk_rows: usize,
+    /// Deflate level 0-9 (with the shuffle filter); 0 stores uncompressed. Default 1.
+    pub deflate_level: u8,
+    /// Columns C of `/truth/*`; rows with fewer contacts are NaN-padded. Default 8.
+    pub truth_max_contacts: usize,
+    /// Columns of `/derived/contacts/*` and `/derived/forces/*`. Default 16; more contacts
+    /// in a row are dropped and counted in `WriterStats::contacts_dropped`.
+    pub derived_max_contacts: usize,
+    /// Replace existing files instead of refusing to write. Default false.
+    pub overwrite: bool,
+}
+
+impl WriterOptions {
+    pub fn new(sensor_toml: impl Into<String>) -> Self {
+        WriterOptions {
+            sensor_toml: sensor_toml.into(),
+            graph_toml: None,
+            created: None,
+            software_version: concat!("skinflow-record ", env!("CARGO_PKG_VERSION")).to_owned(),
+            streams: Streams::default(),
+            flush_interval_s: 1.0,
+            rotate_mb: None,
+            rotate_s: None,
+            swmr: false,
+            chunk_rows: 1024,
+            deflate_level: 1,
+            truth_max_contacts: 8,
+            derived_max_contacts: 16,
+            overwrite: false,
+        }
+    }
+
+    /// Checks every option; returns the EIT width M of the sensor's protocol.
+    pub fn validate(&self) -> Result<usize, RecordError> {
+        let bad = |name, problem: String| Err(RecordError::InvalidOption { name, problem });
+        let sensor = match Sensor::from_toml(&self.sensor_toml) {
+            Ok(s) => s,
+            Err(e) => return bad("sensor_toml", e.to_string()),
+        };
+        if !(self.flush_interval_s.is_finite() && self.flush_interval_s > 0.0) {
+            return bad(
+                "flush_interval_s",
+                format!("must be finite and > 0 (got {})", self.flush_interval_s),
+            );
+        }
+        if let Some(mb) = self.rotate_mb.filter(|mb| !(mb.is_finite() && *mb > 0.0)) {
+            return bad("rotate_mb", format!("must be finite and > 0 (got {mb})"));
+        }
+        if let Some(s) = self.rotate_s.filter(|s| !(s.is_finite() && *s > 0.0)) {
+            return bad("rotate_s", format!("must be finite and > 0 (got {s})"));
+        }
+        if self.chunk_rows == 0 {
+            return bad("chunk_rows", "must be >= 1 (got 0)".into());
+        }
+        if self.deflate_level > 9 {
+            return bad(
+                "deflate_level",
+                format!("must be 0..=9 (got {})", self.deflate_level),
+            );
+        }
+        if self.truth_max_contacts == 0 {
+            return bad("truth_max_contacts", "must be >= 1 (got 0)".into());
+        }
+        if self.derived_max_contacts == 0 {
+            return bad("derived_max_contacts", "must be >= 1 (got 0)".into());
+        }
+        if let Some([h, w]) = self.streams.image_hw.filter(|[h, w]| *h == 0 || *w == 0) {
+            return bad(
+                "streams.image_hw",
+                format!("must be >= 1 x 1 pixels (got {h} x {w})"),
+            );
+        }
+        for (i, name) in self.streams.force_strategies.iter().enumerate() {
+            if name.is_empty() || name.contains('/') || name == "." || name == ".." {
+                return bad(
+                    "streams.force_strategies",
+                    format!("{name:?} is not a valid group name"),
+                );
+            }
+            if self.streams.force_strategies[..i].contains(name) {
+                return bad(
+                    "streams.force_strategies",
+                    format!("{name:?} appears twice"),
+                );
+            }
+        }
+        Ok(sensor.measurement_count())
+    }
+}
+
+/// Counters of a writer, over all parts.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct WriterStats {
+    /// Rows accepted per stream.
+    pub eit_rows: u64,
+    pub pressure_rows: u64,
+    pub truth_rows: u64,
+    pub image_rows: u64,
+    pub contacts_rows: u64,
+    /// Summed over strategies.
+    pub force_rows: u64,
+    /// Rows (all streams) written to a file and flushed: these survive a crash.
+    pub rows_written: u64,
+    pub flushes: u64,
+    /// Files written so far (1 without rotation).
+    pub parts: u32,
+    /// Derived contacts or forces beyond `derived_max_contacts`, not stored.
+    pub contacts_dropped: u64,
+}
+
+#[derive(Debug, Clone, Copy)]
+enum Slot {
+    Eit,
+    Pressure,
+    Truth,
+    Image,
+    Contacts,
+    Force(usize),
+}
+
+/// Synchronous writer of format v1; see the module doc. Dropping it flushes (errors ignored);
+/// call `close` to see them.
+pub struct RecordingWriter {
+    // Configuration
+    opts: WriterOptions,
+    base: PathBuf,
+    eit_width: usize,
+    flush_interval: Duration,
+    // Internal state
+    path: PathBuf,
+    part: Option<u32>,
+    file: Option<File>,
+    eit: Option<Table>,
+    pressure: Option<Table>,
+    truth: Option<Table>,
+    image: Option<Table>,
+    contacts: Option<Table>,
+    forces: Vec<Table>,
+    reference: Option<Vec<f64>>,
+    swmr_started: bool,
+    last_flush: Instant,
+    part_start_t_s: Option<f64>,
+    rotate_due: bool,
+    stats: WriterStats,
+}
+
+impl RecordingWriter {
+    /// Validates the options and creates the file (or its first part `rec-0001.h5` when
+    /// rotating) with every declared dataset, empty.
+    pub fn create(
+        path: impl AsRef<Path>,
+        opts: &WriterOptions,
+    ) -> Result<RecordingWriter, RecordError> {
+        let eit_width = opts.validate()?;
+        let base = path.as_ref().to_path_buf();
+        let rotating = opts.rotate_mb.is_some() || opts.rotate_s.is_some();
+        let part = rotating.then_some(1);
+        let s = &opts.streams;
+        let rows = opts.chunk_rows;
+        let (tc, dc) = (opts.truth_max_contacts, opts.derived_max_contacts);
+        let mut writer = RecordingWriter {
+            eit: s.eit.then(|| {
+                let v = vec![ColumnSpec::new(layout::EIT_V, &[eit_width])];
+                Table::new(layout::EIT_T, Some(layout::EIT_SEQ), v, rows)
+            }),
+            pressure: s.pressure.then(|| {
+                Table::new(
+                    layout::PRESSURE_T,
+                    None,
+                    vec![ColumnSpec::new(layout::PRESSURE_KPA, &[])],
+                    rows,
+                )
+            }),
+            truth: s.truth.then(|| {
+                let cols = [
+                    layout::TRUTH_X_MM,
+                    layout::TRUTH_Y_MM,
+                    layout::TRUTH_FORCE_N,
+                    layout::TRUTH_DIAMETER_MM,
+                ];
+                Table::new(
+                    layout::TRUTH_T,
+                    None,
+                    cols.iter().map(|p| ColumnSpec::new(*p, &[tc])).collect(),
+                    rows,
+                )
+            }),
+            image: s.image_hw.map(|[h, w]| {
+                Table::new(
+                    layout::DERIVED_IMAGE_T,
+                    None,
+                    vec![ColumnSpec::new(layout::DERIVED_IMAGE, &[h, w])],
+                    rows,
+                )
+            }),
+            contacts: s.contacts.then(|| {
+                let cols = [
+                    layout::CONTACTS_X_MM,
+                    layout::CONTACTS_Y_MM,
+                    layout::CONTACTS_SUM,
+                    layout::CONTACTS_AREA_MM2,
+                ];
+                Table::new(
+                    layout::CONTACTS_T,
+                    None,
+                    cols.iter().map(|p| ColumnSpec::new(*p, &[dc])).collect(),
+                    rows,
+                )
+            }),
+            forces: s
+                .force_strategies
+                .iter()
+                .map(|name| {
+                    let v = vec![ColumnSpec::new(layout::forces_force_n(name), &[dc])];
+                    Table::new(&layout::forces_t(name), None, v, rows)
+                })
+                .collect(),
+            opts: opts.clone(),
+            path: part.map_or_else(|| base.clone(), |i| part_path(&base, i)),
+            base,
+            eit_width,
+            flush_interval: Duration::from_secs_f64(opts.flush_interval_s),
+            part,
+            file: None,
+            reference: None,
+            swmr_started: false,
+            last_flush: Instant::now(),
+            part_start_t_s: None,
+            rotate_due: false,
+            stats: WriterStats::default(),
+        };
+        writer.open_part()?;
+        Ok(writer)
+    }
+
+    /// The file being written now (the current part when rotating).
+    pub fn current_path(&self) -> &Path {
+        &self.path
+    }
+
+    /// Values per EIT frame (M).
+    pub fn eit_width(&self) -> usize {
+        self.eit_width
+    }
+
+    /// Index of a force strategy for `append_forces`, in `Streams::force_strategies` order.
+    pub fn strategy_index(&self, name: &str) -> Option<usize> {
+        self.opts
+            .streams
+            .force_strategies
+            .iter()
+            .position(|s| s == name)
+    }
+
+    pub fn stats(&self) -> WriterStats {
+        let rows = |t: &Option<Table>| t.as_ref().map_or(0, |t| t.rows_appended);
+        WriterStats {
+            eit_rows: rows(&self.eit),
+            pressure_rows: rows(&self.pressure),
+            truth_rows: rows(&self.truth),
+            image_rows: rows(&self.image),
+            contacts_rows: rows(&self.contacts),
+            force_rows: self.forces.iter().map(|t| t.rows_appended).sum(),
+            ..self.stats
+        }
+    }
+
+    /// One EIT frame: time (s, middle of the acquisition), device counter, M values (V).
+    pub fn append_eit(&mut self, t_s: f64, seq: u64, v: &[f64]) -> Result<(), RecordError> {
+        self.check_width(Slot::Eit, layout::EIT_V, v.len(), self.eit_width)?;
+        self.before_append(Slot::Eit, t_s)?;
+        if let Some(table) = self.eit.as_mut() {
+            table.t.buf.push(t_s);
+            if let Some(c) = table.seq.as_mut() {
+                c.buf.push(seq);
+            }
+            table.values[0].buf.extend_from_slice(v);
+        }
+        self.after_append(Slot::Eit)
+    }
+
+    /// One gauge pressure sample (kPa).
+    pub fn append_pressure(&mut self, t_s: f64, kpa: f64) -> Result<(), RecordError> {
+        self.before_append(Slot::Pressure, t_s)?;
+        if let Some(table) = self.pressure.as_mut() {
+            table.t.buf.push(t_s);
+            table.values[0].buf.push(kpa);
+        }
+        self.after_append(Slot::Pressure)
+    }
+
+    /// One truth row (valid from `t_s` until the next row); an empty slice means no contact.
+    pub fn append_truth(&mut self, t_s: f64, contacts: &[TruthContact]) -> Result<(), RecordError> {
+        let max = self.opts.truth_max_contacts;
+        if contacts.len() > max {
+            return Err(RecordError::TooManyTruthContacts {
+                file: self.path.clone(),
+                found: contacts.len(),
+                max,
+            });
+        }
+        self.before_append(Slot::Truth, t_s)?;
+        if let Some(table) = self.truth.as_mut() {
+            table.t.buf.push(t_s);
+            let fields: [fn(&TruthContact) -> f64; 4] =
+                [|c| c.x_mm, |c| c.y_mm, |c| c.force_n, |c| c.diameter_mm];
+            for (col, field) in table.values.iter_mut().zip(fields) {
+                col.buf.extend(contacts.iter().map(field));
+                col.buf
+                    .extend(std::iter::repeat_n(f64::NAN, max - contacts.len()));
+            }
+        }
+        self.after_append(Slot::Truth)
+    }
+
+    /// One reconstructed image, row-major `[H][W]` as declared in `Streams::image_hw`.
+    pub fn append_image(&mut self, t_s: f64, pixels: &[f64]) -> Result<(), RecordError> {
+        let expected = self.opts.streams.image_hw.map_or(0, |[h, w]| h * w);
+        self.check_width(Slot::Image, layout::DERIVED_IMAGE, pixels.len(), expected)?;
+        self.before_append(Slot::Image, t_s)?;
+        if let Some(table) = self.image.as_mut() {
+            table.t.buf.push(t_s);
+            table.values[0].buf.extend_from_slice(pixels);
+        }
+        self.after_append(Slot::Image)
+    }
+
+    /// The segmented contacts of one frame (any number; beyond `derived_max_contacts` they
+    /// are dropped and counted).
+    pub fn append_contacts(
+        &mut self,
+        t_s: f64,
+        contacts: impl IntoIterator<Item = ContactRow>,
+    ) -> Result<(), RecordError> {
+        self.before_append(Slot::Contacts, t_s)?;
+        let max = self.opts.derived_max_contacts;
+        let mut count = 0;
+        if let Some(table) = self.contacts.as_mut() {
+            table.t.buf.push(t_s);
+            for c in contacts {
+                if count < max {
+                    for (col, v) in table
+                        .values
+                        .iter_mut()
+                        .zip([c.x_mm, c.y_mm, c.sum, c.area_mm2])
+                    {
+                        col.buf.push(v);
+                    }
+                }
+                count += 1;
+            }
+            for col in &mut table.values {
+                col.buf
+                    .extend(std::iter::repeat_n(f64::NAN, max.saturating_sub(count)));
+            }
+        }
+        self.stats.contacts_dropped += count.saturating_sub(max) as u64;
+        self.after_append(Slot::Contacts)
+    }
+
+    /// Per-contact forces (N) of strategy `strategy` (see `strategy_index`), in the order of
+    /// the frame's contacts.
+    pub fn append_forces(
+        &mut self,
+        strategy: usize,
+        t_s: f64,
+        forces_n: &[f64],
+    ) -> Result<(), RecordError> {
+        self.before_append(Slot::Force(strategy), t_s)?;
+        let max = self.opts.derived_max_contacts;
+        let kept = forces_n.len().min(max);
+        if let Some(table) = self.forces.get_mut(strategy) {
+            table.t.buf.push(t_s);
+            table.values[0].buf.extend_from_slice(&forces_n[..kept]);
+            table.values[0]
+                .buf
+                .extend(std::iter::repeat_n(f64::NAN, max - kept));
+        }
+        self.stats.contacts_dropped += (forces_n.len() - kept) as u64;
+        self.after_append(Slot::Force(strategy))
+    }
+
+    /// Stores the no-load frame `/eit/reference` [M] (also in every later part). With SWMR it
+    /// must come before the first flush, since SWMR writers cannot create datasets.
+    pub fn set_reference(&mut self, reference: &[f64]) -> Result<(), RecordError> {
+        self.check_width(
+            Slot::Eit,
+            layout::EIT_REFERENCE,
+            reference.len(),
+            self.eit_width,
+        )?;
+        if self.swmr_started {
+            return Err(RecordError::ReferenceAfterSwmr {
+                file: self.path.clone(),
+            });
+        }
+        if let Some(file) = self.file.as_ref() {
+            write_reference(file, &self.path, reference)?;
+        }
+        self.reference = Some(reference.to_vec());
+        Ok(())
+    }
+
+    /// Writes every buffered row and flushes the file.
+    pub fn flush(&mut self) -> Result<(), RecordError> {
+        for slot in [
+            Slot::Eit,
+            Slot::Pressure,
+            Slot::Truth,
+            Slot::Image,
+            Slot::Contacts,
+        ] {
+            self.write_table(slot)?;
+        }
+        for i in 0..self.forces.len() {
+            self.write_table(Slot::Force(i))?;
+        }
+        self.flush_file()
+    }
+
+    /// Flushes if `flush_interval_s` has passed since the last flush: for callers whose
+    /// streams may pause (appends check this themselves).
+    pub fn flush_if_due(&mut self) -> Result<(), RecordError> {
+        if self.last_flush.elapsed() >= self.flush_interval {
+            self.flush()
+        } else {
+            Ok(())
+        }
+    }
+
+    /// Flushes and closes the file; returns the final counters.
+    pub fn close(mut self) -> Result<WriterStats, RecordError> {
+        self.flush()?;
+        self.close_file()?;
+        Ok(self.stats())
+    }
+
+    fn table_mut(&mut self, slot: Slot) -> Option<&mut Table> {
+        match slot {
+            Slot::Eit => self.eit.as_mut(),
+            Slot::Pressure => self.pressure.as_mut(),
+            Slot::Truth => self.truth.as_mut(),
+            Slot::Image => self.image.as_mut(),
+            Slot::Contacts => self.contacts.as_mut(),
+            Slot::Force(i) => self.forces.get_mut(i),
+        }
+    }
+
+    fn all_tables_mut(&mut self) -> impl Iterator<Item = &mut Table> {
+        [
+            &mut self.eit,
+            &mut self.pressure,
+            &mut self.truth,
+            &mut self.image,
+            &mut self.contacts,
+        ]
+        .into_iter()
+        .filter_map(Option::as_mut)
+        .chain(self.forces.iter_mut())
+    }
+
+    fn not_declared(&self, slot: Slot) -> RecordError {
+        let path = match slot {
+            Slot::Eit => "/eit".to_owned(),
+            Slot::Pressure => "/pressure".to_owned(),
+            Slot::Truth => "/truth".to_owned(),
+            Slot::Image => layout::DERIVED_IMAGE.to_owned(),
+            Slot::Contacts => "/derived/contacts".to_owned(),
+            Slot::Force(i) => format!("{}/#{i}", layout::FORCES_GROUP),
+        };
+        RecordError::NotDeclared {
+            file: self.path.clone(),
+            path,
+        }
+    }
+
+    fn check_width(
+        &mut self,
+        slot: Slot,
+        path: &str,
+        found: usize,
+        expected: usize,
+    ) -> Result<(), RecordError> {
+        if self.table_mut(slot).is_none() {
+            return Err(self.not_declared(slot));
+        }
+        if found != expected {
+            return Err(RecordError::RowWidth {
+                file: self.path.clone(),
+                path: path.to_owned(),
+                found,
+                expected,
+            });
+        }
+        Ok(())
+    }
+
+    /// Refuses undeclared streams and non-finite times; rotates first when due.
+    fn before_append(&mut self, slot: Slot, t_s: f64) -> Result<(), RecordError> {
+        if self.table_mut(slot).is_none() {
+            return Err(self.not_declared(slot));
+        }
+        if !t_s.is_finite() {
+            let path = self
+                .table_mut(slot)
+                .map(|t| t.t.spec.path.clone())
+                .unwrap_or_default();
+            return Err(RecordError::Schema {
+                file: self.path.clone(),
+                path,
+                problem: SchemaProblem::NonFiniteTime { t_s },
+            });
+        }
+        if self.part.is_some() {
+            let by_time = matches!((self.opts.rotate_s, self.part_start_t_s), (Some(r), Some(t0)) if t_s - t0 >= r);
+            if self.rotate_due || by_time {
+                self.rotate()?;
+            }
+        }
+        self.part_start_t_s.get_or_insert(t_s);
+        Ok(())
+    }
+
+    fn after_append(&mut self, slot: Slot) -> Result<(), RecordError> {
+        let Some(table) = self.table_mut(slot) else {
+            return Ok(());
+        };
+        table.rows_appended += 1;
+        if table.is_chunk_full() {
+            self.write_table(slot)?;
+            self.flush_file()?;
+        }
+        self.flush_if_due()
+    }
+
+    fn write_table(&mut self, slot: Slot) -> Result<(), RecordError> {
+        let (Some(file), path) = (self.file.as_ref(), &self.path) else {
+            return Ok(());
+        };
+        if self.opts.swmr && !self.swmr_started {
+            // All datasets exist by now; from here on the file's structure is frozen.
+            file.start_swmr()
+                .map_err(|e| RecordError::hdf5(path, "/", e))?;
+            self.swmr_started = true;
+        }
+        let path = self.path.clone();
+        let written = match self.table_mut(slot) {
+            Some(table) => table.write_pending(&path)?,
+            None => 0,
+        };
+        self.stats.rows_written += written as u64;
+        Ok(())
+    }
+
+    fn flush_file(&mut self) -> Result<(), RecordError> {
+        let Some(file) = self.file.as_ref() else {
+            return Ok(());
+        };
+        file.flush()
+            .map_err(|e| RecordError::hdf5(&self.path, "/", e))?;
+        self.stats.flushes += 1;
+        self.last_flush = Instant::now();
+        if let Some(mb) = self.opts.rotate_mb
+            && file.size() as f64 >= mb * 1e6
+        {
+            self.rotate_due = true;
+        }
+        Ok(())
+    }
+
+    fn open_part(&mut self) -> Result<(), RecordError> {
+        let file = create_file(&self.path, self.opts.swmr, self.opts.overwrite)?;
+        let created = self
+            .opts
+            .created
+            .clone()
+            .unwrap_or_else(|| iso8601_utc(SystemTime::now()));
+        let attrs = RootAttrs {
+            sensor_toml: &self.opts.sensor_toml,
+            graph_toml: self.opts.graph_toml.as_deref(),
+            created: &created,
+            software_version: &self.opts.software_version,
+            part: self.part,
+        };
+        write_root_attrs(&file, &self.path, &attrs)?;
+        let storage = Storage {
+            deflate_level: self.opts.deflate_level,
+        };
+        let path = self.path.clone();
+        for table in self.all_tables_mut() {
+            let paths: Vec<String> = table.paths().map(str::to_owned).collect();
+            for p in &paths {
+                ensure_parent_groups(&file, &path, p)?;
+            }
+            table.create(&file, storage)?;
+        }
+        if let Some(reference) = self.reference.as_ref() {
+            write_reference(&file, &path, reference)?;
+        }
+        self.file = Some(file);
+        self.swmr_started = false;
+        self.part_start_t_s = None;
+        self.rotate_due = false;
+        self.stats.parts += 1;
+        self.flush_file()
+    }
+
+    fn close_file(&mut self) -> Result<(), RecordError> {
+        for table in self.all_tables_mut() {
+            table.detach();
+        }
+        match self.file.take() {
+            Some(file) => file
+                .close()
+                .map_err(|e| RecordError::hdf5(&self.path, "/", e)),
+            None => Ok(()),
+        }
+    }
+
+    fn rotate(&mut self) -> Result<(), RecordError> {
+        self.flush()?;
+        self.close_file()?;
+        let next = self.part.map_or(1, |p| p + 1);
+        self.part = Some(next);
+        self.path = part_path(&self.base, next);
+        self.open_part()
+    }
+}
+
+impl Drop for RecordingWriter {
+    fn drop(&mut self) {
+        if self.file.is_some() {
+            // Best effort: errors can't be reported from drop; `close` reports them.
+            let _ = self.flush();
+            let _ = self.close_file();
+        }
+    }
+}

@@ -1,1 +1,163 @@
-fn main() {}
+//! The `skinflow` command line: run, check, describe and render graphs (CONTRACTS.md section 3).
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Duration;
+
+use anyhow::{Context as _, Result, bail};
+use clap::{Parser, Subcommand};
+use skinflow_core::{GraphSpec, Registry, RunOptions, RunningGraph};
+
+#[derive(Parser)]
+#[command(name = "skinflow", version, about = "Dataflow engine and toolkit for dual-channel (EIT + pneumatic) robot skins")]
+struct Cli {
+    #[command(subcommand)]
+    cmd: Cmd,
+}
+
+#[derive(Subcommand)]
+enum Cmd {
+    /// Run a graph until its sources end, Ctrl-C, or the time is up; print per-node statistics.
+    Run {
+        graph: PathBuf,
+        /// Stop after this many seconds.
+        #[arg(long = "for", value_name = "SECONDS")]
+        for_s: Option<f64>,
+        /// Also write the statistics as JSON.
+        #[arg(long, value_name = "FILE")]
+        stats_json: Option<PathBuf>,
+    },
+    /// Validate a graph without running it; errors name file, line and column.
+    Check { graph: PathBuf },
+    /// List every node kind with its ports, parameters and docs.
+    Nodes,
+    /// Print a graph as Graphviz dot.
+    Dot { graph: PathBuf },
+}
+
+fn main() -> ExitCode {
+    tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
+        )
+        .with_writer(std::io::stderr)
+        .init();
+    let cli = Cli::parse();
+    match dispatch(cli.cmd) {
+        Ok(code) => code,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::from(1)
+        }
+    }
+}
+
+fn dispatch(cmd: Cmd) -> Result<ExitCode> {
+    match cmd {
+        Cmd::Run { graph, for_s, stats_json } => run(&graph, for_s, stats_json.as_deref()),
+        Cmd::Check { graph } => {
+            let spec = load(&graph)?;
+            match spec {
+                Ok(spec) => {
+                    println!("{}: ok ({} nodes, {} edges)", graph.display(), spec.nodes.len(), spec.edges.len());
+                    Ok(ExitCode::SUCCESS)
+                }
+                Err(code) => Ok(code),
+            }
+        }
+        Cmd::Nodes => {
+            print_nodes(&registry());
+            Ok(ExitCode::SUCCESS)
+        }
+        Cmd::Dot { graph } => match load(&graph)? {
+            Ok(spec) => {
+                print!("{}", skinflow_core::graph::dot::to_dot(&spec));
+                Ok(ExitCode::SUCCESS)
+            }
+            Err(code) => Ok(code),
+        },
+    }
+}
+
+fn registry() -> Registry {
+    skinflow_nodes::registry()
+}
+
+/// Loads and validates; validation errors are printed one per line and give exit code 2.
+fn load(path: &Path) -> Result<Result<GraphSpec, ExitCode>> {
+    let reg = registry();
+    match GraphSpec::load(path, &reg) {
+        Ok(spec) => Ok(Ok(spec)),
+        Err(errs) => {
+            for e in &errs.0 {
+                eprintln!("{e}");
+            }
+            Ok(Err(ExitCode::from(2)))
+        }
+    }
+}
+
+fn run(path: &Path, for_s: Option<f64>, stats_json: Option<&Path>) -> Result<ExitCode> {
+    let spec = match load(path)? {
+        Ok(s) => s,
+        Err(code) => return Ok(code),
+    };
+    let duration = match for_s {
+        Some(s) if s.is_finite() && s > 0.0 => Some(Duration::from_secs_f64(s)),
+        Some(s) => bail!("--for must be a positive number of seconds (got {s})"),
+        None => None,
+    };
+    let stop = Arc::new(AtomicBool::new(false));
+    let flag = stop.clone();
+    ctrlc::set_handler(move || {
+        if flag.swap(true, Ordering::SeqCst) {
+            // A second Ctrl-C while draining: give up at once.
+            eprintln!("second interrupt: exiting without draining");
+            std::process::exit(130);
+        }
+        eprintln!("interrupt: stopping sources, draining queues (Ctrl-C again to abort)");
+    })
+    .context("installing the Ctrl-C handler")?;
+    let running = match RunningGraph::start(&spec) {
+        Ok(r) => r,
+        Err(e) => {
+            eprintln!("{}: {e}", path.display());
+            return Ok(ExitCode::from(1));
+        }
+    };
+    let report = running.wait(&RunOptions { duration, stop: Some(stop) });
+    println!("{}", report.stats);
+    if let Some(p) = stats_json {
+        let json = serde_json::to_string_pretty(&report.stats)?;
+        std::fs::write(p, json).with_context(|| format!("writing {}", p.display()))?;
+    }
+    if report.failures.is_empty() {
+        Ok(ExitCode::SUCCESS)
+    } else {
+        for f in &report.failures {
+            eprintln!("{}: {f}", path.display());
+        }
+        Ok(ExitCode::from(1))
+    }
+}
+
+fn print_nodes(reg: &Registry) {
+    for f in reg.iter() {
+        let k = f.info();
+        println!("{} ({:?}, {}): {}", k.name, k.role, k.origin, k.doc);
+        for p in &k.inputs {
+            let opt = if p.required { "" } else { ", optional" };
+            let multi = if p.multi { ", multi" } else { "" };
+            println!("  in  {}: {}{opt}{multi}  {}", p.name, p.ty, p.doc);
+        }
+        for p in &k.outputs {
+            println!("  out {}: {}  {}", p.name, p.ty, p.doc);
+        }
+        for p in &k.params {
+            let d = if p.default.is_empty() { "required".to_string() } else { format!("default {}", p.default) };
+            println!("  param {}: {} ({d})  {}", p.name, p.ty, p.doc);
+        }
+    }
+}

@@ -1,0 +1,85 @@
+//! Graph validation errors, each located at a file, line and column.
+
+use std::fmt;
+use std::ops::Range;
+use std::path::PathBuf;
+
+use super::source::SourceFile;
+
+/// What is wrong.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum GraphErrorKind {
+    #[error("{0}")]
+    Syntax(String),
+    #[error("unknown kind \"{kind}\" (known kinds: {known})")]
+    UnknownKind { kind: String, known: String },
+    #[error("{0}")]
+    Param(String),
+    #[error("duplicate node id \"{0}\"")]
+    DuplicateId(String),
+    #[error("invalid node id \"{0}\": use letters, digits, '_' and '-' (the '.' separates node and port)")]
+    BadId(String),
+    #[error("\"{0}\" is not a port reference: write \"node.port\"")]
+    BadPortRef(String),
+    #[error("edge {end} \"{node}\": no such node")]
+    UnknownNode { end: &'static str, node: String },
+    #[error("node \"{node}\" (kind \"{kind}\") has no {dir} port \"{port}\" (its {dir} ports: {known})")]
+    UnknownPort { node: String, kind: String, dir: &'static str, port: String, known: String },
+    #[error("type mismatch: output \"{from}\" carries \"{from_ty}\" but input \"{to}\" takes \"{to_ty}\"")]
+    TypeMismatch { from: String, from_ty: String, to: String, to_ty: String },
+    #[error("input \"{to}\" takes a single edge but has another from \"{from}\" (the first comes from \"{first}\")")]
+    SecondEdge { to: String, from: String, first: String },
+    #[error("required input \"{0}\" is not connected")]
+    Unconnected(String),
+    #[error("cycle: {0}")]
+    Cycle(String),
+    #[error("{0}")]
+    Option(String),
+    #[error("plugin {path}: {problem}")]
+    Plugin { path: String, problem: String },
+}
+
+/// One located error: `file:line:col: node "id": cause`.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct GraphError {
+    pub file: PathBuf,
+    pub line: usize,
+    pub col: usize,
+    pub node: Option<String>,
+    pub kind: GraphErrorKind,
+}
+
+impl GraphError {
+    pub(crate) fn at(src: &SourceFile, span: Option<Range<usize>>, node: Option<&str>, kind: GraphErrorKind) -> GraphError {
+        let (line, col) = span.map_or((1, 1), |s| src.line_col(s.start));
+        GraphError { file: src.path.clone(), line, col, node: node.map(str::to_owned), kind }
+    }
+}
+
+impl fmt::Display for GraphError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}:{}:{}: ", self.file.display(), self.line, self.col)?;
+        if let Some(n) = &self.node {
+            write!(f, "node \"{n}\": ")?;
+        }
+        write!(f, "{}", self.kind)
+    }
+}
+
+/// Every error found in a graph file, in file order.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct GraphErrors(pub Vec<GraphError>);
+
+impl fmt::Display for GraphErrors {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        for (i, e) in self.0.iter().enumerate() {
+            if i > 0 {
+                writeln!(f)?;
+            }
+            write!(f, "{e}")?;
+        }
+        Ok(())
+    }
+}
+
+impl std::error::Error for GraphErrors {}

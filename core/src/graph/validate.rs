@@ -1,0 +1,289 @@
+//! Static checks of a graph file: syntax and schema, kinds and params, wiring, types, cycles.
+//! Every error found is reported, each located in the file. Nothing here touches files or
+//! devices named in params: that happens when nodes are built.
+
+use std::collections::HashMap;
+use std::ops::Range;
+use std::path::PathBuf;
+use std::time::Duration;
+
+use super::error::{GraphError, GraphErrorKind as K, GraphErrors};
+use super::file::{AlignBy, GraphFile, NodeEntry, TriggerKind};
+use super::source::SourceFile;
+use super::{DEFAULT_CAPACITY, EdgeSpec, GraphSpec, NodeSpec, Trigger};
+use crate::params::Params;
+use crate::registry::{Registry, Role};
+
+fn parse_file(src: &SourceFile) -> Result<GraphFile, GraphErrors> {
+    toml::from_str::<GraphFile>(&src.text)
+        .map_err(|e| GraphErrors(vec![GraphError::at(src, e.span(), None, K::Syntax(e.message().trim().to_owned()))]))
+}
+
+pub(super) fn plugin_paths(src: &SourceFile) -> Result<Vec<PathBuf>, GraphErrors> {
+    let file = parse_file(src)?;
+    let base = src.base_dir();
+    Ok(file.plugin.iter().map(|p| base.join(p.path.get_ref())).collect())
+}
+
+fn valid_id(id: &str) -> bool {
+    !id.is_empty() && id.chars().all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
+}
+
+pub(super) fn validate(src: SourceFile, registry: &Registry) -> Result<GraphSpec, GraphErrors> {
+    let file = parse_file(&src)?;
+    let mut errs: Vec<GraphError> = Vec::new();
+    let mut err = |span: Option<Range<usize>>, node: Option<&str>, kind: K| errs.push(GraphError::at(&src, span, node, kind));
+
+    // Nodes: ids, kinds, params, trigger options.
+    let mut nodes: Vec<Option<NodeSpec>> = Vec::with_capacity(file.node.len());
+    let mut by_id: HashMap<String, usize> = HashMap::new();
+    for (i, entry) in file.node.iter().enumerate() {
+        let n: &NodeEntry = entry.get_ref();
+        let id = n.id.get_ref().clone();
+        if !valid_id(&id) {
+            err(Some(n.id.span()), None, K::BadId(id.clone()));
+        } else if by_id.contains_key(&id) {
+            err(Some(n.id.span()), None, K::DuplicateId(id.clone()));
+        } else {
+            by_id.insert(id.clone(), i);
+        }
+        let Some(factory) = registry.get(n.kind.get_ref()) else {
+            let known = registry.names().collect::<Vec<_>>().join(", ");
+            err(Some(n.kind.span()), Some(&id), K::UnknownKind { kind: n.kind.get_ref().clone(), known });
+            nodes.push(None);
+            continue;
+        };
+        let params = Params::in_graph(src.text.clone(), i, n.params.clone().unwrap_or_default());
+        if let Err(e) = factory.check(&params) {
+            err(e.span.clone().or(Some(entry.span())), Some(&id), K::Param(e.to_string()));
+        }
+        let role = factory.info().role;
+        let trigger = match trigger_of(n) {
+            Ok(t) => t,
+            Err((span, msg)) => {
+                err(span.or(Some(entry.span())), Some(&id), K::Option(msg));
+                Trigger::Any
+            }
+        };
+        if role == Role::Source && n.trigger != TriggerKind::Any {
+            err(Some(entry.span()), Some(&id), K::Option("a source has no trigger: it runs on its own thread".into()));
+        }
+        if let Some(d) = &n.deadline_us
+            && !(d.get_ref().is_finite() && *d.get_ref() > 0.0)
+        {
+            err(Some(d.span()), Some(&id), K::Option(format!("deadline_us must be finite and > 0 (got {})", d.get_ref())));
+        }
+        if let Some(p) = &n.rt_priority
+            && !(1..=99).contains(p.get_ref())
+        {
+            err(Some(p.span()), Some(&id), K::Option(format!("rt_priority must be in 1..=99 (got {})", p.get_ref())));
+        }
+        nodes.push(Some(NodeSpec {
+            id,
+            kind: n.kind.get_ref().clone(),
+            factory: factory.clone(),
+            params,
+            trigger,
+            deadline_us: n.deadline_us.as_ref().map(|d| *d.get_ref()),
+            cpu: n.cpu,
+            rt_priority: n.rt_priority.as_ref().map(|p| *p.get_ref()),
+            restart: n.restart,
+            thread: n.thread,
+        }));
+    }
+
+    // Edges: endpoints, ports, types, capacities, single inputs.
+    let mut edges: Vec<EdgeSpec> = Vec::new();
+    let mut first_into: HashMap<(usize, usize), String> = HashMap::new();
+    for e in &file.edge {
+        let ed = e.get_ref();
+        let from = resolve(&ed.from, "from", &by_id, &nodes, &mut err);
+        let to = resolve(&ed.to, "to", &by_id, &nodes, &mut err);
+        let capacity = ed.capacity.as_ref().map_or(DEFAULT_CAPACITY, |c| *c.get_ref());
+        if capacity == 0 {
+            let span = ed.capacity.as_ref().map(|c| c.span());
+            err(span, None, K::Option("edge capacity must be >= 1 (got 0)".into()));
+        }
+        let (Some((fnode, fport_name)), Some((tnode, tport_name))) = (from, to) else { continue };
+        let (Some(fspec), Some(tspec)) = (&nodes[fnode], &nodes[tnode]) else { continue };
+        let finfo = fspec.factory.info();
+        let tinfo = tspec.factory.info();
+        let fport = finfo.output_index(&fport_name);
+        let tport = tinfo.input_index(&tport_name);
+        if fport.is_none() {
+            let known = finfo.outputs.iter().map(|p| p.name.as_ref()).collect::<Vec<_>>().join(", ");
+            err(Some(ed.from.span()), None, K::UnknownPort {
+                node: fspec.id.clone(),
+                kind: fspec.kind.clone(),
+                dir: "output",
+                port: fport_name.clone(),
+                known: if known.is_empty() { "none".into() } else { known },
+            });
+        }
+        if tport.is_none() {
+            let known = tinfo.inputs.iter().map(|p| p.name.as_ref()).collect::<Vec<_>>().join(", ");
+            err(Some(ed.to.span()), None, K::UnknownPort {
+                node: tspec.id.clone(),
+                kind: tspec.kind.clone(),
+                dir: "input",
+                port: tport_name.clone(),
+                known: if known.is_empty() { "none".into() } else { known },
+            });
+        }
+        let (Some(fport), Some(tport)) = (fport, tport) else { continue };
+        let (fp, tp) = (&finfo.outputs[fport], &tinfo.inputs[tport]);
+        if !tp.accepts(&fp.ty) {
+            err(Some(ed.to.span()), None, K::TypeMismatch {
+                from: ed.from.get_ref().clone(),
+                from_ty: fp.ty.to_string(),
+                to: ed.to.get_ref().clone(),
+                to_ty: tp.ty.to_string(),
+            });
+        }
+        if !tp.multi {
+            if let Some(first) = first_into.get(&(tnode, tport)) {
+                err(Some(ed.to.span()), None, K::SecondEdge {
+                    to: ed.to.get_ref().clone(),
+                    from: ed.from.get_ref().clone(),
+                    first: first.clone(),
+                });
+            } else {
+                first_into.insert((tnode, tport), ed.from.get_ref().clone());
+            }
+        }
+        edges.push(EdgeSpec {
+            from_node: fnode,
+            from_port: fport,
+            to_node: tnode,
+            to_port: tport,
+            capacity: capacity.max(1),
+            policy: ed.policy,
+            from: ed.from.get_ref().clone(),
+            to: ed.to.get_ref().clone(),
+        });
+    }
+
+    // Required inputs.
+    for (i, n) in nodes.iter().enumerate() {
+        let Some(n) = n else { continue };
+        for (p, port) in n.factory.info().inputs.iter().enumerate() {
+            if port.required && !edges.iter().any(|e| e.to_node == i && e.to_port == p) {
+                err(Some(file.node[i].get_ref().id.span()), Some(&n.id), K::Unconnected(format!("{}.{}", n.id, port.name)));
+            }
+        }
+    }
+
+    // Cycles (Kahn's algorithm; ties broken by file order so `topo` is deterministic).
+    let topo = topo_order(nodes.len(), &edges);
+    if topo.len() < nodes.len() {
+        let stuck: Vec<usize> = (0..nodes.len()).filter(|i| !topo.contains(i)).collect();
+        let e = edges.iter().position(|e| stuck.contains(&e.from_node) && stuck.contains(&e.to_node));
+        let names: Vec<String> = stuck.iter().map(|&i| file.node[i].get_ref().id.get_ref().clone()).collect();
+        let span = e.and_then(|k| file.edge.iter().find(|x| x.get_ref().from.get_ref() == &edges[k].from).map(|x| x.span()));
+        err(span, None, K::Cycle(format!("nodes {} feed each other; a dataflow graph must be acyclic", names.join(", "))));
+    }
+
+    if !errs.is_empty() {
+        return Err(GraphErrors(errs));
+    }
+    let base = src.base_dir();
+    Ok(GraphSpec {
+        name: file.graph.name.clone().unwrap_or_else(|| src.path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default()),
+        mode: file.graph.mode,
+        workers: file.graph.workers.unwrap_or(0),
+        plugins: file.plugin.iter().map(|p| base.join(p.path.get_ref())).collect(),
+        nodes: nodes.into_iter().map(|n| n.expect("errors were reported for missing nodes")).collect(),
+        edges,
+        topo,
+        source: src,
+    })
+}
+
+fn trigger_of(n: &NodeEntry) -> Result<Trigger, (Option<Range<usize>>, String)> {
+    let misplaced = |what: &str, span: Range<usize>, t: &str| Err((Some(span), format!("{what} applies only to trigger = \"{t}\"")));
+    match n.trigger {
+        TriggerKind::Any => {
+            if let Some(w) = &n.align_window_us {
+                return misplaced("align_window_us", w.span(), "aligned");
+            }
+            if let Some(p) = &n.period_ms {
+                return misplaced("period_ms", p.span(), "periodic");
+            }
+            Ok(Trigger::Any)
+        }
+        TriggerKind::Aligned => {
+            if let Some(p) = &n.period_ms {
+                return misplaced("period_ms", p.span(), "periodic");
+            }
+            match (n.align.unwrap_or(if n.align_window_us.is_some() { AlignBy::Time } else { AlignBy::Seq }), &n.align_window_us) {
+                (AlignBy::Seq, None) => Ok(Trigger::AlignedSeq),
+                (AlignBy::Seq, Some(w)) => Err((Some(w.span()), "align_window_us needs align = \"time\"".into())),
+                (AlignBy::Time, None) => Err((None, "align = \"time\" needs align_window_us".into())),
+                (AlignBy::Time, Some(w)) => {
+                    let us = *w.get_ref();
+                    if us.is_finite() && us >= 0.0 {
+                        Ok(Trigger::AlignedWindow { window_ns: (us * 1e3) as u64 })
+                    } else {
+                        Err((Some(w.span()), format!("align_window_us must be finite and >= 0 (got {us})")))
+                    }
+                }
+            }
+        }
+        TriggerKind::Periodic => {
+            if let Some(w) = &n.align_window_us {
+                return misplaced("align_window_us", w.span(), "aligned");
+            }
+            match &n.period_ms {
+                None => Err((None, "trigger = \"periodic\" needs period_ms".into())),
+                Some(p) if p.get_ref().is_finite() && *p.get_ref() > 0.0 => {
+                    Ok(Trigger::Periodic { period: Duration::from_secs_f64(*p.get_ref() / 1e3) })
+                }
+                Some(p) => Err((Some(p.span()), format!("period_ms must be finite and > 0 (got {})", p.get_ref()))),
+            }
+        }
+    }
+}
+
+fn resolve(
+    r: &toml::Spanned<String>,
+    end: &'static str,
+    by_id: &HashMap<String, usize>,
+    nodes: &[Option<NodeSpec>],
+    err: &mut impl FnMut(Option<Range<usize>>, Option<&str>, K),
+) -> Option<(usize, String)> {
+    let Some((node, port)) = r.get_ref().split_once('.') else {
+        err(Some(r.span()), None, K::BadPortRef(r.get_ref().clone()));
+        return None;
+    };
+    if port.is_empty() || node.is_empty() {
+        err(Some(r.span()), None, K::BadPortRef(r.get_ref().clone()));
+        return None;
+    }
+    match by_id.get(node) {
+        Some(&i) if nodes[i].is_some() => Some((i, port.to_owned())),
+        Some(_) => None, // the node's own error (unknown kind) was reported
+        None => {
+            err(Some(r.span()), None, K::UnknownNode { end, node: node.to_owned() });
+            None
+        }
+    }
+}
+
+/// Kahn's algorithm; among ready nodes the lowest index goes first.
+pub(crate) fn topo_order(n: usize, edges: &[EdgeSpec]) -> Vec<usize> {
+    let mut indeg = vec![0usize; n];
+    for e in edges {
+        indeg[e.to_node] += 1;
+    }
+    let mut out = Vec::with_capacity(n);
+    let mut done = vec![false; n];
+    loop {
+        let Some(next) = (0..n).find(|&i| !done[i] && indeg[i] == 0) else { break };
+        done[next] = true;
+        out.push(next);
+        for e in edges.iter().filter(|e| e.from_node == next) {
+            indeg[e.to_node] -= 1;
+        }
+    }
+    out
+}

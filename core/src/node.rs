@@ -1,0 +1,203 @@
+//! The node roles and the per-node context.
+//!
+//! One trait per role: a [`Source`] produces messages (on its own thread, so it may block on
+//! I/O), a [`Processor`] turns inputs into outputs on the worker pool, a [`Sink`] consumes.
+//! Lifecycle: the kind's factory constructs the node (reads params, allocates every buffer,
+//! fails here) -> `start` -> `poll`/`process`/`consume` (hot: no allocation) -> `stop`
+//! (flush, close; called once, also after errors).
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+use crate::error::NodeError;
+use crate::io::{Inputs, Outputs};
+
+/// How the graph is scheduled.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Deserialize, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Mode {
+    /// Sources on their own threads, processors on the worker pool, real-time pacing.
+    #[default]
+    Realtime,
+    /// One thread, fixed order, no pacing: bit-identical outputs run to run.
+    Lockstep,
+}
+
+/// What a source's `poll` did.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SourcePoll {
+    /// Put messages in its output slots (or consumed input without output); poll again.
+    Emitted,
+    /// Nothing available yet (a read timed out); poll again.
+    Idle,
+    /// The source is exhausted; it will not be polled again.
+    Finished,
+}
+
+/// A producer of messages.
+pub trait Source: Send {
+    fn start(&mut self, _ctx: &mut Context) -> Result<(), NodeError> {
+        Ok(())
+    }
+    /// Produces at most one message per output port. May block (read with a timeout of at
+    /// most ~100 ms so a stop request is seen promptly). Pacing sources should wait with
+    /// [`Context::sleep_until_ns`], which returns early on stop and never sleeps in lockstep.
+    fn poll(&mut self, ctx: &mut Context, out: &mut Outputs) -> Result<SourcePoll, NodeError>;
+    fn stop(&mut self, _ctx: &mut Context) -> Result<(), NodeError> {
+        Ok(())
+    }
+    /// A control command (e.g. `tare`) from the control socket or a test.
+    fn control(&mut self, _ctx: &mut Context, cmd: &str) -> Result<(), NodeError> {
+        Err(NodeError::msg(format!("control command \"{cmd}\" is not supported by this node")))
+    }
+}
+
+/// A transformer of messages.
+pub trait Processor: Send {
+    fn start(&mut self, _ctx: &mut Context) -> Result<(), NodeError> {
+        Ok(())
+    }
+    /// Handles the inputs selected by the node's trigger; at most one message per output port.
+    fn process(&mut self, ctx: &mut Context, inputs: &Inputs, out: &mut Outputs) -> Result<(), NodeError>;
+    fn stop(&mut self, _ctx: &mut Context) -> Result<(), NodeError> {
+        Ok(())
+    }
+    fn control(&mut self, _ctx: &mut Context, cmd: &str) -> Result<(), NodeError> {
+        Err(NodeError::msg(format!("control command \"{cmd}\" is not supported by this node")))
+    }
+}
+
+/// A consumer of messages.
+pub trait Sink: Send {
+    fn start(&mut self, _ctx: &mut Context) -> Result<(), NodeError> {
+        Ok(())
+    }
+    fn consume(&mut self, ctx: &mut Context, inputs: &Inputs) -> Result<(), NodeError>;
+    /// Flushes and closes. Called once at shutdown, after every queued message was consumed.
+    fn stop(&mut self, _ctx: &mut Context) -> Result<(), NodeError> {
+        Ok(())
+    }
+    fn control(&mut self, _ctx: &mut Context, cmd: &str) -> Result<(), NodeError> {
+        Err(NodeError::msg(format!("control command \"{cmd}\" is not supported by this node")))
+    }
+}
+
+/// A constructed node of any role.
+pub enum NodeImpl {
+    Source(Box<dyn Source>),
+    Processor(Box<dyn Processor>),
+    Sink(Box<dyn Sink>),
+}
+
+impl NodeImpl {
+    pub(crate) fn start(&mut self, ctx: &mut Context) -> Result<(), NodeError> {
+        match self {
+            NodeImpl::Source(n) => n.start(ctx),
+            NodeImpl::Processor(n) => n.start(ctx),
+            NodeImpl::Sink(n) => n.start(ctx),
+        }
+    }
+
+    pub(crate) fn stop(&mut self, ctx: &mut Context) -> Result<(), NodeError> {
+        match self {
+            NodeImpl::Source(n) => n.stop(ctx),
+            NodeImpl::Processor(n) => n.stop(ctx),
+            NodeImpl::Sink(n) => n.stop(ctx),
+        }
+    }
+
+    pub(crate) fn control(&mut self, ctx: &mut Context, cmd: &str) -> Result<(), NodeError> {
+        match self {
+            NodeImpl::Source(n) => n.control(ctx, cmd),
+            NodeImpl::Processor(n) => n.control(ctx, cmd),
+            NodeImpl::Sink(n) => n.control(ctx, cmd),
+        }
+    }
+
+    pub fn role(&self) -> crate::registry::Role {
+        match self {
+            NodeImpl::Source(_) => crate::registry::Role::Source,
+            NodeImpl::Processor(_) => crate::registry::Role::Processor,
+            NodeImpl::Sink(_) => crate::registry::Role::Sink,
+        }
+    }
+}
+
+/// Per-node context: identity, the graph clock, the stop flag and rerun requests.
+pub struct Context {
+    pub(crate) index: u32,
+    pub(crate) id: Arc<str>,
+    pub(crate) origin: Instant,
+    pub(crate) mode: Mode,
+    pub(crate) stop: Arc<AtomicBool>,
+    pub(crate) rerun: bool,
+}
+
+/// Longest single park while a source paces, so a stop request is seen within this time even
+/// if the unpark is missed.
+const PACE_SLICE: Duration = Duration::from_millis(50);
+
+impl Context {
+    pub(crate) fn new(index: u32, id: Arc<str>, origin: Instant, mode: Mode, stop: Arc<AtomicBool>) -> Context {
+        Context { index, id, origin, mode, stop, rerun: false }
+    }
+
+    /// A context for driving a node outside a graph (unit tests of nodes, benchmarks).
+    pub fn detached(id: &str, mode: Mode) -> Context {
+        Context::new(0, Arc::from(id), Instant::now(), mode, Arc::new(AtomicBool::new(false)))
+    }
+
+    /// The node's id from the graph file.
+    pub fn id(&self) -> &str {
+        &self.id
+    }
+
+    /// The node's index, used as `Header::origin`.
+    pub fn index(&self) -> u32 {
+        self.index
+    }
+
+    pub fn mode(&self) -> Mode {
+        self.mode
+    }
+
+    /// Whether sources should pace to real time (false in lockstep).
+    pub fn paced(&self) -> bool {
+        self.mode == Mode::Realtime
+    }
+
+    /// Nanoseconds since the graph started, monotonic.
+    pub fn now_ns(&self) -> u64 {
+        self.origin.elapsed().as_nanos() as u64
+    }
+
+    /// Whether the graph is stopping.
+    pub fn stopping(&self) -> bool {
+        self.stop.load(Ordering::Acquire)
+    }
+
+    /// Asks to be called again although no new input arrived (e.g. more buffered output).
+    pub fn request_rerun(&mut self) {
+        self.rerun = true;
+    }
+
+    /// Sleeps until the graph clock reads `t_ns`. Returns false if the graph is stopping.
+    /// Does not sleep in lockstep mode.
+    pub fn sleep_until_ns(&self, t_ns: u64) -> bool {
+        if !self.paced() {
+            return !self.stopping();
+        }
+        loop {
+            if self.stopping() {
+                return false;
+            }
+            let now = self.now_ns();
+            if now >= t_ns {
+                return true;
+            }
+            let wait = Duration::from_nanos(t_ns - now).min(PACE_SLICE);
+            std::thread::park_timeout(wait);
+        }
+    }
+}

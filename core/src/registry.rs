@@ -1,0 +1,214 @@
+//! Node kinds: what `kind = "..."` in a graph file can name.
+//!
+//! A [`NodeFactory`] describes a kind ([`KindInfo`]: role, ports, parameters, docs), checks
+//! parameters without side effects (for `skinflow check`) and builds nodes. [`typed`] makes a
+//! factory from a `#[derive(Deserialize)] #[serde(deny_unknown_fields)]` params struct and a
+//! constructor. The [`Registry`] maps kind names to factories; plugins add to it at load.
+
+use std::borrow::Cow;
+use std::collections::BTreeMap;
+use std::marker::PhantomData;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use serde::de::DeserializeOwned;
+
+use crate::error::NodeError;
+use crate::node::{Mode, NodeImpl};
+use crate::params::{ParamError, Params};
+use crate::port::PortSpec;
+
+/// The role of a kind.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Role {
+    Source,
+    Processor,
+    Sink,
+}
+
+/// Documentation of one parameter (for `skinflow nodes`).
+#[derive(Debug, Clone)]
+pub struct ParamDoc {
+    pub name: Cow<'static, str>,
+    pub ty: Cow<'static, str>,
+    /// Default as TOML text, or empty when required.
+    pub default: Cow<'static, str>,
+    pub doc: Cow<'static, str>,
+}
+
+impl ParamDoc {
+    pub fn new(name: &'static str, ty: &'static str, default: &'static str, doc: &'static str) -> ParamDoc {
+        ParamDoc { name: name.into(), ty: ty.into(), default: default.into(), doc: doc.into() }
+    }
+}
+
+/// Everything known about a kind without building it.
+#[derive(Debug, Clone)]
+pub struct KindInfo {
+    pub name: Cow<'static, str>,
+    /// One line.
+    pub doc: Cow<'static, str>,
+    pub role: Role,
+    pub inputs: Vec<PortSpec>,
+    pub outputs: Vec<PortSpec>,
+    pub params: Vec<ParamDoc>,
+    /// `"built-in"` or the plugin library's path.
+    pub origin: Cow<'static, str>,
+}
+
+impl KindInfo {
+    pub fn new(name: &'static str, role: Role, doc: &'static str) -> KindInfo {
+        KindInfo {
+            name: name.into(),
+            doc: doc.into(),
+            role,
+            inputs: Vec::new(),
+            outputs: Vec::new(),
+            params: Vec::new(),
+            origin: "built-in".into(),
+        }
+    }
+
+    pub fn input(mut self, p: PortSpec) -> KindInfo {
+        self.inputs.push(p);
+        self
+    }
+
+    pub fn output(mut self, p: PortSpec) -> KindInfo {
+        self.outputs.push(p);
+        self
+    }
+
+    pub fn param(mut self, p: ParamDoc) -> KindInfo {
+        self.params.push(p);
+        self
+    }
+
+    pub fn input_index(&self, name: &str) -> Option<usize> {
+        self.inputs.iter().position(|p| p.name == name)
+    }
+
+    pub fn output_index(&self, name: &str) -> Option<usize> {
+        self.outputs.iter().position(|p| p.name == name)
+    }
+}
+
+/// What a factory may use while building a node.
+#[derive(Debug, Clone)]
+pub struct BuildContext {
+    /// Directory of the graph file: relative paths in params resolve against it.
+    pub base_dir: PathBuf,
+    pub mode: Mode,
+    pub node_id: String,
+}
+
+impl BuildContext {
+    /// Resolves a path parameter relative to the graph file's directory.
+    pub fn resolve(&self, p: &Path) -> PathBuf {
+        if p.is_absolute() { p.to_path_buf() } else { self.base_dir.join(p) }
+    }
+}
+
+/// Builds nodes of one kind.
+pub trait NodeFactory: Send + Sync {
+    fn info(&self) -> &KindInfo;
+    /// Parses and validates parameters; no side effects (no files opened).
+    fn check(&self, params: &Params) -> Result<(), ParamError>;
+    /// Builds a node: parses params, opens what it needs, allocates its buffers.
+    fn build(&self, params: &Params, ctx: &BuildContext) -> Result<NodeImpl, NodeError>;
+}
+
+/// A node's parameters: a serde struct with `deny_unknown_fields` plus range checks.
+pub trait NodeParams: DeserializeOwned + Send + Sync + 'static {
+    /// Range and consistency checks, run at load so `skinflow check` reports them.
+    fn validate(&self) -> Result<(), ParamError> {
+        Ok(())
+    }
+}
+
+/// A factory built from a params type and a constructor.
+pub struct TypedFactory<P, F> {
+    info: KindInfo,
+    build: F,
+    _params: PhantomData<fn() -> P>,
+}
+
+/// Makes a factory from `info` and `build(params, ctx)`.
+pub fn typed<P, F>(info: KindInfo, build: F) -> Arc<dyn NodeFactory>
+where
+    P: NodeParams,
+    F: Fn(P, &BuildContext) -> Result<NodeImpl, NodeError> + Send + Sync + 'static,
+{
+    Arc::new(TypedFactory { info, build, _params: PhantomData })
+}
+
+impl<P, F> NodeFactory for TypedFactory<P, F>
+where
+    P: NodeParams,
+    F: Fn(P, &BuildContext) -> Result<NodeImpl, NodeError> + Send + Sync + 'static,
+{
+    fn info(&self) -> &KindInfo {
+        &self.info
+    }
+
+    fn check(&self, params: &Params) -> Result<(), ParamError> {
+        params.parse::<P>().map(|_| ())
+    }
+
+    fn build(&self, params: &Params, ctx: &BuildContext) -> Result<NodeImpl, NodeError> {
+        let p = params.parse::<P>().map_err(|e| NodeError::Param {
+            param: e.param.clone().unwrap_or_default(),
+            problem: e.problem,
+        })?;
+        (self.build)(p, ctx)
+    }
+}
+
+/// Two kinds with one name.
+#[derive(Debug, thiserror::Error)]
+#[error("kind \"{kind}\" from {new_origin} is already defined by {existing_origin}")]
+pub struct DuplicateKind {
+    pub kind: String,
+    pub existing_origin: String,
+    pub new_origin: String,
+}
+
+/// Kind name -> factory.
+#[derive(Clone, Default)]
+pub struct Registry {
+    kinds: BTreeMap<String, Arc<dyn NodeFactory>>,
+}
+
+impl Registry {
+    pub fn new() -> Registry {
+        Registry::default()
+    }
+
+    /// Adds a kind; a second kind with the same name is an error.
+    pub fn register(&mut self, f: Arc<dyn NodeFactory>) -> Result<(), DuplicateKind> {
+        let name = f.info().name.to_string();
+        if let Some(existing) = self.kinds.get(&name) {
+            return Err(DuplicateKind {
+                kind: name,
+                existing_origin: existing.info().origin.to_string(),
+                new_origin: f.info().origin.to_string(),
+            });
+        }
+        self.kinds.insert(name, f);
+        Ok(())
+    }
+
+    pub fn get(&self, kind: &str) -> Option<&Arc<dyn NodeFactory>> {
+        self.kinds.get(kind)
+    }
+
+    /// Kind names in sorted order.
+    pub fn names(&self) -> impl Iterator<Item = &str> {
+        self.kinds.keys().map(String::as_str)
+    }
+
+    pub fn iter(&self) -> impl Iterator<Item = &Arc<dyn NodeFactory>> {
+        self.kinds.values()
+    }
+}

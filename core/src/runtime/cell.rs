@@ -1,0 +1,272 @@
+//! A node instance with its queue ends, and the per-call protocol shared by every executor:
+//! is it ready (trigger satisfied, room on its lossless outputs), then fire (select inputs,
+//! call the node under `catch_unwind`, time it, publish its outputs, wake its consumers).
+
+use std::panic::{AssertUnwindSafe, catch_unwind};
+use std::sync::Arc;
+use std::sync::atomic::Ordering::Relaxed;
+use std::time::Instant;
+
+use crate::edge::{EdgeRx, EdgeTx};
+use crate::error::NodeError;
+use crate::graph::{Restart, Trigger};
+use crate::io::{Inputs, Outputs};
+use crate::node::{Context, NodeImpl, SourcePoll};
+use crate::params::Params;
+use crate::registry::{BuildContext, NodeFactory};
+use crate::stats::NodeStats;
+
+/// Wakes nodes made runnable by a push (consumers) or a pop (waiting producers).
+pub(crate) trait Notify {
+    fn notify(&self, node: usize);
+}
+
+/// What rebuilding a node needs (restart after a panic, hot swap).
+#[derive(Clone)]
+pub(crate) struct Recipe {
+    pub factory: Arc<dyn NodeFactory>,
+    pub params: Params,
+    pub build: BuildContext,
+}
+
+/// Outcome of one call, for the executor.
+pub(crate) enum Fired {
+    Ok,
+    /// A source finished.
+    Finished,
+    /// The node cannot go on and the graph must stop.
+    Fatal(NodeError),
+}
+
+pub(crate) struct Cell {
+    pub imp: NodeImpl,
+    pub ctx: Context,
+    pub inputs: Vec<EdgeRx>,
+    pub in_io: Inputs,
+    pub outputs: Vec<Vec<EdgeTx>>,
+    pub out_io: Outputs,
+    pub trigger: Trigger,
+    pub deadline_ns: Option<u64>,
+    pub restart: Restart,
+    pub recipe: Recipe,
+    pub stats: Arc<NodeStats>,
+    /// Set after a panic without restart or a fatal error: the node is never called again.
+    pub dead: bool,
+    /// A periodic tick is pending.
+    pub tick: bool,
+}
+
+fn panic_message(p: Box<dyn std::any::Any + Send>) -> String {
+    if let Some(s) = p.downcast_ref::<&str>() {
+        (*s).to_owned()
+    } else if let Some(s) = p.downcast_ref::<String>() {
+        s.clone()
+    } else {
+        "non-string panic payload".to_owned()
+    }
+}
+
+impl Cell {
+    /// Room on every lossless output (registers for a wake-up when not).
+    pub fn outputs_have_space(&self) -> bool {
+        self.outputs.iter().flatten().all(|tx| tx.has_space_or_wait())
+    }
+
+    fn take(&mut self, i: usize, n: &dyn Notify) -> Option<crate::message::Message> {
+        let (m, wake) = self.inputs[i].take();
+        if wake {
+            n.notify(self.inputs[i].shared.spec.from_node);
+        }
+        m
+    }
+
+    /// Whether the processor or sink may fire now. May discard unalignable heads (counted).
+    pub fn ready(&mut self, n: &dyn Notify) -> bool {
+        if self.dead || !self.outputs_have_space() {
+            return false;
+        }
+        if self.ctx.rerun {
+            return true;
+        }
+        match self.trigger {
+            Trigger::Any => self.inputs.iter_mut().any(|rx| rx.peek().is_some()),
+            Trigger::Periodic { .. } => self.tick,
+            Trigger::AlignedSeq | Trigger::AlignedWindow { .. } => loop {
+                if self.inputs.is_empty() {
+                    return false;
+                }
+                let mut lo = (u64::MAX, 0usize);
+                let mut hi = 0u64;
+                for (i, rx) in self.inputs.iter_mut().enumerate() {
+                    let Some(h) = rx.peek() else { return false };
+                    let key = match self.trigger {
+                        Trigger::AlignedSeq => h.header.seq,
+                        _ => h.header.t_ns,
+                    };
+                    if key < lo.0 {
+                        lo = (key, i);
+                    }
+                    hi = hi.max(key);
+                }
+                let aligned = match self.trigger {
+                    Trigger::AlignedWindow { window_ns } => hi - lo.0 <= window_ns,
+                    _ => hi == lo.0,
+                };
+                if aligned {
+                    return true;
+                }
+                // The oldest head can never be matched: every other input is already past it.
+                if self.take(lo.1, n).is_some() {
+                    self.inputs[lo.1].shared.stats.dropped_unaligned.fetch_add(1, Relaxed);
+                }
+            },
+        }
+    }
+
+    /// Fills `in_io` per the trigger. Returns the number of messages taken.
+    fn select_inputs(&mut self, n: &dyn Notify) -> u64 {
+        match self.trigger {
+            Trigger::Any => {
+                let mut best: Option<(u64, usize)> = None;
+                for (i, rx) in self.inputs.iter_mut().enumerate() {
+                    if let Some(h) = rx.peek()
+                        && best.is_none_or(|(t, _)| h.header.t_ns < t)
+                    {
+                        best = Some((h.header.t_ns, i));
+                    }
+                }
+                match best {
+                    Some((_, i)) => {
+                        self.in_io.slots[i] = self.take(i, n);
+                        1
+                    }
+                    None => 0,
+                }
+            }
+            Trigger::AlignedSeq | Trigger::AlignedWindow { .. } => {
+                let mut k = 0;
+                for i in 0..self.inputs.len() {
+                    self.in_io.slots[i] = self.take(i, n);
+                    k += u64::from(self.in_io.slots[i].is_some());
+                }
+                k
+            }
+            Trigger::Periodic { .. } => {
+                self.tick = false;
+                let mut k = 0;
+                for i in 0..self.inputs.len() {
+                    let mut latest = None;
+                    while let Some(m) = self.take(i, n) {
+                        if latest.replace(m).is_some() {
+                            self.inputs[i].shared.stats.dropped_coalesced.fetch_add(1, Relaxed);
+                        }
+                    }
+                    k += u64::from(latest.is_some());
+                    self.in_io.slots[i] = latest;
+                }
+                k
+            }
+        }
+    }
+
+    /// Runs one call of a processor/sink (`ready` returned true) or a source poll.
+    pub fn fire(&mut self, n: &dyn Notify) -> Fired {
+        let taken = if matches!(self.imp, NodeImpl::Source(_)) { 0 } else { self.select_inputs(n) };
+        self.ctx.rerun = false;
+        let span = tracing::trace_span!("node", id = %self.ctx.id);
+        let _enter = span.enter();
+        let t0 = Instant::now();
+        let Cell { imp, ctx, in_io, out_io, .. } = self;
+        let result = catch_unwind(AssertUnwindSafe(|| match imp {
+            NodeImpl::Source(s) => s.poll(ctx, out_io),
+            NodeImpl::Processor(p) => p.process(ctx, in_io, out_io).map(|()| SourcePoll::Emitted),
+            NodeImpl::Sink(s) => s.consume(ctx, in_io).map(|()| SourcePoll::Emitted),
+        }));
+        let ns = t0.elapsed().as_nanos() as u64;
+        drop(_enter);
+        self.in_io.clear();
+        let st = &self.stats;
+        st.calls.fetch_add(1, Relaxed);
+        st.msgs_in.fetch_add(taken, Relaxed);
+        st.latency.record(ns);
+        if self.deadline_ns.is_some_and(|d| ns > d) {
+            st.deadline_misses.fetch_add(1, Relaxed);
+        }
+        let outcome = match result {
+            Ok(Ok(SourcePoll::Finished)) => Fired::Finished,
+            Ok(Ok(_)) => Fired::Ok,
+            Ok(Err(e)) if e.is_fatal() => {
+                st.errors.fetch_add(1, Relaxed);
+                self.dead = true;
+                Fired::Fatal(e)
+            }
+            Ok(Err(e)) => {
+                st.errors.fetch_add(1, Relaxed);
+                tracing::warn!(node = %self.ctx.id, "{e}");
+                Fired::Ok
+            }
+            Err(p) => {
+                st.panics.fetch_add(1, Relaxed);
+                let msg = panic_message(p);
+                tracing::error!(node = %self.ctx.id, "panicked: {msg}");
+                self.after_panic(msg)
+            }
+        };
+        self.publish(n);
+        outcome
+    }
+
+    /// Restart policy: rebuild and start again, or stop for good.
+    fn after_panic(&mut self, msg: String) -> Fired {
+        for slot in &mut self.out_io.slots {
+            *slot = None; // outputs of a panicked call are not trusted
+        }
+        if self.restart == Restart::Always {
+            let r = &self.recipe;
+            match r.factory.build(&r.params, &r.build).and_then(|mut imp| {
+                imp.start(&mut self.ctx)?;
+                Ok(imp)
+            }) {
+                Ok(imp) => {
+                    self.imp = imp;
+                    self.stats.restarts.fetch_add(1, Relaxed);
+                    tracing::warn!(node = %self.ctx.id, "restarted after panic");
+                    return Fired::Ok;
+                }
+                Err(e) => {
+                    self.dead = true;
+                    return Fired::Fatal(NodeError::msg(format!("panicked ({msg}) and failed to restart: {e}")));
+                }
+            }
+        }
+        self.dead = true;
+        Fired::Fatal(NodeError::Panic(msg))
+    }
+
+    /// Moves the output slots onto their edges and wakes the consumers. Fan-out clones the
+    /// `Arc` only; the last edge takes the message itself.
+    fn publish(&mut self, n: &dyn Notify) {
+        for (port, slot) in self.out_io.slots.iter_mut().enumerate() {
+            let Some(msg) = slot.take() else { continue };
+            self.stats.msgs_out.fetch_add(1, Relaxed);
+            let Some((last, rest)) = self.outputs[port].split_last_mut() else { continue };
+            for tx in rest {
+                if tx.push(msg.clone()) {
+                    n.notify(tx.shared.spec.to_node);
+                }
+            }
+            if last.push(msg) {
+                n.notify(last.shared.spec.to_node);
+            }
+        }
+    }
+
+    /// Runs a control command between calls.
+    pub fn control(&mut self, cmd: &str) {
+        if let Err(e) = self.imp.control(&mut self.ctx, cmd) {
+            tracing::warn!(node = %self.ctx.id, "control \"{cmd}\": {e}");
+        } else {
+            tracing::info!(node = %self.ctx.id, "control \"{cmd}\" applied");
+        }
+    }
+}

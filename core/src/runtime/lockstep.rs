@@ -1,0 +1,114 @@
+//! The deterministic executor: one thread, fixed order. Each step polls every unfinished
+//! source once (in topological, then file, order) and then runs processors and sinks in
+//! topological order until none is ready. Periodic nodes fire once per step. No pacing, no
+//! races: the same inputs give bit-identical outputs run to run.
+
+use std::sync::atomic::AtomicBool;
+use std::sync::atomic::Ordering::SeqCst;
+use std::time::Instant;
+
+use super::cell::{Cell, Fired, Notify};
+use super::pool::{Exec, Shared};
+use crate::error::NodeError;
+use crate::graph::Trigger;
+
+struct NoNotify;
+
+impl Notify for NoNotify {
+    fn notify(&self, _node: usize) {}
+}
+
+fn run_controls(shared: &Shared, i: usize, cell: &mut Cell) {
+    let slot = &shared.slots[i];
+    if slot.has_control.swap(false, SeqCst) {
+        while let Some(c) = slot.control.pop() {
+            cell.control(&c);
+        }
+    }
+}
+
+pub(crate) fn run(shared: &Shared, topo: &[usize], external_stop: &AtomicBool, until: Option<Instant>) {
+    let mut cells: Vec<Box<Cell>> = shared
+        .slots
+        .iter()
+        .map(|s| s.cell.take().expect("cells are in their slots before a lockstep run"))
+        .collect();
+    let sources: Vec<usize> = topo.iter().copied().filter(|&i| shared.slots[i].exec == Exec::Source).collect();
+    let others: Vec<usize> = topo.iter().copied().filter(|&i| shared.slots[i].exec != Exec::Source).collect();
+    let mut finished = vec![false; cells.len()];
+    let n = NoNotify;
+    loop {
+        if external_stop.load(SeqCst) || shared.stop.load(SeqCst) || until.is_some_and(|t| Instant::now() >= t) {
+            break;
+        }
+        let mut polled = false;
+        for &s in &sources {
+            if finished[s] {
+                continue;
+            }
+            let cell = &mut cells[s];
+            run_controls(shared, s, cell);
+            if !cell.outputs_have_space() {
+                continue;
+            }
+            polled = true;
+            match cell.fire(&n) {
+                Fired::Ok => {}
+                Fired::Finished => finished[s] = true,
+                Fired::Fatal(e) => {
+                    finished[s] = true;
+                    shared.fail(s, e);
+                }
+            }
+        }
+        for &i in &others {
+            if matches!(cells[i].trigger, Trigger::Periodic { .. }) {
+                cells[i].tick = true;
+            }
+        }
+        drain(shared, &mut cells, &others, &n);
+        if sources.iter().all(|&s| finished[s]) {
+            break;
+        }
+        if !polled {
+            let blocked: Vec<&str> = sources.iter().filter(|&&s| !finished[s]).map(|&s| cells[s].ctx.id()).collect();
+            let e = NodeError::msg(format!(
+                "deadlock: sources {} wait for room downstream and no node can run",
+                blocked.join(", ")
+            ));
+            shared.fail(sources.iter().copied().find(|&s| !finished[s]).unwrap_or(0), e);
+            break;
+        }
+    }
+    // Final pass: whatever is queued and can run, runs (also after a stop request).
+    drain(shared, &mut cells, &others, &n);
+    for &s in &sources {
+        let cell = &mut cells[s];
+        if let Err(e) = cell.imp.stop(&mut cell.ctx) {
+            shared.fail(s, NodeError::msg(format!("stop failed: {e}")));
+        }
+        cell.dead = true;
+    }
+    for (slot, cell) in shared.slots.iter().zip(cells) {
+        slot.cell.store(Some(cell));
+    }
+}
+
+fn drain(shared: &Shared, cells: &mut [Box<Cell>], order: &[usize], n: &NoNotify) {
+    loop {
+        let mut any = false;
+        for &i in order {
+            let cell = &mut cells[i];
+            run_controls(shared, i, cell);
+            while cell.ready(n) {
+                any = true;
+                if let Fired::Fatal(e) = cell.fire(n) {
+                    shared.fail(i, e);
+                }
+            }
+        }
+        if !any {
+            return;
+        }
+    }
+}

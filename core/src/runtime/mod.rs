@@ -1,0 +1,449 @@
+//! Running a validated graph: build every node (failing before any data flows), wire the
+//! edges, start the executor ([`pool`] threads or [`lockstep`]), and shut down in order:
+//! stop sources, drain queues, stop processors and sinks (flush, close), report.
+
+mod cell;
+mod lockstep;
+mod pool;
+mod rt;
+
+use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
+use std::sync::atomic::Ordering::SeqCst;
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use crossbeam::atomic::AtomicCell;
+use crossbeam::deque::{Injector, Worker};
+use crossbeam::queue::SegQueue;
+use crossbeam::sync::Parker;
+
+use cell::{Cell, Recipe};
+use pool::{Exec, IDLE, Shared, Sleeper, Slot};
+
+use crate::edge::{EdgeShared, EdgeTx, edge};
+use crate::error::NodeError;
+use crate::graph::{GraphSpec, ThreadMode, Trigger};
+use crate::io::{Inputs, Outputs};
+use crate::node::{Context, Mode, NodeImpl};
+use crate::registry::{BuildContext, Role};
+use crate::stats::{EdgeReport, NodeReport, NodeStats, StatsReport};
+
+/// Longest the shutdown waits for queues to drain before it counts what is left as
+/// undelivered and stops the nodes anyway (a node that never stops asking to rerun).
+const DRAIN_TIMEOUT: Duration = Duration::from_secs(30);
+
+/// Why a run did not go as planned.
+#[derive(Debug, thiserror::Error)]
+pub enum RunError {
+    #[error("node \"{node}\" (kind \"{kind}\") failed to start: {error}")]
+    Start { node: String, kind: String, error: NodeError },
+    #[error("node \"{node}\": {error}")]
+    Node { node: String, error: NodeError },
+    #[error("node \"{node}\" failed to stop: {error}")]
+    Stop { node: String, error: NodeError },
+    #[error("no node \"{0}\" in this graph")]
+    UnknownNode(String),
+}
+
+/// The result of a run that started.
+#[derive(Debug)]
+pub struct RunReport {
+    pub stats: StatsReport,
+    /// Fatal node errors, panics without restart and stop failures, in order.
+    pub failures: Vec<RunError>,
+}
+
+/// How long to run and how to be told to stop.
+#[derive(Clone, Default)]
+pub struct RunOptions {
+    /// Stop after this long (sources stop, queues drain).
+    pub duration: Option<Duration>,
+    /// Set by a Ctrl-C handler (or a test) to stop the run cleanly.
+    pub stop: Option<Arc<AtomicBool>>,
+}
+
+/// A graph whose nodes are built and started.
+pub struct RunningGraph {
+    shared: Arc<Shared>,
+    ids: Vec<String>,
+    kinds: Vec<String>,
+    edges: Vec<Arc<EdgeShared>>,
+    topo: Vec<usize>,
+    name: String,
+    mode: Mode,
+    t0: Instant,
+    sources: Vec<JoinHandle<()>>,
+    threads: Vec<JoinHandle<()>>,
+    timer: Option<JoinHandle<()>>,
+    timer_stop: Arc<AtomicBool>,
+}
+
+/// Builds, starts and runs a graph to its end; the convenience form of [`RunningGraph`].
+pub fn run(spec: &GraphSpec, opts: &RunOptions) -> Result<RunReport, RunError> {
+    Ok(RunningGraph::start(spec)?.wait(opts))
+}
+
+impl RunningGraph {
+    /// Builds every node and calls `start` on each (sinks first). Any failure stops the nodes
+    /// already started and returns the error naming the node; no data has flowed.
+    pub fn start(spec: &GraphSpec) -> Result<RunningGraph, RunError> {
+        let t0 = Instant::now();
+        let stop = Arc::new(AtomicBool::new(false));
+        let base_dir = spec.source.base_dir();
+        let n = spec.nodes.len();
+
+        // Build.
+        let mut imps: Vec<Option<NodeImpl>> = Vec::with_capacity(n);
+        let mut recipes = Vec::with_capacity(n);
+        for ns in &spec.nodes {
+            let build = BuildContext { base_dir: base_dir.clone(), mode: spec.mode, node_id: ns.id.clone() };
+            let imp = ns.factory.build(&ns.params, &build).map_err(|error| RunError::Start {
+                node: ns.id.clone(),
+                kind: ns.kind.clone(),
+                error,
+            })?;
+            let declared = ns.factory.info().role;
+            if imp.role() != declared {
+                return Err(RunError::Start {
+                    node: ns.id.clone(),
+                    kind: ns.kind.clone(),
+                    error: NodeError::msg(format!("factory built a {:?} for a kind declared {declared:?}", imp.role())),
+                });
+            }
+            imps.push(Some(imp));
+            recipes.push(Recipe { factory: ns.factory.clone(), params: ns.params.clone(), build });
+        }
+
+        // Wire.
+        let mut txs: Vec<Vec<Vec<EdgeTx>>> =
+            spec.nodes.iter().map(|ns| (0..ns.factory.info().outputs.len()).map(|_| Vec::new()).collect()).collect();
+        let mut rxs: Vec<Vec<(usize, crate::edge::EdgeRx)>> = (0..n).map(|_| Vec::new()).collect();
+        let mut edges = Vec::with_capacity(spec.edges.len());
+        for e in &spec.edges {
+            let (tx, rx) = edge(e.clone());
+            edges.push(tx.shared.clone());
+            txs[e.from_node][e.from_port].push(tx);
+            rxs[e.to_node].push((e.to_port, rx));
+        }
+
+        // Cells.
+        let mut cells: Vec<Box<Cell>> = Vec::with_capacity(n);
+        let mut stats = Vec::with_capacity(n);
+        for (i, (ns, (outs, mut ins))) in spec.nodes.iter().zip(txs.into_iter().zip(rxs)).enumerate() {
+            ins.sort_by_key(|(port, _)| *port); // stable: lanes keep file order
+            let port_of: Vec<usize> = ins.iter().map(|(p, _)| *p).collect();
+            let connected: Vec<bool> = outs.iter().map(|v| !v.is_empty()).collect();
+            let st = Arc::new(NodeStats::default());
+            stats.push(st.clone());
+            cells.push(Box::new(Cell {
+                imp: imps[i].take().expect("built above"),
+                ctx: Context::new(i as u32, Arc::from(ns.id.as_str()), t0, spec.mode, stop.clone()),
+                inputs: ins.into_iter().map(|(_, rx)| rx).collect(),
+                in_io: Inputs::new(port_of),
+                outputs: outs,
+                out_io: Outputs::new(connected),
+                trigger: ns.trigger,
+                deadline_ns: ns.deadline_us.map(|us| (us * 1e3) as u64),
+                restart: ns.restart,
+                recipe: recipes[i].clone(),
+                stats: st,
+                dead: false,
+                tick: false,
+            }));
+        }
+
+        // Start, sinks first so consumers are ready before producers.
+        let mut started: Vec<usize> = Vec::new();
+        for &i in spec.topo.iter().rev() {
+            let c = &mut cells[i];
+            if let Err(error) = c.imp.start(&mut c.ctx) {
+                for &j in &started {
+                    let c = &mut cells[j];
+                    let _ = c.imp.stop(&mut c.ctx);
+                }
+                let ns = &spec.nodes[i];
+                return Err(RunError::Start { node: ns.id.clone(), kind: ns.kind.clone(), error });
+            }
+            started.push(i);
+        }
+
+        let workers = if spec.workers == 0 {
+            std::thread::available_parallelism().map_or(2, |p| p.get())
+        } else {
+            spec.workers
+        };
+        let locals: Vec<Worker<usize>> = (0..workers).map(|_| Worker::new_lifo()).collect();
+        let parkers: Vec<Parker> = (0..workers).map(|_| Parker::new()).collect();
+        let slots = spec
+            .nodes
+            .iter()
+            .zip(cells)
+            .zip(stats)
+            .map(|((ns, cell), st)| {
+                let exec = match ns.factory.info().role {
+                    Role::Source => Exec::Source,
+                    _ if ns.thread == ThreadMode::Dedicated || ns.cpu.is_some() || ns.rt_priority.is_some() => {
+                        Exec::Dedicated
+                    }
+                    _ => Exec::Pool,
+                };
+                Slot {
+                    state: std::sync::atomic::AtomicU8::new(IDLE),
+                    cell: AtomicCell::new(Some(cell)),
+                    exec,
+                    thread: std::sync::OnceLock::new(),
+                    control: SegQueue::new(),
+                    has_control: AtomicBool::new(false),
+                    tick: AtomicBool::new(false),
+                    periodic: matches!(ns.trigger, Trigger::Periodic { .. }),
+                    stats: st,
+                }
+            })
+            .collect();
+        let shared = Arc::new(Shared {
+            slots,
+            injector: Injector::new(),
+            stealers: locals.iter().map(Worker::stealer).collect(),
+            sleepers: parkers
+                .iter()
+                .map(|p| Sleeper { sleeping: AtomicBool::new(false), unparker: p.unparker().clone() })
+                .collect(),
+            active: std::sync::atomic::AtomicUsize::new(0),
+            stop,
+            shutdown: AtomicBool::new(false),
+            failures: std::sync::Mutex::new(Vec::new()),
+            faulted: AtomicBool::new(false),
+        });
+
+        let mut g = RunningGraph {
+            ids: spec.nodes.iter().map(|n| n.id.clone()).collect(),
+            kinds: spec.nodes.iter().map(|n| n.kind.clone()).collect(),
+            edges,
+            topo: spec.topo.clone(),
+            name: spec.name.clone(),
+            mode: spec.mode,
+            t0,
+            sources: Vec::new(),
+            threads: Vec::new(),
+            timer: None,
+            timer_stop: Arc::new(AtomicBool::new(false)),
+            shared,
+        };
+        if spec.mode == Mode::Realtime {
+            g.spawn_threads(spec, locals, parkers);
+        }
+        Ok(g)
+    }
+
+    fn spawn_threads(&mut self, spec: &GraphSpec, locals: Vec<Worker<usize>>, parkers: Vec<Parker>) {
+        for (idx, (local, parker)) in locals.into_iter().zip(parkers).enumerate() {
+            let sh = self.shared.clone();
+            self.threads.push(
+                std::thread::Builder::new()
+                    .name(format!("skinflow-worker-{idx}"))
+                    .spawn(move || pool::worker_loop(&sh, idx, local, parker))
+                    .expect("spawning a worker thread"),
+            );
+        }
+        for (i, ns) in spec.nodes.iter().enumerate() {
+            let exec = self.shared.slots[i].exec;
+            if exec == Exec::Pool {
+                continue;
+            }
+            let sh = self.shared.clone();
+            let (id, cpu, prio) = (ns.id.clone(), ns.cpu, ns.rt_priority);
+            let h = std::thread::Builder::new()
+                .name(format!("skinflow-{}", ns.id))
+                .spawn(move || {
+                    rt::apply(&id, cpu, prio);
+                    match exec {
+                        Exec::Source => pool::source_loop(&sh, i),
+                        _ => pool::dedicated_loop(&sh, i),
+                    }
+                })
+                .expect("spawning a node thread");
+            let _ = self.shared.slots[i].thread.set(h.thread().clone());
+            h.thread().unpark(); // in case it parked before its handle was registered
+            if exec == Exec::Source {
+                self.sources.push(h);
+            } else {
+                self.threads.push(h);
+            }
+        }
+        let periodic: Vec<(usize, Duration)> = spec
+            .nodes
+            .iter()
+            .enumerate()
+            .filter_map(|(i, ns)| match ns.trigger {
+                Trigger::Periodic { period } => Some((i, period)),
+                _ => None,
+            })
+            .collect();
+        if !periodic.is_empty() {
+            let sh = self.shared.clone();
+            let stop = self.timer_stop.clone();
+            self.timer = Some(
+                std::thread::Builder::new()
+                    .name("skinflow-timer".into())
+                    .spawn(move || timer_loop(&sh, &periodic, &stop))
+                    .expect("spawning the timer thread"),
+            );
+        }
+    }
+
+    /// Index of a node by id.
+    pub fn node_index(&self, id: &str) -> Option<usize> {
+        self.ids.iter().position(|x| x == id)
+    }
+
+    /// The id of node `index` (as in `Header::origin`).
+    pub fn node_name(&self, index: u32) -> Option<&str> {
+        self.ids.get(index as usize).map(String::as_str)
+    }
+
+    /// Sends a control command (e.g. `tare`) to a node; it runs between two of its calls.
+    pub fn control(&self, node: &str, cmd: &str) -> Result<(), RunError> {
+        let i = self.node_index(node).ok_or_else(|| RunError::UnknownNode(node.to_owned()))?;
+        let slot = &self.shared.slots[i];
+        slot.control.push(cmd.to_owned());
+        slot.has_control.store(true, SeqCst);
+        self.shared.notify_external(i);
+        Ok(())
+    }
+
+    /// A live snapshot of the statistics.
+    pub fn stats(&self) -> StatsReport {
+        let nodes = (0..self.ids.len())
+            .map(|i| {
+                let inputs: Vec<&crate::stats::EdgeStats> =
+                    self.edges.iter().filter(|e| e.spec.to_node == i).map(|e| &e.stats).collect();
+                NodeReport::from_stats(&self.ids[i], &self.kinds[i], &self.shared.slots[i].stats, &inputs)
+            })
+            .collect();
+        let edges = self
+            .edges
+            .iter()
+            .map(|e| EdgeReport::from_stats(&e.spec.from, &e.spec.to, e.spec.policy, e.spec.capacity, &e.stats))
+            .collect();
+        StatsReport { graph: self.name.clone(), mode: self.mode, wall_s: self.t0.elapsed().as_secs_f64(), nodes, edges }
+    }
+
+    /// Runs until the sources end, the stop flag is set, the duration passes or a node fails;
+    /// then drains, stops every node and reports.
+    pub fn wait(mut self, opts: &RunOptions) -> RunReport {
+        let until = opts.duration.map(|d| Instant::now() + d);
+        let never = AtomicBool::new(false);
+        let external = opts.stop.as_deref().unwrap_or(&never);
+        if self.mode == Mode::Lockstep {
+            lockstep::run(&self.shared, &self.topo, external, until);
+        } else {
+            self.wait_sources(external, until);
+            self.drain();
+        }
+        self.finish()
+    }
+
+    fn wait_sources(&mut self, external: &AtomicBool, until: Option<Instant>) {
+        loop {
+            if self.sources.iter().all(JoinHandle::is_finished) {
+                break;
+            }
+            if external.load(SeqCst) || self.shared.stop.load(SeqCst) || until.is_some_and(|t| Instant::now() >= t) {
+                self.shared.stop.store(true, SeqCst);
+                for h in &self.sources {
+                    h.thread().unpark();
+                }
+                break;
+            }
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        for h in self.sources.drain(..) {
+            let _ = h.join();
+        }
+    }
+
+    fn drain(&mut self) {
+        self.timer_stop.store(true, SeqCst);
+        if let Some(t) = self.timer.take() {
+            let _ = t.join();
+        }
+        // One last tick so periodic nodes see the newest data.
+        for (i, slot) in self.shared.slots.iter().enumerate() {
+            if slot.periodic {
+                slot.tick.store(true, SeqCst);
+                self.shared.notify_external(i);
+            }
+        }
+        // Wake every node that still has input, then wait until nothing is queued or running.
+        for i in 0..self.shared.slots.len() {
+            if self.shared.slots[i].exec != Exec::Source {
+                self.shared.notify_external(i);
+            }
+        }
+        let deadline = Instant::now() + DRAIN_TIMEOUT;
+        while self.shared.active.load(SeqCst) != 0 {
+            if Instant::now() >= deadline {
+                tracing::warn!("queues did not drain within {DRAIN_TIMEOUT:?}; stopping anyway");
+                break;
+            }
+            std::thread::sleep(Duration::from_millis(1));
+        }
+        self.shared.shutdown.store(true, SeqCst);
+        for s in &self.shared.sleepers {
+            s.unparker.unpark();
+        }
+        for slot in &self.shared.slots {
+            if let Some(t) = slot.thread.get() {
+                t.unpark();
+            }
+        }
+        for h in self.threads.drain(..) {
+            let _ = h.join();
+        }
+    }
+
+    fn finish(self) -> RunReport {
+        let mut stop_failures = Vec::new();
+        for &i in &self.topo {
+            let slot = &self.shared.slots[i];
+            let Some(mut cell) = slot.cell.take() else { continue };
+            for rx in &cell.inputs {
+                let left = rx.pending() as u64;
+                rx.shared.stats.undelivered.fetch_add(left, std::sync::atomic::Ordering::Relaxed);
+            }
+            if slot.exec != Exec::Source
+                && let Err(error) = cell.imp.stop(&mut cell.ctx)
+            {
+                stop_failures.push(RunError::Stop { node: self.ids[i].clone(), error });
+            }
+            slot.cell.store(Some(cell));
+        }
+        let stats = self.stats();
+        let mut failures: Vec<RunError> = std::mem::take(&mut *self.shared.failures.lock().unwrap_or_else(|p| p.into_inner()))
+            .into_iter()
+            .map(|(i, error)| RunError::Node { node: self.ids[i].clone(), error })
+            .collect();
+        failures.extend(stop_failures);
+        RunReport { stats, failures }
+    }
+}
+
+fn timer_loop(shared: &Shared, periodic: &[(usize, Duration)], stop: &AtomicBool) {
+    let start = Instant::now();
+    let mut next: Vec<Instant> = periodic.iter().map(|(_, p)| start + *p).collect();
+    while !stop.load(SeqCst) {
+        let now = Instant::now();
+        for (k, &(i, period)) in periodic.iter().enumerate() {
+            if now >= next[k] {
+                shared.slots[i].tick.store(true, SeqCst);
+                shared.notify_external(i);
+                while next[k] <= now {
+                    next[k] += period;
+                }
+            }
+        }
+        let wake = next.iter().min().copied().unwrap_or(now + Duration::from_millis(50));
+        std::thread::sleep(wake.saturating_duration_since(Instant::now()).min(Duration::from_millis(50)));
+    }
+}

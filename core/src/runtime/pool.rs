@@ -1,0 +1,309 @@
+//! The threaded executor: a worker pool for processors and sinks, one thread per source and
+//! per dedicated node, and a timer thread for periodic triggers.
+//!
+//! A node's `state` (idle, queued, running, running-and-notified) guarantees that one thread
+//! at a time runs it; its [`Cell`] is handed over through a lock-free `AtomicCell`. A push
+//! that makes a consumer runnable puts it in the worker's LIFO slot, so the next hop runs on
+//! the same thread with no trip through a shared queue; further ready nodes go to the
+//! worker's local deque, which idle workers steal from.
+
+use std::cell::Cell as StdCell;
+use std::sync::Arc;
+use std::sync::atomic::Ordering::SeqCst;
+use std::sync::atomic::{AtomicBool, AtomicU8, AtomicUsize};
+use std::thread::Thread;
+use std::time::Duration;
+
+use crossbeam::atomic::AtomicCell;
+use crossbeam::deque::{Injector, Steal, Stealer, Worker};
+use crossbeam::queue::SegQueue;
+use crossbeam::sync::{Parker, Unparker};
+
+use super::cell::{Cell, Fired, Notify};
+use crate::error::NodeError;
+use crate::stats::NodeStats;
+
+pub(crate) const IDLE: u8 = 0;
+pub(crate) const QUEUED: u8 = 1;
+pub(crate) const RUNNING: u8 = 2;
+pub(crate) const NOTIFIED: u8 = 3;
+
+/// Calls a node may make in one activation before it yields its worker to others.
+const BUDGET: usize = 64;
+/// Longest an idle worker sleeps without a wake-up (a safety net, not the wake-up path).
+const IDLE_PARK: Duration = Duration::from_millis(50);
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Exec {
+    Pool,
+    Dedicated,
+    Source,
+}
+
+pub(crate) struct Slot {
+    pub state: AtomicU8,
+    pub cell: AtomicCell<Option<Box<Cell>>>,
+    pub exec: Exec,
+    pub thread: std::sync::OnceLock<Thread>,
+    pub control: SegQueue<String>,
+    pub has_control: AtomicBool,
+    pub tick: AtomicBool,
+    pub periodic: bool,
+    pub stats: Arc<NodeStats>,
+}
+
+pub(crate) struct Sleeper {
+    pub sleeping: AtomicBool,
+    pub unparker: Unparker,
+}
+
+pub(crate) struct Shared {
+    pub slots: Vec<Slot>,
+    pub injector: Injector<usize>,
+    pub stealers: Vec<Stealer<usize>>,
+    pub sleepers: Vec<Sleeper>,
+    /// Nodes queued or running.
+    pub active: AtomicUsize,
+    /// Sources stop polling (the contexts' stop flag).
+    pub stop: Arc<AtomicBool>,
+    /// Workers and dedicated threads exit.
+    pub shutdown: AtomicBool,
+    pub failures: std::sync::Mutex<Vec<(usize, NodeError)>>,
+    pub faulted: AtomicBool,
+}
+
+impl Shared {
+    /// Records a fatal node error and asks the graph to stop (cold path).
+    pub fn fail(&self, node: usize, e: NodeError) {
+        self.failures.lock().unwrap_or_else(|p| p.into_inner()).push((node, e));
+        self.faulted.store(true, SeqCst);
+        self.stop.store(true, SeqCst);
+    }
+
+    fn wake_one(&self) {
+        for s in &self.sleepers {
+            if s.sleeping.swap(false, SeqCst) {
+                s.unparker.unpark();
+                return;
+            }
+        }
+    }
+
+    /// Moves an idle node to queued (true: the caller must enqueue it), or flags a running
+    /// node to look at its inputs again before going idle.
+    fn mark(&self, node: usize) -> bool {
+        let st = &self.slots[node].state;
+        loop {
+            match st.load(SeqCst) {
+                IDLE => {
+                    self.active.fetch_add(1, SeqCst);
+                    if st.compare_exchange(IDLE, QUEUED, SeqCst, SeqCst).is_ok() {
+                        return true;
+                    }
+                    self.active.fetch_sub(1, SeqCst);
+                }
+                RUNNING => {
+                    if st.compare_exchange(RUNNING, NOTIFIED, SeqCst, SeqCst).is_ok() {
+                        return false;
+                    }
+                }
+                _ => return false,
+            }
+        }
+    }
+
+    /// Wakes a node from outside a worker (source threads, timers, control, shutdown).
+    pub fn notify_external(&self, node: usize) {
+        let slot = &self.slots[node];
+        match slot.exec {
+            Exec::Source => {
+                if let Some(t) = slot.thread.get() {
+                    t.unpark();
+                }
+            }
+            Exec::Dedicated => {
+                if self.mark(node)
+                    && let Some(t) = slot.thread.get()
+                {
+                    t.unpark();
+                }
+            }
+            Exec::Pool => {
+                if self.mark(node) {
+                    self.injector.push(node);
+                    self.wake_one();
+                }
+            }
+        }
+    }
+
+    /// Runs a queued node until it is not ready, its budget is spent, or it is notified no more.
+    pub fn execute(&self, node: usize, n: &dyn Notify, budget: usize) {
+        let slot = &self.slots[node];
+        slot.state.store(RUNNING, SeqCst);
+        let mut cell = slot.cell.take().expect("a queued node's cell is in its slot");
+        let mut left = budget;
+        loop {
+            if slot.has_control.swap(false, SeqCst) {
+                while let Some(c) = slot.control.pop() {
+                    cell.control(&c);
+                }
+            }
+            if slot.tick.swap(false, SeqCst) {
+                cell.tick = true;
+            }
+            while left > 0 && cell.ready(n) {
+                left -= 1;
+                if let Fired::Fatal(e) = cell.fire(n) {
+                    self.fail(node, e);
+                }
+            }
+            slot.cell.store(Some(cell));
+            if left == 0 {
+                slot.state.store(QUEUED, SeqCst);
+                match slot.exec {
+                    Exec::Pool => {
+                        self.injector.push(node);
+                        self.wake_one();
+                    }
+                    _ => {
+                        if let Some(t) = slot.thread.get() {
+                            t.unpark();
+                        }
+                    }
+                }
+                return;
+            }
+            if slot.state.compare_exchange(RUNNING, IDLE, SeqCst, SeqCst).is_ok() {
+                self.active.fetch_sub(1, SeqCst);
+                return;
+            }
+            slot.state.store(RUNNING, SeqCst);
+            cell = slot.cell.take().expect("a running node's cell is in its slot");
+            left = budget;
+        }
+    }
+}
+
+/// Notifications from outside the pool.
+pub(crate) struct ExternalNotify<'a>(pub &'a Shared);
+
+impl Notify for ExternalNotify<'_> {
+    fn notify(&self, node: usize) {
+        self.0.notify_external(node);
+    }
+}
+
+/// Notifications from a worker: the first runnable consumer goes to the LIFO slot.
+struct WorkerNotify<'a> {
+    shared: &'a Shared,
+    local: &'a Worker<usize>,
+    lifo: StdCell<Option<usize>>,
+}
+
+impl Notify for WorkerNotify<'_> {
+    fn notify(&self, node: usize) {
+        if self.shared.slots[node].exec != Exec::Pool {
+            return self.shared.notify_external(node);
+        }
+        if self.shared.mark(node) {
+            match self.lifo.get() {
+                None => self.lifo.set(Some(node)),
+                Some(_) => {
+                    self.local.push(node);
+                    self.shared.wake_one();
+                }
+            }
+        }
+    }
+}
+
+pub(crate) fn worker_loop(shared: &Shared, idx: usize, local: Worker<usize>, parker: Parker) {
+    let n = WorkerNotify { shared, local: &local, lifo: StdCell::new(None) };
+    loop {
+        let next = n.lifo.take().or_else(|| local.pop()).or_else(|| steal(shared, &local));
+        if let Some(node) = next {
+            shared.execute(node, &n, BUDGET);
+            continue;
+        }
+        if shared.shutdown.load(SeqCst) {
+            return;
+        }
+        shared.sleepers[idx].sleeping.store(true, SeqCst);
+        if !shared.injector.is_empty() || shared.stealers.iter().any(|s| !s.is_empty()) {
+            shared.sleepers[idx].sleeping.store(false, SeqCst);
+            continue;
+        }
+        parker.park_timeout(IDLE_PARK);
+        shared.sleepers[idx].sleeping.store(false, SeqCst);
+    }
+}
+
+fn steal(shared: &Shared, local: &Worker<usize>) -> Option<usize> {
+    loop {
+        match shared.injector.steal_batch_and_pop(local) {
+            Steal::Success(t) => return Some(t),
+            Steal::Retry => continue,
+            Steal::Empty => break,
+        }
+    }
+    for s in &shared.stealers {
+        loop {
+            match s.steal() {
+                Steal::Success(t) => return Some(t),
+                Steal::Retry => continue,
+                Steal::Empty => break,
+            }
+        }
+    }
+    None
+}
+
+/// A node with a thread of its own (pinned or real-time): runs whenever it is queued.
+pub(crate) fn dedicated_loop(shared: &Shared, node: usize) {
+    let n = ExternalNotify(shared);
+    loop {
+        if shared.slots[node].state.load(SeqCst) == QUEUED {
+            shared.execute(node, &n, usize::MAX);
+        } else if shared.shutdown.load(SeqCst) {
+            return;
+        } else {
+            std::thread::park_timeout(IDLE_PARK);
+        }
+    }
+}
+
+/// A source's thread: poll while there is room downstream, until finished or stopped.
+/// Returns the cell so the runtime can report and stop it.
+pub(crate) fn source_loop(shared: &Shared, node: usize) {
+    let slot = &shared.slots[node];
+    let mut cell = slot.cell.take().expect("a source's cell is in its slot at start");
+    let n = ExternalNotify(shared);
+    loop {
+        if shared.stop.load(SeqCst) {
+            break;
+        }
+        if slot.has_control.swap(false, SeqCst) {
+            while let Some(c) = slot.control.pop() {
+                cell.control(&c);
+            }
+        }
+        if !cell.outputs_have_space() {
+            std::thread::park_timeout(IDLE_PARK);
+            continue;
+        }
+        match cell.fire(&n) {
+            Fired::Ok => {}
+            Fired::Finished => break,
+            Fired::Fatal(e) => {
+                shared.fail(node, e);
+                break;
+            }
+        }
+    }
+    if let Err(e) = cell.imp.stop(&mut cell.ctx) {
+        shared.fail(node, NodeError::msg(format!("stop failed: {e}")));
+    }
+    cell.dead = true; // stopped: never run again
+    slot.cell.store(Some(cell));
+}

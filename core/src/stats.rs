@@ -1,0 +1,289 @@
+//! Run statistics: lock-free counters and latency histograms updated on the hot path, and the
+//! report printed at the end of `skinflow run` and written with `--stats-json`.
+
+use std::fmt;
+use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering::Relaxed};
+
+use serde::Serialize;
+
+use crate::graph::Policy;
+
+/// Values below this are their own bucket; above, 8 sub-buckets per power of two (12.5 %
+/// resolution), like an HDR histogram with 3 significant bits.
+const LINEAR: u64 = 16;
+const SUB_BITS: u32 = 3;
+const BUCKETS: usize = 16 + 60 * 8;
+
+/// A lock-free log-linear histogram of nanosecond durations.
+pub struct Histogram {
+    buckets: Box<[AtomicU64]>,
+    count: AtomicU64,
+    max: AtomicU64,
+}
+
+impl Default for Histogram {
+    fn default() -> Self {
+        Histogram { buckets: (0..BUCKETS).map(|_| AtomicU64::new(0)).collect(), count: AtomicU64::new(0), max: AtomicU64::new(0) }
+    }
+}
+
+fn bucket_of(v: u64) -> usize {
+    if v < LINEAR {
+        return v as usize;
+    }
+    let msb = 63 - v.leading_zeros();
+    let sub = (v >> (msb - SUB_BITS)) & ((1 << SUB_BITS) - 1);
+    (LINEAR as usize + (msb as usize - 4) * 8 + sub as usize).min(BUCKETS - 1)
+}
+
+/// Lower and upper bound of a bucket.
+fn bucket_range(i: usize) -> (u64, u64) {
+    if (i as u64) < LINEAR {
+        return (i as u64, i as u64);
+    }
+    let k = i - LINEAR as usize;
+    let msb = (k / 8) as u32 + 4;
+    let sub = (k % 8) as u64;
+    let lo = (1u64 << msb) | (sub << (msb - SUB_BITS));
+    (lo, lo + (1u64 << (msb - SUB_BITS)) - 1)
+}
+
+impl Histogram {
+    pub fn record(&self, ns: u64) {
+        self.buckets[bucket_of(ns)].fetch_add(1, Relaxed);
+        self.count.fetch_add(1, Relaxed);
+        self.max.fetch_max(ns, Relaxed);
+    }
+
+    pub fn count(&self) -> u64 {
+        self.count.load(Relaxed)
+    }
+
+    pub fn max(&self) -> u64 {
+        self.max.load(Relaxed)
+    }
+
+    /// The `q`-quantile (0..=1) in ns: the midpoint of the bucket holding it (within 6.25 %).
+    pub fn quantile(&self, q: f64) -> u64 {
+        let n = self.count();
+        if n == 0 {
+            return 0;
+        }
+        let rank = ((q.clamp(0.0, 1.0) * n as f64).ceil() as u64).max(1);
+        let mut seen = 0;
+        for (i, b) in self.buckets.iter().enumerate() {
+            seen += b.load(Relaxed);
+            if seen >= rank {
+                let (lo, hi) = bucket_range(i);
+                return (lo + (hi - lo) / 2).min(self.max());
+            }
+        }
+        self.max()
+    }
+}
+
+/// Counters of one node.
+#[derive(Default)]
+pub struct NodeStats {
+    pub calls: AtomicU64,
+    pub msgs_in: AtomicU64,
+    pub msgs_out: AtomicU64,
+    pub errors: AtomicU64,
+    pub panics: AtomicU64,
+    pub restarts: AtomicU64,
+    pub deadline_misses: AtomicU64,
+    /// Wall time per call.
+    pub latency: Histogram,
+}
+
+/// Counters of one edge.
+#[derive(Default)]
+pub struct EdgeStats {
+    pub pushed: AtomicU64,
+    /// Evicted by `drop_oldest` when full.
+    pub dropped_full: AtomicU64,
+    /// Discarded by an aligned trigger because no partner arrived.
+    pub dropped_unaligned: AtomicU64,
+    /// Superseded by a newer message before a periodic trigger fired.
+    pub dropped_coalesced: AtomicU64,
+    /// Still queued at shutdown (its consumer could not take it: stopped or never aligned).
+    pub undelivered: AtomicU64,
+    pub max_depth: AtomicUsize,
+}
+
+impl EdgeStats {
+    pub fn drops(&self) -> u64 {
+        self.dropped_full.load(Relaxed)
+            + self.dropped_unaligned.load(Relaxed)
+            + self.dropped_coalesced.load(Relaxed)
+            + self.undelivered.load(Relaxed)
+    }
+}
+
+/// One node's line in the report.
+#[derive(Debug, Clone, Serialize)]
+pub struct NodeReport {
+    pub id: String,
+    pub kind: String,
+    pub calls: u64,
+    pub msgs_in: u64,
+    pub msgs_out: u64,
+    pub errors: u64,
+    pub panics: u64,
+    pub restarts: u64,
+    pub deadline_misses: u64,
+    pub latency_us_p50: f64,
+    pub latency_us_p99: f64,
+    pub latency_us_max: f64,
+    /// Deepest queue on any of its inputs.
+    pub max_queue_depth: usize,
+    /// Drops on its input edges (all causes).
+    pub drops: u64,
+}
+
+/// One edge's line in the report.
+#[derive(Debug, Clone, Serialize)]
+pub struct EdgeReport {
+    pub from: String,
+    pub to: String,
+    pub policy: Policy,
+    pub capacity: usize,
+    pub pushed: u64,
+    pub max_depth: usize,
+    pub dropped_full: u64,
+    pub dropped_unaligned: u64,
+    pub dropped_coalesced: u64,
+    pub undelivered: u64,
+    pub drops: u64,
+}
+
+/// Statistics of a run.
+#[derive(Debug, Clone, Serialize)]
+pub struct StatsReport {
+    pub graph: String,
+    pub mode: crate::node::Mode,
+    pub wall_s: f64,
+    pub nodes: Vec<NodeReport>,
+    pub edges: Vec<EdgeReport>,
+}
+
+impl NodeReport {
+    pub(crate) fn from_stats(id: &str, kind: &str, s: &NodeStats, inputs: &[&EdgeStats]) -> NodeReport {
+        let us = |ns: u64| ns as f64 / 1e3;
+        NodeReport {
+            id: id.to_owned(),
+            kind: kind.to_owned(),
+            calls: s.calls.load(Relaxed),
+            msgs_in: s.msgs_in.load(Relaxed),
+            msgs_out: s.msgs_out.load(Relaxed),
+            errors: s.errors.load(Relaxed),
+            panics: s.panics.load(Relaxed),
+            restarts: s.restarts.load(Relaxed),
+            deadline_misses: s.deadline_misses.load(Relaxed),
+            latency_us_p50: us(s.latency.quantile(0.5)),
+            latency_us_p99: us(s.latency.quantile(0.99)),
+            latency_us_max: us(s.latency.max()),
+            max_queue_depth: inputs.iter().map(|e| e.max_depth.load(Relaxed)).max().unwrap_or(0),
+            drops: inputs.iter().map(|e| e.drops()).sum(),
+        }
+    }
+}
+
+impl EdgeReport {
+    pub(crate) fn from_stats(from: &str, to: &str, policy: Policy, capacity: usize, s: &EdgeStats) -> EdgeReport {
+        EdgeReport {
+            from: from.to_owned(),
+            to: to.to_owned(),
+            policy,
+            capacity,
+            pushed: s.pushed.load(Relaxed),
+            max_depth: s.max_depth.load(Relaxed),
+            dropped_full: s.dropped_full.load(Relaxed),
+            dropped_unaligned: s.dropped_unaligned.load(Relaxed),
+            dropped_coalesced: s.dropped_coalesced.load(Relaxed),
+            undelivered: s.undelivered.load(Relaxed),
+            drops: s.drops(),
+        }
+    }
+}
+
+impl StatsReport {
+    /// Total drops over all edges.
+    pub fn total_drops(&self) -> u64 {
+        self.edges.iter().map(|e| e.drops).sum()
+    }
+
+    pub fn node(&self, id: &str) -> Option<&NodeReport> {
+        self.nodes.iter().find(|n| n.id == id)
+    }
+}
+
+impl fmt::Display for StatsReport {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        writeln!(f, "graph \"{}\" ({:?}), {:.3} s", self.graph, self.mode, self.wall_s)?;
+        writeln!(
+            f,
+            "{:<16} {:<16} {:>9} {:>9} {:>9} {:>10} {:>10} {:>10} {:>6} {:>7} {:>6} {:>6}",
+            "node", "kind", "calls", "in", "out", "p50 us", "p99 us", "max us", "depth", "drops", "miss", "err"
+        )?;
+        for n in &self.nodes {
+            writeln!(
+                f,
+                "{:<16} {:<16} {:>9} {:>9} {:>9} {:>10.2} {:>10.2} {:>10.2} {:>6} {:>7} {:>6} {:>6}",
+                n.id,
+                n.kind,
+                n.calls,
+                n.msgs_in,
+                n.msgs_out,
+                n.latency_us_p50,
+                n.latency_us_p99,
+                n.latency_us_max,
+                n.max_queue_depth,
+                n.drops,
+                n.deadline_misses,
+                n.errors + n.panics
+            )?;
+        }
+        let dropping: Vec<&EdgeReport> = self.edges.iter().filter(|e| e.drops > 0).collect();
+        if !dropping.is_empty() {
+            writeln!(f, "drops by edge:")?;
+            for e in dropping {
+                writeln!(
+                    f,
+                    "  {} -> {} ({:?}, capacity {}): full {}, unaligned {}, coalesced {}, undelivered {}",
+                    e.from, e.to, e.policy, e.capacity, e.dropped_full, e.dropped_unaligned, e.dropped_coalesced, e.undelivered
+                )?;
+            }
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn buckets_cover_values_monotonically() {
+        let mut last = 0;
+        for v in [0u64, 1, 15, 16, 17, 31, 32, 100, 1000, 1_000_000, u64::MAX / 2] {
+            let b = bucket_of(v);
+            assert!(b >= last);
+            let (lo, hi) = bucket_range(b);
+            assert!(lo <= v && v <= hi, "{v} not in [{lo}, {hi}]");
+            last = b;
+        }
+    }
+
+    #[test]
+    fn quantiles_are_within_resolution() {
+        let h = Histogram::default();
+        for v in 1..=1000u64 {
+            h.record(v * 1000);
+        }
+        let p50 = h.quantile(0.5) as f64;
+        assert!((p50 - 500_000.0).abs() / 500_000.0 < 0.07, "{p50}");
+        assert_eq!(h.max(), 1_000_000);
+        assert_eq!(h.count(), 1000);
+    }
+}

@@ -1,1 +1,3 @@
+//! Whole-binary tests: run / check / calibrate / eval on small fixtures.
 
+mod engine;

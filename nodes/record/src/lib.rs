@@ -1,12 +1,74 @@
-//! skinflow recording format v1 (CONTRACTS.md section 2): writer, reader, replay, inspect.
+//! skinflow recording format v1 (CONTRACTS.md section 2): writing, reading, replay, inspect.
+//!
+//! `RecordingWriter` (module `write`) appends rows of the declared streams and writes them a
+//! chunk at a time, flushing at least every `flush_interval_s`, rotating parts by size or time.
+//! `Recording::open` (module `read`) validates a file from any writer (skinflow, h5py, MATLAB)
+//! and loads its streams; `Recording::events` (module `replay`) merges them in time order;
+//! `Recording::no_load` (module `tare`) finds the leading no-load period; `inspect` summarises.
+//! Plain library: no engine types; the `hdf5_logger` and `replay` nodes wrap it.
+//!
+//! # Recording format: skinflow's extras
+//!
+//! Files follow CONTRACTS.md section 2. The logger also writes the following, which readers
+//! of the contract ignore (extra groups and attributes are allowed).
+//!
+//! | path | type, shape | meaning |
+//! |---|---|---|
+//! | `/` attr `software_version` | string | writer and version, e.g. `skinflow 0.1.0` |
+//! | `/` attr `part` | u32 | 1-based index of a rotated part (only when rotating) |
+//! | `/derived/image` | f64 [n, H, W] | reconstructed conductivity-change images, row-major, as the pipeline produced them |
+//! | `/derived/image_t` | f64 [n] | seconds, time of the EIT frame each image comes from |
+//! | `/derived/contacts/t` | f64 [n] | seconds |
+//! | `/derived/contacts/x_mm`, `y_mm` | f64 [n, Cmax] | segmented contact centroids, NaN-padded |
+//! | `/derived/contacts/sum` | f64 [n, Cmax] | conductivity sum of each contact (image units) |
+//! | `/derived/contacts/area_mm2` | f64 [n, Cmax] | contact area, mm² |
+//! | `/derived/forces/<strategy>/t` | f64 [n] | seconds |
+//! | `/derived/forces/<strategy>/force_n` | f64 [n, Cmax] | per-contact force of that strategy, N, in the order of the frame's contacts, NaN-padded |
+//!
+//! - Widths are fixed when a file is created, because HDF5 can't widen a chunked dataset:
+//!   truth C = `truth_max_contacts` (default 8) and derived Cmax = `derived_max_contacts`
+//!   (default 16). Unused columns hold NaN. A truth row with more contacts than C is refused
+//!   (an error, never silent); derived contacts beyond Cmax are dropped and counted.
+//! - Every declared stream's datasets exist from the start, empty until rows arrive.
+//! - Storage: chunked along rows, resizable, shuffle + deflate (level 1 by default); the chunk
+//!   holds up to `chunk_rows` rows (default 1024), fewer when a row is wide, so a chunk stays
+//!   near 1 MiB. Fill value NaN (0 for `/eit/seq`). Object modification times are not stored.
+//! - Library version bounds: `earliest..v18` (readable by HDF5 1.8 and Debian's 1.10 tools),
+//!   or `v110..v110` with SWMR on (readable by HDF5 >= 1.10).
+//! - Crash safety: rows stay in memory until their chunk is full or `flush_interval_s` (wall
+//!   clock, default 1 s) has passed, then they are written and the file is flushed; the file is
+//!   not touched between flushes, so after a SIGKILL it opens with every row up to the last
+//!   flush. A file killed while in SWMR mode keeps HDF5's "open for writing" mark; `Recording::open`
+//!   then opens it in SWMR-read mode (other tools: `h5clear -s FILE` removes the mark).
+//!
+//! # Rotation and file names
+//!
+//! With `rotate_mb` or `rotate_s` set, the writer never writes the path it was given: for
+//! `rec.h5` it writes `rec-0001.h5`, `rec-0002.h5`, ... (1-based, 4 digits or more, next to
+//! `rec.h5`; see `rotate::part_path`, and `rotate::find_parts` to list them). A new part starts
+//! before the first row appended after the current part reached `rotate_mb` MB (10^6 bytes, as
+//! measured after a flush) or before the first row whose time is `rotate_s` seconds or more after
+//! the part's first row. Each row is in exactly one part, and each part is a complete format-v1
+//! file with the same root attributes (plus `part`) and `/eit/reference` when set. The truth
+//! row in effect at the start of a part lives in the previous part.
+
 pub mod error;
+pub mod inspect;
 pub mod layout;
+pub mod read;
+pub mod replay;
 pub mod rotate;
+pub mod tare;
 mod timestamp;
 pub mod write;
 
 pub use error::{RecordError, SchemaProblem};
+pub use inspect::{FrameGaps, StreamSummary, Summary, TruthCoverage, inspect};
+pub use read::{
+    ContactsStream, Derived, EitStream, ForceStream, ImageStream, PressureStream, Recording,
+    TruthRow, TruthStream,
+};
+pub use replay::{Event, Events};
+pub use tare::{DEFAULT_TARE_S, NoLoad, NoLoadSource};
 pub use timestamp::iso8601_utc;
 pub use write::{ContactRow, RecordingWriter, Streams, TruthContact, WriterOptions, WriterStats};
-pub mod read;
-pub use read::{EitStream, PressureStream, Recording, TruthRow, TruthStream};

@@ -292,19 +292,21 @@ impl Segmenter {
             return Ok(());
         }
         let range = d_max - d_min;
+        let inv_range = 1.0 / range;
         self.hist.fill(0);
         for &v in image.iter().filter(|v| v.is_finite()) {
-            self.hist[otsu::bin_of((-v - d_min) / range)] += 1;
+            self.hist[otsu::bin_of((-v - d_min) * inv_range)] += 1;
         }
         let Some(t_norm) = otsu::otsu_threshold(&self.hist) else {
             return Ok(());
         };
         out.threshold_norm = Some(t_norm);
         out.threshold = Some(d_min + t_norm * range);
-        let floor = self.params.floor;
+        // d_norm >= t* and d >= floor, as one comparison on the decrease itself.
+        let cut = (d_min + t_norm * range).max(self.params.floor);
         for (m, &v) in self.mask.iter_mut().zip(image) {
             // NaN compares false: pixels outside the domain never become foreground.
-            *m = u8::from((-v - d_min) / range >= t_norm && -v >= floor);
+            *m = u8::from(-v >= cut);
         }
         morphology::open_then_close(
             &self.disk,
@@ -315,6 +317,7 @@ impl Segmenter {
         );
         let mut acc = Accum::default();
         let pixel_area = g.pixel_area_mm2();
+        let (x0, dx, y0, dy) = (g.x_mm(0), g.dx_mm(), g.y_mm(0), g.dy_mm());
         label::label_components(
             g.width,
             g.height,
@@ -325,7 +328,10 @@ impl Segmenter {
                 label::Visit::Pixel(p) => {
                     let d = image[p];
                     let d = if d.is_finite() { (-d).max(0.0) } else { 0.0 };
-                    let (x, y) = (g.x_mm(p % g.width), g.y_mm(p / g.width));
+                    let (x, y) = (
+                        x0 + (p % g.width) as f64 * dx,
+                        y0 + (p / g.width) as f64 * dy,
+                    );
                     acc.w += d;
                     acc.wx += d * x;
                     acc.wy += d * y;

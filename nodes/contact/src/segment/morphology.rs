@@ -201,7 +201,7 @@ mod tests {
                         state = state
                             .wrapping_mul(6364136223846793005)
                             .wrapping_add(1442695040888963407);
-                        u8::from((state >> 40) % 3 != 0)
+                        u8::from(!(state >> 40).is_multiple_of(3))
                     })
                     .collect();
                 let mut out = vec![0u8; w * h];

@@ -226,6 +226,11 @@ fn all_samples_at_one_location_fall_back_to_the_prior() {
     assert_eq!(la.gain.coeffs, [1.0, 0.0, 0.0, 0.0, 0.0, 0.0]);
     assert_eq!(la.offset.coeffs, [0.0; 6]);
     assert_eq!(out.calibration.warnings.len(), out.warnings.len());
+    let text = out.calibration.to_toml_string().unwrap();
+    assert_eq!(
+        Calibration::from_toml_str(&text, "<test>").unwrap(),
+        out.calibration
+    );
     // Still a usable pneumatic map.
     let s = Strategy::new(&out.calibration, StrategyKind::PneumaticLocAware);
     let f = s

@@ -91,7 +91,7 @@ fn single_contacts_across_the_sensor_evaluate_like_the_paper() {
                 detected_mm: &det,
                 forces_n: &slices,
                 latency_us: &vec![0.0; slices.len()],
-                resolution: resolution(&synth::image(&truth)),
+                resolution: resolution(&synth::image(&truth), chain.contacts.as_slice()),
             })
             .unwrap();
         }

@@ -8,6 +8,7 @@
 //! percentiles by linear interpolation between order statistics.
 
 use super::matching::{Pair, match_contacts};
+use crate::segment::Contact;
 
 /// CONTRACTS.md §4 matching radius, mm.
 pub const MATCH_RADIUS_MM: f64 = 15.0;
@@ -216,14 +217,10 @@ pub fn percentile(values: &[f64], q: f64) -> Option<f64> {
     Some(v[lo] + (pos - lo as f64) * (v[hi] - v[lo]))
 }
 
-/// Image sharpness 100 (1 - sqrt(A_t / A)) for `fraction` t of the peak decrease: A_t counts
-/// pixels whose decrease `-image` is at least t x peak, A counts all finite pixels (the
-/// sensing area on the image grid). `None` when nothing decreased.
-pub fn resolution_pct(image: &[f64], fraction: f64) -> Option<f64> {
-    let peak = image
-        .iter()
-        .filter(|v| v.is_finite())
-        .fold(f64::NEG_INFINITY, |m, &v| m.max(-v));
+/// Image sharpness 100 (1 - sqrt(A_t / A)) for `fraction` t of `peak` (a decrease, image
+/// units): A_t counts pixels whose decrease `-image` is at least t x peak, A counts all finite
+/// pixels (the sensing area on the image grid). `None` unless peak > 0.
+pub fn resolution_pct(image: &[f64], peak: f64, fraction: f64) -> Option<f64> {
     if peak.is_nan() || peak <= 0.0 {
         return None;
     }
@@ -232,14 +229,19 @@ pub fn resolution_pct(image: &[f64], fraction: f64) -> Option<f64> {
         .iter()
         .filter(|v| v.is_finite() && -**v >= fraction * peak)
         .count();
-    Some(100.0 * (1.0 - (above as f64 / total as f64).sqrt()))
+    (total > 0).then(|| 100.0 * (1.0 - (above as f64 / total as f64).sqrt()))
 }
 
-/// RES50 and RES75 of one image.
-pub fn resolution(image: &[f64]) -> Option<Resolution> {
+/// RES50 and RES75 of one frame, with the peak = the largest contact amplitude (CONTRACTS.md
+/// §4: the largest [`Contact::peak`] of the frame's segmented contacts); `None` without contacts.
+pub fn resolution(image: &[f64], contacts: &[Contact]) -> Option<Resolution> {
+    let peak = contacts
+        .iter()
+        .map(|c| c.peak)
+        .fold(f64::NEG_INFINITY, f64::max);
     Some(Resolution {
-        res50_pct: resolution_pct(image, 0.5)?,
-        res75_pct: resolution_pct(image, 0.75)?,
+        res50_pct: resolution_pct(image, peak, 0.5)?,
+        res75_pct: resolution_pct(image, peak, 0.75)?,
     })
 }
 
@@ -273,9 +275,18 @@ mod tests {
                 img[r * 10 + c] = -1.0;
             }
         }
-        let res = resolution(&img).unwrap();
+        let c = Contact {
+            x_mm: 0.0,
+            y_mm: 0.0,
+            sum: 1.0,
+            area_mm2: 1.0,
+            peak: 1.0,
+            label: 1,
+        };
+        let res = resolution(&img, &[c]).unwrap();
         assert!((res.res50_pct - 60.0).abs() < 1e-12 && (res.res75_pct - 80.0).abs() < 1e-12);
-        assert!(resolution(&[0.0; 4]).is_none());
+        assert!(resolution(&img, &[]).is_none());
+        assert_eq!(resolution_pct(&img, 0.0, 0.5), None);
     }
 
     #[test]

@@ -179,11 +179,18 @@ pub(super) fn validate(src: SourceFile, registry: &Registry) -> Result<GraphSpec
         let stuck: Vec<usize> = (0..nodes.len()).filter(|i| !topo.contains(i)).collect();
         let e = edges.iter().position(|e| stuck.contains(&e.from_node) && stuck.contains(&e.to_node));
         let names: Vec<String> = stuck.iter().map(|&i| file.node[i].get_ref().id.get_ref().clone()).collect();
-        let span = e.and_then(|k| file.edge.iter().find(|x| x.get_ref().from.get_ref() == &edges[k].from).map(|x| x.span()));
+        let span = e.and_then(|k| {
+            let (from, to) = (&edges[k].from, &edges[k].to);
+            file.edge
+                .iter()
+                .find(|x| x.get_ref().from.get_ref() == from && x.get_ref().to.get_ref() == to)
+                .map(|x| x.get_ref().from.span())
+        });
         err(span, None, K::Cycle(format!("nodes {} feed each other; a dataflow graph must be acyclic", names.join(", "))));
     }
 
     if !errs.is_empty() {
+        errs.sort_by_key(|e| (e.line, e.col)); // stable: same place keeps discovery order
         return Err(GraphErrors(errs));
     }
     let base = src.base_dir();

@@ -2,7 +2,8 @@
 
 mod synth;
 
-use skinflow_contact::correct::calibrate::{CalibParams, CalibWarning, average_holds, calibrate};
+use skinflow_contact::correct::average_holds;
+use skinflow_contact::correct::calibrate::{CalibParams, CalibWarning, calibrate};
 use skinflow_contact::correct::calibration::{Calibration, Provenance};
 use skinflow_contact::correct::field::{NPHI, Region, phi};
 use skinflow_contact::correct::fit::{CvSearch, RidgeProblem, cross_validate};

@@ -1,13 +1,14 @@
 //! Fitting a [`Calibration`] from single-contact samples (paper §III).
 //!
-//! Input: one [`CalibSample`] per EIT frame with a detected contact and ground truth. Frames of
-//! one hold (consecutive frames with identical truth) are averaged ([`average_holds`], the
-//! paper's 6-frame means), outliers are rejected (non-finite, C <= 0, F <= 0, centroid farther
-//! than `max_location_error_mm` from the truth), then per signal: f by least squares over all
-//! locations, and g, b by ridge towards alpha0 = [1,0,0,0,0,0], beta = 0 with (lambda_g,
-//! lambda_b) = grid x T chosen by inner k-fold CV. Degenerate data (too few samples or
-//! locations, a region narrower than `min_span_mm`) keep the prior, with a warning.
+//! Input: one [`CalibSample`] per EIT frame with a detected contact and ground truth. Frames
+//! of one hold are averaged ([`super::average`], the paper's 6-frame means), outliers are
+//! rejected (non-finite, C <= 0, F <= 0, centroid farther than `max_location_error_mm` from
+//! the truth), then per signal: f by least squares over all locations, and g, b by ridge
+//! towards alpha0 = [1,0,0,0,0,0], beta = 0 with (lambda_g, lambda_b) = grid x T chosen by
+//! inner k-fold CV. Degenerate data (too few samples or locations, a region narrower than
+//! `min_span_mm`) keep the prior, with a warning.
 
+use super::average::{Holds, average_holds, locations};
 use super::calibration::{
     AreaAware, Calibration, FORMAT, FORMAT_VERSION, LocAware, Provenance, R2Table,
     SignalCalibration, TrainingSummary,
@@ -165,78 +166,6 @@ pub struct Calibrated {
     pub calibration: Calibration,
     /// Warnings as data.
     pub warnings: Vec<CalibWarning>,
-}
-
-/// Averages of the holds and the mean within-hold spread.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Holds {
-    /// One averaged sample per hold, in order.
-    pub samples: Vec<CalibSample>,
-    /// Mean within-hold standard deviation of dP, kPa.
-    pub sd_dp_kpa: f64,
-    /// Mean within-hold standard deviation of C.
-    pub sd_cond_sum: f64,
-}
-
-/// Averages runs of consecutive frames with identical truth (x, y, force, diameter).
-pub fn average_holds(frames: &[CalibSample]) -> Holds {
-    let same = |a: &CalibSample, b: &CalibSample| {
-        a.true_x_mm == b.true_x_mm
-            && a.true_y_mm == b.true_y_mm
-            && a.force_n == b.force_n
-            && a.diameter_mm == b.diameter_mm
-    };
-    let (mut samples, mut sd_dp, mut sd_c) = (Vec::new(), 0.0, 0.0);
-    let mut start = 0;
-    while start < frames.len() {
-        let mut end = start + 1;
-        while end < frames.len() && same(&frames[start], &frames[end]) {
-            end += 1;
-        }
-        let run = &frames[start..end];
-        let n = run.len() as f64;
-        let mean = |f: fn(&CalibSample) -> f64| run.iter().map(f).sum::<f64>() / n;
-        let sd = |f: fn(&CalibSample) -> f64, m: f64| {
-            if run.len() < 2 {
-                0.0
-            } else {
-                (run.iter().map(|s| (f(s) - m).powi(2)).sum::<f64>() / (n - 1.0)).sqrt()
-            }
-        };
-        let avg = CalibSample {
-            x_mm: mean(|s| s.x_mm),
-            y_mm: mean(|s| s.y_mm),
-            dp_kpa: mean(|s| s.dp_kpa),
-            cond_sum: mean(|s| s.cond_sum),
-            area_mm2: mean(|s| s.area_mm2),
-            ..run[0]
-        };
-        sd_dp += sd(|s| s.dp_kpa, avg.dp_kpa);
-        sd_c += sd(|s| s.cond_sum, avg.cond_sum);
-        samples.push(avg);
-        start = end;
-    }
-    let holds = samples.len().max(1) as f64;
-    Holds {
-        samples,
-        sd_dp_kpa: sd_dp / holds,
-        sd_cond_sum: sd_c / holds,
-    }
-}
-
-/// Distinct true locations (greedy clustering within `tol_mm`) and each sample's location.
-fn locations(samples: &[CalibSample], tol_mm: f64) -> (Vec<(f64, f64)>, Vec<usize>) {
-    let (mut locs, mut of): (Vec<(f64, f64)>, Vec<usize>) = (Vec::new(), Vec::new());
-    for s in samples {
-        let near = locs
-            .iter()
-            .position(|l| (l.0 - s.true_x_mm).hypot(l.1 - s.true_y_mm) <= tol_mm);
-        of.push(near.unwrap_or_else(|| {
-            locs.push((s.true_x_mm, s.true_y_mm));
-            locs.len() - 1
-        }));
-    }
-    (locs, of)
 }
 
 fn fit_map(signal: &[f64], force: &[f64]) -> Option<SignalMap> {

@@ -5,6 +5,7 @@
 //! [`calibration::Calibration`] (TOML). Per frame, a [`strategy::Strategy`] resolved from it
 //! maps a contact and its pressure share to a force with guard flags.
 
+pub mod average;
 pub mod calibrate;
 pub mod calibration;
 pub mod field;
@@ -12,8 +13,9 @@ pub mod fit;
 pub mod map;
 pub mod strategy;
 
+pub use average::{Holds, average_holds};
 pub use calibrate::{
-    CalibParams, CalibSample, CalibWarning, CalibrateError, Calibrated, average_holds, calibrate,
+    CalibParams, CalibSample, CalibWarning, CalibrateError, Calibrated, calibrate,
 };
 pub use calibration::{Calibration, CalibrationFileError, Provenance, R2Table};
 pub use strategy::{ForceEstimate, ForceFlags, Strategy, StrategyKind};

@@ -1,0 +1,126 @@
+//! Averaging the frames of a hold (the paper's 6-frame means) and grouping true locations.
+//!
+//! A hold is a run of consecutive frames whose truth (x, y, force, diameter) is identical; its
+//! frames are averaged into one [`CalibSample`] and their spread is reported. Locations are
+//! true positions clustered greedily within a tolerance (mm).
+
+use super::calibrate::CalibSample;
+
+/// Averages of the holds and the mean within-hold spread.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Holds {
+    /// One averaged sample per hold, in order.
+    pub samples: Vec<CalibSample>,
+    /// Mean within-hold standard deviation of dP, kPa.
+    pub sd_dp_kpa: f64,
+    /// Mean within-hold standard deviation of C.
+    pub sd_cond_sum: f64,
+}
+
+/// Averages runs of consecutive frames with identical truth (x, y, force, diameter).
+pub fn average_holds(frames: &[CalibSample]) -> Holds {
+    let same = |a: &CalibSample, b: &CalibSample| {
+        a.true_x_mm == b.true_x_mm
+            && a.true_y_mm == b.true_y_mm
+            && a.force_n == b.force_n
+            && a.diameter_mm == b.diameter_mm
+    };
+    let (mut samples, mut sd_dp, mut sd_c) = (Vec::new(), 0.0, 0.0);
+    let mut start = 0;
+    while start < frames.len() {
+        let mut end = start + 1;
+        while end < frames.len() && same(&frames[start], &frames[end]) {
+            end += 1;
+        }
+        let run = &frames[start..end];
+        let n = run.len() as f64;
+        let mean = |f: fn(&CalibSample) -> f64| run.iter().map(f).sum::<f64>() / n;
+        let sd = |f: fn(&CalibSample) -> f64, m: f64| {
+            if run.len() < 2 {
+                0.0
+            } else {
+                (run.iter().map(|s| (f(s) - m).powi(2)).sum::<f64>() / (n - 1.0)).sqrt()
+            }
+        };
+        let avg = CalibSample {
+            x_mm: mean(|s| s.x_mm),
+            y_mm: mean(|s| s.y_mm),
+            dp_kpa: mean(|s| s.dp_kpa),
+            cond_sum: mean(|s| s.cond_sum),
+            area_mm2: mean(|s| s.area_mm2),
+            ..run[0]
+        };
+        sd_dp += sd(|s| s.dp_kpa, avg.dp_kpa);
+        sd_c += sd(|s| s.cond_sum, avg.cond_sum);
+        samples.push(avg);
+        start = end;
+    }
+    let holds = samples.len().max(1) as f64;
+    Holds {
+        samples,
+        sd_dp_kpa: sd_dp / holds,
+        sd_cond_sum: sd_c / holds,
+    }
+}
+
+/// Distinct true locations (greedy clustering within `tol_mm`) and each sample's location.
+pub fn locations(samples: &[CalibSample], tol_mm: f64) -> (Vec<(f64, f64)>, Vec<usize>) {
+    let (mut locs, mut of): (Vec<(f64, f64)>, Vec<usize>) = (Vec::new(), Vec::new());
+    for s in samples {
+        let near = locs
+            .iter()
+            .position(|l| (l.0 - s.true_x_mm).hypot(l.1 - s.true_y_mm) <= tol_mm);
+        of.push(near.unwrap_or_else(|| {
+            locs.push((s.true_x_mm, s.true_y_mm));
+            locs.len() - 1
+        }));
+    }
+    (locs, of)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn frame(true_x_mm: f64, force_n: f64, dp_kpa: f64) -> CalibSample {
+        CalibSample {
+            x_mm: true_x_mm,
+            y_mm: 0.0,
+            true_x_mm,
+            true_y_mm: 0.0,
+            force_n,
+            dp_kpa,
+            cond_sum: 1.0,
+            area_mm2: 1.0,
+            diameter_mm: 15.0,
+        }
+    }
+
+    #[test]
+    fn consecutive_identical_truth_is_one_hold() {
+        // Two holds at x = 0 (1 N: dP 1, 3; 2 N: dP 5) and a return to 1 N that is a new hold.
+        let frames = [
+            frame(0.0, 1.0, 1.0),
+            frame(0.0, 1.0, 3.0),
+            frame(0.0, 2.0, 5.0),
+            frame(0.0, 1.0, 7.0),
+        ];
+        let h = average_holds(&frames);
+        let dp: Vec<f64> = h.samples.iter().map(|s| s.dp_kpa).collect();
+        assert_eq!(dp, [2.0, 5.0, 7.0]);
+        // SDs: sqrt(2), 0, 0 -> mean sqrt(2) / 3.
+        assert!((h.sd_dp_kpa - 2f64.sqrt() / 3.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn nearby_positions_are_one_location() {
+        let s = [
+            frame(0.0, 1.0, 1.0),
+            frame(1.5, 1.0, 1.0),
+            frame(10.0, 1.0, 1.0),
+        ];
+        let (locs, of) = locations(&s, 2.0);
+        assert_eq!(locs.len(), 2);
+        assert_eq!(of, [0, 0, 1]);
+    }
+}

@@ -4,7 +4,7 @@
 //! Data flow per frame: [`segment::Segmenter`] turns a conductivity-change image into
 //! [`segment::Contact`]s; [`split::Splitter`] shares the pneumatic pressure change among them;
 //! [`correct::Strategy`] maps each share (or each conductivity sum) to a force.
-//! Offline: [`correct::calibrate`] fits a [`correct::Calibration`] from single-contact samples,
+//! Offline: [`correct::calibrate()`] fits a [`correct::Calibration`] from single-contact samples,
 //! and [`eval`] matches predictions to ground truth and reports CONTRACTS.md §4 metrics.
 
 pub mod segment;

@@ -4,7 +4,7 @@
 //! of one hold are averaged ([`super::average`], the paper's 6-frame means), outliers are
 //! rejected (non-finite, C <= 0, F <= 0, centroid farther than `max_location_error_mm` from
 //! the truth), then per signal: f by least squares over all locations, and g, b by ridge
-//! towards alpha0 = [1,0,0,0,0,0], beta = 0 with (lambda_g, lambda_b) = grid x T chosen by
+//! towards alpha0 = (1, 0, 0, 0, 0, 0), beta = 0 with (lambda_g, lambda_b) = grid x T chosen by
 //! inner k-fold CV. Degenerate data (too few samples or locations, a region narrower than
 //! `min_span_mm`) keep the prior, with a warning.
 

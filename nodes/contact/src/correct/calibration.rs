@@ -227,7 +227,7 @@ impl Calibration {
         toml::to_string_pretty(self).map_err(|e| CalibrationFileError::Serialize(e.to_string()))
     }
 
-    /// Parses TOML text; `origin` names the source in errors (a path, or "<string>").
+    /// Parses TOML text; `origin` names the source in errors (a path, or `<string>`).
     pub fn from_toml_str(text: &str, origin: &str) -> Result<Self, CalibrationFileError> {
         let cal: Calibration = toml::from_str(text).map_err(|e| CalibrationFileError::Parse {
             path: origin.to_string(),

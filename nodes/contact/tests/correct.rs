@@ -358,3 +358,31 @@ fn sensitivity_compensated_split_fixes_eit_bias_between_two_equal_contacts() {
         "compensated {compensated} vs proportional {proportional}"
     );
 }
+
+#[test]
+fn bad_calibration_params_are_rejected_by_name() {
+    let params = CalibParams {
+        folds: 1,
+        ..CalibParams::default()
+    };
+    let err = calibrate(&synth::paper_like(1), &params, provenance())
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("\"folds\""), "{err}");
+    let params = CalibParams {
+        lambda_grid_rel: vec![1.0, -1.0],
+        ..CalibParams::default()
+    };
+    assert!(
+        params
+            .validate()
+            .unwrap_err()
+            .to_string()
+            .contains("lambda_grid_rel")
+    );
+    let params = CalibParams {
+        max_location_error_mm: f64::NAN,
+        ..CalibParams::default()
+    };
+    assert!(params.validate().is_err());
+}

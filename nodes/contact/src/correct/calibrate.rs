@@ -97,6 +97,34 @@ impl Default for CalibParams {
     }
 }
 
+impl CalibParams {
+    /// Checks every field; run at load.
+    pub fn validate(&self) -> Result<(), CalibrateError> {
+        let bad = |name, problem| Err(CalibrateError::Param { name, problem });
+        if self.folds < 2 {
+            return bad("folds", "must be >= 2");
+        }
+        if self.lambda_grid_rel.is_empty()
+            || self
+                .lambda_grid_rel
+                .iter()
+                .any(|l| !(l.is_finite() && *l > 0.0))
+        {
+            return bad("lambda_grid_rel", "must be non-empty, finite and > 0");
+        }
+        for (name, v) in [
+            ("min_span_mm", self.min_span_mm),
+            ("location_tolerance_mm", self.location_tolerance_mm),
+            ("max_location_error_mm", self.max_location_error_mm),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return bad(name, "must be finite and >= 0");
+            }
+        }
+        Ok(())
+    }
+}
+
 /// Something the fit noticed; the calibration is still usable.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum CalibWarning {
@@ -224,23 +252,7 @@ pub fn calibrate(
     params: &CalibParams,
     provenance: Provenance,
 ) -> Result<Calibrated, CalibrateError> {
-    if params.folds < 2 {
-        return Err(CalibrateError::Param {
-            name: "folds",
-            problem: "must be >= 2",
-        });
-    }
-    if params.lambda_grid_rel.is_empty()
-        || params
-            .lambda_grid_rel
-            .iter()
-            .any(|l| !(l.is_finite() && *l > 0.0))
-    {
-        return Err(CalibrateError::Param {
-            name: "lambda_grid_rel",
-            problem: "must be non-empty, finite and > 0",
-        });
-    }
+    params.validate()?;
     let mut warnings = Vec::new();
     let holds = if params.average_holds {
         average_holds(frames)

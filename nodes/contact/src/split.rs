@@ -3,12 +3,13 @@
 //! `Proportional` is the paper: dP_i = C_i / sum_j C_j * dP. Its stated weakness is EIT's
 //! nonuniform sensitivity (the same force gives different C at different places).
 //! `SensitivityCompensated` divides each C_i by a relative sensitivity s(x_i, y_i) learned
-//! from the single-contact calibration (quadratic field fitted to C / F, normalized to mean 1
-//! over the calibration samples, floored at `floor`), so the weights estimate force, not
-//! conductivity. dP is in kPa and may be negative (drift); shares keep its sign.
+//! from the single-contact calibration (quadratic field fitted to C / F, mean 1, floored),
+//! then maps r = C / s through w(r) = a1 r + a2 r^2 (fitted to F through the origin, since C
+//! grows sub-linearly with force), so the weights estimate force, not conductivity.
+//! dP is in kPa and may be negative (drift); shares keep its sign.
 
 use crate::correct::field::{NPHI, QuadField, Region, phi};
-use crate::correct::fit::{CvSearch, RidgeProblem, cross_validate};
+use crate::correct::fit::{CvSearch, RidgeProblem, cross_validate, ridge};
 use crate::segment::Contact;
 use serde::{Deserialize, Serialize};
 
@@ -22,6 +23,12 @@ pub struct SensitivityField {
     pub field: QuadField,
     /// Smallest sensitivity used, so a weight never divides by ~0 or a negative value.
     pub floor: f64,
+    /// Linear coefficient of the force equivalent w(r) = a1 r + a2 r^2 (N per unit of C).
+    pub force_a1: f64,
+    /// Quadratic coefficient of w(r).
+    pub force_a2: f64,
+    /// Largest calibration r; w continues linearly with its end slope beyond it.
+    pub ratio_max: f64,
 }
 
 impl SensitivityField {
@@ -31,7 +38,22 @@ impl SensitivityField {
             region,
             field: QuadField::constant(1.0),
             floor: 0.1,
+            force_a1: 1.0,
+            force_a2: 0.0,
+            ratio_max: 1.0,
         }
+    }
+
+    /// Force equivalent (N, >= 0) of a conductivity sum at a point: w(C / s(x, y)).
+    pub fn force_equivalent(&self, cond_sum: f64, x_mm: f64, y_mm: f64) -> f64 {
+        let r = cond_sum.max(0.0) / self.at(x_mm, y_mm);
+        let (a1, a2, r_max) = (self.force_a1, self.force_a2, self.ratio_max);
+        let w = if r <= r_max {
+            a1 * r + a2 * r * r
+        } else {
+            a1 * r_max + a2 * r_max * r_max + (a1 + 2.0 * a2 * r_max) * (r - r_max)
+        };
+        w.max(0.0)
     }
 
     /// Sensitivity at a point (mm), floored.
@@ -82,11 +104,35 @@ impl SensitivityField {
         )?;
         let mut coeffs = [0.0; NPHI];
         coeffs.copy_from_slice(&cv.coeffs);
-        Some(Self {
+        let mut out = Self {
             region,
             field: QuadField { coeffs },
             floor: 0.1,
-        })
+            force_a1: 1.0,
+            force_a2: 0.0,
+            ratio_max: 1.0,
+        };
+        // F ~ a1 r + a2 r^2 through the origin, on r scaled by its maximum for conditioning.
+        let r: Vec<f64> = used.iter().map(|s| s.2 / out.at(s.0, s.1)).collect();
+        let f: Vec<f64> = used.iter().map(|s| s.3).collect();
+        let r_max = r.iter().copied().fold(0.0, f64::max);
+        let scaled: Vec<f64> = r
+            .iter()
+            .flat_map(|&v| [v / r_max, (v / r_max).powi(2)])
+            .collect();
+        let fit = ridge(&scaled, &f, 2, &[0.0; 2], &[0.0; 2]);
+        let monotone = |a: &[f64]| a[0] > 0.0 && a[0] + 2.0 * a[1] > 0.0;
+        match fit {
+            // w' > 0 at r = 0 and r = r_max, hence on the whole range (w' is linear).
+            Some(a) if monotone(&a) => {
+                out.force_a1 = a[0] / r_max;
+                out.force_a2 = a[1] / (r_max * r_max);
+            }
+            // Not monotone: a straight line through the origin (mean force / mean r).
+            _ => out.force_a1 = f.iter().sum::<f64>() / r.iter().sum::<f64>(),
+        }
+        out.ratio_max = r_max;
+        Some(out)
     }
 }
 
@@ -96,7 +142,7 @@ impl SensitivityField {
 pub enum Splitter {
     /// dP_i = C_i / sum C_j * dP (the paper).
     Proportional,
-    /// dP_i = (C_i / s_i) / sum (C_j / s_j) * dP.
+    /// dP_i = w(C_i / s_i) / sum_j w(C_j / s_j) * dP.
     SensitivityCompensated(SensitivityField),
 }
 
@@ -118,7 +164,7 @@ impl Splitter {
         };
         match self {
             Splitter::Proportional => sum,
-            Splitter::SensitivityCompensated(s) => sum / s.at(c.x_mm, c.y_mm),
+            Splitter::SensitivityCompensated(s) => s.force_equivalent(sum, c.x_mm, c.y_mm),
         }
     }
 
@@ -184,6 +230,9 @@ mod tests {
                 coeffs: [1.0, 1.0, 0.0, 0.0, 0.0, 0.0],
             },
             floor: 0.1,
+            force_a1: 1.0,
+            force_a2: 0.0,
+            ratio_max: 10.0,
         };
         let cs = [contact(0.0, 1.0), contact(40.0, 2.0)];
         let mut out = [0.0; 2];
@@ -209,5 +258,23 @@ mod tests {
         let grid = [1e-6, 1e-3, 1.0, 1e3];
         let s = SensitivityField::fit(region(), &samples, &grid, 5).unwrap();
         assert!((s.at(40.0, 0.0) - 1.5).abs() < 1e-3 && (s.at(-40.0, 10.0) - 0.5).abs() < 1e-3);
+        // C / s = F exactly, so the force equivalent is the identity: a1 = 1, a2 = 0.
+        let w = s.force_equivalent(4.0 * 1.25, 20.0, 0.0);
+        assert!((w - 4.0).abs() < 1e-3, "{w}");
+        assert!(s.force_equivalent(0.0, 0.0, 0.0) == 0.0);
+    }
+
+    #[test]
+    fn force_equivalent_is_monotone_and_linear_beyond_the_range() {
+        let mut s = SensitivityField::uniform(region());
+        (s.force_a1, s.force_a2, s.ratio_max) = (2.0, -0.5, 1.5);
+        // w(1.5) = 3 - 1.125 = 1.875, w'(1.5) = 2 - 1.5 = 0.5 -> w(3.5) = 1.875 + 1.0
+        assert!((s.force_equivalent(3.5, 0.0, 0.0) - 2.875).abs() < 1e-12);
+        let mut prev = 0.0;
+        for i in 0..100 {
+            let w = s.force_equivalent(0.05 * i as f64, 0.0, 0.0);
+            assert!(w >= prev);
+            prev = w;
+        }
     }
 }

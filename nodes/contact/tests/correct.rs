@@ -386,3 +386,31 @@ fn bad_calibration_params_are_rejected_by_name() {
     };
     assert!(params.validate().is_err());
 }
+
+#[test]
+fn sensitivity_compensated_split_recovers_unequal_forces() {
+    // 2 N where EIT is weak (x = -30) and 6 N where it is strong (x = +30): the proportional
+    // split overweights the right contact twice over (sensitivity and C ~ F^0.7 both bias it).
+    let cal = fitted();
+    let truth = [(-30.0, 10.0, 2.0), (30.0, -10.0, 6.0)];
+    let cs: Vec<Contact> = truth
+        .iter()
+        .map(|&(x, y, f)| contact(x, y, synth::cond_of(f, x, y)))
+        .collect();
+    let dp: f64 = truth.iter().map(|&(x, y, f)| synth::dp_of(f, x, y)).sum();
+    let worst = |kind| {
+        let mut o = [Default::default(); 2];
+        Strategy::new(&cal, kind).estimate_frame_into(dp, &cs, &mut o);
+        o.iter()
+            .zip(&truth)
+            .map(|(e, t)| (e.force_n - t.2).abs())
+            .fold(0.0, f64::max)
+    };
+    let proportional = worst(StrategyKind::PneumaticLocAware);
+    let compensated = worst(StrategyKind::PneumaticLocAwareSensitivity);
+    assert!(compensated < 0.3, "compensated worst error {compensated} N");
+    assert!(
+        proportional > 3.0 * compensated,
+        "proportional {proportional} vs compensated {compensated}"
+    );
+}

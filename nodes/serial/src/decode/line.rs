@@ -29,6 +29,16 @@ impl LineSplitter {
         }
     }
 
+    /// A placeholder without capacity, for moving a splitter out of its owner for a call.
+    pub(super) fn empty() -> Self {
+        Self {
+            buf: Vec::new(),
+            overflow: false,
+            run: DiscardRun::default(),
+            stats: DecodeStats::default(),
+        }
+    }
+
     /// Consumes bytes until a line is accepted by `parse` (which stores the record and returns
     /// true) or the input ends.
     pub(super) fn step(

@@ -1,13 +1,19 @@
 //! Pressure board line decoder: `t_ms,kPa` lines from the Teensy at 20 Hz.
 //!
 //! `t_ms` is the board's `millis()` (wrapping u32), unwrapped to seconds; `kPa` is gauge
-//! pressure. With an expected period, time-stamp gaps longer than 1.5 periods count
-//! round(gap / period) - 1 lost samples; a time stamp that repeats or goes back counts as a
-//! device restart. Lines carry no checksum: a corrupted digit that still parses is undetectable.
+//! pressure. Lines carry no checksum, so the time stamp is the integrity check: a line whose time
+//! does not advance by 1..=`max_jump_ms` from the last accepted one (two lines merged by a lost
+//! line end, a repeat, a restart) is held back as a bad line; the next line is judged against it
+//! too, and a stream continuing from it is a device restart (`counter_resets`). With a period,
+//! gaps over 1.5 periods count round(gap / period) - 1 lost samples. A wrong digit that keeps the
+//! time plausible is undetectable.
 
 use super::line::{LineSplitter, parse_finite};
 use super::{Decode, DecodeStats, Step};
 use crate::error::ParamError;
+
+/// Default largest forward time step accepted without confirmation, ms (200 periods at 20 Hz).
+pub const DEFAULT_MAX_JUMP_MS: u32 = 10_000;
 
 /// One decoded pressure sample.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -25,28 +31,50 @@ pub struct PressureReading {
 pub struct PressureDecoder {
     // Configuration
     period_ms: Option<u32>,
+    max_jump_ms: u32,
     // Internal state
     lines: LineSplitter,
     reading: PressureReading,
+    /// Time of the last accepted line.
     last_ms: Option<u32>,
+    /// Time of the last line rejected as implausible, awaiting confirmation.
+    held_ms: Option<u32>,
+    /// The stream was interrupted: the next line is accepted whatever its time.
+    rebase: bool,
     epoch_ms: u64,
 }
 
 impl PressureDecoder {
     /// A decoder; `period_ms` is the board's sample period (50 for 20 Hz), used to count lost
-    /// samples from time-stamp gaps (`None`: no loss accounting).
+    /// samples from time-stamp gaps (`None`: no loss accounting). Time steps up to
+    /// [`DEFAULT_MAX_JUMP_MS`] are accepted directly.
     ///
     /// # Errors
     /// [`ParamError::Positive`] if `period_ms` is `Some(0)`.
     pub fn try_new(period_ms: Option<u32>) -> Result<Self, ParamError> {
+        Self::with_max_jump(period_ms, DEFAULT_MAX_JUMP_MS)
+    }
+
+    /// Like [`PressureDecoder::try_new`] with the largest directly accepted time step, ms.
+    ///
+    /// # Errors
+    /// [`ParamError::Positive`] if `period_ms` is `Some(0)` or `max_jump_ms` is 0.
+    pub fn with_max_jump(period_ms: Option<u32>, max_jump_ms: u32) -> Result<Self, ParamError> {
         if period_ms == Some(0) {
             return Err(ParamError::Positive {
                 param: "period_ms",
                 got: 0,
             });
         }
+        if max_jump_ms == 0 {
+            return Err(ParamError::Positive {
+                param: "max_jump_ms",
+                got: 0,
+            });
+        }
         Ok(Self {
             period_ms,
+            max_jump_ms,
             lines: LineSplitter::new(),
             reading: PressureReading {
                 device_time_ms: 0,
@@ -54,6 +82,8 @@ impl PressureDecoder {
                 kpa: 0.0,
             },
             last_ms: None,
+            held_ms: None,
+            rebase: false,
             epoch_ms: 0,
         })
     }
@@ -70,46 +100,68 @@ fn parse_line(line: &[u8]) -> Option<(u32, f64)> {
     Some((t_ms, parse_finite(kpa)?))
 }
 
+/// Whether `t` follows `from` by a plausible forward step (wrapping).
+fn follows(from: u32, t: u32, max_jump_ms: u32) -> bool {
+    (1..=max_jump_ms).contains(&t.wrapping_sub(from))
+}
+
+impl PressureDecoder {
+    /// Judges a parsed line; true if accepted (then `reading` holds it).
+    fn judge(&mut self, t_ms: u32, kpa: f64, stats: &mut DecodeStats) -> bool {
+        match self.last_ms {
+            Some(last) if follows(last, t_ms, self.max_jump_ms) => {
+                if t_ms < last {
+                    self.epoch_ms += 1 << 32;
+                }
+                let d = t_ms.wrapping_sub(last);
+                if let Some(p) = self.period_ms
+                    && 2 * u64::from(d) > 3 * u64::from(p)
+                {
+                    let periods = (u64::from(d) + u64::from(p) / 2) / u64::from(p);
+                    stats.lost_frames += periods - 1;
+                }
+            }
+            Some(_) if self.rebase => {
+                stats.counter_resets += 1;
+                self.epoch_ms = 0;
+            }
+            Some(_) => {
+                let confirmed = self
+                    .held_ms
+                    .is_some_and(|h| follows(h, t_ms, self.max_jump_ms));
+                if !confirmed {
+                    self.held_ms = Some(t_ms);
+                    return false;
+                }
+                stats.counter_resets += 1;
+                self.epoch_ms = 0;
+            }
+            None => {}
+        }
+        self.last_ms = Some(t_ms);
+        self.held_ms = None;
+        self.rebase = false;
+        self.reading = PressureReading {
+            device_time_ms: t_ms,
+            device_t_s: (self.epoch_ms + u64::from(t_ms)) as f64 * 1e-3,
+            kpa,
+        };
+        true
+    }
+}
+
 impl Decode for PressureDecoder {
     type Record<'a> = PressureReading;
 
     fn step(&mut self, bytes: &[u8]) -> Step {
-        let Self {
-            period_ms,
-            lines,
-            reading,
-            last_ms,
-            epoch_ms,
-        } = self;
-        lines.step(bytes, |line, stats: &mut DecodeStats| {
-            let Some((t_ms, kpa)) = parse_line(line) else {
-                return false;
-            };
-            if let Some(last) = *last_ms {
-                let d = t_ms.wrapping_sub(last);
-                if d == 0 || d > i32::MAX as u32 {
-                    stats.counter_resets += 1;
-                    *epoch_ms = 0;
-                } else {
-                    if t_ms < last {
-                        *epoch_ms += 1 << 32;
-                    }
-                    if let Some(p) = *period_ms
-                        && 2 * u64::from(d) > 3 * u64::from(p)
-                    {
-                        let periods = (u64::from(d) + u64::from(p) / 2) / u64::from(p);
-                        stats.lost_frames += periods - 1;
-                    }
-                }
-            }
-            *last_ms = Some(t_ms);
-            *reading = PressureReading {
-                device_time_ms: t_ms,
-                device_t_s: (*epoch_ms + u64::from(t_ms)) as f64 * 1e-3,
-                kpa,
-            };
-            true
-        })
+        // The splitter is moved out for the call so `judge` can borrow the rest of `self`.
+        let mut lines = std::mem::replace(&mut self.lines, LineSplitter::empty());
+        let step = lines.step(bytes, |line, stats| match parse_line(line) {
+            Some((t_ms, kpa)) => self.judge(t_ms, kpa, stats),
+            None => false,
+        });
+        self.lines = lines;
+        step
     }
 
     fn record(&self) -> PressureReading {
@@ -118,6 +170,7 @@ impl Decode for PressureDecoder {
 
     fn reset(&mut self) {
         self.lines.reset();
+        self.rebase = true;
     }
 
     fn stats(&self) -> &DecodeStats {
@@ -176,9 +229,34 @@ mod tests {
     #[test]
     fn gaps_count_lost_samples_and_backwards_time_is_a_restart() {
         let mut d = PressureDecoder::try_new(Some(50)).unwrap();
-        decode(&mut d, b"0,1\n50,1\n200,1\n260,1\n10,1\n");
+        let got = decode(&mut d, b"0,1\n50,1\n200,1\n260,1\n10,1\n60,1\n110,1\n");
+        // 10 goes back: held as a bad line until 60 confirms the restart.
+        assert_eq!(
+            got.iter().map(|g| g.0).collect::<Vec<_>>(),
+            vec![0, 50, 200, 260, 60, 110]
+        );
         let s = d.stats();
-        assert_eq!((s.lost_frames, s.counter_resets), (2, 1));
+        assert_eq!((s.lost_frames, s.counter_resets, s.bad_lines), (2, 1, 1));
+    }
+
+    #[test]
+    fn merged_lines_with_implausible_time_are_rejected() {
+        let mut d = PressureDecoder::try_new(Some(50)).unwrap();
+        // "1000,1.5\r\n" lost its tail and merged with "1050,...": t = 10001050 ms.
+        let got = decode(&mut d, b"950,1\n10001050,2\n1100,3\n1150,4\n");
+        assert_eq!(got, vec![(950, 1.0), (1100, 3.0), (1150, 4.0)]);
+        let s = d.stats();
+        assert_eq!((s.bad_lines, s.lost_frames, s.counter_resets), (1, 2, 0));
+    }
+
+    #[test]
+    fn after_reset_any_time_is_accepted() {
+        let mut d = PressureDecoder::try_new(Some(50)).unwrap();
+        decode(&mut d, b"5000,1\n5050,1\n");
+        d.reset();
+        let got = decode(&mut d, b"20,1\n70,1\n");
+        assert_eq!(got.len(), 2);
+        assert_eq!((d.stats().counter_resets, d.stats().bad_lines), (1, 0));
     }
 
     #[test]
@@ -193,5 +271,6 @@ mod tests {
     #[test]
     fn zero_period_is_rejected() {
         assert!(PressureDecoder::try_new(Some(0)).is_err());
+        assert!(PressureDecoder::with_max_jump(None, 0).is_err());
     }
 }

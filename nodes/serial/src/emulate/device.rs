@@ -19,7 +19,7 @@ use crate::encode::{
 /// Granularity of interruptible sleeps.
 const TICK: Duration = Duration::from_millis(20);
 /// How long an unplug waits for a reader to take the bytes already sent.
-const DRAIN_TIMEOUT: Duration = Duration::from_secs(1);
+const DRAIN_TIMEOUT: Duration = Duration::from_secs(2);
 
 /// A sample a board can send.
 pub(super) trait Sample {

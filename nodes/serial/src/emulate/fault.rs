@@ -23,7 +23,7 @@ pub enum Fault {
     /// The record is not sent at all (the device lost it; its counter still advances).
     Skip,
     /// Before the record, the device disappears for `down_s` seconds and then returns at the
-    /// same path. Bytes already sent are given up to 1 s to be read before the link drops.
+    /// same path. Bytes already sent are given up to 2 s to be read before the link drops.
     Unplug { down_s: f64 },
     /// Before the record, the device is silent for `silent_s` seconds; the port stays.
     Stall { silent_s: f64 },

@@ -20,6 +20,8 @@ use nix::sys::termios::{SetArg, cfmakeraw, tcgetattr, tcsetattr};
 
 /// How often blocked writes and drains look at the stop flag.
 const STOP_POLL: Duration = Duration::from_millis(20);
+/// How long the slave's input queue must stay empty before bytes count as taken by a reader.
+const DRAIN_SETTLE: Duration = Duration::from_millis(100);
 
 nix::ioctl_read_bad!(bytes_queued, nix::libc::FIONREAD, nix::libc::c_int);
 
@@ -112,17 +114,29 @@ impl StablePty {
     }
 
     /// Waits until a reader has taken every written byte, `timeout` passed, or `stop` was raised.
+    ///
+    /// The kernel moves written bytes into the slave's input queue asynchronously, so an empty
+    /// queue right after a write proves nothing: the queue must stay empty for `DRAIN_SETTLE`.
     pub(super) fn wait_drained(&self, timeout: Duration, stop: &AtomicBool) -> io::Result<()> {
         let Some(pair) = self.pair.as_ref() else {
             return Ok(());
         };
         let until = Instant::now() + timeout;
+        let mut empty_since: Option<Instant> = None;
         loop {
             let mut queued: nix::libc::c_int = 0;
             // SAFETY: FIONREAD writes one c_int through the pointer, which points to a live local;
             // the descriptor is an open tty owned by `pair`.
             unsafe { bytes_queued(pair.slave.as_raw_fd(), &mut queued) }?;
-            if queued == 0 || Instant::now() >= until || stop.load(Ordering::Relaxed) {
+            let now = Instant::now();
+            if queued == 0 {
+                if now.duration_since(*empty_since.get_or_insert(now)) >= DRAIN_SETTLE {
+                    return Ok(());
+                }
+            } else {
+                empty_since = None;
+            }
+            if now >= until || stop.load(Ordering::Relaxed) {
                 return Ok(());
             }
             std::thread::sleep(STOP_POLL / 4);

@@ -10,7 +10,7 @@ use std::time::{Duration, Instant};
 
 use skinflow_serial::decode::Decode;
 use skinflow_serial::read::{Reading, SerialReader};
-use skinflow_serial::{TimedForce, TimedFrame, TimedPressure};
+use skinflow_serial::{Emulator, TimedForce, TimedFrame, TimedPressure};
 
 /// Frame `i` of `plain_frames(m, _)`.
 pub fn plain_values(i: usize, m: usize) -> Vec<f64> {
@@ -74,4 +74,28 @@ pub fn read_n<D: Decode>(
         }
     }
     got
+}
+
+/// Polls `reader` until the emulator has sent everything and 300 ms pass without a record (or
+/// `limit` passes, a hang guard); returns how many records `take` got.
+pub fn read_until_idle<D: Decode>(
+    reader: &mut SerialReader<D>,
+    emulator: &Emulator,
+    limit: Duration,
+    mut take: impl FnMut(Reading<D::Record<'_>>),
+) -> usize {
+    let until = Instant::now() + limit;
+    let mut got = 0;
+    loop {
+        let finished = emulator.finished();
+        let deadline = (Instant::now() + Duration::from_millis(300)).min(until);
+        match reader.poll_next(deadline).expect("reader error") {
+            Some(r) => {
+                take(r);
+                got += 1;
+            }
+            None if finished || Instant::now() >= until => return got,
+            None => {}
+        }
+    }
 }

@@ -219,6 +219,7 @@ pub struct Segmenter {
     disk: Disk,
     // Internal state (scratch, overwritten every frame)
     hist: Box<[u32; otsu::BINS]>,
+    lanes: Box<[[u32; otsu::BINS]; 4]>,
     mask: Vec<u8>,
     scratch: Vec<u8>,
     labels: Vec<u32>,
@@ -237,6 +238,7 @@ impl Segmenter {
             params: params.clone(),
             disk: Disk::new(radius_px),
             hist: Box::new([0; otsu::BINS]),
+            lanes: Box::new([[0; otsu::BINS]; 4]),
             mask: vec![0; n],
             scratch: vec![0; n],
             labels: vec![0; n],
@@ -280,9 +282,23 @@ impl Segmenter {
         self.mask.fill(0);
         self.labels.fill(0);
         let (mut d_min, mut d_max) = (f64::INFINITY, f64::NEG_INFINITY);
-        for &v in image.iter().filter(|v| v.is_finite()) {
-            d_min = d_min.min(-v);
-            d_max = d_max.max(-v);
+        // Plain comparisons skip NaN (they compare false) and are cheaper than the NaN-aware
+        // f64::min/max; an infinite pixel falls back to the explicit finite filter.
+        for &v in image {
+            let d = -v;
+            if d < d_min {
+                d_min = d;
+            }
+            if d > d_max {
+                d_max = d;
+            }
+        }
+        if !(d_min.is_finite() && d_max.is_finite()) {
+            (d_min, d_max) = (f64::INFINITY, f64::NEG_INFINITY);
+            for &v in image.iter().filter(|v| v.is_finite()) {
+                d_min = d_min.min(-v);
+                d_max = d_max.max(-v);
+            }
         }
         if d_max.is_finite() {
             out.peak_decrease = d_max;
@@ -293,9 +309,18 @@ impl Segmenter {
         }
         let range = d_max - d_min;
         let inv_range = 1.0 / range;
-        self.hist.fill(0);
-        for &v in image.iter().filter(|v| v.is_finite()) {
-            self.hist[otsu::bin_of((-v - d_min) * inv_range)] += 1;
+        // Four interleaved sub-histograms: most pixels share the background bin, and one
+        // histogram would serialize every increment on that single counter.
+        for h in self.lanes.iter_mut() {
+            h.fill(0);
+        }
+        for (i, &v) in image.iter().enumerate() {
+            if v.is_finite() {
+                self.lanes[i & 3][otsu::bin_of((-v - d_min) * inv_range)] += 1;
+            }
+        }
+        for (k, h) in self.hist.iter_mut().enumerate() {
+            *h = self.lanes.iter().map(|l| l[k]).sum();
         }
         let Some(t_norm) = otsu::otsu_threshold(&self.hist) else {
             return Ok(());

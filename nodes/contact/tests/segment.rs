@@ -180,3 +180,18 @@ fn wrong_image_size_and_bad_params_are_errors() {
     assert!(Segmenter::new(grid(), &SegmentParams::with_floor(0.0)).is_err());
     assert!(Segmenter::new(grid(), &SegmentParams::with_floor(f64::NAN)).is_err());
 }
+
+#[test]
+fn pixels_outside_the_domain_and_invalid_values_are_ignored() {
+    let mut img = image(&[(5.0, -5.0, 1.0, 8.0)], 0.0, 1);
+    // A NaN band (outside the domain) and two infinite pixels (invalid) far from the blob.
+    for v in img.iter_mut().take(3 * N) {
+        *v = f64::NAN;
+    }
+    img[40 * N + 50] = f64::INFINITY;
+    img[50 * N + 10] = f64::NEG_INFINITY;
+    let c = segment(&img, 0.05);
+    assert_eq!(c.len(), 1, "{c:?}");
+    assert!((c[0].x_mm - 5.0).hypot(c[0].y_mm + 5.0) < grid().dx_mm());
+    assert!(c[0].sum.is_finite() && (c[0].peak - 1.0).abs() < 0.05);
+}

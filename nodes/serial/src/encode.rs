@@ -87,6 +87,18 @@ mod tests {
     }
 
     #[test]
+    fn documented_example_frame() {
+        // The example in PROTOCOLS.md, computed independently (Python struct + bitwise CRC).
+        let mut out = Vec::new();
+        encode_eit_frame(&mut out, 1, 1_000_000, &[0.5, -0.25]);
+        let expected = [
+            0xAA, 0x55, 0x01, 0x00, 0x00, 0x00, 0x40, 0x42, 0x0F, 0x00, 0x02, 0x00, 0x00, 0x00,
+            0x00, 0x3F, 0x00, 0x00, 0x80, 0xBE, 0xC0, 0xB7,
+        ];
+        assert_eq!(out, expected);
+    }
+
+    #[test]
     fn ascii_lines() {
         let mut out = Vec::new();
         encode_pressure_line(&mut out, 1500, 1.23456);

@@ -18,7 +18,7 @@ pub use error::ParamError;
 pub mod read;
 
 pub use read::{
-    EitReader, ForceReader, LinkStats, PressureReader, ReaderConfig, Reading, SerialError,
+    EitReader, LinkStats, LoadcellReader, PressureReader, ReaderConfig, Reading, SerialError,
     SerialReader,
 };
 pub mod emulate;

@@ -205,7 +205,7 @@ fn line_faults_are_counted_and_resynced() {
             (12, Fault::Skip),
             (20, Fault::Truncate { keep: 4 }),
         ],
-        force: vec![
+        loadcell: vec![
             (4, Fault::Garbage(b"\r\n 1.0 kgf\r\n".to_vec())),
             (9, Fault::DropBytes { offset: 11, len: 2 }),
         ],
@@ -213,7 +213,7 @@ fn line_faults_are_counted_and_resynced() {
     };
     let feed = EmulatorFeed::default()
         .with_pressure(feeds::pressures(n, 0.05))
-        .with_force(feeds::forces(n, 0.05));
+        .with_loadcell(feeds::forces(n, 0.05));
     let emulator = Emulator::spawn(fast(), feed, faults).unwrap();
     let origin = Instant::now();
 

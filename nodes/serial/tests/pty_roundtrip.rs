@@ -21,7 +21,7 @@ fn three_devices_fast_roundtrip_exact() {
     let feed = EmulatorFeed::default()
         .with_eit(frames.clone())
         .with_pressure(pressures.clone())
-        .with_force(forces.clone());
+        .with_loadcell(forces.clone());
     let config = EmulatorConfig {
         pacing: Pacing::AsFastAsPossible,
         first_counter: u32::MAX - 70,
@@ -141,6 +141,34 @@ fn missing_port_is_a_clear_error_at_start() {
         msg.contains("skinflow-no-such-board") && msg.contains("does not exist"),
         "{msg}"
     );
+}
+
+#[test]
+fn a_path_that_is_not_a_tty_is_an_open_error() {
+    let dir = std::env::temp_dir().join(format!("skinflow-serial-test-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let file = dir.join("plain-file");
+    std::fs::write(&file, b"not a tty").unwrap();
+    let err = SerialReader::open(
+        ReaderConfig::new(&file),
+        ForceDecoder::new(),
+        Instant::now(),
+    )
+    .unwrap_err();
+    assert!(matches!(err, SerialError::Open { .. }), "{err}");
+    assert!(err.to_string().contains("plain-file"), "{err}");
+
+    // The emulator refuses to replace a regular file with its link.
+    let config = EmulatorConfig {
+        dir: Some(dir.clone()),
+        ..Default::default()
+    };
+    std::fs::write(dir.join("eit"), b"mine").unwrap();
+    let feed = EmulatorFeed::default().with_eit(feeds::plain_frames(4, 1));
+    let err = Emulator::spawn(config, feed, FaultPlan::default()).unwrap_err();
+    assert!(err.to_string().contains("not a symlink"), "{err}");
+    assert_eq!(std::fs::read(dir.join("eit")).unwrap(), b"mine");
+    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 #[test]

@@ -66,7 +66,7 @@ pub struct FaultPlan {
     /// Faults of the pressure board.
     pub pressure: Vec<(usize, Fault)>,
     /// Faults of the load cell.
-    pub force: Vec<(usize, Fault)>,
+    pub loadcell: Vec<(usize, Fault)>,
 }
 
 /// A fault plan that cannot be carried out.

@@ -42,7 +42,7 @@ pub struct EmulatorFeed {
     /// Pressure board samples.
     pub pressure: Option<Samples<TimedPressure>>,
     /// Load-cell readings.
-    pub force: Option<Samples<TimedForce>>,
+    pub loadcell: Option<Samples<TimedForce>>,
 }
 
 impl EmulatorFeed {
@@ -70,12 +70,12 @@ impl EmulatorFeed {
 
     /// Adds a load-cell reading stream.
     #[must_use]
-    pub fn with_force<I>(mut self, readings: I) -> Self
+    pub fn with_loadcell<I>(mut self, readings: I) -> Self
     where
         I: IntoIterator<Item = TimedForce>,
         I::IntoIter: Send + 'static,
     {
-        self.force = Some(Box::new(readings.into_iter()));
+        self.loadcell = Some(Box::new(readings.into_iter()));
         self
     }
 }
@@ -85,7 +85,7 @@ impl std::fmt::Debug for EmulatorFeed {
         f.debug_struct("EmulatorFeed")
             .field("eit", &self.eit.is_some())
             .field("pressure", &self.pressure.is_some())
-            .field("force", &self.force.is_some())
+            .field("loadcell", &self.loadcell.is_some())
             .finish()
     }
 }

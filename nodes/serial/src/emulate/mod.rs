@@ -151,7 +151,7 @@ impl Emulator {
     ) -> Result<Self, EmulateError> {
         let eit_faults = sorted(faults.eit, Device::Eit)?;
         let pressure_faults = sorted(faults.pressure, Device::Pressure)?;
-        let force_faults = sorted(faults.force, Device::Loadcell)?;
+        let loadcell_faults = sorted(faults.loadcell, Device::Loadcell)?;
         let (dir, owns_dir) = match &config.dir {
             Some(dir) => {
                 std::fs::create_dir_all(dir).map_err(|source| EmulateError::Dir {
@@ -181,8 +181,8 @@ impl Emulator {
         if let Some(samples) = feed.pressure {
             emulator.start(Device::Pressure, samples, pressure_faults, &config)?;
         }
-        if let Some(samples) = feed.force {
-            emulator.start(Device::Loadcell, samples, force_faults, &config)?;
+        if let Some(samples) = feed.loadcell {
+            emulator.start(Device::Loadcell, samples, loadcell_faults, &config)?;
         }
         Ok(emulator)
     }

@@ -62,8 +62,17 @@ fn open_pair(link: &Path) -> io::Result<PtyPair> {
 }
 
 impl StablePty {
-    /// Opens a pty pair and publishes its slave at `link`.
+    /// Opens a pty pair and publishes its slave at `link`; an old symlink there is replaced,
+    /// anything else at that path is left alone and is an error.
     pub(super) fn create(link: PathBuf) -> io::Result<Self> {
+        if let Ok(meta) = std::fs::symlink_metadata(&link)
+            && !meta.file_type().is_symlink()
+        {
+            return Err(io::Error::new(
+                io::ErrorKind::AlreadyExists,
+                format!("{} exists and is not a symlink", link.display()),
+            ));
+        }
         let pair = open_pair(&link)?;
         Ok(Self {
             link,

@@ -170,7 +170,7 @@ pub type EitReader = SerialReader<EitDecoder>;
 /// Pressure board reader.
 pub type PressureReader = SerialReader<PressureDecoder>;
 /// Load-cell reader.
-pub type ForceReader = SerialReader<ForceDecoder>;
+pub type LoadcellReader = SerialReader<ForceDecoder>;
 
 fn open_port(config: &ReaderConfig, timeout: Duration) -> serialport::Result<Box<dyn SerialPort>> {
     serialport::new(config.path.to_string_lossy(), config.baud)

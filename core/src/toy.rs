@@ -78,17 +78,7 @@ impl Source for Counter {
         let v = self.next;
         let payload = self.ring.fill(|c| c.0 = v);
         let t_ns = if ctx.paced() { ctx.now_ns() } else { k };
-        out.send(
-            0,
-            Message::from_arc(
-                Header {
-                    seq: k,
-                    t_ns,
-                    origin: ctx.index(),
-                },
-                payload,
-            ),
-        )?;
+        out.send(0, Message::from_arc(Header { seq: k, t_ns, origin: ctx.index() }, payload))?;
         self.next += 1;
         Ok(SourcePoll::Emitted)
     }
@@ -114,29 +104,14 @@ struct Scale {
     ring: Recycler<Count>,
 }
 
-fn count_in<'a>(
-    inputs: &'a Inputs,
-    port: usize,
-    name: &'static str,
-) -> Result<(&'a Message, u64), NodeError> {
-    let m = inputs.get(port).ok_or(NodeError::Input {
-        port: name.into(),
-        problem: "no message".into(),
-    })?;
-    let c = m.get::<Count>().ok_or(NodeError::Input {
-        port: name.into(),
-        problem: "not a count".into(),
-    })?;
+fn count_in<'a>(inputs: &'a Inputs, port: usize, name: &'static str) -> Result<(&'a Message, u64), NodeError> {
+    let m = inputs.get(port).ok_or(NodeError::Input { port: name.into(), problem: "no message".into() })?;
+    let c = m.get::<Count>().ok_or(NodeError::Input { port: name.into(), problem: "not a count".into() })?;
     Ok((m, c.0))
 }
 
 impl Processor for Scale {
-    fn process(
-        &mut self,
-        _ctx: &mut Context,
-        inputs: &Inputs,
-        out: &mut Outputs,
-    ) -> Result<(), NodeError> {
+    fn process(&mut self, _ctx: &mut Context, inputs: &Inputs, out: &mut Outputs) -> Result<(), NodeError> {
         if inputs.is_empty() {
             return Ok(()); // a periodic tick with nothing new: nothing to scale
         }
@@ -158,12 +133,7 @@ struct Sum {
 }
 
 impl Processor for Sum {
-    fn process(
-        &mut self,
-        _ctx: &mut Context,
-        inputs: &Inputs,
-        out: &mut Outputs,
-    ) -> Result<(), NodeError> {
+    fn process(&mut self, _ctx: &mut Context, inputs: &Inputs, out: &mut Outputs) -> Result<(), NodeError> {
         let (m, a) = count_in(inputs, 0, "a")?;
         let (_, b) = count_in(inputs, 1, "b")?;
         let payload = self.ring.fill(|c| c.0 = a.wrapping_add(b));
@@ -188,12 +158,7 @@ struct Delay {
 }
 
 impl Processor for Delay {
-    fn process(
-        &mut self,
-        _ctx: &mut Context,
-        inputs: &Inputs,
-        out: &mut Outputs,
-    ) -> Result<(), NodeError> {
+    fn process(&mut self, _ctx: &mut Context, inputs: &Inputs, out: &mut Outputs) -> Result<(), NodeError> {
         let t0 = Instant::now();
         while t0.elapsed() < self.d {
             std::hint::spin_loop();
@@ -217,12 +182,7 @@ struct Panicker {
 }
 
 impl Processor for Panicker {
-    fn process(
-        &mut self,
-        _ctx: &mut Context,
-        inputs: &Inputs,
-        out: &mut Outputs,
-    ) -> Result<(), NodeError> {
+    fn process(&mut self, _ctx: &mut Context, inputs: &Inputs, out: &mut Outputs) -> Result<(), NodeError> {
         self.seen += 1;
         let (m, v) = count_in(inputs, 0, "in")?;
         if self.seen == self.at {
@@ -248,20 +208,15 @@ struct Collect {
 
 impl Sink for Collect {
     fn start(&mut self, _ctx: &mut Context) -> Result<(), NodeError> {
-        let f = std::fs::File::create(&self.path).map_err(|e| NodeError::Path {
-            path: self.path.clone(),
-            problem: format!("cannot create: {e}"),
-        })?;
+        let f = std::fs::File::create(&self.path)
+            .map_err(|e| NodeError::Path { path: self.path.clone(), problem: format!("cannot create: {e}") })?;
         self.file = Some(std::io::BufWriter::new(f));
         Ok(())
     }
 
     fn consume(&mut self, _ctx: &mut Context, inputs: &Inputs) -> Result<(), NodeError> {
         for (_, m) in inputs.iter_port(0) {
-            let c = m.get::<Count>().ok_or(NodeError::Input {
-                port: "in".into(),
-                problem: "not a count".into(),
-            })?;
+            let c = m.get::<Count>().ok_or(NodeError::Input { port: "in".into(), problem: "not a count".into() })?;
             self.rows.push((m.header.seq, c.0));
         }
         Ok(())
@@ -269,10 +224,7 @@ impl Sink for Collect {
 
     fn stop(&mut self, _ctx: &mut Context) -> Result<(), NodeError> {
         let path = self.path.clone();
-        let io = |e: std::io::Error| NodeError::Path {
-            path: path.clone(),
-            problem: e.to_string(),
-        };
+        let io = |e: std::io::Error| NodeError::Path { path: path.clone(), problem: e.to_string() };
         if let Some(mut f) = self.file.take() {
             for (s, v) in &self.rows {
                 writeln!(f, "{s},{v}").map_err(io)?;
@@ -299,19 +251,10 @@ pub fn register(r: &mut Registry) -> Result<(), crate::registry::DuplicateKind> 
             .output(out())
             .param(ParamDoc::new("count", "u64", "100", "messages to emit"))
             .param(ParamDoc::new("start", "u64", "0", "first value"))
-            .param(ParamDoc::new(
-                "rate_hz",
-                "f64",
-                "",
-                "pace to this rate (absent: as fast as possible)",
-            )),
+            .param(ParamDoc::new("rate_hz", "f64", "", "pace to this rate (absent: as fast as possible)")),
         |p: CounterParams, _| {
             let next = p.start;
-            Ok(NodeImpl::Source(Box::new(Counter {
-                p,
-                next,
-                ring: Recycler::new(RING, Count::default),
-            })))
+            Ok(NodeImpl::Source(Box::new(Counter { p, next, ring: Recycler::new(RING, Count::default) })))
         },
     ))?;
     r.register(typed(
@@ -320,93 +263,39 @@ pub fn register(r: &mut Registry) -> Result<(), crate::registry::DuplicateKind> 
             .output(out())
             .param(ParamDoc::new("factor", "u64", "1", "multiplier"))
             .param(ParamDoc::new("add", "u64", "0", "offset")),
-        |p: ScaleParams, _| {
-            Ok(NodeImpl::Processor(Box::new(Scale {
-                p,
-                ring: Recycler::new(RING, Count::default),
-            })))
-        },
+        |p: ScaleParams, _| Ok(NodeImpl::Processor(Box::new(Scale { p, ring: Recycler::new(RING, Count::default) }))),
     ))?;
     r.register(typed(
-        KindInfo::new(
-            "sum",
-            Role::Processor,
-            "toy: out = a + b (use trigger = \"aligned\")",
-        )
-        .input(PortSpec::input::<Count>("a", "first term"))
-        .input(PortSpec::input::<Count>("b", "second term"))
-        .output(out()),
-        |_: NoParams, _| {
-            Ok(NodeImpl::Processor(Box::new(Sum {
-                ring: Recycler::new(RING, Count::default),
-            })))
-        },
+        KindInfo::new("sum", Role::Processor, "toy: out = a + b (use trigger = \"aligned\")")
+            .input(PortSpec::input::<Count>("a", "first term"))
+            .input(PortSpec::input::<Count>("b", "second term"))
+            .output(out()),
+        |_: NoParams, _| Ok(NodeImpl::Processor(Box::new(Sum { ring: Recycler::new(RING, Count::default) }))),
     ))?;
     r.register(typed(
-        KindInfo::new(
-            "delay",
-            Role::Processor,
-            "toy: passes messages on after busy-waiting",
-        )
-        .input(PortSpec::input::<Count>("in", "the value"))
-        .output(out())
-        .param(ParamDoc::new(
-            "delay_us",
-            "f64",
-            "",
-            "busy-wait per message, microseconds",
-        )),
-        |p: DelayParams, _| {
-            Ok(NodeImpl::Processor(Box::new(Delay {
-                d: Duration::from_secs_f64(p.delay_us * 1e-6),
-            })))
-        },
+        KindInfo::new("delay", Role::Processor, "toy: passes messages on after busy-waiting")
+            .input(PortSpec::input::<Count>("in", "the value"))
+            .output(out())
+            .param(ParamDoc::new("delay_us", "f64", "", "busy-wait per message, microseconds")),
+        |p: DelayParams, _| Ok(NodeImpl::Processor(Box::new(Delay { d: Duration::from_secs_f64(p.delay_us * 1e-6) }))),
     ))?;
     r.register(typed(
-        KindInfo::new(
-            "panicker",
-            Role::Processor,
-            "toy: passes messages on, panics on the at-th",
-        )
-        .input(PortSpec::input::<Count>("in", "the value"))
-        .output(out())
-        .param(ParamDoc::new(
-            "at",
-            "u64",
-            "",
-            "1-based index of the message that panics",
-        )),
-        |p: PanickerParams, _| {
-            Ok(NodeImpl::Processor(Box::new(Panicker {
-                at: p.at,
-                seen: 0,
-            })))
-        },
+        KindInfo::new("panicker", Role::Processor, "toy: passes messages on, panics on the at-th")
+            .input(PortSpec::input::<Count>("in", "the value"))
+            .output(out())
+            .param(ParamDoc::new("at", "u64", "", "1-based index of the message that panics")),
+        |p: PanickerParams, _| Ok(NodeImpl::Processor(Box::new(Panicker { at: p.at, seen: 0 }))),
     ))?;
     r.register(typed(
-        KindInfo::new(
-            "collect",
-            Role::Sink,
-            "toy: writes seq,value lines to a file at stop",
-        )
-        .input(PortSpec::input::<Count>("in", "values").multi())
-        .param(ParamDoc::new(
-            "path",
-            "path",
-            "",
-            "output file (relative to the graph file)",
-        )),
+        KindInfo::new("collect", Role::Sink, "toy: writes seq,value lines to a file at stop")
+            .input(PortSpec::input::<Count>("in", "values").multi())
+            .param(ParamDoc::new("path", "path", "", "output file (relative to the graph file)")),
         |p: CollectParams, ctx| {
-            Ok(NodeImpl::Sink(Box::new(Collect {
-                path: ctx.resolve(&p.path),
-                file: None,
-                rows: Vec::with_capacity(1 << 16),
-            })))
+            Ok(NodeImpl::Sink(Box::new(Collect { path: ctx.resolve(&p.path), file: None, rows: Vec::with_capacity(1 << 16) })))
         },
     ))?;
     r.register(typed(
-        KindInfo::new("null", Role::Sink, "toy: discards its input")
-            .input(PortSpec::any("in", "anything").multi()),
+        KindInfo::new("null", Role::Sink, "toy: discards its input").input(PortSpec::any("in", "anything").multi()),
         |_: NoParams, _| Ok(NodeImpl::Sink(Box::new(Null))),
     ))?;
     Ok(())

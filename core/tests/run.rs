@@ -26,10 +26,7 @@ fn run_ok(spec: skinflow_core::GraphSpec) -> RunReport {
 }
 
 fn edge<'a>(s: &'a StatsReport, from: &str, to: &str) -> &'a skinflow_core::stats::EdgeReport {
-    s.edges
-        .iter()
-        .find(|e| e.from == from && e.to == to)
-        .unwrap_or_else(|| panic!("no edge {from} -> {to}"))
+    s.edges.iter().find(|e| e.from == from && e.to == to).unwrap_or_else(|| panic!("no edge {from} -> {to}"))
 }
 
 /// Source -> gate -> collect. The source sends message 0, waits until the gate holds it in a
@@ -71,15 +68,9 @@ fn block_edge_holds_the_producer_and_loses_nothing() {
     let dir = temp_dir("block");
     let g = RunningGraph::start(&gated(&dir, "block", "block")).unwrap();
     // The gate holds message 0 in its call; the queue fills with 1..=4 and the source waits.
-    wait_for("the queue to fill", || {
-        edge(&g.stats(), "c.out", "g.in").pushed == 5
-    });
+    wait_for("the queue to fill", || edge(&g.stats(), "c.out", "g.in").pushed == 5);
     std::thread::sleep(Duration::from_millis(20));
-    assert_eq!(
-        edge(&g.stats(), "c.out", "g.in").pushed,
-        5,
-        "a full block edge must hold its producer"
-    );
+    assert_eq!(edge(&g.stats(), "c.out", "g.in").pushed, 5, "a full block edge must hold its producer");
     gate("block").store(true, SeqCst);
     let r = within(LIMIT, move || g.wait(&RunOptions::default()));
     assert!(r.failures.is_empty(), "{:?}", r.failures);
@@ -96,9 +87,7 @@ fn drop_oldest_edge_keeps_the_newest_and_counts_every_drop() {
     let dir = temp_dir("drop-oldest");
     let g = RunningGraph::start(&gated(&dir, "drop", "drop_oldest")).unwrap();
     // The gate holds its first message; the other 99 go through a queue of 4.
-    wait_for("the source to finish", || {
-        edge(&g.stats(), "c.out", "g.in").pushed == 100
-    });
+    wait_for("the source to finish", || edge(&g.stats(), "c.out", "g.in").pushed == 100);
     gate("drop").store(true, SeqCst);
     let r = within(LIMIT, move || g.wait(&RunOptions::default()));
     assert!(r.failures.is_empty(), "{:?}", r.failures);
@@ -106,17 +95,10 @@ fn drop_oldest_edge_keeps_the_newest_and_counts_every_drop() {
     let received = r.stats.node("g").unwrap().msgs_in;
     assert_eq!(e.policy, Policy::DropOldest);
     assert_eq!((received, e.dropped_full, e.undelivered), (5, 95, 0));
-    assert_eq!(
-        received + e.dropped_full,
-        r.stats.node("c").unwrap().msgs_out
-    );
+    assert_eq!(received + e.dropped_full, r.stats.node("c").unwrap().msgs_out);
     let got = rows(&dir.join("out.csv"));
     assert_eq!(got.len(), 5);
-    assert_eq!(
-        &got[1..],
-        &[(96, 96), (97, 97), (98, 98), (99, 99)],
-        "latest wins"
-    );
+    assert_eq!(&got[1..], &[(96, 96), (97, 97), (98, 98), (99, 99)], "latest wins");
 }
 
 #[test]
@@ -150,24 +132,12 @@ fn drop_oldest_with_a_slow_consumer_accounts_for_every_message() {
     let r = run_ok(spec);
     let e = edge(&r.stats, "c.out", "slow.in");
     let received = r.stats.node("slow").unwrap().msgs_in;
-    assert_eq!(
-        received + e.dropped_full,
-        2000,
-        "received {received} + dropped {} != sent",
-        e.dropped_full
-    );
+    assert_eq!(received + e.dropped_full, 2000, "received {received} + dropped {} != sent", e.dropped_full);
     assert_eq!(e.pushed, 2000);
     let got = rows(&dir.join("out.csv"));
     assert_eq!(got.len() as u64, received);
-    assert!(
-        got.windows(2).all(|w| w[0].0 < w[1].0),
-        "survivors stay in order"
-    );
-    assert_eq!(
-        got.last(),
-        Some(&(1999, 1999)),
-        "the newest message is never dropped"
-    );
+    assert!(got.windows(2).all(|w| w[0].0 < w[1].0), "survivors stay in order");
+    assert_eq!(got.last(), Some(&(1999, 1999)), "the newest message is never dropped");
 }
 
 fn aligned_graph(
@@ -224,16 +194,8 @@ fn aligned_by_seq_pairs_equal_sequence_numbers() {
         let spec = aligned_graph(&dir, mode, (&a, &[0; 6]), (&b, &[0; 4]), "");
         let r = run_ok(spec);
         // Output header is a's; value = a.seq + b.seq.
-        assert_eq!(
-            rows(&dir.join("out.csv")),
-            [(0, 0), (2, 4), (3, 6), (5, 10)],
-            "{mode}"
-        );
-        assert_eq!(
-            edge(&r.stats, "a.out", "sum.a").dropped_unaligned,
-            2,
-            "{mode}: a's 1 and 4 have no partner"
-        );
+        assert_eq!(rows(&dir.join("out.csv")), [(0, 0), (2, 4), (3, 6), (5, 10)], "{mode}");
+        assert_eq!(edge(&r.stats, "a.out", "sum.a").dropped_unaligned, 2, "{mode}: a's 1 and 4 have no partner");
         assert_eq!(edge(&r.stats, "b.out", "sum.b").drops, 0, "{mode}");
     }
 }
@@ -256,11 +218,7 @@ fn aligned_by_time_window_pairs_close_timestamps() {
         let ea = edge(&r.stats, "a.out", "sum.a");
         let eb = edge(&r.stats, "b.out", "sum.b");
         assert_eq!((ea.dropped_unaligned, ea.undelivered), (2, 0), "{mode}");
-        assert_eq!(
-            (eb.dropped_unaligned, eb.undelivered),
-            (1, 1),
-            "{mode}: 5000 waits for a partner at shutdown"
-        );
+        assert_eq!((eb.dropped_unaligned, eb.undelivered), (1, 1), "{mode}: 5000 waits for a partner at shutdown");
         assert_eq!(r.stats.node("sum").unwrap().drops, 4, "{mode}");
     }
 }
@@ -302,39 +260,20 @@ fn periodic_trigger_in_lockstep_fires_once_per_step() {
     let r = run_ok(periodic_graph(&dir, "lockstep", "count = 10"));
     let want: Vec<(u64, u64)> = (0..10).map(|k| (k, k)).collect();
     assert_eq!(rows(&dir.join("out.csv")), want);
-    assert_eq!(
-        r.stats.node("tick").unwrap().errors,
-        0,
-        "a tick without new input is not an error"
-    );
+    assert_eq!(r.stats.node("tick").unwrap().errors, 0, "a tick without new input is not an error");
 }
 
 #[test]
 fn periodic_trigger_in_realtime_takes_the_newest_and_counts_the_rest() {
     let dir = temp_dir("periodic-realtime");
-    let r = run_ok(periodic_graph(
-        &dir,
-        "realtime",
-        "count = 60, rate_hz = 2000.0",
-    ));
+    let r = run_ok(periodic_graph(&dir, "realtime", "count = 60, rate_hz = 2000.0"));
     let got = rows(&dir.join("out.csv"));
     let e = edge(&r.stats, "c.out", "tick.in");
     let tick = r.stats.node("tick").unwrap();
     assert!(!got.is_empty());
-    assert!(
-        got.windows(2).all(|w| w[0].0 < w[1].0),
-        "each tick sees newer data: {got:?}"
-    );
-    assert_eq!(
-        got.last(),
-        Some(&(59, 59)),
-        "the final tick at shutdown sees the newest message"
-    );
-    assert_eq!(
-        tick.msgs_in + e.dropped_coalesced,
-        60,
-        "every message is either used or counted as coalesced"
-    );
+    assert!(got.windows(2).all(|w| w[0].0 < w[1].0), "each tick sees newer data: {got:?}");
+    assert_eq!(got.last(), Some(&(59, 59)), "the final tick at shutdown sees the newest message");
+    assert_eq!(tick.msgs_in + e.dropped_coalesced, 60, "every message is either used or counted as coalesced");
     assert_eq!(tick.msgs_out, got.len() as u64);
     assert_eq!(tick.errors, 0);
 }
@@ -378,11 +317,7 @@ fn deadline_misses_are_counted() {
     let late = r.stats.node("late").unwrap();
     // Every call busy-waits 200 us against a 50 us budget: all 20 miss.
     assert_eq!((late.calls, late.deadline_misses), (20, 20));
-    assert!(
-        late.latency_us_p50 >= 200.0 * 0.9,
-        "p50 {} us",
-        late.latency_us_p50
-    );
+    assert!(late.latency_us_p50 >= 200.0 * 0.9, "p50 {} us", late.latency_us_p50);
     assert_eq!(r.stats.node("roomy").unwrap().deadline_misses, 0);
 }
 
@@ -452,24 +387,16 @@ fn lockstep_is_bit_identical_run_to_run_and_matches_the_threaded_run() {
         let dir = temp_dir(name);
         let r = run_ok(lossless_graph(&dir, mode));
         assert_eq!(r.stats.total_drops(), 0, "{name}");
-        (
-            std::fs::read(dir.join("sums.csv")).unwrap(),
-            std::fs::read(dir.join("cubes.csv")).unwrap(),
-        )
+        (std::fs::read(dir.join("sums.csv")).unwrap(), std::fs::read(dir.join("cubes.csv")).unwrap())
     };
     let first = outputs("lockstep-1", Mode::Lockstep);
     let second = outputs("lockstep-2", Mode::Lockstep);
     assert!(first == second, "two lockstep runs differ");
     let threaded = outputs("threaded", Mode::Realtime);
-    assert!(
-        first == threaded,
-        "the threaded run of a lossless graph differs from lockstep"
-    );
+    assert!(first == threaded, "the threaded run of a lossless graph differs from lockstep");
     // And the content is right: sum = (2a + 1) + (a + 7), cube = 3a.
     let sums = String::from_utf8(first.0).unwrap();
-    let want: String = (0..3000u64)
-        .map(|k| format!("{k},{}\n", 2 * k + 1 + k + 7))
-        .collect();
+    let want: String = (0..3000u64).map(|k| format!("{k},{}\n", 2 * k + 1 + k + 7)).collect();
     assert_eq!(sums, want);
     let cubes = String::from_utf8(first.1).unwrap();
     let want: String = (0..3000u64).map(|k| format!("{k},{}\n", 3 * k)).collect();
@@ -508,22 +435,14 @@ fn offset_graph(dir: &std::path::Path, mode: &str, source: &str) -> skinflow_cor
 fn control_commands_reach_processors_and_sources() {
     // Lockstep: commands queued before the run apply before the first message.
     let dir = temp_dir("control-lockstep");
-    let g = RunningGraph::start(&offset_graph(
-        &dir,
-        "lockstep",
-        "kind = \"counter\"\nparams = { count = 5 }",
-    ))
-    .unwrap();
+    let g = RunningGraph::start(&offset_graph(&dir, "lockstep", "kind = \"counter\"\nparams = { count = 5 }")).unwrap();
     g.control("off", "add 100").unwrap();
     g.control("off", "add 20").unwrap();
     g.control("out", "tare").unwrap(); // unsupported: a warning, the run goes on
     assert!(matches!(g.control("ghost", "go"), Err(RunError::UnknownNode(n)) if n == "ghost"));
     let r = within(LIMIT, move || g.wait(&RunOptions::default()));
     assert!(r.failures.is_empty(), "{:?}", r.failures);
-    assert_eq!(
-        rows(&dir.join("out.csv")),
-        [(0, 120), (1, 121), (2, 122), (3, 123), (4, 124)]
-    );
+    assert_eq!(rows(&dir.join("out.csv")), [(0, 120), (1, 121), (2, 122), (3, 123), (4, 124)]);
 
     // Threaded: the source idles until it is told to go (a lost command would hang).
     let dir = temp_dir("control-threaded");
@@ -536,10 +455,7 @@ fn control_commands_reach_processors_and_sources() {
     g.control("src", "go").unwrap();
     let r = within(LIMIT, move || g.wait(&RunOptions::default()));
     assert!(r.failures.is_empty(), "{:?}", r.failures);
-    assert_eq!(
-        rows(&dir.join("out.csv")),
-        [(0, 0), (1, 1), (2, 2), (3, 3), (4, 4)]
-    );
+    assert_eq!(rows(&dir.join("out.csv")), [(0, 0), (1, 1), (2, 2), (3, 3), (4, 4)]);
 }
 
 #[test]
@@ -615,14 +531,9 @@ fn stop_request_ends_a_paced_run_with_every_message_delivered() {
     );
     let stop = Arc::new(AtomicBool::new(false));
     let g = RunningGraph::start(&spec).unwrap();
-    wait_for("some messages", || {
-        g.stats().node("out").unwrap().msgs_in >= 20
-    });
+    wait_for("some messages", || g.stats().node("out").unwrap().msgs_in >= 20);
     stop.store(true, SeqCst);
-    let opts = RunOptions {
-        duration: None,
-        stop: Some(stop),
-    };
+    let opts = RunOptions { duration: None, stop: Some(stop) };
     let r = within(LIMIT, move || g.wait(&opts));
     assert!(r.failures.is_empty(), "{:?}", r.failures);
     let sent = r.stats.node("c").unwrap().msgs_out;
@@ -635,10 +546,7 @@ fn stop_request_ends_a_paced_run_with_every_message_delivered() {
     let dir = temp_dir("stop-duration");
     let mut spec = spec_with_dir(&dir);
     spec.mode = Mode::Realtime;
-    let opts = RunOptions {
-        duration: Some(Duration::from_millis(50)),
-        stop: None,
-    };
+    let opts = RunOptions { duration: Some(Duration::from_millis(50)), stop: None };
     let r = within(LIMIT, move || run(&spec, &opts)).unwrap();
     let sent = r.stats.node("c").unwrap().msgs_out;
     assert_eq!(rows(&dir.join("out.csv")).len() as u64, sent);
@@ -696,38 +604,21 @@ fn stats_report_has_the_documented_shape() {
         }
     }
     let sum = nodes.iter().find(|n| n["id"] == "sum").unwrap();
-    assert_eq!(
-        (sum["msgs_in"].as_u64(), sum["msgs_out"].as_u64()),
-        (Some(6000), Some(3000))
-    );
+    assert_eq!((sum["msgs_in"].as_u64(), sum["msgs_out"].as_u64()), (Some(6000), Some(3000)));
     let edges = v["edges"].as_array().unwrap();
     assert_eq!(edges.len(), 6);
     let e = edges.iter().find(|e| e["from"] == "cube.out").unwrap();
     assert_eq!(
-        (
-            e["to"].as_str(),
-            e["policy"].as_str(),
-            e["capacity"].as_u64()
-        ),
+        (e["to"].as_str(), e["policy"].as_str(), e["capacity"].as_u64()),
         (Some("cubes.in"), Some("block"), Some(1))
     );
-    for key in [
-        "pushed",
-        "max_depth",
-        "dropped_full",
-        "dropped_unaligned",
-        "dropped_coalesced",
-        "undelivered",
-        "drops",
-    ] {
+    for key in ["pushed", "max_depth", "dropped_full", "dropped_unaligned", "dropped_coalesced", "undelivered", "drops"]
+    {
         assert!(e.get(key).is_some(), "edge report lacks {key}: {e}");
     }
     // The text report names every node.
     let text = r.stats.to_string();
     for id in ["a", "b", "twice", "sum", "cube", "sums", "cubes"] {
-        assert!(
-            text.lines().any(|l| l.starts_with(&format!("{id} "))),
-            "{id} missing from:\n{text}"
-        );
+        assert!(text.lines().any(|l| l.starts_with(&format!("{id} "))), "{id} missing from:\n{text}");
     }
 }

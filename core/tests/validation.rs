@@ -10,9 +10,7 @@ use std::time::Duration;
 
 use skinflow_core::graph::{Policy, Trigger};
 use skinflow_core::registry::{KindInfo, NodeParams, Registry, Role, typed};
-use skinflow_core::{
-    GraphSpec, Inputs, NodeError, NodeImpl, Outputs, Payload, PortSpec, Sink, Source, SourcePoll,
-};
+use skinflow_core::{GraphSpec, Inputs, NodeError, NodeImpl, Outputs, Payload, PortSpec, Sink, Source, SourcePoll};
 
 /// A second payload type, so a type mismatch can be built from test kinds.
 struct Text;
@@ -30,11 +28,7 @@ impl NodeParams for NoParams {}
 struct Silent;
 
 impl Source for Silent {
-    fn poll(
-        &mut self,
-        _: &mut skinflow_core::Context,
-        _: &mut Outputs,
-    ) -> Result<SourcePoll, NodeError> {
+    fn poll(&mut self, _: &mut skinflow_core::Context, _: &mut Outputs) -> Result<SourcePoll, NodeError> {
         Ok(SourcePoll::Finished)
     }
 }
@@ -49,12 +43,8 @@ fn registry() -> Registry {
     let mut r = Registry::new();
     skinflow_core::toy::register(&mut r).unwrap();
     r.register(typed(
-        KindInfo::new(
-            "text_source",
-            Role::Source,
-            "test: emits nothing, declares a text output",
-        )
-        .output(PortSpec::output::<Text>("out", "text")),
+        KindInfo::new("text_source", Role::Source, "test: emits nothing, declares a text output")
+            .output(PortSpec::output::<Text>("out", "text")),
         |_: NoParams, _| Ok(NodeImpl::Source(Box::new(Silent))),
     ))
     .unwrap();
@@ -78,11 +68,7 @@ fn cases(prefix: &str) -> Vec<PathBuf> {
         })
         .collect();
     v.sort();
-    assert!(
-        !v.is_empty(),
-        "no {prefix}*.toml cases in {}",
-        dir.display()
-    );
+    assert!(!v.is_empty(), "no {prefix}*.toml cases in {}", dir.display());
     v
 }
 
@@ -122,11 +108,7 @@ fn invalid_cases_report_located_errors() {
     let mut failures = Vec::new();
     for path in cases("invalid-") {
         let want = expectations(&path);
-        assert!(
-            !want.is_empty(),
-            "{} has no `# expect:` line",
-            path.display()
-        );
+        assert!(!want.is_empty(), "{} has no `# expect:` line", path.display());
         let got = match GraphSpec::load(&path, &reg) {
             Ok(_) => {
                 failures.push(format!("{}: loaded but should fail", path.display()));
@@ -143,22 +125,11 @@ fn invalid_cases_report_located_errors() {
                     && r.contains(&w.text)
             });
         if !ok {
-            let want: Vec<String> = want
-                .iter()
-                .map(|w| format!("{}:{}: {}", w.line, w.col, w.text))
-                .collect();
-            failures.push(format!(
-                "{}\n  want: {want:#?}\n  got:  {rendered:#?}",
-                path.display()
-            ));
+            let want: Vec<String> = want.iter().map(|w| format!("{}:{}: {}", w.line, w.col, w.text)).collect();
+            failures.push(format!("{}\n  want: {want:#?}\n  got:  {rendered:#?}", path.display()));
         }
     }
-    assert!(
-        failures.is_empty(),
-        "{} case(s) failed:\n{}",
-        failures.len(),
-        failures.join("\n")
-    );
+    assert!(failures.is_empty(), "{} case(s) failed:\n{}", failures.len(), failures.join("\n"));
 }
 
 #[test]
@@ -193,10 +164,7 @@ fn missing_file_is_an_error_naming_it() {
     let path = Path::new("/nonexistent-skinflow-dir/graph.toml");
     let errs = GraphSpec::load(path, &registry()).err().unwrap();
     let msg = errs.to_string();
-    assert!(
-        msg.starts_with("/nonexistent-skinflow-dir/graph.toml:1:1: cannot read"),
-        "{msg}"
-    );
+    assert!(msg.starts_with("/nonexistent-skinflow-dir/graph.toml:1:1: cannot read"), "{msg}");
 }
 
 #[test]
@@ -222,25 +190,12 @@ fn valid_triggers_are_parsed() {
     assert_eq!(g.mode, skinflow_core::Mode::Lockstep);
     assert_eq!(g.workers, 2);
     assert_eq!(node("by-seq").trigger, Trigger::AlignedSeq);
-    assert_eq!(
-        node("by-time").trigger,
-        Trigger::AlignedWindow { window_ns: 50_000 }
-    );
-    assert_eq!(
-        node("tick").trigger,
-        Trigger::Periodic {
-            period: Duration::from_millis(10)
-        }
-    );
+    assert_eq!(node("by-time").trigger, Trigger::AlignedWindow { window_ns: 50_000 });
+    assert_eq!(node("tick").trigger, Trigger::Periodic { period: Duration::from_millis(10) });
     assert_eq!(node("tick").cpu, Some(0));
     assert_eq!(node("tick").rt_priority, Some(10));
     assert_eq!(node("a").trigger, Trigger::Any);
     // Two edges into the multi-input sink, in file order.
-    let into_sink: Vec<&str> = g
-        .edges
-        .iter()
-        .filter(|e| e.to == "sink.in")
-        .map(|e| e.from.as_str())
-        .collect();
+    let into_sink: Vec<&str> = g.edges.iter().filter(|e| e.to == "sink.in").map(|e| e.from.as_str()).collect();
     assert_eq!(into_sink, ["tick.out", "by-time.out"]);
 }

@@ -9,6 +9,7 @@
 //! | `offset` | processor | `out = in + offset`; control `add N` raises the offset |
 //! | `go_source` | source | idle until control `go`, then emits `count` messages |
 //! | `paired` | source | emits message 0, waits until gate `key` entered its first call, emits the rest |
+//! | `fails` | processor | passes messages on, returns a fatal error on the `at`-th |
 //! | `broken` | processor | its factory always fails |
 
 #![allow(dead_code)]
@@ -23,8 +24,8 @@ use skinflow_core::graph::SourceFile;
 use skinflow_core::registry::{KindInfo, NodeParams, Registry, Role, typed};
 use skinflow_core::toy::Count;
 use skinflow_core::{
-    Context, GraphSpec, Header, Inputs, Message, NodeError, NodeImpl, Outputs, PortSpec, Processor,
-    Sink, Source, SourcePoll,
+    Context, GraphSpec, Header, Inputs, Message, NodeError, NodeImpl, Outputs, PortSpec, Processor, Sink, Source,
+    SourcePoll,
 };
 
 /// Counters a probe node writes, looked up by key.
@@ -38,25 +39,13 @@ pub struct Probe {
 
 pub fn probe(key: &str) -> Arc<Probe> {
     static PROBES: OnceLock<Mutex<HashMap<String, Arc<Probe>>>> = OnceLock::new();
-    PROBES
-        .get_or_init(Default::default)
-        .lock()
-        .unwrap()
-        .entry(key.to_owned())
-        .or_default()
-        .clone()
+    PROBES.get_or_init(Default::default).lock().unwrap().entry(key.to_owned()).or_default().clone()
 }
 
 /// A flag a gate node waits on, looked up by key.
 pub fn gate(key: &str) -> Arc<AtomicBool> {
     static GATES: OnceLock<Mutex<HashMap<String, Arc<AtomicBool>>>> = OnceLock::new();
-    GATES
-        .get_or_init(Default::default)
-        .lock()
-        .unwrap()
-        .entry(key.to_owned())
-        .or_default()
-        .clone()
+    GATES.get_or_init(Default::default).lock().unwrap().entry(key.to_owned()).or_default().clone()
 }
 
 #[derive(serde::Deserialize)]
@@ -71,10 +60,7 @@ impl NodeParams for StampedParams {
         if self.seq.len() == self.t_ns.len() {
             Ok(())
         } else {
-            Err(skinflow_core::ParamError::new(
-                "t_ns",
-                "must have as many entries as seq",
-            ))
+            Err(skinflow_core::ParamError::new("t_ns", "must have as many entries as seq"))
         }
     }
 }
@@ -89,11 +75,7 @@ impl Source for Stamped {
         let Some(&seq) = self.p.seq.get(self.k) else {
             return Ok(SourcePoll::Finished);
         };
-        let header = Header {
-            seq,
-            t_ns: self.p.t_ns[self.k],
-            origin: ctx.index(),
-        };
+        let header = Header { seq, t_ns: self.p.t_ns[self.k], origin: ctx.index() };
         out.send(0, Message::new(header, Count(seq)))?;
         self.k += 1;
         Ok(SourcePoll::Emitted)
@@ -116,12 +98,7 @@ struct Gate {
 }
 
 impl Processor for Gate {
-    fn process(
-        &mut self,
-        _ctx: &mut Context,
-        inputs: &Inputs,
-        out: &mut Outputs,
-    ) -> Result<(), NodeError> {
+    fn process(&mut self, _ctx: &mut Context, inputs: &Inputs, out: &mut Outputs) -> Result<(), NodeError> {
         self.probe.polls.fetch_add(1, SeqCst);
         let t0 = Instant::now();
         while !self.open.load(SeqCst) {
@@ -152,17 +129,7 @@ impl Source for ProbeSource {
             return Ok(SourcePoll::Finished);
         }
         self.left -= 1;
-        out.send(
-            0,
-            Message::new(
-                Header {
-                    seq: self.left,
-                    t_ns: 0,
-                    origin: ctx.index(),
-                },
-                Count(self.left),
-            ),
-        )?;
+        out.send(0, Message::new(Header { seq: self.left, t_ns: 0, origin: ctx.index() }, Count(self.left)))?;
         Ok(SourcePoll::Emitted)
     }
 
@@ -198,17 +165,9 @@ struct Offset {
 }
 
 impl Processor for Offset {
-    fn process(
-        &mut self,
-        _ctx: &mut Context,
-        inputs: &Inputs,
-        out: &mut Outputs,
-    ) -> Result<(), NodeError> {
+    fn process(&mut self, _ctx: &mut Context, inputs: &Inputs, out: &mut Outputs) -> Result<(), NodeError> {
         let m = inputs.get(0).ok_or_else(|| NodeError::msg("no input"))?;
-        let v = m
-            .get::<Count>()
-            .ok_or_else(|| NodeError::msg("not a count"))?
-            .0;
+        let v = m.get::<Count>().ok_or_else(|| NodeError::msg("not a count"))?.0;
         out.send(0, Message::new(m.header, Count(v + self.offset)))
     }
 
@@ -238,19 +197,33 @@ impl Source for Paired {
         if self.next == self.count {
             return Ok(SourcePoll::Finished);
         }
-        out.send(
-            0,
-            Message::new(
-                Header {
-                    seq: self.next,
-                    t_ns: self.next,
-                    origin: ctx.index(),
-                },
-                Count(self.next),
-            ),
-        )?;
+        out.send(0, Message::new(Header { seq: self.next, t_ns: self.next, origin: ctx.index() }, Count(self.next)))?;
         self.next += 1;
         Ok(SourcePoll::Emitted)
+    }
+}
+
+#[derive(serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct AtParams {
+    at: u64,
+}
+
+impl NodeParams for AtParams {}
+
+/// Passes messages on; returns a fatal error on the `at`-th (1-based).
+struct Fails {
+    at: u64,
+    seen: u64,
+}
+
+impl Processor for Fails {
+    fn process(&mut self, _ctx: &mut Context, inputs: &Inputs, out: &mut Outputs) -> Result<(), NodeError> {
+        self.seen += 1;
+        if self.seen == self.at {
+            return Err(NodeError::msg(format!("device lost at message {}", self.at)).fatal());
+        }
+        out.send(0, inputs.get(0).ok_or_else(|| NodeError::msg("no input"))?.clone())
     }
 }
 
@@ -269,17 +242,7 @@ impl Source for GoSource {
         if self.next == self.count {
             return Ok(SourcePoll::Finished);
         }
-        out.send(
-            0,
-            Message::new(
-                Header {
-                    seq: self.next,
-                    t_ns: self.next,
-                    origin: ctx.index(),
-                },
-                Count(self.next),
-            ),
-        )?;
+        out.send(0, Message::new(Header { seq: self.next, t_ns: self.next, origin: ctx.index() }, Count(self.next)))?;
         self.next += 1;
         Ok(SourcePoll::Emitted)
     }
@@ -307,78 +270,38 @@ pub fn registry() -> Registry {
     let out = || PortSpec::output::<Count>("out", "value");
     let inp = || PortSpec::input::<Count>("in", "value");
     let kinds = [
+        typed(KindInfo::new("stamped", Role::Source, "test: given headers").output(out()), |p: StampedParams, _| {
+            Ok(NodeImpl::Source(Box::new(Stamped { p, k: 0 })))
+        }),
         typed(
-            KindInfo::new("stamped", Role::Source, "test: given headers").output(out()),
-            |p: StampedParams, _| Ok(NodeImpl::Source(Box::new(Stamped { p, k: 0 }))),
+            KindInfo::new("gate", Role::Processor, "test: waits to be opened").input(inp()).output(out()),
+            |p: KeyParams, _| Ok(NodeImpl::Processor(Box::new(Gate { open: gate(&p.key), probe: probe(&p.key) }))),
         ),
+        typed(KindInfo::new("probe_source", Role::Source, "test: counted source").output(out()), |p: KeyParams, _| {
+            Ok(NodeImpl::Source(Box::new(ProbeSource { probe: probe(&p.key), left: p.count })))
+        }),
+        typed(KindInfo::new("probe_sink", Role::Sink, "test: counted sink").input(inp().multi()), |p: KeyParams, _| {
+            Ok(NodeImpl::Sink(Box::new(ProbeSink { probe: probe(&p.key) })))
+        }),
         typed(
-            KindInfo::new("gate", Role::Processor, "test: waits to be opened")
-                .input(inp())
-                .output(out()),
-            |p: KeyParams, _| {
-                Ok(NodeImpl::Processor(Box::new(Gate {
-                    open: gate(&p.key),
-                    probe: probe(&p.key),
-                })))
-            },
-        ),
-        typed(
-            KindInfo::new("probe_source", Role::Source, "test: counted source").output(out()),
-            |p: KeyParams, _| {
-                Ok(NodeImpl::Source(Box::new(ProbeSource {
-                    probe: probe(&p.key),
-                    left: p.count,
-                })))
-            },
-        ),
-        typed(
-            KindInfo::new("probe_sink", Role::Sink, "test: counted sink").input(inp().multi()),
-            |p: KeyParams, _| {
-                Ok(NodeImpl::Sink(Box::new(ProbeSink {
-                    probe: probe(&p.key),
-                })))
-            },
-        ),
-        typed(
-            KindInfo::new("offset", Role::Processor, "test: adds an offset")
-                .input(inp())
-                .output(out()),
+            KindInfo::new("offset", Role::Processor, "test: adds an offset").input(inp()).output(out()),
             |_: NoParams, _| Ok(NodeImpl::Processor(Box::new(Offset { offset: 0 }))),
         ),
+        typed(KindInfo::new("go_source", Role::Source, "test: waits for go").output(out()), |p: KeyParams, _| {
+            Ok(NodeImpl::Source(Box::new(GoSource { go: false, next: 0, count: p.count })))
+        }),
         typed(
-            KindInfo::new("go_source", Role::Source, "test: waits for go").output(out()),
-            |p: KeyParams, _| {
-                Ok(NodeImpl::Source(Box::new(GoSource {
-                    go: false,
-                    next: 0,
-                    count: p.count,
-                })))
-            },
+            KindInfo::new("paired", Role::Source, "test: waits for a gate after one message").output(out()),
+            |p: KeyParams, _| Ok(NodeImpl::Source(Box::new(Paired { gate: probe(&p.key), next: 0, count: p.count }))),
         ),
         typed(
-            KindInfo::new(
-                "paired",
-                Role::Source,
-                "test: waits for a gate after one message",
-            )
-            .output(out()),
-            |p: KeyParams, _| {
-                Ok(NodeImpl::Source(Box::new(Paired {
-                    gate: probe(&p.key),
-                    next: 0,
-                    count: p.count,
-                })))
-            },
+            KindInfo::new("fails", Role::Processor, "test: fatal error on the at-th").input(inp()).output(out()),
+            |p: AtParams, _| Ok(NodeImpl::Processor(Box::new(Fails { at: p.at, seen: 0 }))),
         ),
         typed(
-            KindInfo::new("broken", Role::Processor, "test: cannot be built")
-                .input(inp())
-                .output(out()),
+            KindInfo::new("broken", Role::Processor, "test: cannot be built").input(inp()).output(out()),
             |_: NoParams, _| {
-                Err(NodeError::Path {
-                    path: PathBuf::from("/dev/skinflow-missing"),
-                    problem: "no such device".into(),
-                })
+                Err(NodeError::Path { path: PathBuf::from("/dev/skinflow-missing"), problem: "no such device".into() })
             },
         ),
     ];
@@ -435,10 +358,7 @@ pub fn within<T: Send + 'static>(limit: Duration, f: impl FnOnce() -> T + Send +
 pub fn wait_for(what: &str, mut cond: impl FnMut() -> bool) {
     let t0 = Instant::now();
     while !cond() {
-        assert!(
-            t0.elapsed() < Duration::from_secs(30),
-            "timed out waiting for {what}"
-        );
+        assert!(t0.elapsed() < Duration::from_secs(30), "timed out waiting for {what}");
         std::thread::sleep(Duration::from_millis(1));
     }
 }

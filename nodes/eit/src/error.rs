@@ -34,6 +34,9 @@ pub enum EitError {
     /// Reading or writing the on-disk cache failed.
     #[error("cache file {path}: {cause}")]
     Cache { path: String, cause: String },
+    /// A channel that is not masked out holds a non-finite difference (mask it first).
+    #[error("channel {channel}: difference {value} is not finite (mask the channel)")]
+    NonFinite { channel: usize, value: f64 },
     /// Every channel is masked out, nothing is left to reconstruct from.
     #[error("channel mask excludes all {total} channels")]
     NoChannels { total: usize },

@@ -238,11 +238,6 @@ impl ForwardModel {
         self.electrodes
     }
 
-    /// Geometric stiffness of element `e` (see the field doc), for the Jacobian.
-    pub(crate) fn element_stiffness(&self, e: usize) -> &[f64; 6] {
-        &self.element_stiffness[e]
-    }
-
     /// A conductivity vector equal to the background everywhere, S/m.
     pub fn background(&self) -> Vec<f64> {
         vec![self.params.background_s_per_m; self.element_count()]

@@ -1,0 +1,152 @@
+//! The no-load reference frame for time-difference imaging, and where it came from.
+//!
+//! Precedence: a recorded `/eit/reference` (`from_reference`) or an explicit `tare` replaces
+//! whatever was there; otherwise the mean of the first `n` complete frames (`accumulate`). Frames
+//! with a non-finite value are not averaged (they are counted in `skipped`). Allocation happens at
+//! construction only.
+
+use crate::error::EitError;
+
+/// Where the current reference came from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ReferenceSource {
+    /// No reference yet (still accumulating).
+    None,
+    /// The recording's `/eit/reference`.
+    Recorded,
+    /// Mean of the first `frames` no-load frames.
+    MeanOfFirst { frames: usize },
+    /// A `tare` control message: the frame it named.
+    Tare,
+}
+
+/// Tracks the reference frame (M values, volts).
+#[derive(Debug, Clone)]
+pub struct ReferenceTracker {
+    reference: Vec<f64>,
+    sum: Vec<f64>,
+    wanted: usize,
+    seen: usize,
+    /// Frames not averaged because they held a non-finite value.
+    pub skipped: usize,
+    source: ReferenceSource,
+}
+
+impl ReferenceTracker {
+    /// A tracker for M channels that averages the first `n` frames (n >= 1).
+    pub fn new(m: usize, n: usize) -> Result<ReferenceTracker, EitError> {
+        if n == 0 {
+            return Err(crate::error::invalid(
+                "reference_frames",
+                "must be >= 1 (got 0)",
+            ));
+        }
+        Ok(ReferenceTracker {
+            reference: vec![0.0; m],
+            sum: vec![0.0; m],
+            wanted: n,
+            seen: 0,
+            skipped: 0,
+            source: ReferenceSource::None,
+        })
+    }
+
+    /// A tracker whose reference is a recorded frame.
+    pub fn from_reference(v: &[f64]) -> ReferenceTracker {
+        ReferenceTracker {
+            reference: v.to_vec(),
+            sum: vec![0.0; v.len()],
+            wanted: 1,
+            seen: 0,
+            skipped: 0,
+            source: ReferenceSource::Recorded,
+        }
+    }
+
+    fn check(&self, frame: &[f64]) -> Result<(), EitError> {
+        if frame.len() != self.reference.len() {
+            return Err(EitError::Length {
+                what: "frame",
+                expected: self.reference.len(),
+                got: frame.len(),
+            });
+        }
+        Ok(())
+    }
+
+    /// Feeds a frame: while no reference is set, adds it to the mean of the first N. Returns
+    /// whether a reference is available after this frame.
+    pub fn accumulate(&mut self, frame: &[f64]) -> Result<bool, EitError> {
+        self.check(frame)?;
+        if self.source != ReferenceSource::None {
+            return Ok(true);
+        }
+        if frame.iter().any(|v| !v.is_finite()) {
+            self.skipped += 1;
+            return Ok(false);
+        }
+        for (s, v) in self.sum.iter_mut().zip(frame) {
+            *s += v;
+        }
+        self.seen += 1;
+        if self.seen == self.wanted {
+            let n = self.seen as f64;
+            for (r, s) in self.reference.iter_mut().zip(&self.sum) {
+                *r = s / n;
+            }
+            self.source = ReferenceSource::MeanOfFirst { frames: self.seen };
+        }
+        Ok(self.source != ReferenceSource::None)
+    }
+
+    /// Makes `frame` the reference (a `tare` message).
+    pub fn tare(&mut self, frame: &[f64]) -> Result<(), EitError> {
+        self.check(frame)?;
+        self.reference.copy_from_slice(frame);
+        self.source = ReferenceSource::Tare;
+        Ok(())
+    }
+
+    /// The reference, once available.
+    pub fn reference(&self) -> Option<&[f64]> {
+        (self.source != ReferenceSource::None).then_some(&self.reference[..])
+    }
+
+    pub fn source(&self) -> ReferenceSource {
+        self.source
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn mean_of_first_n_then_tare_overrides() {
+        let mut r = ReferenceTracker::new(2, 2).unwrap();
+        assert!(!r.accumulate(&[1.0, 2.0]).unwrap());
+        assert!(!r.accumulate(&[f64::NAN, 2.0]).unwrap());
+        assert_eq!(r.reference(), None);
+        assert!(r.accumulate(&[3.0, 4.0]).unwrap());
+        assert_eq!(r.reference(), Some(&[2.0, 3.0][..]));
+        assert_eq!(r.source(), ReferenceSource::MeanOfFirst { frames: 2 });
+        assert_eq!(r.skipped, 1);
+        // Later frames do not move it.
+        r.accumulate(&[9.0, 9.0]).unwrap();
+        assert_eq!(r.reference(), Some(&[2.0, 3.0][..]));
+        r.tare(&[5.0, 6.0]).unwrap();
+        assert_eq!(
+            (r.reference(), r.source()),
+            (Some(&[5.0, 6.0][..]), ReferenceSource::Tare)
+        );
+        assert!(r.tare(&[1.0]).is_err());
+    }
+
+    #[test]
+    fn recorded_reference_is_used_at_once() {
+        let mut r = ReferenceTracker::from_reference(&[1.0, 1.5]);
+        assert_eq!(r.source(), ReferenceSource::Recorded);
+        assert!(r.accumulate(&[7.0, 7.0]).unwrap());
+        assert_eq!(r.reference(), Some(&[1.0, 1.5][..]));
+    }
+}

@@ -105,8 +105,8 @@ struct Scale {
 }
 
 fn count_in<'a>(inputs: &'a Inputs, port: usize, name: &'static str) -> Result<(&'a Message, u64), NodeError> {
-    let m = inputs.get(port).ok_or(NodeError::Input { port: name.into(), problem: "no message".into() })?;
-    let c = m.get::<Count>().ok_or(NodeError::Input { port: name.into(), problem: "not a count".into() })?;
+    let m = inputs.get(port).ok_or_else(|| NodeError::Input { port: name.into(), problem: "no message".into() })?;
+    let c = m.get::<Count>().ok_or_else(|| NodeError::Input { port: name.into(), problem: "not a count".into() })?;
     Ok((m, c.0))
 }
 
@@ -216,7 +216,7 @@ impl Sink for Collect {
 
     fn consume(&mut self, _ctx: &mut Context, inputs: &Inputs) -> Result<(), NodeError> {
         for (_, m) in inputs.iter_port(0) {
-            let c = m.get::<Count>().ok_or(NodeError::Input { port: "in".into(), problem: "not a count".into() })?;
+            let c = m.get::<Count>().ok_or_else(|| NodeError::Input { port: "in".into(), problem: "not a count".into() })?;
             self.rows.push((m.header.seq, c.0));
         }
         Ok(())

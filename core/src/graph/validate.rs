@@ -284,8 +284,7 @@ pub(crate) fn topo_order(n: usize, edges: &[EdgeSpec]) -> Vec<usize> {
     }
     let mut out = Vec::with_capacity(n);
     let mut done = vec![false; n];
-    loop {
-        let Some(next) = (0..n).find(|&i| !done[i] && indeg[i] == 0) else { break };
+    while let Some(next) = (0..n).find(|&i| !done[i] && indeg[i] == 0) {
         done[next] = true;
         out.push(next);
         for e in edges.iter().filter(|e| e.from_node == next) {

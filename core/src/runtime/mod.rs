@@ -14,7 +14,8 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use crossbeam::atomic::AtomicCell;
-use crossbeam::deque::{Injector, Worker};
+use crossbeam::deque::Worker;
+use crossbeam::queue::ArrayQueue;
 use crossbeam::queue::SegQueue;
 use crossbeam::sync::Parker;
 
@@ -203,7 +204,7 @@ impl RunningGraph {
             .collect();
         let shared = Arc::new(Shared {
             slots,
-            injector: Injector::new(),
+            injector: ArrayQueue::new(n.max(1)),
             stealers: locals.iter().map(Worker::stealer).collect(),
             sleepers: parkers
                 .iter()

@@ -15,8 +15,8 @@ use std::thread::Thread;
 use std::time::Duration;
 
 use crossbeam::atomic::AtomicCell;
-use crossbeam::deque::{Injector, Steal, Stealer, Worker};
-use crossbeam::queue::SegQueue;
+use crossbeam::deque::{Steal, Stealer, Worker};
+use crossbeam::queue::{ArrayQueue, SegQueue};
 use crossbeam::sync::{Parker, Unparker};
 
 use super::cell::{Cell, Fired, Notify};
@@ -59,7 +59,10 @@ pub(crate) struct Sleeper {
 
 pub(crate) struct Shared {
     pub slots: Vec<Slot>,
-    pub injector: Injector<usize>,
+    /// Nodes queued from outside a worker. Bounded by the node count: the state machine puts
+    /// a node in at most one queue at a time, so a push never fails and never allocates
+    /// (an unbounded `Injector` allocates a block every 63 pushes).
+    pub injector: ArrayQueue<usize>,
     pub stealers: Vec<Stealer<usize>>,
     pub sleepers: Vec<Sleeper>,
     /// Nodes queued or running.
@@ -78,6 +81,11 @@ impl Shared {
         self.failures.lock().unwrap_or_else(|p| p.into_inner()).push((node, e));
         self.faulted.store(true, SeqCst);
         self.stop.store(true, SeqCst);
+    }
+
+    fn inject(&self, node: usize) {
+        let pushed = self.injector.push(node);
+        debug_assert!(pushed.is_ok(), "a node is queued at most once, so the injector never fills");
     }
 
     fn wake_one(&self) {
@@ -130,7 +138,7 @@ impl Shared {
             }
             Exec::Pool => {
                 if self.mark(node) {
-                    self.injector.push(node);
+                    self.inject(node);
                     self.wake_one();
                 }
             }
@@ -163,7 +171,7 @@ impl Shared {
                 slot.state.store(QUEUED, SeqCst);
                 match slot.exec {
                     Exec::Pool => {
-                        self.injector.push(node);
+                        self.inject(node);
                         self.wake_one();
                     }
                     _ => {
@@ -221,7 +229,7 @@ impl Notify for WorkerNotify<'_> {
 pub(crate) fn worker_loop(shared: &Shared, idx: usize, local: Worker<usize>, parker: Parker) {
     let n = WorkerNotify { shared, local: &local, lifo: StdCell::new(None) };
     loop {
-        let next = n.lifo.take().or_else(|| local.pop()).or_else(|| steal(shared, &local));
+        let next = n.lifo.take().or_else(|| local.pop()).or_else(|| steal(shared));
         if let Some(node) = next {
             shared.execute(node, &n, BUDGET);
             continue;
@@ -239,13 +247,9 @@ pub(crate) fn worker_loop(shared: &Shared, idx: usize, local: Worker<usize>, par
     }
 }
 
-fn steal(shared: &Shared, local: &Worker<usize>) -> Option<usize> {
-    loop {
-        match shared.injector.steal_batch_and_pop(local) {
-            Steal::Success(t) => return Some(t),
-            Steal::Retry => continue,
-            Steal::Empty => break,
-        }
+fn steal(shared: &Shared) -> Option<usize> {
+    if let Some(t) = shared.injector.pop() {
+        return Some(t);
     }
     for s in &shared.stealers {
         loop {

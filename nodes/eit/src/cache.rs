@@ -1,7 +1,8 @@
 //! On-disk cache of folded reconstruction matrices, keyed by a SHA-256 of everything they depend on.
 //!
 //! File `<dir>/skinflow-eit-<key>.bin`: magic `SFEITMX1`, then u64 LE measurements, pixels,
-//! elements, clipped, then the f64 LE image matrix (pixels x M) and element matrix (E x M).
+//! elements, clipped, then the f64 LE image matrix (pixels x M) and element matrix (E x M),
+//! both column-major.
 //! Writes go to a temporary file renamed into place, so readers never see a partial file. A file
 //! that does not parse is reported, never silently replaced.
 

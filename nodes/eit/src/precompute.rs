@@ -107,16 +107,17 @@ impl Model {
     }
 }
 
-/// Folded reconstruction matrices, row-major with all M columns (excluded channels are zero
-/// columns, so a frame's layout never changes): image = F_image * dv, elements = F_el * dv.
+/// Folded reconstruction matrices, column-major (column k holds channel k's weights, so
+/// excluded channels are zero columns and a frame's layout never changes):
+/// image = F_image * dv, elements = F_el * dv.
 #[derive(Debug, Clone)]
 pub struct Folded {
     pub measurements: usize,
-    /// Pixels x M, S/m per unit of dv.
+    /// Pixels x M, column-major, S/m per unit of dv.
     pub image: Vec<f64>,
     /// `image` rounded to f32.
     pub image_f32: Vec<f32>,
-    /// Elements x M, S/m per unit of dv.
+    /// Elements x M, column-major, S/m per unit of dv.
     pub elements: Vec<f64>,
     /// Eigenvalues of the dual system clipped as rank-deficient.
     pub clipped: usize,
@@ -133,20 +134,20 @@ impl Folded {
         clipped: usize,
     ) -> Folded {
         let e_count = d.nrows();
-        let mut elements = vec![0.0; e_count * m];
-        for (c, &ch) in kept.iter().enumerate() {
-            for (e, v) in d.col(c).iter().enumerate() {
-                elements[e * m + ch] = sigma0 * v;
-            }
-        }
         let pixels = map.row_ptr.len() - 1;
+        let mut elements = vec![0.0; e_count * m];
         let mut image = vec![0.0; pixels * m];
-        for p in 0..pixels {
-            let row = &mut image[p * m..(p + 1) * m];
-            for &(e, w) in &map.entries[map.row_ptr[p]..map.row_ptr[p + 1]] {
-                for (o, x) in row.iter_mut().zip(&elements[e * m..(e + 1) * m]) {
-                    *o += w * x;
-                }
+        for (c, &ch) in kept.iter().enumerate() {
+            let col = &mut elements[ch * e_count..(ch + 1) * e_count];
+            for (o, v) in col.iter_mut().zip(d.col(c).iter()) {
+                *o = sigma0 * v;
+            }
+            let img = &mut image[ch * pixels..(ch + 1) * pixels];
+            for (p, o) in img.iter_mut().enumerate() {
+                *o = map.entries[map.row_ptr[p]..map.row_ptr[p + 1]]
+                    .iter()
+                    .map(|&(e, w)| w * col[e])
+                    .sum();
             }
         }
         Folded::from_parts(m, image, elements, clipped)

@@ -17,7 +17,8 @@ use crate::mesh::MeshParams;
 use crate::noser::{DualSystem, Prior};
 use crate::precompute::{DifferenceMode, Folded, Model};
 use crate::sensor::{Measurement, Sensor};
-use faer::Mat;
+use faer::linalg::matmul::matmul;
+use faer::{Accum, Mat, MatMut, MatRef, Par};
 use serde::Deserialize;
 use std::collections::HashMap;
 use std::path::PathBuf;
@@ -123,6 +124,7 @@ pub struct Reconstructor {
     by_mask: HashMap<Vec<bool>, Arc<Folded>>,
     dv: Vec<f64>,
     dv32: Vec<f32>,
+    image32: Vec<f32>,
     info: ReconInfo,
 }
 
@@ -145,6 +147,7 @@ impl Reconstructor {
             by_mask: HashMap::new(),
             dv: vec![0.0; m],
             dv32: vec![0.0; m],
+            image32: vec![0.0; params.image_nx * params.image_ny],
             info: ReconInfo {
                 cache: CacheStatus::Disabled,
                 mesh_nodes: None,
@@ -172,7 +175,7 @@ impl Reconstructor {
             .collect();
         let ex: Vec<usize> = (0..excluded.len()).filter(|&k| excluded[k]).collect();
         format!(
-            "skinflow-eit {} matrix v1|sensor {:?}x{:?} {} {:?}|mesh {:?}|cem {:?}|prior {}|lambda {:?}|mode {:?}|image {}x{} sub {}|excluded {:?}",
+            "skinflow-eit {} matrix v2|sensor {:?}x{:?} {} {:?}|mesh {:?}|cem {:?}|prior {}|lambda {:?}|mode {:?}|image {}x{} sub {}|excluded {:?}",
             env!("CARGO_PKG_VERSION"),
             s.width_mm,
             s.height_mm,
@@ -277,13 +280,22 @@ impl Reconstructor {
                 got: mask.excluded.len(),
             });
         }
+        if mask.dead.len() != self.mask.dead.len() {
+            return Err(EitError::Length {
+                what: "dead electrode mask",
+                expected: self.mask.dead.len(),
+                got: mask.dead.len(),
+            });
+        }
         if *mask == self.mask {
             return Ok(false);
         }
         let f = self.folded_for(mask)?;
         self.info.clipped_eigenvalues = f.clipped;
         self.active = f;
-        self.mask.clone_from(mask);
+        // In place: switching to a known mask allocates nothing.
+        self.mask.excluded.copy_from_slice(&mask.excluded);
+        self.mask.dead.copy_from_slice(&mask.dead);
         Ok(true)
     }
 
@@ -376,14 +388,16 @@ impl Reconstructor {
             });
         }
         self.difference(v, v_ref)?;
-        let m = self.measurements.len();
         match self.params.precision {
-            Precision::F64 => matvec_f64(&self.active.image, m, &self.dv, image),
+            Precision::F64 => matvec(&self.active.image, &self.dv, image),
             Precision::F32 => {
                 for (a, b) in self.dv32.iter_mut().zip(&self.dv) {
                     *a = *b as f32;
                 }
-                matvec_f32(&self.active.image_f32, m, &self.dv32, image);
+                matvec(&self.active.image_f32, &self.dv32, &mut self.image32);
+                for (o, x) in image.iter_mut().zip(&self.image32) {
+                    *o = f64::from(*x);
+                }
             }
         }
         Ok(())
@@ -404,49 +418,16 @@ impl Reconstructor {
             });
         }
         self.difference(v, v_ref)?;
-        matvec_f64(
-            &self.active.elements,
-            self.measurements.len(),
-            &self.dv,
-            elements,
-        );
+        matvec(&self.active.elements, &self.dv, elements);
         Ok(())
     }
 }
 
-/// out[r] = row r of `a` (row-major, `m` columns) . x, with 4 independent accumulators so the
-/// compiler vectorises the reduction.
-fn matvec_f64(a: &[f64], m: usize, x: &[f64], out: &mut [f64]) {
-    for (o, row) in out.iter_mut().zip(a.chunks_exact(m)) {
-        let mut acc = [0.0f64; 4];
-        let (body, tail) = row.split_at(m - m % 4);
-        for (r, xs) in body.chunks_exact(4).zip(x.chunks_exact(4)) {
-            for k in 0..4 {
-                acc[k] += r[k] * xs[k];
-            }
-        }
-        let mut s = (acc[0] + acc[1]) + (acc[2] + acc[3]);
-        for (r, xs) in tail.iter().zip(&x[m - m % 4..]) {
-            s += r * xs;
-        }
-        *o = s;
-    }
-}
-
-/// As `matvec_f64` in f32 with 8 accumulators, results widened to f64.
-fn matvec_f32(a: &[f32], m: usize, x: &[f32], out: &mut [f64]) {
-    for (o, row) in out.iter_mut().zip(a.chunks_exact(m)) {
-        let mut acc = [0.0f32; 8];
-        let (body, tail) = row.split_at(m - m % 8);
-        for (r, xs) in body.chunks_exact(8).zip(x.chunks_exact(8)) {
-            for k in 0..8 {
-                acc[k] += r[k] * xs[k];
-            }
-        }
-        let mut s = acc.iter().sum::<f32>();
-        for (r, xs) in tail.iter().zip(&x[m - m % 8..]) {
-            s += r * xs;
-        }
-        *o = f64::from(s);
-    }
+/// out = A x with A column-major (out.len() rows, x.len() columns), through faer's matrix
+/// product, which picks the widest SIMD the CPU has at run time and allocates nothing here.
+fn matvec<T: faer::traits::ComplexField>(a: &[T], x: &[T], out: &mut [T]) {
+    let lhs = MatRef::from_column_major_slice(a, out.len(), x.len());
+    let rhs = MatRef::from_column_major_slice(x, x.len(), 1);
+    let dst = MatMut::from_column_major_slice_mut(out, lhs.nrows(), 1);
+    matmul(dst, Accum::Replace, lhs, rhs, T::one_impl(), Par::Seq);
 }

@@ -3,10 +3,10 @@
 //! Pixels are `nx` x `ny` equal cells tiling the rectangle; pixel (ix, iy) has index
 //! `iy * nx + ix`, with ix = 0 at the left (x = -hx) and iy = 0 at the BOTTOM (y = -hy): the
 //! sensor frame, y up. A pixel's value is the area-weighted mean of the element values under it,
-//! estimated from `SUBSAMPLES` x `SUBSAMPLES` points per pixel, each located in its triangle.
+//! estimated from `SUBSAMPLES` x `SUBSAMPLES` points per pixel, each assigned to its triangle.
 
 use crate::error::{EitError, invalid};
-use crate::mesh::Mesh;
+use crate::mesh::{Mesh, signed_area};
 use crate::sensor::Sensor;
 use serde::Deserialize;
 
@@ -95,35 +95,79 @@ pub struct ImageMap {
 }
 
 impl ImageMap {
-    /// Builds the weights of `grid` over `mesh`.
+    /// Builds the weights of `grid` over `mesh`. Each triangle claims the sample points inside
+    /// its bounding box that it contains (first claim wins on shared edges), which touches each
+    /// point about twice instead of searching for it.
     pub fn new(mesh: &Mesh, grid: &ImageGrid) -> Result<ImageMap, EitError> {
-        let locator = Locator::new(mesh);
-        let (w, h) = grid.pixel_size_mm();
+        let (snx, sny) = (grid.nx * SUBSAMPLES, grid.ny * SUBSAMPLES);
+        let (w, h) = (2.0 * grid.hx_mm / snx as f64, 2.0 * grid.hy_mm / sny as f64);
+        let point = |ix: usize, iy: usize| {
+            [
+                -grid.hx_mm + (ix as f64 + 0.5) * w,
+                -grid.hy_mm + (iy as f64 + 0.5) * h,
+            ]
+        };
+        let mut owner = vec![usize::MAX; snx * sny];
+        for (e, t) in mesh.triangles.iter().enumerate() {
+            let [a, b, c] = t.map(|i| mesh.nodes[i]);
+            let area = signed_area(a, b, c);
+            let range = |lo: f64, hi: f64, o: f64, d: f64, n: usize| {
+                let i0 = ((lo - o) / d - 0.5).floor().max(0.0) as usize;
+                let i1 = (((hi - o) / d - 0.5).ceil().max(0.0) as usize).min(n - 1);
+                (i0, i1)
+            };
+            let (x0, x1) = range(
+                a[0].min(b[0]).min(c[0]),
+                a[0].max(b[0]).max(c[0]),
+                -grid.hx_mm,
+                w,
+                snx,
+            );
+            let (y0, y1) = range(
+                a[1].min(b[1]).min(c[1]),
+                a[1].max(b[1]).max(c[1]),
+                -grid.hy_mm,
+                h,
+                sny,
+            );
+            for iy in y0..=y1 {
+                for ix in x0..=x1 {
+                    let k = iy * snx + ix;
+                    if owner[k] != usize::MAX {
+                        continue;
+                    }
+                    let q = point(ix, iy);
+                    let l0 = signed_area(q, b, c) / area;
+                    let l1 = signed_area(a, q, c) / area;
+                    if l0 >= -INSIDE_TOL && l1 >= -INSIDE_TOL && 1.0 - l0 - l1 >= -INSIDE_TOL {
+                        owner[k] = e;
+                    }
+                }
+            }
+        }
+        if let Some(k) = owner.iter().position(|&e| e == usize::MAX) {
+            let q = point(k % snx, k / snx);
+            return Err(EitError::Mesh {
+                problem: format!("no element contains the point ({}, {}) mm", q[0], q[1]),
+            });
+        }
         let mut row_ptr = Vec::with_capacity(grid.pixel_count() + 1);
         let mut entries = Vec::with_capacity(grid.pixel_count() * 4);
-        let mut hits: Vec<usize> = Vec::with_capacity(SUBSAMPLES * SUBSAMPLES);
-        row_ptr.push(0);
+        let mut hits = [0usize; SUBSAMPLES * SUBSAMPLES];
         let weight = 1.0 / (SUBSAMPLES * SUBSAMPLES) as f64;
+        row_ptr.push(0);
         for p in 0..grid.pixel_count() {
-            let (ix, iy) = (p % grid.nx, p / grid.nx);
-            hits.clear();
+            let (px, py) = (p % grid.nx, p / grid.nx);
             for sy in 0..SUBSAMPLES {
                 for sx in 0..SUBSAMPLES {
-                    let x = -grid.hx_mm + (ix as f64 + (sx as f64 + 0.5) / SUBSAMPLES as f64) * w;
-                    let y = -grid.hy_mm + (iy as f64 + (sy as f64 + 0.5) / SUBSAMPLES as f64) * h;
-                    let e = locator.locate(mesh, [x, y]).ok_or_else(|| EitError::Mesh {
-                        problem: format!("no element contains the point ({x}, {y}) mm"),
-                    })?;
-                    hits.push(e);
+                    hits[sy * SUBSAMPLES + sx] =
+                        owner[(py * SUBSAMPLES + sy) * snx + px * SUBSAMPLES + sx];
                 }
             }
             hits.sort_unstable();
             let mut k = 0;
             while k < hits.len() {
-                let mut n = 1;
-                while k + n < hits.len() && hits[k + n] == hits[k] {
-                    n += 1;
-                }
+                let n = hits[k..].iter().take_while(|&&e| e == hits[k]).count();
                 entries.push((hits[k], n as f64 * weight));
                 k += n;
             }
@@ -143,105 +187,9 @@ impl ImageMap {
     }
 }
 
-/// Point location by a uniform bucket grid over element bounding boxes.
-struct Locator {
-    nx: usize,
-    ny: usize,
-    x0: f64,
-    y0: f64,
-    cell: f64,
-    cell_ptr: Vec<usize>,
-    cell_elements: Vec<usize>,
-}
-
 /// Barycentric tolerance: a point this far outside an edge (relative) still counts as inside,
-/// so points on shared edges and the boundary are always found.
+/// so points on shared edges and the boundary are always claimed.
 const INSIDE_TOL: f64 = 1e-10;
-
-impl Locator {
-    fn new(mesh: &Mesh) -> Locator {
-        let (mut x0, mut y0, mut x1, mut y1) = (
-            f64::INFINITY,
-            f64::INFINITY,
-            f64::NEG_INFINITY,
-            f64::NEG_INFINITY,
-        );
-        for p in &mesh.nodes {
-            x0 = x0.min(p[0]);
-            y0 = y0.min(p[1]);
-            x1 = x1.max(p[0]);
-            y1 = y1.max(p[1]);
-        }
-        let area = (x1 - x0) * (y1 - y0);
-        let cell = (area / mesh.element_count().max(1) as f64).sqrt() * 2.0;
-        let nx = (((x1 - x0) / cell).ceil() as usize).max(1);
-        let ny = (((y1 - y0) / cell).ceil() as usize).max(1);
-        let cell_range = |t: &[usize; 3]| {
-            let xs = t.map(|i| mesh.nodes[i][0]);
-            let ys = t.map(|i| mesh.nodes[i][1]);
-            let f =
-                |v: f64, o: f64, n: usize| (((v - o) / cell).floor().max(0.0) as usize).min(n - 1);
-            let (cx0, cx1) = (
-                f(xs.iter().copied().fold(f64::INFINITY, f64::min), x0, nx),
-                f(xs.iter().copied().fold(f64::NEG_INFINITY, f64::max), x0, nx),
-            );
-            let (cy0, cy1) = (
-                f(ys.iter().copied().fold(f64::INFINITY, f64::min), y0, ny),
-                f(ys.iter().copied().fold(f64::NEG_INFINITY, f64::max), y0, ny),
-            );
-            (cx0, cx1, cy0, cy1)
-        };
-        let mut counts = vec![0usize; nx * ny + 1];
-        for t in &mesh.triangles {
-            let (a, b, c, d) = cell_range(t);
-            for cy in c..=d {
-                for cx in a..=b {
-                    counts[cy * nx + cx + 1] += 1;
-                }
-            }
-        }
-        for i in 0..nx * ny {
-            counts[i + 1] += counts[i];
-        }
-        let mut fill = counts.clone();
-        let mut cell_elements = vec![0; counts[nx * ny]];
-        for (e, t) in mesh.triangles.iter().enumerate() {
-            let (a, b, c, d) = cell_range(t);
-            for cy in c..=d {
-                for cx in a..=b {
-                    cell_elements[fill[cy * nx + cx]] = e;
-                    fill[cy * nx + cx] += 1;
-                }
-            }
-        }
-        Locator {
-            nx,
-            ny,
-            x0,
-            y0,
-            cell,
-            cell_ptr: counts,
-            cell_elements,
-        }
-    }
-
-    fn locate(&self, mesh: &Mesh, q: [f64; 2]) -> Option<usize> {
-        let cx = (((q[0] - self.x0) / self.cell).floor().max(0.0) as usize).min(self.nx - 1);
-        let cy = (((q[1] - self.y0) / self.cell).floor().max(0.0) as usize).min(self.ny - 1);
-        let c = cy * self.nx + cx;
-        self.cell_elements[self.cell_ptr[c]..self.cell_ptr[c + 1]]
-            .iter()
-            .copied()
-            .find(|&e| {
-                let [a, b, cc] = mesh.triangles[e].map(|i| mesh.nodes[i]);
-                let area = crate::mesh::signed_area(a, b, cc);
-                let l0 = crate::mesh::signed_area(q, b, cc) / area;
-                let l1 = crate::mesh::signed_area(a, q, cc) / area;
-                let l2 = 1.0 - l0 - l1;
-                l0 >= -INSIDE_TOL && l1 >= -INSIDE_TOL && l2 >= -INSIDE_TOL
-            })
-    }
-}
 
 #[cfg(test)]
 mod tests {

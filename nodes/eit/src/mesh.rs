@@ -138,7 +138,7 @@ impl Mesh {
                 });
             }
             let a = signed_area(nodes[t[0]], nodes[t[1]], nodes[t[2]]);
-            if !(a.abs() > 0.0) {
+            if a == 0.0 || !a.is_finite() {
                 return Err(EitError::Mesh {
                     problem: format!("triangle {k} is degenerate"),
                 });

@@ -113,7 +113,7 @@ impl DualSystem {
                 llt.solve_in_place(x.as_mut());
             }
         }
-        let mut k = &j * &x;
+        let mut k = j * &x;
         let trace: f64 = (0..m).map(|i| k[(i, i)]).sum();
         if !(trace.is_finite() && trace > 0.0) {
             return Err(EitError::NotPositiveDefinite {
@@ -201,7 +201,7 @@ pub fn noser_diagonal(j: MatRef<'_, f64>, p: f64) -> Vec<f64> {
         .fold(f64::INFINITY, f64::min);
     let floor = if floor.is_finite() { floor } else { 1.0 };
     for v in &mut d {
-        if !(*v > 0.0) {
+        if v.is_nan() || *v <= 0.0 {
             *v = floor;
         }
     }

@@ -213,7 +213,7 @@ impl Sensor {
                     start_mm: e.start_mm,
                     end_mm: e.end_mm,
                 };
-                if !(el.length_mm() > 0.0) {
+                if el.length_mm().is_nan() || el.length_mm() <= 0.0 {
                     return Err(invalid(format!("electrode[{i}]"), "has zero length"));
                 }
                 if side_of(e.start_mm, hw, hh) != side_of(e.end_mm, hw, hh)

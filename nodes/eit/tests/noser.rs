@@ -38,12 +38,11 @@ fn dense_prior(model: &Model, prior: &Prior) -> Mat<f64> {
         Prior::Laplacian { epsilon } => {
             let r = laplacian(&model.mesh, epsilon).unwrap();
             let lower = r.to_dense();
-            let m = Mat::from_fn(
+            Mat::from_fn(
                 e,
                 e,
                 |i, j| if i >= j { lower[(i, j)] } else { lower[(j, i)] },
-            );
-            m
+            )
         }
     }
 }

@@ -126,7 +126,7 @@ impl Profile {
             sensitivity_kpa_per_n: 0.3,
             edge_stiffening: 0.45,
             edge_length_mm: 18.0,
-            sensitivity_heterogeneity: 0.06,
+            sensitivity_heterogeneity: 0.05,
             sensitivity_heterogeneity_length_mm: 25.0,
             nonlinearity_force_n: 60.0,
             reference_diameter_mm: 15.0,

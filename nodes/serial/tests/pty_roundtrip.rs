@@ -124,6 +124,48 @@ fn real_time_pacing_delivers_every_frame() {
 }
 
 #[test]
+fn real_time_board_drops_what_nobody_reads() {
+    // 200 frames of 494 bytes (~99 kB), all due at once, no reader: a Linux pty takes about
+    // 64 kB + 4 kB, the rest is dropped (as a board's full transmit buffer would) and the
+    // emulator does not block.
+    let frames = feeds::busy_frames(120, 200, 0.0);
+    let emulator = Emulator::spawn(
+        EmulatorConfig::default(),
+        EmulatorFeed::default().with_eit(frames.clone()),
+        FaultPlan::default(),
+    )
+    .unwrap();
+    assert!(emulator.wait_finished(LIMIT));
+    let s = emulator.stats(Device::Eit).unwrap();
+    assert!(s.bytes_dropped > 0);
+    assert_eq!(s.bytes_written + s.bytes_dropped, 200 * 494);
+
+    // A reader arriving late gets the frames that fit, intact and in order.
+    let path = emulator.path(Device::Eit).unwrap();
+    let mut eit = SerialReader::open(
+        ReaderConfig::new(path),
+        EitDecoder::new(120),
+        Instant::now(),
+    )
+    .unwrap();
+    let mut counters = Vec::new();
+    feeds::read_until_idle(&mut eit, &emulator, LIMIT, |r| {
+        let k = r.record.counter as usize;
+        assert!(
+            r.record
+                .volts
+                .iter()
+                .zip(&frames[k].volts)
+                .all(|(g, s)| *g == f64::from(*s as f32))
+        );
+        counters.push(r.record.counter);
+    });
+    assert!(!counters.is_empty());
+    assert_eq!(counters, (0..counters.len() as u32).collect::<Vec<_>>());
+    assert!(u64::from(eit.decode_stats().frames) * 494 <= s.bytes_written);
+}
+
+#[test]
 fn missing_port_is_a_clear_error_at_start() {
     let path = std::env::temp_dir().join("skinflow-no-such-board");
     let err = SerialReader::open(

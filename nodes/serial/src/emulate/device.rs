@@ -3,6 +3,8 @@
 //! Real-time pacing sends sample k at `start + (t_k - t_0) + pauses`, where pauses are the
 //! unplug and stall durations so far (a pause delays the rest of the stream, it drops nothing).
 //! When the feed ends the pty stays open until the emulator stops, so readers can drain it.
+//! In real time, bytes a full pty (no reader) does not take are dropped and counted, as a
+//! board's transmit buffer would; fast pacing waits for the reader instead.
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -10,7 +12,7 @@ use std::time::{Duration, Instant};
 
 use super::fault::{Fault, corrupt};
 use super::feed::{Samples, TimedForce, TimedFrame, TimedPressure};
-use super::pty::StablePty;
+use super::pty::{StablePty, Written};
 use super::{Device, EmulateError, Pacing};
 use crate::encode::{
     device_time_ms, device_time_us, encode_eit_frame, encode_force_line, encode_pressure_line,
@@ -18,6 +20,8 @@ use crate::encode::{
 
 /// Granularity of interruptible sleeps.
 const TICK: Duration = Duration::from_millis(20);
+/// How long a real-time board waits for room in a full pty before dropping the rest.
+const FULL_GIVE_UP: Duration = Duration::from_millis(200);
 /// How long an unplug waits for a reader to take the bytes already sent.
 const DRAIN_TIMEOUT: Duration = Duration::from_secs(2);
 
@@ -60,6 +64,7 @@ pub(super) struct DeviceCounters {
     pub records_sent: AtomicU64,
     pub records_skipped: AtomicU64,
     pub bytes_written: AtomicU64,
+    pub bytes_dropped: AtomicU64,
     pub faults_applied: AtomicU64,
     pub unplugs: AtomicU64,
     pub finished: AtomicBool,
@@ -75,6 +80,8 @@ pub(super) struct DeviceRun<T> {
     pub first_counter: u32,
     pub stop: Arc<AtomicBool>,
     pub counters: Arc<DeviceCounters>,
+    /// The last write found the pty full and dropped bytes.
+    pub overflowing: bool,
 }
 
 /// Sleeps until `due`; false if `stop` was raised first.
@@ -117,6 +124,37 @@ impl<T: Sample> DeviceRun<T> {
         }
     }
 
+    /// Writes to the pty and counts; false when the emulator is stopping. Real-time boards drop
+    /// what a reader does not take within `FULL_GIVE_UP`, and while they are dropping they wait
+    /// no more; fast pacing waits for the reader.
+    fn send(&mut self, bytes: &[u8]) -> Result<bool, EmulateError> {
+        let give_up = match self.pacing {
+            Pacing::RealTime if self.overflowing => Some(Duration::ZERO),
+            Pacing::RealTime => Some(FULL_GIVE_UP),
+            Pacing::AsFastAsPossible => None,
+        };
+        let written = self
+            .pty
+            .write(bytes, &self.stop, give_up)
+            .map_err(|e| self.pty_error(e))?;
+        let c = &self.counters;
+        match written {
+            Written::All => {
+                self.overflowing = false;
+                c.bytes_written
+                    .fetch_add(bytes.len() as u64, Ordering::Relaxed);
+            }
+            Written::Dropped { bytes: dropped } => {
+                self.overflowing = true;
+                c.bytes_written
+                    .fetch_add((bytes.len() - dropped) as u64, Ordering::Relaxed);
+                c.bytes_dropped.fetch_add(dropped as u64, Ordering::Relaxed);
+            }
+            Written::Stopped => return Ok(false),
+        }
+        Ok(true)
+    }
+
     fn send_all(&mut self) -> Result<(), EmulateError> {
         let start = Instant::now();
         let mut t0_s = None;
@@ -125,6 +163,8 @@ impl<T: Sample> DeviceRun<T> {
         let mut next_fault = 0;
         let c = Arc::clone(&self.counters);
         let stop = Arc::clone(&self.stop);
+        // Taken out so garbage bytes can be borrowed while `send` borrows `self`.
+        let faults = std::mem::take(&mut self.faults);
         let mut index = 0usize;
         while let Some(sample) = self.samples.next() {
             if let Pacing::RealTime = self.pacing {
@@ -138,8 +178,7 @@ impl<T: Sample> DeviceRun<T> {
             record.clear();
             sample.encode(self.first_counter.wrapping_add(index as u32), &mut record);
             let mut send = true;
-            while let Some((at, fault)) = self.faults.get(next_fault).filter(|(at, _)| *at <= index)
-            {
+            while let Some((at, fault)) = faults.get(next_fault).filter(|(at, _)| *at <= index) {
                 next_fault += 1;
                 if *at < index {
                     continue;
@@ -167,30 +206,18 @@ impl<T: Sample> DeviceRun<T> {
                         paused += silent;
                     }
                     Fault::Garbage(bytes) => {
-                        if !self
-                            .pty
-                            .write_all(bytes, &stop)
-                            .map_err(|e| self.pty_error(e))?
-                        {
+                        if !self.send(bytes)? {
                             return Ok(());
                         }
-                        c.bytes_written
-                            .fetch_add(bytes.len() as u64, Ordering::Relaxed);
                     }
                     byte_fault => send &= corrupt(&mut record, byte_fault),
                 }
             }
             if send {
-                if !self
-                    .pty
-                    .write_all(&record, &stop)
-                    .map_err(|e| self.pty_error(e))?
-                {
+                if !self.send(&record)? {
                     return Ok(());
                 }
                 c.records_sent.fetch_add(1, Ordering::Relaxed);
-                c.bytes_written
-                    .fetch_add(record.len() as u64, Ordering::Relaxed);
             } else {
                 c.records_skipped.fetch_add(1, Ordering::Relaxed);
             }

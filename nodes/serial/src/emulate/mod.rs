@@ -105,6 +105,8 @@ pub struct DeviceStats {
     pub records_skipped: u64,
     /// Bytes written, garbage included.
     pub bytes_written: u64,
+    /// Bytes dropped because the pty stayed full (real-time pacing with no or a slow reader).
+    pub bytes_dropped: u64,
     /// Faults carried out (faults at indices past the feed's end never are).
     pub faults_applied: u64,
     /// Unplug and replug cycles.
@@ -207,6 +209,7 @@ impl Emulator {
             first_counter: config.first_counter,
             stop: Arc::clone(&self.stop),
             counters: Arc::clone(&counters),
+            overflowing: false,
         };
         let thread = std::thread::Builder::new()
             .name(format!("emulate-{device}"))
@@ -250,6 +253,7 @@ impl Emulator {
             records_sent: c.records_sent.load(Ordering::Relaxed),
             records_skipped: c.records_skipped.load(Ordering::Relaxed),
             bytes_written: c.bytes_written.load(Ordering::Relaxed),
+            bytes_dropped: c.bytes_dropped.load(Ordering::Relaxed),
             faults_applied: c.faults_applied.load(Ordering::Relaxed),
             unplugs: c.unplugs.load(Ordering::Relaxed),
             finished: c.finished.load(Ordering::Acquire),

@@ -30,6 +30,17 @@ struct PtyPair {
     slave: OwnedFd,
 }
 
+/// What a write achieved.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum Written {
+    /// Every byte went into the pty.
+    All,
+    /// The pty stayed full; the last `bytes` bytes were dropped.
+    Dropped { bytes: usize },
+    /// The emulator is stopping.
+    Stopped,
+}
+
 /// A pty pair published at a stable symlink path.
 pub(super) struct StablePty {
     link: PathBuf,
@@ -97,19 +108,29 @@ impl StablePty {
         Ok(())
     }
 
-    /// Writes all of `bytes`, waiting for room; returns false if `stop` was raised first.
-    pub(super) fn write_all(&mut self, mut bytes: &[u8], stop: &AtomicBool) -> io::Result<bool> {
+    /// Writes `bytes`, waiting for room while a reader is slow. With `give_up`, bytes the pty
+    /// has not taken after that long are dropped, as a board's full transmit buffer drops them.
+    pub(super) fn write(
+        &mut self,
+        mut bytes: &[u8],
+        stop: &AtomicBool,
+        give_up: Option<Duration>,
+    ) -> io::Result<Written> {
         let pair = self
             .pair
             .as_ref()
             .ok_or_else(|| io::Error::other("pty is unplugged"))?;
+        let until = give_up.map(|d| Instant::now() + d);
         while !bytes.is_empty() {
             if stop.load(Ordering::Relaxed) {
-                return Ok(false);
+                return Ok(Written::Stopped);
             }
             match nix::unistd::write(&pair.master, bytes) {
                 Ok(n) => bytes = &bytes[n..],
                 Err(Errno::EAGAIN | Errno::EINTR) => {
+                    if until.is_some_and(|u| Instant::now() >= u) {
+                        return Ok(Written::Dropped { bytes: bytes.len() });
+                    }
                     let mut fds = [PollFd::new(pair.master.as_fd(), PollFlags::POLLOUT)];
                     poll(
                         &mut fds,
@@ -119,7 +140,7 @@ impl StablePty {
                 Err(e) => return Err(e.into()),
             }
         }
-        Ok(true)
+        Ok(Written::All)
     }
 
     /// Waits until a reader has taken every written byte, `timeout` passed, or `stop` was raised.

@@ -13,7 +13,9 @@ use skinflow_serial::encode::{eit_frame_len, encode_eit_frame};
 const MARK: u32 = 0x5EED_F00D;
 
 fuzz_target!(|data: &[u8]| {
-    let Some((&head, bytes)) = data.split_first() else { return };
+    let Some((&head, bytes)) = data.split_first() else {
+        return;
+    };
     let m = 1 + usize::from(head & 0x0F);
     let piece = 1 + usize::from(head >> 4) * 17;
     let volts: Vec<f64> = (0..m).map(|k| 0.125 * k as f64 - 0.75).collect();
@@ -33,6 +35,12 @@ fuzz_target!(|data: &[u8]| {
     d.reset();
     let s = *d.stats();
     assert_eq!(s.frames, frames);
-    assert_eq!(s.frames * eit_frame_len(m) as u64 + s.discarded_bytes, stream.len() as u64);
-    assert!(found || frames > 0, "valid frame lost without any other frame accepted");
+    assert_eq!(
+        s.frames * eit_frame_len(m) as u64 + s.discarded_bytes,
+        stream.len() as u64
+    );
+    assert!(
+        found || frames > 0,
+        "valid frame lost without any other frame accepted"
+    );
 });

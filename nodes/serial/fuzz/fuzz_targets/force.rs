@@ -5,7 +5,9 @@ use libfuzzer_sys::fuzz_target;
 use skinflow_serial::decode::{Decode, ForceDecoder, decode_all};
 
 fuzz_target!(|data: &[u8]| {
-    let Some((&head, bytes)) = data.split_first() else { return };
+    let Some((&head, bytes)) = data.split_first() else {
+        return;
+    };
     let piece = 1 + usize::from(head);
     let mut d = ForceDecoder::new();
     for chunk in bytes.chunks(piece) {

@@ -1,7 +1,7 @@
 //! One emulated board: a thread that paces its samples, applies its faults and writes its pty.
 //!
 //! Real-time pacing sends sample k at `start + (t_k - t_0) + pauses`, where pauses are the
-//! unplug and stall durations so far (a pause delays the rest of the stream, it drops nothing).
+//! time spent unplugged or stalled so far (a pause delays the rest of the stream, drops nothing).
 //! When the feed ends the pty stays open until the emulator stops, so readers can drain it.
 //! In real time, bytes a full pty (no reader) does not take are dropped and counted, as a
 //! board's transmit buffer would; fast pacing waits for the reader instead.
@@ -178,32 +178,31 @@ impl<T: Sample> DeviceRun<T> {
             record.clear();
             sample.encode(self.first_counter.wrapping_add(index as u32), &mut record);
             let mut send = true;
-            while let Some((at, fault)) = faults.get(next_fault).filter(|(at, _)| *at <= index) {
+            // Sorted by index, so the faults of this record are next in line.
+            while let Some((_, fault)) = faults.get(next_fault).filter(|(at, _)| *at == index) {
                 next_fault += 1;
-                if *at < index {
-                    continue;
-                }
                 c.faults_applied.fetch_add(1, Ordering::Relaxed);
                 match fault {
                     Fault::Unplug { down_s } => {
-                        let down = secs(*down_s);
+                        let began = Instant::now();
                         self.pty
                             .wait_drained(DRAIN_TIMEOUT, &stop)
                             .map_err(|e| self.pty_error(e))?;
                         self.pty.unplug().map_err(|e| self.pty_error(e))?;
                         c.unplugs.fetch_add(1, Ordering::Relaxed);
-                        if !sleep_until(Instant::now() + down, &stop) {
+                        if !sleep_until(Instant::now() + secs(*down_s), &stop) {
                             return Ok(());
                         }
                         self.pty.replug().map_err(|e| self.pty_error(e))?;
-                        paused += down;
+                        // The drain wait delays the stream too.
+                        paused += began.elapsed();
                     }
                     Fault::Stall { silent_s } => {
-                        let silent = secs(*silent_s);
-                        if !sleep_until(Instant::now() + silent, &stop) {
+                        let began = Instant::now();
+                        if !sleep_until(began + secs(*silent_s), &stop) {
                             return Ok(());
                         }
-                        paused += silent;
+                        paused += began.elapsed();
                     }
                     Fault::Garbage(bytes) => {
                         if !self.send(bytes)? {

@@ -3,7 +3,7 @@
 
 use std::hint::black_box;
 
-use criterion::{Criterion, criterion_group, criterion_main};
+use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use skinflow_serial::decode::{EitDecoder, PressureDecoder, decode_all};
 use skinflow_serial::encode::{encode_eit_frame, encode_pressure_line};
 
@@ -14,13 +14,16 @@ fn eit_120x64(c: &mut Criterion) {
         encode_eit_frame(&mut stream, counter, counter * 769_000, &volts);
     }
     let mut decoder = EitDecoder::new(120);
-    c.bench_function("eit_120x64", |b| {
+    let mut group = c.benchmark_group("decode");
+    group.throughput(Throughput::Bytes(stream.len() as u64));
+    group.bench_function("eit_120x64", |b| {
         b.iter(|| {
             let mut sum = 0.0;
             decode_all(&mut decoder, black_box(&stream), |f| sum += f.volts[7]);
             black_box(sum)
         });
     });
+    group.finish();
 }
 
 fn pressure_lines_1000(c: &mut Criterion) {
@@ -29,13 +32,16 @@ fn pressure_lines_1000(c: &mut Criterion) {
         encode_pressure_line(&mut stream, k * 50, 1.0 + 1e-3 * f64::from(k));
     }
     let mut decoder = PressureDecoder::try_new(Some(50)).expect("valid period");
-    c.bench_function("pressure_lines_1000", |b| {
+    let mut group = c.benchmark_group("decode");
+    group.throughput(Throughput::Bytes(stream.len() as u64));
+    group.bench_function("pressure_lines_1000", |b| {
         b.iter(|| {
             let mut sum = 0.0;
             decode_all(&mut decoder, black_box(&stream), |r| sum += r.kpa);
             black_box(sum)
         });
     });
+    group.finish();
 }
 
 criterion_group!(benches, eit_120x64, pressure_lines_1000);

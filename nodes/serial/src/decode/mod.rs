@@ -13,7 +13,7 @@ mod pressure;
 
 pub use eit::{EitDecoder, EitFrame};
 pub use force::{ForceDecoder, ForceReading};
-pub use pressure::{PressureDecoder, PressureReading};
+pub use pressure::{DEFAULT_MAX_JUMP_MS, PressureDecoder, PressureReading};
 
 /// What one [`Decode::step`] did.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

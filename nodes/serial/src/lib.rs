@@ -7,23 +7,21 @@
 
 pub mod crc16;
 pub mod decode;
+pub mod emulate;
 pub mod encode;
 pub mod error;
+pub mod read;
 
 pub use decode::{
     Decode, DecodeStats, EitDecoder, EitFrame, ForceDecoder, ForceReading, PressureDecoder,
     PressureReading, Step, StreamMismatch, decode_all,
 };
-pub use error::ParamError;
-pub mod read;
-
-pub use read::{
-    EitReader, LinkStats, LoadcellReader, PressureReader, ReaderConfig, Reading, SerialError,
-    SerialReader,
-};
-pub mod emulate;
-
 pub use emulate::{
     Device, DeviceStats, EmulateError, Emulator, EmulatorConfig, EmulatorFeed, Fault, FaultPlan,
     Pacing, TimedForce, TimedFrame, TimedPressure,
+};
+pub use error::ParamError;
+pub use read::{
+    EitReader, LinkStats, LoadcellReader, PressureReader, ReaderConfig, Reading, SerialError,
+    SerialReader,
 };

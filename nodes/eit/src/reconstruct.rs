@@ -403,6 +403,27 @@ impl Reconstructor {
         Ok(())
     }
 
+    /// Both outputs of one frame: the image (pixels) and the element values, S/m.
+    pub fn reconstruct_into(
+        &mut self,
+        v: &[f64],
+        v_ref: &[f64],
+        image: &mut [f64],
+        elements: &mut [f64],
+    ) -> Result<(), EitError> {
+        self.reconstruct_image_into(v, v_ref, image)?;
+        if elements.len() != self.info.elements {
+            return Err(EitError::Length {
+                what: "elements",
+                expected: self.info.elements,
+                got: elements.len(),
+            });
+        }
+        // `dv` is still the frame's difference vector.
+        matvec(&self.active.elements, &self.dv, elements);
+        Ok(())
+    }
+
     /// Reconstructs frame `v` against `v_ref` into per-element conductivity changes, S/m.
     pub fn reconstruct_elements_into(
         &mut self,

@@ -1,5 +1,7 @@
 //! The `skinflow` command line: run, check, describe and render graphs (CONTRACTS.md section 3).
 
+mod cmd;
+
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Arc;
@@ -35,6 +37,42 @@ enum Cmd {
     Nodes,
     /// Print a graph as Graphviz dot.
     Dot { graph: PathBuf },
+    /// Simulate a scene and write it as a recording.
+    Simulate {
+        scene: PathBuf,
+        #[arg(long)]
+        out: PathBuf,
+        /// Seed of the noise and drift.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Replace an existing output file.
+        #[arg(long)]
+        overwrite: bool,
+    },
+    /// Summarise a recording: streams, counts, duration, rates, gaps, truth coverage.
+    Inspect { recording: PathBuf },
+    /// Fit the force calibration from a single-contact recording with ground truth.
+    Calibrate {
+        recording: PathBuf,
+        #[arg(long)]
+        out: PathBuf,
+        #[command(flatten)]
+        pipeline: cmd::pipeline::PipelineArgs,
+    },
+    /// Run every force strategy on a recording with ground truth and print the comparison.
+    Eval {
+        recording: PathBuf,
+        #[arg(long)]
+        calib: PathBuf,
+        /// Write the CONTRACTS.md JSON report here.
+        #[arg(long)]
+        json: Option<PathBuf>,
+        /// Write PNG plots into this directory.
+        #[arg(long)]
+        plots: Option<PathBuf>,
+        #[command(flatten)]
+        pipeline: cmd::pipeline::PipelineArgs,
+    },
 }
 
 fn main() -> ExitCode {
@@ -70,6 +108,12 @@ fn dispatch(cmd: Cmd) -> Result<ExitCode> {
         Cmd::Nodes => {
             print_nodes(&registry());
             Ok(ExitCode::SUCCESS)
+        }
+        Cmd::Simulate { scene, out, seed, overwrite } => cmd::simulate::run(&scene, &out, seed, overwrite).map(|()| ExitCode::SUCCESS),
+        Cmd::Inspect { recording } => cmd::inspect::run(&recording).map(|()| ExitCode::SUCCESS),
+        Cmd::Calibrate { recording, out, pipeline } => cmd::calibrate::run(&recording, &out, &pipeline).map(|()| ExitCode::SUCCESS),
+        Cmd::Eval { recording, calib, json, plots, pipeline } => {
+            cmd::eval::run(&recording, &calib, json.as_deref(), plots.as_deref(), &pipeline).map(|()| ExitCode::SUCCESS)
         }
         Cmd::Dot { graph } => match load(&graph)? {
             Ok(spec) => {

@@ -1,7 +1,21 @@
 //! skinflow's built-in nodes: thin engine wrappers over the domain crates
 //! (`skinflow-eit`, `skinflow-contact`, `skinflow-record`, `skinflow-serial`, `skinflow-sim`).
 //!
-//! [`registry`] returns every built-in kind, plus the engine's toy kinds used by demos and tests.
+//! Data path: sources (`sim`, `replay`, `serial_*`) -> [`sync`] -> `reconstructor` ->
+//! `segmenter` -> `splitter` -> `corrector` -> sinks (`hdf5_logger`, `compare`). Messages are
+//! the [`payload`] types. [`registry`] returns every built-in kind, plus the engine's toy kinds.
+
+pub mod correct;
+pub mod log;
+pub mod order;
+pub mod payload;
+pub mod pipeline;
+pub mod reconstruct;
+pub mod replay;
+pub mod segment;
+pub mod sim;
+pub mod split;
+pub mod sync;
 
 use skinflow_core::Registry;
 
@@ -9,5 +23,10 @@ use skinflow_core::Registry;
 pub fn registry() -> Registry {
     let mut r = Registry::new();
     skinflow_core::toy::register(&mut r).expect("built-in kinds have distinct names");
+    let reg: [fn(&mut Registry) -> Result<(), skinflow_core::registry::DuplicateKind>; 8] =
+        [sim::register, replay::register, log::register, sync::register, reconstruct::register, segment::register, split::register, correct::register];
+    for f in reg {
+        f(&mut r).expect("built-in kinds have distinct names");
+    }
     r
 }

@@ -99,6 +99,19 @@ impl ReferenceTracker {
         Ok(self.source != ReferenceSource::None)
     }
 
+    /// Completes the reference with the frames averaged so far, when fewer than N no-load
+    /// frames exist (the no-load period ended early). Returns whether a reference is set.
+    pub fn finish(&mut self) -> bool {
+        if self.source == ReferenceSource::None && self.seen > 0 {
+            let n = self.seen as f64;
+            for (r, s) in self.reference.iter_mut().zip(&self.sum) {
+                *r = s / n;
+            }
+            self.source = ReferenceSource::MeanOfFirst { frames: self.seen };
+        }
+        self.source != ReferenceSource::None
+    }
+
     /// Makes `frame` the reference (a `tare` message).
     pub fn tare(&mut self, frame: &[f64]) -> Result<(), EitError> {
         self.check(frame)?;

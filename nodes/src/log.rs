@@ -1,0 +1,242 @@
+//! Node `hdf5_logger`: writes a recording (CONTRACTS.md section 2, format v1) from whatever
+//! streams are connected, plus the derived streams (images, contacts, per-strategy forces)
+//! under `/derived` (see `skinflow_record`'s docs). Rows are written a chunk at a time and
+//! flushed at least every `flush_interval_s`, so a crash loses at most that much; rotation by
+//! `rotate_mb` / `rotate_s` gives `name-0001.h5`, `name-0002.h5`, ...
+//!
+//! Give it `thread = "dedicated"` and a large input `capacity`, so disk stalls never reach a
+//! real-time path: with `block` edges nothing is lost (the producer waits once the buffer is
+//! full); with `drop_oldest` acquisition never waits and every overflow is counted.
+//!
+//! ```toml
+//! params = { path = "../out/run.h5", flush_interval_s = 1.0, strategies = ["pneumatic-locaware"] }
+//! ```
+//! Inputs (all optional): `eit`, `pressure`, `truth`, `image`, `contacts`, `forces` (multi).
+
+use std::path::{Path, PathBuf};
+
+use serde::Deserialize;
+use skinflow_core::params::positive;
+use skinflow_core::{
+    BuildContext, Context, Inputs, KindInfo, NodeError, NodeImpl, NodeParams, ParamDoc, ParamError, PortSpec, Registry, Role,
+    Sink, typed,
+};
+use skinflow_record::write::{ContactRow, RecordingWriter, Streams, TruthContact as RecTruth, WriterOptions};
+
+use crate::payload::{Contacts, EitFrame, Forces, Image, PressureSample, Truth};
+use crate::reconstruct::load_sensor;
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LoggerParams {
+    /// Output file (relative to the graph file).
+    pub path: PathBuf,
+    /// Sensor TOML written to the `sensor` attribute; absent: the default `paper-100mm`.
+    pub sensor: Option<PathBuf>,
+    #[serde(default = "default_flush")]
+    pub flush_interval_s: f64,
+    pub rotate_mb: Option<f64>,
+    pub rotate_s: Option<f64>,
+    #[serde(default)]
+    pub swmr: bool,
+    #[serde(default)]
+    pub overwrite: bool,
+    /// Force strategies logged under `/derived/forces/<name>` (needed when `forces` is connected).
+    #[serde(default)]
+    pub strategies: Vec<String>,
+    /// Image size of logged images, pixels.
+    #[serde(default = "default_image")]
+    pub image_nx: usize,
+    #[serde(default = "default_image")]
+    pub image_ny: usize,
+    #[serde(default = "default_deflate")]
+    pub deflate_level: u8,
+}
+
+fn default_flush() -> f64 {
+    1.0
+}
+fn default_image() -> usize {
+    64
+}
+fn default_deflate() -> u8 {
+    1
+}
+
+impl NodeParams for LoggerParams {
+    fn validate(&self) -> Result<(), ParamError> {
+        positive("flush_interval_s", self.flush_interval_s)?;
+        if let Some(m) = self.rotate_mb {
+            positive("rotate_mb", m)?;
+        }
+        if let Some(s) = self.rotate_s {
+            positive("rotate_s", s)?;
+        }
+        if self.deflate_level > 9 {
+            return Err(ParamError::new("deflate_level", format!("must be 0-9 (got {})", self.deflate_level)));
+        }
+        Ok(())
+    }
+}
+
+const EIT: usize = 0;
+const PRESSURE: usize = 1;
+const TRUTH: usize = 2;
+const IMAGE: usize = 3;
+const CONTACTS: usize = 4;
+const FORCES: usize = 5;
+
+pub struct Logger {
+    path: PathBuf,
+    opts: Option<WriterOptions>,
+    writer: Option<RecordingWriter>,
+    truth_buf: Vec<RecTruth>,
+    forces_buf: Vec<f64>,
+}
+
+fn io(path: &Path, e: impl std::fmt::Display) -> NodeError {
+    NodeError::Path { path: path.to_path_buf(), problem: e.to_string() }
+}
+
+impl Logger {
+    pub fn new(p: LoggerParams, ctx: &BuildContext) -> Result<Logger, NodeError> {
+        let sensor = load_sensor(p.sensor.as_deref(), ctx)?;
+        let path = ctx.resolve(&p.path);
+        let mut o = WriterOptions::new(sensor.toml.clone());
+        o.software_version = concat!("skinflow ", env!("CARGO_PKG_VERSION")).to_owned();
+        o.flush_interval_s = p.flush_interval_s;
+        o.rotate_mb = p.rotate_mb;
+        o.rotate_s = p.rotate_s;
+        o.swmr = p.swmr;
+        o.overwrite = p.overwrite;
+        o.deflate_level = p.deflate_level;
+        o.streams = Streams {
+            eit: false,
+            pressure: false,
+            truth: false,
+            image_hw: Some([p.image_ny, p.image_nx]),
+            contacts: false,
+            force_strategies: p.strategies,
+        };
+        Ok(Logger { path, opts: Some(o), writer: None, truth_buf: Vec::with_capacity(16), forces_buf: Vec::with_capacity(64) })
+    }
+
+    /// Creates the file once the connected inputs are known (first call).
+    fn ensure_writer(&mut self, inputs: &Inputs) -> Result<(), NodeError> {
+        if self.writer.is_none() {
+            let mut o = self.opts.take().expect("options kept until the writer exists");
+            o.streams.eit = inputs.lanes(EIT) > 0;
+            o.streams.pressure = inputs.lanes(PRESSURE) > 0;
+            o.streams.truth = inputs.lanes(TRUTH) > 0;
+            if inputs.lanes(IMAGE) == 0 {
+                o.streams.image_hw = None;
+            }
+            o.streams.contacts = inputs.lanes(CONTACTS) > 0;
+            if inputs.lanes(FORCES) == 0 {
+                o.streams.force_strategies.clear();
+            } else if o.streams.force_strategies.is_empty() {
+                return Err(NodeError::Param { param: "strategies".into(), problem: "list the force strategies to log when `forces` is connected".into() }.fatal());
+            }
+            let w = RecordingWriter::create(&self.path, &o).map_err(|e| io(&self.path, e).fatal())?;
+            tracing::info!(path = %self.path.display(), "recording");
+            self.writer = Some(w);
+        }
+        Ok(())
+    }
+}
+
+impl Sink for Logger {
+    fn start(&mut self, _ctx: &mut Context) -> Result<(), NodeError> {
+        // Fail before any data flows when the file cannot be created.
+        let dir = self.path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
+        if !dir.is_dir() {
+            return Err(io(&self.path, format!("directory {} does not exist", dir.display())));
+        }
+        let overwrite = self.opts.as_ref().is_some_and(|o| o.overwrite);
+        if self.path.exists() && !overwrite {
+            return Err(io(&self.path, "exists (set overwrite = true to replace it)"));
+        }
+        Ok(())
+    }
+
+    fn consume(&mut self, _ctx: &mut Context, inputs: &Inputs) -> Result<(), NodeError> {
+        let path = self.path.clone();
+        let fatal = |e: skinflow_record::error::RecordError| io(&path, e).fatal();
+        self.ensure_writer(inputs)?;
+        let Logger { writer, truth_buf, forces_buf, .. } = self;
+        let w = writer.as_mut().expect("ensured above");
+        if let Some(m) = inputs.get(EIT)
+            && let Some(f) = m.get::<EitFrame>()
+        {
+            w.append_eit(m.header.t_s(), m.header.seq, &f.v).map_err(fatal)?;
+        }
+        if let Some(m) = inputs.get(PRESSURE)
+            && let Some(p) = m.get::<PressureSample>()
+        {
+            w.append_pressure(m.header.t_s(), p.kpa).map_err(fatal)?;
+        }
+        if let Some(m) = inputs.get(TRUTH)
+            && let Some(t) = m.get::<Truth>()
+        {
+            truth_buf.clear();
+            truth_buf.extend(t.contacts.iter().map(|c| RecTruth { x_mm: c.x_mm, y_mm: c.y_mm, force_n: c.force_n, diameter_mm: c.diameter_mm }));
+            w.append_truth(m.header.t_s(), truth_buf).map_err(fatal)?;
+        }
+        if let Some(m) = inputs.get(IMAGE)
+            && let Some(img) = m.get::<Image>()
+        {
+            w.append_image(m.header.t_s(), &img.pixels).map_err(fatal)?;
+        }
+        if let Some(m) = inputs.get(CONTACTS)
+            && let Some(c) = m.get::<Contacts>()
+        {
+            let rows = c.contacts.iter().map(|c| ContactRow { x_mm: c.x_mm, y_mm: c.y_mm, sum: c.sum, area_mm2: c.area_mm2 });
+            w.append_contacts(m.header.t_s(), rows).map_err(fatal)?;
+        }
+        for (_, m) in inputs.iter_port(FORCES) {
+            let Some(f) = m.get::<Forces>() else { continue };
+            let Some(k) = w.strategy_index(&f.strategy) else {
+                return Err(NodeError::Input { port: "forces".into(), problem: format!("strategy \"{}\" is not in `strategies`", f.strategy) });
+            };
+            forces_buf.clear();
+            forces_buf.extend(f.forces.iter().map(|e| e.force_n));
+            w.append_forces(k, m.header.t_s(), forces_buf).map_err(fatal)?;
+        }
+        w.flush_if_due().map_err(fatal)
+    }
+
+    fn stop(&mut self, ctx: &mut Context) -> Result<(), NodeError> {
+        if let Some(w) = self.writer.take() {
+            let s = w.close().map_err(|e| io(&self.path, e))?;
+            tracing::info!(
+                node = ctx.id(), path = %self.path.display(), eit = s.eit_rows, pressure = s.pressure_rows, truth = s.truth_rows,
+                images = s.image_rows, parts = s.parts, contacts_dropped = s.contacts_dropped, "recording closed"
+            );
+        }
+        Ok(())
+    }
+}
+
+pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::DuplicateKind> {
+    r.register(typed(
+        KindInfo::new("hdf5_logger", Role::Sink, "writes a recording (HDF5 format v1) with optional derived streams")
+            .input(PortSpec::input::<EitFrame>("eit", "EIT frames").optional())
+            .input(PortSpec::input::<PressureSample>("pressure", "pressure samples").optional())
+            .input(PortSpec::input::<Truth>("truth", "truth rows").optional())
+            .input(PortSpec::input::<Image>("image", "reconstructed images").optional())
+            .input(PortSpec::input::<Contacts>("contacts", "segmented contacts").optional())
+            .input(PortSpec::input::<Forces>("forces", "per-strategy forces").optional().multi())
+            .param(ParamDoc::new("path", "path", "", "output file"))
+            .param(ParamDoc::new("sensor", "path", "", "sensor TOML for the `sensor` attribute (default paper-100mm)"))
+            .param(ParamDoc::new("flush_interval_s", "f64", "1.0", "longest time rows stay in memory, s"))
+            .param(ParamDoc::new("rotate_mb", "f64", "", "start a new part at this size, MB"))
+            .param(ParamDoc::new("rotate_s", "f64", "", "start a new part after this many seconds"))
+            .param(ParamDoc::new("swmr", "bool", "false", "single-writer/multiple-reader mode for live readers"))
+            .param(ParamDoc::new("overwrite", "bool", "false", "replace an existing file"))
+            .param(ParamDoc::new("strategies", "[string]", "[]", "force strategies to log"))
+            .param(ParamDoc::new("image_nx", "usize", "64", "logged image width"))
+            .param(ParamDoc::new("image_ny", "usize", "64", "logged image height"))
+            .param(ParamDoc::new("deflate_level", "u8", "1", "0-9")),
+        |p: LoggerParams, ctx| Ok(NodeImpl::Sink(Box::new(Logger::new(p, ctx)?))),
+    ))
+}

@@ -1,0 +1,158 @@
+//! The messages of the skin pipeline. Each derived payload holds an `Arc` of the one it came
+//! from (image -> synced frame -> EIT frame), so any stage, logger or comparer can see the
+//! whole provenance of a result without copying frame data.
+//!
+//! Units: volts, kPa, mm, N, seconds; header times are nanoseconds on the graph (or recording) clock.
+
+use std::sync::Arc;
+
+use skinflow_contact::{Contact, ForceEstimate};
+use skinflow_core::Payload;
+
+/// One EIT frame: measurements in protocol order, volts. The header's `t_ns` is the middle of
+/// its acquisition window and `seq` the device frame counter.
+#[derive(Debug, Clone, Default)]
+pub struct EitFrame {
+    pub v: Vec<f64>,
+}
+
+impl Payload for EitFrame {
+    const TYPE: &'static str = "eit_frame";
+}
+
+/// One gauge-pressure sample of the pneumatic layer, kPa (not tared).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct PressureSample {
+    pub kpa: f64,
+}
+
+impl Payload for PressureSample {
+    const TYPE: &'static str = "pressure";
+}
+
+/// One true contact (CONTRACTS.md frame and units).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TruthContact {
+    pub x_mm: f64,
+    pub y_mm: f64,
+    pub force_n: f64,
+    pub diameter_mm: f64,
+}
+
+/// A ground-truth row: these contacts hold from the header time until the next row.
+#[derive(Debug, Clone, Default)]
+pub struct Truth {
+    pub contacts: Vec<TruthContact>,
+}
+
+impl Payload for Truth {
+    const TYPE: &'static str = "truth";
+}
+
+/// An EIT frame with the pneumatic pressure of its acquisition window, tared.
+#[derive(Debug, Clone, Default)]
+pub struct SyncedFrame {
+    pub frame: Arc<EitFrame>,
+    /// Mean pressure over the frame's window minus the no-load offset P0, kPa (NaN when no
+    /// pressure sample fell in the window).
+    pub dp_kpa: f64,
+    /// Pressure samples averaged.
+    pub pressure_samples: u32,
+    /// The no-load offset in use, kPa.
+    pub p0_kpa: f64,
+    /// The frame lies in the leading no-load period (a reference, not evaluated).
+    pub no_load: bool,
+    /// The truth row in effect at the frame's time, when a truth stream is connected.
+    pub truth: Option<Arc<Truth>>,
+}
+
+impl Payload for SyncedFrame {
+    const TYPE: &'static str = "synced_frame";
+}
+
+/// Where the reconstructor's reference frame came from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ReferenceSource {
+    /// Not yet complete: the running mean of the no-load frames so far.
+    #[default]
+    Accumulating,
+    /// `/eit/reference` of the recording (or a `reference` message).
+    Recorded,
+    /// The mean of the first N no-load frames.
+    NoLoadMean,
+    /// A `tare` control command.
+    Tare,
+}
+
+/// A reconstructed conductivity-change image (negative = decrease = contact), row-major,
+/// row 0 at the bottom (y = -height/2), on the grid the reconstructor reports.
+#[derive(Debug, Clone, Default)]
+pub struct Image {
+    pub src: Arc<SyncedFrame>,
+    pub width: usize,
+    pub height: usize,
+    /// The rectangle the pixels tile, mm (centred on the origin).
+    pub width_mm: f64,
+    pub height_mm: f64,
+    pub pixels: Vec<f64>,
+    /// The conductivity change per mesh element.
+    pub elements: Vec<f64>,
+    pub reference: ReferenceSource,
+    /// Channels excluded (NaN, saturated, dead electrode), as a count.
+    pub masked_channels: u32,
+    /// Wall time of the reconstruction, ns (for speed-against-error reports).
+    pub compute_ns: u64,
+}
+
+impl Payload for Image {
+    const TYPE: &'static str = "image";
+}
+
+/// Segmented contacts of one image.
+#[derive(Debug, Clone, Default)]
+pub struct Contacts {
+    pub image: Arc<Image>,
+    pub contacts: Vec<Contact>,
+    pub compute_ns: u64,
+}
+
+impl Payload for Contacts {
+    const TYPE: &'static str = "contacts";
+}
+
+/// The pressure change assigned to each contact by one splitting strategy.
+#[derive(Debug, Clone, Default)]
+pub struct Split {
+    pub contacts: Arc<Contacts>,
+    pub strategy: &'static str,
+    /// Per contact, kPa, same order as `contacts.contacts`.
+    pub dp_kpa: Vec<f64>,
+    pub compute_ns: u64,
+}
+
+impl Payload for Split {
+    const TYPE: &'static str = "split";
+}
+
+/// Per-contact forces of one correction strategy.
+#[derive(Debug, Clone, Default)]
+pub struct Forces {
+    pub split: Arc<Split>,
+    /// Strategy name as in CONTRACTS.md section 4 (e.g. `pneumatic-locaware`), or the lane's.
+    pub strategy: String,
+    pub forces: Vec<ForceEstimate>,
+    pub compute_ns: u64,
+}
+
+impl Payload for Forces {
+    const TYPE: &'static str = "forces";
+}
+
+impl Forces {
+    /// Total wall time from the EIT frame to these forces over the pipeline stages, ns.
+    pub fn pipeline_ns(&self) -> u64 {
+        let c = &self.split.contacts;
+        self.compute_ns + self.split.compute_ns + c.compute_ns + c.image.compute_ns
+    }
+}

@@ -1,0 +1,290 @@
+//! Node `reconstructor`: EIT frames -> conductivity-change images (paper section II-A).
+//!
+//! Theory: time-difference imaging against a no-load reference with one-step NOSER,
+//! ds = (J^T J + lambda^2 R)^-1 J^T dv in dual form, folded with the mesh-to-image map into one
+//! matrix (cached on disk), so a frame costs one matrix-vector product. The reference is the
+//! recording's `/eit/reference` (the `reference` input), else the mean of the first
+//! `reference_frames` no-load frames, else a `tare` command (the next frame). NaN, saturated
+//! and dead-electrode channels are masked with a matrix for the reduced set.
+//! Math: `skinflow_eit`.
+//!
+//! ```toml
+//! params = { lambda = 0.03, prior = { noser = { p = 0.5 } }, reference_frames = 10, mesh = { elements = 4000 } }
+//! ```
+//! Inputs: `frame` (synced_frame), `reference` (eit_frame, optional). Output: `image` (image):
+//! pixels in S/m, negative = conductivity decrease = contact, row 0 at the bottom.
+
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::time::Instant;
+
+use serde::Deserialize;
+use skinflow_core::{
+    BuildContext, Context, Inputs, KindInfo, Message, NodeError, NodeImpl, NodeParams, Outputs, ParamDoc, ParamError,
+    PortSpec, Processor, Recycler, Registry, Role, typed,
+};
+use skinflow_eit::mask::ChannelMask;
+use skinflow_eit::precompute::DifferenceMode;
+use skinflow_eit::reconstruct::{Precision, ReconParams};
+use skinflow_eit::reference::{ReferenceSource as EitRef, ReferenceTracker};
+use skinflow_eit::{CemParams, MaskParams, Sensor};
+
+use crate::payload::{EitFrame, Image, ReferenceSource, SyncedFrame};
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ReconstructorParams {
+    /// Sensor TOML file (CONTRACTS.md section 1); absent: the default `paper-100mm`.
+    pub sensor: Option<PathBuf>,
+    /// No-load frames averaged into the reference when the recording has none.
+    #[serde(default = "default_reference_frames")]
+    pub reference_frames: usize,
+    /// Also output per-element values (one more matrix-vector product per frame).
+    #[serde(default)]
+    pub elements: bool,
+    /// Directory of the matrix cache; absent: `$XDG_CACHE_HOME/skinflow` or `~/.cache/skinflow`.
+    pub cache_dir: Option<PathBuf>,
+    /// Disable the disk cache.
+    #[serde(default)]
+    pub no_cache: bool,
+    pub lambda: Option<f64>,
+    pub prior: Option<skinflow_eit::noser::Prior>,
+    pub mode: Option<DifferenceMode>,
+    pub image_nx: Option<usize>,
+    pub image_ny: Option<usize>,
+    pub precision: Option<Precision>,
+    pub mesh: Option<skinflow_eit::mesh::MeshParams>,
+    pub cem: Option<CemParams>,
+    pub mask: Option<MaskParams>,
+}
+
+fn default_reference_frames() -> usize {
+    10
+}
+
+/// The default matrix cache directory.
+pub fn default_cache_dir() -> PathBuf {
+    if let Some(x) = std::env::var_os("XDG_CACHE_HOME") {
+        return PathBuf::from(x).join("skinflow");
+    }
+    match std::env::var_os("HOME") {
+        Some(h) => PathBuf::from(h).join(".cache").join("skinflow"),
+        None => std::env::temp_dir().join("skinflow-cache"),
+    }
+}
+
+impl ReconstructorParams {
+    /// The math parameters (cache dir resolved by the caller).
+    pub fn recon(&self) -> ReconParams {
+        let d = ReconParams::default();
+        ReconParams {
+            mesh: self.mesh.clone().unwrap_or(d.mesh),
+            cem: self.cem.clone().unwrap_or(d.cem),
+            prior: self.prior.clone().unwrap_or(d.prior),
+            lambda: self.lambda.unwrap_or(d.lambda),
+            mode: self.mode.unwrap_or(d.mode),
+            image_nx: self.image_nx.unwrap_or(d.image_nx),
+            image_ny: self.image_ny.unwrap_or(d.image_ny),
+            precision: self.precision.unwrap_or(d.precision),
+            mask: self.mask.clone().unwrap_or(d.mask),
+            cache_dir: None,
+        }
+    }
+}
+
+impl NodeParams for ReconstructorParams {
+    fn validate(&self) -> Result<(), ParamError> {
+        if self.reference_frames == 0 {
+            return Err(ParamError::new("reference_frames", "must be >= 1 (got 0)"));
+        }
+        // The sensor file is read when the node is built; check against the default here.
+        if self.sensor.is_none() {
+            self.recon().validate(&Sensor::paper_100mm()).map_err(|e| ParamError { param: None, problem: e.to_string(), span: None })?;
+        }
+        Ok(())
+    }
+}
+
+/// Reads a sensor file named by a node parameter, or the default sensor.
+pub(crate) fn load_sensor(path: Option<&std::path::Path>, ctx: &BuildContext) -> Result<Sensor, NodeError> {
+    match path {
+        None => Ok(Sensor::paper_100mm()),
+        Some(p) => {
+            let p = ctx.resolve(p);
+            let text = std::fs::read_to_string(&p).map_err(|e| NodeError::Path { path: p.clone(), problem: format!("cannot read sensor: {e}") })?;
+            Sensor::from_toml(&text).map_err(|e| NodeError::Path { path: p, problem: e.to_string() })
+        }
+    }
+}
+
+pub struct Reconstructor {
+    math: skinflow_eit::Reconstructor,
+    sensor: Sensor,
+    tracker: ReferenceTracker,
+    tare_pending: bool,
+    elements: bool,
+    mask: ChannelMask,
+    mask_scratch: ChannelMask,
+    reported: EitRef,
+    ring: Recycler<Image>,
+}
+
+impl Reconstructor {
+    pub fn new(p: &ReconstructorParams, ctx: &BuildContext) -> Result<Reconstructor, NodeError> {
+        let sensor = load_sensor(p.sensor.as_deref(), ctx)?;
+        let mut recon = p.recon();
+        if !p.no_cache {
+            recon.cache_dir = Some(p.cache_dir.as_ref().map_or_else(default_cache_dir, |d| ctx.resolve(d)));
+        }
+        let t0 = Instant::now();
+        let math = skinflow_eit::Reconstructor::new(&sensor, &recon).map_err(|e| NodeError::Param { param: "reconstruction".into(), problem: e.to_string() })?;
+        let info = math.info();
+        tracing::info!(
+            node = %ctx.node_id, elements = info.elements, lambda = info.lambda, prior = %info.prior,
+            cache = ?info.cache, min_angle_deg = ?info.mesh_min_angle_deg, setup_ms = t0.elapsed().as_secs_f64() * 1e3,
+            "reconstruction matrix ready"
+        );
+        let m = sensor.measurement_count();
+        let mask = math.mask().clone();
+        Ok(Reconstructor {
+            tracker: ReferenceTracker::new(m, p.reference_frames).map_err(|e| NodeError::Param { param: "reference_frames".into(), problem: e.to_string() })?,
+            tare_pending: false,
+            elements: p.elements,
+            mask_scratch: mask.clone(),
+            mask,
+            reported: EitRef::None,
+            ring: Recycler::new(64, Image::default),
+            math,
+            sensor,
+        })
+    }
+
+    fn check_width(&self, port: &'static str, v: &[f64]) -> Result<(), NodeError> {
+        let m = self.sensor.measurement_count();
+        if v.len() != m {
+            return Err(NodeError::Input {
+                port: port.into(),
+                problem: format!("frame has {} values but sensor \"{}\" ({}) has {m}", v.len(), self.sensor.name, self.sensor.protocol.name()),
+            });
+        }
+        Ok(())
+    }
+
+    fn report_reference(&mut self, ctx: &Context) {
+        let now = self.tracker.source();
+        if now != self.reported {
+            tracing::info!(node = ctx.id(), source = ?now, "EIT reference frame in use");
+            self.reported = now;
+        }
+    }
+}
+
+fn reference_source(s: EitRef) -> ReferenceSource {
+    match s {
+        EitRef::None => ReferenceSource::Accumulating,
+        EitRef::Recorded => ReferenceSource::Recorded,
+        EitRef::MeanOfFirst { .. } => ReferenceSource::NoLoadMean,
+        EitRef::Tare => ReferenceSource::Tare,
+    }
+}
+
+impl Processor for Reconstructor {
+    fn process(&mut self, ctx: &mut Context, inputs: &Inputs, out: &mut Outputs) -> Result<(), NodeError> {
+        if let Some(m) = inputs.get(1) {
+            let f = m.get::<EitFrame>().ok_or(NodeError::Input { port: "reference".into(), problem: "not an EIT frame".into() })?;
+            self.check_width("reference", &f.v)?;
+            self.tracker = ReferenceTracker::from_reference(&f.v);
+            self.report_reference(ctx);
+        }
+        let Some(m) = inputs.get(0) else { return Ok(()) };
+        let t0 = Instant::now();
+        let synced = m.arc::<SyncedFrame>().ok_or(NodeError::Input { port: "frame".into(), problem: "not a synced frame".into() })?;
+        let v = &synced.frame.v;
+        self.check_width("frame", v)?;
+        if self.tare_pending {
+            self.tracker.tare(v).map_err(|e| NodeError::Input { port: "frame".into(), problem: e.to_string() })?;
+            self.tare_pending = false;
+        } else if synced.no_load {
+            self.tracker.accumulate(v).map_err(|e| NodeError::Input { port: "frame".into(), problem: e.to_string() })?;
+        } else if !self.tracker.finish() {
+            // The no-load period ended before any usable frame: the best remaining choice.
+            tracing::warn!(node = ctx.id(), "no usable no-load frame before the first loaded one: taking this frame as the reference");
+            self.tracker.tare(v).map_err(|e| NodeError::Input { port: "frame".into(), problem: e.to_string() })?;
+        }
+        self.report_reference(ctx);
+        // Channel masking: a change of the bad-channel set switches matrices (cached per set).
+        self.math.detect_mask_into(v, &mut self.mask_scratch);
+        if self.mask_scratch != self.mask {
+            std::mem::swap(&mut self.mask, &mut self.mask_scratch);
+            self.math.set_mask(&self.mask).map_err(|e| NodeError::Input { port: "frame".into(), problem: e.to_string() })?;
+            tracing::warn!(node = ctx.id(), excluded = ?self.mask.excluded_channels(), dead_electrodes = ?self.mask.dead_electrodes(), "channel mask changed");
+        }
+        let masked = self.mask.excluded_count() as u32;
+        let (nx, ny) = (self.math.params().image_nx, self.math.params().image_ny);
+        let n_pix = self.math.pixel_count();
+        let n_el = if self.elements { self.math.element_count() } else { 0 };
+        let source = reference_source(self.tracker.source());
+        let (w_mm, h_mm) = (self.sensor.width_mm, self.sensor.height_mm);
+        let math = &mut self.math;
+        let tracker = &self.tracker;
+        let mut result = Ok(());
+        let payload = self.ring.fill(|img| {
+            img.width = nx;
+            img.height = ny;
+            img.width_mm = w_mm;
+            img.height_mm = h_mm;
+            img.pixels.resize(n_pix, 0.0);
+            img.elements.resize(n_el, 0.0);
+            img.reference = source;
+            img.masked_channels = masked;
+            match tracker.reference() {
+                Some(r) => {
+                    result = math.reconstruct_image_into(v, r, &mut img.pixels);
+                    if result.is_ok() && n_el > 0 {
+                        result = math.reconstruct_elements_into(v, r, &mut img.elements);
+                    }
+                }
+                None => img.pixels.fill(0.0),
+            }
+            img.src = Arc::clone(&synced);
+            img.compute_ns = t0.elapsed().as_nanos() as u64;
+        });
+        result.map_err(|e| NodeError::Input { port: "frame".into(), problem: e.to_string() })?;
+        out.send(0, Message::from_arc(m.header, payload))
+    }
+
+    fn control(&mut self, ctx: &mut Context, cmd: &str) -> Result<(), NodeError> {
+        match cmd {
+            "tare" => {
+                self.tare_pending = true;
+                tracing::info!(node = ctx.id(), "tare: the next frame becomes the reference");
+                Ok(())
+            }
+            _ => Err(NodeError::msg(format!("unknown control command \"{cmd}\" (known: tare)"))),
+        }
+    }
+}
+
+pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::DuplicateKind> {
+    r.register(typed(
+        KindInfo::new("reconstructor", Role::Processor, "EIT frames -> conductivity-change images (one-step NOSER, cached matrix)")
+            .input(PortSpec::input::<SyncedFrame>("frame", "synced EIT frames"))
+            .input(PortSpec::input::<EitFrame>("reference", "recorded no-load reference frame").optional())
+            .output(PortSpec::output::<Image>("image", "conductivity change, S/m, negative = contact"))
+            .param(ParamDoc::new("sensor", "path", "", "sensor TOML (default paper-100mm)"))
+            .param(ParamDoc::new("lambda", "f64", "0.03", "regularisation weight (dimensionless)"))
+            .param(ParamDoc::new("prior", "table", "{ noser = { p = 0.5 } }", "noser {p} | identity | laplacian {epsilon}"))
+            .param(ParamDoc::new("mode", "string", "\"normalized\"", "normalized | plain difference data"))
+            .param(ParamDoc::new("reference_frames", "usize", "10", "no-load frames averaged into the reference"))
+            .param(ParamDoc::new("image_nx", "usize", "64", "image width, pixels"))
+            .param(ParamDoc::new("image_ny", "usize", "64", "image height, pixels"))
+            .param(ParamDoc::new("precision", "string", "\"f64\"", "f64 | f32 matrix"))
+            .param(ParamDoc::new("mesh", "table", "{ elements = 4000 }", "reconstruction mesh"))
+            .param(ParamDoc::new("cem", "table", "", "complete electrode model constants"))
+            .param(ParamDoc::new("mask", "table", "", "saturation_v, dead_electrode_fraction"))
+            .param(ParamDoc::new("elements", "bool", "false", "also output per-element values"))
+            .param(ParamDoc::new("cache_dir", "path", "~/.cache/skinflow", "matrix cache directory"))
+            .param(ParamDoc::new("no_cache", "bool", "false", "do not use the disk cache")),
+        |p: ReconstructorParams, ctx| Ok(NodeImpl::Processor(Box::new(Reconstructor::new(&p, ctx)?))),
+    ))
+}

@@ -1,0 +1,126 @@
+//! Node `segmenter`: conductivity-change image -> contacts (paper section II-B).
+//!
+//! Theory: contacts are conductivity decreases. The decrease is normalised to [0, 1], Otsu's
+//! threshold splits it, an absolute `floor` (image units, S/m) keeps noise-only frames from
+//! inventing a contact, opening then closing with a disk of `radius_frac` of the image size
+//! cleans the mask, and each connected component gives a contact: intensity-weighted centroid
+//! (mm), conductivity-change sum C_i and area (mm^2). Math: `skinflow_contact::segment`.
+//!
+//! ```toml
+//! params = { floor = 0.002, radius_frac = 0.02, max_contacts = 8 }
+//! ```
+//! Input: `image` (image). Output: `contacts` (contacts).
+
+use std::time::Instant;
+
+use serde::Deserialize;
+use skinflow_contact::{Contacts as ContactBuf, ImageGrid, SegmentParams, Segmenter as SegmentMath};
+use skinflow_core::{
+    Context, Inputs, KindInfo, Message, NodeError, NodeImpl, NodeParams, Outputs, ParamDoc, ParamError, PortSpec,
+    Processor, Recycler, Registry, Role, typed,
+};
+
+use crate::payload::{Contacts, Image};
+
+/// Default absolute floor on the decrease, S/m: about 10 % of the background conductivity
+/// (0.02 S/m) change at a pixel. No-load frames of the `paper` profile peak well below it.
+pub const DEFAULT_FLOOR: f64 = 2e-3;
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SegmenterParams {
+    /// Absolute floor on the conductivity decrease, S/m (image units).
+    #[serde(default = "default_floor")]
+    pub floor: f64,
+    /// Structuring-disk radius as a fraction of the image size (paper: 2 %).
+    #[serde(default = "default_radius_frac")]
+    pub radius_frac: f64,
+    /// Most contacts per frame; further components are counted and dropped.
+    #[serde(default = "default_max_contacts")]
+    pub max_contacts: usize,
+}
+
+fn default_floor() -> f64 {
+    DEFAULT_FLOOR
+}
+fn default_radius_frac() -> f64 {
+    0.02
+}
+fn default_max_contacts() -> usize {
+    8
+}
+
+impl SegmenterParams {
+    pub fn math(&self) -> SegmentParams {
+        SegmentParams { floor: self.floor, radius_frac: self.radius_frac, max_contacts: self.max_contacts }
+    }
+}
+
+impl NodeParams for SegmenterParams {
+    fn validate(&self) -> Result<(), ParamError> {
+        self.math().validate().map_err(|e| match e {
+            skinflow_contact::SegmentError::Param { name, .. } => ParamError::new(name, e.to_string()),
+            other => ParamError { param: None, problem: other.to_string(), span: None },
+        })
+    }
+}
+
+pub struct Segmenter {
+    params: SegmentParams,
+    math: Option<(ImageGrid, SegmentMath, ContactBuf)>,
+    ring: Recycler<Contacts>,
+    dropped_components: u64,
+}
+
+impl Segmenter {
+    pub fn new(p: &SegmenterParams) -> Segmenter {
+        Segmenter { params: p.math(), math: None, ring: Recycler::new(128, Contacts::default), dropped_components: 0 }
+    }
+}
+
+impl Processor for Segmenter {
+    fn process(&mut self, ctx: &mut Context, inputs: &Inputs, out: &mut Outputs) -> Result<(), NodeError> {
+        let Some(m) = inputs.get(0) else { return Ok(()) };
+        let t0 = Instant::now();
+        let image = m.arc::<Image>().ok_or(NodeError::Input { port: "image".into(), problem: "not an image".into() })?;
+        let grid = ImageGrid::centred(image.width, image.height, image.width_mm, image.height_mm);
+        // The grid is fixed by the first image; a change rebuilds the scratch (rare, allocates).
+        if self.math.as_ref().is_none_or(|(g, _, _)| *g != grid) {
+            let seg = SegmentMath::new(grid, &self.params).map_err(|e| NodeError::Input { port: "image".into(), problem: e.to_string() })?;
+            let buf = seg.new_contacts();
+            self.math = Some((grid, seg, buf));
+        }
+        let (_, seg, buf) = self.math.as_mut().expect("set above");
+        seg.segment_into(&image.pixels, buf).map_err(|e| NodeError::Input { port: "image".into(), problem: e.to_string() })?;
+        self.dropped_components += buf.dropped as u64;
+        let found = buf.as_slice();
+        let ns = t0.elapsed().as_nanos() as u64;
+        let payload = self.ring.fill(|c| {
+            c.image = image;
+            c.contacts.clear();
+            c.contacts.extend_from_slice(found);
+            c.compute_ns = ns;
+        });
+        let _ = ctx;
+        out.send(0, Message::from_arc(m.header, payload))
+    }
+
+    fn stop(&mut self, ctx: &mut Context) -> Result<(), NodeError> {
+        if self.dropped_components > 0 {
+            tracing::warn!(node = ctx.id(), components = self.dropped_components, "components beyond max_contacts were dropped");
+        }
+        Ok(())
+    }
+}
+
+pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::DuplicateKind> {
+    r.register(typed(
+        KindInfo::new("segmenter", Role::Processor, "image -> contacts: Otsu + floor, disk opening/closing, components, centroids")
+            .input(PortSpec::input::<Image>("image", "conductivity-change image"))
+            .output(PortSpec::output::<Contacts>("contacts", "centroid (mm), conductivity sum, area (mm^2) per contact"))
+            .param(ParamDoc::new("floor", "f64", "0.002", "absolute floor on the conductivity decrease, S/m"))
+            .param(ParamDoc::new("radius_frac", "f64", "0.02", "disk radius / image size"))
+            .param(ParamDoc::new("max_contacts", "usize", "8", "most contacts per frame")),
+        |p: SegmenterParams, _| Ok(NodeImpl::Processor(Box::new(Segmenter::new(&p)))),
+    ))
+}

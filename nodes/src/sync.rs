@@ -1,0 +1,288 @@
+//! Node `sync`: pairs each EIT frame with the pneumatic pressure over its acquisition window,
+//! removes the no-load offset P0 and attaches the ground truth in effect.
+//!
+//! Theory: a frame stamped `t` (middle of acquisition) with period `T` gets the mean of the
+//! pressure samples in `[t - T/2, t + T/2)` (CONTRACTS.md section 2). `T` is `frame_period_s`
+//! or the median of the observed frame intervals. A frame is emitted as soon as no later
+//! pressure sample can fall into its window (the newest sample is within one pressure period
+//! of the window's end), when a newer frame proves the window is past, or at once when no
+//! pressure is connected. P0 is the mean pressure of the leading no-load period: before the
+//! first truth row with a contact, or the first `tare_s` seconds without truth; a `tare`
+//! control command re-tares from the last `tare_window_s` seconds of pressure.
+//!
+//! ```toml
+//! params = { tare_s = 2.0, tare_window_s = 1.0 }   # frame_period_s = 0.77 to fix T
+//! ```
+//! Inputs: `eit` (eit_frame), `pressure` (pressure, optional), `truth` (truth, optional).
+//! Output: `frame` (synced_frame).
+
+use std::collections::VecDeque;
+use std::sync::Arc;
+
+use serde::Deserialize;
+use skinflow_core::params::positive;
+use skinflow_core::{
+    Context, Header, Inputs, KindInfo, Message, NodeError, NodeImpl, NodeParams, Outputs, ParamDoc, ParamError, PortSpec,
+    Processor, Recycler, Registry, Role, typed,
+};
+
+use crate::payload::{EitFrame, PressureSample, SyncedFrame, Truth};
+
+/// Frame period assumed before two frames were seen: the paper's board, 1.3 frames/s.
+const DEFAULT_FRAME_PERIOD_S: f64 = 1.0 / 1.3;
+/// Frame intervals kept for the median period.
+const PERIOD_HISTORY: usize = 15;
+/// Frames waiting for their window to close before the oldest is emitted regardless.
+const MAX_PENDING: usize = 2;
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SyncParams {
+    /// Length of the no-load period when no truth is connected, s (CONTRACTS.md default 2 s).
+    #[serde(default = "default_tare_s")]
+    pub tare_s: f64,
+    /// Acquisition window T, s. Absent: the median of observed frame intervals.
+    pub frame_period_s: Option<f64>,
+    /// Pressure history a `tare` command averages, s.
+    #[serde(default = "default_tare_window_s")]
+    pub tare_window_s: f64,
+}
+
+fn default_tare_s() -> f64 {
+    2.0
+}
+fn default_tare_window_s() -> f64 {
+    1.0
+}
+
+impl NodeParams for SyncParams {
+    fn validate(&self) -> Result<(), ParamError> {
+        positive("tare_s", self.tare_s)?;
+        positive("tare_window_s", self.tare_window_s)?;
+        self.frame_period_s.map_or(Ok(()), |t| positive("frame_period_s", t))
+    }
+}
+
+/// Port indices.
+const EIT: usize = 0;
+const PRESSURE: usize = 1;
+const TRUTH: usize = 2;
+
+pub struct Sync {
+    // Configuration
+    p: SyncParams,
+    pressure_connected: bool,
+    truth_connected: bool,
+    // Internal state
+    /// (t_s, kPa), time order.
+    pressure: VecDeque<(f64, f64)>,
+    pressure_period_s: Option<f64>,
+    /// (t_s, row), time order; the first is the row in effect for the oldest pending frame.
+    truth: VecDeque<(f64, Arc<Truth>)>,
+    /// Time of the first truth row with a contact: the no-load period ends there.
+    first_contact_s: Option<f64>,
+    /// No-load pressure accumulation for P0.
+    p0_sum: f64,
+    p0_n: u64,
+    p0_fixed: Option<f64>,
+    pending: VecDeque<(Header, Arc<EitFrame>)>,
+    last_frame_s: Option<f64>,
+    intervals: VecDeque<f64>,
+    scratch: Vec<f64>,
+    ring: Recycler<SyncedFrame>,
+}
+
+impl Sync {
+    pub fn new(p: SyncParams) -> Sync {
+        Sync {
+            p,
+            pressure_connected: true,
+            truth_connected: true,
+            pressure: VecDeque::with_capacity(4096),
+            pressure_period_s: None,
+            truth: VecDeque::with_capacity(64),
+            first_contact_s: None,
+            p0_sum: 0.0,
+            p0_n: 0,
+            p0_fixed: None,
+            pending: VecDeque::with_capacity(MAX_PENDING + 2),
+            last_frame_s: None,
+            intervals: VecDeque::with_capacity(PERIOD_HISTORY + 1),
+            scratch: Vec::with_capacity(PERIOD_HISTORY),
+            ring: Recycler::new(128, SyncedFrame::default),
+        }
+    }
+
+    fn frame_period_s(&mut self) -> f64 {
+        if let Some(t) = self.p.frame_period_s {
+            return t;
+        }
+        if self.intervals.is_empty() {
+            return DEFAULT_FRAME_PERIOD_S;
+        }
+        self.scratch.clear();
+        self.scratch.extend(self.intervals.iter().copied());
+        self.scratch.sort_by(f64::total_cmp);
+        self.scratch[self.scratch.len() / 2]
+    }
+
+    fn in_no_load(&self, t_s: f64) -> bool {
+        if self.truth_connected {
+            self.first_contact_s.is_none_or(|t0| t_s < t0)
+        } else {
+            t_s < self.p.tare_s
+        }
+    }
+
+    fn p0(&self) -> f64 {
+        self.p0_fixed.unwrap_or(if self.p0_n > 0 { self.p0_sum / self.p0_n as f64 } else { 0.0 })
+    }
+
+    fn on_pressure(&mut self, t_s: f64, kpa: f64) {
+        if let Some(&(last, _)) = self.pressure.back() {
+            let dt = t_s - last;
+            if dt > 0.0 {
+                // A smoothed period estimate; the first interval seeds it.
+                self.pressure_period_s = Some(self.pressure_period_s.map_or(dt, |p| 0.9 * p + 0.1 * dt));
+            }
+        }
+        if self.p0_fixed.is_none() && self.in_no_load(t_s) && kpa.is_finite() {
+            self.p0_sum += kpa;
+            self.p0_n += 1;
+        }
+        self.pressure.push_back((t_s, kpa));
+    }
+
+    fn on_truth(&mut self, t_s: f64, row: Arc<Truth>) {
+        if self.first_contact_s.is_none() && !row.contacts.is_empty() {
+            self.first_contact_s = Some(t_s);
+        }
+        self.truth.push_back((t_s, row));
+    }
+
+    fn on_frame(&mut self, h: Header, f: Arc<EitFrame>) {
+        let t = h.t_s();
+        if let Some(last) = self.last_frame_s
+            && t > last
+        {
+            self.intervals.push_back(t - last);
+            if self.intervals.len() > PERIOD_HISTORY {
+                self.intervals.pop_front();
+            }
+        }
+        self.last_frame_s = Some(t);
+        self.pending.push_back((h, f));
+    }
+
+    /// Whether the oldest pending frame's window can receive no more samples.
+    fn oldest_complete(&mut self) -> bool {
+        let Some((h, _)) = self.pending.front() else { return false };
+        if !self.pressure_connected || self.pending.len() > MAX_PENDING {
+            return true;
+        }
+        let end = h.t_s() + 0.5 * self.frame_period_s();
+        match (self.pressure.back(), self.pressure_period_s) {
+            (Some(&(last, _)), Some(dt)) => last + dt >= end,
+            (Some(&(last, _)), None) => last >= end,
+            _ => false,
+        }
+    }
+
+    fn emit_oldest(&mut self, ctx: &Context, out: &mut Outputs) -> Result<(), NodeError> {
+        let (h, frame) = self.pending.pop_front().expect("called with a pending frame");
+        let t = h.t_s();
+        let half = 0.5 * self.frame_period_s();
+        let (lo, hi) = (t - half, t + half);
+        let (mut sum, mut n) = (0.0, 0u32);
+        for &(tp, kpa) in &self.pressure {
+            if tp >= lo && tp < hi && kpa.is_finite() {
+                sum += kpa;
+                n += 1;
+            }
+        }
+        // Samples before this window can serve no later frame.
+        while self.pressure.front().is_some_and(|&(tp, _)| tp < lo) && self.pressure.len() > 1 {
+            self.pressure.pop_front();
+        }
+        while self.truth.len() > 1 && self.truth[1].0 <= t {
+            self.truth.pop_front();
+        }
+        let truth = self.truth.front().filter(|(tt, _)| *tt <= t).map(|(_, r)| r.clone());
+        let no_load = self.in_no_load(t);
+        let p0 = self.p0();
+        let dp_kpa = if n > 0 { sum / n as f64 - p0 } else { f64::NAN };
+        let payload = self.ring.fill(|s| {
+            s.frame = frame;
+            s.dp_kpa = dp_kpa;
+            s.pressure_samples = n;
+            s.p0_kpa = p0;
+            s.no_load = no_load;
+            s.truth = truth;
+        });
+        out.send(0, Message::from_arc(Header { origin: ctx.index(), ..h }, payload))
+    }
+}
+
+impl Processor for Sync {
+    fn process(&mut self, ctx: &mut Context, inputs: &Inputs, out: &mut Outputs) -> Result<(), NodeError> {
+        self.pressure_connected = inputs.lanes(PRESSURE) > 0;
+        self.truth_connected = inputs.lanes(TRUTH) > 0;
+        if let Some(m) = inputs.get(PRESSURE) {
+            let s = m.get::<PressureSample>().ok_or(NodeError::Input { port: "pressure".into(), problem: "not a pressure sample".into() })?;
+            self.on_pressure(m.header.t_s(), s.kpa);
+        }
+        if let Some(m) = inputs.get(TRUTH) {
+            let row = m.arc::<Truth>().ok_or(NodeError::Input { port: "truth".into(), problem: "not a truth row".into() })?;
+            self.on_truth(m.header.t_s(), row);
+        }
+        if let Some(m) = inputs.get(EIT) {
+            let f = m.arc::<EitFrame>().ok_or(NodeError::Input { port: "eit".into(), problem: "not an EIT frame".into() })?;
+            self.on_frame(m.header, f);
+        }
+        if self.oldest_complete() {
+            self.emit_oldest(ctx, out)?;
+            if self.oldest_complete() {
+                ctx.request_rerun();
+            }
+        }
+        Ok(())
+    }
+
+    fn control(&mut self, _ctx: &mut Context, cmd: &str) -> Result<(), NodeError> {
+        match cmd {
+            "tare" => {
+                let Some(&(last, _)) = self.pressure.back() else {
+                    return Err(NodeError::msg("tare: no pressure sample received yet"));
+                };
+                let from = last - self.p.tare_window_s;
+                let (s, n) = self.pressure.iter().filter(|(t, k)| *t >= from && k.is_finite()).fold((0.0, 0u32), |(s, n), (_, k)| (s + k, n + 1));
+                let p0 = s / f64::from(n.max(1));
+                tracing::info!(p0_kpa = p0, samples = n, "sync: re-tared P0");
+                self.p0_fixed = Some(p0);
+                Ok(())
+            }
+            _ => Err(NodeError::msg(format!("unknown control command \"{cmd}\" (known: tare)"))),
+        }
+    }
+
+    fn stop(&mut self, ctx: &mut Context) -> Result<(), NodeError> {
+        if !self.pending.is_empty() {
+            tracing::warn!(node = ctx.id(), frames = self.pending.len(), "frames still waiting for pressure at stop were not emitted");
+        }
+        Ok(())
+    }
+}
+
+pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::DuplicateKind> {
+    r.register(typed(
+        KindInfo::new("sync", Role::Processor, "pairs EIT frames with the tared pressure of their window and the truth in effect")
+            .input(PortSpec::input::<EitFrame>("eit", "EIT frames, stamped at the middle of acquisition"))
+            .input(PortSpec::input::<PressureSample>("pressure", "gauge pressure samples, kPa").optional())
+            .input(PortSpec::input::<Truth>("truth", "ground-truth rows").optional())
+            .output(PortSpec::output::<SyncedFrame>("frame", "frame + dP (kPa, tared) + truth"))
+            .param(ParamDoc::new("tare_s", "f64", "2.0", "no-load period without truth, s"))
+            .param(ParamDoc::new("frame_period_s", "f64", "", "acquisition window T, s (absent: median of frame intervals)"))
+            .param(ParamDoc::new("tare_window_s", "f64", "1.0", "pressure history a tare command averages, s")),
+        |p: SyncParams, _| Ok(NodeImpl::Processor(Box::new(Sync::new(p)))),
+    ))
+}

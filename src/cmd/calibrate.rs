@@ -1,0 +1,99 @@
+//! `skinflow calibrate REC.h5 --out CALIB.toml`: fits the force calibration (paper section III)
+//! from a single-contact recording with ground truth, and prints the paper's Table II.
+
+use std::path::Path;
+
+use anyhow::{Context as _, Result, bail};
+use sha2::{Digest, Sha256};
+use skinflow_contact::correct::{CalibParams, Provenance, calibrate};
+use skinflow_contact::CalibSample;
+use skinflow_nodes::payload::Contacts;
+use skinflow_record::read::Recording;
+
+use super::pipeline::PipelineArgs;
+
+/// `sha256:<hex>` of a file's bytes.
+pub fn content_hash(path: &Path) -> Result<String> {
+    let bytes = std::fs::read(path).with_context(|| format!("{}: cannot read", path.display()))?;
+    let digest = Sha256::digest(&bytes);
+    Ok(format!("sha256:{}", digest.iter().map(|b| format!("{b:02x}")).collect::<String>()))
+}
+
+/// Refuses recordings the pipeline cannot evaluate against truth.
+pub fn require_truth(path: &Path) -> Result<()> {
+    let rec = Recording::open(path).map_err(anyhow::Error::msg)?;
+    if rec.eit.as_ref().is_none_or(|e| e.is_empty()) {
+        bail!("{}: the recording has no EIT frames (/eit/v is missing or empty)", path.display());
+    }
+    if rec.truth.as_ref().is_none_or(|t| t.is_empty()) {
+        bail!("{}: the recording has no ground truth (/truth/*); calibrate and eval need the true contacts", path.display());
+    }
+    Ok(())
+}
+
+/// One calibration sample per loaded single-contact frame with a detection.
+pub fn samples(rows: &[Vec<skinflow_core::Message>]) -> Vec<CalibSample> {
+    let mut out = Vec::new();
+    for row in rows {
+        let Some(c) = row.first().and_then(|m| m.get::<Contacts>()) else { continue };
+        let synced = &c.image.src;
+        let Some(truth) = synced.truth.as_ref() else { continue };
+        if synced.no_load || truth.contacts.len() != 1 || !synced.dp_kpa.is_finite() {
+            continue;
+        }
+        let t = truth.contacts[0];
+        // The strongest detection is the indenter; weaker ones are artefacts.
+        let Some(best) = c.contacts.iter().max_by(|a, b| a.sum.total_cmp(&b.sum)) else { continue };
+        out.push(CalibSample {
+            x_mm: best.x_mm,
+            y_mm: best.y_mm,
+            true_x_mm: t.x_mm,
+            true_y_mm: t.y_mm,
+            force_n: t.force_n,
+            dp_kpa: synced.dp_kpa,
+            cond_sum: best.sum,
+            area_mm2: best.area_mm2,
+            diameter_mm: t.diameter_mm,
+        });
+    }
+    out
+}
+
+pub fn run(recording: &Path, out: &Path, args: &PipelineArgs) -> Result<()> {
+    require_truth(recording)?;
+    let spec = args.spec(recording.to_path_buf());
+    if args.print_graph {
+        println!("{}", spec.graph_toml());
+    }
+    let rows = spec.run().map_err(|e| anyhow::anyhow!("{}: pipeline: {e}", recording.display()))?;
+    let samples = samples(&rows);
+    if samples.is_empty() {
+        bail!("{}: no loaded single-contact frame with a detected contact to calibrate from", recording.display());
+    }
+    let provenance = Provenance {
+        recording: recording.display().to_string(),
+        recording_hash: content_hash(recording)?,
+        software_version: concat!("skinflow ", env!("CARGO_PKG_VERSION")).to_owned(),
+    };
+    let fitted = calibrate(&samples, &CalibParams::default(), provenance).map_err(anyhow::Error::msg)?;
+    for w in &fitted.warnings {
+        eprintln!("warning: {w}");
+    }
+    let cal = &fitted.calibration;
+    println!("{}", cal.r2);
+    let lam = |v: Option<f64>| v.map_or_else(|| "prior".to_string(), |v| format!("{v:.3e}"));
+    println!(
+        "samples: {} frames -> {} used ({} rejected) at {} locations; ridge lambda_g / lambda_b: pneumatic {} / {}, EIT {} / {}",
+        cal.training.frames,
+        cal.training.samples,
+        cal.training.rejected,
+        cal.training.locations,
+        lam(cal.pneumatic.locaware.lambda_g),
+        lam(cal.pneumatic.locaware.lambda_b),
+        lam(cal.eit.locaware.lambda_g),
+        lam(cal.eit.locaware.lambda_b),
+    );
+    cal.write(out).map_err(anyhow::Error::msg)?;
+    eprintln!("calibration written to {}", out.display());
+    Ok(())
+}

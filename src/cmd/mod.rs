@@ -1,0 +1,7 @@
+//! One module per subcommand beyond run/check/nodes/dot.
+
+pub mod calibrate;
+pub mod eval;
+pub mod inspect;
+pub mod pipeline;
+pub mod simulate;

@@ -103,7 +103,7 @@ impl<T: H5Type + Copy> Column<T> {
 
     pub fn pending_rows(&self) -> usize {
         let w = self.spec.width();
-        if w == 0 { 0 } else { self.buf.len() / w }
+        self.buf.len().checked_div(w).unwrap_or(0)
     }
 
     /// Appends the pending rows to the dataset (resize, then one hyperslab write).

@@ -36,6 +36,26 @@ pub fn find_parts(base: &Path) -> Result<Vec<PathBuf>, RecordError> {
     Ok(parts)
 }
 
+/// The files of a recording given by the path a writer was created with: `base` itself if it
+/// exists, else its rotated parts in order. Errors name `base` when neither exists.
+pub fn recording_files(base: &Path) -> Result<Vec<PathBuf>, RecordError> {
+    if base.exists() {
+        return Ok(vec![base.to_path_buf()]);
+    }
+    let parts = find_parts(base)?;
+    if parts.is_empty() {
+        let source = std::io::Error::new(
+            std::io::ErrorKind::NotFound,
+            "no such file, and no rotated parts (-0001...)",
+        );
+        return Err(RecordError::Io {
+            path: base.to_path_buf(),
+            source,
+        });
+    }
+    Ok(parts)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

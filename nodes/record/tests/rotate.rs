@@ -4,7 +4,7 @@
 use std::path::{Path, PathBuf};
 
 use skinflow_eit::sensor::PAPER_100MM_TOML;
-use skinflow_record::rotate::{find_parts, part_path};
+use skinflow_record::rotate::{find_parts, part_path, recording_files};
 use skinflow_record::{Recording, RecordingWriter, Streams, TruthContact, WriterOptions};
 
 fn tempdir(name: &str) -> PathBuf {
@@ -96,6 +96,14 @@ fn rotation_by_duration_splits_at_rotate_s() {
         parts,
         (1..=4).map(|i| part_path(&base, i)).collect::<Vec<_>>()
     );
+    assert_eq!(
+        recording_files(&base).unwrap(),
+        parts,
+        "the base path resolves to its parts"
+    );
+    let missing = dir.join("other.h5");
+    let err = recording_files(&missing).unwrap_err().to_string();
+    assert!(err.starts_with(&missing.display().to_string()), "{err}");
     // Part k starts with the first frame at or after k seconds: 100 frames per part.
     let firsts: Vec<f64> = parts
         .iter()

@@ -196,3 +196,22 @@ fn reference_after_swmr_start_is_refused() {
     let rec = Recording::open(&path).unwrap();
     assert_eq!(rec.reference.as_deref(), Some(&[1.0; 120][..]));
 }
+
+#[test]
+fn writer_moves_to_a_logging_thread_and_recordings_are_shareable() {
+    fn send<T: Send>() {}
+    fn send_sync<T: Send + Sync>() {}
+    send::<RecordingWriter>();
+    send_sync::<Recording>();
+    let dir = tempdir("thread");
+    let path = dir.join("rec.h5");
+    let mut w = RecordingWriter::create(&path, &WriterOptions::new(PAPER_100MM_TOML)).unwrap();
+    let stats = std::thread::spawn(move || {
+        w.append_pressure(0.0, 1.5).unwrap();
+        w.close().unwrap()
+    })
+    .join()
+    .unwrap();
+    assert_eq!(stats.pressure_rows, 1);
+    assert_eq!(Recording::open(&path).unwrap().pressure.unwrap().kpa, [1.5]);
+}

@@ -20,6 +20,15 @@
 //!   are dsigma in S/m: negative = conductivity decrease (a press on the paper's skin).
 //! - Image: 64 x 64 pixels tiling the rectangle, index iy * nx + ix, iy = 0 at the bottom.
 //!
+//! # Per-frame API (the `reconstructor` node)
+//! `Reconstructor::new(&Sensor, &ReconParams)` (loads or precomputes; `info()` reports cache
+//! use, mesh size and minimum angle, lambda, prior). Per frame, no allocation:
+//! `reconstruct_image_into(v, v_ref, image)`, `reconstruct_elements_into(v, v_ref, elements)` or
+//! `reconstruct_into(v, v_ref, image, elements)`; `detect_mask_into(v, &mut mask)` then
+//! `set_mask(&mask)` (a new mask builds its matrix once, then it is cached in memory and on
+//! disk). Pixel geometry: `grid()` (`pixel_centre_mm`, `pixel_area_mm2`, `pixel_at`).
+//! `ReferenceTracker` picks the reference frame; `choose_lambda` + `set_lambda` tune lambda.
+//!
 //! # Stable forward API (used by the simulator)
 //! `Mesh::generate(&Sensor, &MeshParams) -> Result<Mesh, EitError>` (fields `nodes` in mm,
 //! `triangles`; `element_centroids_mm()`, `element_areas_mm2()`),

@@ -49,6 +49,21 @@ enum Cmd {
         #[arg(long)]
         overwrite: bool,
     },
+    /// Emulate the EIT board, pressure board and load cell on pseudo-terminals from a scene.
+    Emulate {
+        scene: PathBuf,
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Send as fast as the readers take the bytes instead of at the real rates.
+        #[arg(long)]
+        fast: bool,
+        /// Directory for the stable device links (default: a fresh temporary directory).
+        #[arg(long)]
+        dir: Option<PathBuf>,
+        /// Inject a fault: device:index:kind[=value], e.g. eit:10:crc, eit:20:unplug=0.5.
+        #[arg(long = "fault")]
+        faults: Vec<String>,
+    },
     /// Summarise a recording: streams, counts, duration, rates, gaps, truth coverage.
     Inspect { recording: PathBuf },
     /// Fit the force calibration from a single-contact recording with ground truth.
@@ -110,6 +125,9 @@ fn dispatch(cmd: Cmd) -> Result<ExitCode> {
             Ok(ExitCode::SUCCESS)
         }
         Cmd::Simulate { scene, out, seed, overwrite } => cmd::simulate::run(&scene, &out, seed, overwrite).map(|()| ExitCode::SUCCESS),
+        Cmd::Emulate { scene, seed, fast, dir, faults } => {
+            cmd::emulate::run(&scene, seed, fast, dir, &faults, interrupt_flag()?).map(|()| ExitCode::SUCCESS)
+        }
         Cmd::Inspect { recording } => cmd::inspect::run(&recording).map(|()| ExitCode::SUCCESS),
         Cmd::Calibrate { recording, out, pipeline } => cmd::calibrate::run(&recording, &out, &pipeline).map(|()| ExitCode::SUCCESS),
         Cmd::Eval { recording, calib, json, plots, pipeline } => {
@@ -153,17 +171,7 @@ fn run(path: &Path, for_s: Option<f64>, stats_json: Option<&Path>) -> Result<Exi
         Some(s) => bail!("--for must be a positive number of seconds (got {s})"),
         None => None,
     };
-    let stop = Arc::new(AtomicBool::new(false));
-    let flag = stop.clone();
-    ctrlc::set_handler(move || {
-        if flag.swap(true, Ordering::SeqCst) {
-            // A second Ctrl-C while draining: give up at once.
-            eprintln!("second interrupt: exiting without draining");
-            std::process::exit(130);
-        }
-        eprintln!("interrupt: stopping sources, draining queues (Ctrl-C again to abort)");
-    })
-    .context("installing the Ctrl-C handler")?;
+    let stop = interrupt_flag()?;
     let running = match RunningGraph::start(&spec) {
         Ok(r) => r,
         Err(e) => {
@@ -185,6 +193,21 @@ fn run(path: &Path, for_s: Option<f64>, stats_json: Option<&Path>) -> Result<Exi
         }
         Ok(ExitCode::from(1))
     }
+}
+
+/// A flag set by the first Ctrl-C (or SIGTERM); a second one exits at once.
+fn interrupt_flag() -> Result<Arc<AtomicBool>> {
+    let stop = Arc::new(AtomicBool::new(false));
+    let flag = stop.clone();
+    ctrlc::set_handler(move || {
+        if flag.swap(true, Ordering::SeqCst) {
+            eprintln!("second interrupt: exiting without draining");
+            std::process::exit(130);
+        }
+        eprintln!("interrupt: stopping sources, draining queues (Ctrl-C again to abort)");
+    })
+    .context("installing the Ctrl-C handler")?;
+    Ok(stop)
 }
 
 fn print_nodes(reg: &Registry) {

@@ -13,6 +13,7 @@ pub mod pipeline;
 pub mod reconstruct;
 pub mod replay;
 pub mod segment;
+pub mod serial;
 pub mod sim;
 pub mod split;
 pub mod sync;
@@ -23,8 +24,8 @@ use skinflow_core::Registry;
 pub fn registry() -> Registry {
     let mut r = Registry::new();
     skinflow_core::toy::register(&mut r).expect("built-in kinds have distinct names");
-    let reg: [fn(&mut Registry) -> Result<(), skinflow_core::registry::DuplicateKind>; 8] =
-        [sim::register, replay::register, log::register, sync::register, reconstruct::register, segment::register, split::register, correct::register];
+    let reg: [fn(&mut Registry) -> Result<(), skinflow_core::registry::DuplicateKind>; 9] =
+        [sim::register, replay::register, log::register, serial::register, sync::register, reconstruct::register, segment::register, split::register, correct::register];
     for f in reg {
         f(&mut r).expect("built-in kinds have distinct names");
     }

@@ -1,6 +1,7 @@
 //! One module per subcommand beyond run/check/nodes/dot.
 
 pub mod calibrate;
+pub mod emulate;
 pub mod eval;
 pub mod inspect;
 pub mod pipeline;

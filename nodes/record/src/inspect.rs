@@ -203,13 +203,13 @@ impl fmt::Display for Summary {
         writeln!(f, "duration: {:.3} s", self.duration_s)?;
         writeln!(
             f,
-            "{:<32} {:>9} {:>11} {:>11} {:>11} {:>12}",
+            "{:<36} {:>9} {:>11} {:>11} {:>11} {:>12}",
             "stream", "rows", "first", "last", "rate", "period"
         )?;
         for s in &self.streams {
             write!(
                 f,
-                "{:<32} {:>9} {:>11} {:>11} {:>11} {:>12}",
+                "{:<36} {:>9} {:>11} {:>11} {:>11} {:>12}",
                 s.path,
                 s.rows,
                 opt(s.first_t_s, " s"),

@@ -16,16 +16,17 @@
 //! |---|---|---|
 //! | `/` attr `software_version` | string | writer and version, e.g. `skinflow 0.1.0` |
 //! | `/` attr `part` | u32 | 1-based index of a rotated part (only when rotating) |
-//! | `/derived/image` | f64 [n, H, W] | reconstructed conductivity-change images, row-major, as the pipeline produced them |
-//! | `/derived/image_t` | f64 [n] | seconds, time of the EIT frame each image comes from |
-//! | `/derived/contacts/t` | f64 [n] | seconds |
-//! | `/derived/contacts/x_mm`, `y_mm` | f64 [n, Cmax] | segmented contact centroids, NaN-padded |
-//! | `/derived/contacts/sum` | f64 [n, Cmax] | conductivity sum of each contact (image units) |
-//! | `/derived/contacts/area_mm2` | f64 [n, Cmax] | contact area, mm² |
-//! | `/derived/forces/<strategy>/t` | f64 [n] | seconds |
-//! | `/derived/forces/<strategy>/force_n` | f64 [n, Cmax] | per-contact force of that strategy, N, in the order of the frame's contacts, NaN-padded |
+//! | `/derived/image` | f64 `[n, H, W]` | reconstructed conductivity-change images, row-major, as the pipeline produced them |
+//! | `/derived/image_t` | f64 `[n]` | seconds, time of the EIT frame each image comes from |
+//! | `/derived/contacts/t` | f64 `[n]` | seconds |
+//! | `/derived/contacts/x_mm`, `y_mm` | f64 `[n, Cmax]` | segmented contact centroids, NaN-padded |
+//! | `/derived/contacts/sum` | f64 `[n, Cmax]` | conductivity sum of each contact (image units) |
+//! | `/derived/contacts/area_mm2` | f64 `[n, Cmax]` | contact area, mm² |
+//! | `/derived/forces/<strategy>/t` | f64 `[n]` | seconds |
+//! | `/derived/forces/<strategy>/force_n` | f64 `[n, Cmax]` | per-contact force of that strategy, N, in the order of the frame's contacts, NaN-padded |
 //!
-//! - Widths are fixed when a file is created, because HDF5 can't widen a chunked dataset:
+//! - Widths are fixed when a file is created, so rows never change once written and all parts
+//!   have the same shapes:
 //!   truth C = `truth_max_contacts` (default 8) and derived Cmax = `derived_max_contacts`
 //!   (default 16). Unused columns hold NaN. A truth row with more contacts than C is refused
 //!   (an error, never silent); derived contacts beyond Cmax are dropped and counted.
@@ -50,7 +51,16 @@
 //! measured after a flush) or before the first row whose time is `rotate_s` seconds or more after
 //! the part's first row. Each row is in exactly one part, and each part is a complete format-v1
 //! file with the same root attributes (plus `part`) and `/eit/reference` when set. The truth
-//! row in effect at the start of a part lives in the previous part.
+//! row in effect at the start of a part lives in the previous part. `rotate::recording_files`
+//! turns the path the writer was given into the list of files to replay in order.
+//!
+//! # Reading
+//!
+//! `Recording::open` loads every stream whole (an hour of 120-value frames at 100 Hz is
+//! ~350 MB); rotation keeps parts small. It is strict: a file whose datasets disagree in
+//! length is refused, so a file still being written in SWMR mode may be refused mid-update
+//! (retry, or follow it with h5py's SWMR reader). Times are not required to increase;
+//! `inspect` counts backward steps and `Recording::events` merges in stored order.
 
 pub mod error;
 pub mod inspect;

@@ -141,7 +141,7 @@ pub struct Recording {
     /// 1-based part index of a rotated recording.
     pub part: Option<i64>,
     pub eit: Option<EitStream>,
-    /// `/eit/reference` [M], the no-load frame, when present.
+    /// `/eit/reference` `[M]`, the no-load frame, when present.
     pub reference: Option<Vec<f64>>,
     pub pressure: Option<PressureStream>,
     pub truth: Option<TruthStream>,

@@ -295,7 +295,7 @@ impl RecordingWriter {
         self.after_append(Slot::Force(strategy))
     }
 
-    /// Stores the no-load frame `/eit/reference` [M] (also in every later part). With SWMR it
+    /// Stores the no-load frame `/eit/reference` `[M]` (also in every later part). With SWMR it
     /// must come before the first flush, since SWMR writers cannot create datasets.
     pub fn set_reference(&mut self, reference: &[f64]) -> Result<(), RecordError> {
         self.check_width(

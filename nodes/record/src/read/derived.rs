@@ -9,7 +9,7 @@ use super::data;
 use crate::error::RecordError;
 use crate::layout;
 
-/// `/derived/image` [n, H, W] with `/derived/image_t` [n].
+/// `/derived/image` `[n, H, W]` with `/derived/image_t` `[n]`.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ImageStream {
     pub t_s: Vec<f64>,

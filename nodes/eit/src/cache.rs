@@ -93,7 +93,15 @@ pub fn store(dir: &Path, key: &str, folded: &Folded) -> Result<(), EitError> {
     for v in folded.image.iter().chain(&folded.elements) {
         bytes.extend_from_slice(&v.to_le_bytes());
     }
-    let tmp = dir.join(format!(".skinflow-eit-{key}.{}.tmp", std::process::id()));
+    // Unique per process and thread: two writers of the same key never share a temporary file.
+    let thread: String = format!("{:?}", std::thread::current().id())
+        .chars()
+        .filter(char::is_ascii_digit)
+        .collect();
+    let tmp = dir.join(format!(
+        ".skinflow-eit-{key}.{}-{thread}.tmp",
+        std::process::id()
+    ));
     std::fs::write(&tmp, &bytes).map_err(|e| cache_err(&tmp, e))?;
     std::fs::rename(&tmp, &path).map_err(|e| cache_err(&path, e))
 }

@@ -59,14 +59,7 @@ fn cache_dir() -> PathBuf {
 }
 
 fn recon(params: ReconParams) -> Reconstructor {
-    Reconstructor::new(
-        &Sensor::paper_100mm(),
-        &ReconParams {
-            cache_dir: Some(cache_dir()),
-            ..params
-        },
-    )
-    .unwrap()
+    Reconstructor::new(&Sensor::paper_100mm(), &params).unwrap()
 }
 
 /// Image of a frame, and the centre (mm) of its most negative pixel (or most positive).
@@ -228,7 +221,7 @@ fn f32_matrix_agrees_with_f64() {
 
 #[test]
 fn disk_cache_hits_with_the_same_key_and_misses_otherwise() {
-    let dir = cache_dir().join("own");
+    let dir = cache_dir();
     let params = ReconParams {
         lambda: 0.05,
         cache_dir: Some(dir.clone()),

@@ -1,0 +1,80 @@
+//! Call overhead of a plugin node over a built-in one: a no-op processor called directly
+//! through `Box<dyn Processor>`, and the same no-op as a plugin kind called through the
+//! host wrapper and the C function table (the path of a loaded library: encode inputs, call
+//! the `extern "C"` shim under `catch_unwind`, read the outputs). The table is built in this
+//! binary with the SDK's export code instead of `dlopen`ed; a call through a function pointer
+//! costs the same either way.
+//!
+//! `cargo bench -p skinflow-plugin-sdk --features host --bench call`
+
+use std::hint::black_box;
+use std::path::Path;
+use std::sync::OnceLock;
+
+use criterion::{Criterion, criterion_group, criterion_main};
+use serde::Deserialize;
+use skinflow_core::{BuildContext, Context, Inputs, Mode, NodeError, NodeImpl, Outputs, Params, Processor, Registry};
+use skinflow_plugin_sdk::export::{Table, entry, kind};
+use skinflow_plugin_sdk::host::{Codecs, read_table, register_kinds};
+use skinflow_plugin_sdk::{Columns, KindSpec, PluginNode};
+
+struct BuiltinNoop;
+
+impl Processor for BuiltinNoop {
+    fn process(&mut self, _ctx: &mut Context, _inputs: &Inputs, _out: &mut Outputs) -> Result<(), NodeError> {
+        Ok(())
+    }
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct NoParams {}
+
+struct PluginNoop;
+
+impl PluginNode for PluginNoop {
+    type Params = NoParams;
+
+    fn spec() -> KindSpec {
+        KindSpec::new("bench-noop", "does nothing")
+    }
+
+    fn new(_: NoParams) -> Result<Self, String> {
+        Ok(PluginNoop)
+    }
+
+    fn process(&mut self, _inputs: &[Columns<'_>], _out: &mut skinflow_plugin_sdk::Outputs) -> Result<(), String> {
+        Ok(())
+    }
+}
+
+fn plugin_node() -> Box<dyn Processor> {
+    static TABLE: OnceLock<Table> = OnceLock::new();
+    let table = entry(&TABLE, "bench", "0", || vec![kind::<PluginNoop>()]);
+    // SAFETY: `entry` returned a pointer to the static table above (non-null: it did not panic).
+    let table = unsafe { &*table };
+    let path = Path::new("<bench>");
+    let kinds = read_table(path, table, &Codecs::new()).expect("valid table");
+    let mut reg = Registry::new();
+    register_kinds(path, kinds, &mut reg).expect("no duplicates");
+    let ctx = BuildContext { base_dir: ".".into(), mode: Mode::Lockstep, node_id: "noop".into() };
+    match reg.get("bench-noop").expect("registered").build(&Params::empty(), &ctx) {
+        Ok(NodeImpl::Processor(p)) => p,
+        _ => panic!("plugin kind did not build a processor"),
+    }
+}
+
+fn bench(c: &mut Criterion) {
+    let mut ctx = Context::detached("noop", Mode::Lockstep);
+    let inputs = Inputs::default();
+    let mut out = Outputs::default();
+    let mut g = c.benchmark_group("call");
+    let mut builtin: Box<dyn Processor> = Box::new(BuiltinNoop);
+    g.bench_function("noop_builtin", |b| b.iter(|| black_box(&mut builtin).process(&mut ctx, black_box(&inputs), &mut out)));
+    let mut plugin = plugin_node();
+    g.bench_function("noop_plugin", |b| b.iter(|| black_box(&mut plugin).process(&mut ctx, black_box(&inputs), &mut out)));
+    g.finish();
+}
+
+criterion_group!(benches, bench);
+criterion_main!(benches);

@@ -1,0 +1,195 @@
+//! The C ABI between the host and a plugin library, version [`ABI_VERSION`].
+//!
+//! A plugin exports one symbol, [`ENTRY_SYMBOL`], an [`EntryFn`] returning a static
+//! [`SfPlugin`]: its kinds ([`SfKind`]) with their ports, params and three functions (create,
+//! process, destroy). A message crosses as named `f64` columns plus a header ([`SfMessage`]);
+//! the memory behind every pointer belongs to the side that wrote it and stays valid until that
+//! side's next call on the same node. The first two fields of [`SfPlugin`] never move, so any
+//! host can read the version of any plugin; all struct sizes are checked at load.
+
+use std::ffi::c_void;
+
+/// Bumped on any change of the structs or functions in this module.
+pub const ABI_VERSION: u32 = 1;
+
+/// The exported entry point (NUL-terminated for `dlsym`).
+pub const ENTRY_SYMBOL: &[u8] = b"skinflow_plugin_entry\0";
+
+/// A borrowed UTF-8 string (not NUL-terminated).
+#[repr(C)]
+#[derive(Debug, Clone, Copy)]
+pub struct SfStr {
+    pub ptr: *const u8,
+    pub len: usize,
+}
+
+impl SfStr {
+    pub const EMPTY: SfStr = SfStr { ptr: std::ptr::NonNull::dangling().as_ptr(), len: 0 };
+
+    pub const fn new(s: &str) -> SfStr {
+        SfStr { ptr: s.as_ptr(), len: s.len() }
+    }
+
+    /// The string, if it is valid UTF-8.
+    ///
+    /// # Safety
+    /// `ptr` must point at `len` readable bytes that stay valid and unchanged for `'a`.
+    pub unsafe fn to_str<'a>(self) -> Result<&'a str, std::str::Utf8Error> {
+        if self.len == 0 {
+            return Ok("");
+        }
+        // SAFETY: the caller guarantees `len` readable bytes at `ptr` for `'a`.
+        let bytes = unsafe { std::slice::from_raw_parts(self.ptr, self.len) };
+        std::str::from_utf8(bytes)
+    }
+}
+
+/// One named column of `len` values.
+#[repr(C)]
+#[derive(Debug, Clone, Copy)]
+pub struct SfColumn {
+    pub name: SfStr,
+    pub len: usize,
+    pub data: *const f64,
+}
+
+/// One message as columns. `present == 0`: no message on this port in this call.
+#[repr(C)]
+#[derive(Debug, Clone, Copy)]
+pub struct SfMessage {
+    pub present: u32,
+    /// The payload type (`Payload::TYPE`) the columns encode.
+    pub type_name: SfStr,
+    pub seq: u64,
+    pub t_ns: u64,
+    pub n_cols: usize,
+    pub cols: *const SfColumn,
+}
+
+impl SfMessage {
+    pub const ABSENT: SfMessage =
+        SfMessage { present: 0, type_name: SfStr::EMPTY, seq: 0, t_ns: 0, n_cols: 0, cols: std::ptr::null() };
+}
+
+/// A port of a kind.
+#[repr(C)]
+#[derive(Debug, Clone, Copy)]
+pub struct SfPort {
+    pub name: SfStr,
+    /// `Payload::TYPE` of its messages; the host needs a codec for it.
+    pub type_name: SfStr,
+    pub doc: SfStr,
+    /// Inputs: 1 when the graph may leave it unconnected.
+    pub optional: u32,
+}
+
+/// Documentation of a param.
+#[repr(C)]
+#[derive(Debug, Clone, Copy)]
+pub struct SfParam {
+    pub name: SfStr,
+    pub ty: SfStr,
+    /// Default as TOML text, empty when required.
+    pub default: SfStr,
+    pub doc: SfStr,
+}
+
+/// Where a plugin writes an error message: the host copies it during the call.
+#[repr(C)]
+#[derive(Clone, Copy)]
+pub struct SfErrorSink {
+    pub ctx: *mut c_void,
+    pub write: unsafe extern "C" fn(ctx: *mut c_void, msg: SfStr),
+}
+
+/// Result of a plugin call.
+#[repr(transparent)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct SfStatus(pub u32);
+
+impl SfStatus {
+    pub const OK: SfStatus = SfStatus(0);
+    /// The node returned an error (message written to the error sink).
+    pub const ERROR: SfStatus = SfStatus(1);
+    /// The node panicked; the panic was caught in the plugin (message written to the sink).
+    /// The instance is poisoned: every later call fails.
+    pub const PANIC: SfStatus = SfStatus(2);
+}
+
+/// Checks params (TOML text) without side effects.
+pub type CheckFn = unsafe extern "C" fn(params_toml: SfStr, err: SfErrorSink) -> SfStatus;
+/// Builds a node from params (TOML text); null on failure (message written to `err`).
+pub type CreateFn = unsafe extern "C" fn(params_toml: SfStr, err: SfErrorSink) -> *mut c_void;
+/// One call: reads `n_inputs` messages, writes `n_outputs` (plugin-owned memory, valid until
+/// the next call on this node or its destruction).
+pub type ProcessFn = unsafe extern "C" fn(
+    node: *mut c_void,
+    inputs: *const SfMessage,
+    n_inputs: usize,
+    outputs: *mut SfMessage,
+    n_outputs: usize,
+    err: SfErrorSink,
+) -> SfStatus;
+/// Frees a node built by `create`.
+pub type DestroyFn = unsafe extern "C" fn(node: *mut c_void);
+
+/// A kind (role: processor).
+#[repr(C)]
+#[derive(Debug, Clone, Copy)]
+pub struct SfKind {
+    pub name: SfStr,
+    pub doc: SfStr,
+    pub inputs: *const SfPort,
+    pub n_inputs: usize,
+    pub outputs: *const SfPort,
+    pub n_outputs: usize,
+    pub params: *const SfParam,
+    pub n_params: usize,
+    pub check: CheckFn,
+    pub create: CreateFn,
+    pub process: ProcessFn,
+    pub destroy: DestroyFn,
+}
+
+/// What the entry point returns. Static for the life of the library.
+#[repr(C)]
+#[derive(Debug, Clone, Copy)]
+pub struct SfPlugin {
+    /// Never moves: [`ABI_VERSION`] of the SDK the plugin was built with.
+    pub abi_version: u32,
+    /// Never moves: `size_of::<SfPlugin>()` in the plugin.
+    pub plugin_size: u32,
+    pub kind_size: u32,
+    pub port_size: u32,
+    pub param_size: u32,
+    pub message_size: u32,
+    pub column_size: u32,
+    /// The plugin's name and version, for messages.
+    pub name: SfStr,
+    pub version: SfStr,
+    pub kinds: *const SfKind,
+    pub n_kinds: usize,
+}
+
+/// The entry point's type. Never unwinds; null when the plugin could not describe itself.
+pub type EntryFn = unsafe extern "C" fn() -> *const SfPlugin;
+
+/// The struct sizes a peer must agree on, in [`SfPlugin`] order.
+pub const fn sizes() -> [(&'static str, u32); 6] {
+    [
+        ("SfPlugin", size_of::<SfPlugin>() as u32),
+        ("SfKind", size_of::<SfKind>() as u32),
+        ("SfPort", size_of::<SfPort>() as u32),
+        ("SfParam", size_of::<SfParam>() as u32),
+        ("SfMessage", size_of::<SfMessage>() as u32),
+        ("SfColumn", size_of::<SfColumn>() as u32),
+    ]
+}
+
+impl SfPlugin {
+    /// The sizes this table declares, in [`sizes`] order.
+    pub fn declared_sizes(&self) -> [u32; 6] {
+        [self.plugin_size, self.kind_size, self.port_size, self.param_size, self.message_size, self.column_size]
+    }
+}
+

@@ -1,0 +1,259 @@
+//! Loading a plugin library into a [`Registry`]: copy the file to a unique temporary path (so a
+//! rebuilt file is a new library to the dynamic loader, and the build may overwrite it while we
+//! run), `dlopen` the copy, call the entry point, check the ABI version and every struct size,
+//! copy the kind descriptions out, and register one factory per kind. Nothing is registered
+//! unless every kind of the library can be. The library stays mapped while any factory or node
+//! from it exists (they hold an `Arc<PluginLibrary>`).
+
+use std::borrow::Cow;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+
+use skinflow_core::{KindInfo, ParamDoc, PortSpec, Registry, Role};
+
+use super::codec::Codecs;
+use super::node::{KindFns, PluginFactory, PluginKind};
+use crate::abi::{ABI_VERSION, ENTRY_SYMBOL, EntryFn, SfKind, SfPlugin, SfPort, SfStr, sizes};
+
+/// Why a plugin could not be loaded. Every message names the library's path.
+#[derive(Debug, thiserror::Error)]
+pub enum PluginError {
+    #[error("plugin {}: file not found", path.display())]
+    Missing { path: PathBuf },
+    #[error("plugin {}: cannot copy it to {}: {source}", path.display(), to.display())]
+    Copy { path: PathBuf, to: PathBuf, source: std::io::Error },
+    #[error("plugin {}: not a loadable library: {cause}", path.display())]
+    Open { path: PathBuf, cause: String },
+    #[error("plugin {}: not a skinflow plugin (no symbol \"skinflow_plugin_entry\"; export kinds with skinflow_plugin_sdk::export_plugin!)", path.display())]
+    NotAPlugin { path: PathBuf },
+    #[error("plugin {}: its entry point failed (it panicked while describing its kinds)", path.display())]
+    Entry { path: PathBuf },
+    #[error("plugin {}: built for plugin ABI version {found}, this skinflow loads version {expected} (rebuild it against this skinflow-plugin-sdk)", path.display())]
+    AbiVersion { path: PathBuf, found: u32, expected: u32 },
+    #[error("plugin {}: struct {what} is {found} bytes in the plugin but {expected} in the host (ABI mismatch; rebuild the plugin)", path.display())]
+    StructSize { path: PathBuf, what: &'static str, found: u32, expected: u32 },
+    #[error("plugin {}: {problem}", path.display())]
+    Invalid { path: PathBuf, problem: String },
+    #[error("plugin {}: kind \"{kind}\" {port}: no codec for payload type \"{ty}\" (known: {known})", path.display())]
+    NoCodec { path: PathBuf, kind: String, port: String, ty: String, known: String },
+    #[error("plugin {}: kind \"{kind}\" is already defined by {existing}", path.display())]
+    DuplicateKind { path: PathBuf, kind: String, existing: String },
+}
+
+/// A mapped plugin library.
+pub struct PluginLibrary {
+    /// The path the user named.
+    pub path: PathBuf,
+    pub name: String,
+    pub version: String,
+    // Dropped last, after every node and factory that could call into it.
+    _lib: libloading::Library,
+}
+
+impl std::fmt::Debug for PluginLibrary {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("PluginLibrary").field("path", &self.path).field("name", &self.name).finish()
+    }
+}
+
+/// What a load added.
+#[derive(Debug, Clone)]
+pub struct Loaded {
+    pub library: Arc<PluginLibrary>,
+    pub kinds: Vec<String>,
+}
+
+static COPIES: AtomicU64 = AtomicU64::new(0);
+
+/// Copies `path` to a fresh temporary file and opens that copy.
+fn open_copy(path: &Path) -> Result<libloading::Library, PluginError> {
+    let dir = std::env::temp_dir().join("skinflow-plugins");
+    let file = path.file_name().map_or_else(|| "plugin".into(), |f| f.to_string_lossy().into_owned());
+    let to = dir.join(format!("{}-{}-{file}", std::process::id(), COPIES.fetch_add(1, Ordering::Relaxed)));
+    std::fs::create_dir_all(&dir)
+        .and_then(|()| std::fs::copy(path, &to))
+        .map_err(|source| PluginError::Copy { path: path.to_path_buf(), to: to.clone(), source })?;
+    // SAFETY: loading a library runs its initialisers; the user named this plugin in a graph or
+    // on the command line, which is the trust decision. The copy is ours alone.
+    let lib = unsafe { libloading::Library::new(&to) };
+    // The mapping outlives the file: removing the copy now leaves nothing behind.
+    let _ = std::fs::remove_file(&to);
+    lib.map_err(|e| PluginError::Open {
+        path: path.to_path_buf(),
+        cause: e.to_string().replace(&*to.to_string_lossy(), &path.to_string_lossy()),
+    })
+}
+
+fn text(path: &Path, what: &str, s: SfStr) -> Result<String, PluginError> {
+    // SAFETY: the table passed the ABI checks; its strings are static in the library, which
+    // stays mapped while we read.
+    unsafe { s.to_str() }
+        .map(str::to_owned)
+        .map_err(|e| PluginError::Invalid { path: path.to_path_buf(), problem: format!("{what} is not UTF-8: {e}") })
+}
+
+/// `n` items at `p` (empty when `n == 0`, whatever `p` is).
+///
+/// # Safety
+/// When `n > 0`, `p` must point at `n` valid items that live as long as the library.
+unsafe fn items<'a, T>(p: *const T, n: usize) -> &'a [T] {
+    if n == 0 || p.is_null() {
+        return &[];
+    }
+    // SAFETY: forwarded from the caller.
+    unsafe { std::slice::from_raw_parts(p, n) }
+}
+
+/// Checks the version and struct sizes before anything else of the table is read.
+fn check_abi(path: &Path, t: &SfPlugin) -> Result<(), PluginError> {
+    if t.abi_version != ABI_VERSION {
+        return Err(PluginError::AbiVersion { path: path.to_path_buf(), found: t.abi_version, expected: ABI_VERSION });
+    }
+    for ((what, expected), found) in sizes().into_iter().zip(t.declared_sizes()) {
+        if found != expected {
+            return Err(PluginError::StructSize { path: path.to_path_buf(), what, found, expected });
+        }
+    }
+    Ok(())
+}
+
+fn port_spec(path: &Path, kind: &str, p: &SfPort, input: bool) -> Result<PortSpec, PluginError> {
+    let name = text(path, &format!("kind \"{kind}\" port name"), p.name)?;
+    Ok(PortSpec {
+        ty: Cow::Owned(text(path, &format!("kind \"{kind}\" port \"{name}\" type"), p.type_name)?),
+        doc: Cow::Owned(text(path, &format!("kind \"{kind}\" port \"{name}\" doc"), p.doc)?),
+        name: Cow::Owned(name),
+        required: input && p.optional == 0,
+        multi: !input,
+    })
+}
+
+/// Reads one kind's description and finds codecs for its ports.
+fn read_kind(path: &Path, origin: &str, k: &SfKind, codecs: &Codecs) -> Result<PluginKind, PluginError> {
+    let name = text(path, "a kind name", k.name)?;
+    let mut info = KindInfo {
+        name: Cow::Owned(name.clone()),
+        doc: Cow::Owned(text(path, &format!("kind \"{name}\" doc"), k.doc)?),
+        role: Role::Processor,
+        inputs: Vec::new(),
+        outputs: Vec::new(),
+        params: Vec::new(),
+        origin: Cow::Owned(origin.to_owned()),
+    };
+    // SAFETY (three calls): arrays in the checked table, static in the mapped library.
+    for p in unsafe { items(k.inputs, k.n_inputs) } {
+        info.inputs.push(port_spec(path, &name, p, true)?);
+    }
+    for p in unsafe { items(k.outputs, k.n_outputs) } {
+        info.outputs.push(port_spec(path, &name, p, false)?);
+    }
+    for p in unsafe { items(k.params, k.n_params) } {
+        let pname = text(path, &format!("kind \"{name}\" param name"), p.name)?;
+        let what = |f: &str| format!("kind \"{name}\" param \"{pname}\" {f}");
+        info.params.push(ParamDoc {
+            ty: Cow::Owned(text(path, &what("type"), p.ty)?),
+            default: Cow::Owned(text(path, &what("default"), p.default)?),
+            doc: Cow::Owned(text(path, &what("doc"), p.doc)?),
+            name: Cow::Owned(pname),
+        });
+    }
+    let codec = |port: &PortSpec, dir: &str| {
+        codecs.get(&port.ty).ok_or_else(|| PluginError::NoCodec {
+            path: path.to_path_buf(),
+            kind: name.clone(),
+            port: format!("{dir} \"{}\"", port.name),
+            ty: port.ty.to_string(),
+            known: codecs.names().collect::<Vec<_>>().join(", "),
+        })
+    };
+    let in_codecs = info.inputs.iter().map(|p| codec(p, "input")).collect::<Result<_, _>>()?;
+    let out_codecs = info.outputs.iter().map(|p| codec(p, "output")).collect::<Result<_, _>>()?;
+    let fns = KindFns { check: k.check, create: k.create, process: k.process, destroy: k.destroy };
+    Ok(PluginKind { info, fns, in_codecs, out_codecs, library: None })
+}
+
+/// Reads a table into kinds: checks the ABI, copies the descriptions, finds the codecs.
+/// `table` must be a plugin entry point's result (or an in-binary `export::Table`'s).
+pub fn read_table(path: &Path, table: &SfPlugin, codecs: &Codecs) -> Result<Vec<PluginKind>, PluginError> {
+    check_abi(path, table)?;
+    let origin = path.display().to_string();
+    // SAFETY: the kinds array of the checked table.
+    let raw_kinds = unsafe { items(table.kinds, table.n_kinds) };
+    if raw_kinds.is_empty() {
+        return Err(PluginError::Invalid { path: path.to_path_buf(), problem: "it exports no kinds".into() });
+    }
+    let mut kinds: Vec<PluginKind> = Vec::with_capacity(raw_kinds.len());
+    for k in raw_kinds {
+        let kind = read_kind(path, &origin, k, codecs)?;
+        if kinds.iter().any(|o| o.info.name == kind.info.name) {
+            return Err(PluginError::DuplicateKind { path: path.to_path_buf(), kind: kind.info.name.to_string(), existing: origin });
+        }
+        kinds.push(kind);
+    }
+    Ok(kinds)
+}
+
+/// Registers kinds read from `path` (all or none); returns their names.
+pub fn register_kinds(path: &Path, kinds: Vec<PluginKind>, registry: &mut Registry) -> Result<Vec<String>, PluginError> {
+    for k in &kinds {
+        if let Some(f) = registry.get(&k.info.name) {
+            let existing = f.info().origin.to_string();
+            return Err(PluginError::DuplicateKind { path: path.to_path_buf(), kind: k.info.name.to_string(), existing });
+        }
+    }
+    let names: Vec<String> = kinds.iter().map(|k| k.info.name.to_string()).collect();
+    for k in kinds {
+        registry
+            .register(Arc::new(PluginFactory(Arc::new(k))))
+            .map_err(|d| PluginError::DuplicateKind { path: path.to_path_buf(), kind: d.kind, existing: d.existing_origin })?;
+    }
+    Ok(names)
+}
+
+/// Loads the plugin at `path` and registers its kinds (all or none).
+pub fn load(path: &Path, registry: &mut Registry, codecs: &Codecs) -> Result<Loaded, PluginError> {
+    if !path.is_file() {
+        return Err(PluginError::Missing { path: path.to_path_buf() });
+    }
+    let lib = open_copy(path)?;
+    // SAFETY: the symbol, when present, is the SDK's entry point with this signature (the
+    // name is reserved for it); a library exporting it otherwise is not a skinflow plugin and
+    // the ABI checks below reject what they can.
+    let entry: EntryFn = match unsafe { lib.get::<EntryFn>(ENTRY_SYMBOL) } {
+        Ok(sym) => *sym,
+        Err(_) => return Err(PluginError::NotAPlugin { path: path.to_path_buf() }),
+    };
+    // SAFETY: the entry point never unwinds (it catches panics) and returns a pointer to a
+    // table that lives as long as the library, or null.
+    let table = unsafe { entry() };
+    if table.is_null() {
+        return Err(PluginError::Entry { path: path.to_path_buf() });
+    }
+    // SAFETY: non-null and static in the library. Only the two leading fields, which never
+    // move between ABI versions, are read until the version is known to match.
+    let head = unsafe { std::ptr::read(table.cast::<[u32; 2]>()) };
+    if head[0] != ABI_VERSION {
+        return Err(PluginError::AbiVersion { path: path.to_path_buf(), found: head[0], expected: ABI_VERSION });
+    }
+    // SAFETY: same version, so the table has this layout (sizes are checked by read_table).
+    let t: &SfPlugin = unsafe { &*table };
+    let mut kinds = read_table(path, t, codecs)?;
+    let library = Arc::new(PluginLibrary {
+        path: path.to_path_buf(),
+        name: text(path, "the plugin name", t.name)?,
+        version: text(path, "the plugin version", t.version)?,
+        _lib: lib,
+    });
+    for k in &mut kinds {
+        k.library = Some(library.clone());
+    }
+    let names = register_kinds(path, kinds, registry)?;
+    tracing::info!(plugin = %library.name, version = %library.version, path = %path.display(), kinds = ?names, "plugin loaded");
+    Ok(Loaded { library, kinds: names })
+}
+
+/// Loads every plugin in order; stops at the first failure.
+pub fn load_all(paths: &[PathBuf], registry: &mut Registry, codecs: &Codecs) -> Result<Vec<Loaded>, PluginError> {
+    paths.iter().map(|p| load(p, registry, codecs)).collect()
+}

@@ -1,0 +1,11 @@
+//! The host side (feature `host`): [`load`] a plugin library into a
+//! [`skinflow_core::Registry`], with [`Codecs`] that turn payloads into columns and back.
+//! Plugin kinds then build [`HostedNode`]s, ordinary engine processors.
+
+mod codec;
+mod load;
+mod node;
+
+pub use codec::{Codec, Codecs, MakeCodec};
+pub use load::{Loaded, PluginError, PluginLibrary, load, load_all, read_table, register_kinds};
+pub use node::{HostedNode, KindFns, PluginFactory, PluginKind};

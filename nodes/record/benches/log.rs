@@ -64,7 +64,38 @@ fn log_eit(c: &mut Criterion) {
         );
     }
     group.finish();
+    // Criterion reports wall time, which on a shared machine includes time spent waiting for a
+    // core; the logger thread's cost is its CPU time, printed here from /proc (Linux only).
+    for level in [1u8, 4] {
+        let opts = WriterOptions {
+            deflate_level: level,
+            overwrite: true,
+            ..WriterOptions::new(PAPER_100MM_TOML)
+        };
+        let Some(cpu0) = process_cpu_s() else { break };
+        let n = 10 * FRAMES;
+        let mut w = RecordingWriter::create(dir.join("cpu.h5"), &opts).unwrap();
+        for i in 0..n {
+            w.append_eit(i as f64 * 1e-3, i as u64, &pool[i % pool.len()])
+                .unwrap();
+        }
+        w.close().unwrap();
+        if let Some(cpu) = process_cpu_s().map(|c| c - cpu0).filter(|c| *c > 0.0) {
+            println!(
+                "deflate {level}: {n} frames in {cpu:.2} s of CPU time = {:.0} frames per CPU-second",
+                n as f64 / cpu
+            );
+        }
+    }
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// User + system CPU time of this process, in seconds (clock ticks of 1/100 s).
+fn process_cpu_s() -> Option<f64> {
+    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
+    let fields: Vec<&str> = stat.rsplit(')').next()?.split_whitespace().collect();
+    let ticks = fields.get(11)?.parse::<f64>().ok()? + fields.get(12)?.parse::<f64>().ok()?;
+    Some(ticks / 100.0)
 }
 
 criterion_group!(benches, log_eit);

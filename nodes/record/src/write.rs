@@ -134,7 +134,9 @@ impl RecordingWriter {
             path: part.map_or_else(|| base.clone(), |i| part_path(&base, i)),
             base,
             eit_width,
-            flush_interval: Duration::from_secs_f64(opts.flush_interval_s),
+            // Validated finite and > 0; absurdly long intervals saturate instead of panicking.
+            flush_interval: Duration::try_from_secs_f64(opts.flush_interval_s)
+                .unwrap_or(Duration::MAX),
             part,
             file: None,
             reference: None,

@@ -1,3 +1,4 @@
 //! Whole-binary tests: run / check / calibrate / eval on small fixtures.
 
+mod cli;
 mod engine;

@@ -1,0 +1,149 @@
+//! Whole-binary tests of simulate, inspect, calibrate, eval and a replayed pipeline graph, on
+//! small fixture scenes (tests/fixtures). Each test works in its own temporary directory and
+//! points the reconstruction-matrix cache there.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn bin() -> &'static str {
+    env!("CARGO_BIN_EXE_skinflow")
+}
+
+fn fixture(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures").join(name)
+}
+
+/// A fresh directory under the system temp dir, unique per test.
+fn workdir(test: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("skinflow-cli-{}-{test}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn skinflow(dir: &Path, args: &[&str]) -> Output {
+    Command::new(bin()).args(args).current_dir(dir).env("XDG_CACHE_HOME", dir.join("cache")).env("RUST_LOG", "warn").output().unwrap()
+}
+
+fn ok(out: &Output) -> String {
+    let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
+    assert!(out.status.success(), "exit {:?}\nstdout:\n{stdout}\nstderr:\n{}", out.status, String::from_utf8_lossy(&out.stderr));
+    stdout
+}
+
+fn simulate(dir: &Path, scene: &str, out: &str) {
+    ok(&skinflow(dir, &["simulate", fixture(scene).to_str().unwrap(), "--out", out, "--seed", "3"]));
+}
+
+#[test]
+fn simulate_then_inspect_reports_streams_and_truth_coverage() {
+    let d = workdir("inspect");
+    simulate(&d, "tiny-eval.toml", "rec.h5");
+    let text = ok(&skinflow(&d, &["inspect", "rec.h5"]));
+    assert!(text.contains("skinflow-recording v1"), "{text}");
+    for stream in ["/eit", "/pressure", "/truth"] {
+        assert!(text.contains(stream), "{stream} missing:\n{text}");
+    }
+    assert!(text.contains("0 frames lost"), "{text}");
+}
+
+#[test]
+fn calibrate_then_eval_writes_the_contract_json() {
+    let d = workdir("eval");
+    simulate(&d, "tiny-calibration.toml", "cal.h5");
+    simulate(&d, "tiny-eval.toml", "test.h5");
+    let table = ok(&skinflow(&d, &["calibrate", "cal.h5", "--out", "calib.toml"]));
+    assert!(table.contains("Signal-force correlation"), "{table}");
+    assert!(table.contains("Pneumatic pressure"), "{table}");
+    let calib = std::fs::read_to_string(d.join("calib.toml")).unwrap();
+    assert!(calib.contains("sha256:"), "provenance hash missing");
+
+    let report = ok(&skinflow(&d, &["eval", "test.h5", "--calib", "calib.toml", "--json", "eval.json"]));
+    assert!(report.contains("Pneumatic-LocAware"), "{report}");
+    let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(d.join("eval.json")).unwrap()).unwrap();
+    assert!(v["frames"].as_u64().unwrap() > 0);
+    for s in ["pneumatic-locaware", "pneumatic-nocal", "eit-nocal", "eit-locaware"] {
+        let st = &v["strategies"][s];
+        for key in ["rmse_n", "rmse_sd_n", "per_diameter_rmse_n", "relative_error_pct", "latency_us_p50", "latency_us_p99"] {
+            assert!(st.get(key).is_some(), "strategies.{s}.{key} missing: {v}");
+        }
+    }
+    for key in ["mean_mm", "sd_mm", "matched", "missed", "spurious"] {
+        assert!(v["localization"].get(key).is_some(), "localization.{key} missing");
+    }
+    assert!(v["multi_contact"]["frames"].as_u64().unwrap() > 0, "the fixture has a two-contact case: {v}");
+    assert!(v["resolution"].get("res50_pct").is_some());
+    let rmse = v["strategies"]["pneumatic-locaware"]["rmse_n"].as_f64().unwrap();
+    assert!(rmse.is_finite() && rmse >= 0.0);
+}
+
+#[test]
+fn eval_refuses_a_recording_without_truth() {
+    let d = workdir("notruth");
+    simulate(&d, "tiny-eval.toml", "rec.h5");
+    // Re-record EIT and pressure only, through a replay -> logger graph.
+    let graph = "[graph]\nmode = \"lockstep\"\n\
+        [[node]]\nid = \"replay\"\nkind = \"replay\"\nparams = { path = \"rec.h5\", speed = 0.0 }\n\
+        [[node]]\nid = \"log\"\nkind = \"hdf5_logger\"\nparams = { path = \"bare.h5\" }\n\
+        [[edge]]\nfrom = \"replay.eit\"\nto = \"log.eit\"\n\
+        [[edge]]\nfrom = \"replay.pressure\"\nto = \"log.pressure\"\n";
+    std::fs::write(d.join("strip.toml"), graph).unwrap();
+    ok(&skinflow(&d, &["run", "strip.toml"]));
+    let out = skinflow(&d, &["eval", "bare.h5", "--calib", fixture("../../graphs/calib/paper.toml").to_str().unwrap()]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("bare.h5") && err.contains("no ground truth"), "{err}");
+}
+
+#[test]
+fn replayed_pipeline_logs_derived_streams_without_drops() {
+    let d = workdir("pipeline");
+    simulate(&d, "tiny-eval.toml", "rec.h5");
+    let calib = fixture("../../graphs/calib/paper.toml");
+    let graph = format!(
+        "[graph]\nmode = \"lockstep\"\n\
+        [[node]]\nid = \"replay\"\nkind = \"replay\"\nparams = {{ path = \"rec.h5\", speed = 0.0 }}\n\
+        [[node]]\nid = \"sync\"\nkind = \"sync\"\n\
+        [[node]]\nid = \"recon\"\nkind = \"reconstructor\"\n\
+        [[node]]\nid = \"seg\"\nkind = \"segmenter\"\n\
+        [[node]]\nid = \"split\"\nkind = \"splitter\"\n\
+        [[node]]\nid = \"force\"\nkind = \"corrector\"\nparams = {{ calibration = {calib:?} }}\n\
+        [[node]]\nid = \"log\"\nkind = \"hdf5_logger\"\nparams = {{ path = \"out.h5\", strategies = [\"pneumatic-locaware\"] }}\n\
+        [[edge]]\nfrom = \"replay.eit\"\nto = \"sync.eit\"\n\
+        [[edge]]\nfrom = \"replay.pressure\"\nto = \"sync.pressure\"\n\
+        [[edge]]\nfrom = \"replay.truth\"\nto = \"sync.truth\"\n\
+        [[edge]]\nfrom = \"sync.frame\"\nto = \"recon.frame\"\n\
+        [[edge]]\nfrom = \"recon.image\"\nto = \"seg.image\"\n\
+        [[edge]]\nfrom = \"seg.contacts\"\nto = \"split.contacts\"\n\
+        [[edge]]\nfrom = \"split.split\"\nto = \"force.split\"\n\
+        [[edge]]\nfrom = \"replay.eit\"\nto = \"log.eit\"\ncapacity = 1024\n\
+        [[edge]]\nfrom = \"replay.truth\"\nto = \"log.truth\"\ncapacity = 1024\n\
+        [[edge]]\nfrom = \"seg.contacts\"\nto = \"log.contacts\"\n\
+        [[edge]]\nfrom = \"force.forces\"\nto = \"log.forces\"\n"
+    );
+    std::fs::write(d.join("g.toml"), graph).unwrap();
+    let out = skinflow(&d, &["run", "g.toml", "--stats-json", "stats.json"]);
+    ok(&out);
+    let stats: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(d.join("stats.json")).unwrap()).unwrap();
+    let total_drops: u64 = stats["edges"].as_array().unwrap().iter().map(|e| e["drops"].as_u64().unwrap()).sum();
+    assert_eq!(total_drops, 0, "{stats}");
+    let node = |id: &str| stats["nodes"].as_array().unwrap().iter().find(|n| n["id"] == id).unwrap().clone();
+    // Every EIT frame goes through every stage.
+    let frames = node("recon")["msgs_in"].as_u64().unwrap();
+    assert!(frames > 10);
+    assert_eq!(node("force")["msgs_out"].as_u64().unwrap(), frames);
+    let text = ok(&skinflow(&d, &["inspect", "out.h5"]));
+    assert!(text.contains("/eit") && text.contains("/truth"), "{text}");
+}
+
+#[test]
+fn a_missing_recording_stops_run_before_data_flows() {
+    let d = workdir("missing");
+    let graph = "[[node]]\nid = \"replay\"\nkind = \"replay\"\nparams = { path = \"nope.h5\" }\n\
+        [[node]]\nid = \"sink\"\nkind = \"null\"\n[[edge]]\nfrom = \"replay.eit\"\nto = \"sink.in\"\n";
+    std::fs::write(d.join("g.toml"), graph).unwrap();
+    let out = skinflow(&d, &["run", "g.toml"]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("\"replay\"") && err.contains("nope.h5"), "{err}");
+}

@@ -7,7 +7,7 @@
 //! `ArrayQueue::force_push` does so atomically; each eviction is counted.
 
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicBool, Ordering};
 
 use crossbeam::queue::ArrayQueue;
 use ringbuf::traits::{Consumer, Observer, Producer, Split};
@@ -15,13 +15,11 @@ use ringbuf::{HeapCons, HeapProd, HeapRb};
 
 use crate::graph::{EdgeSpec, Policy};
 use crate::message::Message;
-use crate::stats::EdgeStats;
+use crate::stats::{EdgeStats, bump, raise};
 
 /// State both ends and the runtime see.
 pub(crate) struct EdgeShared {
     pub spec: EdgeSpec,
-    /// Messages in the queue (not counting a head the consumer already peeked).
-    pub len: AtomicUsize,
     /// Set by a producer that found this (block) edge full; the consumer wakes it after a pop.
     pub producer_waiting: AtomicBool,
     pub stats: EdgeStats,
@@ -53,7 +51,6 @@ pub(crate) struct EdgeRx {
 /// Creates both ends of an edge.
 pub(crate) fn edge(spec: EdgeSpec) -> (EdgeTx, EdgeRx) {
     let shared = Arc::new(EdgeShared {
-        len: AtomicUsize::new(0),
         producer_waiting: AtomicBool::new(false),
         stats: EdgeStats::default(),
         spec,
@@ -93,46 +90,36 @@ impl EdgeTx {
 
     /// Pushes; the caller checked `has_space` for block edges. Returns false if a block edge was
     /// full after all (the message is then counted as dropped, never silently lost).
+    /// Statistics are written by this end only, without locked instructions.
     pub fn push(&mut self, msg: Message) -> bool {
-        let s = &self.shared;
-        let ok = match &mut self.q {
+        let s = &self.shared.stats;
+        let depth = match &mut self.q {
             Tx::Spsc(p) => match p.try_push(msg) {
-                Ok(()) => {
-                    s.len.fetch_add(1, Ordering::SeqCst);
-                    true
-                }
+                Ok(()) => p.occupied_len(),
                 Err(_) => {
-                    s.stats.dropped_full.fetch_add(1, Ordering::Relaxed);
-                    false
+                    bump(&s.dropped_full, 1);
+                    return false;
                 }
             },
             Tx::Latest(q) => {
                 if q.force_push(msg).is_some() {
-                    s.stats.dropped_full.fetch_add(1, Ordering::Relaxed);
-                } else {
-                    s.len.fetch_add(1, Ordering::SeqCst);
+                    bump(&s.dropped_full, 1);
                 }
-                true
+                q.len()
             }
         };
-        if ok {
-            s.stats.pushed.fetch_add(1, Ordering::Relaxed);
-            s.stats.max_depth.fetch_max(s.len.load(Ordering::Relaxed), Ordering::Relaxed);
-        }
-        ok
+        bump(&s.pushed, 1);
+        raise(&s.max_depth, depth);
+        true
     }
 }
 
 impl EdgeRx {
     fn pop_raw(&mut self) -> Option<Message> {
-        let m = match &mut self.q {
+        match &mut self.q {
             Rx::Spsc(c) => c.try_pop(),
             Rx::Latest(q) => q.pop(),
-        };
-        if m.is_some() {
-            self.shared.len.fetch_sub(1, Ordering::SeqCst);
         }
-        m
     }
 
     /// The next message without taking it.
@@ -154,7 +141,11 @@ impl EdgeRx {
 
     /// Messages queued, including a peeked head.
     pub fn pending(&self) -> usize {
-        self.shared.len.load(Ordering::SeqCst) + usize::from(self.head.is_some())
+        let queued = match &self.q {
+            Rx::Spsc(c) => c.occupied_len(),
+            Rx::Latest(q) => q.len(),
+        };
+        queued + usize::from(self.head.is_some())
     }
 }
 

@@ -48,11 +48,38 @@ fn bucket_range(i: usize) -> (u64, u64) {
     (lo, lo + (1u64 << (msb - SUB_BITS)) - 1)
 }
 
+/// Adds `n` to a counter that only one thread writes at a time (the node's or the edge end's
+/// current owner; ownership moves with happens-before through the scheduler). A plain load
+/// and store: no locked instruction on the hot path. Readers may see a slightly stale value.
+#[inline]
+pub(crate) fn bump(a: &AtomicU64, n: u64) {
+    a.store(a.load(Relaxed).wrapping_add(n), Relaxed);
+}
+
+/// Raises a single-writer maximum (see [`bump`]).
+#[inline]
+pub(crate) fn raise(a: &AtomicUsize, v: usize) {
+    if v > a.load(Relaxed) {
+        a.store(v, Relaxed);
+    }
+}
+
 impl Histogram {
+    /// Records a value; safe with any number of concurrent writers.
     pub fn record(&self, ns: u64) {
         self.buckets[bucket_of(ns)].fetch_add(1, Relaxed);
         self.count.fetch_add(1, Relaxed);
         self.max.fetch_max(ns, Relaxed);
+    }
+
+    /// Records a value when only one thread writes this histogram at a time (see [`bump`]).
+    #[inline]
+    pub(crate) fn record_single_writer(&self, ns: u64) {
+        bump(&self.buckets[bucket_of(ns)], 1);
+        bump(&self.count, 1);
+        if ns > self.max.load(Relaxed) {
+            self.max.store(ns, Relaxed);
+        }
     }
 
     pub fn count(&self) -> u64 {

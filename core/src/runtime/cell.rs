@@ -4,7 +4,6 @@
 
 use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::sync::Arc;
-use std::sync::atomic::Ordering::Relaxed;
 use std::time::Instant;
 
 use crate::edge::{EdgeRx, EdgeTx};
@@ -14,7 +13,7 @@ use crate::io::{Inputs, Outputs};
 use crate::node::{Context, NodeImpl, SourcePoll};
 use crate::params::Params;
 use crate::registry::{BuildContext, NodeFactory};
-use crate::stats::NodeStats;
+use crate::stats::{NodeStats, bump};
 
 /// Wakes nodes made runnable by a push (consumers) or a pop (waiting producers).
 pub(crate) trait Notify {
@@ -117,7 +116,7 @@ impl Cell {
                 }
                 // The oldest head can never be matched: every other input is already past it.
                 if self.take(lo.1, n).is_some() {
-                    self.inputs[lo.1].shared.stats.dropped_unaligned.fetch_add(1, Relaxed);
+                    bump(&self.inputs[lo.1].shared.stats.dropped_unaligned, 1);
                 }
             },
         }
@@ -158,7 +157,7 @@ impl Cell {
                     let mut latest = None;
                     while let Some(m) = self.take(i, n) {
                         if latest.replace(m).is_some() {
-                            self.inputs[i].shared.stats.dropped_coalesced.fetch_add(1, Relaxed);
+                            bump(&self.inputs[i].shared.stats.dropped_coalesced, 1);
                         }
                     }
                     k += u64::from(latest.is_some());
@@ -186,27 +185,27 @@ impl Cell {
         drop(_enter);
         self.in_io.clear();
         let st = &self.stats;
-        st.calls.fetch_add(1, Relaxed);
-        st.msgs_in.fetch_add(taken, Relaxed);
-        st.latency.record(ns);
+        bump(&st.calls, 1);
+        bump(&st.msgs_in, taken);
+        st.latency.record_single_writer(ns);
         if self.deadline_ns.is_some_and(|d| ns > d) {
-            st.deadline_misses.fetch_add(1, Relaxed);
+            bump(&st.deadline_misses, 1);
         }
         let outcome = match result {
             Ok(Ok(SourcePoll::Finished)) => Fired::Finished,
             Ok(Ok(_)) => Fired::Ok,
             Ok(Err(e)) if e.is_fatal() => {
-                st.errors.fetch_add(1, Relaxed);
+                bump(&st.errors, 1);
                 self.dead = true;
                 Fired::Fatal(e)
             }
             Ok(Err(e)) => {
-                st.errors.fetch_add(1, Relaxed);
+                bump(&st.errors, 1);
                 tracing::warn!(node = %self.ctx.id, "{e}");
                 Fired::Ok
             }
             Err(p) => {
-                st.panics.fetch_add(1, Relaxed);
+                bump(&st.panics, 1);
                 let msg = panic_message(p);
                 tracing::error!(node = %self.ctx.id, "panicked: {msg}");
                 self.after_panic(msg)
@@ -229,7 +228,7 @@ impl Cell {
             }) {
                 Ok(imp) => {
                     self.imp = imp;
-                    self.stats.restarts.fetch_add(1, Relaxed);
+                    bump(&self.stats.restarts, 1);
                     tracing::warn!(node = %self.ctx.id, "restarted after panic");
                     return Fired::Ok;
                 }
@@ -248,7 +247,7 @@ impl Cell {
     fn publish(&mut self, n: &dyn Notify) {
         for (port, slot) in self.out_io.slots.iter_mut().enumerate() {
             let Some(msg) = slot.take() else { continue };
-            self.stats.msgs_out.fetch_add(1, Relaxed);
+            bump(&self.stats.msgs_out, 1);
             let Some((last, rest)) = self.outputs[port].split_last_mut() else { continue };
             for tx in rest {
                 if tx.push(msg.clone()) {

@@ -8,7 +8,7 @@ use std::sync::atomic::Ordering::SeqCst;
 use std::time::Instant;
 
 use super::cell::{Cell, Fired, Notify};
-use super::pool::{Exec, Shared};
+use super::pool::{Exec, Shared, take_flag};
 use crate::error::NodeError;
 use crate::graph::Trigger;
 
@@ -20,7 +20,7 @@ impl Notify for NoNotify {
 
 fn run_controls(shared: &Shared, i: usize, cell: &mut Cell) {
     let slot = &shared.slots[i];
-    if slot.has_control.swap(false, SeqCst) {
+    if take_flag(&slot.has_control) {
         while let Some(c) = slot.control.pop() {
             cell.control(&c);
         }

@@ -52,6 +52,13 @@ pub(crate) struct Slot {
     pub stats: Arc<NodeStats>,
 }
 
+/// Clears a flag and says whether it was set. Checks with a plain load first, so the common
+/// case (not set) costs no locked instruction on the hot path.
+#[inline]
+pub(crate) fn take_flag(f: &AtomicBool) -> bool {
+    f.load(std::sync::atomic::Ordering::Acquire) && f.swap(false, SeqCst)
+}
+
 pub(crate) struct Sleeper {
     pub sleeping: AtomicBool,
     pub unparker: Unparker,
@@ -152,12 +159,12 @@ impl Shared {
         let mut cell = slot.cell.take().expect("a queued node's cell is in its slot");
         let mut left = budget;
         loop {
-            if slot.has_control.swap(false, SeqCst) {
+            if take_flag(&slot.has_control) {
                 while let Some(c) = slot.control.pop() {
                     cell.control(&c);
                 }
             }
-            if slot.tick.swap(false, SeqCst) {
+            if take_flag(&slot.tick) {
                 cell.tick = true;
             }
             while left > 0 && cell.ready(n) {
@@ -287,7 +294,7 @@ pub(crate) fn source_loop(shared: &Shared, node: usize) {
         if shared.stop.load(SeqCst) {
             break;
         }
-        if slot.has_control.swap(false, SeqCst) {
+        if take_flag(&slot.has_control) {
             while let Some(c) = slot.control.pop() {
                 cell.control(&c);
             }

@@ -94,7 +94,7 @@ impl DualSystem {
         match *prior {
             Prior::Noser { p } => {
                 let diag = noser_diagonal(j, p);
-                scale_rows(&mut x, &diag)?;
+                scale_rows(&mut x, &diag);
             }
             Prior::Identity => {}
             Prior::Laplacian { epsilon } => {
@@ -209,13 +209,12 @@ pub fn noser_diagonal(j: MatRef<'_, f64>, p: f64) -> Vec<f64> {
 }
 
 /// Divides row e of `x` by `diag[e]`.
-fn scale_rows(x: &mut Mat<f64>, diag: &[f64]) -> Result<(), EitError> {
+fn scale_rows(x: &mut Mat<f64>, diag: &[f64]) {
     for c in 0..x.ncols() {
         for (v, d) in x.col_mut(c).iter_mut().zip(diag) {
             *v /= d;
         }
     }
-    Ok(())
 }
 
 /// R = L + epsilon I over the element adjacency graph (lower triangle stored).

@@ -31,7 +31,8 @@ pub enum Precision {
     /// f64 matrix (default).
     #[default]
     F64,
-    /// f32 matrix and data, half the memory traffic; agrees with f64 to ~1e-6 of the image peak.
+    /// f32 matrix and data: half the memory traffic, about 2x faster per frame; agrees with
+    /// f64 to within 1e-4 of the image peak (tested).
     F32,
 }
 

@@ -54,6 +54,45 @@ fn same_state(a: &[Load], b: &[Load]) -> bool {
         })
 }
 
+/// Largest displacement of an electrode, in standard deviations (keeps it on its side).
+const MISPLACEMENT_CLIP_SD: f64 = 3.0;
+
+/// The sensor as built: each electrode moved along its side by N(0, sd) mm (clipped to 3 sd and
+/// to the side), a pure function of the seed. sd 0 returns the nominal sensor.
+pub fn misplace_electrodes(sensor: &Sensor, sd_mm: f64, seed: u64) -> Sensor {
+    let mut built = sensor.clone();
+    if sd_mm == 0.0 {
+        return built;
+    }
+    let (hx, hy) = sensor.half_extents_mm();
+    let mut rng = stream(seed, Stream::ElectrodePlacement);
+    for e in &mut built.electrodes {
+        let len = e.length_mm();
+        let dir = [
+            (e.end_mm[0] - e.start_mm[0]) / len,
+            (e.end_mm[1] - e.start_mm[1]) / len,
+        ];
+        let mut shift = (sd_mm * normal(&mut rng))
+            .clamp(-MISPLACEMENT_CLIP_SD * sd_mm, MISPLACEMENT_CLIP_SD * sd_mm);
+        // keep both ends on the side (the electrode may not wrap a corner)
+        for p in [e.start_mm, e.end_mm] {
+            for (axis, half) in [(0, hx), (1, hy)] {
+                if dir[axis] != 0.0 {
+                    let moved = p[axis] + shift * dir[axis];
+                    if moved.abs() > half {
+                        shift -= (moved - moved.signum() * half) / dir[axis];
+                    }
+                }
+            }
+        }
+        for p in [&mut e.start_mm, &mut e.end_mm] {
+            p[0] += shift * dir[0];
+            p[1] += shift * dir[1];
+        }
+    }
+    built
+}
+
 #[derive(Debug, Clone)]
 struct CachedState {
     loads: Vec<Load>,
@@ -90,6 +129,7 @@ impl EitChannel {
         seed: u64,
     ) -> Result<EitChannel, EitError> {
         let elements = sim_mesh_elements(profile, sensor, timeline.smallest_diameter_mm());
+        let sensor = &misplace_electrodes(sensor, profile.electrode_misplacement_mm, seed);
         let mesh = Mesh::generate(
             sensor,
             &MeshParams {
@@ -126,7 +166,13 @@ impl EitChannel {
             profile.foam_heterogeneity,
             profile.foam_heterogeneity_length_mm,
         );
-        let compressor = Compressor::new(profile, mesh.element_centroids_mm(), &diameters, &foam);
+        let compressor = Compressor::new(
+            profile,
+            mesh.element_centroids_mm(),
+            &diameters,
+            &foam,
+            seed,
+        );
         let n = compressor.element_count();
         let max_contacts = timeline.max_contacts();
         Ok(EitChannel {
@@ -235,5 +281,63 @@ impl EitChannel {
         entry.last_used = self.clock;
         solution.measurements_into(&self.measurements, &mut entry.values);
         Ok(slot)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn misplaced_electrodes_stay_on_their_side_with_their_length() {
+        let nominal = Sensor::paper_100mm();
+        assert_eq!(misplace_electrodes(&nominal, 0.0, 5), nominal);
+        let built = misplace_electrodes(&nominal, 2.0, 5);
+        let mut moved = 0.0;
+        for (a, b) in nominal.electrodes.iter().zip(&built.electrodes) {
+            assert!((a.length_mm() - b.length_mm()).abs() < 1e-9);
+            for p in [b.start_mm, b.end_mm] {
+                assert!(p[0].abs() <= 50.0 + 1e-9 && p[1].abs() <= 50.0 + 1e-9);
+            }
+            // same side: the coordinate normal to the side is unchanged
+            let along_x = a.start_mm[1] == a.end_mm[1];
+            if along_x {
+                assert_eq!(a.start_mm[1], b.start_mm[1]);
+            } else {
+                assert_eq!(a.start_mm[0], b.start_mm[0]);
+            }
+            moved += (a.centre_mm()[0] - b.centre_mm()[0]).abs()
+                + (a.centre_mm()[1] - b.centre_mm()[1]).abs();
+        }
+        let mean = moved / 16.0;
+        assert!(
+            mean > 0.5 && mean < 4.0,
+            "mean displacement {mean} mm for sd 2 mm"
+        );
+        // a tight sensor: an electrode at a corner cannot be pushed past it
+        let tight = Sensor::from_toml("[sensor]\nwidth_mm = 22.0\nheight_mm = 22.0\nelectrodes_per_side = 1\nelectrode_length_mm = 20.0\n").unwrap();
+        for e in misplace_electrodes(&tight, 5.0, 1).electrodes {
+            for p in [e.start_mm, e.end_mm] {
+                assert!(
+                    p[0].abs() <= 11.0 + 1e-9 && p[1].abs() <= 11.0 + 1e-9,
+                    "{p:?}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn mesh_follows_the_smallest_indenter_within_bounds() {
+        let p = Profile::paper();
+        let s = Sensor::paper_100mm();
+        assert_eq!(sim_mesh_elements(&p, &s, None), p.mesh_min_elements);
+        assert_eq!(sim_mesh_elements(&p, &s, Some(2.0)), p.mesh_max_elements);
+        let fine = Profile {
+            mesh_min_elements: 100,
+            ..p.clone()
+        };
+        assert!(
+            sim_mesh_elements(&fine, &s, Some(10.0)) > sim_mesh_elements(&fine, &s, Some(20.0))
+        );
     }
 }

@@ -2,14 +2,15 @@
 //! the local conductivity. For each contact, the flat indenter's footprint (a disc carrying
 //! force / area) is blurred by a Gaussian of about the foam thickness (load spreads through
 //! the 5 mm layer); the local pressure p compresses the foam by
-//! strain = strain_max * c(x, y) * (1 - exp(-p / p_sat)) (saturating; c is the foam's smooth
-//! random compliance), and Archie's law gives sigma = sigma0 * (1 - strain)^m.
+//! strain = strain_max * c(x, y) * g * (1 - exp(-p / p_sat)) (saturating; c is the foam's smooth
+//! random compliance, g the press's seating factor per load level), and Archie's law gives
+//! sigma = sigma0 * (1 - strain)^m.
 //!
 //! Units: positions mm, pressure kPa (1 N/mm^2 = 1000 kPa), conductivity S/m per element.
 //! `Compressor` precomputes the radial footprint kernel of every diameter a scene uses.
 
 use crate::profile::Profile;
-use crate::randomness::SmoothField;
+use crate::randomness::{SmoothField, Stream, indexed_normal};
 use crate::timeline::Load;
 
 /// Samples of each radial kernel table.
@@ -87,22 +88,27 @@ pub struct Compressor {
     strain_max: f64,
     pressure_sat_kpa: f64,
     archie_exponent: f64,
+    seating_jitter: f64,
+    seed: u64,
     kernels: Vec<RadialKernel>,
     // Per element: centroid (mm) and compliance factor (1 + heterogeneity field)
     centroids_mm: Vec<[f64; 2]>,
     compliance: Vec<f64>,
-    // Scratch: local pressure per element, kPa
+    // Scratch: local pressure per element (kPa) and its seating-weighted sum
     pressure_kpa: Vec<f64>,
+    seated_kpa: Vec<f64>,
 }
 
 impl Compressor {
     /// For elements with these centroids (mm), the indenter diameters a scene uses, and the
-    /// foam's compliance field (relative deviation, zero-mean).
+    /// foam's compliance field (relative deviation, zero-mean); `seed` fixes the per-level
+    /// seating draws.
     pub fn new(
         profile: &Profile,
         centroids_mm: Vec<[f64; 2]>,
         diameters_mm: &[f64],
         foam: &SmoothField,
+        seed: u64,
     ) -> Compressor {
         let blur_mm = profile.foam_thickness_mm * profile.spread_per_thickness;
         let mut kernels: Vec<RadialKernel> = Vec::new();
@@ -121,10 +127,13 @@ impl Compressor {
             strain_max: profile.strain_max,
             pressure_sat_kpa: profile.pressure_sat_kpa,
             archie_exponent: profile.archie_exponent,
+            seating_jitter: profile.foam_seating_jitter,
+            seed,
             kernels,
             centroids_mm,
             compliance,
             pressure_kpa: vec![0.0; n],
+            seated_kpa: vec![0.0; n],
         }
     }
 
@@ -141,25 +150,43 @@ impl Compressor {
     /// diameter was not announced to `new` panics (the simulator announces all of them).
     pub fn conductivity_into(&mut self, loads: &[Load], sigma: &mut [f64]) {
         self.pressure_kpa.fill(0.0);
+        self.seated_kpa.fill(0.0);
         for load in loads {
+            let seating = if self.seating_jitter > 0.0 {
+                (1.0 + self.seating_jitter
+                    * indexed_normal(self.seed, Stream::FoamSeating, u64::from(load.level)))
+                .max(0.0)
+            } else {
+                1.0
+            };
             let k = self
                 .kernels
                 .iter()
                 .find(|k| k.diameter_mm == load.diameter_mm)
                 .expect("every diameter of the timeline has a kernel");
             let n_per_mm2_to_kpa = 1000.0;
-            for (p, c) in self.pressure_kpa.iter_mut().zip(&self.centroids_mm) {
+            let elements = self
+                .pressure_kpa
+                .iter_mut()
+                .zip(&mut self.seated_kpa)
+                .zip(&self.centroids_mm);
+            for ((p, q), c) in elements {
                 let rho = ((c[0] - load.x_mm).powi(2) + (c[1] - load.y_mm).powi(2)).sqrt();
-                *p += n_per_mm2_to_kpa * load.force_n * k.at(rho);
+                let dp = n_per_mm2_to_kpa * load.force_n * k.at(rho);
+                *p += dp;
+                *q += dp * seating;
             }
         }
-        for ((s, p), c) in sigma
+        let elements = sigma
             .iter_mut()
             .zip(&self.pressure_kpa)
-            .zip(&self.compliance)
-        {
-            let strain =
-                (self.strain_max * c * (1.0 - (-p / self.pressure_sat_kpa).exp())).min(STRAIN_CAP);
+            .zip(&self.seated_kpa)
+            .zip(&self.compliance);
+        for (((s, p), q), c) in elements {
+            // pressure-weighted seating factor of the contacts that load this element
+            let seating = if *p > 0.0 { q / p } else { 1.0 };
+            let saturation = 1.0 - (-p / self.pressure_sat_kpa).exp();
+            let strain = (self.strain_max * c * seating * saturation).min(STRAIN_CAP);
             *s = self.sigma0_s_per_m * (1.0 - strain).powf(self.archie_exponent);
         }
     }
@@ -168,7 +195,7 @@ impl Compressor {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::randomness::{Stream, stream};
+    use crate::randomness::stream;
 
     fn load(x: f64, y: f64, d: f64, f: f64) -> Load {
         Load {
@@ -207,7 +234,7 @@ mod tests {
         let p = Profile::ideal();
         let centroids: Vec<[f64; 2]> = vec![[0.0, 0.0], [30.0, 0.0]];
         let field = SmoothField::new(&mut stream(1, Stream::FoamField), 0.0, 10.0);
-        let mut c = Compressor::new(&p, centroids, &[15.0], &field);
+        let mut c = Compressor::new(&p, centroids, &[15.0], &field, 0);
         let mut s = vec![0.0; 2];
         c.conductivity_into(&[], &mut s);
         assert_eq!(s, vec![p.sigma0_s_per_m; 2]);

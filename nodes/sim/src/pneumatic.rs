@@ -10,7 +10,7 @@
 //! Units: kPa (gauge), N, mm, s. Samples must be requested in non-decreasing time.
 
 use crate::profile::Profile;
-use crate::randomness::{Drift, SmoothField, Stream, normal, stream};
+use crate::randomness::{Drift, SmoothField, Stream, indexed_normal, normal, stream};
 use crate::timeline::Load;
 use rand_chacha::ChaCha8Rng;
 use skinflow_eit::Sensor;
@@ -114,8 +114,8 @@ impl Pneumatic {
         if self.seating_jitter == 0.0 {
             return 1.0;
         }
-        let mut rng = stream(self.seed ^ (u64::from(level) << 20), Stream::Seating);
-        (1.0 + self.seating_jitter * normal(&mut rng)).max(0.0)
+        (1.0 + self.seating_jitter * indexed_normal(self.seed, Stream::Seating, u64::from(level)))
+            .max(0.0)
     }
 
     /// Pressure change of the loads with no history (quasi-static, noiseless), kPa.

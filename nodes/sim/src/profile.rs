@@ -30,10 +30,16 @@ pub struct Profile {
     pub foam_heterogeneity: f64,
     /// Correlation length of that field, mm.
     pub foam_heterogeneity_length_mm: f64,
+    /// Relative standard deviation of the foam's compression per load level (how the indenter
+    /// seats and how much liquid a given press expels vary from press to press).
+    pub foam_seating_jitter: f64,
     /// Specific electrode contact impedance, ohm mm^2 (CEM z_l over the electrode's contact face).
     pub contact_impedance_ohm_mm2: f64,
     /// Relative spread of the contact impedance across electrodes (fixed per seed).
     pub contact_impedance_spread: f64,
+    /// Standard deviation of each electrode's displacement along its side from the nominal
+    /// layout, mm (hand-applied silver tape; the reconstruction assumes the nominal layout).
+    pub electrode_misplacement_mm: f64,
     /// Measurement noise: standard deviation relative to each value.
     pub eit_noise_rel: f64,
     /// Measurement noise: absolute standard deviation, V.
@@ -110,11 +116,13 @@ impl Profile {
             strain_max: 0.6,
             pressure_sat_kpa: 40.0,
             archie_exponent: 2.0,
-            foam_heterogeneity: 0.25,
+            foam_heterogeneity: 0.2,
             foam_heterogeneity_length_mm: 20.0,
+            foam_seating_jitter: 0.07,
             contact_impedance_ohm_mm2: 5e4,
             contact_impedance_spread: 0.1,
-            eit_noise_rel: 1e-3,
+            electrode_misplacement_mm: 1.0,
+            eit_noise_rel: 2e-4,
             eit_noise_abs_v: 0.0,
             eit_drift_rel: 2e-3,
             eit_drift_tau_s: 600.0,
@@ -145,7 +153,9 @@ impl Profile {
     pub fn ideal() -> Profile {
         Profile {
             foam_heterogeneity: 0.0,
+            foam_seating_jitter: 0.0,
             contact_impedance_spread: 0.0,
+            electrode_misplacement_mm: 0.0,
             eit_noise_rel: 0.0,
             eit_noise_abs_v: 0.0,
             eit_drift_rel: 0.0,
@@ -194,6 +204,7 @@ impl Profile {
         )?;
         pos("contact_impedance_ohm_mm2", self.contact_impedance_ohm_mm2)?;
         frac("contact_impedance_spread", self.contact_impedance_spread)?;
+        nonneg("electrode_misplacement_mm", self.electrode_misplacement_mm)?;
         nonneg("eit_noise_rel", self.eit_noise_rel)?;
         nonneg("eit_noise_abs_v", self.eit_noise_abs_v)?;
         frac("eit_drift_rel", self.eit_drift_rel)?;

@@ -21,6 +21,8 @@ pub enum Stream {
     PressureNoise = 6,
     PressureDrift = 7,
     Seating = 8,
+    ElectrodePlacement = 9,
+    FoamSeating = 10,
 }
 
 /// The generator of one stream of one seed.
@@ -28,6 +30,16 @@ pub fn stream(seed: u64, s: Stream) -> ChaCha8Rng {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     rng.set_stream(s as u64);
     rng
+}
+
+/// A standard normal draw that is a pure function of (seed, stream, index): per-item
+/// randomness (one draw per load level, say) that does not depend on the order of requests.
+pub fn indexed_normal(seed: u64, s: Stream, index: u64) -> f64 {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    rng.set_stream(s as u64);
+    // 2 words per draw (StandardNormal may use more, but the word position alone fixes it)
+    rng.set_word_pos(u128::from(index) * 64);
+    normal(&mut rng)
 }
 
 /// A standard normal draw.

@@ -13,7 +13,9 @@ use std::sync::OnceLock;
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use serde::Deserialize;
-use skinflow_core::{BuildContext, Context, Inputs, Mode, NodeError, NodeImpl, Outputs, Params, Processor, Registry};
+use skinflow_core::{
+    BuildContext, Context, Inputs, Mode, NodeError, NodeImpl, Outputs, Params, Processor, Registry,
+};
 use skinflow_plugin_sdk::export::{Table, entry, kind};
 use skinflow_plugin_sdk::host::{Codecs, read_table, register_kinds};
 use skinflow_plugin_sdk::{Columns, KindSpec, PluginNode};
@@ -21,7 +23,12 @@ use skinflow_plugin_sdk::{Columns, KindSpec, PluginNode};
 struct BuiltinNoop;
 
 impl Processor for BuiltinNoop {
-    fn process(&mut self, _ctx: &mut Context, _inputs: &Inputs, _out: &mut Outputs) -> Result<(), NodeError> {
+    fn process(
+        &mut self,
+        _ctx: &mut Context,
+        _inputs: &Inputs,
+        _out: &mut Outputs,
+    ) -> Result<(), NodeError> {
         Ok(())
     }
 }
@@ -39,11 +46,15 @@ impl PluginNode for PluginNoop {
         KindSpec::new("bench-noop", "does nothing")
     }
 
-    fn new(_: NoParams) -> Result<Self, String> {
+    fn new(_: NoParams, _: &Path) -> Result<Self, String> {
         Ok(PluginNoop)
     }
 
-    fn process(&mut self, _inputs: &[Columns<'_>], _out: &mut skinflow_plugin_sdk::Outputs) -> Result<(), String> {
+    fn process(
+        &mut self,
+        _inputs: &[Columns<'_>],
+        _out: &mut skinflow_plugin_sdk::Outputs,
+    ) -> Result<(), String> {
         Ok(())
     }
 }
@@ -57,8 +68,16 @@ fn plugin_node() -> Box<dyn Processor> {
     let kinds = read_table(path, table, &Codecs::new()).expect("valid table");
     let mut reg = Registry::new();
     register_kinds(path, kinds, &mut reg).expect("no duplicates");
-    let ctx = BuildContext { base_dir: ".".into(), mode: Mode::Lockstep, node_id: "noop".into() };
-    match reg.get("bench-noop").expect("registered").build(&Params::empty(), &ctx) {
+    let ctx = BuildContext {
+        base_dir: ".".into(),
+        mode: Mode::Lockstep,
+        node_id: "noop".into(),
+    };
+    match reg
+        .get("bench-noop")
+        .expect("registered")
+        .build(&Params::empty(), &ctx)
+    {
         Ok(NodeImpl::Processor(p)) => p,
         _ => panic!("plugin kind did not build a processor"),
     }
@@ -70,9 +89,13 @@ fn bench(c: &mut Criterion) {
     let mut out = Outputs::default();
     let mut g = c.benchmark_group("call");
     let mut builtin: Box<dyn Processor> = Box::new(BuiltinNoop);
-    g.bench_function("noop_builtin", |b| b.iter(|| black_box(&mut builtin).process(&mut ctx, black_box(&inputs), &mut out)));
+    g.bench_function("noop_builtin", |b| {
+        b.iter(|| black_box(&mut builtin).process(&mut ctx, black_box(&inputs), &mut out))
+    });
     let mut plugin = plugin_node();
-    g.bench_function("noop_plugin", |b| b.iter(|| black_box(&mut plugin).process(&mut ctx, black_box(&inputs), &mut out)));
+    g.bench_function("noop_plugin", |b| {
+        b.iter(|| black_box(&mut plugin).process(&mut ctx, black_box(&inputs), &mut out))
+    });
     g.finish();
 }
 

@@ -23,7 +23,10 @@ impl<'a> Columns<'a> {
     /// # Safety
     /// Every pointer in `raw` (type name, column array, names, data) must be valid for `'a`.
     pub unsafe fn from_raw(raw: SfMessage) -> Columns<'a> {
-        Columns { raw, _life: std::marker::PhantomData }
+        Columns {
+            raw,
+            _life: std::marker::PhantomData,
+        }
     }
 
     /// Views a slice of raw messages.
@@ -89,14 +92,18 @@ impl<'a> Columns<'a> {
 
     /// The column called `name`, or an error naming it (allocates only on error).
     pub fn require(&self, name: &str) -> Result<&'a [f64], String> {
-        self.get(name).ok_or_else(|| format!("message \"{}\" has no column \"{name}\"", self.type_name()))
+        self.get(name)
+            .ok_or_else(|| format!("message \"{}\" has no column \"{name}\"", self.type_name()))
     }
 
     /// The single value of column `name`.
     pub fn scalar(&self, name: &str) -> Result<f64, String> {
         match self.require(name)? {
             [v] => Ok(*v),
-            d => Err(format!("column \"{name}\" has {} values, expected 1", d.len())),
+            d => Err(format!(
+                "column \"{name}\" has {} values, expected 1",
+                d.len()
+            )),
         }
     }
 }
@@ -145,7 +152,11 @@ impl ColumnBuf {
         let i = match self.cols.iter().position(|c| c.name == name) {
             Some(i) => i,
             None => {
-                self.cols.push(Col { name, data: Vec::new(), used: false });
+                self.cols.push(Col {
+                    name,
+                    data: Vec::new(),
+                    used: false,
+                });
                 self.cols.len() - 1
             }
         };
@@ -176,10 +187,21 @@ impl ColumnBuf {
     pub fn view(&mut self, type_name: &'static str, default_header: (u64, u64)) -> SfMessage {
         self.raw.clear();
         for c in self.cols.iter().filter(|c| c.used) {
-            self.raw.push(SfColumn { name: SfStr::new(c.name), len: c.data.len(), data: c.data.as_ptr() });
+            self.raw.push(SfColumn {
+                name: SfStr::new(c.name),
+                len: c.data.len(),
+                data: c.data.as_ptr(),
+            });
         }
         let (seq, t_ns) = self.seq.unwrap_or(default_header);
-        SfMessage { present: 1, type_name: SfStr::new(type_name), seq, t_ns, n_cols: self.raw.len(), cols: self.raw.as_ptr() }
+        SfMessage {
+            present: 1,
+            type_name: SfStr::new(type_name),
+            seq,
+            t_ns,
+            n_cols: self.raw.len(),
+            cols: self.raw.as_ptr(),
+        }
     }
 }
 
@@ -199,7 +221,10 @@ mod tests {
         assert_eq!((c.type_name(), c.seq(), c.t_ns()), ("contacts", 7, 70));
         assert_eq!(c.get("x_mm"), Some(&[1.0, -2.5][..]));
         assert_eq!(c.scalar("frame_dp_kpa"), Ok(0.75));
-        assert_eq!(c.require("y_mm").unwrap_err(), "message \"contacts\" has no column \"y_mm\"");
+        assert_eq!(
+            c.require("y_mm").unwrap_err(),
+            "message \"contacts\" has no column \"y_mm\""
+        );
         assert!(c.scalar("x_mm").unwrap_err().contains("2 values"));
     }
 

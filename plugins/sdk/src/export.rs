@@ -6,13 +6,14 @@
 
 use std::ffi::c_void;
 use std::panic::{AssertUnwindSafe, catch_unwind};
+use std::path::Path;
 use std::sync::OnceLock;
 
 use serde::de::DeserializeOwned;
 
 use crate::abi::{
-    ABI_VERSION, CheckFn, CreateFn, DestroyFn, ProcessFn, SfErrorSink, SfKind, SfMessage, SfParam, SfPlugin, SfPort,
-    SfStatus, SfStr,
+    ABI_VERSION, CheckFn, CreateFn, DestroyFn, ProcessFn, SfErrorSink, SfKind, SfMessage, SfParam,
+    SfPlugin, SfPort, SfStatus, SfStr,
 };
 use crate::columns::{ColumnBuf, Columns};
 
@@ -48,28 +49,75 @@ pub struct KindSpec {
 
 impl KindSpec {
     pub fn new(name: &'static str, doc: &'static str) -> KindSpec {
-        KindSpec { name, doc, inputs: Vec::new(), outputs: Vec::new(), params: Vec::new() }
+        KindSpec {
+            name,
+            doc,
+            inputs: Vec::new(),
+            outputs: Vec::new(),
+            params: Vec::new(),
+        }
     }
 
     /// A required input.
-    pub fn input(mut self, name: &'static str, type_name: &'static str, doc: &'static str) -> KindSpec {
-        self.inputs.push(PortDecl { name, type_name, doc, optional: false });
+    pub fn input(
+        mut self,
+        name: &'static str,
+        type_name: &'static str,
+        doc: &'static str,
+    ) -> KindSpec {
+        self.inputs.push(PortDecl {
+            name,
+            type_name,
+            doc,
+            optional: false,
+        });
         self
     }
 
     /// An input the graph may leave unconnected.
-    pub fn optional_input(mut self, name: &'static str, type_name: &'static str, doc: &'static str) -> KindSpec {
-        self.inputs.push(PortDecl { name, type_name, doc, optional: true });
+    pub fn optional_input(
+        mut self,
+        name: &'static str,
+        type_name: &'static str,
+        doc: &'static str,
+    ) -> KindSpec {
+        self.inputs.push(PortDecl {
+            name,
+            type_name,
+            doc,
+            optional: true,
+        });
         self
     }
 
-    pub fn output(mut self, name: &'static str, type_name: &'static str, doc: &'static str) -> KindSpec {
-        self.outputs.push(PortDecl { name, type_name, doc, optional: false });
+    pub fn output(
+        mut self,
+        name: &'static str,
+        type_name: &'static str,
+        doc: &'static str,
+    ) -> KindSpec {
+        self.outputs.push(PortDecl {
+            name,
+            type_name,
+            doc,
+            optional: false,
+        });
         self
     }
 
-    pub fn param(mut self, name: &'static str, ty: &'static str, default: &'static str, doc: &'static str) -> KindSpec {
-        self.params.push(ParamDecl { name, ty, default, doc });
+    pub fn param(
+        mut self,
+        name: &'static str,
+        ty: &'static str,
+        default: &'static str,
+        doc: &'static str,
+    ) -> KindSpec {
+        self.params.push(ParamDecl {
+            name,
+            ty,
+            default,
+            doc,
+        });
         self
     }
 }
@@ -81,7 +129,9 @@ pub struct Outputs {
 
 impl Outputs {
     fn new(n: usize) -> Outputs {
-        Outputs { ports: (0..n).map(|_| ColumnBuf::new()).collect() }
+        Outputs {
+            ports: (0..n).map(|_| ColumnBuf::new()).collect(),
+        }
     }
 
     /// Output port `i` (declaration order). Panics when `i` is not a declared output (the
@@ -104,8 +154,9 @@ pub trait PluginNode: Send + Sized + 'static {
         Ok(())
     }
 
-    /// Builds a node (allocate every buffer here).
-    fn new(params: Self::Params) -> Result<Self, String>;
+    /// Builds a node (allocate every buffer here). Relative paths in params are meant relative
+    /// to `base_dir`, the graph file's directory.
+    fn new(params: Self::Params, base_dir: &Path) -> Result<Self, String>;
 
     /// One call: `inputs` in declaration order (absent ones have `present() == false`).
     fn process(&mut self, inputs: &[Columns<'_>], out: &mut Outputs) -> Result<(), String>;
@@ -162,11 +213,15 @@ unsafe extern "C" fn check<T: PluginNode>(params: SfStr, err: SfErrorSink) -> Sf
     }
 }
 
-unsafe extern "C" fn create<T: PluginNode>(params: SfStr, err: SfErrorSink) -> *mut c_void {
+unsafe extern "C" fn create<T: PluginNode>(
+    params: SfStr,
+    base_dir: SfStr,
+    err: SfErrorSink,
+) -> *mut c_void {
     let r = catch_unwind(|| -> Result<*mut c_void, String> {
-        // SAFETY: the host passes params valid for the call.
-        let p = parse::<T>(unsafe { params_text(params) }?)?;
-        let node = T::new(p)?;
+        // SAFETY: the host passes params and base_dir valid for the call.
+        let (params, base_dir) = unsafe { (params_text(params)?, params_text(base_dir)?) };
+        let node = T::new(parse::<T>(params)?, Path::new(base_dir))?;
         let spec = T::spec();
         let inst = Instance::<T> {
             node,
@@ -200,24 +255,40 @@ unsafe extern "C" fn process<T: PluginNode>(
     // SAFETY: `node` came from `create::<T>` and the host calls one node from one thread at a time.
     let inst = unsafe { &mut *node.cast::<Instance<T>>() };
     if let Some(why) = &inst.poisoned {
-        report(err, &format!("node is unusable after an earlier panic ({why})"));
+        report(
+            err,
+            &format!("node is unusable after an earlier panic ({why})"),
+        );
         return SfStatus::ERROR;
     }
     let r = catch_unwind(AssertUnwindSafe(|| -> Result<(), String> {
-        let raw_in: &[SfMessage] =
-            if n_inputs == 0 { &[] } else { unsafe { std::slice::from_raw_parts(inputs, n_inputs) } };
+        let raw_in: &[SfMessage] = if n_inputs == 0 {
+            &[]
+        } else {
+            unsafe { std::slice::from_raw_parts(inputs, n_inputs) }
+        };
         // SAFETY (above and here): the host passes `n_inputs` messages whose memory is valid for the call.
         let ins = unsafe { Columns::slice_from_raw(raw_in) };
         for p in &mut inst.out.ports {
             p.clear();
         }
         inst.node.process(ins, &mut inst.out)?;
-        let header = ins.iter().find(|c| c.present()).map_or((0, 0), |c| (c.seq(), c.t_ns()));
-        let outs: &mut [SfMessage] =
-            if n_outputs == 0 { &mut [] } else { unsafe { std::slice::from_raw_parts_mut(outputs, n_outputs) } };
+        let header = ins
+            .iter()
+            .find(|c| c.present())
+            .map_or((0, 0), |c| (c.seq(), c.t_ns()));
+        let outs: &mut [SfMessage] = if n_outputs == 0 {
+            &mut []
+        } else {
+            unsafe { std::slice::from_raw_parts_mut(outputs, n_outputs) }
+        };
         // SAFETY (above): the host passes `n_outputs` writable messages for the call.
         for (i, (o, buf)) in outs.iter_mut().zip(&mut inst.out.ports).enumerate() {
-            *o = if buf.is_written() { buf.view(inst.out_types[i], header) } else { SfMessage::ABSENT };
+            *o = if buf.is_written() {
+                buf.view(inst.out_types[i], header)
+            } else {
+                SfMessage::ABSENT
+            };
         }
         Ok(())
     }));
@@ -241,7 +312,9 @@ unsafe extern "C" fn destroy<T: PluginNode>(node: *mut c_void) {
         return;
     }
     // SAFETY: `node` came from `create::<T>` and is destroyed once; a panicking Drop is caught.
-    let _ = catch_unwind(AssertUnwindSafe(|| drop(unsafe { Box::from_raw(node.cast::<Instance<T>>()) })));
+    let _ = catch_unwind(AssertUnwindSafe(|| {
+        drop(unsafe { Box::from_raw(node.cast::<Instance<T>>()) })
+    }));
 }
 
 /// One kind for the table: its spec and monomorphized shims.
@@ -255,7 +328,13 @@ pub struct KindEntry {
 
 /// The table entry of `T` (used by [`export_plugin!`](crate::export_plugin)).
 pub fn kind<T: PluginNode>() -> KindEntry {
-    KindEntry { spec: T::spec(), check: check::<T>, create: create::<T>, process: process::<T>, destroy: destroy::<T> }
+    KindEntry {
+        spec: T::spec(),
+        check: check::<T>,
+        create: create::<T>,
+        process: process::<T>,
+        destroy: destroy::<T>,
+    }
 }
 
 /// The static description of a plugin: the table and the arrays it points into.
@@ -273,7 +352,12 @@ unsafe impl Send for Table {}
 unsafe impl Sync for Table {}
 
 fn port(p: &PortDecl) -> SfPort {
-    SfPort { name: SfStr::new(p.name), type_name: SfStr::new(p.type_name), doc: SfStr::new(p.doc), optional: u32::from(p.optional) }
+    SfPort {
+        name: SfStr::new(p.name),
+        type_name: SfStr::new(p.type_name),
+        doc: SfStr::new(p.doc),
+        optional: u32::from(p.optional),
+    }
 }
 
 impl Table {
@@ -288,7 +372,12 @@ impl Table {
                 .spec
                 .params
                 .iter()
-                .map(|p| SfParam { name: SfStr::new(p.name), ty: SfStr::new(p.ty), default: SfStr::new(p.default), doc: SfStr::new(p.doc) })
+                .map(|p| SfParam {
+                    name: SfStr::new(p.name),
+                    ty: SfStr::new(p.ty),
+                    default: SfStr::new(p.default),
+                    doc: SfStr::new(p.doc),
+                })
                 .collect();
             kinds.push(SfKind {
                 name: SfStr::new(e.spec.name),
@@ -323,7 +412,12 @@ impl Table {
             kinds: kinds.as_ptr(),
             n_kinds: kinds.len(),
         };
-        Table { plugin, _kinds: kinds, _ports: ports, _params: params }
+        Table {
+            plugin,
+            _kinds: kinds,
+            _ports: ports,
+            _params: params,
+        }
     }
 
     pub fn plugin(&self) -> &SfPlugin {
@@ -332,9 +426,19 @@ impl Table {
 }
 
 /// The body of the exported entry point: builds the table once; null if that panicked.
-pub fn entry(cell: &'static OnceLock<Table>, name: &'static str, version: &'static str, kinds: fn() -> Vec<KindEntry>) -> *const SfPlugin {
-    catch_unwind(|| std::ptr::from_ref(cell.get_or_init(|| Table::build(name, version, kinds())).plugin()))
-        .unwrap_or(std::ptr::null())
+pub fn entry(
+    cell: &'static OnceLock<Table>,
+    name: &'static str,
+    version: &'static str,
+    kinds: fn() -> Vec<KindEntry>,
+) -> *const SfPlugin {
+    catch_unwind(|| {
+        std::ptr::from_ref(
+            cell.get_or_init(|| Table::build(name, version, kinds()))
+                .plugin(),
+        )
+    })
+    .unwrap_or(std::ptr::null())
 }
 
 /// Exports plugin kinds: `export_plugin!(name = "my-plugin", kinds = [MySplitter, MyCorrector]);`

@@ -15,8 +15,29 @@ use crate::columns::{ColumnBuf, Columns};
 pub trait Codec: Send {
     /// Writes `msg` as columns into `out` (already cleared).
     fn encode(&mut self, msg: &Message, out: &mut ColumnBuf) -> Result<(), String>;
-    /// Builds the payload of a plugin output from its columns; `inputs` are the call's inputs.
-    fn decode(&mut self, cols: &Columns<'_>, header: Header, inputs: &Inputs) -> Result<Message, String>;
+    /// Builds the payload of a plugin output from its columns.
+    fn decode(&mut self, cols: &Columns<'_>, at: &Decode<'_>) -> Result<Message, String>;
+}
+
+/// What a decoder knows of the call besides the columns.
+pub struct Decode<'a> {
+    /// The output's header (from the plugin, origin = the plugin node).
+    pub header: Header,
+    /// The call's inputs: the provenance to re-attach.
+    pub inputs: &'a Inputs,
+    /// Number of input ports of the kind.
+    pub n_inputs: usize,
+    /// Wall time of the call so far (encoding and the plugin), ns: the stage's `compute_ns`.
+    pub compute_ns: u64,
+}
+
+impl Decode<'_> {
+    /// Every input message of the call, in port then lane order.
+    pub fn input_messages(&self) -> impl Iterator<Item = &Message> {
+        (0..self.n_inputs)
+            .flat_map(|p| self.inputs.iter_port(p))
+            .map(|(_, m)| m)
+    }
 }
 
 /// Makes a codec for one port of one node.
@@ -37,8 +58,14 @@ impl Default for Codecs {
 impl Codecs {
     /// The engine's own payloads: `count` (the toy nodes') as one column `value`.
     pub fn new() -> Codecs {
-        let mut c = Codecs { map: BTreeMap::new() };
-        c.register("count", || Box::new(CountCodec { ring: Recycler::new(256, Count::default) }));
+        let mut c = Codecs {
+            map: BTreeMap::new(),
+        };
+        c.register("count", || {
+            Box::new(CountCodec {
+                ring: Recycler::new(256, Count::default),
+            })
+        });
         c
     }
 
@@ -69,11 +96,14 @@ impl Codec for CountCodec {
         Ok(())
     }
 
-    fn decode(&mut self, cols: &Columns<'_>, header: Header, _inputs: &Inputs) -> Result<Message, String> {
+    fn decode(&mut self, cols: &Columns<'_>, at: &Decode<'_>) -> Result<Message, String> {
         let v = cols.scalar("value")?;
         if !(v.is_finite() && v >= 0.0 && v <= u64::MAX as f64) {
             return Err(format!("column \"value\" = {v} is not a count"));
         }
-        Ok(Message::from_arc(header, self.ring.fill(|c| c.0 = v as u64)))
+        Ok(Message::from_arc(
+            at.header,
+            self.ring.fill(|c| c.0 = v as u64),
+        ))
     }
 }

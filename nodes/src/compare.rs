@@ -1,0 +1,384 @@
+//! Node `compare`: the sink of A/B lanes. One stream fans out into alternative branches (two
+//! splitters, NOSER at two lambdas, a plugin corrector...) whose `forces` come back here on one
+//! `multi` input, aligned by frame sequence (`trigger = "aligned"`). Per lane it reports the
+//! latency from EIT frame to forces (p50/p99 of `Forces::pipeline_ns`, us) and, when the frame
+//! carries ground truth, the force RMSE over contacts matched to the truth and the mean
+//! localization error (CONTRACTS.md section 4 matching, `skinflow_contact::eval`); without truth,
+//! each lane's disagreement with the reference lane (force RMS difference over matched
+//! contacts). Live: a `tracing` info line per lane every `report_s`; at stop: a table on stdout
+//! and, with `json`, the same as JSON. No-load reference frames are not evaluated.
+//!
+//! ```toml
+//! params = { names = ["proportional", "peak-weighted"], report_s = 2.0, json = "../out/ab.json" }
+//! ```
+
+use std::fmt::Write as _;
+use std::path::PathBuf;
+
+use serde::Deserialize;
+use skinflow_contact::eval::match_contacts;
+use skinflow_contact::eval::metrics::MATCH_RADIUS_MM;
+use skinflow_core::params::non_negative;
+use skinflow_core::stats::Histogram;
+use skinflow_core::{
+    BuildContext, Context, Inputs, KindInfo, NodeError, NodeImpl, NodeParams, ParamDoc, ParamError,
+    PortSpec, Registry, Role, Sink, typed,
+};
+
+use crate::payload::Forces;
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CompareParams {
+    /// Lane names in edge order (default: each lane's strategy name, else `lane<i>`).
+    #[serde(default)]
+    pub names: Vec<String>,
+    /// Wall seconds between live report lines; 0 = none.
+    #[serde(default = "default_report_s")]
+    pub report_s: f64,
+    /// Write the final report as JSON here (relative to the graph file).
+    pub json: Option<PathBuf>,
+    /// The lane others are compared with when a frame has no truth.
+    #[serde(default)]
+    pub reference: usize,
+}
+
+fn default_report_s() -> f64 {
+    2.0
+}
+
+impl NodeParams for CompareParams {
+    fn validate(&self) -> Result<(), ParamError> {
+        non_negative("report_s", self.report_s)
+    }
+}
+
+/// Accumulated results of one lane.
+#[derive(Default)]
+struct Lane {
+    name: String,
+    frames: u64,
+    latency: Histogram,
+    sq_err_n2: f64,
+    rel_err_pct: f64,
+    loc_mm: f64,
+    matched: u64,
+    missed: u64,
+    spurious: u64,
+    truth_frames: u64,
+    disagree_sq_n2: f64,
+    disagree_matched: u64,
+}
+
+/// One lane's figures (what the table and the JSON show).
+#[derive(Debug, Clone, PartialEq)]
+pub struct LaneReport {
+    pub name: String,
+    pub frames: u64,
+    pub latency_us_p50: f64,
+    pub latency_us_p99: f64,
+    /// Over matched contacts of frames with truth; NaN without.
+    pub rmse_n: f64,
+    pub relative_error_pct: f64,
+    pub localization_mean_mm: f64,
+    pub matched: u64,
+    pub missed: u64,
+    pub spurious: u64,
+    /// Force RMS difference from the reference lane over frames without truth; NaN without.
+    pub disagreement_rmse_n: f64,
+}
+
+fn ratio(num: f64, den: u64) -> f64 {
+    if den == 0 { f64::NAN } else { num / den as f64 }
+}
+
+impl Lane {
+    fn report(&self) -> LaneReport {
+        LaneReport {
+            name: self.name.clone(),
+            frames: self.frames,
+            latency_us_p50: self.latency.quantile(0.5) as f64 / 1e3,
+            latency_us_p99: self.latency.quantile(0.99) as f64 / 1e3,
+            rmse_n: ratio(self.sq_err_n2, self.matched).sqrt(),
+            relative_error_pct: ratio(self.rel_err_pct, self.matched),
+            localization_mean_mm: ratio(self.loc_mm, self.matched),
+            matched: self.matched,
+            missed: self.missed,
+            spurious: self.spurious,
+            disagreement_rmse_n: ratio(self.disagree_sq_n2, self.disagree_matched).sqrt(),
+        }
+    }
+}
+
+pub struct Compare {
+    // Configuration
+    names: Vec<String>,
+    report_ns: u64,
+    json: Option<PathBuf>,
+    reference: usize,
+    // Internal state
+    lanes: Vec<Lane>,
+    next_report_ns: u64,
+    pred_xy: Vec<(f64, f64)>,
+    truth_xy: Vec<(f64, f64)>,
+}
+
+impl Compare {
+    fn lane(&mut self, i: usize, f: &Forces) -> &mut Lane {
+        while self.lanes.len() <= i {
+            let k = self.lanes.len();
+            let name = self.names.get(k).cloned().unwrap_or_default();
+            self.lanes.push(Lane {
+                name,
+                ..Lane::default()
+            });
+        }
+        let lane = &mut self.lanes[i];
+        if lane.name.is_empty() {
+            lane.name = if f.strategy.is_empty() {
+                format!("lane{i}")
+            } else {
+                f.strategy.clone()
+            };
+        }
+        lane
+    }
+
+    /// Scores one lane's forces against the frame's truth.
+    fn score_truth(&mut self, i: usize, f: &Forces) {
+        let truth = f.split.contacts.image.src.truth.clone();
+        let contacts = &f.split.contacts.contacts;
+        self.pred_xy.clear();
+        self.pred_xy
+            .extend(contacts.iter().map(|c| (c.x_mm, c.y_mm)));
+        self.truth_xy.clear();
+        let t = truth.as_deref().map_or(&[][..], |t| &t.contacts[..]);
+        self.truth_xy.extend(t.iter().map(|c| (c.x_mm, c.y_mm)));
+        let pairs = match_contacts(&self.pred_xy, &self.truth_xy, MATCH_RADIUS_MM);
+        let lane = &mut self.lanes[i];
+        lane.truth_frames += 1;
+        lane.missed += (t.len() - pairs.len()) as u64;
+        lane.spurious += (contacts.len() - pairs.len()) as u64;
+        for p in &pairs {
+            let (est, truth) = (f.forces[p.pred].force_n, t[p.truth].force_n);
+            lane.sq_err_n2 += (est - truth).powi(2);
+            if truth > 0.0 {
+                lane.rel_err_pct += 100.0 * (est - truth).abs() / truth;
+            }
+            lane.loc_mm += p.dist_mm;
+            lane.matched += 1;
+        }
+    }
+
+    /// Scores one lane's forces against the reference lane's (no truth).
+    fn score_disagreement(&mut self, i: usize, f: &Forces, reference: &Forces) {
+        self.pred_xy.clear();
+        self.pred_xy
+            .extend(f.split.contacts.contacts.iter().map(|c| (c.x_mm, c.y_mm)));
+        self.truth_xy.clear();
+        self.truth_xy.extend(
+            reference
+                .split
+                .contacts
+                .contacts
+                .iter()
+                .map(|c| (c.x_mm, c.y_mm)),
+        );
+        let pairs = match_contacts(&self.pred_xy, &self.truth_xy, MATCH_RADIUS_MM);
+        let lane = &mut self.lanes[i];
+        for p in &pairs {
+            lane.disagree_sq_n2 +=
+                (f.forces[p.pred].force_n - reference.forces[p.truth].force_n).powi(2);
+            lane.disagree_matched += 1;
+        }
+    }
+
+    /// Every lane's figures so far.
+    pub fn reports(&self) -> Vec<LaneReport> {
+        self.lanes.iter().map(Lane::report).collect()
+    }
+}
+
+impl Sink for Compare {
+    fn consume(&mut self, ctx: &mut Context, inputs: &Inputs) -> Result<(), NodeError> {
+        let reference = inputs
+            .iter_port(0)
+            .find(|(lane, _)| *lane == self.reference)
+            .and_then(|(_, m)| m.arc::<Forces>());
+        for (i, m) in inputs.iter_port(0) {
+            let f = m.get::<Forces>().ok_or(NodeError::Input {
+                port: "forces".into(),
+                problem: "not forces".into(),
+            })?;
+            let synced = &f.split.contacts.image.src;
+            let lane = self.lane(i, f);
+            if synced.no_load {
+                continue;
+            }
+            lane.frames += 1;
+            lane.latency.record(f.pipeline_ns());
+            if synced.truth.is_some() {
+                self.score_truth(i, f);
+            } else if let Some(r) = reference.as_deref().filter(|_| i != self.reference) {
+                self.score_disagreement(i, f, r);
+            }
+        }
+        if self.report_ns > 0 && ctx.now_ns() >= self.next_report_ns {
+            self.next_report_ns = ctx.now_ns() + self.report_ns;
+            for r in self.reports() {
+                tracing::info!(
+                    node = %ctx.id(), lane = %r.name, frames = r.frames, p50_us = r.latency_us_p50, p99_us = r.latency_us_p99,
+                    rmse_n = r.rmse_n, loc_mm = r.localization_mean_mm, disagreement_n = r.disagreement_rmse_n, "compare"
+                );
+            }
+        }
+        Ok(())
+    }
+
+    fn stop(&mut self, _ctx: &mut Context) -> Result<(), NodeError> {
+        let reports = self.reports();
+        print!("{}", table(&reports));
+        if let Some(p) = &self.json {
+            std::fs::write(p, to_json(&reports)).map_err(|e| NodeError::Path {
+                path: p.clone(),
+                problem: e.to_string(),
+            })?;
+        }
+        Ok(())
+    }
+}
+
+fn num(x: f64, digits: usize) -> String {
+    if x.is_finite() {
+        format!("{x:.digits$}")
+    } else {
+        "-".into()
+    }
+}
+
+/// The end-of-run table (Markdown).
+pub fn table(reports: &[LaneReport]) -> String {
+    let mut s = String::from(
+        "| lane | frames | p50 us | p99 us | RMSE N | rel. err % | loc. mm | matched | missed | spurious | disagreement N |\n|---|---|---|---|---|---|---|---|---|---|---|\n",
+    );
+    for r in reports {
+        let _ = writeln!(
+            s,
+            "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
+            r.name,
+            r.frames,
+            num(r.latency_us_p50, 1),
+            num(r.latency_us_p99, 1),
+            num(r.rmse_n, 3),
+            num(r.relative_error_pct, 1),
+            num(r.localization_mean_mm, 2),
+            r.matched,
+            r.missed,
+            r.spurious,
+            num(r.disagreement_rmse_n, 3)
+        );
+    }
+    s
+}
+
+fn json_num(x: f64) -> String {
+    if x.is_finite() {
+        format!("{x}")
+    } else {
+        "null".into()
+    }
+}
+
+fn json_str(s: &str) -> String {
+    let mut o = String::with_capacity(s.len() + 2);
+    o.push('"');
+    for ch in s.chars() {
+        match ch {
+            '"' => o.push_str("\\\""),
+            '\\' => o.push_str("\\\\"),
+            c if (c as u32) < 0x20 => {
+                let _ = write!(o, "\\u{:04x}", c as u32);
+            }
+            c => o.push(c),
+        }
+    }
+    o.push('"');
+    o
+}
+
+/// The report as JSON: `{"lanes": [{"name": ..., "frames": ..., "latency_us_p50": ..., ...}]}`;
+/// values that cannot be computed are `null`.
+pub fn to_json(reports: &[LaneReport]) -> String {
+    let lanes: Vec<String> = reports
+        .iter()
+        .map(|r| {
+            format!(
+                "    {{\"name\": {}, \"frames\": {}, \"latency_us_p50\": {}, \"latency_us_p99\": {}, \"rmse_n\": {}, \"relative_error_pct\": {}, \"localization_mean_mm\": {}, \"matched\": {}, \"missed\": {}, \"spurious\": {}, \"disagreement_rmse_n\": {}}}",
+                json_str(&r.name),
+                r.frames,
+                json_num(r.latency_us_p50),
+                json_num(r.latency_us_p99),
+                json_num(r.rmse_n),
+                json_num(r.relative_error_pct),
+                json_num(r.localization_mean_mm),
+                r.matched,
+                r.missed,
+                r.spurious,
+                json_num(r.disagreement_rmse_n)
+            )
+        })
+        .collect();
+    format!("{{\n  \"lanes\": [\n{}\n  ]\n}}\n", lanes.join(",\n"))
+}
+
+fn build(p: CompareParams, ctx: &BuildContext) -> Result<NodeImpl, NodeError> {
+    Ok(NodeImpl::Sink(Box::new(Compare {
+        names: p.names,
+        report_ns: (p.report_s * 1e9) as u64,
+        json: p.json.map(|j| ctx.resolve(&j)),
+        reference: p.reference,
+        lanes: Vec::new(),
+        next_report_ns: 0,
+        pred_xy: Vec::with_capacity(16),
+        truth_xy: Vec::with_capacity(16),
+    })))
+}
+
+pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::DuplicateKind> {
+    r.register(typed(
+        KindInfo::new(
+            "compare",
+            Role::Sink,
+            "A/B lanes: per-lane latency and error against truth (or disagreement)",
+        )
+        .input(
+            PortSpec::input::<Forces>("forces", "one edge per lane; use trigger = \"aligned\"")
+                .multi(),
+        )
+        .param(ParamDoc::new(
+            "names",
+            "array of strings",
+            "[]",
+            "lane names in edge order (default: strategy names)",
+        ))
+        .param(ParamDoc::new(
+            "report_s",
+            "float",
+            "2.0",
+            "wall seconds between live report lines; 0 = none",
+        ))
+        .param(ParamDoc::new(
+            "json",
+            "path",
+            "",
+            "write the final report as JSON here",
+        ))
+        .param(ParamDoc::new(
+            "reference",
+            "integer",
+            "0",
+            "lane compared against when a frame has no truth",
+        )),
+        build,
+    ))
+}

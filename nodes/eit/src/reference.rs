@@ -1,7 +1,8 @@
 //! The no-load reference frame for time-difference imaging, and where it came from.
 //!
 //! Precedence: a recorded `/eit/reference` (`from_reference`) or an explicit `tare` replaces
-//! whatever was there; otherwise the mean of the first `n` complete frames (`accumulate`). Frames
+//! whatever was there; otherwise the mean of the first `n` complete frames (`accumulate`), or of
+//! fewer if the no-load period ends first (`finish`). Frames
 //! with a non-finite value are not averaged (they are counted in `skipped`). Allocation happens at
 //! construction only.
 
@@ -153,6 +154,17 @@ mod tests {
             (Some(&[5.0, 6.0][..]), ReferenceSource::Tare)
         );
         assert!(r.tare(&[1.0]).is_err());
+    }
+
+    #[test]
+    fn finish_takes_the_mean_of_the_frames_so_far() {
+        let mut r = ReferenceTracker::new(1, 10).unwrap();
+        assert!(!r.finish());
+        r.accumulate(&[1.0]).unwrap();
+        r.accumulate(&[2.0]).unwrap();
+        assert!(r.finish());
+        assert_eq!(r.reference(), Some(&[1.5][..]));
+        assert_eq!(r.source(), ReferenceSource::MeanOfFirst { frames: 2 });
     }
 
     #[test]

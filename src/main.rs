@@ -64,6 +64,19 @@ enum Cmd {
         #[arg(long = "fault")]
         faults: Vec<String>,
     },
+    /// Reproduce the paper's experiments on the simulated skin and write a Markdown report.
+    Reproduce {
+        /// Output directory (recordings, calibration, JSON, report.md).
+        #[arg(long, default_value = "out/reproduce")]
+        out: PathBuf,
+        /// Directory of the scene files.
+        #[arg(long, default_value = "graphs/scenes")]
+        scenes: PathBuf,
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        #[command(flatten)]
+        pipeline: cmd::pipeline::PipelineArgs,
+    },
     /// Summarise a recording: streams, counts, duration, rates, gaps, truth coverage.
     Inspect { recording: PathBuf },
     /// Fit the force calibration from a single-contact recording with ground truth.
@@ -128,6 +141,7 @@ fn dispatch(cmd: Cmd) -> Result<ExitCode> {
         Cmd::Emulate { scene, seed, fast, dir, faults } => {
             cmd::emulate::run(&scene, seed, fast, dir, &faults, interrupt_flag()?).map(|()| ExitCode::SUCCESS)
         }
+        Cmd::Reproduce { out, scenes, seed, pipeline } => cmd::reproduce::run(&scenes, &out, seed, &pipeline).map(|()| ExitCode::SUCCESS),
         Cmd::Inspect { recording } => cmd::inspect::run(&recording).map(|()| ExitCode::SUCCESS),
         Cmd::Calibrate { recording, out, pipeline } => cmd::calibrate::run(&recording, &out, &pipeline).map(|()| ExitCode::SUCCESS),
         Cmd::Eval { recording, calib, json, plots, pipeline } => {

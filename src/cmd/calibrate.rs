@@ -5,7 +5,7 @@ use std::path::Path;
 
 use anyhow::{Context as _, Result, bail};
 use sha2::{Digest, Sha256};
-use skinflow_contact::correct::{CalibParams, Provenance, calibrate};
+use skinflow_contact::correct::{CalibParams, Calibrated, Provenance, calibrate};
 use skinflow_contact::CalibSample;
 use skinflow_nodes::payload::Contacts;
 use skinflow_record::read::Recording;
@@ -59,7 +59,8 @@ pub fn samples(rows: &[Vec<skinflow_core::Message>]) -> Vec<CalibSample> {
     out
 }
 
-pub fn run(recording: &Path, out: &Path, args: &PipelineArgs) -> Result<()> {
+/// Runs the pipeline over a calibration recording and fits the calibration.
+pub fn fit(recording: &Path, args: &PipelineArgs) -> Result<Calibrated> {
     require_truth(recording)?;
     let spec = args.spec(recording.to_path_buf());
     if args.print_graph {
@@ -75,7 +76,11 @@ pub fn run(recording: &Path, out: &Path, args: &PipelineArgs) -> Result<()> {
         recording_hash: content_hash(recording)?,
         software_version: concat!("skinflow ", env!("CARGO_PKG_VERSION")).to_owned(),
     };
-    let fitted = calibrate(&samples, &CalibParams::default(), provenance).map_err(anyhow::Error::msg)?;
+    calibrate(&samples, &CalibParams::default(), provenance).map_err(anyhow::Error::msg)
+}
+
+pub fn run(recording: &Path, out: &Path, args: &PipelineArgs) -> Result<()> {
+    let fitted = fit(recording, args)?;
     for w in &fitted.warnings {
         eprintln!("warning: {w}");
     }

@@ -5,4 +5,5 @@ pub mod emulate;
 pub mod eval;
 pub mod inspect;
 pub mod pipeline;
+pub mod reproduce;
 pub mod simulate;

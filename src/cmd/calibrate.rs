@@ -10,7 +10,7 @@ use skinflow_contact::CalibSample;
 use skinflow_nodes::payload::Contacts;
 use skinflow_record::read::Recording;
 
-use super::pipeline::PipelineArgs;
+use super::pipeline::{PipelineArgs, Settled};
 
 /// `sha256:<hex>` of a file's bytes.
 pub fn content_hash(path: &Path) -> Result<String> {
@@ -19,8 +19,8 @@ pub fn content_hash(path: &Path) -> Result<String> {
     Ok(format!("sha256:{}", digest.iter().map(|b| format!("{b:02x}")).collect::<String>()))
 }
 
-/// Refuses recordings the pipeline cannot evaluate against truth.
-pub fn require_truth(path: &Path) -> Result<()> {
+/// Refuses recordings the pipeline cannot evaluate against truth; returns the recording.
+pub fn require_truth(path: &Path) -> Result<Recording> {
     let rec = Recording::open(path).map_err(anyhow::Error::msg)?;
     if rec.eit.as_ref().is_none_or(|e| e.is_empty()) {
         bail!("{}: the recording has no EIT frames (/eit/v is missing or empty)", path.display());
@@ -28,14 +28,18 @@ pub fn require_truth(path: &Path) -> Result<()> {
     if rec.truth.as_ref().is_none_or(|t| t.is_empty()) {
         bail!("{}: the recording has no ground truth (/truth/*); calibrate and eval need the true contacts", path.display());
     }
-    Ok(())
+    Ok(rec)
 }
 
-/// One calibration sample per loaded single-contact frame with a detection.
-pub fn samples(rows: &[Vec<skinflow_core::Message>]) -> Vec<CalibSample> {
+/// One calibration sample per settled, loaded single-contact frame with a detection.
+pub fn samples(rows: &[Vec<skinflow_core::Message>], settled: &Settled) -> Vec<CalibSample> {
     let mut out = Vec::new();
     for row in rows {
-        let Some(c) = row.first().and_then(|m| m.get::<Contacts>()) else { continue };
+        let Some(m) = row.first() else { continue };
+        let Some(c) = m.get::<Contacts>() else { continue };
+        if !settled.is_settled(m.header.t_s()) {
+            continue;
+        }
         let synced = &c.image.src;
         let Some(truth) = synced.truth.as_ref() else { continue };
         if synced.no_load || truth.contacts.len() != 1 || !synced.dp_kpa.is_finite() {
@@ -61,13 +65,15 @@ pub fn samples(rows: &[Vec<skinflow_core::Message>]) -> Vec<CalibSample> {
 
 /// Runs the pipeline over a calibration recording and fits the calibration.
 pub fn fit(recording: &Path, args: &PipelineArgs) -> Result<Calibrated> {
-    require_truth(recording)?;
+    let rec = require_truth(recording)?;
+    let settled = Settled::of(&rec, args.all_frames);
+    drop(rec);
     let spec = args.spec(recording.to_path_buf());
     if args.print_graph {
         println!("{}", spec.graph_toml());
     }
     let rows = spec.run().map_err(|e| anyhow::anyhow!("{}: pipeline: {e}", recording.display()))?;
-    let samples = samples(&rows);
+    let samples = samples(&rows, &settled);
     if samples.is_empty() {
         bail!("{}: no loaded single-contact frame with a detected contact to calibrate from", recording.display());
     }

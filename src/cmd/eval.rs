@@ -12,7 +12,7 @@ use skinflow_contact::{Calibration, ImageGrid, Segmenter};
 use skinflow_nodes::payload::{Forces, Image};
 
 use super::calibrate::require_truth;
-use super::pipeline::PipelineArgs;
+use super::pipeline::{PipelineArgs, Settled};
 
 /// (lane name, splitter, corrector strategy, label), in report order: the paper's four, then ours.
 pub const LANES: [(&str, &str, &str, &str); 6] = [
@@ -32,7 +32,9 @@ pub struct EvalOutcome {
 
 /// Runs every lane over the recording and feeds the evaluator.
 pub fn evaluate(recording: &Path, calib: &Path, args: &PipelineArgs) -> Result<EvalOutcome> {
-    require_truth(recording)?;
+    let rec = require_truth(recording)?;
+    let settled = Settled::of(&rec, args.all_frames);
+    drop(rec);
     let mut spec = args.spec(recording.to_path_buf());
     spec.calibration = Some(calib.to_path_buf());
     spec.lanes = LANES.iter().map(|(n, s, c, _)| ((*n).to_owned(), (*s).to_owned(), (*c).to_owned())).collect();
@@ -45,12 +47,17 @@ pub fn evaluate(recording: &Path, calib: &Path, args: &PipelineArgs) -> Result<E
     let mut example: Option<(Arc<Image>, Vec<(f64, f64)>)> = None;
     let mut truth = Vec::new();
     let mut detected = Vec::new();
+    let mut transitions = 0usize;
     for row in &rows {
         let forces: Vec<&Forces> = row.iter().filter_map(|m| m.get::<Forces>()).collect();
         let Some(first) = forces.first() else { continue };
         let contacts = &first.split.contacts;
         let synced = &contacts.image.src;
         if synced.no_load {
+            continue;
+        }
+        if !settled.is_settled(row[0].header.t_s()) {
+            transitions += 1;
             continue;
         }
         truth.clear();
@@ -69,6 +76,9 @@ pub fn evaluate(recording: &Path, calib: &Path, args: &PipelineArgs) -> Result<E
         if better && !contacts.contacts.is_empty() {
             example = Some((contacts.image.clone(), truth.iter().map(|t| (t.x_mm, t.y_mm)).collect()));
         }
+    }
+    if transitions > 0 {
+        eprintln!("{}: {transitions} frames acquired while the load changed were not evaluated (--all-frames includes them)", recording.display());
     }
     Ok(EvalOutcome { evaluator: ev, example })
 }

@@ -20,6 +20,9 @@ pub struct PipelineArgs {
     /// Print the generated pipeline graph and continue.
     #[arg(long)]
     pub print_graph: bool,
+    /// Also use frames acquired while the load changed (see `Settled`).
+    #[arg(long)]
+    pub all_frames: bool,
 }
 
 impl PipelineArgs {
@@ -32,5 +35,35 @@ impl PipelineArgs {
             lanes: Vec::new(),
             calibration: None,
         }
+    }
+}
+
+/// Which frames have a single true load: the truth rows' times and the EIT frame period of a
+/// recording. A frame acquired while the load changed (a truth row starts inside its
+/// acquisition window) mixes two states in one image, so it has no single true force; those
+/// frames are neither calibrated on nor evaluated unless `--all-frames` is given.
+pub struct Settled {
+    truth_t: Vec<f64>,
+    half_period_s: f64,
+    pub all_frames: bool,
+}
+
+impl Settled {
+    pub fn of(rec: &skinflow_record::read::Recording, all_frames: bool) -> Settled {
+        let eit_t = rec.eit.as_ref().map_or(&[][..], |e| &e.t_s[..]);
+        let mut d: Vec<f64> = eit_t.windows(2).map(|w| w[1] - w[0]).filter(|d| *d > 0.0).collect();
+        d.sort_by(f64::total_cmp);
+        let period = d.get(d.len() / 2).copied().unwrap_or(1.0 / 1.3);
+        Settled { truth_t: rec.truth.as_ref().map_or_else(Vec::new, |t| t.t_s.clone()), half_period_s: 0.5 * period, all_frames }
+    }
+
+    /// Whether no truth row starts within the acquisition window of a frame stamped `t_s`.
+    pub fn is_settled(&self, t_s: f64) -> bool {
+        if self.all_frames {
+            return true;
+        }
+        let (lo, hi) = (t_s - self.half_period_s, t_s + self.half_period_s);
+        let i = self.truth_t.partition_point(|&t| t <= lo);
+        self.truth_t.get(i).is_none_or(|&t| t > hi)
     }
 }

@@ -253,3 +253,38 @@ fn a_non_fatal_error_is_counted_and_the_run_goes_on() {
     assert_eq!((s.calls, s.errors, s.msgs_in, s.msgs_out), (6, 6, 6, 0));
     assert!(rows(&dir.join("out.csv")).is_empty());
 }
+
+#[test]
+fn a_graph_dropped_without_wait_stops_its_threads() {
+    let dir = temp_dir("drop");
+    let spec = graph(
+        &dir,
+        r#"
+        [[node]]
+        id = "src"
+        kind = "probe_source"
+        params = { key = "drop-src", count = 1000000000000 }
+        [[node]]
+        id = "s"
+        kind = "offset"
+        [[node]]
+        id = "out"
+        kind = "null"
+        [[edge]]
+        from = "src.out"
+        to = "s.in"
+        [[edge]]
+        from = "s.out"
+        to = "out.in"
+        "#,
+    );
+    let g = RunningGraph::start(&spec).unwrap();
+    kinds::wait_for("the source to run", || probe("drop-src").polls.load(SeqCst) > 10);
+    // Dropping joins the source thread, which stops its node on the way out.
+    within(LIMIT, move || drop(g));
+    let src = probe("drop-src");
+    assert_eq!(src.stops.load(SeqCst), 1, "the source thread was joined");
+    let polls = src.polls.load(SeqCst);
+    std::thread::sleep(Duration::from_millis(20));
+    assert_eq!(src.polls.load(SeqCst), polls, "nothing polls after the drop");
+}

@@ -430,6 +430,33 @@ impl RunningGraph {
     }
 }
 
+/// A graph dropped without [`RunningGraph::wait`] (e.g. the caller bailed out) stops its
+/// threads instead of leaving them running; nodes are not stopped (no flush) in that case.
+impl Drop for RunningGraph {
+    fn drop(&mut self) {
+        if self.sources.is_empty() && self.threads.is_empty() && self.timer.is_none() {
+            return; // waited (or lockstep): nothing is running
+        }
+        self.shared.stop.store(true, SeqCst);
+        self.timer_stop.store(true, SeqCst);
+        self.shared.shutdown.store(true, SeqCst);
+        for h in &self.sources {
+            h.thread().unpark();
+        }
+        for s in &self.shared.sleepers {
+            s.unparker.unpark();
+        }
+        for slot in &self.shared.slots {
+            if let Some(t) = slot.thread.get() {
+                t.unpark();
+            }
+        }
+        for h in self.sources.drain(..).chain(self.threads.drain(..)).chain(self.timer.take()) {
+            let _ = h.join();
+        }
+    }
+}
+
 fn timer_loop(shared: &Shared, periodic: &[(usize, Duration)], stop: &AtomicBool) {
     let start = Instant::now();
     let mut next: Vec<Instant> = periodic.iter().map(|(_, p)| start + *p).collect();

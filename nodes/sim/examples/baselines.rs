@@ -120,11 +120,12 @@ fn quadratic(points: &[(f64, f64)]) -> (impl Fn(f64) -> f64, f64) {
         }
     }
     for c in 0..3 {
-        for r in 0..3 {
+        let pivot_row = a[c];
+        for (r, row) in a.iter_mut().enumerate() {
             if r != c {
-                let f = a[r][c] / a[c][c];
-                for k in c..4 {
-                    a[r][k] -= f * a[c][k];
+                let f = row[c] / pivot_row[c];
+                for (x, pv) in row[c..].iter_mut().zip(&pivot_row[c..]) {
+                    *x -= f * pv;
                 }
             }
         }

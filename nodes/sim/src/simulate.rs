@@ -208,6 +208,22 @@ impl Simulator {
         Ok(Some(EventKind::Eit { t_s: t, seq }))
     }
 
+    /// An EIT frame centred at `t_s`, outside the event stream (probes, benchmarks): the stream
+    /// does not advance, but the noise and drift generators do. Errors without an EIT channel
+    /// only if the forward solve fails; without one, `v` is left untouched.
+    pub fn eit_frame_at_into(&mut self, t_s: f64, v: &mut [f64]) -> Result<(), SimError> {
+        let period = self.frame_period_s();
+        match self.eit.as_mut() {
+            Some(eit) => eit
+                .frame_into(&self.timeline, t_s, period, v)
+                .map_err(|source| SimError::Eit {
+                    scene: self.scene.clone(),
+                    source,
+                }),
+            None => Ok(()),
+        }
+    }
+
     /// The next event as an owned value (allocates for EIT frames and truth rows).
     pub fn next_event(&mut self) -> Result<Option<SimEvent>, SimError> {
         let mut v = vec![0.0; self.measurement_count()];

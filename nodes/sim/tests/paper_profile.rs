@@ -107,11 +107,12 @@ fn least_squares(rows: &[Vec<f64>], y: &[f64], ridge: &[f64]) -> Vec<f64> {
             .max_by(|&i, &j| a[i][c].abs().total_cmp(&a[j][c].abs()))
             .unwrap();
         a.swap(c, piv);
-        for r in 0..p {
+        let pivot_row = a[c].clone();
+        for (r, row) in a.iter_mut().enumerate() {
             if r != c {
-                let f = a[r][c] / a[c][c];
-                for k in c..=p {
-                    a[r][k] -= f * a[c][k];
+                let f = row[c] / pivot_row[c];
+                for (x, pv) in row[c..].iter_mut().zip(&pivot_row[c..]) {
+                    *x -= f * pv;
                 }
             }
         }

@@ -83,7 +83,7 @@ pub(super) fn validate(raw: RawScene, text: &str, at: &Locator<'_>) -> Result<Sc
     let timeline = Timeline {
         segments: builder.segments,
     };
-    if !(timeline.duration_s() > 0.0) {
+    if timeline.duration_s() <= 0.0 {
         return Err(at.error(None, "empty timeline: the steps add up to 0 s".into()));
     }
 

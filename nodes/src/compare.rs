@@ -9,7 +9,7 @@
 //! and, with `json`, the same as JSON. No-load reference frames are not evaluated.
 //!
 //! ```toml
-//! params = { names = ["proportional", "peak-weighted"], report_s = 2.0, json = "../out/ab.json" }
+//! params = { names = ["proportional", "peak-weighted"], report_s = 2.0, json = "../out/ab.json", print = true }
 //! ```
 
 use std::fmt::Write as _;
@@ -41,6 +41,13 @@ pub struct CompareParams {
     /// The lane others are compared with when a frame has no truth.
     #[serde(default)]
     pub reference: usize,
+    /// Print the table on stdout at stop.
+    #[serde(default = "default_print")]
+    pub print: bool,
+}
+
+fn default_print() -> bool {
+    true
 }
 
 fn default_report_s() -> f64 {
@@ -116,6 +123,7 @@ pub struct Compare {
     report_ns: u64,
     json: Option<PathBuf>,
     reference: usize,
+    print: bool,
     // Internal state
     lanes: Vec<Lane>,
     next_report_ns: u64,
@@ -237,7 +245,9 @@ impl Sink for Compare {
 
     fn stop(&mut self, _ctx: &mut Context) -> Result<(), NodeError> {
         let reports = self.reports();
-        print!("{}", table(&reports));
+        if self.print {
+            print!("{}", table(&reports));
+        }
         if let Some(p) = &self.json {
             std::fs::write(p, to_json(&reports)).map_err(|e| NodeError::Path {
                 path: p.clone(),
@@ -337,6 +347,7 @@ fn build(p: CompareParams, ctx: &BuildContext) -> Result<NodeImpl, NodeError> {
         report_ns: (p.report_s * 1e9) as u64,
         json: p.json.map(|j| ctx.resolve(&j)),
         reference: p.reference,
+        print: p.print,
         lanes: Vec::new(),
         next_report_ns: 0,
         pred_xy: Vec::with_capacity(16),

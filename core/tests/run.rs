@@ -622,3 +622,52 @@ fn stats_report_has_the_documented_shape() {
         assert!(text.lines().any(|l| l.starts_with(&format!("{id} "))), "{id} missing from:\n{text}");
     }
 }
+
+/// Counts `node` spans by their `id` field.
+#[derive(Default)]
+struct SpanCounter {
+    spans: std::sync::Mutex<std::collections::BTreeMap<String, u64>>,
+    next: std::sync::atomic::AtomicU64,
+}
+
+struct IdField(String);
+
+impl tracing::field::Visit for IdField {
+    fn record_debug(&mut self, field: &tracing::field::Field, value: &dyn std::fmt::Debug) {
+        if field.name() == "id" {
+            self.0 = format!("{value:?}");
+        }
+    }
+}
+
+impl tracing::Subscriber for SpanCounter {
+    fn enabled(&self, _: &tracing::Metadata<'_>) -> bool {
+        true
+    }
+    fn new_span(&self, span: &tracing::span::Attributes<'_>) -> tracing::span::Id {
+        if span.metadata().name() == "node" {
+            let mut id = IdField(String::new());
+            span.record(&mut id);
+            *self.spans.lock().unwrap().entry(id.0).or_default() += 1;
+        }
+        tracing::span::Id::from_u64(self.next.fetch_add(1, SeqCst) + 1)
+    }
+    fn record(&self, _: &tracing::span::Id, _: &tracing::span::Record<'_>) {}
+    fn record_follows_from(&self, _: &tracing::span::Id, _: &tracing::span::Id) {}
+    fn event(&self, _: &tracing::Event<'_>) {}
+    fn enter(&self, _: &tracing::span::Id) {}
+    fn exit(&self, _: &tracing::span::Id) {}
+}
+
+#[test]
+fn every_node_call_has_a_tracing_span_named_after_the_node() {
+    let dir = temp_dir("spans");
+    let spec = lossless_graph(&dir, Mode::Lockstep);
+    let counter = Arc::new(SpanCounter::default());
+    // Lockstep runs on this thread, so a thread-local subscriber sees every call.
+    let r = tracing::subscriber::with_default(counter.clone(), || run(&spec, &RunOptions::default()).unwrap());
+    let spans = counter.spans.lock().unwrap().clone();
+    for n in &r.stats.nodes {
+        assert_eq!(spans.get(&n.id).copied(), Some(n.calls), "spans of {}: {spans:?}", n.id);
+    }
+}

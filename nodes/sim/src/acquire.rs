@@ -12,6 +12,7 @@
 use crate::compress::Compressor;
 use crate::profile::Profile;
 use crate::randomness::{Drift, Stream, normal, stream};
+use crate::stage::Stage;
 use crate::timeline::{Load, Timeline};
 use rand_chacha::ChaCha8Rng;
 use skinflow_eit::{CemParams, EitError, ForwardModel, Measurement, Mesh, MeshParams, Sensor};
@@ -210,10 +211,12 @@ impl EitChannel {
         self.solves
     }
 
-    /// The frame whose window is centred on `t_s` and lasts `period_s`, into `out` (M values).
+    /// The frame whose window is centred on `t_s` and lasts `period_s`, into `out` (M values);
+    /// contacts land where `stage` puts them.
     pub fn frame_into(
         &mut self,
         timeline: &Timeline,
+        stage: &Stage,
         t_s: f64,
         period_s: f64,
         out: &mut [f64],
@@ -231,6 +234,7 @@ impl EitChannel {
         for b in 0..EIT_BLOCKS {
             let tb = start + (b as f64 + 0.5) * period_s / EIT_BLOCKS as f64;
             hint = timeline.loads_into(tb, hint, &mut self.block_loads);
+            stage.place(&mut self.block_loads);
             let slot = self.solved()?;
             let (lo, hi) = (b * m / EIT_BLOCKS, (b + 1) * m / EIT_BLOCKS);
             out[lo..hi].copy_from_slice(&self.cache[slot].values[lo..hi]);

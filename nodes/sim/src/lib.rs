@@ -14,6 +14,7 @@ pub mod profile;
 pub mod randomness;
 pub mod scene;
 pub mod simulate;
+pub mod stage;
 pub mod timeline;
 pub mod truth;
 

@@ -11,6 +11,14 @@ use serde::{Deserialize, Serialize};
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Profile {
+    // ---- test stage: where contacts land relative to where they were commanded
+    /// Standard deviation of the sensor's offset under the stage, per axis, mm (fixed per seed).
+    pub stage_offset_mm: f64,
+    /// Standard deviation of the sensor's rotation under the stage, degrees (fixed per seed).
+    pub stage_rotation_deg: f64,
+    /// Standard deviation of each press's landing position, per axis, mm (stage repeatability).
+    pub stage_repeatability_mm: f64,
+
     // ---- EIT layer: conductivity of the soaked foam and its response to compression
     /// Conductivity of the unloaded, liquid-filled foam, S/m (saline 125-300 uS/cm in PU foam).
     pub sigma0_s_per_m: f64,
@@ -110,6 +118,9 @@ impl Profile {
     /// The paper's skin (MODEL.md gives the figures these constants achieve).
     pub fn paper() -> Profile {
         Profile {
+            stage_offset_mm: 1.5,
+            stage_rotation_deg: 1.0,
+            stage_repeatability_mm: 0.5,
             sigma0_s_per_m: 0.02,
             foam_thickness_mm: 5.0,
             spread_per_thickness: 0.6,
@@ -152,6 +163,9 @@ impl Profile {
     /// deterministic and smooth, for tests.
     pub fn ideal() -> Profile {
         Profile {
+            stage_offset_mm: 0.0,
+            stage_rotation_deg: 0.0,
+            stage_repeatability_mm: 0.0,
             foam_heterogeneity: 0.0,
             foam_seating_jitter: 0.0,
             contact_impedance_spread: 0.0,
@@ -191,6 +205,9 @@ impl Profile {
                 Err((name, format!("must be in [0, 1) (got {x})")))
             }
         };
+        nonneg("stage_offset_mm", self.stage_offset_mm)?;
+        nonneg("stage_rotation_deg", self.stage_rotation_deg)?;
+        nonneg("stage_repeatability_mm", self.stage_repeatability_mm)?;
         pos("sigma0_s_per_m", self.sigma0_s_per_m)?;
         pos("foam_thickness_mm", self.foam_thickness_mm)?;
         nonneg("spread_per_thickness", self.spread_per_thickness)?;

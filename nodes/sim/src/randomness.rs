@@ -23,6 +23,8 @@ pub enum Stream {
     Seating = 8,
     ElectrodePlacement = 9,
     FoamSeating = 10,
+    StageMount = 11,
+    StageRepeat = 12,
 }
 
 /// The generator of one stream of one seed.

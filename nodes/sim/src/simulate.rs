@@ -2,7 +2,8 @@
 //! then pressure, then EIT). EIT frame k covers [k T, (k+1) T) and is stamped at its middle
 //! (k + 0.5) T, T = 1 / eit_fps; pressure sample j is at j / pressure_hz; truth rows at their
 //! times (see `truth`). Time starts at 0; only events before the scene's end are emitted, and
-//! only the channels the scene asks for are computed.
+//! only the channels the scene asks for are computed. Contacts land where `stage` puts them;
+//! the truth reports the commanded positions.
 //!
 //! `next_into` writes an EIT frame into a caller's buffer (no allocation on static holds);
 //! `next_event` and the `Iterator` impl return owned events for convenience.
@@ -10,6 +11,7 @@
 use crate::acquire::EitChannel;
 use crate::pneumatic::Pneumatic;
 use crate::scene::{Rates, Scene};
+use crate::stage::Stage;
 use crate::timeline::{Load, Timeline};
 use crate::truth::{TruthContact, TruthRow, truth_rows};
 use skinflow_eit::{EitError, Sensor};
@@ -53,6 +55,7 @@ pub struct Simulator {
     sensor: Sensor,
     rates: Rates,
     timeline: Timeline,
+    stage: Stage,
     duration_s: f64,
     scene: String,
     eit: Option<EitChannel>,
@@ -90,6 +93,7 @@ impl Simulator {
             rates: scene.rates,
             truth: truth_rows(&scene.timeline, scene.rates.pressure_hz),
             timeline: scene.timeline.clone(),
+            stage: Stage::new(&scene.profile, seed),
             duration_s: scene.duration_s(),
             scene: scene.name.clone(),
             eit,
@@ -185,6 +189,7 @@ impl Simulator {
         }
         if tp == Some(t) {
             self.hint = self.timeline.loads_into(t, self.hint, &mut self.loads);
+            self.stage.place(&mut self.loads);
             let pn = self
                 .pneumatic
                 .as_mut()
@@ -198,7 +203,7 @@ impl Simulator {
             .eit
             .as_mut()
             .expect("a frame time implies the eit channel");
-        eit.frame_into(&self.timeline, t, period, eit_v)
+        eit.frame_into(&self.timeline, &self.stage, t, period, eit_v)
             .map_err(|source| SimError::Eit {
                 scene: self.scene.clone(),
                 source,
@@ -215,7 +220,7 @@ impl Simulator {
         let period = self.frame_period_s();
         match self.eit.as_mut() {
             Some(eit) => eit
-                .frame_into(&self.timeline, t_s, period, v)
+                .frame_into(&self.timeline, &self.stage, t_s, period, v)
                 .map_err(|source| SimError::Eit {
                     scene: self.scene.clone(),
                     source,

@@ -231,6 +231,9 @@ impl Sink for Compare {
                 self.score_disagreement(i, f, r);
             }
         }
+        if self.report_ns > 0 && self.next_report_ns == 0 {
+            self.next_report_ns = ctx.now_ns() + self.report_ns; // first line after one period
+        }
         if self.report_ns > 0 && ctx.now_ns() >= self.next_report_ns {
             self.next_report_ns = ctx.now_ns() + self.report_ns;
             for r in self.reports() {

@@ -3,6 +3,7 @@
 //! topological order until none is ready. Periodic nodes fire once per step. No pacing, no
 //! races: the same inputs give bit-identical outputs run to run.
 
+use std::cell::Cell as StdCell;
 use std::sync::atomic::AtomicBool;
 use std::sync::atomic::Ordering::SeqCst;
 use std::time::Instant;
@@ -12,10 +13,15 @@ use super::pool::{Exec, Shared, take_flag};
 use crate::error::NodeError;
 use crate::graph::Trigger;
 
-struct NoNotify;
+/// Nodes that may have become runnable since they were last checked: a push gave them input,
+/// or a pop gave them room on a full output. Only these (and nodes with a tick or a rerun
+/// request) are checked, so an idle node costs one flag test per pass.
+struct Dirty(Vec<StdCell<bool>>);
 
-impl Notify for NoNotify {
-    fn notify(&self, _node: usize) {}
+impl Notify for Dirty {
+    fn notify(&self, node: usize) {
+        self.0[node].set(true);
+    }
 }
 
 fn run_controls(shared: &Shared, i: usize, cell: &mut Cell) {
@@ -36,7 +42,7 @@ pub(crate) fn run(shared: &Shared, topo: &[usize], external_stop: &AtomicBool, u
     let sources: Vec<usize> = topo.iter().copied().filter(|&i| shared.slots[i].exec == Exec::Source).collect();
     let others: Vec<usize> = topo.iter().copied().filter(|&i| shared.slots[i].exec != Exec::Source).collect();
     let mut finished = vec![false; cells.len()];
-    let n = NoNotify;
+    let n = Dirty((0..cells.len()).map(|_| StdCell::new(true)).collect());
     loop {
         if external_stop.load(SeqCst) || shared.stop.load(SeqCst) || until.is_some_and(|t| Instant::now() >= t) {
             break;
@@ -94,12 +100,15 @@ pub(crate) fn run(shared: &Shared, topo: &[usize], external_stop: &AtomicBool, u
     }
 }
 
-fn drain(shared: &Shared, cells: &mut [Box<Cell>], order: &[usize], n: &NoNotify) {
+fn drain(shared: &Shared, cells: &mut [Box<Cell>], order: &[usize], n: &Dirty) {
     loop {
         let mut any = false;
         for &i in order {
             let cell = &mut cells[i];
             run_controls(shared, i, cell);
+            if !n.0[i].replace(false) && !cell.tick && !cell.ctx.rerun {
+                continue;
+            }
             while cell.ready(n) {
                 any = true;
                 if let Fired::Fatal(e) = cell.fire(n) {
@@ -107,7 +116,9 @@ fn drain(shared: &Shared, cells: &mut [Box<Cell>], order: &[usize], n: &NoNotify
                 }
             }
         }
-        if !any {
+        // Done when nothing ran and nothing was woken meanwhile (an aligned trigger that
+        // discards a head can free room for its producer without running).
+        if !any && !order.iter().any(|&i| n.0[i].get()) {
             return;
         }
     }

@@ -72,10 +72,12 @@ pub struct Point {
     pub pareto: bool,
 }
 
-/// Every combination of the varied values, as (label, [(node, param, value)]).
-fn combinations(vary: &[Vary]) -> Vec<(String, Vec<(String, String, toml::Value)>)> {
-    let mut out: Vec<(String, Vec<(String, String, toml::Value)>)> =
-        vec![(String::new(), Vec::new())];
+/// The overrides of one variant: (node id, param, value).
+type Overrides = Vec<(String, String, toml::Value)>;
+
+/// Every combination of the varied values, as (label, overrides).
+fn combinations(vary: &[Vary]) -> Vec<(String, Overrides)> {
+    let mut out: Vec<(String, Overrides)> = vec![(String::new(), Vec::new())];
     for v in vary {
         let mut next = Vec::with_capacity(out.len() * v.values.len());
         for (label, set) in &out {

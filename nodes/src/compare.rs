@@ -17,9 +17,8 @@ use std::path::PathBuf;
 
 use serde::Deserialize;
 use skinflow_contact::eval::match_contacts;
-use skinflow_contact::eval::metrics::MATCH_RADIUS_MM;
+use skinflow_contact::eval::metrics::{MATCH_RADIUS_MM, percentile};
 use skinflow_core::params::non_negative;
-use skinflow_core::stats::Histogram;
 use skinflow_core::{
     BuildContext, Context, Inputs, KindInfo, NodeError, NodeImpl, NodeParams, ParamDoc, ParamError,
     PortSpec, Registry, Role, Sink, typed,
@@ -65,7 +64,8 @@ impl NodeParams for CompareParams {
 struct Lane {
     name: String,
     frames: u64,
-    latency: Histogram,
+    /// Per evaluated frame, us (exact percentiles; grows by amortized doubling only).
+    latency_us: Vec<f64>,
     sq_err_n2: f64,
     rel_err_pct: f64,
     loc_mm: f64,
@@ -104,8 +104,8 @@ impl Lane {
         LaneReport {
             name: self.name.clone(),
             frames: self.frames,
-            latency_us_p50: self.latency.quantile(0.5) as f64 / 1e3,
-            latency_us_p99: self.latency.quantile(0.99) as f64 / 1e3,
+            latency_us_p50: percentile(&self.latency_us, 50.0).unwrap_or(f64::NAN),
+            latency_us_p99: percentile(&self.latency_us, 99.0).unwrap_or(f64::NAN),
             rmse_n: ratio(self.sq_err_n2, self.matched).sqrt(),
             relative_error_pct: ratio(self.rel_err_pct, self.matched),
             localization_mean_mm: ratio(self.loc_mm, self.matched),
@@ -138,6 +138,7 @@ impl Compare {
             let name = self.names.get(k).cloned().unwrap_or_default();
             self.lanes.push(Lane {
                 name,
+                latency_us: Vec::with_capacity(4096),
                 ..Lane::default()
             });
         }
@@ -224,7 +225,7 @@ impl Sink for Compare {
                 continue;
             }
             lane.frames += 1;
-            lane.latency.record(f.pipeline_ns());
+            lane.latency_us.push(f.pipeline_ns() as f64 / 1e3);
             if synced.truth.is_some() {
                 self.score_truth(i, f);
             } else if let Some(r) = reference.as_deref().filter(|_| i != self.reference) {

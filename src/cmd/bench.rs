@@ -248,17 +248,20 @@ fn plot(path: &Path, points: &[Point]) -> Result<()> {
     if xy.is_empty() {
         bail!("no point has both a latency and an RMSE (does the recording have truth?)");
     }
-    let pad = |lo: f64, hi: f64| {
+    // Room on the right for the point labels.
+    let pad = |lo: f64, hi: f64, right: f64| {
         let d = (hi - lo).abs().max(hi.abs() * 0.05).max(1e-9);
-        (lo - 0.1 * d, hi + 0.1 * d)
+        (lo - 0.1 * d, hi + right * d)
     };
     let (x0, x1) = pad(
         xy.iter().map(|p| p.0).fold(f64::INFINITY, f64::min),
         xy.iter().map(|p| p.0).fold(f64::NEG_INFINITY, f64::max),
+        0.6,
     );
     let (y0, y1) = pad(
         xy.iter().map(|p| p.1).fold(f64::INFINITY, f64::min),
         xy.iter().map(|p| p.1).fold(f64::NEG_INFINITY, f64::max),
+        0.1,
     );
     let root = BitMapBackend::new(path, (900, 600)).into_drawing_area();
     let err = |e: &dyn std::fmt::Display| anyhow!("{}: {e}", path.display());

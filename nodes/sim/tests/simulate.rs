@@ -215,3 +215,69 @@ fn shipped_scenes_parse() {
     }
     assert!(n >= 5);
 }
+
+/// Mean tared pressure over each truth row that holds at least `min_s`, with its contacts.
+fn holds(scene_name: &str, min_s: f64) -> Vec<(Vec<skinflow_sim::TruthContact>, f64)> {
+    let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/../../graphs/scenes");
+    let mut s = Scene::from_file(format!("{dir}/{scene_name}.toml")).unwrap();
+    s.channels.eit = false;
+    let events = run(&s, 11);
+    let mut truth = Vec::new();
+    let mut p = Vec::new();
+    for e in events {
+        match e {
+            SimEvent::Truth { t_s, contacts } => truth.push((t_s, contacts)),
+            SimEvent::Pressure { t_s, kpa } => p.push((t_s, kpa)),
+            SimEvent::Eit { .. } => {}
+        }
+    }
+    let mean = |a: f64, b: f64| {
+        let v: Vec<f64> = p
+            .iter()
+            .filter(|x| x.0 >= a && x.0 < b)
+            .map(|x| x.1)
+            .collect();
+        v.iter().sum::<f64>() / v.len() as f64
+    };
+    let p0 = mean(0.0, truth[1].0);
+    let mut out = Vec::new();
+    for (i, (t, c)) in truth.iter().enumerate() {
+        let end = truth.get(i + 1).map_or(s.duration_s(), |r| r.0);
+        if !c.is_empty() && end - t >= min_s {
+            out.push((c.clone(), mean(t + 0.5, end) - p0));
+        }
+    }
+    out
+}
+
+#[test]
+fn hard_cases_light_touch_heavy_press_corners() {
+    let h = holds("hard-cases", 2.0);
+    let single = |x: f64, y: f64, f: f64| {
+        h.iter()
+            .find(|(c, _)| c.len() == 1 && c[0].x_mm == x && c[0].y_mm == y && c[0].force_n == f)
+            .unwrap_or_else(|| panic!("no hold at ({x}, {y}) with {f} N"))
+            .1
+    };
+    // a 0.3 N touch is well above the 0.01 kPa sensor noise (averaged over the hold: far above)
+    let touch = single(0.0, 0.0, 0.3);
+    assert!(touch > 0.05, "{touch} kPa");
+    // 12 N reads more than the paper's full calibration range would at the centre
+    let heavy = single(0.0, 0.0, 12.0);
+    assert!(heavy > 30.0 * touch, "{heavy} vs {touch}");
+    // corners are stiffer: 5 N there reads less than half of 12 N at the centre * 5/12
+    for (x, y) in [(-42.0, -42.0), (42.0, -42.0), (42.0, 42.0), (-42.0, 42.0)] {
+        let corner = single(x, y, 5.0);
+        assert!(
+            corner > 0.0 && corner < 0.8 * heavy * 5.0 / 12.0,
+            "corner ({x}, {y}): {corner}"
+        );
+    }
+    // two contacts 14 mm apart: both count
+    let pair = h
+        .iter()
+        .find(|(c, _)| c.len() == 2 && c[0].force_n == 3.0)
+        .unwrap()
+        .1;
+    assert!(pair > 1.5 * single(20.0, -15.0, 0.3) * 10.0, "{pair}");
+}

@@ -7,6 +7,7 @@
 
 mod expand;
 mod parse;
+mod validate;
 
 use crate::profile::Profile;
 use crate::timeline::Timeline;
@@ -101,7 +102,7 @@ impl Scene {
         let at = Locator { text, file };
         let raw: RawScene =
             toml::from_str(text).map_err(|e| at.error(e.span(), e.message().to_owned()))?;
-        expand::validate(raw, text, &at)
+        validate::validate(raw, text, &at)
     }
 
     /// Scene duration, s.

@@ -1,0 +1,207 @@
+//! Validates a parsed scene: profile and `[model]` overrides, sensor, rates, channels, the
+//! no-load start; then hands each step to `expand`. Errors carry the span of the culprit.
+
+use super::expand::{Builder, expand_step, has_contacts};
+use super::parse::RawScene;
+use super::{Channels, Locator, Pacing, Rates, Scene, SceneError};
+use crate::profile::Profile;
+use crate::timeline::Timeline;
+use skinflow_eit::Sensor;
+use toml::Spanned;
+
+const DEFAULT_EIT_FPS: f64 = 1.3;
+const DEFAULT_PRESSURE_HZ: f64 = 20.0;
+pub(super) fn validate(raw: RawScene, text: &str, at: &Locator<'_>) -> Result<Scene, SceneError> {
+    let err = |span: std::ops::Range<usize>, problem: String| at.error(Some(span), problem);
+
+    let (profile_name, mut profile) = match &raw.scene.profile {
+        None => ("paper".to_owned(), Profile::paper()),
+        Some(p) => match Profile::preset(p.get_ref()) {
+            Some(prof) => (p.get_ref().clone(), prof),
+            None => {
+                return Err(err(
+                    p.span(),
+                    format!(
+                        "\"profile\": unknown profile \"{}\" (expected one of {:?})",
+                        p.get_ref(),
+                        Profile::NAMES
+                    ),
+                ));
+            }
+        },
+    };
+    if let Some(model) = &raw.model {
+        profile = override_profile(&profile, model).map_err(|p| err(model.span(), p))?;
+    }
+    profile.validate().map_err(|(field, p)| {
+        err(
+            raw.model.as_ref().map_or(0..0, |m| m.span()),
+            format!("[model] \"{field}\": {p}"),
+        )
+    })?;
+
+    let sensor = match &raw.sensor {
+        None => Sensor::paper_100mm(),
+        Some(table) => {
+            let mut doc = toml::Table::new();
+            doc.insert("sensor".into(), toml::Value::Table(table.get_ref().clone()));
+            let sensor_text =
+                toml::to_string(&doc).map_err(|e| err(table.span(), format!("[sensor]: {e}")))?;
+            Sensor::from_toml(&sensor_text).map_err(|e| err(table.span(), e.to_string()))?
+        }
+    };
+
+    let rates = rates(&raw, &err)?;
+    let channels = channels(&raw, &err)?;
+
+    if raw.step.is_empty() {
+        return Err(at.error(
+            None,
+            "empty timeline: the scene has no [[step]] (hint: start with `[[step]] rest_s = 5.0`)"
+                .into(),
+        ));
+    }
+    let mut builder = Builder::default();
+    for (k, step) in raw.step.iter().enumerate() {
+        let s = step.get_ref();
+        if k == 0 && has_contacts(s) {
+            return Err(err(
+                step.span(),
+                "the first [[step]] must be a no-load period (hint: `[[step]] rest_s = 5.0`), the pipeline tares on it".into(),
+            ));
+        }
+        expand_step(s, step.span(), &sensor, rates.eit_fps, &mut builder, &err)?;
+    }
+    let timeline = Timeline {
+        segments: builder.segments,
+    };
+    if timeline.duration_s() <= 0.0 {
+        return Err(at.error(None, "empty timeline: the steps add up to 0 s".into()));
+    }
+
+    Ok(Scene {
+        name: raw.scene.name.clone().unwrap_or_default(),
+        source: at.file.to_owned(),
+        sensor,
+        profile,
+        profile_name,
+        rates,
+        channels,
+        timeline,
+        toml: text.to_owned(),
+    })
+}
+
+pub(super) type ErrFn<'a> = dyn Fn(std::ops::Range<usize>, String) -> SceneError + 'a;
+
+fn override_profile(base: &Profile, model: &Spanned<toml::Table>) -> Result<Profile, String> {
+    let mut table = toml::Table::try_from(base).map_err(|e| format!("[model]: {e}"))?;
+    for (k, v) in model.get_ref() {
+        if !table.contains_key(k) {
+            return Err(format!(
+                "[model]: unknown constant \"{k}\" (see the fields of Profile in MODEL.md)"
+            ));
+        }
+        // integers written where a float is expected are accepted
+        let v = match (table.get(k), v) {
+            (Some(toml::Value::Float(_)), toml::Value::Integer(i)) => toml::Value::Float(*i as f64),
+            _ => v.clone(),
+        };
+        table.insert(k.clone(), v);
+    }
+    toml::Value::Table(table)
+        .try_into::<Profile>()
+        .map_err(|e| format!("[model]: {}", e.message()))
+}
+
+fn rates(raw: &RawScene, err: &ErrFn<'_>) -> Result<Rates, SceneError> {
+    let mut rates = Rates {
+        eit_fps: DEFAULT_EIT_FPS,
+        pressure_hz: DEFAULT_PRESSURE_HZ,
+        pacing: Pacing::Realtime,
+    };
+    let Some(r) = &raw.rates else {
+        return Ok(rates);
+    };
+    if let Some(v) = &r.eit_fps {
+        rates.eit_fps = positive("eit_fps", v, err)?;
+    }
+    if let Some(v) = &r.pressure_hz {
+        rates.pressure_hz = positive("pressure_hz", v, err)?;
+    }
+    if let Some(p) = &r.pacing {
+        rates.pacing = match p.get_ref().as_str() {
+            "realtime" => Pacing::Realtime,
+            "fast" => Pacing::Fast,
+            other => {
+                return Err(err(
+                    p.span(),
+                    format!("\"pacing\": expected \"realtime\" or \"fast\" (got \"{other}\")"),
+                ));
+            }
+        };
+    }
+    Ok(rates)
+}
+
+fn channels(raw: &RawScene, err: &ErrFn<'_>) -> Result<Channels, SceneError> {
+    let Some(list) = &raw.scene.channels else {
+        return Ok(Channels {
+            eit: true,
+            pressure: true,
+        });
+    };
+    let mut ch = Channels {
+        eit: false,
+        pressure: false,
+    };
+    for c in list.get_ref() {
+        match c.get_ref().as_str() {
+            "eit" => ch.eit = true,
+            "pressure" => ch.pressure = true,
+            other => {
+                return Err(err(
+                    c.span(),
+                    format!(
+                        "\"channels\": unknown channel \"{other}\" (expected \"eit\" or \"pressure\")"
+                    ),
+                ));
+            }
+        }
+    }
+    if !ch.eit && !ch.pressure {
+        return Err(err(
+            list.span(),
+            "\"channels\": at least one of \"eit\", \"pressure\" is needed".into(),
+        ));
+    }
+    Ok(ch)
+}
+
+pub(super) fn positive(name: &str, v: &Spanned<f64>, err: &ErrFn<'_>) -> Result<f64, SceneError> {
+    let x = *v.get_ref();
+    if x.is_finite() && x > 0.0 {
+        Ok(x)
+    } else {
+        Err(err(
+            v.span(),
+            format!("\"{name}\": must be finite and > 0 (got {x})"),
+        ))
+    }
+}
+
+pub(super) fn non_negative(
+    name: &str,
+    v: &Spanned<f64>,
+    err: &ErrFn<'_>,
+) -> Result<f64, SceneError> {
+    let x = *v.get_ref();
+    if x.is_finite() && x >= 0.0 {
+        Ok(x)
+    } else {
+        Err(err(
+            v.span(),
+            format!("\"{name}\": must be finite and >= 0 (got {x})"),
+        ))
+    }
+}

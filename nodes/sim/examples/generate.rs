@@ -4,7 +4,17 @@
 use skinflow_sim::{EventKind, Scene, Simulator};
 use std::time::Instant;
 
-fn main() -> Result<(), Box<dyn std::error::Error>> {
+fn main() -> std::process::ExitCode {
+    match generate() {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("{e}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}
+
+fn generate() -> Result<(), Box<dyn std::error::Error>> {
     let mut args = std::env::args().skip(1);
     let path = args.next().ok_or("usage: generate SCENE.toml [SEED]")?;
     let seed: u64 = args.next().map_or(Ok(0), |s| s.parse())?;

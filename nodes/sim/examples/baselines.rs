@@ -138,13 +138,20 @@ fn quadratic(points: &[(f64, f64)]) -> (impl Fn(f64) -> f64, f64) {
     (f, 1.0 - res / tot)
 }
 
-fn main() {
-    let mut args = std::env::args().skip(1);
-    let seed: u64 = args
-        .next()
-        .map_or(1, |s| s.parse().expect("SEED is an integer"));
-    let overrides: Vec<String> = args.collect();
-    let cal = load("calibration", &overrides);
+/// The EIT-side figures of one seed.
+pub struct EitFigures {
+    pub r2_centre: f64,
+    pub r2_all: f64,
+    pub nocal_rmse_n: f64,
+    pub test_frames: usize,
+    pub localisation_mm: (f64, f64),
+    pub missed: usize,
+    pub calibration_frames: usize,
+}
+
+/// Runs the calibration and cross-diameter scenes through the pipeline (see the module doc).
+pub fn measure(seed: u64, overrides: &[String]) -> EitFigures {
+    let cal = load("calibration", overrides);
     let mut recon = Reconstructor::new(&cal.sensor, &ReconParams::default()).unwrap();
     let cal_samples = samples(&cal, seed, &mut recon);
     // calibration points: hold means of (C, F)
@@ -174,27 +181,46 @@ fn main() {
                 .map(|c| ((c[0] - s.truth[0]).powi(2) + (c[1] - s.truth[1]).powi(2)).sqrt())
         })
         .collect();
-    let missed = cal_samples.len() - errs.len();
     let pe_mean = errs.iter().sum::<f64>() / errs.len() as f64;
     let pe_sd =
         (errs.iter().map(|e| (e - pe_mean).powi(2)).sum::<f64>() / errs.len() as f64).sqrt();
-    let test = samples(&load("cross-diameter", &overrides), seed, &mut recon);
+    let test = samples(&load("cross-diameter", overrides), seed, &mut recon);
     let rmse = (test
         .iter()
         .map(|s| (f_all(s.sum) - s.truth[2]).powi(2))
         .sum::<f64>()
         / test.len() as f64)
         .sqrt();
+    EitFigures {
+        r2_centre,
+        r2_all,
+        nocal_rmse_n: rmse,
+        test_frames: test.len(),
+        localisation_mm: (pe_mean, pe_sd),
+        missed: cal_samples.len() - errs.len(),
+        calibration_frames: cal_samples.len(),
+    }
+}
+
+#[allow(dead_code)] // the pinning test includes this file for `measure`
+fn main() {
+    let mut args = std::env::args().skip(1);
+    let seed: u64 = args
+        .next()
+        .map_or(1, |s| s.parse().expect("SEED is an integer"));
+    let overrides: Vec<String> = args.collect();
+    let f = measure(seed, &overrides);
     println!("seed {seed} overrides {overrides:?}");
     println!(
-        "EIT conductivity-sum R^2: centre {r2_centre:.3} (paper 0.935), all positions {r2_all:.3} (paper 0.781)"
+        "EIT conductivity-sum R^2: centre {:.3} (paper 0.935), all positions {:.3} (paper 0.781)",
+        f.r2_centre, f.r2_all
     );
     println!(
-        "EIT-NoCal RMSE on cross-diameter: {rmse:.3} N over {} frames (paper 1.45 N)",
-        test.len()
+        "EIT-NoCal RMSE on cross-diameter: {:.3} N over {} frames (paper 1.45 N)",
+        f.nocal_rmse_n, f.test_frames
     );
     println!(
-        "localisation on calibration frames: {pe_mean:.2} +- {pe_sd:.2} mm, {missed} of {} frames without contact (paper 4.4 +- 1.9 mm)",
-        cal_samples.len()
+        "localisation on calibration frames: {:.2} +- {:.2} mm, {} of {} frames without contact (paper 4.4 +- 1.9 mm)",
+        f.localisation_mm.0, f.localisation_mm.1, f.missed, f.calibration_frames
     );
 }

@@ -32,6 +32,9 @@ use crate::payload::{EitFrame, PressureSample, SyncedFrame, Truth};
 const DEFAULT_FRAME_PERIOD_S: f64 = 1.0 / 1.3;
 /// Frame intervals kept for the median period.
 const PERIOD_HISTORY: usize = 15;
+/// No-load samples remembered for retraction: more than arrive between a contact's start and
+/// its truth row on any realistic link (20 Hz pressure: over 3 s).
+const P0_RECENT: usize = 64;
 /// Frames waiting for their window to close before the oldest is emitted regardless.
 const MAX_PENDING: usize = 2;
 
@@ -84,6 +87,9 @@ pub struct Sync {
     /// No-load pressure accumulation for P0.
     p0_sum: f64,
     p0_n: u64,
+    /// The latest samples in the P0 sum, so samples that turn out to follow the first contact
+    /// (its truth row may arrive after them) can be taken out again.
+    p0_recent: VecDeque<(f64, f64)>,
     p0_fixed: Option<f64>,
     pending: VecDeque<(Header, Arc<EitFrame>)>,
     last_frame_s: Option<f64>,
@@ -104,6 +110,7 @@ impl Sync {
             first_contact_s: None,
             p0_sum: 0.0,
             p0_n: 0,
+            p0_recent: VecDeque::with_capacity(P0_RECENT + 1),
             p0_fixed: None,
             pending: VecDeque::with_capacity(MAX_PENDING + 2),
             last_frame_s: None,
@@ -149,6 +156,10 @@ impl Sync {
         if self.p0_fixed.is_none() && self.in_no_load(t_s) && kpa.is_finite() {
             self.p0_sum += kpa;
             self.p0_n += 1;
+            self.p0_recent.push_back((t_s, kpa));
+            if self.p0_recent.len() > P0_RECENT {
+                self.p0_recent.pop_front();
+            }
         }
         self.pressure.push_back((t_s, kpa));
     }
@@ -156,6 +167,14 @@ impl Sync {
     fn on_truth(&mut self, t_s: f64, row: Arc<Truth>) {
         if self.first_contact_s.is_none() && !row.contacts.is_empty() {
             self.first_contact_s = Some(t_s);
+            // Samples at or after the first contact are loaded: out of P0.
+            while let Some(&(tp, kpa)) = self.p0_recent.back()
+                && tp >= t_s
+            {
+                self.p0_recent.pop_back();
+                self.p0_sum -= kpa;
+                self.p0_n -= 1;
+            }
         }
         self.truth.push_back((t_s, row));
     }

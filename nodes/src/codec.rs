@@ -224,3 +224,74 @@ impl Codec for ForcesCodec {
         Ok(Message::from_arc(at.header, payload))
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use skinflow_core::Header;
+
+    use super::*;
+    use crate::payload::SyncedFrame;
+
+    #[test]
+    fn contacts_encode_as_per_contact_columns_plus_the_frame_pressure() {
+        let src = Arc::new(SyncedFrame {
+            dp_kpa: 1.5,
+            ..SyncedFrame::default()
+        });
+        let image = Arc::new(Image {
+            src,
+            ..Image::default()
+        });
+        let c = Contact {
+            x_mm: 1.0,
+            y_mm: 2.0,
+            sum: 3.0,
+            area_mm2: 4.0,
+            peak: 5.0,
+            label: 1,
+        };
+        let msg = Message::new(
+            Header {
+                seq: 9,
+                t_ns: 90,
+                origin: 0,
+            },
+            Contacts {
+                image,
+                contacts: vec![c, c],
+                compute_ns: 0,
+            },
+        );
+        let mut buf = ColumnBuf::new();
+        let mut codec = (codecs().get(Contacts::TYPE).expect("registered"))();
+        codec.encode(&msg, &mut buf).unwrap();
+        let raw = buf.view(Contacts::TYPE, (msg.header.seq, msg.header.t_ns));
+        // SAFETY: `raw` points into `buf`, alive and unchanged while `cols` is used.
+        let cols = unsafe { Columns::from_raw(raw) };
+        for (name, v) in [
+            ("x_mm", 1.0),
+            ("y_mm", 2.0),
+            ("sum", 3.0),
+            ("area_mm2", 4.0),
+            ("peak", 5.0),
+        ] {
+            assert_eq!(cols.get(name), Some(&[v, v][..]), "{name}");
+        }
+        assert_eq!(cols.scalar("frame_dp_kpa"), Ok(1.5));
+        assert_eq!((cols.seq(), cols.t_ns()), (9, 90));
+    }
+
+    #[test]
+    fn every_pipeline_payload_has_a_codec() {
+        let c = codecs();
+        for ty in [
+            Image::TYPE,
+            Contacts::TYPE,
+            Split::TYPE,
+            Forces::TYPE,
+            "count",
+        ] {
+            assert!(c.get(ty).is_some(), "{ty}");
+        }
+    }
+}

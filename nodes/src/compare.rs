@@ -397,3 +397,177 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
         build,
     ))
 }
+
+#[cfg(test)]
+mod tests {
+    use std::sync::Arc;
+
+    use skinflow_contact::{Contact, ForceEstimate};
+
+    use super::*;
+    use crate::payload::{Contacts, Image, Split, SyncedFrame, Truth, TruthContact};
+
+    fn contact(x_mm: f64, y_mm: f64) -> Contact {
+        Contact {
+            x_mm,
+            y_mm,
+            sum: 1.0,
+            area_mm2: 50.0,
+            peak: 0.1,
+            label: 1,
+        }
+    }
+
+    /// Forces of `lane` at detected `(x, y, force)`, with `truth` (x, y, force) when given.
+    fn forces(lane: &str, det: &[(f64, f64, f64)], truth: Option<&[(f64, f64, f64)]>) -> Forces {
+        let truth = truth.map(|t| {
+            Arc::new(Truth {
+                contacts: t
+                    .iter()
+                    .map(|&(x_mm, y_mm, force_n)| TruthContact {
+                        x_mm,
+                        y_mm,
+                        force_n,
+                        diameter_mm: 10.0,
+                    })
+                    .collect(),
+            })
+        });
+        let src = Arc::new(SyncedFrame {
+            truth,
+            ..SyncedFrame::default()
+        });
+        let image = Arc::new(Image {
+            src,
+            compute_ns: 100_000,
+            ..Image::default()
+        });
+        let contacts = Arc::new(Contacts {
+            image,
+            contacts: det.iter().map(|&(x, y, _)| contact(x, y)).collect(),
+            compute_ns: 20_000,
+        });
+        let split = Arc::new(Split {
+            contacts,
+            dp_kpa: vec![1.0; det.len()],
+            ..Split::default()
+        });
+        Forces {
+            split,
+            strategy: lane.into(),
+            forces: det
+                .iter()
+                .map(|&(_, _, force_n)| ForceEstimate {
+                    force_n,
+                    ..ForceEstimate::default()
+                })
+                .collect(),
+            compute_ns: 1_000,
+        }
+    }
+
+    fn compare() -> Compare {
+        Compare {
+            names: Vec::new(),
+            report_ns: 0,
+            json: None,
+            reference: 0,
+            print: false,
+            lanes: Vec::new(),
+            next_report_ns: 0,
+            pred_xy: Vec::new(),
+            truth_xy: Vec::new(),
+        }
+    }
+
+    #[test]
+    fn the_kind_builds_a_sink() {
+        let ctx = BuildContext {
+            base_dir: ".".into(),
+            mode: skinflow_core::Mode::Lockstep,
+            node_id: "c".into(),
+        };
+        let p = CompareParams {
+            names: vec![],
+            report_s: 1.0,
+            json: None,
+            reference: 0,
+            print: false,
+        };
+        assert!(matches!(build(p, &ctx), Ok(NodeImpl::Sink(_))));
+    }
+
+    fn feed(c: &mut Compare, i: usize, f: &Forces) {
+        c.lane(i, f).frames += 1;
+        c.lanes[i].latency_us.push(f.pipeline_ns() as f64 / 1e3);
+        c.score_truth(i, f);
+    }
+
+    #[test]
+    fn truth_scoring_matches_contacts_and_pools_errors() {
+        let mut c = compare();
+        let truth = [(0.0, 0.0, 2.0), (30.0, 0.0, 4.0)];
+        // Lane 0: both found, errors +1 N and -1 N, 3 mm off each. Lane 1: one found, one spurious far away.
+        feed(
+            &mut c,
+            0,
+            &forces("a", &[(3.0, 0.0, 3.0), (30.0, 3.0, 3.0)], Some(&truth)),
+        );
+        feed(
+            &mut c,
+            1,
+            &forces("b", &[(0.0, 0.0, 2.5), (-40.0, -40.0, 1.0)], Some(&truth)),
+        );
+        let r = c.reports();
+        assert_eq!(r[0].name, "a");
+        assert_eq!((r[0].matched, r[0].missed, r[0].spurious), (2, 0, 0));
+        assert!((r[0].rmse_n - 1.0).abs() < 1e-12);
+        assert!((r[0].localization_mean_mm - 3.0).abs() < 1e-12);
+        // |3-2|/2 = 50 %, |3-4|/4 = 25 %.
+        assert!((r[0].relative_error_pct - 37.5).abs() < 1e-12);
+        assert_eq!((r[1].matched, r[1].missed, r[1].spurious), (1, 1, 1));
+        assert!((r[1].rmse_n - 0.5).abs() < 1e-12);
+        // 100 + 20 + 1 + 1 us (image, contacts, forces; the split's compute_ns is 0).
+        assert!((r[0].latency_us_p50 - 121.0).abs() < 1e-9);
+        assert!(r[0].disagreement_rmse_n.is_nan(), "every frame had truth");
+    }
+
+    #[test]
+    fn without_truth_lanes_are_compared_with_the_reference() {
+        let mut c = compare();
+        let a = forces("a", &[(0.0, 0.0, 2.0), (30.0, 0.0, 4.0)], None);
+        let b = forces("b", &[(1.0, 0.0, 3.0), (31.0, 0.0, 4.0)], None);
+        c.lane(0, &a);
+        c.lane(1, &b);
+        c.score_disagreement(1, &b, &a);
+        let r = c.reports();
+        assert!((r[1].disagreement_rmse_n - (0.5f64).sqrt()).abs() < 1e-12);
+        assert!(r[1].rmse_n.is_nan());
+    }
+
+    #[test]
+    fn table_and_json_show_missing_values_plainly() {
+        let r = LaneReport {
+            name: "a \"quoted\" lane".into(),
+            frames: 3,
+            latency_us_p50: 12.25,
+            latency_us_p99: 20.0,
+            rmse_n: f64::NAN,
+            relative_error_pct: f64::NAN,
+            localization_mean_mm: f64::NAN,
+            matched: 0,
+            missed: 0,
+            spurious: 0,
+            disagreement_rmse_n: 0.5,
+        };
+        let t = table(std::slice::from_ref(&r));
+        assert!(
+            t.contains("| a \"quoted\" lane | 3 | 12.2 | 20.0 | - |"),
+            "{t}"
+        );
+        let j = to_json(&[r]);
+        assert!(j.contains("\"name\": \"a \\\"quoted\\\" lane\""), "{j}");
+        assert!(j.contains("\"rmse_n\": null"), "{j}");
+        assert!(j.contains("\"disagreement_rmse_n\": 0.5"), "{j}");
+    }
+}

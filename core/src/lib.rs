@@ -29,5 +29,5 @@ pub use params::{ParamError, Params};
 pub use port::PortSpec;
 pub use recycle::Recycler;
 pub use registry::{BuildContext, KindInfo, NodeFactory, NodeParams, ParamDoc, Registry, Role, typed};
-pub use runtime::{RunError, RunOptions, RunReport, RunningGraph, run};
+pub use runtime::{GraphHandle, RunError, RunOptions, RunReport, RunningGraph, run};
 pub use stats::StatsReport;

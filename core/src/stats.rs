@@ -118,6 +118,8 @@ pub struct NodeStats {
     pub errors: AtomicU64,
     pub panics: AtomicU64,
     pub restarts: AtomicU64,
+    /// Hot swaps applied.
+    pub swaps: AtomicU64,
     pub deadline_misses: AtomicU64,
     /// Wall time per call.
     pub latency: Histogram,
@@ -158,6 +160,7 @@ pub struct NodeReport {
     pub errors: u64,
     pub panics: u64,
     pub restarts: u64,
+    pub swaps: u64,
     pub deadline_misses: u64,
     pub latency_us_p50: f64,
     pub latency_us_p99: f64,
@@ -206,6 +209,7 @@ impl NodeReport {
             errors: s.errors.load(Relaxed),
             panics: s.panics.load(Relaxed),
             restarts: s.restarts.load(Relaxed),
+            swaps: s.swaps.load(Relaxed),
             deadline_misses: s.deadline_misses.load(Relaxed),
             latency_us_p50: us(s.latency.quantile(0.5)),
             latency_us_p99: us(s.latency.quantile(0.99)),

@@ -260,12 +260,24 @@ impl Cell {
         }
     }
 
-    /// Runs a control command between calls.
-    pub fn control(&mut self, cmd: &str) {
-        if let Err(e) = self.imp.control(&mut self.ctx, cmd) {
-            tracing::warn!(node = %self.ctx.id, "control \"{cmd}\": {e}");
-        } else {
-            tracing::info!(node = %self.ctx.id, "control \"{cmd}\" applied");
+    /// Runs a control command, or installs a hot-swapped instance, between calls.
+    pub fn control(&mut self, c: super::pool::Control) {
+        match c {
+            super::pool::Control::Command(cmd) => match self.imp.control(&mut self.ctx, &cmd) {
+                Ok(()) => tracing::info!(node = %self.ctx.id, "control \"{cmd}\" applied"),
+                Err(e) => tracing::warn!(node = %self.ctx.id, "control \"{cmd}\": {e}"),
+            },
+            super::pool::Control::Swap(s) => {
+                let s = *s;
+                let mut old = std::mem::replace(&mut self.imp, s.imp);
+                self.recipe = s.recipe;
+                self.dead = false;
+                if let Err(e) = old.stop(&mut self.ctx) {
+                    tracing::warn!(node = %self.ctx.id, "replaced instance failed to stop: {e}");
+                }
+                bump(&self.stats.swaps, 1);
+                tracing::info!(node = %self.ctx.id, kind = %s.kind, "hot swap applied");
+            }
         }
     }
 }

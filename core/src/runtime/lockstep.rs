@@ -28,7 +28,7 @@ fn run_controls(shared: &Shared, i: usize, cell: &mut Cell) {
     let slot = &shared.slots[i];
     if take_flag(&slot.has_control) {
         while let Some(c) = slot.control.pop() {
-            cell.control(&c);
+            cell.control(c);
         }
     }
 }

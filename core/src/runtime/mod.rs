@@ -3,6 +3,7 @@
 //! stop sources, drain queues, stop processors and sinks (flush, close), report.
 
 mod cell;
+mod handle;
 mod lockstep;
 mod pool;
 mod rt;
@@ -20,15 +21,16 @@ use crossbeam::queue::SegQueue;
 use crossbeam::sync::Parker;
 
 use cell::{Cell, Recipe};
+pub use handle::GraphHandle;
 use pool::{Exec, IDLE, Shared, Sleeper, Slot};
 
-use crate::edge::{EdgeShared, EdgeTx, edge};
+use crate::edge::{EdgeTx, edge};
 use crate::error::NodeError;
 use crate::graph::{GraphSpec, ThreadMode, Trigger};
 use crate::io::{Inputs, Outputs};
 use crate::node::{Context, Mode, NodeImpl};
 use crate::registry::{BuildContext, Role};
-use crate::stats::{EdgeReport, NodeReport, NodeStats, StatsReport};
+use crate::stats::{NodeStats, StatsReport};
 
 /// Longest the shutdown waits for queues to drain before it counts what is left as
 /// undelivered and stops the nodes anyway (a node that never stops asking to rerun).
@@ -45,6 +47,8 @@ pub enum RunError {
     Stop { node: String, error: NodeError },
     #[error("no node \"{0}\" in this graph")]
     UnknownNode(String),
+    #[error("node \"{node}\": swap refused: {problem}")]
+    Swap { node: String, problem: String },
 }
 
 /// The result of a run that started.
@@ -68,16 +72,13 @@ pub struct RunOptions {
 pub struct RunningGraph {
     shared: Arc<Shared>,
     ids: Vec<String>,
-    kinds: Vec<String>,
-    edges: Vec<Arc<EdgeShared>>,
     topo: Vec<usize>,
-    name: String,
     mode: Mode,
-    t0: Instant,
     sources: Vec<JoinHandle<()>>,
     threads: Vec<JoinHandle<()>>,
     timer: Option<JoinHandle<()>>,
     timer_stop: Arc<AtomicBool>,
+    handle: GraphHandle,
 }
 
 /// Builds, starts and runs a graph to its end; the convenience form of [`RunningGraph`].
@@ -217,19 +218,27 @@ impl RunningGraph {
             faulted: AtomicBool::new(false),
         });
 
-        let mut g = RunningGraph {
+        let handle = GraphHandle::new(handle::Inner {
+            shared: shared.clone(),
             ids: spec.nodes.iter().map(|n| n.id.clone()).collect(),
-            kinds: spec.nodes.iter().map(|n| n.kind.clone()).collect(),
+            kinds: std::sync::Mutex::new(spec.nodes.iter().map(|n| n.kind.clone()).collect()),
+            signatures: spec.nodes.iter().map(|n| GraphHandle::signature_of(n.factory.info())).collect(),
             edges,
-            topo: spec.topo.clone(),
             name: spec.name.clone(),
             mode: spec.mode,
             t0,
+            base_dir: spec.source.base_dir(),
+        });
+        let mut g = RunningGraph {
+            ids: spec.nodes.iter().map(|n| n.id.clone()).collect(),
+            topo: spec.topo.clone(),
+            mode: spec.mode,
             sources: Vec::new(),
             threads: Vec::new(),
             timer: None,
             timer_stop: Arc::new(AtomicBool::new(false)),
             shared,
+            handle,
         };
         if spec.mode == Mode::Realtime {
             g.spawn_threads(spec, locals, parkers);
@@ -305,29 +314,17 @@ impl RunningGraph {
 
     /// Sends a control command (e.g. `tare`) to a node; it runs between two of its calls.
     pub fn control(&self, node: &str, cmd: &str) -> Result<(), RunError> {
-        let i = self.node_index(node).ok_or_else(|| RunError::UnknownNode(node.to_owned()))?;
-        let slot = &self.shared.slots[i];
-        slot.control.push(cmd.to_owned());
-        slot.has_control.store(true, SeqCst);
-        self.shared.notify_external(i);
-        Ok(())
+        self.handle.control(node, cmd)
+    }
+
+    /// A handle for other threads: statistics, control commands, hot swaps.
+    pub fn handle(&self) -> GraphHandle {
+        self.handle.clone()
     }
 
     /// A live snapshot of the statistics.
     pub fn stats(&self) -> StatsReport {
-        let nodes = (0..self.ids.len())
-            .map(|i| {
-                let inputs: Vec<&crate::stats::EdgeStats> =
-                    self.edges.iter().filter(|e| e.spec.to_node == i).map(|e| &e.stats).collect();
-                NodeReport::from_stats(&self.ids[i], &self.kinds[i], &self.shared.slots[i].stats, &inputs)
-            })
-            .collect();
-        let edges = self
-            .edges
-            .iter()
-            .map(|e| EdgeReport::from_stats(&e.spec.from, &e.spec.to, e.spec.policy, e.spec.capacity, &e.stats))
-            .collect();
-        StatsReport { graph: self.name.clone(), mode: self.mode, wall_s: self.t0.elapsed().as_secs_f64(), nodes, edges }
+        self.handle.stats()
     }
 
     /// Runs until the sources end, the stop flag is set, the duration passes or a node fails;

@@ -45,7 +45,7 @@ pub(crate) struct Slot {
     pub cell: AtomicCell<Option<Box<Cell>>>,
     pub exec: Exec,
     pub thread: std::sync::OnceLock<Thread>,
-    pub control: SegQueue<String>,
+    pub control: SegQueue<Control>,
     pub has_control: AtomicBool,
     pub tick: AtomicBool,
     pub periodic: bool,
@@ -57,6 +57,21 @@ pub(crate) struct Slot {
 #[inline]
 pub(crate) fn take_flag(f: &AtomicBool) -> bool {
     f.load(std::sync::atomic::Ordering::Acquire) && f.swap(false, SeqCst)
+}
+
+/// Work for a node between two of its calls.
+pub(crate) enum Control {
+    /// A command for the node itself (e.g. `tare`).
+    Command(String),
+    /// Replace the node's instance (hot swap).
+    Swap(Box<Swap>),
+}
+
+/// A started replacement and how to rebuild it.
+pub(crate) struct Swap {
+    pub imp: crate::node::NodeImpl,
+    pub recipe: super::cell::Recipe,
+    pub kind: String,
 }
 
 pub(crate) struct Sleeper {
@@ -161,7 +176,7 @@ impl Shared {
         loop {
             if take_flag(&slot.has_control) {
                 while let Some(c) = slot.control.pop() {
-                    cell.control(&c);
+                    cell.control(c);
                 }
             }
             if take_flag(&slot.tick) {
@@ -296,7 +311,7 @@ pub(crate) fn source_loop(shared: &Shared, node: usize) {
         }
         if take_flag(&slot.has_control) {
             while let Some(c) = slot.control.pop() {
-                cell.control(&c);
+                cell.control(c);
             }
         }
         if !cell.outputs_have_space() {

@@ -1,0 +1,130 @@
+//! A handle on a running graph, usable from other threads (a control socket, a file watcher):
+//! live statistics, control commands, and hot swaps of a node's kind or parameters.
+//!
+//! A swap builds and starts the replacement off the data path, then hands it to the node's
+//! executor as a control message: it takes effect between two calls, the node's queues (and
+//! every message in them) stay where they are, and the old instance is stopped. Only a
+//! replacement with the same ports (names and types, in order) is accepted: edges index ports.
+
+use std::path::PathBuf;
+use std::sync::atomic::Ordering::SeqCst;
+use std::sync::{Arc, Mutex};
+use std::time::Instant;
+
+use super::cell::Recipe;
+use super::pool::{Control, Shared, Swap};
+use super::RunError;
+use crate::edge::EdgeShared;
+use crate::error::NodeError;
+use crate::node::{Context, Mode};
+use crate::params::Params;
+use crate::registry::{BuildContext, KindInfo, NodeFactory};
+use crate::stats::{EdgeReport, NodeReport, StatsReport};
+
+/// Port names and types of a kind, inputs then outputs: what a replacement must match.
+fn signature(k: &KindInfo) -> (Vec<(String, String)>, Vec<(String, String)>) {
+    let ports = |v: &[crate::port::PortSpec]| v.iter().map(|p| (p.name.to_string(), p.ty.to_string())).collect();
+    (ports(&k.inputs), ports(&k.outputs))
+}
+
+pub(crate) struct Inner {
+    pub shared: Arc<Shared>,
+    pub ids: Vec<String>,
+    pub kinds: Mutex<Vec<String>>,
+    pub signatures: Vec<(Vec<(String, String)>, Vec<(String, String)>)>,
+    pub edges: Vec<Arc<EdgeShared>>,
+    pub name: String,
+    pub mode: Mode,
+    pub t0: Instant,
+    pub base_dir: PathBuf,
+}
+
+/// Cheap to clone; `Send + Sync`.
+#[derive(Clone)]
+pub struct GraphHandle {
+    pub(crate) inner: Arc<Inner>,
+}
+
+impl GraphHandle {
+    /// Index of a node by id.
+    pub fn node_index(&self, id: &str) -> Option<usize> {
+        self.inner.ids.iter().position(|x| x == id)
+    }
+
+    /// Node ids in graph order.
+    pub fn node_ids(&self) -> &[String] {
+        &self.inner.ids
+    }
+
+    fn index(&self, node: &str) -> Result<usize, RunError> {
+        self.node_index(node).ok_or_else(|| RunError::UnknownNode(node.to_owned()))
+    }
+
+    fn push(&self, i: usize, c: Control) {
+        let slot = &self.inner.shared.slots[i];
+        slot.control.push(c);
+        slot.has_control.store(true, SeqCst);
+        self.inner.shared.notify_external(i);
+    }
+
+    /// Sends a control command (e.g. `tare`) to a node; it runs between two of its calls.
+    pub fn control(&self, node: &str, cmd: &str) -> Result<(), RunError> {
+        let i = self.index(node)?;
+        self.push(i, Control::Command(cmd.to_owned()));
+        Ok(())
+    }
+
+    /// Replaces a node by one built from `factory` and `params`. The replacement is built and
+    /// started here (the running node keeps working meanwhile) and installed between two of
+    /// the node's calls; its queues are kept, so a `block` edge loses nothing.
+    pub fn swap(&self, node: &str, factory: Arc<dyn NodeFactory>, params: Params) -> Result<(), RunError> {
+        let i = self.index(node)?;
+        let swap_err = |problem: String| RunError::Swap { node: node.to_owned(), problem };
+        let info = factory.info();
+        if signature(info) != self.inner.signatures[i] {
+            return Err(swap_err(format!(
+                "kind \"{}\" has other ports than the running node; changing ports needs a restart",
+                info.name
+            )));
+        }
+        factory.check(&params).map_err(|e| swap_err(e.to_string()))?;
+        let build = BuildContext { base_dir: self.inner.base_dir.clone(), mode: self.inner.mode, node_id: node.to_owned() };
+        let mut imp = factory.build(&params, &build).map_err(|e| swap_err(format!("build failed: {e}")))?;
+        if imp.role() != info.role {
+            return Err(swap_err(format!("factory built a {:?} for a kind declared {:?}", imp.role(), info.role)));
+        }
+        let mut ctx = Context::new(i as u32, Arc::from(node), self.inner.t0, self.inner.mode, self.inner.shared.stop.clone());
+        imp.start(&mut ctx).map_err(|e: NodeError| swap_err(format!("start failed: {e}")))?;
+        let kind = info.name.to_string();
+        self.push(i, Control::Swap(Box::new(Swap { imp, recipe: Recipe { factory, params, build }, kind: kind.clone() })));
+        self.inner.kinds.lock().unwrap_or_else(|p| p.into_inner())[i] = kind;
+        Ok(())
+    }
+
+    /// A live snapshot of the statistics.
+    pub fn stats(&self) -> StatsReport {
+        let inner = &self.inner;
+        let kinds = inner.kinds.lock().unwrap_or_else(|p| p.into_inner()).clone();
+        let nodes = (0..inner.ids.len())
+            .map(|i| {
+                let inputs: Vec<&crate::stats::EdgeStats> =
+                    inner.edges.iter().filter(|e| e.spec.to_node == i).map(|e| &e.stats).collect();
+                NodeReport::from_stats(&inner.ids[i], &kinds[i], &inner.shared.slots[i].stats, &inputs)
+            })
+            .collect();
+        let edges = inner
+            .edges
+            .iter()
+            .map(|e| EdgeReport::from_stats(&e.spec.from, &e.spec.to, e.spec.policy, e.spec.capacity, &e.stats))
+            .collect();
+        StatsReport { graph: inner.name.clone(), mode: inner.mode, wall_s: inner.t0.elapsed().as_secs_f64(), nodes, edges }
+    }
+
+    pub(crate) fn new(inner: Inner) -> GraphHandle {
+        GraphHandle { inner: Arc::new(inner) }
+    }
+
+    pub(crate) fn signature_of(k: &KindInfo) -> (Vec<(String, String)>, Vec<(String, String)>) {
+        signature(k)
+    }
+}

@@ -30,6 +30,12 @@ enum Cmd {
         /// Also write the statistics as JSON.
         #[arg(long, value_name = "FILE")]
         stats_json: Option<PathBuf>,
+        /// Apply edits of the graph file to the running graph (changed nodes are swapped).
+        #[arg(long)]
+        watch: bool,
+        /// Serve a control socket (Unix domain, JSON lines): stats, tare, control, swap.
+        #[arg(long, value_name = "SOCKET")]
+        control: Option<PathBuf>,
     },
     /// Validate a graph without running it; errors name file, line and column.
     Check { graph: PathBuf },
@@ -122,7 +128,7 @@ fn main() -> ExitCode {
 
 fn dispatch(cmd: Cmd) -> Result<ExitCode> {
     match cmd {
-        Cmd::Run { graph, for_s, stats_json } => run(&graph, for_s, stats_json.as_deref()),
+        Cmd::Run { graph, for_s, stats_json, watch, control } => run(&graph, for_s, stats_json.as_deref(), watch, control.as_deref()),
         Cmd::Check { graph } => {
             let spec = load(&graph)?;
             match spec {
@@ -175,7 +181,7 @@ fn load(path: &Path) -> Result<Result<GraphSpec, ExitCode>> {
     }
 }
 
-fn run(path: &Path, for_s: Option<f64>, stats_json: Option<&Path>) -> Result<ExitCode> {
+fn run(path: &Path, for_s: Option<f64>, stats_json: Option<&Path>, watch: bool, control: Option<&Path>) -> Result<ExitCode> {
     let spec = match load(path)? {
         Ok(s) => s,
         Err(code) => return Ok(code),
@@ -193,7 +199,22 @@ fn run(path: &Path, for_s: Option<f64>, stats_json: Option<&Path>) -> Result<Exi
             return Ok(ExitCode::from(1));
         }
     };
+    let done = Arc::new(AtomicBool::new(false));
+    let mut helpers = Vec::new();
+    if watch {
+        let (p, reg, spec, h, d) = (path.to_path_buf(), registry(), spec.clone(), running.handle(), done.clone());
+        helpers.push(std::thread::spawn(move || cmd::live::watch(p, reg, spec, h, d)));
+        eprintln!("watching {} for edits", path.display());
+    }
+    if let Some(sock) = control {
+        helpers.push(cmd::live::control_socket(sock, registry(), running.handle(), done.clone())?);
+        eprintln!("control socket at {}", sock.display());
+    }
     let report = running.wait(&RunOptions { duration, stop: Some(stop) });
+    done.store(true, Ordering::SeqCst);
+    for h in helpers {
+        let _ = h.join();
+    }
     println!("{}", report.stats);
     if let Some(p) = stats_json {
         let json = serde_json::to_string_pretty(&report.stats)?;

@@ -4,6 +4,7 @@ pub mod calibrate;
 pub mod emulate;
 pub mod eval;
 pub mod inspect;
+pub mod live;
 pub mod pipeline;
 pub mod reproduce;
 pub mod simulate;

@@ -1,0 +1,78 @@
+//! `skinflow run --watch --control SOCKET`: edits of the graph file swap changed nodes while
+//! the graph runs (an invalid edit is rejected and the graph goes on), and the control socket
+//! answers stats and tare requests. Nothing is lost across the swap.
+
+use std::io::{BufRead, BufReader, Write};
+use std::os::unix::net::UnixStream;
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+fn graph(scale_params: &str, out: &str) -> String {
+    format!(
+        "[[node]]\nid = \"src\"\nkind = \"counter\"\nparams = {{ count = 1500, rate_hz = 500.0 }}\n\
+         [[node]]\nid = \"f\"\nkind = \"scale\"\nparams = {{ {scale_params} }}\n\
+         [[node]]\nid = \"out\"\nkind = \"collect\"\nparams = {{ path = \"{out}\" }}\n\
+         [[edge]]\nfrom = \"src.out\"\nto = \"f.in\"\n\
+         [[edge]]\nfrom = \"f.out\"\nto = \"out.in\"\n"
+    )
+}
+
+fn ask(sock: &std::path::Path, req: &str) -> serde_json::Value {
+    let mut s = UnixStream::connect(sock).unwrap();
+    writeln!(s, "{req}").unwrap();
+    let mut line = String::new();
+    BufReader::new(s).read_line(&mut line).unwrap();
+    serde_json::from_str(&line).unwrap()
+}
+
+#[test]
+fn watch_swaps_edited_nodes_and_the_control_socket_answers() {
+    let d = std::env::temp_dir().join(format!("skinflow-live-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    let g = d.join("g.toml");
+    let sock = d.join("ctl.sock");
+    std::fs::write(&g, graph("factor = 2", "out.csv")).unwrap();
+    let mut child = Command::new(env!("CARGO_BIN_EXE_skinflow"))
+        .args(["run", g.to_str().unwrap(), "--watch", "--control", sock.to_str().unwrap()])
+        .env("RUST_LOG", "warn")
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let t0 = Instant::now();
+    while !sock.exists() {
+        assert!(t0.elapsed() < Duration::from_secs(20), "no control socket");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let stats = ask(&sock, r#"{"cmd": "stats"}"#);
+    assert_eq!(stats["ok"], true, "{stats}");
+    assert!(stats["stats"]["nodes"].as_array().unwrap().iter().any(|n| n["id"] == "f"));
+    let bad = ask(&sock, r#"{"cmd": "tare", "node": "nope"}"#);
+    assert_eq!(bad["ok"], false);
+    assert!(bad["error"].as_str().unwrap().contains("nope"), "{bad}");
+    // Wait until data flows, then an invalid edit (rejected), then a valid one (swapped).
+    std::thread::sleep(Duration::from_millis(600));
+    std::fs::write(&g, graph("factr = 3", "out.csv")).unwrap();
+    std::thread::sleep(Duration::from_millis(600));
+    std::fs::write(&g, graph("add = 1000000", "out.csv")).unwrap();
+    let out = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert!(stderr.contains("edit rejected") && stderr.contains("factr"), "{stderr}");
+    assert!(stderr.contains("swapped f"), "{stderr}");
+    let rows: Vec<(u64, u64)> = std::fs::read_to_string(d.join("out.csv"))
+        .unwrap()
+        .lines()
+        .map(|l| {
+            let (a, b) = l.split_once(',').unwrap();
+            (a.parse().unwrap(), b.parse().unwrap())
+        })
+        .collect();
+    assert_eq!(rows.len(), 1500, "nothing lost across the swap");
+    let switch = rows.iter().position(|&(_, y)| y >= 1_000_000).expect("the edit took effect");
+    for (i, &(seq, y)) in rows.iter().enumerate() {
+        assert_eq!(seq, i as u64);
+        assert_eq!(y, if i < switch { 2 * seq } else { seq + 1_000_000 }, "row {i}");
+    }
+}

@@ -122,6 +122,11 @@ pub struct Reconstructor {
     sensor: Sensor,
     tracker: ReferenceTracker,
     tare_pending: bool,
+    /// Running sum of the no-load frames before the reference is complete: those frames are
+    /// imaged against the mean so far, so downstream sees the noise level of a no-load image.
+    noload_sum: Vec<f64>,
+    noload_mean: Vec<f64>,
+    noload_n: u32,
     elements: bool,
     mask: ChannelMask,
     mask_scratch: ChannelMask,
@@ -149,6 +154,9 @@ impl Reconstructor {
         Ok(Reconstructor {
             tracker: ReferenceTracker::new(m, p.reference_frames).map_err(|e| NodeError::Param { param: "reference_frames".into(), problem: e.to_string() })?,
             tare_pending: false,
+            noload_sum: vec![0.0; m],
+            noload_mean: vec![0.0; m],
+            noload_n: 0,
             elements: p.elements,
             mask_scratch: mask.clone(),
             mask,
@@ -206,6 +214,14 @@ impl Processor for Reconstructor {
             self.tare_pending = false;
         } else if synced.no_load {
             self.tracker.accumulate(v).map_err(|e| NodeError::Input { port: "frame".into(), problem: e.to_string() })?;
+            if self.tracker.reference().is_none() && v.iter().all(|x| x.is_finite()) {
+                self.noload_n += 1;
+                let n = f64::from(self.noload_n);
+                for ((s, m), x) in self.noload_sum.iter_mut().zip(self.noload_mean.iter_mut()).zip(v) {
+                    *s += x;
+                    *m = *s / n;
+                }
+            }
         } else if !self.tracker.finish() {
             // The no-load period ended before any usable frame: the best remaining choice.
             tracing::warn!(node = ctx.id(), "no usable no-load frame before the first loaded one: taking this frame as the reference");
@@ -227,6 +243,7 @@ impl Processor for Reconstructor {
         let (w_mm, h_mm) = (self.sensor.width_mm, self.sensor.height_mm);
         let math = &mut self.math;
         let tracker = &self.tracker;
+        let partial = (self.noload_n > 1).then_some(&self.noload_mean[..]);
         let mut result = Ok(());
         let payload = self.ring.fill(|img| {
             img.width = nx;
@@ -237,7 +254,7 @@ impl Processor for Reconstructor {
             img.elements.resize(n_el, 0.0);
             img.reference = source;
             img.masked_channels = masked;
-            match tracker.reference() {
+            match tracker.reference().or(partial) {
                 Some(r) => {
                     result = math.reconstruct_image_into(v, r, &mut img.pixels);
                     if result.is_ok() && n_el > 0 {

@@ -1,7 +1,8 @@
 //! Node `segmenter`: conductivity-change image -> contacts (paper section II-B).
 //!
 //! Theory: contacts are conductivity decreases. The decrease is normalised to [0, 1], Otsu's
-//! threshold splits it, an absolute `floor` (image units, S/m) keeps noise-only frames from
+//! threshold splits it, a floor (image units, S/m: the larger of `floor` and
+//! `floor_over_noise` times the median peak decrease of the no-load images) keeps noise-only frames from
 //! inventing a contact, opening then closing with a disk of `radius_frac` of the image size
 //! cleans the mask, and each connected component gives a contact: intensity-weighted centroid
 //! (mm), conductivity-change sum C_i and area (mm^2). Math: `skinflow_contact::segment`.
@@ -22,9 +23,14 @@ use skinflow_core::{
 
 use crate::payload::{Contacts, Image};
 
-/// Default absolute floor on the decrease, S/m: about 10 % of the background conductivity
-/// (0.02 S/m) change at a pixel. No-load frames of the `paper` profile peak well below it.
-pub const DEFAULT_FLOOR: f64 = 2e-3;
+/// Default absolute floor on the decrease, S/m (1 % of the 0.02 S/m background). The
+/// effective floor is the larger of this and `floor_over_noise` times the largest decrease
+/// seen in a no-load image, so it follows the sensor's actual noise.
+pub const DEFAULT_FLOOR: f64 = 2e-4;
+/// No-load images whose peaks set the noise level.
+const NOISE_FRAMES: usize = 64;
+/// Default multiple of the no-load noise peak.
+pub const DEFAULT_FLOOR_OVER_NOISE: f64 = 3.0;
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -32,6 +38,10 @@ pub struct SegmenterParams {
     /// Absolute floor on the conductivity decrease, S/m (image units).
     #[serde(default = "default_floor")]
     pub floor: f64,
+    /// The floor is at least this multiple of the largest decrease of the no-load images seen
+    /// so far (0 disables the adaptive floor).
+    #[serde(default = "default_floor_over_noise")]
+    pub floor_over_noise: f64,
     /// Structuring-disk radius as a fraction of the image size (paper: 2 %).
     #[serde(default = "default_radius_frac")]
     pub radius_frac: f64,
@@ -42,6 +52,9 @@ pub struct SegmenterParams {
 
 fn default_floor() -> f64 {
     DEFAULT_FLOOR
+}
+fn default_floor_over_noise() -> f64 {
+    DEFAULT_FLOOR_OVER_NOISE
 }
 fn default_radius_frac() -> f64 {
     0.02
@@ -58,6 +71,7 @@ impl SegmenterParams {
 
 impl NodeParams for SegmenterParams {
     fn validate(&self) -> Result<(), ParamError> {
+        skinflow_core::params::non_negative("floor_over_noise", self.floor_over_noise)?;
         self.math().validate().map_err(|e| match e {
             skinflow_contact::SegmentError::Param { name, .. } => ParamError::new(name, e.to_string()),
             other => ParamError { param: None, problem: other.to_string(), span: None },
@@ -67,6 +81,12 @@ impl NodeParams for SegmenterParams {
 
 pub struct Segmenter {
     params: SegmentParams,
+    floor_min: f64,
+    floor_over_noise: f64,
+    /// Peak decreases of the no-load images (their median is the noise level: robust to the
+    /// last no-load frame, whose acquisition window may reach into the first press).
+    noise_peaks: Vec<f64>,
+    scratch: Vec<f64>,
     math: Option<(ImageGrid, SegmentMath, ContactBuf)>,
     ring: Recycler<Contacts>,
     dropped_components: u64,
@@ -74,7 +94,16 @@ pub struct Segmenter {
 
 impl Segmenter {
     pub fn new(p: &SegmenterParams) -> Segmenter {
-        Segmenter { params: p.math(), math: None, ring: Recycler::new(128, Contacts::default), dropped_components: 0 }
+        Segmenter {
+            params: p.math(),
+            floor_min: p.floor,
+            floor_over_noise: p.floor_over_noise,
+            noise_peaks: Vec::with_capacity(NOISE_FRAMES),
+            scratch: Vec::with_capacity(NOISE_FRAMES),
+            math: None,
+            ring: Recycler::new(128, Contacts::default),
+            dropped_components: 0,
+        }
     }
 }
 
@@ -83,6 +112,22 @@ impl Processor for Segmenter {
         let Some(m) = inputs.get(0) else { return Ok(()) };
         let t0 = Instant::now();
         let image = m.arc::<Image>().ok_or(NodeError::Input { port: "image".into(), problem: "not an image".into() })?;
+        let peak = skinflow_contact::segment::peak_decrease(&image.pixels);
+        if image.src.no_load && peak > 0.0 && self.noise_peaks.len() < NOISE_FRAMES {
+            self.noise_peaks.push(peak);
+            self.scratch.clear();
+            self.scratch.extend_from_slice(&self.noise_peaks);
+            self.scratch.sort_by(f64::total_cmp);
+            let median = self.scratch[self.scratch.len() / 2];
+            {
+                let floor = self.floor_min.max(self.floor_over_noise * median);
+                if floor != self.params.floor {
+                    self.params.floor = floor;
+                    self.math = None; // rebuilt below with the new floor (no-load period only)
+                    tracing::debug!(node = ctx.id(), floor, "segmentation floor follows the no-load noise");
+                }
+            }
+        }
         let grid = ImageGrid::centred(image.width, image.height, image.width_mm, image.height_mm);
         // The grid is fixed by the first image; a change rebuilds the scratch (rare, allocates).
         if self.math.as_ref().is_none_or(|(g, _, _)| *g != grid) {
@@ -101,7 +146,6 @@ impl Processor for Segmenter {
             c.contacts.extend_from_slice(found);
             c.compute_ns = ns;
         });
-        let _ = ctx;
         out.send(0, Message::from_arc(m.header, payload))
     }
 
@@ -118,7 +162,8 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
         KindInfo::new("segmenter", Role::Processor, "image -> contacts: Otsu + floor, disk opening/closing, components, centroids")
             .input(PortSpec::input::<Image>("image", "conductivity-change image"))
             .output(PortSpec::output::<Contacts>("contacts", "centroid (mm), conductivity sum, area (mm^2) per contact"))
-            .param(ParamDoc::new("floor", "f64", "0.002", "absolute floor on the conductivity decrease, S/m"))
+            .param(ParamDoc::new("floor", "f64", "0.0002", "smallest floor on the conductivity decrease, S/m"))
+            .param(ParamDoc::new("floor_over_noise", "f64", "3.0", "floor >= this x the no-load images' peak decrease"))
             .param(ParamDoc::new("radius_frac", "f64", "0.02", "disk radius / image size"))
             .param(ParamDoc::new("max_contacts", "usize", "8", "most contacts per frame")),
         |p: SegmenterParams, _| Ok(NodeImpl::Processor(Box::new(Segmenter::new(&p)))),

@@ -24,16 +24,10 @@ pub struct SfStr {
 }
 
 impl SfStr {
-    pub const EMPTY: SfStr = SfStr {
-        ptr: std::ptr::NonNull::dangling().as_ptr(),
-        len: 0,
-    };
+    pub const EMPTY: SfStr = SfStr { ptr: std::ptr::NonNull::dangling().as_ptr(), len: 0 };
 
     pub const fn new(s: &str) -> SfStr {
-        SfStr {
-            ptr: s.as_ptr(),
-            len: s.len(),
-        }
+        SfStr { ptr: s.as_ptr(), len: s.len() }
     }
 
     /// The string, if it is valid UTF-8.
@@ -73,14 +67,8 @@ pub struct SfMessage {
 }
 
 impl SfMessage {
-    pub const ABSENT: SfMessage = SfMessage {
-        present: 0,
-        type_name: SfStr::EMPTY,
-        seq: 0,
-        t_ns: 0,
-        n_cols: 0,
-        cols: std::ptr::null(),
-    };
+    pub const ABSENT: SfMessage =
+        SfMessage { present: 0, type_name: SfStr::EMPTY, seq: 0, t_ns: 0, n_cols: 0, cols: std::ptr::null() };
 }
 
 /// A port of a kind.
@@ -132,8 +120,7 @@ impl SfStatus {
 pub type CheckFn = unsafe extern "C" fn(params_toml: SfStr, err: SfErrorSink) -> SfStatus;
 /// Builds a node from params (TOML text); relative paths in params resolve against `base_dir`
 /// (the graph file's directory). Null on failure (message written to `err`).
-pub type CreateFn =
-    unsafe extern "C" fn(params_toml: SfStr, base_dir: SfStr, err: SfErrorSink) -> *mut c_void;
+pub type CreateFn = unsafe extern "C" fn(params_toml: SfStr, base_dir: SfStr, err: SfErrorSink) -> *mut c_void;
 /// One call: reads `n_inputs` messages, writes `n_outputs` (plugin-owned memory, valid until
 /// the next call on this node or its destruction).
 pub type ProcessFn = unsafe extern "C" fn(
@@ -203,13 +190,6 @@ pub const fn sizes() -> [(&'static str, u32); 6] {
 impl SfPlugin {
     /// The sizes this table declares, in [`sizes`] order.
     pub fn declared_sizes(&self) -> [u32; 6] {
-        [
-            self.plugin_size,
-            self.kind_size,
-            self.port_size,
-            self.param_size,
-            self.message_size,
-            self.column_size,
-        ]
+        [self.plugin_size, self.kind_size, self.port_size, self.param_size, self.message_size, self.column_size]
     }
 }

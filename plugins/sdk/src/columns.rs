@@ -23,10 +23,7 @@ impl<'a> Columns<'a> {
     /// # Safety
     /// Every pointer in `raw` (type name, column array, names, data) must be valid for `'a`.
     pub unsafe fn from_raw(raw: SfMessage) -> Columns<'a> {
-        Columns {
-            raw,
-            _life: std::marker::PhantomData,
-        }
+        Columns { raw, _life: std::marker::PhantomData }
     }
 
     /// Views a slice of raw messages.
@@ -70,42 +67,60 @@ impl<'a> Columns<'a> {
         unsafe { std::slice::from_raw_parts(self.raw.cols, self.raw.n_cols) }
     }
 
-    /// Every `(name, values)` in order.
+    /// Every `(name, values)` in order (a name that is not UTF-8 reads as "").
     pub fn iter(&self) -> impl Iterator<Item = (&'a str, &'a [f64])> + use<'a> {
         self.raw_cols().iter().map(|c| {
-            // SAFETY: from_raw's contract covers names and data.
+            // SAFETY: from_raw's contract covers names.
             let name = unsafe { c.name.to_str() }.unwrap_or("");
-            let data = if c.len == 0 || c.data.is_null() {
-                &[][..]
-            } else {
-                // SAFETY: from_raw's contract: `len` values at `data`, valid for 'a.
-                unsafe { std::slice::from_raw_parts(c.data, c.len) }
-            };
-            (name, data)
+            (name, Self::data(c))
         })
     }
 
-    /// The column called `name`.
+    fn data(c: &SfColumn) -> &'a [f64] {
+        if c.len == 0 || c.data.is_null() {
+            &[]
+        } else {
+            // SAFETY: from_raw's contract: `len` values at `data`, valid for 'a.
+            unsafe { std::slice::from_raw_parts(c.data, c.len) }
+        }
+    }
+
+    /// The column called `name` (names compared as bytes: no UTF-8 check on the hot path).
     pub fn get(&self, name: &str) -> Option<&'a [f64]> {
-        self.iter().find(|(n, _)| *n == name).map(|(_, d)| d)
+        // SAFETY: from_raw's contract covers the column names.
+        self.raw_cols().iter().find(|c| unsafe { bytes(c.name) } == name.as_bytes()).map(Self::data)
+    }
+
+    /// Whether the message's type name is `ty`.
+    pub fn is_type(&self, ty: &str) -> bool {
+        // SAFETY: from_raw's contract covers the type name.
+        unsafe { bytes(self.raw.type_name) == ty.as_bytes() }
     }
 
     /// The column called `name`, or an error naming it (allocates only on error).
     pub fn require(&self, name: &str) -> Result<&'a [f64], String> {
-        self.get(name)
-            .ok_or_else(|| format!("message \"{}\" has no column \"{name}\"", self.type_name()))
+        self.get(name).ok_or_else(|| format!("message \"{}\" has no column \"{name}\"", self.type_name()))
     }
 
     /// The single value of column `name`.
     pub fn scalar(&self, name: &str) -> Result<f64, String> {
         match self.require(name)? {
             [v] => Ok(*v),
-            d => Err(format!(
-                "column \"{name}\" has {} values, expected 1",
-                d.len()
-            )),
+            d => Err(format!("column \"{name}\" has {} values, expected 1", d.len())),
         }
     }
+}
+
+/// The bytes of a string.
+///
+/// # Safety
+/// `s` must point at `len` readable bytes valid for `'a`.
+unsafe fn bytes<'a>(s: SfStr) -> &'a [u8] {
+    if s.len == 0 {
+        return &[];
+    }
+    // SAFETY: forwarded from the caller.
+    unsafe { std::slice::from_raw_parts(s.ptr, s.len) }
 }
 
 struct Col {
@@ -152,11 +167,7 @@ impl ColumnBuf {
         let i = match self.cols.iter().position(|c| c.name == name) {
             Some(i) => i,
             None => {
-                self.cols.push(Col {
-                    name,
-                    data: Vec::new(),
-                    used: false,
-                });
+                self.cols.push(Col { name, data: Vec::new(), used: false });
                 self.cols.len() - 1
             }
         };
@@ -187,11 +198,7 @@ impl ColumnBuf {
     pub fn view(&mut self, type_name: &'static str, default_header: (u64, u64)) -> SfMessage {
         self.raw.clear();
         for c in self.cols.iter().filter(|c| c.used) {
-            self.raw.push(SfColumn {
-                name: SfStr::new(c.name),
-                len: c.data.len(),
-                data: c.data.as_ptr(),
-            });
+            self.raw.push(SfColumn { name: SfStr::new(c.name), len: c.data.len(), data: c.data.as_ptr() });
         }
         let (seq, t_ns) = self.seq.unwrap_or(default_header);
         SfMessage {
@@ -221,10 +228,7 @@ mod tests {
         assert_eq!((c.type_name(), c.seq(), c.t_ns()), ("contacts", 7, 70));
         assert_eq!(c.get("x_mm"), Some(&[1.0, -2.5][..]));
         assert_eq!(c.scalar("frame_dp_kpa"), Ok(0.75));
-        assert_eq!(
-            c.require("y_mm").unwrap_err(),
-            "message \"contacts\" has no column \"y_mm\""
-        );
+        assert_eq!(c.require("y_mm").unwrap_err(), "message \"contacts\" has no column \"y_mm\"");
         assert!(c.scalar("x_mm").unwrap_err().contains("2 values"));
     }
 

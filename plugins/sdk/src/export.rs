@@ -12,8 +12,8 @@ use std::sync::OnceLock;
 use serde::de::DeserializeOwned;
 
 use crate::abi::{
-    ABI_VERSION, CheckFn, CreateFn, DestroyFn, ProcessFn, SfErrorSink, SfKind, SfMessage, SfParam,
-    SfPlugin, SfPort, SfStatus, SfStr,
+    ABI_VERSION, CheckFn, CreateFn, DestroyFn, ProcessFn, SfErrorSink, SfKind, SfMessage, SfParam, SfPlugin, SfPort,
+    SfStatus, SfStr,
 };
 use crate::columns::{ColumnBuf, Columns};
 
@@ -49,75 +49,28 @@ pub struct KindSpec {
 
 impl KindSpec {
     pub fn new(name: &'static str, doc: &'static str) -> KindSpec {
-        KindSpec {
-            name,
-            doc,
-            inputs: Vec::new(),
-            outputs: Vec::new(),
-            params: Vec::new(),
-        }
+        KindSpec { name, doc, inputs: Vec::new(), outputs: Vec::new(), params: Vec::new() }
     }
 
     /// A required input.
-    pub fn input(
-        mut self,
-        name: &'static str,
-        type_name: &'static str,
-        doc: &'static str,
-    ) -> KindSpec {
-        self.inputs.push(PortDecl {
-            name,
-            type_name,
-            doc,
-            optional: false,
-        });
+    pub fn input(mut self, name: &'static str, type_name: &'static str, doc: &'static str) -> KindSpec {
+        self.inputs.push(PortDecl { name, type_name, doc, optional: false });
         self
     }
 
     /// An input the graph may leave unconnected.
-    pub fn optional_input(
-        mut self,
-        name: &'static str,
-        type_name: &'static str,
-        doc: &'static str,
-    ) -> KindSpec {
-        self.inputs.push(PortDecl {
-            name,
-            type_name,
-            doc,
-            optional: true,
-        });
+    pub fn optional_input(mut self, name: &'static str, type_name: &'static str, doc: &'static str) -> KindSpec {
+        self.inputs.push(PortDecl { name, type_name, doc, optional: true });
         self
     }
 
-    pub fn output(
-        mut self,
-        name: &'static str,
-        type_name: &'static str,
-        doc: &'static str,
-    ) -> KindSpec {
-        self.outputs.push(PortDecl {
-            name,
-            type_name,
-            doc,
-            optional: false,
-        });
+    pub fn output(mut self, name: &'static str, type_name: &'static str, doc: &'static str) -> KindSpec {
+        self.outputs.push(PortDecl { name, type_name, doc, optional: false });
         self
     }
 
-    pub fn param(
-        mut self,
-        name: &'static str,
-        ty: &'static str,
-        default: &'static str,
-        doc: &'static str,
-    ) -> KindSpec {
-        self.params.push(ParamDecl {
-            name,
-            ty,
-            default,
-            doc,
-        });
+    pub fn param(mut self, name: &'static str, ty: &'static str, default: &'static str, doc: &'static str) -> KindSpec {
+        self.params.push(ParamDecl { name, ty, default, doc });
         self
     }
 }
@@ -129,9 +82,7 @@ pub struct Outputs {
 
 impl Outputs {
     fn new(n: usize) -> Outputs {
-        Outputs {
-            ports: (0..n).map(|_| ColumnBuf::new()).collect(),
-        }
+        Outputs { ports: (0..n).map(|_| ColumnBuf::new()).collect() }
     }
 
     /// Output port `i` (declaration order). Panics when `i` is not a declared output (the
@@ -213,11 +164,7 @@ unsafe extern "C" fn check<T: PluginNode>(params: SfStr, err: SfErrorSink) -> Sf
     }
 }
 
-unsafe extern "C" fn create<T: PluginNode>(
-    params: SfStr,
-    base_dir: SfStr,
-    err: SfErrorSink,
-) -> *mut c_void {
+unsafe extern "C" fn create<T: PluginNode>(params: SfStr, base_dir: SfStr, err: SfErrorSink) -> *mut c_void {
     let r = catch_unwind(|| -> Result<*mut c_void, String> {
         // SAFETY: the host passes params and base_dir valid for the call.
         let (params, base_dir) = unsafe { (params_text(params)?, params_text(base_dir)?) };
@@ -255,40 +202,24 @@ unsafe extern "C" fn process<T: PluginNode>(
     // SAFETY: `node` came from `create::<T>` and the host calls one node from one thread at a time.
     let inst = unsafe { &mut *node.cast::<Instance<T>>() };
     if let Some(why) = &inst.poisoned {
-        report(
-            err,
-            &format!("node is unusable after an earlier panic ({why})"),
-        );
+        report(err, &format!("node is unusable after an earlier panic ({why})"));
         return SfStatus::ERROR;
     }
     let r = catch_unwind(AssertUnwindSafe(|| -> Result<(), String> {
-        let raw_in: &[SfMessage] = if n_inputs == 0 {
-            &[]
-        } else {
-            unsafe { std::slice::from_raw_parts(inputs, n_inputs) }
-        };
+        let raw_in: &[SfMessage] =
+            if n_inputs == 0 { &[] } else { unsafe { std::slice::from_raw_parts(inputs, n_inputs) } };
         // SAFETY (above and here): the host passes `n_inputs` messages whose memory is valid for the call.
         let ins = unsafe { Columns::slice_from_raw(raw_in) };
         for p in &mut inst.out.ports {
             p.clear();
         }
         inst.node.process(ins, &mut inst.out)?;
-        let header = ins
-            .iter()
-            .find(|c| c.present())
-            .map_or((0, 0), |c| (c.seq(), c.t_ns()));
-        let outs: &mut [SfMessage] = if n_outputs == 0 {
-            &mut []
-        } else {
-            unsafe { std::slice::from_raw_parts_mut(outputs, n_outputs) }
-        };
+        let header = ins.iter().find(|c| c.present()).map_or((0, 0), |c| (c.seq(), c.t_ns()));
+        let outs: &mut [SfMessage] =
+            if n_outputs == 0 { &mut [] } else { unsafe { std::slice::from_raw_parts_mut(outputs, n_outputs) } };
         // SAFETY (above): the host passes `n_outputs` writable messages for the call.
         for (i, (o, buf)) in outs.iter_mut().zip(&mut inst.out.ports).enumerate() {
-            *o = if buf.is_written() {
-                buf.view(inst.out_types[i], header)
-            } else {
-                SfMessage::ABSENT
-            };
+            *o = if buf.is_written() { buf.view(inst.out_types[i], header) } else { SfMessage::ABSENT };
         }
         Ok(())
     }));
@@ -312,9 +243,7 @@ unsafe extern "C" fn destroy<T: PluginNode>(node: *mut c_void) {
         return;
     }
     // SAFETY: `node` came from `create::<T>` and is destroyed once; a panicking Drop is caught.
-    let _ = catch_unwind(AssertUnwindSafe(|| {
-        drop(unsafe { Box::from_raw(node.cast::<Instance<T>>()) })
-    }));
+    let _ = catch_unwind(AssertUnwindSafe(|| drop(unsafe { Box::from_raw(node.cast::<Instance<T>>()) })));
 }
 
 /// One kind for the table: its spec and monomorphized shims.
@@ -328,13 +257,7 @@ pub struct KindEntry {
 
 /// The table entry of `T` (used by [`export_plugin!`](crate::export_plugin)).
 pub fn kind<T: PluginNode>() -> KindEntry {
-    KindEntry {
-        spec: T::spec(),
-        check: check::<T>,
-        create: create::<T>,
-        process: process::<T>,
-        destroy: destroy::<T>,
-    }
+    KindEntry { spec: T::spec(), check: check::<T>, create: create::<T>, process: process::<T>, destroy: destroy::<T> }
 }
 
 /// The static description of a plugin: the table and the arrays it points into.
@@ -412,12 +335,7 @@ impl Table {
             kinds: kinds.as_ptr(),
             n_kinds: kinds.len(),
         };
-        Table {
-            plugin,
-            _kinds: kinds,
-            _ports: ports,
-            _params: params,
-        }
+        Table { plugin, _kinds: kinds, _ports: ports, _params: params }
     }
 
     pub fn plugin(&self) -> &SfPlugin {
@@ -432,13 +350,8 @@ pub fn entry(
     version: &'static str,
     kinds: fn() -> Vec<KindEntry>,
 ) -> *const SfPlugin {
-    catch_unwind(|| {
-        std::ptr::from_ref(
-            cell.get_or_init(|| Table::build(name, version, kinds()))
-                .plugin(),
-        )
-    })
-    .unwrap_or(std::ptr::null())
+    catch_unwind(|| std::ptr::from_ref(cell.get_or_init(|| Table::build(name, version, kinds())).plugin()))
+        .unwrap_or(std::ptr::null())
 }
 
 /// Exports plugin kinds: `export_plugin!(name = "my-plugin", kinds = [MySplitter, MyCorrector]);`

@@ -34,11 +34,7 @@ impl PluginNode for Add {
     }
 
     fn validate(p: &AddParams) -> Result<(), String> {
-        if p.add > 1000 {
-            Err(format!("param \"add\": must be <= 1000 (got {})", p.add))
-        } else {
-            Ok(())
-        }
+        if p.add > 1000 { Err(format!("param \"add\": must be <= 1000 (got {})", p.add)) } else { Ok(()) }
     }
 
     fn new(p: AddParams, _: &Path) -> Result<Self, String> {
@@ -58,8 +54,7 @@ impl PluginNode for Unknown {
     type Params = AddParams;
 
     fn spec() -> KindSpec {
-        KindSpec::new("test-unknown", "a port of a type no codec knows")
-            .input("in", "hologram", "?")
+        KindSpec::new("test-unknown", "a port of a type no codec knows").input("in", "hologram", "?")
     }
 
     fn new(_: AddParams, _: &Path) -> Result<Self, String> {
@@ -89,11 +84,7 @@ fn a_table_of_another_version_is_refused_before_anything_else_is_read() {
     t.n_kinds = 7;
     match read_table(path(), &t, &Codecs::new()) {
         Err(e @ PluginError::AbiVersion { .. }) => {
-            assert!(
-                e.to_string()
-                    .starts_with("plugin libtest.so: built for plugin ABI version"),
-                "{e}"
-            )
+            assert!(e.to_string().starts_with("plugin libtest.so: built for plugin ABI version"), "{e}")
         }
         other => panic!("expected an ABI version error, got {:?}", other.err()),
     }
@@ -103,19 +94,8 @@ fn a_table_of_another_version_is_refused_before_anything_else_is_read() {
 fn a_struct_size_mismatch_names_the_struct() {
     let mut t = table();
     t.message_size += 8;
-    let e = read_table(path(), &t, &Codecs::new())
-        .err()
-        .expect("refused");
-    assert!(
-        matches!(
-            e,
-            PluginError::StructSize {
-                what: "SfMessage",
-                ..
-            }
-        ),
-        "{e}"
-    );
+    let e = read_table(path(), &t, &Codecs::new()).err().expect("refused");
+    assert!(matches!(e, PluginError::StructSize { what: "SfMessage", .. }), "{e}");
     assert!(e.to_string().contains("struct SfMessage is"), "{e}");
 }
 
@@ -124,10 +104,7 @@ fn a_port_without_a_codec_names_kind_port_and_type() {
     static TABLE: OnceLock<Table> = OnceLock::new();
     // SAFETY: `entry` points at the static table above.
     let t = unsafe { *entry(&TABLE, "test", "0", || vec![kind::<Unknown>()]) };
-    let e = read_table(path(), &t, &Codecs::new())
-        .err()
-        .expect("refused")
-        .to_string();
+    let e = read_table(path(), &t, &Codecs::new()).err().expect("refused").to_string();
     assert_eq!(
         e,
         "plugin libtest.so: kind \"test-unknown\" input \"in\": no codec for payload type \"hologram\" (known: count)"
@@ -139,19 +116,11 @@ fn registering_is_all_or_none_and_duplicates_name_the_first_origin() {
     let mut reg = Registry::new();
     skinflow_core::toy::register(&mut reg).unwrap();
     let kinds = read_table(path(), &table(), &Codecs::new()).unwrap();
-    assert_eq!(
-        register_kinds(path(), kinds, &mut reg).unwrap(),
-        vec!["test-add".to_owned()]
-    );
+    assert_eq!(register_kinds(path(), kinds, &mut reg).unwrap(), vec!["test-add".to_owned()]);
     assert_eq!(reg.get("test-add").unwrap().info().origin, "libtest.so");
     let again = read_table(Path::new("other.so"), &table(), &Codecs::new()).unwrap();
-    let e = register_kinds(Path::new("other.so"), again, &mut reg)
-        .unwrap_err()
-        .to_string();
-    assert_eq!(
-        e,
-        "plugin other.so: kind \"test-add\" is already defined by libtest.so"
-    );
+    let e = register_kinds(Path::new("other.so"), again, &mut reg).unwrap_err().to_string();
+    assert_eq!(e, "plugin other.so: kind \"test-add\" is already defined by libtest.so");
 }
 
 fn build(params: &str) -> Result<NodeImpl, String> {
@@ -161,27 +130,15 @@ fn build(params: &str) -> Result<NodeImpl, String> {
     let f = reg.get("test-add").unwrap();
     let p = Params::from_toml(params).unwrap();
     f.check(&p).map_err(|e| e.to_string())?;
-    let ctx = BuildContext {
-        base_dir: ".".into(),
-        mode: Mode::Lockstep,
-        node_id: "add".into(),
-    };
+    let ctx = BuildContext { base_dir: ".".into(), mode: Mode::Lockstep, node_id: "add".into() };
     f.build(&p, &ctx).map_err(|e| e.to_string())
 }
 
 #[test]
 fn params_are_checked_by_the_plugin() {
     assert!(build("add = 3").is_ok());
-    assert!(
-        build("ad = 3")
-            .err()
-            .unwrap()
-            .contains("unknown field `ad`")
-    );
-    assert_eq!(
-        build("add = 5000").err().unwrap(),
-        "param \"add\": must be <= 1000 (got 5000)"
-    );
+    assert!(build("ad = 3").err().unwrap().contains("unknown field `ad`"));
+    assert_eq!(build("add = 5000").err().unwrap(), "param \"add\": must be <= 1000 (got 5000)");
 }
 
 #[test]
@@ -189,22 +146,9 @@ fn the_kind_describes_its_ports_and_params() {
     let kinds = read_table(path(), &table(), &Codecs::new()).unwrap();
     let info = &kinds[0].info;
     assert_eq!(
-        (
-            info.inputs[0].name.as_ref(),
-            info.inputs[0].ty.as_ref(),
-            info.inputs[0].required
-        ),
+        (info.inputs[0].name.as_ref(), info.inputs[0].ty.as_ref(), info.inputs[0].required),
         ("in", "count", true)
     );
-    assert_eq!(
-        (info.outputs[0].name.as_ref(), info.outputs[0].ty.as_ref()),
-        ("out", "count")
-    );
-    assert_eq!(
-        (
-            info.params[0].name.as_ref(),
-            info.params[0].default.as_ref()
-        ),
-        ("add", "0")
-    );
+    assert_eq!((info.outputs[0].name.as_ref(), info.outputs[0].ty.as_ref()), ("out", "count"));
+    assert_eq!((info.params[0].name.as_ref(), info.params[0].default.as_ref()), ("add", "0"));
 }

@@ -34,9 +34,7 @@ pub struct Decode<'a> {
 impl Decode<'_> {
     /// Every input message of the call, in port then lane order.
     pub fn input_messages(&self) -> impl Iterator<Item = &Message> {
-        (0..self.n_inputs)
-            .flat_map(|p| self.inputs.iter_port(p))
-            .map(|(_, m)| m)
+        (0..self.n_inputs).flat_map(|p| self.inputs.iter_port(p)).map(|(_, m)| m)
     }
 }
 
@@ -58,14 +56,8 @@ impl Default for Codecs {
 impl Codecs {
     /// The engine's own payloads: `count` (the toy nodes') as one column `value`.
     pub fn new() -> Codecs {
-        let mut c = Codecs {
-            map: BTreeMap::new(),
-        };
-        c.register("count", || {
-            Box::new(CountCodec {
-                ring: Recycler::new(256, Count::default),
-            })
-        });
+        let mut c = Codecs { map: BTreeMap::new() };
+        c.register("count", || Box::new(CountCodec { ring: Recycler::new(256, Count::default) }));
         c
     }
 
@@ -101,9 +93,6 @@ impl Codec for CountCodec {
         if !(v.is_finite() && v >= 0.0 && v <= u64::MAX as f64) {
             return Err(format!("column \"value\" = {v} is not a count"));
         }
-        Ok(Message::from_arc(
-            at.header,
-            self.ring.fill(|c| c.0 = v as u64),
-        ))
+        Ok(Message::from_arc(at.header, self.ring.fill(|c| c.0 = v as u64)))
     }
 }

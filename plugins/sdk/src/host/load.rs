@@ -22,11 +22,7 @@ pub enum PluginError {
     #[error("plugin {}: file not found", path.display())]
     Missing { path: PathBuf },
     #[error("plugin {}: cannot copy it to {}: {source}", path.display(), to.display())]
-    Copy {
-        path: PathBuf,
-        to: PathBuf,
-        source: std::io::Error,
-    },
+    Copy { path: PathBuf, to: PathBuf, source: std::io::Error },
     #[error("plugin {}: not a loadable library: {cause}", path.display())]
     Open { path: PathBuf, cause: String },
     #[error("plugin {}: not a skinflow plugin (no symbol \"skinflow_plugin_entry\"; export kinds with skinflow_plugin_sdk::export_plugin!)", path.display())]
@@ -34,34 +30,15 @@ pub enum PluginError {
     #[error("plugin {}: its entry point failed (it panicked while describing its kinds)", path.display())]
     Entry { path: PathBuf },
     #[error("plugin {}: built for plugin ABI version {found}, this skinflow loads version {expected} (rebuild it against this skinflow-plugin-sdk)", path.display())]
-    AbiVersion {
-        path: PathBuf,
-        found: u32,
-        expected: u32,
-    },
+    AbiVersion { path: PathBuf, found: u32, expected: u32 },
     #[error("plugin {}: struct {what} is {found} bytes in the plugin but {expected} in the host (ABI mismatch; rebuild the plugin)", path.display())]
-    StructSize {
-        path: PathBuf,
-        what: &'static str,
-        found: u32,
-        expected: u32,
-    },
+    StructSize { path: PathBuf, what: &'static str, found: u32, expected: u32 },
     #[error("plugin {}: {problem}", path.display())]
     Invalid { path: PathBuf, problem: String },
     #[error("plugin {}: kind \"{kind}\" {port}: no codec for payload type \"{ty}\" (known: {known})", path.display())]
-    NoCodec {
-        path: PathBuf,
-        kind: String,
-        port: String,
-        ty: String,
-        known: String,
-    },
+    NoCodec { path: PathBuf, kind: String, port: String, ty: String, known: String },
     #[error("plugin {}: kind \"{kind}\" is already defined by {existing}", path.display())]
-    DuplicateKind {
-        path: PathBuf,
-        kind: String,
-        existing: String,
-    },
+    DuplicateKind { path: PathBuf, kind: String, existing: String },
 }
 
 /// A mapped plugin library.
@@ -76,10 +53,7 @@ pub struct PluginLibrary {
 
 impl std::fmt::Debug for PluginLibrary {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("PluginLibrary")
-            .field("path", &self.path)
-            .field("name", &self.name)
-            .finish()
+        f.debug_struct("PluginLibrary").field("path", &self.path).field("name", &self.name).finish()
     }
 }
 
@@ -95,21 +69,13 @@ static COPIES: AtomicU64 = AtomicU64::new(0);
 /// Copies `path` to a fresh temporary file and opens that copy.
 fn open_copy(path: &Path) -> Result<libloading::Library, PluginError> {
     let dir = std::env::temp_dir().join("skinflow-plugins");
-    let file = path
-        .file_name()
-        .map_or_else(|| "plugin".into(), |f| f.to_string_lossy().into_owned());
-    let to = dir.join(format!(
-        "{}-{}-{file}",
-        std::process::id(),
-        COPIES.fetch_add(1, Ordering::Relaxed)
-    ));
-    std::fs::create_dir_all(&dir)
-        .and_then(|()| std::fs::copy(path, &to))
-        .map_err(|source| PluginError::Copy {
-            path: path.to_path_buf(),
-            to: to.clone(),
-            source,
-        })?;
+    let file = path.file_name().map_or_else(|| "plugin".into(), |f| f.to_string_lossy().into_owned());
+    let to = dir.join(format!("{}-{}-{file}", std::process::id(), COPIES.fetch_add(1, Ordering::Relaxed)));
+    std::fs::create_dir_all(&dir).and_then(|()| std::fs::copy(path, &to)).map_err(|source| PluginError::Copy {
+        path: path.to_path_buf(),
+        to: to.clone(),
+        source,
+    })?;
     // SAFETY: loading a library runs its initialisers; the user named this plugin in a graph or
     // on the command line, which is the trust decision. The copy is ours alone.
     let lib = unsafe { libloading::Library::new(&to) };
@@ -117,9 +83,7 @@ fn open_copy(path: &Path) -> Result<libloading::Library, PluginError> {
     let _ = std::fs::remove_file(&to);
     lib.map_err(|e| PluginError::Open {
         path: path.to_path_buf(),
-        cause: e
-            .to_string()
-            .replace(&*to.to_string_lossy(), &path.to_string_lossy()),
+        cause: e.to_string().replace(&*to.to_string_lossy(), &path.to_string_lossy()),
     })
 }
 
@@ -128,10 +92,7 @@ fn text(path: &Path, what: &str, s: SfStr) -> Result<String, PluginError> {
     // stays mapped while we read.
     unsafe { s.to_str() }
         .map(str::to_owned)
-        .map_err(|e| PluginError::Invalid {
-            path: path.to_path_buf(),
-            problem: format!("{what} is not UTF-8: {e}"),
-        })
+        .map_err(|e| PluginError::Invalid { path: path.to_path_buf(), problem: format!("{what} is not UTF-8: {e}") })
 }
 
 /// `n` items at `p` (empty when `n == 0`, whatever `p` is).
@@ -149,20 +110,11 @@ unsafe fn items<'a, T>(p: *const T, n: usize) -> &'a [T] {
 /// Checks the version and struct sizes before anything else of the table is read.
 fn check_abi(path: &Path, t: &SfPlugin) -> Result<(), PluginError> {
     if t.abi_version != ABI_VERSION {
-        return Err(PluginError::AbiVersion {
-            path: path.to_path_buf(),
-            found: t.abi_version,
-            expected: ABI_VERSION,
-        });
+        return Err(PluginError::AbiVersion { path: path.to_path_buf(), found: t.abi_version, expected: ABI_VERSION });
     }
     for ((what, expected), found) in sizes().into_iter().zip(t.declared_sizes()) {
         if found != expected {
-            return Err(PluginError::StructSize {
-                path: path.to_path_buf(),
-                what,
-                found,
-                expected,
-            });
+            return Err(PluginError::StructSize { path: path.to_path_buf(), what, found, expected });
         }
     }
     Ok(())
@@ -171,16 +123,8 @@ fn check_abi(path: &Path, t: &SfPlugin) -> Result<(), PluginError> {
 fn port_spec(path: &Path, kind: &str, p: &SfPort, input: bool) -> Result<PortSpec, PluginError> {
     let name = text(path, &format!("kind \"{kind}\" port name"), p.name)?;
     Ok(PortSpec {
-        ty: Cow::Owned(text(
-            path,
-            &format!("kind \"{kind}\" port \"{name}\" type"),
-            p.type_name,
-        )?),
-        doc: Cow::Owned(text(
-            path,
-            &format!("kind \"{kind}\" port \"{name}\" doc"),
-            p.doc,
-        )?),
+        ty: Cow::Owned(text(path, &format!("kind \"{kind}\" port \"{name}\" type"), p.type_name)?),
+        doc: Cow::Owned(text(path, &format!("kind \"{kind}\" port \"{name}\" doc"), p.doc)?),
         name: Cow::Owned(name),
         required: input && p.optional == 0,
         multi: !input,
@@ -188,12 +132,7 @@ fn port_spec(path: &Path, kind: &str, p: &SfPort, input: bool) -> Result<PortSpe
 }
 
 /// Reads one kind's description and finds codecs for its ports.
-fn read_kind(
-    path: &Path,
-    origin: &str,
-    k: &SfKind,
-    codecs: &Codecs,
-) -> Result<PluginKind, PluginError> {
+fn read_kind(path: &Path, origin: &str, k: &SfKind, codecs: &Codecs) -> Result<PluginKind, PluginError> {
     let name = text(path, "a kind name", k.name)?;
     let mut info = KindInfo {
         name: Cow::Owned(name.clone()),
@@ -230,47 +169,21 @@ fn read_kind(
             known: codecs.names().collect::<Vec<_>>().join(", "),
         })
     };
-    let in_codecs = info
-        .inputs
-        .iter()
-        .map(|p| codec(p, "input"))
-        .collect::<Result<_, _>>()?;
-    let out_codecs = info
-        .outputs
-        .iter()
-        .map(|p| codec(p, "output"))
-        .collect::<Result<_, _>>()?;
-    let fns = KindFns {
-        check: k.check,
-        create: k.create,
-        process: k.process,
-        destroy: k.destroy,
-    };
-    Ok(PluginKind {
-        info,
-        fns,
-        in_codecs,
-        out_codecs,
-        library: None,
-    })
+    let in_codecs = info.inputs.iter().map(|p| codec(p, "input")).collect::<Result<_, _>>()?;
+    let out_codecs = info.outputs.iter().map(|p| codec(p, "output")).collect::<Result<_, _>>()?;
+    let fns = KindFns { check: k.check, create: k.create, process: k.process, destroy: k.destroy };
+    Ok(PluginKind { info, fns, in_codecs, out_codecs, library: None })
 }
 
 /// Reads a table into kinds: checks the ABI, copies the descriptions, finds the codecs.
 /// `table` must be a plugin entry point's result (or an in-binary `export::Table`'s).
-pub fn read_table(
-    path: &Path,
-    table: &SfPlugin,
-    codecs: &Codecs,
-) -> Result<Vec<PluginKind>, PluginError> {
+pub fn read_table(path: &Path, table: &SfPlugin, codecs: &Codecs) -> Result<Vec<PluginKind>, PluginError> {
     check_abi(path, table)?;
     let origin = path.display().to_string();
     // SAFETY: the kinds array of the checked table.
     let raw_kinds = unsafe { items(table.kinds, table.n_kinds) };
     if raw_kinds.is_empty() {
-        return Err(PluginError::Invalid {
-            path: path.to_path_buf(),
-            problem: "it exports no kinds".into(),
-        });
+        return Err(PluginError::Invalid { path: path.to_path_buf(), problem: "it exports no kinds".into() });
     }
     let mut kinds: Vec<PluginKind> = Vec::with_capacity(raw_kinds.len());
     for k in raw_kinds {
@@ -305,13 +218,11 @@ pub fn register_kinds(
     }
     let names: Vec<String> = kinds.iter().map(|k| k.info.name.to_string()).collect();
     for k in kinds {
-        registry
-            .register(Arc::new(PluginFactory(Arc::new(k))))
-            .map_err(|d| PluginError::DuplicateKind {
-                path: path.to_path_buf(),
-                kind: d.kind,
-                existing: d.existing_origin,
-            })?;
+        registry.register(Arc::new(PluginFactory(Arc::new(k)))).map_err(|d| PluginError::DuplicateKind {
+            path: path.to_path_buf(),
+            kind: d.kind,
+            existing: d.existing_origin,
+        })?;
     }
     Ok(names)
 }
@@ -319,9 +230,7 @@ pub fn register_kinds(
 /// Loads the plugin at `path` and registers its kinds (all or none).
 pub fn load(path: &Path, registry: &mut Registry, codecs: &Codecs) -> Result<Loaded, PluginError> {
     if !path.is_file() {
-        return Err(PluginError::Missing {
-            path: path.to_path_buf(),
-        });
+        return Err(PluginError::Missing { path: path.to_path_buf() });
     }
     let lib = open_copy(path)?;
     // SAFETY: the symbol, when present, is the SDK's entry point with this signature (the
@@ -330,28 +239,20 @@ pub fn load(path: &Path, registry: &mut Registry, codecs: &Codecs) -> Result<Loa
     let entry: EntryFn = match unsafe { lib.get::<EntryFn>(ENTRY_SYMBOL) } {
         Ok(sym) => *sym,
         Err(_) => {
-            return Err(PluginError::NotAPlugin {
-                path: path.to_path_buf(),
-            });
+            return Err(PluginError::NotAPlugin { path: path.to_path_buf() });
         }
     };
     // SAFETY: the entry point never unwinds (it catches panics) and returns a pointer to a
     // table that lives as long as the library, or null.
     let table = unsafe { entry() };
     if table.is_null() {
-        return Err(PluginError::Entry {
-            path: path.to_path_buf(),
-        });
+        return Err(PluginError::Entry { path: path.to_path_buf() });
     }
     // SAFETY: non-null and static in the library. Only the two leading fields, which never
     // move between ABI versions, are read until the version is known to match.
     let head = unsafe { std::ptr::read(table.cast::<[u32; 2]>()) };
     if head[0] != ABI_VERSION {
-        return Err(PluginError::AbiVersion {
-            path: path.to_path_buf(),
-            found: head[0],
-            expected: ABI_VERSION,
-        });
+        return Err(PluginError::AbiVersion { path: path.to_path_buf(), found: head[0], expected: ABI_VERSION });
     }
     // SAFETY: same version, so the table has this layout (sizes are checked by read_table).
     let t: &SfPlugin = unsafe { &*table };
@@ -367,17 +268,10 @@ pub fn load(path: &Path, registry: &mut Registry, codecs: &Codecs) -> Result<Loa
     }
     let names = register_kinds(path, kinds, registry)?;
     tracing::info!(plugin = %library.name, version = %library.version, path = %path.display(), kinds = ?names, "plugin loaded");
-    Ok(Loaded {
-        library,
-        kinds: names,
-    })
+    Ok(Loaded { library, kinds: names })
 }
 
 /// Loads every plugin in order; stops at the first failure.
-pub fn load_all(
-    paths: &[PathBuf],
-    registry: &mut Registry,
-    codecs: &Codecs,
-) -> Result<Vec<Loaded>, PluginError> {
+pub fn load_all(paths: &[PathBuf], registry: &mut Registry, codecs: &Codecs) -> Result<Vec<Loaded>, PluginError> {
     paths.iter().map(|p| load(p, registry, codecs)).collect()
 }

@@ -10,15 +10,13 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use skinflow_core::{
-    BuildContext, Context, Header, Inputs, KindInfo, NodeError, NodeFactory, NodeImpl, Outputs,
-    ParamError, Params, Processor,
+    BuildContext, Context, Header, Inputs, KindInfo, NodeError, NodeFactory, NodeImpl, Outputs, ParamError, Params,
+    Processor,
 };
 
 use super::codec::{Codec, Decode, MakeCodec};
 use super::load::PluginLibrary;
-use crate::abi::{
-    CheckFn, CreateFn, DestroyFn, ProcessFn, SfErrorSink, SfMessage, SfStatus, SfStr,
-};
+use crate::abi::{CheckFn, CreateFn, DestroyFn, ProcessFn, SfErrorSink, SfMessage, SfStatus, SfStr};
 use crate::columns::{ColumnBuf, Columns};
 
 /// The functions of one kind, copied out of the plugin's table.
@@ -47,11 +45,7 @@ impl PluginKind {
     }
 
     fn fail(&self, what: &str, msg: &str) -> String {
-        format!(
-            "plugin kind \"{}\" ({}): {what}{msg}",
-            self.info.name,
-            self.origin()
-        )
+        format!("plugin kind \"{}\" ({}): {what}{msg}", self.info.name, self.origin())
     }
 }
 
@@ -69,10 +63,7 @@ unsafe extern "C" fn write_error(ctx: *mut c_void, msg: SfStr) {
 
 fn sink(err: &mut String) -> SfErrorSink {
     err.clear();
-    SfErrorSink {
-        ctx: std::ptr::from_mut(err).cast(),
-        write: write_error,
-    }
+    SfErrorSink { ctx: std::ptr::from_mut(err).cast(), write: write_error }
 }
 
 fn params_toml(params: &Params) -> Result<String, String> {
@@ -88,11 +79,7 @@ impl NodeFactory for PluginFactory {
     }
 
     fn check(&self, params: &Params) -> Result<(), ParamError> {
-        let to_err = |problem| ParamError {
-            param: None,
-            problem,
-            span: None,
-        };
+        let to_err = |problem| ParamError { param: None, problem, span: None };
         let text = params_toml(params).map_err(to_err)?;
         let mut err = String::new();
         // SAFETY: `check` comes from a table that passed the ABI checks; `text` and the error
@@ -100,10 +87,7 @@ impl NodeFactory for PluginFactory {
         let status = unsafe { (self.0.fns.check)(SfStr::new(&text), sink(&mut err)) };
         match status {
             SfStatus::OK => Ok(()),
-            SfStatus::PANIC => Err(to_err(format!(
-                "plugin {}: checking params {err}",
-                self.0.origin()
-            ))),
+            SfStatus::PANIC => Err(to_err(format!("plugin {}: checking params {err}", self.0.origin()))),
             _ => Err(to_err(err)),
         }
     }
@@ -115,18 +99,13 @@ impl NodeFactory for PluginFactory {
         let mut err = String::new();
         // SAFETY: as in `check`; `create` returns an instance owned by us (destroyed in Drop)
         // or null with a message.
-        let raw =
-            unsafe { (k.fns.create)(SfStr::new(&text), SfStr::new(&base_dir), sink(&mut err)) };
+        let raw = unsafe { (k.fns.create)(SfStr::new(&text), SfStr::new(&base_dir), sink(&mut err)) };
         let Some(raw) = NonNull::new(raw) else {
             return Err(NodeError::msg(k.fail("cannot build: ", &err)));
         };
         Ok(NodeImpl::Processor(Box::new(HostedNode {
             raw,
-            ins: k
-                .in_codecs
-                .iter()
-                .map(|m| (m(), ColumnBuf::new()))
-                .collect(),
+            ins: k.in_codecs.iter().map(|m| (m(), ColumnBuf::new())).collect(),
             outs: k.out_codecs.iter().map(|m| m()).collect(),
             in_raw: vec![SfMessage::ABSENT; k.in_codecs.len()],
             out_raw: vec![SfMessage::ABSENT; k.out_codecs.len()],
@@ -154,21 +133,15 @@ pub struct HostedNode {
 unsafe impl Send for HostedNode {}
 
 impl Processor for HostedNode {
-    fn process(
-        &mut self,
-        ctx: &mut Context,
-        inputs: &Inputs,
-        out: &mut Outputs,
-    ) -> Result<(), NodeError> {
+    fn process(&mut self, ctx: &mut Context, inputs: &Inputs, out: &mut Outputs) -> Result<(), NodeError> {
         let t0 = Instant::now();
         for (i, (codec, buf)) in self.ins.iter_mut().enumerate() {
             self.in_raw[i] = match inputs.get(i) {
                 Some(m) => {
                     buf.clear();
-                    codec.encode(m, buf).map_err(|problem| NodeError::Input {
-                        port: self.kind.info.inputs[i].name.clone(),
-                        problem,
-                    })?;
+                    codec
+                        .encode(m, buf)
+                        .map_err(|problem| NodeError::Input { port: self.kind.info.inputs[i].name.clone(), problem })?;
                     buf.view(m.type_name(), (m.header.seq, m.header.t_ns))
                 }
                 None => SfMessage::ABSENT,
@@ -194,9 +167,7 @@ impl Processor for HostedNode {
             SfStatus::PANIC => std::panic::resume_unwind(Box::new(self.kind.fail("", &self.err))),
             SfStatus::ERROR => return Err(NodeError::msg(self.kind.fail("", &self.err))),
             SfStatus(s) => {
-                return Err(NodeError::msg(
-                    self.kind.fail("", &format!("unknown status {s}")),
-                ));
+                return Err(NodeError::msg(self.kind.fail("", &format!("unknown status {s}"))));
             }
         }
         for (j, codec) in self.outs.iter_mut().enumerate() {
@@ -207,29 +178,22 @@ impl Processor for HostedNode {
             // SAFETY: the plugin's outputs stay valid until its next call on this instance.
             let cols = unsafe { Columns::from_raw(raw) };
             let port = &self.kind.info.outputs[j];
-            if cols.type_name() != port.ty {
+            if !cols.is_type(&port.ty) {
                 let got = cols.type_name();
-                return Err(NodeError::msg(self.kind.fail(
-                    "",
-                    &format!(
-                        "output \"{}\" carries \"{got}\", declared \"{}\"",
-                        port.name, port.ty
-                    ),
-                )));
+                return Err(NodeError::msg(
+                    self.kind
+                        .fail("", &format!("output \"{}\" carries \"{got}\", declared \"{}\"", port.name, port.ty)),
+                ));
             }
             let at = Decode {
-                header: Header {
-                    seq: raw.seq,
-                    t_ns: raw.t_ns,
-                    origin: ctx.index(),
-                },
+                header: Header { seq: raw.seq, t_ns: raw.t_ns, origin: ctx.index() },
                 inputs,
                 n_inputs: self.in_raw.len(),
                 compute_ns: t0.elapsed().as_nanos() as u64,
             };
-            let msg = codec.decode(&cols, &at).map_err(|e| {
-                NodeError::msg(self.kind.fail(&format!("output \"{}\": ", port.name), &e))
-            })?;
+            let msg = codec
+                .decode(&cols, &at)
+                .map_err(|e| NodeError::msg(self.kind.fail(&format!("output \"{}\": ", port.name), &e)))?;
             out.send(j, msg)?;
         }
         Ok(())

@@ -33,7 +33,7 @@ fn watch_swaps_edited_nodes_and_the_control_socket_answers() {
     let g = d.join("g.toml");
     let sock = d.join("ctl.sock");
     std::fs::write(&g, graph("factor = 2", "out.csv")).unwrap();
-    let mut child = Command::new(env!("CARGO_BIN_EXE_skinflow"))
+    let child = Command::new(env!("CARGO_BIN_EXE_skinflow"))
         .args(["run", g.to_str().unwrap(), "--watch", "--control", sock.to_str().unwrap()])
         .env("RUST_LOG", "warn")
         .stdout(Stdio::piped())

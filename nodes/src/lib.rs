@@ -19,12 +19,16 @@ pub mod split;
 pub mod sync;
 
 use skinflow_core::Registry;
+use skinflow_core::registry::DuplicateKind;
+
+/// A module's kind registration.
+type Register = fn(&mut Registry) -> Result<(), DuplicateKind>;
 
 /// Every built-in node kind.
 pub fn registry() -> Registry {
     let mut r = Registry::new();
     skinflow_core::toy::register(&mut r).expect("built-in kinds have distinct names");
-    let reg: [fn(&mut Registry) -> Result<(), skinflow_core::registry::DuplicateKind>; 9] =
+    let reg: [Register; 9] =
         [sim::register, replay::register, log::register, serial::register, sync::register, reconstruct::register, segment::register, split::register, correct::register];
     for f in reg {
         f(&mut r).expect("built-in kinds have distinct names");

@@ -80,7 +80,7 @@ impl ReconstructorParams {
         ReconParams {
             mesh: self.mesh.clone().unwrap_or(d.mesh),
             cem: self.cem.clone().unwrap_or(d.cem),
-            prior: self.prior.clone().unwrap_or(d.prior),
+            prior: self.prior.unwrap_or(d.prior),
             lambda: self.lambda.unwrap_or(d.lambda),
             mode: self.mode.unwrap_or(d.mode),
             image_nx: self.image_nx.unwrap_or(d.image_nx),

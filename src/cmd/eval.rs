@@ -24,10 +24,13 @@ pub const LANES: [(&str, &str, &str, &str); 6] = [
     ("pneumatic-area-aware", "proportional", "pneumatic-area-aware", "Pneumatic-AreaAware"),
 ];
 
+/// An image with the true contact centres of its frame, mm.
+pub type Example = (Arc<Image>, Vec<(f64, f64)>);
+
 pub struct EvalOutcome {
     pub evaluator: Evaluator,
     /// A loaded frame's image with its contacts and truth, for the conductivity plot.
-    pub example: Option<(Arc<Image>, Vec<(f64, f64)>)>,
+    pub example: Option<Example>,
 }
 
 /// Runs every lane over the recording and feeds the evaluator.
@@ -44,7 +47,7 @@ pub fn evaluate(recording: &Path, calib: &Path, args: &PipelineArgs) -> Result<E
     let rows = spec.run().map_err(|e| anyhow::anyhow!("{}: pipeline: {e}", recording.display()))?;
     let labels: Vec<(&str, &str)> = LANES.iter().map(|(n, _, _, l)| (*n, *l)).collect();
     let mut ev = Evaluator::new(&labels);
-    let mut example: Option<(Arc<Image>, Vec<(f64, f64)>)> = None;
+    let mut example: Option<Example> = None;
     let mut truth = Vec::new();
     let mut detected = Vec::new();
     let mut transitions = 0usize;

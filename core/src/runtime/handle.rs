@@ -21,8 +21,13 @@ use crate::params::Params;
 use crate::registry::{BuildContext, KindInfo, NodeFactory};
 use crate::stats::{EdgeReport, NodeReport, StatsReport};
 
-/// Port names and types of a kind, inputs then outputs: what a replacement must match.
-fn signature(k: &KindInfo) -> (Vec<(String, String)>, Vec<(String, String)>) {
+/// (name, type) of each port, in declaration order.
+type Ports = Vec<(String, String)>;
+/// Inputs then outputs: what a replacement must match.
+pub(crate) type Signature = (Ports, Ports);
+
+/// Port names and types of a kind.
+fn signature(k: &KindInfo) -> Signature {
     let ports = |v: &[crate::port::PortSpec]| v.iter().map(|p| (p.name.to_string(), p.ty.to_string())).collect();
     (ports(&k.inputs), ports(&k.outputs))
 }
@@ -31,7 +36,7 @@ pub(crate) struct Inner {
     pub shared: Arc<Shared>,
     pub ids: Vec<String>,
     pub kinds: Mutex<Vec<String>>,
-    pub signatures: Vec<(Vec<(String, String)>, Vec<(String, String)>)>,
+    pub signatures: Vec<Signature>,
     pub edges: Vec<Arc<EdgeShared>>,
     pub name: String,
     pub mode: Mode,
@@ -124,7 +129,7 @@ impl GraphHandle {
         GraphHandle { inner: Arc::new(inner) }
     }
 
-    pub(crate) fn signature_of(k: &KindInfo) -> (Vec<(String, String)>, Vec<(String, String)>) {
+    pub(crate) fn signature_of(k: &KindInfo) -> Signature {
         signature(k)
     }
 }

@@ -2,7 +2,10 @@
 //! dP_i). `proportional` weights each contact by its conductivity sum C_i (the paper);
 //! `sensitivity-compensated` divides C_i by the EIT sensitivity field s(x, y) learned by
 //! `skinflow calibrate`, so a contact near the electrodes, where EIT over-responds, does not
-//! take more than its share. Math: `skinflow_contact::split`.
+//! take more than its share. `eit-force` weights each contact by its EIT-LocAware force
+//! estimate g_C(x, y) f_C(C_i) + b_C(x, y): the EIT calibration's own location-aware map from
+//! conductivity sum to force, so both the sensitivity field and the sub-linear C(F) response
+//! are undone before the pneumatic total is shared. Math: `skinflow_contact::split`.
 //!
 //! ```toml
 //! params = { strategy = "sensitivity-compensated", calibration = "../out/calib.toml" }
@@ -13,7 +16,7 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use serde::Deserialize;
-use skinflow_contact::{Calibration, Splitter as SplitMath};
+use skinflow_contact::{Calibration, Splitter as SplitMath, Strategy, StrategyKind};
 use skinflow_core::{
     BuildContext, Context, Inputs, KindInfo, Message, NodeError, NodeImpl, NodeParams, Outputs, ParamDoc, ParamError,
     PortSpec, Processor, Recycler, Registry, Role, typed,
@@ -26,6 +29,7 @@ use crate::payload::{Contacts, Split};
 pub enum SplitStrategy {
     Proportional,
     SensitivityCompensated,
+    EitForce,
 }
 
 #[derive(Debug, Deserialize)]
@@ -43,8 +47,8 @@ fn default_strategy() -> SplitStrategy {
 
 impl NodeParams for SplitterParams {
     fn validate(&self) -> Result<(), ParamError> {
-        if self.strategy == SplitStrategy::SensitivityCompensated && self.calibration.is_none() {
-            return Err(ParamError::new("calibration", "strategy \"sensitivity-compensated\" needs a calibration file"));
+        if self.strategy != SplitStrategy::Proportional && self.calibration.is_none() {
+            return Err(ParamError::new("calibration", "this strategy needs a calibration file (from `skinflow calibrate`)"));
         }
         Ok(())
     }
@@ -56,8 +60,15 @@ pub(crate) fn load_calibration(path: &std::path::Path, ctx: &BuildContext) -> Re
     Calibration::read(&p).map_err(|e| NodeError::Path { path: p.clone(), problem: e.to_string() })
 }
 
+/// How weights are computed.
+enum Weights {
+    Math(SplitMath),
+    /// EIT-LocAware force estimates.
+    EitForce(Strategy),
+}
+
 pub struct Splitter {
-    math: SplitMath,
+    weights: Weights,
     ring: Recycler<Split>,
 }
 
@@ -67,12 +78,27 @@ impl Processor for Splitter {
         let t0 = Instant::now();
         let contacts = m.arc::<Contacts>().ok_or(NodeError::Input { port: "contacts".into(), problem: "not contacts".into() })?;
         let dp = contacts.image.src.dp_kpa;
-        let math = &self.math;
+        let weights = &self.weights;
         let payload = self.ring.fill(|s| {
             s.dp_kpa.clear();
             s.dp_kpa.resize(contacts.contacts.len(), 0.0);
-            math.split_into(dp, &contacts.contacts, &mut s.dp_kpa);
-            s.strategy = math.name();
+            match weights {
+                Weights::Math(math) => {
+                    math.split_into(dp, &contacts.contacts, &mut s.dp_kpa);
+                    s.strategy = math.name();
+                }
+                Weights::EitForce(eit) => {
+                    for (w, c) in s.dp_kpa.iter_mut().zip(&contacts.contacts) {
+                        *w = eit.estimate(c, 0.0).force_n.max(0.0);
+                    }
+                    let total: f64 = s.dp_kpa.iter().sum();
+                    let n = s.dp_kpa.len() as f64;
+                    for w in s.dp_kpa.iter_mut() {
+                        *w = if total > 0.0 { *w / total * dp } else { dp / n };
+                    }
+                    s.strategy = "eit-force";
+                }
+            }
             s.compute_ns = t0.elapsed().as_nanos() as u64;
             s.contacts = contacts;
         });
@@ -85,17 +111,16 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
         KindInfo::new("splitter", Role::Processor, "shares the frame's pressure change among its contacts")
             .input(PortSpec::input::<Contacts>("contacts", "segmented contacts (carry the synced dP)"))
             .output(PortSpec::output::<Split>("split", "dP_i per contact, kPa"))
-            .param(ParamDoc::new("strategy", "string", "\"proportional\"", "proportional | sensitivity-compensated"))
+            .param(ParamDoc::new("strategy", "string", "\"proportional\"", "proportional | sensitivity-compensated | eit-force"))
             .param(ParamDoc::new("calibration", "path", "", "calibration TOML (needed by sensitivity-compensated)")),
         |p: SplitterParams, ctx| {
-            let math = match p.strategy {
-                SplitStrategy::Proportional => SplitMath::Proportional,
-                SplitStrategy::SensitivityCompensated => {
-                    let path = p.calibration.as_ref().expect("validated: calibration is set");
-                    SplitMath::SensitivityCompensated(load_calibration(path, ctx)?.sensitivity)
-                }
+            let cal = || load_calibration(p.calibration.as_ref().expect("validated: calibration is set"), ctx);
+            let weights = match p.strategy {
+                SplitStrategy::Proportional => Weights::Math(SplitMath::Proportional),
+                SplitStrategy::SensitivityCompensated => Weights::Math(SplitMath::SensitivityCompensated(cal()?.sensitivity)),
+                SplitStrategy::EitForce => Weights::EitForce(Strategy::new(&cal()?, StrategyKind::EitLocAware)),
             };
-            Ok(NodeImpl::Processor(Box::new(Splitter { math, ring: Recycler::new(128, Split::default) })))
+            Ok(NodeImpl::Processor(Box::new(Splitter { weights, ring: Recycler::new(128, Split::default) })))
         },
     ))
 }

@@ -15,12 +15,13 @@ use super::calibrate::require_truth;
 use super::pipeline::{PipelineArgs, Settled};
 
 /// (lane name, splitter, corrector strategy, label), in report order: the paper's four, then ours.
-pub const LANES: [(&str, &str, &str, &str); 6] = [
+pub const LANES: [(&str, &str, &str, &str); 7] = [
     ("eit-nocal", "proportional", "eit-nocal", "EIT-NoCal"),
     ("pneumatic-nocal", "proportional", "pneumatic-nocal", "Pneumatic-NoCal"),
     ("eit-locaware", "proportional", "eit-locaware", "EIT-LocAware"),
     ("pneumatic-locaware", "proportional", "pneumatic-locaware", "Pneumatic-LocAware (proposed)"),
     ("pneumatic-locaware-sensitivity", "sensitivity-compensated", "pneumatic-locaware", "Pneumatic-LocAware, sens.-comp. split"),
+    ("pneumatic-locaware-eitforce", "eit-force", "pneumatic-locaware", "Pneumatic-LocAware, EIT-force split"),
     ("pneumatic-area-aware", "proportional", "pneumatic-area-aware", "Pneumatic-AreaAware"),
 ];
 

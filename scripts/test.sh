@@ -8,7 +8,7 @@ bash scripts/setup.sh
 cargo fmt --all -- --check
 cargo clippy --workspace --all-targets -- -D warnings
 cargo test --workspace
-cargo build --bin skinflow
+cargo build --workspace
 for g in graphs/*.toml; do
   ./target/debug/skinflow check "$g"
 done

@@ -40,7 +40,24 @@ enum Cmd {
     /// Validate a graph without running it; errors name file, line and column.
     Check { graph: PathBuf },
     /// List every node kind with its ports, parameters and docs.
-    Nodes,
+    Nodes {
+        /// Also load this plugin library (repeatable).
+        #[arg(long = "plugin", value_name = "LIB")]
+        plugins: Vec<PathBuf>,
+    },
+    /// Run a graph's variants on one recording; write a speed-against-error table and Pareto plot.
+    Bench {
+        graph: PathBuf,
+        /// Recording replayed by the graph's `replay` node.
+        #[arg(long)]
+        replay: PathBuf,
+        /// NODE.PARAM=V1,V2,... (repeatable; every combination runs).
+        #[arg(long = "vary", value_name = "NODE.PARAM=V1,V2")]
+        vary: Vec<String>,
+        /// Output directory (bench.md, bench.json, pareto.png).
+        #[arg(long, default_value = "out/bench")]
+        out: PathBuf,
+    },
     /// Print a graph as Graphviz dot.
     Dot { graph: PathBuf },
     /// Simulate a scene and write it as a recording.
@@ -139,10 +156,13 @@ fn dispatch(cmd: Cmd) -> Result<ExitCode> {
                 Err(code) => Ok(code),
             }
         }
-        Cmd::Nodes => {
-            print_nodes(&registry());
+        Cmd::Nodes { plugins } => {
+            let mut reg = registry();
+            skinflow_nodes::codec::load_plugins(&plugins, &mut reg)?;
+            print_nodes(&reg);
             Ok(ExitCode::SUCCESS)
         }
+        Cmd::Bench { graph, replay, vary, out } => cmd::bench::run(&graph, &replay, &vary, &out).map(|()| ExitCode::SUCCESS),
         Cmd::Simulate { scene, out, seed, overwrite } => cmd::simulate::run(&scene, &out, seed, overwrite).map(|()| ExitCode::SUCCESS),
         Cmd::Emulate { scene, seed, fast, dir, faults } => {
             cmd::emulate::run(&scene, seed, fast, dir, &faults, interrupt_flag()?).map(|()| ExitCode::SUCCESS)
@@ -167,9 +187,32 @@ fn registry() -> Registry {
     skinflow_nodes::registry()
 }
 
+/// The built-in kinds plus the graph's `[[plugin]]` libraries. Err(code): plugin entries
+/// that do not parse (printed). An unreadable graph file is reported by `GraphSpec::load`.
+fn registry_for(path: &Path) -> Result<Result<Registry, ExitCode>> {
+    let mut reg = registry();
+    if let Ok(src) = skinflow_core::graph::SourceFile::read(path) {
+        match skinflow_core::graph::plugin_paths(&src) {
+            Ok(plugins) => {
+                skinflow_nodes::codec::load_plugins(&plugins, &mut reg)?;
+            }
+            Err(errs) => {
+                for e in &errs.0 {
+                    eprintln!("{e}");
+                }
+                return Ok(Err(ExitCode::from(2)));
+            }
+        }
+    }
+    Ok(Ok(reg))
+}
+
 /// Loads and validates; validation errors are printed one per line and give exit code 2.
 fn load(path: &Path) -> Result<Result<GraphSpec, ExitCode>> {
-    let reg = registry();
+    let reg = match registry_for(path)? {
+        Ok(r) => r,
+        Err(code) => return Ok(Err(code)),
+    };
     match GraphSpec::load(path, &reg) {
         Ok(spec) => Ok(Ok(spec)),
         Err(errs) => {
@@ -202,12 +245,14 @@ fn run(path: &Path, for_s: Option<f64>, stats_json: Option<&Path>, watch: bool, 
     let done = Arc::new(AtomicBool::new(false));
     let mut helpers = Vec::new();
     if watch {
-        let (p, reg, spec, h, d) = (path.to_path_buf(), registry(), spec.clone(), running.handle(), done.clone());
+        let reg = registry_for(path)?.unwrap_or_else(|_| registry());
+        let (p, spec, h, d) = (path.to_path_buf(), spec.clone(), running.handle(), done.clone());
         helpers.push(std::thread::spawn(move || cmd::live::watch(p, reg, spec, h, d)));
         eprintln!("watching {} for edits", path.display());
     }
     if let Some(sock) = control {
-        helpers.push(cmd::live::control_socket(sock, registry(), running.handle(), done.clone())?);
+        let reg = registry_for(path)?.unwrap_or_else(|_| registry());
+        helpers.push(cmd::live::control_socket(sock, reg, running.handle(), done.clone())?);
         eprintln!("control socket at {}", sock.display());
     }
     let report = running.wait(&RunOptions { duration, stop: Some(stop) });

@@ -5,6 +5,8 @@
 //! `segmenter` -> `splitter` -> `corrector` -> sinks (`hdf5_logger`, `compare`). Messages are
 //! the [`payload`] types. [`registry`] returns every built-in kind, plus the engine's toy kinds.
 
+pub mod codec;
+pub mod compare;
 pub mod correct;
 pub mod log;
 pub mod order;
@@ -28,8 +30,8 @@ type Register = fn(&mut Registry) -> Result<(), DuplicateKind>;
 pub fn registry() -> Registry {
     let mut r = Registry::new();
     skinflow_core::toy::register(&mut r).expect("built-in kinds have distinct names");
-    let reg: [Register; 9] =
-        [sim::register, replay::register, log::register, serial::register, sync::register, reconstruct::register, segment::register, split::register, correct::register];
+    let reg: [Register; 10] =
+        [sim::register, replay::register, log::register, serial::register, sync::register, reconstruct::register, segment::register, split::register, correct::register, compare::register];
     for f in reg {
         f(&mut r).expect("built-in kinds have distinct names");
     }

@@ -30,7 +30,7 @@ pub const DEFAULT_FLOOR: f64 = 2e-4;
 /// No-load images whose peaks set the noise level.
 const NOISE_FRAMES: usize = 64;
 /// Default multiple of the no-load noise peak.
-pub const DEFAULT_FLOOR_OVER_NOISE: f64 = 3.0;
+pub const DEFAULT_FLOOR_OVER_NOISE: f64 = 2.5;
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -163,7 +163,7 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
             .input(PortSpec::input::<Image>("image", "conductivity-change image"))
             .output(PortSpec::output::<Contacts>("contacts", "centroid (mm), conductivity sum, area (mm^2) per contact"))
             .param(ParamDoc::new("floor", "f64", "0.0002", "smallest floor on the conductivity decrease, S/m"))
-            .param(ParamDoc::new("floor_over_noise", "f64", "3.0", "floor >= this x the no-load images' peak decrease"))
+            .param(ParamDoc::new("floor_over_noise", "f64", "2.5", "floor >= this x the no-load images' peak decrease"))
             .param(ParamDoc::new("radius_frac", "f64", "0.02", "disk radius / image size"))
             .param(ParamDoc::new("max_contacts", "usize", "8", "most contacts per frame")),
         |p: SegmenterParams, _| Ok(NodeImpl::Processor(Box::new(Segmenter::new(&p)))),

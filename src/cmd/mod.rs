@@ -1,5 +1,6 @@
 //! One module per subcommand beyond run/check/nodes/dot.
 
+pub mod bench;
 pub mod calibrate;
 pub mod emulate;
 pub mod eval;

@@ -13,7 +13,11 @@ use clap::{Parser, Subcommand};
 use skinflow_core::{GraphSpec, Registry, RunOptions, RunningGraph};
 
 #[derive(Parser)]
-#[command(name = "skinflow", version, about = "Dataflow engine and toolkit for dual-channel (EIT + pneumatic) robot skins")]
+#[command(
+    name = "skinflow",
+    version,
+    about = "Dataflow engine and toolkit for dual-channel (EIT + pneumatic) robot skins"
+)]
 struct Cli {
     #[command(subcommand)]
     cmd: Cmd,
@@ -129,7 +133,8 @@ enum Cmd {
 fn main() -> ExitCode {
     tracing_subscriber::fmt()
         .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
+            tracing_subscriber::EnvFilter::try_from_default_env()
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
         )
         .with_writer(std::io::stderr)
         .init();
@@ -145,7 +150,9 @@ fn main() -> ExitCode {
 
 fn dispatch(cmd: Cmd) -> Result<ExitCode> {
     match cmd {
-        Cmd::Run { graph, for_s, stats_json, watch, control } => run(&graph, for_s, stats_json.as_deref(), watch, control.as_deref()),
+        Cmd::Run { graph, for_s, stats_json, watch, control } => {
+            run(&graph, for_s, stats_json.as_deref(), watch, control.as_deref())
+        }
         Cmd::Check { graph } => {
             let spec = load(&graph)?;
             match spec {
@@ -162,14 +169,22 @@ fn dispatch(cmd: Cmd) -> Result<ExitCode> {
             print_nodes(&reg);
             Ok(ExitCode::SUCCESS)
         }
-        Cmd::Bench { graph, replay, vary, out } => cmd::bench::run(&graph, &replay, &vary, &out).map(|()| ExitCode::SUCCESS),
-        Cmd::Simulate { scene, out, seed, overwrite } => cmd::simulate::run(&scene, &out, seed, overwrite).map(|()| ExitCode::SUCCESS),
+        Cmd::Bench { graph, replay, vary, out } => {
+            cmd::bench::run(&graph, &replay, &vary, &out).map(|()| ExitCode::SUCCESS)
+        }
+        Cmd::Simulate { scene, out, seed, overwrite } => {
+            cmd::simulate::run(&scene, &out, seed, overwrite).map(|()| ExitCode::SUCCESS)
+        }
         Cmd::Emulate { scene, seed, fast, dir, faults } => {
             cmd::emulate::run(&scene, seed, fast, dir, &faults, interrupt_flag()?).map(|()| ExitCode::SUCCESS)
         }
-        Cmd::Reproduce { out, scenes, seed, pipeline } => cmd::reproduce::run(&scenes, &out, seed, &pipeline).map(|()| ExitCode::SUCCESS),
+        Cmd::Reproduce { out, scenes, seed, pipeline } => {
+            cmd::reproduce::run(&scenes, &out, seed, &pipeline).map(|()| ExitCode::SUCCESS)
+        }
         Cmd::Inspect { recording } => cmd::inspect::run(&recording).map(|()| ExitCode::SUCCESS),
-        Cmd::Calibrate { recording, out, pipeline } => cmd::calibrate::run(&recording, &out, &pipeline).map(|()| ExitCode::SUCCESS),
+        Cmd::Calibrate { recording, out, pipeline } => {
+            cmd::calibrate::run(&recording, &out, &pipeline).map(|()| ExitCode::SUCCESS)
+        }
         Cmd::Eval { recording, calib, json, plots, pipeline } => {
             cmd::eval::run(&recording, &calib, json.as_deref(), plots.as_deref(), &pipeline).map(|()| ExitCode::SUCCESS)
         }
@@ -224,7 +239,13 @@ fn load(path: &Path) -> Result<Result<GraphSpec, ExitCode>> {
     }
 }
 
-fn run(path: &Path, for_s: Option<f64>, stats_json: Option<&Path>, watch: bool, control: Option<&Path>) -> Result<ExitCode> {
+fn run(
+    path: &Path,
+    for_s: Option<f64>,
+    stats_json: Option<&Path>,
+    watch: bool,
+    control: Option<&Path>,
+) -> Result<ExitCode> {
     let spec = match load(path)? {
         Ok(s) => s,
         Err(code) => return Ok(code),

@@ -22,12 +22,23 @@ fn workdir(test: &str) -> PathBuf {
 }
 
 fn skinflow(dir: &Path, args: &[&str]) -> Output {
-    Command::new(bin()).args(args).current_dir(dir).env("XDG_CACHE_HOME", dir.join("cache")).env("RUST_LOG", "warn").output().unwrap()
+    Command::new(bin())
+        .args(args)
+        .current_dir(dir)
+        .env("XDG_CACHE_HOME", dir.join("cache"))
+        .env("RUST_LOG", "warn")
+        .output()
+        .unwrap()
 }
 
 fn ok(out: &Output) -> String {
     let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
-    assert!(out.status.success(), "exit {:?}\nstdout:\n{stdout}\nstderr:\n{}", out.status, String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "exit {:?}\nstdout:\n{stdout}\nstderr:\n{}",
+        out.status,
+        String::from_utf8_lossy(&out.stderr)
+    );
     stdout
 }
 
@@ -64,7 +75,9 @@ fn calibrate_then_eval_writes_the_contract_json() {
     assert!(v["frames"].as_u64().unwrap() > 0);
     for s in ["pneumatic-locaware", "pneumatic-nocal", "eit-nocal", "eit-locaware"] {
         let st = &v["strategies"][s];
-        for key in ["rmse_n", "rmse_sd_n", "per_diameter_rmse_n", "relative_error_pct", "latency_us_p50", "latency_us_p99"] {
+        for key in
+            ["rmse_n", "rmse_sd_n", "per_diameter_rmse_n", "relative_error_pct", "latency_us_p50", "latency_us_p99"]
+        {
             assert!(st.get(key).is_some(), "strategies.{s}.{key} missing: {v}");
         }
     }
@@ -124,7 +137,8 @@ fn replayed_pipeline_logs_derived_streams_without_drops() {
     std::fs::write(d.join("g.toml"), graph).unwrap();
     let out = skinflow(&d, &["run", "g.toml", "--stats-json", "stats.json"]);
     ok(&out);
-    let stats: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(d.join("stats.json")).unwrap()).unwrap();
+    let stats: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(d.join("stats.json")).unwrap()).unwrap();
     let total_drops: u64 = stats["edges"].as_array().unwrap().iter().map(|e| e["drops"].as_u64().unwrap()).sum();
     assert_eq!(total_drops, 0, "{stats}");
     let node = |id: &str| stats["nodes"].as_array().unwrap().iter().find(|n| n["id"] == id).unwrap().clone();

@@ -30,7 +30,8 @@ fn inspect(dir: &Path, file: &str) -> String {
 
 /// The row count of a stream in `skinflow inspect` output.
 fn rows(summary: &str, stream: &str) -> u64 {
-    let line = summary.lines().find(|l| l.starts_with(stream)).unwrap_or_else(|| panic!("{stream} missing:\n{summary}"));
+    let line =
+        summary.lines().find(|l| l.starts_with(stream)).unwrap_or_else(|| panic!("{stream} missing:\n{summary}"));
     line.split_whitespace().nth(1).unwrap().parse().unwrap()
 }
 
@@ -97,14 +98,25 @@ fn serial_sources_drive_the_pipeline_through_emulated_boards() {
     assert!(t0.elapsed() < Duration::from_secs(120));
     let summary = inspect(&d, "live.h5");
     // Every frame the emulated board sent arrives and goes through every stage.
-    let sent: u64 = emu_out.stderr.split(|&b| b == b'\n').find_map(|l| {
-        let l = String::from_utf8_lossy(l);
-        l.split("emulating").nth(1).and_then(|r| r.split(':').nth(1)).and_then(|r| r.split_whitespace().next()).and_then(|n| n.parse().ok())
-    }).expect("the emulator reports its frame count");
+    let sent: u64 = emu_out
+        .stderr
+        .split(|&b| b == b'\n')
+        .find_map(|l| {
+            let l = String::from_utf8_lossy(l);
+            l.split("emulating")
+                .nth(1)
+                .and_then(|r| r.split(':').nth(1))
+                .and_then(|r| r.split_whitespace().next())
+                .and_then(|n| n.parse().ok())
+        })
+        .expect("the emulator reports its frame count");
     assert_eq!(rows(&summary, "/eit"), sent, "{summary}");
     assert!(summary.contains("0 frames lost"), "{summary}");
-    let stats: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(d.join("stats.json")).unwrap()).unwrap();
-    let node = |id: &str| stats["nodes"].as_array().unwrap().iter().find(|n| n["id"] == id).unwrap()["msgs_out"].as_u64().unwrap();
+    let stats: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(d.join("stats.json")).unwrap()).unwrap();
+    let node = |id: &str| {
+        stats["nodes"].as_array().unwrap().iter().find(|n| n["id"] == id).unwrap()["msgs_out"].as_u64().unwrap()
+    };
     assert_eq!(node("force"), sent);
 }
 

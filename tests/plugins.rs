@@ -19,10 +19,7 @@ fn root() -> &'static Path {
 
 /// target/<profile>/, where cargo puts the binary and the cdylibs.
 fn profile_dir() -> PathBuf {
-    Path::new(bin())
-        .parent()
-        .expect("the binary is in a directory")
-        .to_path_buf()
+    Path::new(bin()).parent().expect("the binary is in a directory").to_path_buf()
 }
 
 /// The built library of workspace package `package`, built now if it is missing.
@@ -39,14 +36,7 @@ fn plugin(package: &str) -> PathBuf {
     let target_dir = dir.parent().expect("target/<profile> has a parent");
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
     let status = Command::new(cargo)
-        .args([
-            "build",
-            "-p",
-            package,
-            "--profile",
-            &profile,
-            "--target-dir",
-        ])
+        .args(["build", "-p", package, "--profile", &profile, "--target-dir"])
         .arg(target_dir)
         .current_dir(root())
         .status()
@@ -85,13 +75,7 @@ fn stderr(o: &Output) -> String {
 }
 
 fn ok(o: &Output) -> String {
-    assert!(
-        o.status.success(),
-        "exit {:?}\nstdout:\n{}\nstderr:\n{}",
-        o.status,
-        stdout(o),
-        stderr(o)
-    );
+    assert!(o.status.success(), "exit {:?}\nstdout:\n{}\nstderr:\n{}", o.status, stdout(o), stderr(o));
     stdout(o)
 }
 
@@ -119,10 +103,7 @@ fn toy_graph(dir: &Path, plugins: &[PathBuf], scale_params: &str, restart: &str)
 /// The values the collect sink wrote.
 fn collected(dir: &Path) -> Vec<u64> {
     let text = std::fs::read_to_string(dir.join("out.csv")).unwrap_or_default();
-    text.lines()
-        .filter_map(|l| l.split(',').nth(1))
-        .filter_map(|v| v.trim().parse().ok())
-        .collect()
+    text.lines().filter_map(|l| l.split(',').nth(1)).filter_map(|v| v.trim().parse().ok()).collect()
 }
 
 #[test]
@@ -131,32 +112,17 @@ fn plugin_kinds_are_listed_with_their_library_path() {
     let lib = plugin("skinflow-plugin-split-weighted");
     let text = ok(&skinflow(&d, &["nodes", "--plugin", lib.to_str().unwrap()]));
     for kind in ["area-weighted-splitter", "peak-weighted-splitter"] {
-        let line = text
-            .lines()
-            .find(|l| l.starts_with(kind))
-            .unwrap_or_else(|| panic!("{kind} missing:\n{text}"));
-        assert!(
-            line.contains(&lib.display().to_string()),
-            "origin is not the library path: {line}"
-        );
+        let line = text.lines().find(|l| l.starts_with(kind)).unwrap_or_else(|| panic!("{kind} missing:\n{text}"));
+        assert!(line.contains(&lib.display().to_string()), "origin is not the library path: {line}");
     }
     assert!(text.contains("param exponent"), "{text}");
-    assert!(
-        text.lines()
-            .any(|l| l.starts_with("splitter") && l.contains("built-in")),
-        "{text}"
-    );
+    assert!(text.lines().any(|l| l.starts_with("splitter") && l.contains("built-in")), "{text}");
 }
 
 #[test]
 fn a_plugin_kind_runs_in_a_graph() {
     let d = workdir("toy");
-    let g = toy_graph(
-        &d,
-        &[plugin("skinflow-plugin-fixture-faulty")],
-        "factor = 3",
-        "never",
-    );
+    let g = toy_graph(&d, &[plugin("skinflow-plugin-fixture-faulty")], "factor = 3", "never");
     ok(&skinflow(&d, &["run", g.to_str().unwrap()]));
     assert_eq!(collected(&d), (1..=20).map(|v| 3 * v).collect::<Vec<u64>>());
 }
@@ -169,10 +135,7 @@ fn a_missing_plugin_file_names_the_path() {
     let o = skinflow(&d, &["check", g.to_str().unwrap()]);
     assert!(!o.status.success());
     let e = stderr(&o);
-    assert!(
-        e.contains(&format!("plugin {}: file not found", missing.display())),
-        "{e}"
-    );
+    assert!(e.contains(&format!("plugin {}: file not found", missing.display())), "{e}");
     assert_eq!(e.trim().lines().count(), 1, "one line: {e}");
 }
 
@@ -181,67 +144,31 @@ fn a_file_that_is_not_a_library_is_refused() {
     let d = workdir("garbage");
     let bad = d.join("garbage.so");
     std::fs::write(&bad, b"this is not an ELF file").unwrap();
-    let o = skinflow(
-        &d,
-        &[
-            "check",
-            toy_graph(&d, std::slice::from_ref(&bad), "", "never")
-                .to_str()
-                .unwrap(),
-        ],
-    );
+    let o = skinflow(&d, &["check", toy_graph(&d, std::slice::from_ref(&bad), "", "never").to_str().unwrap()]);
     assert!(!o.status.success());
     let e = stderr(&o);
-    assert!(
-        e.contains(&format!("plugin {}: not a loadable library", bad.display())),
-        "{e}"
-    );
+    assert!(e.contains(&format!("plugin {}: not a loadable library", bad.display())), "{e}");
 }
 
 #[test]
 fn a_library_without_the_entry_point_is_not_a_plugin() {
     let d = workdir("not-a-plugin");
     let lib = plugin("skinflow-plugin-fixture-not-a-plugin");
-    let o = skinflow(
-        &d,
-        &[
-            "check",
-            toy_graph(&d, std::slice::from_ref(&lib), "", "never")
-                .to_str()
-                .unwrap(),
-        ],
-    );
+    let o = skinflow(&d, &["check", toy_graph(&d, std::slice::from_ref(&lib), "", "never").to_str().unwrap()]);
     assert!(!o.status.success());
     let e = stderr(&o);
-    assert!(
-        e.contains(&format!("plugin {}: not a skinflow plugin", lib.display())),
-        "{e}"
-    );
+    assert!(e.contains(&format!("plugin {}: not a skinflow plugin", lib.display())), "{e}");
 }
 
 #[test]
 fn a_plugin_of_another_abi_version_is_refused() {
     let d = workdir("bad-abi");
     let lib = plugin("skinflow-plugin-fixture-bad-abi");
-    let o = skinflow(
-        &d,
-        &[
-            "check",
-            toy_graph(&d, std::slice::from_ref(&lib), "", "never")
-                .to_str()
-                .unwrap(),
-        ],
-    );
+    let o = skinflow(&d, &["check", toy_graph(&d, std::slice::from_ref(&lib), "", "never").to_str().unwrap()]);
     assert!(!o.status.success());
     let e = stderr(&o);
     // The fixture claims the host's version + 1.
-    assert!(
-        e.contains(&format!(
-            "plugin {}: built for plugin ABI version ",
-            lib.display()
-        )),
-        "{e}"
-    );
+    assert!(e.contains(&format!("plugin {}: built for plugin ABI version ", lib.display())), "{e}");
     assert!(e.contains("this skinflow loads version"), "{e}");
 }
 
@@ -251,15 +178,7 @@ fn a_kind_defined_twice_names_both_libraries() {
     let lib = plugin("skinflow-plugin-fixture-faulty");
     let copy = d.join("libcopy.so");
     std::fs::copy(&lib, &copy).unwrap();
-    let o = skinflow(
-        &d,
-        &[
-            "check",
-            toy_graph(&d, &[lib.clone(), copy.clone()], "", "never")
-                .to_str()
-                .unwrap(),
-        ],
-    );
+    let o = skinflow(&d, &["check", toy_graph(&d, &[lib.clone(), copy.clone()], "", "never").to_str().unwrap()]);
     assert!(!o.status.success());
     let e = stderr(&o);
     assert!(
@@ -275,12 +194,7 @@ fn a_kind_defined_twice_names_both_libraries() {
 #[test]
 fn bad_plugin_params_are_reported_by_check() {
     let d = workdir("params");
-    let g = toy_graph(
-        &d,
-        &[plugin("skinflow-plugin-fixture-faulty")],
-        "factr = 2",
-        "never",
-    );
+    let g = toy_graph(&d, &[plugin("skinflow-plugin-fixture-faulty")], "factr = 2", "never");
     let o = skinflow(&d, &["check", g.to_str().unwrap()]);
     assert!(!o.status.success());
     let e = stderr(&o);
@@ -290,19 +204,10 @@ fn bad_plugin_params_are_reported_by_check() {
 #[test]
 fn a_plugin_error_is_counted_and_the_graph_goes_on() {
     let d = workdir("error");
-    let g = toy_graph(
-        &d,
-        &[plugin("skinflow-plugin-fixture-faulty")],
-        "error_at = 3",
-        "never",
-    );
+    let g = toy_graph(&d, &[plugin("skinflow-plugin-fixture-faulty")], "error_at = 3", "never");
     ok(&skinflow(&d, &["run", g.to_str().unwrap()]));
     let got = collected(&d);
-    assert_eq!(
-        got.len(),
-        19,
-        "the erring call's message is dropped: {got:?}"
-    );
+    assert_eq!(got.len(), 19, "the erring call's message is dropped: {got:?}");
     assert!(!got.contains(&3));
 }
 
@@ -315,38 +220,19 @@ fn a_plugin_panic_stops_the_graph_without_restart() {
     assert!(!o.status.success(), "a panic without restart is a failure");
     let e = stderr(&o);
     assert!(e.contains("node \"scale\""), "{e}");
-    assert!(
-        e.contains(&format!(
-            "plugin kind \"fixture-scale\" ({})",
-            lib.display()
-        )),
-        "{e}"
-    );
+    assert!(e.contains(&format!("plugin kind \"fixture-scale\" ({})", lib.display())), "{e}");
     assert!(e.contains("fixture panic at call 5"), "{e}");
-    assert_eq!(
-        collected(&d),
-        vec![1, 2, 3, 4],
-        "messages before the panic were delivered"
-    );
+    assert_eq!(collected(&d), vec![1, 2, 3, 4], "messages before the panic were delivered");
 }
 
 #[test]
 fn a_plugin_panic_with_restart_always_rebuilds_the_node() {
     let d = workdir("panic-always");
-    let g = toy_graph(
-        &d,
-        &[plugin("skinflow-plugin-fixture-faulty")],
-        "panic_at = 5",
-        "always",
-    );
+    let g = toy_graph(&d, &[plugin("skinflow-plugin-fixture-faulty")], "panic_at = 5", "always");
     let text = ok(&skinflow(&d, &["run", g.to_str().unwrap()]));
     let got = collected(&d);
     // The fresh instance counts calls from 1 again and panics on its 5th call too.
-    assert_eq!(
-        got,
-        vec![1, 2, 3, 4, 6, 7, 8, 9, 11, 12, 13, 14, 16, 17, 18, 19],
-        "{text}"
-    );
+    assert_eq!(got, vec![1, 2, 3, 4, 6, 7, 8, 9, 11, 12, 13, 14, 16, 17, 18, 19], "{text}");
 }
 
 /// graphs/plugin-ab.toml on the tiny fixture scene, with this build's libraries.
@@ -358,29 +244,16 @@ fn example_plugins_run_as_ab_lanes_and_compare_reports_each() {
     let text = std::fs::read_to_string(root().join("graphs/plugin-ab.toml")).unwrap();
     let json = d.join("ab.json");
     let text = text
-        .replace(
-            "\"../target/debug/libskinflow_plugin_split_weighted.so\"",
-            &quoted(&split),
-        )
-        .replace(
-            "\"../target/debug/libskinflow_plugin_correct_fused.so\"",
-            &quoted(&fused),
-        )
-        .replace(
-            "\"scenes/multi-contact.toml\"",
-            &quoted(&root().join("tests/fixtures/tiny-eval.toml")),
-        )
-        .replace(
-            "\"calib/paper.toml\"",
-            &quoted(&root().join("graphs/calib/paper.toml")),
-        )
+        .replace("\"../target/debug/libskinflow_plugin_split_weighted.so\"", &quoted(&split))
+        .replace("\"../target/debug/libskinflow_plugin_correct_fused.so\"", &quoted(&fused))
+        .replace("\"scenes/multi-contact.toml\"", &quoted(&root().join("tests/fixtures/tiny-eval.toml")))
+        .replace("\"calib/paper.toml\"", &quoted(&root().join("graphs/calib/paper.toml")))
         .replace("\"../out/plugin-ab.json\"", &quoted(&json));
     let g = d.join("plugin-ab.toml");
     std::fs::write(&g, text).unwrap();
     let table = ok(&skinflow(&d, &["run", g.to_str().unwrap()]));
     assert!(table.contains("| peak-weighted (plugin) |"), "{table}");
-    let report: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let report: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
     let lanes = report["lanes"].as_array().unwrap();
     assert_eq!(lanes.len(), 4);
     for l in lanes {
@@ -391,10 +264,7 @@ fn example_plugins_run_as_ab_lanes_and_compare_reports_each() {
         assert!(l["latency_us_p50"].as_f64().unwrap() > 0.0, "{l}");
     }
     // Same contacts in every lane (one segmentation): identical localization.
-    let loc: Vec<f64> = lanes
-        .iter()
-        .map(|l| l["localization_mean_mm"].as_f64().unwrap())
-        .collect();
+    let loc: Vec<f64> = lanes.iter().map(|l| l["localization_mean_mm"].as_f64().unwrap()).collect();
     assert!(loc.iter().all(|&x| x == loc[0]), "{loc:?}");
 }
 
@@ -402,41 +272,16 @@ fn example_plugins_run_as_ab_lanes_and_compare_reports_each() {
 fn bench_varies_a_param_over_a_recording_and_writes_table_and_plot() {
     let d = workdir("bench");
     let fixture = root().join("tests/fixtures/tiny-eval.toml");
-    ok(&skinflow(
-        &d,
-        &[
-            "simulate",
-            fixture.to_str().unwrap(),
-            "--out",
-            "rec.h5",
-            "--seed",
-            "3",
-        ],
-    ));
+    ok(&skinflow(&d, &["simulate", fixture.to_str().unwrap(), "--out", "rec.h5", "--seed", "3"]));
     let graph = root().join("graphs/ab-replay.toml");
     let o = skinflow(
         &d,
-        &[
-            "bench",
-            graph.to_str().unwrap(),
-            "--replay",
-            "rec.h5",
-            "--vary",
-            "recon.lambda=0.02,0.2",
-            "--out",
-            "bench",
-        ],
+        &["bench", graph.to_str().unwrap(), "--replay", "rec.h5", "--vary", "recon.lambda=0.02,0.2", "--out", "bench"],
     );
     let md = ok(&o);
-    let rows: Vec<&str> = md
-        .lines()
-        .filter(|l| l.starts_with("| recon.lambda="))
-        .collect();
+    let rows: Vec<&str> = md.lines().filter(|l| l.starts_with("| recon.lambda=")).collect();
     assert_eq!(rows.len(), 4, "2 variants x 2 lanes:\n{md}");
-    assert!(
-        rows.iter().any(|r| r.ends_with("| yes |")),
-        "a Pareto point:\n{md}"
-    );
+    assert!(rows.iter().any(|r| r.ends_with("| yes |")), "a Pareto point:\n{md}");
     for f in ["bench.md", "bench.json", "pareto.png"] {
         assert!(d.join("bench").join(f).is_file(), "{f} missing");
     }

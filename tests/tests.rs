@@ -2,6 +2,6 @@
 
 mod cli;
 mod engine;
-mod plugins;
 mod hardware;
 mod live;
+mod plugins;

@@ -50,11 +50,7 @@ pub(crate) struct EdgeRx {
 
 /// Creates both ends of an edge.
 pub(crate) fn edge(spec: EdgeSpec) -> (EdgeTx, EdgeRx) {
-    let shared = Arc::new(EdgeShared {
-        producer_waiting: AtomicBool::new(false),
-        stats: EdgeStats::default(),
-        spec,
-    });
+    let shared = Arc::new(EdgeShared { producer_waiting: AtomicBool::new(false), stats: EdgeStats::default(), spec });
     let cap = shared.spec.capacity.max(1);
     let (tx, rx) = match shared.spec.policy {
         Policy::Block => {
@@ -155,7 +151,16 @@ mod tests {
     use crate::message::Header;
 
     fn spec(policy: Policy, capacity: usize) -> EdgeSpec {
-        EdgeSpec { from_node: 0, from_port: 0, to_node: 1, to_port: 0, capacity, policy, from: "a.o".into(), to: "b.i".into() }
+        EdgeSpec {
+            from_node: 0,
+            from_port: 0,
+            to_node: 1,
+            to_port: 0,
+            capacity,
+            policy,
+            from: "a.o".into(),
+            to: "b.i".into(),
+        }
     }
 
     fn msg(seq: u64) -> Message {

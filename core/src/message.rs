@@ -70,9 +70,6 @@ impl Message {
 
 impl fmt::Debug for Message {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.debug_struct("Message")
-            .field("header", &self.header)
-            .field("type", &self.type_name)
-            .finish()
+        f.debug_struct("Message").field("header", &self.header).field("type", &self.type_name).finish()
     }
 }

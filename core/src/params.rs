@@ -69,8 +69,11 @@ impl Params {
 
     /// Parses `key = value` TOML text.
     pub fn from_toml(text: &str) -> Result<Params, ParamError> {
-        let table: toml::Table = toml::from_str(text)
-            .map_err(|e| ParamError { param: None, problem: e.message().to_owned(), span: e.span() })?;
+        let table: toml::Table = toml::from_str(text).map_err(|e| ParamError {
+            param: None,
+            problem: e.message().to_owned(),
+            span: e.span(),
+        })?;
         Ok(Params::from_table(table))
     }
 
@@ -87,17 +90,17 @@ impl Params {
         let (parsed, key_spans) = match &self.located {
             Some(loc) => parse_located::<P>(loc)?,
             None => {
-                let p = P::deserialize(toml::Value::Table(self.table.clone()))
-                    .map_err(|e| ParamError { param: None, problem: e.to_string(), span: None })?;
+                let p = P::deserialize(toml::Value::Table(self.table.clone())).map_err(|e| ParamError {
+                    param: None,
+                    problem: e.to_string(),
+                    span: None,
+                })?;
                 (p, Vec::new())
             }
         };
         parsed.validate().map_err(|mut e| {
             if e.span.is_none() {
-                e.span = e
-                    .param
-                    .as_ref()
-                    .and_then(|k| key_spans.iter().find(|(n, _)| n == k).map(|(_, s)| s.clone()));
+                e.span = e.param.as_ref().and_then(|k| key_spans.iter().find(|(n, _)| n == k).map(|(_, s)| s.clone()));
             }
             e
         })?;
@@ -123,7 +126,9 @@ fn parse_located<P: NodeParams>(loc: &Located) -> Result<(P, KeySpans), ParamErr
     match params {
         Some(p) => {
             let spans = match p.get_ref() {
-                DeValue::Table(t) => t.iter().map(|(k, v)| (k.get_ref().to_string(), k.span().start..v.span().end)).collect(),
+                DeValue::Table(t) => {
+                    t.iter().map(|(k, v)| (k.get_ref().to_string(), k.span().start..v.span().end)).collect()
+                }
                 _ => Vec::new(),
             };
             let parsed = P::deserialize(p.into_deserializer()).map_err(to_err)?;
@@ -131,8 +136,11 @@ fn parse_located<P: NodeParams>(loc: &Located) -> Result<(P, KeySpans), ParamErr
         }
         None => {
             let empty = toml::Value::Table(toml::Table::new());
-            let parsed = P::deserialize(empty.into_deserializer())
-                .map_err(|e| ParamError { param: None, problem: e.message().to_owned(), span: node_span })?;
+            let parsed = P::deserialize(empty.into_deserializer()).map_err(|e| ParamError {
+                param: None,
+                problem: e.message().to_owned(),
+                span: node_span,
+            })?;
             Ok((parsed, Vec::new()))
         }
     }

@@ -157,10 +157,9 @@ where
     }
 
     fn build(&self, params: &Params, ctx: &BuildContext) -> Result<NodeImpl, NodeError> {
-        let p = params.parse::<P>().map_err(|e| NodeError::Param {
-            param: e.param.clone().unwrap_or_default(),
-            problem: e.problem,
-        })?;
+        let p = params
+            .parse::<P>()
+            .map_err(|e| NodeError::Param { param: e.param.clone().unwrap_or_default(), problem: e.problem })?;
         (self.build)(p, ctx)
     }
 }

@@ -23,7 +23,11 @@ pub struct Histogram {
 
 impl Default for Histogram {
     fn default() -> Self {
-        Histogram { buckets: (0..BUCKETS).map(|_| AtomicU64::new(0)).collect(), count: AtomicU64::new(0), max: AtomicU64::new(0) }
+        Histogram {
+            buckets: (0..BUCKETS).map(|_| AtomicU64::new(0)).collect(),
+            count: AtomicU64::new(0),
+            max: AtomicU64::new(0),
+        }
     }
 }
 
@@ -282,7 +286,14 @@ impl fmt::Display for StatsReport {
                 writeln!(
                     f,
                     "  {} -> {} ({:?}, capacity {}): full {}, unaligned {}, coalesced {}, undelivered {}",
-                    e.from, e.to, e.policy, e.capacity, e.dropped_full, e.dropped_unaligned, e.dropped_coalesced, e.undelivered
+                    e.from,
+                    e.to,
+                    e.policy,
+                    e.capacity,
+                    e.dropped_full,
+                    e.dropped_unaligned,
+                    e.dropped_coalesced,
+                    e.undelivered
                 )?;
             }
         }

@@ -216,7 +216,9 @@ impl Sink for Collect {
 
     fn consume(&mut self, _ctx: &mut Context, inputs: &Inputs) -> Result<(), NodeError> {
         for (_, m) in inputs.iter_port(0) {
-            let c = m.get::<Count>().ok_or_else(|| NodeError::Input { port: "in".into(), problem: "not a count".into() })?;
+            let c = m
+                .get::<Count>()
+                .ok_or_else(|| NodeError::Input { port: "in".into(), problem: "not a count".into() })?;
             self.rows.push((m.header.seq, c.0));
         }
         Ok(())
@@ -291,7 +293,11 @@ pub fn register(r: &mut Registry) -> Result<(), crate::registry::DuplicateKind> 
             .input(PortSpec::input::<Count>("in", "values").multi())
             .param(ParamDoc::new("path", "path", "", "output file (relative to the graph file)")),
         |p: CollectParams, ctx| {
-            Ok(NodeImpl::Sink(Box::new(Collect { path: ctx.resolve(&p.path), file: None, rows: Vec::with_capacity(1 << 16) })))
+            Ok(NodeImpl::Sink(Box::new(Collect {
+                path: ctx.resolve(&p.path),
+                file: None,
+                rows: Vec::with_capacity(1 << 16),
+            })))
         },
     ))?;
     r.register(typed(

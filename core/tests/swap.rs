@@ -82,7 +82,10 @@ fn a_swap_to_other_ports_or_bad_params_is_refused_and_the_graph_goes_on() {
     let scale = reg.get("scale").unwrap().clone();
     let e = h.swap("f", scale, Params::from_toml("factr = 3").unwrap()).unwrap_err();
     assert!(e.to_string().contains("factr"), "{e}");
-    assert!(matches!(h.swap("nope", reg.get("scale").unwrap().clone(), Params::empty()), Err(RunError::UnknownNode(_))));
+    assert!(matches!(
+        h.swap("nope", reg.get("scale").unwrap().clone(), Params::empty()),
+        Err(RunError::UnknownNode(_))
+    ));
     let report = running.wait(&RunOptions::default());
     assert!(report.failures.is_empty());
     assert_eq!(report.stats.node("f").unwrap().msgs_out, 10);

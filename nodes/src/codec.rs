@@ -24,10 +24,7 @@ const RING: usize = 128;
 
 /// Loads plugin libraries (e.g. a graph's `[[plugin]]` paths from
 /// `skinflow_core::graph::plugin_paths`) into `registry` with [`codecs`]; stops at the first failure.
-pub fn load_plugins(
-    paths: &[PathBuf],
-    registry: &mut Registry,
-) -> Result<Vec<Loaded>, PluginError> {
+pub fn load_plugins(paths: &[PathBuf], registry: &mut Registry) -> Result<Vec<Loaded>, PluginError> {
     load_all(paths, registry, &codecs())
 }
 
@@ -35,21 +32,9 @@ pub fn load_plugins(
 pub fn codecs() -> Codecs {
     let mut c = Codecs::new();
     c.register(Image::TYPE, || Box::new(ImageCodec));
-    c.register(Contacts::TYPE, || {
-        Box::new(ContactsCodec {
-            ring: Recycler::new(RING, Contacts::default),
-        })
-    });
-    c.register(Split::TYPE, || {
-        Box::new(SplitCodec {
-            ring: Recycler::new(RING, Split::default),
-        })
-    });
-    c.register(Forces::TYPE, || {
-        Box::new(ForcesCodec {
-            ring: Recycler::new(RING, Forces::default),
-        })
-    });
+    c.register(Contacts::TYPE, || Box::new(ContactsCodec { ring: Recycler::new(RING, Contacts::default) }));
+    c.register(Split::TYPE, || Box::new(SplitCodec { ring: Recycler::new(RING, Split::default) }));
+    c.register(Forces::TYPE, || Box::new(ForcesCodec { ring: Recycler::new(RING, Forces::default) }));
     c
 }
 
@@ -76,10 +61,7 @@ fn encode_split(s: &Split, out: &mut ColumnBuf) {
 fn per_item<'a>(cols: &Columns<'a>, name: &str, n: usize) -> Result<&'a [f64], String> {
     let d = cols.require(name)?;
     if d.len() != n {
-        return Err(format!(
-            "column \"{name}\" has {} values for {n} contacts",
-            d.len()
-        ));
+        return Err(format!("column \"{name}\" has {} values for {n} contacts", d.len()));
     }
     Ok(d)
 }
@@ -114,22 +96,15 @@ struct ContactsCodec {
 
 impl Codec for ContactsCodec {
     fn encode(&mut self, msg: &Message, out: &mut ColumnBuf) -> Result<(), String> {
-        encode_contacts(
-            msg.get::<Contacts>().ok_or_else(|| wrong(Contacts::TYPE))?,
-            out,
-        );
+        encode_contacts(msg.get::<Contacts>().ok_or_else(|| wrong(Contacts::TYPE))?, out);
         Ok(())
     }
 
     fn decode(&mut self, cols: &Columns<'_>, at: &Decode<'_>) -> Result<Message, String> {
-        let image = find(at, |m| {
-            m.arc::<Image>()
-                .or_else(|| m.get::<Contacts>().map(|c| c.image.clone()))
-        })
-        .ok_or("a contacts output needs an image or contacts input (its provenance)")?;
+        let image = find(at, |m| m.arc::<Image>().or_else(|| m.get::<Contacts>().map(|c| c.image.clone())))
+            .ok_or("a contacts output needs an image or contacts input (its provenance)")?;
         let n = cols.require("x_mm")?.len();
-        let [x, y, sum, area, peak] =
-            ["x_mm", "y_mm", "sum", "area_mm2", "peak"].map(|c| per_item(cols, c, n));
+        let [x, y, sum, area, peak] = ["x_mm", "y_mm", "sum", "area_mm2", "peak"].map(|c| per_item(cols, c, n));
         let (x, y, sum, area, peak) = (x?, y?, sum?, area?, peak?);
         let payload = self.ring.fill(|c| {
             c.contacts.clear();
@@ -162,11 +137,9 @@ impl Codec for SplitCodec {
     }
 
     fn decode(&mut self, cols: &Columns<'_>, at: &Decode<'_>) -> Result<Message, String> {
-        let contacts: Arc<Contacts> = find(at, |m| {
-            m.arc::<Contacts>()
-                .or_else(|| m.get::<Split>().map(|s| s.contacts.clone()))
-        })
-        .ok_or("a split output needs a contacts or split input (its provenance)")?;
+        let contacts: Arc<Contacts> =
+            find(at, |m| m.arc::<Contacts>().or_else(|| m.get::<Split>().map(|s| s.contacts.clone())))
+                .ok_or("a split output needs a contacts or split input (its provenance)")?;
         let dp = per_item(cols, "dp_kpa", contacts.contacts.len())?;
         let payload = self.ring.fill(|s| {
             s.dp_kpa.clear();
@@ -192,11 +165,8 @@ impl Codec for ForcesCodec {
     }
 
     fn decode(&mut self, cols: &Columns<'_>, at: &Decode<'_>) -> Result<Message, String> {
-        let split: Arc<Split> = find(at, |m| {
-            m.arc::<Split>()
-                .or_else(|| m.get::<Forces>().map(|f| f.split.clone()))
-        })
-        .ok_or("a forces output needs a split or forces input (its provenance)")?;
+        let split: Arc<Split> = find(at, |m| m.arc::<Split>().or_else(|| m.get::<Forces>().map(|f| f.split.clone())))
+            .ok_or("a forces output needs a split or forces input (its provenance)")?;
         let n = split.contacts.contacts.len();
         let force = per_item(cols, "force_n", n)?;
         let dp = match cols.get("dp_kpa") {
@@ -206,15 +176,8 @@ impl Codec for ForcesCodec {
         let payload = self.ring.fill(|f| {
             f.forces.clear();
             for (&force_n, &dp_kpa) in force.iter().zip(dp) {
-                let flags = ForceFlags {
-                    no_load: dp_kpa.is_nan() || dp_kpa <= 0.0,
-                    ..ForceFlags::default()
-                };
-                f.forces.push(ForceEstimate {
-                    force_n,
-                    dp_kpa,
-                    flags,
-                });
+                let flags = ForceFlags { no_load: dp_kpa.is_nan() || dp_kpa <= 0.0, ..ForceFlags::default() };
+                f.forces.push(ForceEstimate { force_n, dp_kpa, flags });
             }
             f.strategy.clear();
             f.strategy.push_str("plugin");
@@ -234,33 +197,12 @@ mod tests {
 
     #[test]
     fn contacts_encode_as_per_contact_columns_plus_the_frame_pressure() {
-        let src = Arc::new(SyncedFrame {
-            dp_kpa: 1.5,
-            ..SyncedFrame::default()
-        });
-        let image = Arc::new(Image {
-            src,
-            ..Image::default()
-        });
-        let c = Contact {
-            x_mm: 1.0,
-            y_mm: 2.0,
-            sum: 3.0,
-            area_mm2: 4.0,
-            peak: 5.0,
-            label: 1,
-        };
+        let src = Arc::new(SyncedFrame { dp_kpa: 1.5, ..SyncedFrame::default() });
+        let image = Arc::new(Image { src, ..Image::default() });
+        let c = Contact { x_mm: 1.0, y_mm: 2.0, sum: 3.0, area_mm2: 4.0, peak: 5.0, label: 1 };
         let msg = Message::new(
-            Header {
-                seq: 9,
-                t_ns: 90,
-                origin: 0,
-            },
-            Contacts {
-                image,
-                contacts: vec![c, c],
-                compute_ns: 0,
-            },
+            Header { seq: 9, t_ns: 90, origin: 0 },
+            Contacts { image, contacts: vec![c, c], compute_ns: 0 },
         );
         let mut buf = ColumnBuf::new();
         let mut codec = (codecs().get(Contacts::TYPE).expect("registered"))();
@@ -268,13 +210,7 @@ mod tests {
         let raw = buf.view(Contacts::TYPE, (msg.header.seq, msg.header.t_ns));
         // SAFETY: `raw` points into `buf`, alive and unchanged while `cols` is used.
         let cols = unsafe { Columns::from_raw(raw) };
-        for (name, v) in [
-            ("x_mm", 1.0),
-            ("y_mm", 2.0),
-            ("sum", 3.0),
-            ("area_mm2", 4.0),
-            ("peak", 5.0),
-        ] {
+        for (name, v) in [("x_mm", 1.0), ("y_mm", 2.0), ("sum", 3.0), ("area_mm2", 4.0), ("peak", 5.0)] {
             assert_eq!(cols.get(name), Some(&[v, v][..]), "{name}");
         }
         assert_eq!(cols.scalar("frame_dp_kpa"), Ok(1.5));
@@ -284,13 +220,7 @@ mod tests {
     #[test]
     fn every_pipeline_payload_has_a_codec() {
         let c = codecs();
-        for ty in [
-            Image::TYPE,
-            Contacts::TYPE,
-            Split::TYPE,
-            Forces::TYPE,
-            "count",
-        ] {
+        for ty in [Image::TYPE, Contacts::TYPE, Split::TYPE, Forces::TYPE, "count"] {
             assert!(c.get(ty).is_some(), "{ty}");
         }
     }

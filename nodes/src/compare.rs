@@ -20,8 +20,8 @@ use skinflow_contact::eval::match_contacts;
 use skinflow_contact::eval::metrics::{MATCH_RADIUS_MM, percentile};
 use skinflow_core::params::non_negative;
 use skinflow_core::{
-    BuildContext, Context, Inputs, KindInfo, NodeError, NodeImpl, NodeParams, ParamDoc, ParamError,
-    PortSpec, Registry, Role, Sink, typed,
+    BuildContext, Context, Inputs, KindInfo, NodeError, NodeImpl, NodeParams, ParamDoc, ParamError, PortSpec, Registry,
+    Role, Sink, typed,
 };
 
 use crate::payload::Forces;
@@ -136,19 +136,11 @@ impl Compare {
         while self.lanes.len() <= i {
             let k = self.lanes.len();
             let name = self.names.get(k).cloned().unwrap_or_default();
-            self.lanes.push(Lane {
-                name,
-                latency_us: Vec::with_capacity(4096),
-                ..Lane::default()
-            });
+            self.lanes.push(Lane { name, latency_us: Vec::with_capacity(4096), ..Lane::default() });
         }
         let lane = &mut self.lanes[i];
         if lane.name.is_empty() {
-            lane.name = if f.strategy.is_empty() {
-                format!("lane{i}")
-            } else {
-                f.strategy.clone()
-            };
+            lane.name = if f.strategy.is_empty() { format!("lane{i}") } else { f.strategy.clone() };
         }
         lane
     }
@@ -158,8 +150,7 @@ impl Compare {
         let truth = f.split.contacts.image.src.truth.clone();
         let contacts = &f.split.contacts.contacts;
         self.pred_xy.clear();
-        self.pred_xy
-            .extend(contacts.iter().map(|c| (c.x_mm, c.y_mm)));
+        self.pred_xy.extend(contacts.iter().map(|c| (c.x_mm, c.y_mm)));
         self.truth_xy.clear();
         let t = truth.as_deref().map_or(&[][..], |t| &t.contacts[..]);
         self.truth_xy.extend(t.iter().map(|c| (c.x_mm, c.y_mm)));
@@ -182,22 +173,13 @@ impl Compare {
     /// Scores one lane's forces against the reference lane's (no truth).
     fn score_disagreement(&mut self, i: usize, f: &Forces, reference: &Forces) {
         self.pred_xy.clear();
-        self.pred_xy
-            .extend(f.split.contacts.contacts.iter().map(|c| (c.x_mm, c.y_mm)));
+        self.pred_xy.extend(f.split.contacts.contacts.iter().map(|c| (c.x_mm, c.y_mm)));
         self.truth_xy.clear();
-        self.truth_xy.extend(
-            reference
-                .split
-                .contacts
-                .contacts
-                .iter()
-                .map(|c| (c.x_mm, c.y_mm)),
-        );
+        self.truth_xy.extend(reference.split.contacts.contacts.iter().map(|c| (c.x_mm, c.y_mm)));
         let pairs = match_contacts(&self.pred_xy, &self.truth_xy, MATCH_RADIUS_MM);
         let lane = &mut self.lanes[i];
         for p in &pairs {
-            lane.disagree_sq_n2 +=
-                (f.forces[p.pred].force_n - reference.forces[p.truth].force_n).powi(2);
+            lane.disagree_sq_n2 += (f.forces[p.pred].force_n - reference.forces[p.truth].force_n).powi(2);
             lane.disagree_matched += 1;
         }
     }
@@ -210,15 +192,11 @@ impl Compare {
 
 impl Sink for Compare {
     fn consume(&mut self, ctx: &mut Context, inputs: &Inputs) -> Result<(), NodeError> {
-        let reference = inputs
-            .iter_port(0)
-            .find(|(lane, _)| *lane == self.reference)
-            .and_then(|(_, m)| m.arc::<Forces>());
+        let reference =
+            inputs.iter_port(0).find(|(lane, _)| *lane == self.reference).and_then(|(_, m)| m.arc::<Forces>());
         for (i, m) in inputs.iter_port(0) {
-            let f = m.get::<Forces>().ok_or(NodeError::Input {
-                port: "forces".into(),
-                problem: "not forces".into(),
-            })?;
+            let f =
+                m.get::<Forces>().ok_or(NodeError::Input { port: "forces".into(), problem: "not forces".into() })?;
             let synced = &f.split.contacts.image.src;
             let lane = self.lane(i, f);
             if synced.no_load {
@@ -253,21 +231,15 @@ impl Sink for Compare {
             print!("{}", table(&reports));
         }
         if let Some(p) = &self.json {
-            std::fs::write(p, to_json(&reports)).map_err(|e| NodeError::Path {
-                path: p.clone(),
-                problem: e.to_string(),
-            })?;
+            std::fs::write(p, to_json(&reports))
+                .map_err(|e| NodeError::Path { path: p.clone(), problem: e.to_string() })?;
         }
         Ok(())
     }
 }
 
 fn num(x: f64, digits: usize) -> String {
-    if x.is_finite() {
-        format!("{x:.digits$}")
-    } else {
-        "-".into()
-    }
+    if x.is_finite() { format!("{x:.digits$}") } else { "-".into() }
 }
 
 /// The end-of-run table (Markdown).
@@ -296,11 +268,7 @@ pub fn table(reports: &[LaneReport]) -> String {
 }
 
 fn json_num(x: f64) -> String {
-    if x.is_finite() {
-        format!("{x}")
-    } else {
-        "null".into()
-    }
+    if x.is_finite() { format!("{x}") } else { "null".into() }
 }
 
 fn json_str(s: &str) -> String {
@@ -361,39 +329,17 @@ fn build(p: CompareParams, ctx: &BuildContext) -> Result<NodeImpl, NodeError> {
 
 pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::DuplicateKind> {
     r.register(typed(
-        KindInfo::new(
-            "compare",
-            Role::Sink,
-            "A/B lanes: per-lane latency and error against truth (or disagreement)",
-        )
-        .input(
-            PortSpec::input::<Forces>("forces", "one edge per lane; use trigger = \"aligned\"")
-                .multi(),
-        )
-        .param(ParamDoc::new(
-            "names",
-            "array of strings",
-            "[]",
-            "lane names in edge order (default: strategy names)",
-        ))
-        .param(ParamDoc::new(
-            "report_s",
-            "float",
-            "2.0",
-            "wall seconds between live report lines; 0 = none",
-        ))
-        .param(ParamDoc::new(
-            "json",
-            "path",
-            "",
-            "write the final report as JSON here",
-        ))
-        .param(ParamDoc::new(
-            "reference",
-            "integer",
-            "0",
-            "lane compared against when a frame has no truth",
-        )),
+        KindInfo::new("compare", Role::Sink, "A/B lanes: per-lane latency and error against truth (or disagreement)")
+            .input(PortSpec::input::<Forces>("forces", "one edge per lane; use trigger = \"aligned\"").multi())
+            .param(ParamDoc::new(
+                "names",
+                "array of strings",
+                "[]",
+                "lane names in edge order (default: strategy names)",
+            ))
+            .param(ParamDoc::new("report_s", "float", "2.0", "wall seconds between live report lines; 0 = none"))
+            .param(ParamDoc::new("json", "path", "", "write the final report as JSON here"))
+            .param(ParamDoc::new("reference", "integer", "0", "lane compared against when a frame has no truth")),
         build,
     ))
 }
@@ -408,14 +354,7 @@ mod tests {
     use crate::payload::{Contacts, Image, Split, SyncedFrame, Truth, TruthContact};
 
     fn contact(x_mm: f64, y_mm: f64) -> Contact {
-        Contact {
-            x_mm,
-            y_mm,
-            sum: 1.0,
-            area_mm2: 50.0,
-            peak: 0.1,
-            label: 1,
-        }
+        Contact { x_mm, y_mm, sum: 1.0, area_mm2: 50.0, peak: 0.1, label: 1 }
     }
 
     /// Forces of `lane` at detected `(x, y, force)`, with `truth` (x, y, force) when given.
@@ -424,44 +363,22 @@ mod tests {
             Arc::new(Truth {
                 contacts: t
                     .iter()
-                    .map(|&(x_mm, y_mm, force_n)| TruthContact {
-                        x_mm,
-                        y_mm,
-                        force_n,
-                        diameter_mm: 10.0,
-                    })
+                    .map(|&(x_mm, y_mm, force_n)| TruthContact { x_mm, y_mm, force_n, diameter_mm: 10.0 })
                     .collect(),
             })
         });
-        let src = Arc::new(SyncedFrame {
-            truth,
-            ..SyncedFrame::default()
-        });
-        let image = Arc::new(Image {
-            src,
-            compute_ns: 100_000,
-            ..Image::default()
-        });
+        let src = Arc::new(SyncedFrame { truth, ..SyncedFrame::default() });
+        let image = Arc::new(Image { src, compute_ns: 100_000, ..Image::default() });
         let contacts = Arc::new(Contacts {
             image,
             contacts: det.iter().map(|&(x, y, _)| contact(x, y)).collect(),
             compute_ns: 20_000,
         });
-        let split = Arc::new(Split {
-            contacts,
-            dp_kpa: vec![1.0; det.len()],
-            ..Split::default()
-        });
+        let split = Arc::new(Split { contacts, dp_kpa: vec![1.0; det.len()], ..Split::default() });
         Forces {
             split,
             strategy: lane.into(),
-            forces: det
-                .iter()
-                .map(|&(_, _, force_n)| ForceEstimate {
-                    force_n,
-                    ..ForceEstimate::default()
-                })
-                .collect(),
+            forces: det.iter().map(|&(_, _, force_n)| ForceEstimate { force_n, ..ForceEstimate::default() }).collect(),
             compute_ns: 1_000,
         }
     }
@@ -482,18 +399,8 @@ mod tests {
 
     #[test]
     fn the_kind_builds_a_sink() {
-        let ctx = BuildContext {
-            base_dir: ".".into(),
-            mode: skinflow_core::Mode::Lockstep,
-            node_id: "c".into(),
-        };
-        let p = CompareParams {
-            names: vec![],
-            report_s: 1.0,
-            json: None,
-            reference: 0,
-            print: false,
-        };
+        let ctx = BuildContext { base_dir: ".".into(), mode: skinflow_core::Mode::Lockstep, node_id: "c".into() };
+        let p = CompareParams { names: vec![], report_s: 1.0, json: None, reference: 0, print: false };
         assert!(matches!(build(p, &ctx), Ok(NodeImpl::Sink(_))));
     }
 
@@ -508,16 +415,8 @@ mod tests {
         let mut c = compare();
         let truth = [(0.0, 0.0, 2.0), (30.0, 0.0, 4.0)];
         // Lane 0: both found, errors +1 N and -1 N, 3 mm off each. Lane 1: one found, one spurious far away.
-        feed(
-            &mut c,
-            0,
-            &forces("a", &[(3.0, 0.0, 3.0), (30.0, 3.0, 3.0)], Some(&truth)),
-        );
-        feed(
-            &mut c,
-            1,
-            &forces("b", &[(0.0, 0.0, 2.5), (-40.0, -40.0, 1.0)], Some(&truth)),
-        );
+        feed(&mut c, 0, &forces("a", &[(3.0, 0.0, 3.0), (30.0, 3.0, 3.0)], Some(&truth)));
+        feed(&mut c, 1, &forces("b", &[(0.0, 0.0, 2.5), (-40.0, -40.0, 1.0)], Some(&truth)));
         let r = c.reports();
         assert_eq!(r[0].name, "a");
         assert_eq!((r[0].matched, r[0].missed, r[0].spurious), (2, 0, 0));
@@ -561,10 +460,7 @@ mod tests {
             disagreement_rmse_n: 0.5,
         };
         let t = table(std::slice::from_ref(&r));
-        assert!(
-            t.contains("| a \"quoted\" lane | 3 | 12.2 | 20.0 | - |"),
-            "{t}"
-        );
+        assert!(t.contains("| a \"quoted\" lane | 3 | 12.2 | 20.0 | - |"), "{t}");
         let j = to_json(&[r]);
         assert!(j.contains("\"name\": \"a \\\"quoted\\\" lane\""), "{j}");
         assert!(j.contains("\"rmse_n\": null"), "{j}");

@@ -92,14 +92,24 @@ impl Processor for Corrector {
 
 pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::DuplicateKind> {
     r.register(typed(
-        KindInfo::new("corrector", Role::Processor, "per-contact force by a calibrated strategy (paper's four + area-aware)")
-            .input(PortSpec::input::<Split>("split", "dP_i per contact"))
-            .output(PortSpec::output::<Forces>("forces", "per-contact force estimates, N, with guard flags"))
-            .param(ParamDoc::new("strategy", "string", "\"pneumatic-locaware\"", "eit-nocal | pneumatic-nocal | eit-locaware | pneumatic-locaware | pneumatic-area-aware"))
-            .param(ParamDoc::new("calibration", "path", "", "calibration TOML from `skinflow calibrate`"))
-            .param(ParamDoc::new("name", "string", "", "name on the output (default: strategy[-splitter])")),
+        KindInfo::new(
+            "corrector",
+            Role::Processor,
+            "per-contact force by a calibrated strategy (paper's four + area-aware)",
+        )
+        .input(PortSpec::input::<Split>("split", "dP_i per contact"))
+        .output(PortSpec::output::<Forces>("forces", "per-contact force estimates, N, with guard flags"))
+        .param(ParamDoc::new(
+            "strategy",
+            "string",
+            "\"pneumatic-locaware\"",
+            "eit-nocal | pneumatic-nocal | eit-locaware | pneumatic-locaware | pneumatic-area-aware",
+        ))
+        .param(ParamDoc::new("calibration", "path", "", "calibration TOML from `skinflow calibrate`"))
+        .param(ParamDoc::new("name", "string", "", "name on the output (default: strategy[-splitter])")),
         |p: CorrectorParams, ctx| {
-            let kind = kind_of(&p.strategy).map_err(|e| NodeError::Param { param: "strategy".into(), problem: e.problem })?;
+            let kind =
+                kind_of(&p.strategy).map_err(|e| NodeError::Param { param: "strategy".into(), problem: e.problem })?;
             let cal = load_calibration(&p.calibration, ctx)?;
             Ok(NodeImpl::Processor(Box::new(Corrector {
                 strategy: Strategy::new(&cal, kind),

@@ -30,8 +30,18 @@ type Register = fn(&mut Registry) -> Result<(), DuplicateKind>;
 pub fn registry() -> Registry {
     let mut r = Registry::new();
     skinflow_core::toy::register(&mut r).expect("built-in kinds have distinct names");
-    let reg: [Register; 10] =
-        [sim::register, replay::register, log::register, serial::register, sync::register, reconstruct::register, segment::register, split::register, correct::register, compare::register];
+    let reg: [Register; 10] = [
+        sim::register,
+        replay::register,
+        log::register,
+        serial::register,
+        sync::register,
+        reconstruct::register,
+        segment::register,
+        split::register,
+        correct::register,
+        compare::register,
+    ];
     for f in reg {
         f(&mut r).expect("built-in kinds have distinct names");
     }

@@ -18,8 +18,8 @@ use std::path::{Path, PathBuf};
 use serde::Deserialize;
 use skinflow_core::params::positive;
 use skinflow_core::{
-    BuildContext, Context, Inputs, KindInfo, NodeError, NodeImpl, NodeParams, ParamDoc, ParamError, PortSpec, Registry, Role,
-    Sink, typed,
+    BuildContext, Context, Inputs, KindInfo, NodeError, NodeImpl, NodeParams, ParamDoc, ParamError, PortSpec, Registry,
+    Role, Sink, typed,
 };
 use skinflow_record::write::{ContactRow, RecordingWriter, Streams, TruthContact as RecTruth, WriterOptions};
 
@@ -118,7 +118,13 @@ impl Logger {
             contacts: false,
             force_strategies: p.strategies,
         };
-        Ok(Logger { path, opts: Some(o), writer: None, truth_buf: Vec::with_capacity(16), forces_buf: Vec::with_capacity(64) })
+        Ok(Logger {
+            path,
+            opts: Some(o),
+            writer: None,
+            truth_buf: Vec::with_capacity(16),
+            forces_buf: Vec::with_capacity(64),
+        })
     }
 
     /// Creates the file once the connected inputs are known (first call).
@@ -135,7 +141,11 @@ impl Logger {
             if inputs.lanes(FORCES) == 0 {
                 o.streams.force_strategies.clear();
             } else if o.streams.force_strategies.is_empty() {
-                return Err(NodeError::Param { param: "strategies".into(), problem: "list the force strategies to log when `forces` is connected".into() }.fatal());
+                return Err(NodeError::Param {
+                    param: "strategies".into(),
+                    problem: "list the force strategies to log when `forces` is connected".into(),
+                }
+                .fatal());
             }
             let w = RecordingWriter::create(&self.path, &o).map_err(|e| io(&self.path, e).fatal())?;
             tracing::info!(path = %self.path.display(), "recording");
@@ -179,7 +189,12 @@ impl Sink for Logger {
             && let Some(t) = m.get::<Truth>()
         {
             truth_buf.clear();
-            truth_buf.extend(t.contacts.iter().map(|c| RecTruth { x_mm: c.x_mm, y_mm: c.y_mm, force_n: c.force_n, diameter_mm: c.diameter_mm }));
+            truth_buf.extend(t.contacts.iter().map(|c| RecTruth {
+                x_mm: c.x_mm,
+                y_mm: c.y_mm,
+                force_n: c.force_n,
+                diameter_mm: c.diameter_mm,
+            }));
             w.append_truth(m.header.t_s(), truth_buf).map_err(fatal)?;
         }
         if let Some(m) = inputs.get(IMAGE)
@@ -190,13 +205,17 @@ impl Sink for Logger {
         if let Some(m) = inputs.get(CONTACTS)
             && let Some(c) = m.get::<Contacts>()
         {
-            let rows = c.contacts.iter().map(|c| ContactRow { x_mm: c.x_mm, y_mm: c.y_mm, sum: c.sum, area_mm2: c.area_mm2 });
+            let rows =
+                c.contacts.iter().map(|c| ContactRow { x_mm: c.x_mm, y_mm: c.y_mm, sum: c.sum, area_mm2: c.area_mm2 });
             w.append_contacts(m.header.t_s(), rows).map_err(fatal)?;
         }
         for (_, m) in inputs.iter_port(FORCES) {
             let Some(f) = m.get::<Forces>() else { continue };
             let Some(k) = w.strategy_index(&f.strategy) else {
-                return Err(NodeError::Input { port: "forces".into(), problem: format!("strategy \"{}\" is not in `strategies`", f.strategy) });
+                return Err(NodeError::Input {
+                    port: "forces".into(),
+                    problem: format!("strategy \"{}\" is not in `strategies`", f.strategy),
+                });
             };
             forces_buf.clear();
             forces_buf.extend(f.forces.iter().map(|e| e.force_n));

@@ -16,12 +16,20 @@ pub struct AvailabilityOrder<E> {
 impl<E> AvailabilityOrder<E> {
     /// `frame_period_s`: the EIT frame period T.
     pub fn new(frame_period_s: f64) -> Self {
-        AvailabilityOrder { half_period_s: 0.5 * frame_period_s, pending_frames: VecDeque::with_capacity(4), lookahead: None, exhausted: false }
+        AvailabilityOrder {
+            half_period_s: 0.5 * frame_period_s,
+            pending_frames: VecDeque::with_capacity(4),
+            lookahead: None,
+            exhausted: false,
+        }
     }
 
     /// The next event in availability order with its availability time. `next` yields the
     /// underlying stream as `(time, is_frame, event)`.
-    pub fn next<Err>(&mut self, mut next: impl FnMut() -> Result<Option<(f64, bool, E)>, Err>) -> Result<Option<(f64, E)>, Err> {
+    pub fn next<Err>(
+        &mut self,
+        mut next: impl FnMut() -> Result<Option<(f64, bool, E)>, Err>,
+    ) -> Result<Option<(f64, E)>, Err> {
         loop {
             if self.lookahead.is_none() && !self.exhausted {
                 match next()? {
@@ -51,7 +59,8 @@ mod tests {
     #[test]
     fn frames_wait_for_the_end_of_their_window() {
         // (t, is_frame, name): frame at 1.0 with T = 1 is available at 1.5.
-        let mut src = vec![(0.9, false, "p0.9"), (1.0, true, "f1"), (1.2, false, "p1.2"), (1.6, false, "p1.6")].into_iter();
+        let mut src =
+            vec![(0.9, false, "p0.9"), (1.0, true, "f1"), (1.2, false, "p1.2"), (1.6, false, "p1.6")].into_iter();
         let mut o = AvailabilityOrder::new(1.0);
         let mut got = Vec::new();
         while let Some((t, e)) = o.next::<()>(|| Ok(src.next())).unwrap() {

@@ -10,8 +10,8 @@ use std::sync::{Arc, Mutex};
 use serde::Deserialize;
 use skinflow_core::graph::SourceFile;
 use skinflow_core::{
-    Context, GraphSpec, Inputs, KindInfo, Message, NodeError, NodeImpl, NodeParams, PortSpec, Registry, Role, RunOptions, Sink,
-    typed,
+    Context, GraphSpec, Inputs, KindInfo, Message, NodeError, NodeImpl, NodeParams, PortSpec, Registry, Role,
+    RunOptions, Sink, typed,
 };
 
 /// Messages captured per call of the capture sink: one per lane, in lane order.
@@ -76,9 +76,14 @@ impl PipelineSpec {
     pub fn graph_toml(&self) -> String {
         let mut g = String::new();
         let _ = writeln!(g, "[graph]\nname = \"pipeline\"\nmode = \"lockstep\"\n");
-        let _ = writeln!(g, "[[node]]\nid = \"replay\"\nkind = \"replay\"\nparams = {{ path = {}, speed = 0.0 }}\n", path_str(&self.recording));
+        let _ = writeln!(
+            g,
+            "[[node]]\nid = \"replay\"\nkind = \"replay\"\nparams = {{ path = {}, speed = 0.0 }}\n",
+            path_str(&self.recording)
+        );
         let _ = writeln!(g, "[[node]]\nid = \"sync\"\nkind = \"sync\"\nparams = {{ {} }}\n", self.sync);
-        let _ = writeln!(g, "[[node]]\nid = \"recon\"\nkind = \"reconstructor\"\nparams = {{ {} }}\n", self.reconstructor);
+        let _ =
+            writeln!(g, "[[node]]\nid = \"recon\"\nkind = \"reconstructor\"\nparams = {{ {} }}\n", self.reconstructor);
         let _ = writeln!(g, "[[node]]\nid = \"segment\"\nkind = \"segmenter\"\nparams = {{ {} }}\n", self.segmenter);
         let _ = writeln!(g, "[[node]]\nid = \"capture\"\nkind = \"capture\"\ntrigger = \"aligned\"\n");
         let edge = |g: &mut String, from: &str, to: &str| {
@@ -101,7 +106,11 @@ impl PipelineSpec {
                     }
                 }
                 for s in &splitters {
-                    let _ = writeln!(g, "[[node]]\nid = \"split-{s}\"\nkind = \"splitter\"\nparams = {{ strategy = {}, calibration = {cal} }}\n", quote(s));
+                    let _ = writeln!(
+                        g,
+                        "[[node]]\nid = \"split-{s}\"\nkind = \"splitter\"\nparams = {{ strategy = {}, calibration = {cal} }}\n",
+                        quote(s)
+                    );
                     edge(&mut g, "segment.contacts", &format!("split-{s}.contacts"));
                 }
                 for (name, split, strategy) in &self.lanes {

@@ -99,7 +99,11 @@ impl NodeParams for ReconstructorParams {
         }
         // The sensor file is read when the node is built; check against the default here.
         if self.sensor.is_none() {
-            self.recon().validate(&Sensor::paper_100mm()).map_err(|e| ParamError { param: None, problem: e.to_string(), span: None })?;
+            self.recon().validate(&Sensor::paper_100mm()).map_err(|e| ParamError {
+                param: None,
+                problem: e.to_string(),
+                span: None,
+            })?;
         }
         Ok(())
     }
@@ -111,7 +115,8 @@ pub(crate) fn load_sensor(path: Option<&std::path::Path>, ctx: &BuildContext) ->
         None => Ok(Sensor::paper_100mm()),
         Some(p) => {
             let p = ctx.resolve(p);
-            let text = std::fs::read_to_string(&p).map_err(|e| NodeError::Path { path: p.clone(), problem: format!("cannot read sensor: {e}") })?;
+            let text = std::fs::read_to_string(&p)
+                .map_err(|e| NodeError::Path { path: p.clone(), problem: format!("cannot read sensor: {e}") })?;
             Sensor::from_toml(&text).map_err(|e| NodeError::Path { path: p, problem: e.to_string() })
         }
     }
@@ -142,7 +147,8 @@ impl Reconstructor {
             recon.cache_dir = Some(p.cache_dir.as_ref().map_or_else(default_cache_dir, |d| ctx.resolve(d)));
         }
         let t0 = Instant::now();
-        let math = skinflow_eit::Reconstructor::new(&sensor, &recon).map_err(|e| NodeError::Param { param: "reconstruction".into(), problem: e.to_string() })?;
+        let math = skinflow_eit::Reconstructor::new(&sensor, &recon)
+            .map_err(|e| NodeError::Param { param: "reconstruction".into(), problem: e.to_string() })?;
         let info = math.info();
         tracing::info!(
             node = %ctx.node_id, elements = info.elements, lambda = info.lambda, prior = %info.prior,
@@ -152,7 +158,8 @@ impl Reconstructor {
         let m = sensor.measurement_count();
         let mask = math.mask().clone();
         Ok(Reconstructor {
-            tracker: ReferenceTracker::new(m, p.reference_frames).map_err(|e| NodeError::Param { param: "reference_frames".into(), problem: e.to_string() })?,
+            tracker: ReferenceTracker::new(m, p.reference_frames)
+                .map_err(|e| NodeError::Param { param: "reference_frames".into(), problem: e.to_string() })?,
             tare_pending: false,
             noload_sum: vec![0.0; m],
             noload_mean: vec![0.0; m],
@@ -172,7 +179,12 @@ impl Reconstructor {
         if v.len() != m {
             return Err(NodeError::Input {
                 port: port.into(),
-                problem: format!("frame has {} values but sensor \"{}\" ({}) has {m}", v.len(), self.sensor.name, self.sensor.protocol.name()),
+                problem: format!(
+                    "frame has {} values but sensor \"{}\" ({}) has {m}",
+                    v.len(),
+                    self.sensor.name,
+                    self.sensor.protocol.name()
+                ),
             });
         }
         Ok(())
@@ -199,21 +211,27 @@ fn reference_source(s: EitRef) -> ReferenceSource {
 impl Processor for Reconstructor {
     fn process(&mut self, ctx: &mut Context, inputs: &Inputs, out: &mut Outputs) -> Result<(), NodeError> {
         if let Some(m) = inputs.get(1) {
-            let f = m.get::<EitFrame>().ok_or(NodeError::Input { port: "reference".into(), problem: "not an EIT frame".into() })?;
+            let f = m
+                .get::<EitFrame>()
+                .ok_or(NodeError::Input { port: "reference".into(), problem: "not an EIT frame".into() })?;
             self.check_width("reference", &f.v)?;
             self.tracker = ReferenceTracker::from_reference(&f.v);
             self.report_reference(ctx);
         }
         let Some(m) = inputs.get(0) else { return Ok(()) };
         let t0 = Instant::now();
-        let synced = m.arc::<SyncedFrame>().ok_or(NodeError::Input { port: "frame".into(), problem: "not a synced frame".into() })?;
+        let synced = m
+            .arc::<SyncedFrame>()
+            .ok_or(NodeError::Input { port: "frame".into(), problem: "not a synced frame".into() })?;
         let v = &synced.frame.v;
         self.check_width("frame", v)?;
         if self.tare_pending {
             self.tracker.tare(v).map_err(|e| NodeError::Input { port: "frame".into(), problem: e.to_string() })?;
             self.tare_pending = false;
         } else if synced.no_load {
-            self.tracker.accumulate(v).map_err(|e| NodeError::Input { port: "frame".into(), problem: e.to_string() })?;
+            self.tracker
+                .accumulate(v)
+                .map_err(|e| NodeError::Input { port: "frame".into(), problem: e.to_string() })?;
             if self.tracker.reference().is_none() && v.iter().all(|x| x.is_finite()) {
                 self.noload_n += 1;
                 let n = f64::from(self.noload_n);
@@ -224,7 +242,10 @@ impl Processor for Reconstructor {
             }
         } else if !self.tracker.finish() {
             // The no-load period ended before any usable frame: the best remaining choice.
-            tracing::warn!(node = ctx.id(), "no usable no-load frame before the first loaded one: taking this frame as the reference");
+            tracing::warn!(
+                node = ctx.id(),
+                "no usable no-load frame before the first loaded one: taking this frame as the reference"
+            );
             self.tracker.tare(v).map_err(|e| NodeError::Input { port: "frame".into(), problem: e.to_string() })?;
         }
         self.report_reference(ctx);
@@ -232,7 +253,9 @@ impl Processor for Reconstructor {
         self.math.detect_mask_into(v, &mut self.mask_scratch);
         if self.mask_scratch != self.mask {
             std::mem::swap(&mut self.mask, &mut self.mask_scratch);
-            self.math.set_mask(&self.mask).map_err(|e| NodeError::Input { port: "frame".into(), problem: e.to_string() })?;
+            self.math
+                .set_mask(&self.mask)
+                .map_err(|e| NodeError::Input { port: "frame".into(), problem: e.to_string() })?;
             tracing::warn!(node = ctx.id(), excluded = ?self.mask.excluded_channels(), dead_electrodes = ?self.mask.dead_electrodes(), "channel mask changed");
         }
         let masked = self.mask.excluded_count() as u32;
@@ -284,24 +307,28 @@ impl Processor for Reconstructor {
 
 pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::DuplicateKind> {
     r.register(typed(
-        KindInfo::new("reconstructor", Role::Processor, "EIT frames -> conductivity-change images (one-step NOSER, cached matrix)")
-            .input(PortSpec::input::<SyncedFrame>("frame", "synced EIT frames"))
-            .input(PortSpec::input::<EitFrame>("reference", "recorded no-load reference frame").optional())
-            .output(PortSpec::output::<Image>("image", "conductivity change, S/m, negative = contact"))
-            .param(ParamDoc::new("sensor", "path", "", "sensor TOML (default paper-100mm)"))
-            .param(ParamDoc::new("lambda", "f64", "0.03", "regularisation weight (dimensionless)"))
-            .param(ParamDoc::new("prior", "table", "{ noser = { p = 0.5 } }", "noser {p} | identity | laplacian {epsilon}"))
-            .param(ParamDoc::new("mode", "string", "\"normalized\"", "normalized | plain difference data"))
-            .param(ParamDoc::new("reference_frames", "usize", "10", "no-load frames averaged into the reference"))
-            .param(ParamDoc::new("image_nx", "usize", "64", "image width, pixels"))
-            .param(ParamDoc::new("image_ny", "usize", "64", "image height, pixels"))
-            .param(ParamDoc::new("precision", "string", "\"f64\"", "f64 | f32 matrix"))
-            .param(ParamDoc::new("mesh", "table", "{ elements = 4000 }", "reconstruction mesh"))
-            .param(ParamDoc::new("cem", "table", "", "complete electrode model constants"))
-            .param(ParamDoc::new("mask", "table", "", "saturation_v, dead_electrode_fraction"))
-            .param(ParamDoc::new("elements", "bool", "false", "also output per-element values"))
-            .param(ParamDoc::new("cache_dir", "path", "~/.cache/skinflow", "matrix cache directory"))
-            .param(ParamDoc::new("no_cache", "bool", "false", "do not use the disk cache")),
+        KindInfo::new(
+            "reconstructor",
+            Role::Processor,
+            "EIT frames -> conductivity-change images (one-step NOSER, cached matrix)",
+        )
+        .input(PortSpec::input::<SyncedFrame>("frame", "synced EIT frames"))
+        .input(PortSpec::input::<EitFrame>("reference", "recorded no-load reference frame").optional())
+        .output(PortSpec::output::<Image>("image", "conductivity change, S/m, negative = contact"))
+        .param(ParamDoc::new("sensor", "path", "", "sensor TOML (default paper-100mm)"))
+        .param(ParamDoc::new("lambda", "f64", "0.03", "regularisation weight (dimensionless)"))
+        .param(ParamDoc::new("prior", "table", "{ noser = { p = 0.5 } }", "noser {p} | identity | laplacian {epsilon}"))
+        .param(ParamDoc::new("mode", "string", "\"normalized\"", "normalized | plain difference data"))
+        .param(ParamDoc::new("reference_frames", "usize", "10", "no-load frames averaged into the reference"))
+        .param(ParamDoc::new("image_nx", "usize", "64", "image width, pixels"))
+        .param(ParamDoc::new("image_ny", "usize", "64", "image height, pixels"))
+        .param(ParamDoc::new("precision", "string", "\"f64\"", "f64 | f32 matrix"))
+        .param(ParamDoc::new("mesh", "table", "{ elements = 4000 }", "reconstruction mesh"))
+        .param(ParamDoc::new("cem", "table", "", "complete electrode model constants"))
+        .param(ParamDoc::new("mask", "table", "", "saturation_v, dead_electrode_fraction"))
+        .param(ParamDoc::new("elements", "bool", "false", "also output per-element values"))
+        .param(ParamDoc::new("cache_dir", "path", "~/.cache/skinflow", "matrix cache directory"))
+        .param(ParamDoc::new("no_cache", "bool", "false", "do not use the disk cache")),
         |p: ReconstructorParams, ctx| Ok(NodeImpl::Processor(Box::new(Reconstructor::new(&p, ctx)?))),
     ))
 }

@@ -15,8 +15,8 @@ use std::sync::Arc;
 use serde::Deserialize;
 use skinflow_core::params::non_negative;
 use skinflow_core::{
-    Context, Header, KindInfo, Message, NodeError, NodeImpl, NodeParams, Outputs, ParamDoc, ParamError, PortSpec, Recycler,
-    Registry, Role, Source, SourcePoll, typed,
+    Context, Header, KindInfo, Message, NodeError, NodeImpl, NodeParams, Outputs, ParamDoc, ParamError, PortSpec,
+    Recycler, Registry, Role, Source, SourcePoll, typed,
 };
 use skinflow_record::read::Recording;
 
@@ -160,7 +160,13 @@ impl Source for Replay {
             Item::Pressure(i) => {
                 let p = rec.pressure.as_ref().expect("indexed from the pressure stream");
                 self.pressure_seq += 1;
-                out.send(PRESSURE, Message::new(Header { seq: self.pressure_seq, t_ns: ns(p.t_s[i] + off), origin }, PressureSample { kpa: p.kpa[i] }))?;
+                out.send(
+                    PRESSURE,
+                    Message::new(
+                        Header { seq: self.pressure_seq, t_ns: ns(p.t_s[i] + off), origin },
+                        PressureSample { kpa: p.kpa[i] },
+                    ),
+                )?;
             }
             Item::Truth(i) => {
                 let tr = rec.truth.as_ref().expect("indexed from the truth stream");
@@ -168,9 +174,17 @@ impl Source for Replay {
                 let contacts = tr
                     .row(i)
                     .contacts()
-                    .map(|c| TruthContact { x_mm: c.x_mm, y_mm: c.y_mm, force_n: c.force_n, diameter_mm: c.diameter_mm })
+                    .map(|c| TruthContact {
+                        x_mm: c.x_mm,
+                        y_mm: c.y_mm,
+                        force_n: c.force_n,
+                        diameter_mm: c.diameter_mm,
+                    })
                     .collect();
-                out.send(TRUTH, Message::new(Header { seq: self.truth_seq, t_ns: ns(tr.t_s[i] + off), origin }, Truth { contacts }))?;
+                out.send(
+                    TRUTH,
+                    Message::new(Header { seq: self.truth_seq, t_ns: ns(tr.t_s[i] + off), origin }, Truth { contacts }),
+                )?;
             }
         }
         Ok(SourcePoll::Emitted)
@@ -179,17 +193,22 @@ impl Source for Replay {
 
 pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::DuplicateKind> {
     r.register(typed(
-        KindInfo::new("replay", Role::Source, "replays a recording (format v1) at its timing, faster, or as fast as possible")
-            .output(PortSpec::output::<EitFrame>("eit", "EIT frames"))
-            .output(PortSpec::output::<PressureSample>("pressure", "gauge pressure, kPa"))
-            .output(PortSpec::output::<Truth>("truth", "ground-truth rows"))
-            .output(PortSpec::output::<EitFrame>("reference", "/eit/reference, once, when recorded"))
-            .param(ParamDoc::new("path", "path", "", "recording file (relative to the graph file)"))
-            .param(ParamDoc::new("speed", "f64", "1.0", "timing factor; 0 = as fast as possible"))
-            .param(ParamDoc::new("loop", "bool", "false", "start again at the end")),
+        KindInfo::new(
+            "replay",
+            Role::Source,
+            "replays a recording (format v1) at its timing, faster, or as fast as possible",
+        )
+        .output(PortSpec::output::<EitFrame>("eit", "EIT frames"))
+        .output(PortSpec::output::<PressureSample>("pressure", "gauge pressure, kPa"))
+        .output(PortSpec::output::<Truth>("truth", "ground-truth rows"))
+        .output(PortSpec::output::<EitFrame>("reference", "/eit/reference, once, when recorded"))
+        .param(ParamDoc::new("path", "path", "", "recording file (relative to the graph file)"))
+        .param(ParamDoc::new("speed", "f64", "1.0", "timing factor; 0 = as fast as possible"))
+        .param(ParamDoc::new("loop", "bool", "false", "start again at the end")),
         |p: ReplayParams, ctx| {
             let path = ctx.resolve(&p.path);
-            let rec = Recording::open(&path).map_err(|e| NodeError::Path { path: path.clone(), problem: e.to_string() })?;
+            let rec =
+                Recording::open(&path).map_err(|e| NodeError::Path { path: path.clone(), problem: e.to_string() })?;
             Ok(NodeImpl::Source(Box::new(Replay::new(rec, p.speed, p.repeat))))
         },
     ))

@@ -111,7 +111,8 @@ impl Processor for Segmenter {
     fn process(&mut self, ctx: &mut Context, inputs: &Inputs, out: &mut Outputs) -> Result<(), NodeError> {
         let Some(m) = inputs.get(0) else { return Ok(()) };
         let t0 = Instant::now();
-        let image = m.arc::<Image>().ok_or(NodeError::Input { port: "image".into(), problem: "not an image".into() })?;
+        let image =
+            m.arc::<Image>().ok_or(NodeError::Input { port: "image".into(), problem: "not an image".into() })?;
         let peak = skinflow_contact::segment::peak_decrease(&image.pixels);
         if image.src.no_load && peak > 0.0 && self.noise_peaks.len() < NOISE_FRAMES {
             self.noise_peaks.push(peak);
@@ -131,12 +132,14 @@ impl Processor for Segmenter {
         let grid = ImageGrid::centred(image.width, image.height, image.width_mm, image.height_mm);
         // The grid is fixed by the first image; a change rebuilds the scratch (rare, allocates).
         if self.math.as_ref().is_none_or(|(g, _, _)| *g != grid) {
-            let seg = SegmentMath::new(grid, &self.params).map_err(|e| NodeError::Input { port: "image".into(), problem: e.to_string() })?;
+            let seg = SegmentMath::new(grid, &self.params)
+                .map_err(|e| NodeError::Input { port: "image".into(), problem: e.to_string() })?;
             let buf = seg.new_contacts();
             self.math = Some((grid, seg, buf));
         }
         let (_, seg, buf) = self.math.as_mut().expect("set above");
-        seg.segment_into(&image.pixels, buf).map_err(|e| NodeError::Input { port: "image".into(), problem: e.to_string() })?;
+        seg.segment_into(&image.pixels, buf)
+            .map_err(|e| NodeError::Input { port: "image".into(), problem: e.to_string() })?;
         self.dropped_components += buf.dropped as u64;
         let found = buf.as_slice();
         let ns = t0.elapsed().as_nanos() as u64;
@@ -151,7 +154,11 @@ impl Processor for Segmenter {
 
     fn stop(&mut self, ctx: &mut Context) -> Result<(), NodeError> {
         if self.dropped_components > 0 {
-            tracing::warn!(node = ctx.id(), components = self.dropped_components, "components beyond max_contacts were dropped");
+            tracing::warn!(
+                node = ctx.id(),
+                components = self.dropped_components,
+                "components beyond max_contacts were dropped"
+            );
         }
         Ok(())
     }
@@ -159,13 +166,17 @@ impl Processor for Segmenter {
 
 pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::DuplicateKind> {
     r.register(typed(
-        KindInfo::new("segmenter", Role::Processor, "image -> contacts: Otsu + floor, disk opening/closing, components, centroids")
-            .input(PortSpec::input::<Image>("image", "conductivity-change image"))
-            .output(PortSpec::output::<Contacts>("contacts", "centroid (mm), conductivity sum, area (mm^2) per contact"))
-            .param(ParamDoc::new("floor", "f64", "0.0002", "smallest floor on the conductivity decrease, S/m"))
-            .param(ParamDoc::new("floor_over_noise", "f64", "2.5", "floor >= this x the no-load images' peak decrease"))
-            .param(ParamDoc::new("radius_frac", "f64", "0.02", "disk radius / image size"))
-            .param(ParamDoc::new("max_contacts", "usize", "8", "most contacts per frame")),
+        KindInfo::new(
+            "segmenter",
+            Role::Processor,
+            "image -> contacts: Otsu + floor, disk opening/closing, components, centroids",
+        )
+        .input(PortSpec::input::<Image>("image", "conductivity-change image"))
+        .output(PortSpec::output::<Contacts>("contacts", "centroid (mm), conductivity sum, area (mm^2) per contact"))
+        .param(ParamDoc::new("floor", "f64", "0.0002", "smallest floor on the conductivity decrease, S/m"))
+        .param(ParamDoc::new("floor_over_noise", "f64", "2.5", "floor >= this x the no-load images' peak decrease"))
+        .param(ParamDoc::new("radius_frac", "f64", "0.02", "disk radius / image size"))
+        .param(ParamDoc::new("max_contacts", "usize", "8", "most contacts per frame")),
         |p: SegmenterParams, _| Ok(NodeImpl::Processor(Box::new(Segmenter::new(&p)))),
     ))
 }

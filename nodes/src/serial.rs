@@ -19,10 +19,13 @@ use std::time::{Duration, Instant};
 use serde::Deserialize;
 use skinflow_core::params::{non_negative, positive};
 use skinflow_core::{
-    Context, Header, KindInfo, Message, NodeError, NodeImpl, NodeParams, Outputs, ParamDoc, ParamError, PortSpec, Recycler,
-    Registry, Role, Source, SourcePoll, typed,
+    Context, Header, KindInfo, Message, NodeError, NodeImpl, NodeParams, Outputs, ParamDoc, ParamError, PortSpec,
+    Recycler, Registry, Role, Source, SourcePoll, typed,
 };
-use skinflow_serial::{Decode, EitDecoder, EitReader, ForceDecoder, LoadcellReader, PressureDecoder, PressureReader, ReaderConfig, SerialReader};
+use skinflow_serial::{
+    Decode, EitDecoder, EitReader, ForceDecoder, LoadcellReader, PressureDecoder, PressureReader, ReaderConfig,
+    SerialReader,
+};
 
 use crate::payload::{EitFrame, PressureSample, Truth, TruthContact};
 
@@ -131,7 +134,8 @@ fn ns(t_s: f64) -> u64 {
 }
 
 fn open<D: Decode>(p: &PortParams, decoder: D, ctx: &Context) -> Result<SerialReader<D>, NodeError> {
-    SerialReader::open(p.config(), decoder, graph_origin(ctx)).map_err(|e| NodeError::Path { path: p.port.clone(), problem: e.to_string() })
+    SerialReader::open(p.config(), decoder, graph_origin(ctx))
+        .map_err(|e| NodeError::Path { path: p.port.clone(), problem: e.to_string() })
 }
 
 fn report<D: Decode>(ctx: &Context, r: &SerialReader<D>) {
@@ -140,8 +144,19 @@ fn report<D: Decode>(ctx: &Context, r: &SerialReader<D>) {
     let lossy = d.crc_errors + d.lost_frames + d.torn_frames + d.bad_lines + l.disconnects > 0;
     let msg = "serial link closed";
     if lossy {
-        tracing::warn!(node = ctx.id(), frames = d.frames, crc_errors = d.crc_errors, lost = d.lost_frames, torn = d.torn_frames,
-            bad_lines = d.bad_lines, discarded_bytes = d.discarded_bytes, disconnects = l.disconnects, reconnects = l.reconnects, stalls = l.stalls, "{msg}");
+        tracing::warn!(
+            node = ctx.id(),
+            frames = d.frames,
+            crc_errors = d.crc_errors,
+            lost = d.lost_frames,
+            torn = d.torn_frames,
+            bad_lines = d.bad_lines,
+            discarded_bytes = d.discarded_bytes,
+            disconnects = l.disconnects,
+            reconnects = l.reconnects,
+            stalls = l.stalls,
+            "{msg}"
+        );
     } else {
         tracing::info!(node = ctx.id(), frames = d.frames, bytes = l.bytes, "{msg}");
     }
@@ -158,14 +173,17 @@ pub struct SerialEit {
 
 impl Source for SerialEit {
     fn start(&mut self, ctx: &mut Context) -> Result<(), NodeError> {
-        let dec = EitDecoder::try_new(self.p.measurements).map_err(|e| NodeError::Param { param: "measurements".into(), problem: e.to_string() })?;
+        let dec = EitDecoder::try_new(self.p.measurements)
+            .map_err(|e| NodeError::Param { param: "measurements".into(), problem: e.to_string() })?;
         self.reader = Some(open(&self.p, dec, ctx)?);
         Ok(())
     }
 
     fn poll(&mut self, ctx: &mut Context, out: &mut Outputs) -> Result<SourcePoll, NodeError> {
         let reader = self.reader.as_mut().ok_or_else(|| NodeError::msg("polled before start"))?;
-        let got = reader.poll_next(Instant::now() + POLL_SLICE).map_err(|e| NodeError::Path { path: self.p.port.clone(), problem: e.to_string() }.fatal())?;
+        let got = reader
+            .poll_next(Instant::now() + POLL_SLICE)
+            .map_err(|e| NodeError::Path { path: self.p.port.clone(), problem: e.to_string() }.fatal())?;
         let Some(r) = got else { return Ok(SourcePoll::Idle) };
         let c = r.record.counter;
         self.seq = match self.last_counter {
@@ -199,17 +217,26 @@ pub struct SerialPressure {
 
 impl Source for SerialPressure {
     fn start(&mut self, ctx: &mut Context) -> Result<(), NodeError> {
-        let dec = PressureDecoder::try_new(Some(self.p.period_ms)).map_err(|e| NodeError::Param { param: "period_ms".into(), problem: e.to_string() })?;
+        let dec = PressureDecoder::try_new(Some(self.p.period_ms))
+            .map_err(|e| NodeError::Param { param: "period_ms".into(), problem: e.to_string() })?;
         self.reader = Some(open(&self.p, dec, ctx)?);
         Ok(())
     }
 
     fn poll(&mut self, ctx: &mut Context, out: &mut Outputs) -> Result<SourcePoll, NodeError> {
         let reader = self.reader.as_mut().ok_or_else(|| NodeError::msg("polled before start"))?;
-        let got = reader.poll_next(Instant::now() + POLL_SLICE).map_err(|e| NodeError::Path { path: self.p.port.clone(), problem: e.to_string() }.fatal())?;
+        let got = reader
+            .poll_next(Instant::now() + POLL_SLICE)
+            .map_err(|e| NodeError::Path { path: self.p.port.clone(), problem: e.to_string() }.fatal())?;
         let Some(r) = got else { return Ok(SourcePoll::Idle) };
         self.seq += 1;
-        out.send(0, Message::new(Header { seq: self.seq, t_ns: ns(r.host_t_s), origin: ctx.index() }, PressureSample { kpa: r.record.kpa }))?;
+        out.send(
+            0,
+            Message::new(
+                Header { seq: self.seq, t_ns: ns(r.host_t_s), origin: ctx.index() },
+                PressureSample { kpa: r.record.kpa },
+            ),
+        )?;
         Ok(SourcePoll::Emitted)
     }
 
@@ -235,7 +262,9 @@ impl Source for SerialLoadcell {
 
     fn poll(&mut self, ctx: &mut Context, out: &mut Outputs) -> Result<SourcePoll, NodeError> {
         let reader = self.reader.as_mut().ok_or_else(|| NodeError::msg("polled before start"))?;
-        let got = reader.poll_next(Instant::now() + POLL_SLICE).map_err(|e| NodeError::Path { path: self.p.port.clone(), problem: e.to_string() }.fatal())?;
+        let got = reader
+            .poll_next(Instant::now() + POLL_SLICE)
+            .map_err(|e| NodeError::Path { path: self.p.port.clone(), problem: e.to_string() }.fatal())?;
         let Some(r) = got else { return Ok(SourcePoll::Idle) };
         self.seq += 1;
         let f = r.record.force_n;
@@ -244,7 +273,10 @@ impl Source for SerialLoadcell {
         } else {
             Vec::new()
         };
-        out.send(0, Message::new(Header { seq: self.seq, t_ns: ns(r.host_t_s), origin: ctx.index() }, Truth { contacts }))?;
+        out.send(
+            0,
+            Message::new(Header { seq: self.seq, t_ns: ns(r.host_t_s), origin: ctx.index() }, Truth { contacts }),
+        )?;
         Ok(SourcePoll::Emitted)
     }
 
@@ -270,21 +302,37 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
             .output(PortSpec::output::<EitFrame>("eit", "EIT frames, volts"))
             .param(ParamDoc::new("measurements", "usize", "120", "values per frame"))
             .param(ParamDoc::new("frame_period_s", "f64", "0.769", "acquisition window, s")),
-        |p: PortParams, _| Ok(NodeImpl::Source(Box::new(SerialEit { p, reader: None, frames: Recycler::new(64, EitFrame::default), last_counter: None, seq: 0 }))),
+        |p: PortParams, _| {
+            Ok(NodeImpl::Source(Box::new(SerialEit {
+                p,
+                reader: None,
+                frames: Recycler::new(64, EitFrame::default),
+                last_counter: None,
+                seq: 0,
+            })))
+        },
     ))?;
     r.register(typed(
-        port_docs(KindInfo::new("serial_pressure", Role::Source, "pressure board on a serial port (ASCII t_ms,kPa lines)"))
-            .output(PortSpec::output::<PressureSample>("pressure", "gauge pressure, kPa"))
-            .param(ParamDoc::new("period_ms", "u32", "50", "nominal sample period (gap detection)")),
+        port_docs(KindInfo::new(
+            "serial_pressure",
+            Role::Source,
+            "pressure board on a serial port (ASCII t_ms,kPa lines)",
+        ))
+        .output(PortSpec::output::<PressureSample>("pressure", "gauge pressure, kPa"))
+        .param(ParamDoc::new("period_ms", "u32", "50", "nominal sample period (gap detection)")),
         |p: PortParams, _| Ok(NodeImpl::Source(Box::new(SerialPressure { p, reader: None, seq: 0 }))),
     ))?;
     r.register(typed(
-        port_docs(KindInfo::new("serial_loadcell", Role::Source, "load cell on a serial port (ASCII force lines, N) as truth"))
-            .output(PortSpec::output::<Truth>("truth", "one contact at the rig position, or none below the threshold"))
-            .param(ParamDoc::new("x_mm", "f64", "0", "indenter position"))
-            .param(ParamDoc::new("y_mm", "f64", "0", "indenter position"))
-            .param(ParamDoc::new("diameter_mm", "f64", "15", "indenter diameter"))
-            .param(ParamDoc::new("contact_threshold_n", "f64", "0.05", "below this: no contact")),
+        port_docs(KindInfo::new(
+            "serial_loadcell",
+            Role::Source,
+            "load cell on a serial port (ASCII force lines, N) as truth",
+        ))
+        .output(PortSpec::output::<Truth>("truth", "one contact at the rig position, or none below the threshold"))
+        .param(ParamDoc::new("x_mm", "f64", "0", "indenter position"))
+        .param(ParamDoc::new("y_mm", "f64", "0", "indenter position"))
+        .param(ParamDoc::new("diameter_mm", "f64", "15", "indenter diameter"))
+        .param(ParamDoc::new("contact_threshold_n", "f64", "0.05", "below this: no contact")),
         |p: PortParams, _| Ok(NodeImpl::Source(Box::new(SerialLoadcell { p, reader: None, seq: 0 }))),
     ))
 }

@@ -13,8 +13,8 @@ use std::sync::Arc;
 
 use serde::Deserialize;
 use skinflow_core::{
-    Context, Header, KindInfo, Message, NodeError, NodeImpl, NodeParams, Outputs, ParamDoc, PortSpec, Registry, Role, Source,
-    SourcePoll, typed,
+    Context, Header, KindInfo, Message, NodeError, NodeImpl, NodeParams, Outputs, ParamDoc, PortSpec, Registry, Role,
+    Source, SourcePoll, typed,
 };
 use skinflow_sim::{Pacing, Scene, SimEvent, Simulator};
 
@@ -41,7 +41,9 @@ impl NodeParams for SimParams {
     fn validate(&self) -> Result<(), skinflow_core::ParamError> {
         match self.pacing.as_deref() {
             None | Some("realtime") | Some("fast") => Ok(()),
-            Some(p) => Err(skinflow_core::ParamError::new("pacing", format!("must be \"realtime\" or \"fast\" (got \"{p}\")"))),
+            Some(p) => {
+                Err(skinflow_core::ParamError::new("pacing", format!("must be \"realtime\" or \"fast\" (got \"{p}\")")))
+            }
         }
     }
 }
@@ -99,13 +101,21 @@ impl Source for Sim {
             }
             SimEvent::Pressure { t_s, kpa } => {
                 self.pressure_seq += 1;
-                out.send(PRESSURE, Message::new(Header { seq: self.pressure_seq, t_ns: ns(t_s), origin }, PressureSample { kpa }))?;
+                out.send(
+                    PRESSURE,
+                    Message::new(Header { seq: self.pressure_seq, t_ns: ns(t_s), origin }, PressureSample { kpa }),
+                )?;
             }
             SimEvent::Truth { t_s, contacts } => {
                 self.truth_seq += 1;
                 let contacts = contacts
                     .iter()
-                    .map(|c| TruthContact { x_mm: c.x_mm, y_mm: c.y_mm, force_n: c.force_n, diameter_mm: c.diameter_mm })
+                    .map(|c| TruthContact {
+                        x_mm: c.x_mm,
+                        y_mm: c.y_mm,
+                        force_n: c.force_n,
+                        diameter_mm: c.diameter_mm,
+                    })
                     .collect();
                 let payload = Arc::new(Truth { contacts });
                 out.send(TRUTH, Message::from_arc(Header { seq: self.truth_seq, t_ns: ns(t_s), origin }, payload))?;
@@ -126,7 +136,8 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
             .param(ParamDoc::new("pacing", "string", "", "override the scene: realtime | fast")),
         |p: SimParams, ctx| {
             let path = ctx.resolve(&p.scene);
-            let scene = Scene::from_file(&path).map_err(|e| NodeError::Path { path: path.clone(), problem: e.to_string() })?;
+            let scene =
+                Scene::from_file(&path).map_err(|e| NodeError::Path { path: path.clone(), problem: e.to_string() })?;
             Ok(NodeImpl::Source(Box::new(Sim::new(&scene, p.seed, p.pacing.as_deref())?)))
         },
     ))

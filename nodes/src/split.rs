@@ -48,7 +48,10 @@ fn default_strategy() -> SplitStrategy {
 impl NodeParams for SplitterParams {
     fn validate(&self) -> Result<(), ParamError> {
         if self.strategy != SplitStrategy::Proportional && self.calibration.is_none() {
-            return Err(ParamError::new("calibration", "this strategy needs a calibration file (from `skinflow calibrate`)"));
+            return Err(ParamError::new(
+                "calibration",
+                "this strategy needs a calibration file (from `skinflow calibrate`)",
+            ));
         }
         Ok(())
     }
@@ -76,7 +79,8 @@ impl Processor for Splitter {
     fn process(&mut self, _ctx: &mut Context, inputs: &Inputs, out: &mut Outputs) -> Result<(), NodeError> {
         let Some(m) = inputs.get(0) else { return Ok(()) };
         let t0 = Instant::now();
-        let contacts = m.arc::<Contacts>().ok_or(NodeError::Input { port: "contacts".into(), problem: "not contacts".into() })?;
+        let contacts =
+            m.arc::<Contacts>().ok_or(NodeError::Input { port: "contacts".into(), problem: "not contacts".into() })?;
         let dp = contacts.image.src.dp_kpa;
         let weights = &self.weights;
         let payload = self.ring.fill(|s| {
@@ -111,13 +115,20 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
         KindInfo::new("splitter", Role::Processor, "shares the frame's pressure change among its contacts")
             .input(PortSpec::input::<Contacts>("contacts", "segmented contacts (carry the synced dP)"))
             .output(PortSpec::output::<Split>("split", "dP_i per contact, kPa"))
-            .param(ParamDoc::new("strategy", "string", "\"proportional\"", "proportional | sensitivity-compensated | eit-force"))
+            .param(ParamDoc::new(
+                "strategy",
+                "string",
+                "\"proportional\"",
+                "proportional | sensitivity-compensated | eit-force",
+            ))
             .param(ParamDoc::new("calibration", "path", "", "calibration TOML (needed by sensitivity-compensated)")),
         |p: SplitterParams, ctx| {
             let cal = || load_calibration(p.calibration.as_ref().expect("validated: calibration is set"), ctx);
             let weights = match p.strategy {
                 SplitStrategy::Proportional => Weights::Math(SplitMath::Proportional),
-                SplitStrategy::SensitivityCompensated => Weights::Math(SplitMath::SensitivityCompensated(cal()?.sensitivity)),
+                SplitStrategy::SensitivityCompensated => {
+                    Weights::Math(SplitMath::SensitivityCompensated(cal()?.sensitivity))
+                }
                 SplitStrategy::EitForce => Weights::EitForce(Strategy::new(&cal()?, StrategyKind::EitLocAware)),
             };
             Ok(NodeImpl::Processor(Box::new(Splitter { weights, ring: Recycler::new(128, Split::default) })))

@@ -22,8 +22,8 @@ use std::sync::Arc;
 use serde::Deserialize;
 use skinflow_core::params::positive;
 use skinflow_core::{
-    Context, Header, Inputs, KindInfo, Message, NodeError, NodeImpl, NodeParams, Outputs, ParamDoc, ParamError, PortSpec,
-    Processor, Recycler, Registry, Role, typed,
+    Context, Header, Inputs, KindInfo, Message, NodeError, NodeImpl, NodeParams, Outputs, ParamDoc, ParamError,
+    PortSpec, Processor, Recycler, Registry, Role, typed,
 };
 
 use crate::payload::{EitFrame, PressureSample, SyncedFrame, Truth};
@@ -134,11 +134,7 @@ impl Sync {
     }
 
     fn in_no_load(&self, t_s: f64) -> bool {
-        if self.truth_connected {
-            self.first_contact_s.is_none_or(|t0| t_s < t0)
-        } else {
-            t_s < self.p.tare_s
-        }
+        if self.truth_connected { self.first_contact_s.is_none_or(|t0| t_s < t0) } else { t_s < self.p.tare_s }
     }
 
     fn p0(&self) -> f64 {
@@ -247,15 +243,20 @@ impl Processor for Sync {
         self.pressure_connected = inputs.lanes(PRESSURE) > 0;
         self.truth_connected = inputs.lanes(TRUTH) > 0;
         if let Some(m) = inputs.get(PRESSURE) {
-            let s = m.get::<PressureSample>().ok_or(NodeError::Input { port: "pressure".into(), problem: "not a pressure sample".into() })?;
+            let s = m
+                .get::<PressureSample>()
+                .ok_or(NodeError::Input { port: "pressure".into(), problem: "not a pressure sample".into() })?;
             self.on_pressure(m.header.t_s(), s.kpa);
         }
         if let Some(m) = inputs.get(TRUTH) {
-            let row = m.arc::<Truth>().ok_or(NodeError::Input { port: "truth".into(), problem: "not a truth row".into() })?;
+            let row =
+                m.arc::<Truth>().ok_or(NodeError::Input { port: "truth".into(), problem: "not a truth row".into() })?;
             self.on_truth(m.header.t_s(), row);
         }
         if let Some(m) = inputs.get(EIT) {
-            let f = m.arc::<EitFrame>().ok_or(NodeError::Input { port: "eit".into(), problem: "not an EIT frame".into() })?;
+            let f = m
+                .arc::<EitFrame>()
+                .ok_or(NodeError::Input { port: "eit".into(), problem: "not an EIT frame".into() })?;
             self.on_frame(m.header, f);
         }
         if self.oldest_complete() {
@@ -274,7 +275,11 @@ impl Processor for Sync {
                     return Err(NodeError::msg("tare: no pressure sample received yet"));
                 };
                 let from = last - self.p.tare_window_s;
-                let (s, n) = self.pressure.iter().filter(|(t, k)| *t >= from && k.is_finite()).fold((0.0, 0u32), |(s, n), (_, k)| (s + k, n + 1));
+                let (s, n) = self
+                    .pressure
+                    .iter()
+                    .filter(|(t, k)| *t >= from && k.is_finite())
+                    .fold((0.0, 0u32), |(s, n), (_, k)| (s + k, n + 1));
                 let p0 = s / f64::from(n.max(1));
                 tracing::info!(p0_kpa = p0, samples = n, "sync: re-tared P0");
                 self.p0_fixed = Some(p0);
@@ -286,7 +291,11 @@ impl Processor for Sync {
 
     fn stop(&mut self, ctx: &mut Context) -> Result<(), NodeError> {
         if !self.pending.is_empty() {
-            tracing::warn!(node = ctx.id(), frames = self.pending.len(), "frames still waiting for pressure at stop were not emitted");
+            tracing::warn!(
+                node = ctx.id(),
+                frames = self.pending.len(),
+                "frames still waiting for pressure at stop were not emitted"
+            );
         }
         Ok(())
     }
@@ -294,14 +303,23 @@ impl Processor for Sync {
 
 pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::DuplicateKind> {
     r.register(typed(
-        KindInfo::new("sync", Role::Processor, "pairs EIT frames with the tared pressure of their window and the truth in effect")
-            .input(PortSpec::input::<EitFrame>("eit", "EIT frames, stamped at the middle of acquisition"))
-            .input(PortSpec::input::<PressureSample>("pressure", "gauge pressure samples, kPa").optional())
-            .input(PortSpec::input::<Truth>("truth", "ground-truth rows").optional())
-            .output(PortSpec::output::<SyncedFrame>("frame", "frame + dP (kPa, tared) + truth"))
-            .param(ParamDoc::new("tare_s", "f64", "2.0", "no-load period without truth, s"))
-            .param(ParamDoc::new("frame_period_s", "f64", "", "acquisition window T, s (absent: median of frame intervals)"))
-            .param(ParamDoc::new("tare_window_s", "f64", "1.0", "pressure history a tare command averages, s")),
+        KindInfo::new(
+            "sync",
+            Role::Processor,
+            "pairs EIT frames with the tared pressure of their window and the truth in effect",
+        )
+        .input(PortSpec::input::<EitFrame>("eit", "EIT frames, stamped at the middle of acquisition"))
+        .input(PortSpec::input::<PressureSample>("pressure", "gauge pressure samples, kPa").optional())
+        .input(PortSpec::input::<Truth>("truth", "ground-truth rows").optional())
+        .output(PortSpec::output::<SyncedFrame>("frame", "frame + dP (kPa, tared) + truth"))
+        .param(ParamDoc::new("tare_s", "f64", "2.0", "no-load period without truth, s"))
+        .param(ParamDoc::new(
+            "frame_period_s",
+            "f64",
+            "",
+            "acquisition window T, s (absent: median of frame intervals)",
+        ))
+        .param(ParamDoc::new("tare_window_s", "f64", "1.0", "pressure history a tare command averages, s")),
         |p: SyncParams, _| Ok(NodeImpl::Processor(Box::new(Sync::new(p)))),
     ))
 }

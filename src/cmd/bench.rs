@@ -36,26 +36,13 @@ impl std::str::FromStr for Vary {
 
     fn from_str(s: &str) -> Result<Vary> {
         let hint = "expected node.param=v1,v2,... (e.g. recon.lambda=0.01,0.03)";
-        let (key, vals) = s
-            .split_once('=')
-            .ok_or_else(|| anyhow!("--vary \"{s}\": {hint}"))?;
-        let (node, param) = key
-            .split_once('.')
-            .ok_or_else(|| anyhow!("--vary \"{s}\": {hint}"))?;
-        let values: Vec<toml::Value> = vals
-            .split(',')
-            .map(str::trim)
-            .filter(|v| !v.is_empty())
-            .map(value)
-            .collect();
+        let (key, vals) = s.split_once('=').ok_or_else(|| anyhow!("--vary \"{s}\": {hint}"))?;
+        let (node, param) = key.split_once('.').ok_or_else(|| anyhow!("--vary \"{s}\": {hint}"))?;
+        let values: Vec<toml::Value> = vals.split(',').map(str::trim).filter(|v| !v.is_empty()).map(value).collect();
         if node.is_empty() || param.is_empty() || values.is_empty() {
             bail!("--vary \"{s}\": {hint}");
         }
-        Ok(Vary {
-            node: node.to_owned(),
-            param: param.to_owned(),
-            values,
-        })
+        Ok(Vary { node: node.to_owned(), param: param.to_owned(), values })
     }
 }
 
@@ -104,14 +91,9 @@ fn nodes_mut(doc: &mut toml::Table) -> Result<&mut Vec<toml::Value>> {
 }
 
 fn params_of(node: &mut toml::Value) -> Result<&mut toml::Table> {
-    let t = node
-        .as_table_mut()
-        .ok_or_else(|| anyhow!("a [[node]] is not a table"))?;
-    let p = t
-        .entry("params")
-        .or_insert_with(|| toml::Value::Table(toml::Table::new()));
-    p.as_table_mut()
-        .ok_or_else(|| anyhow!("a node's params is not a table"))
+    let t = node.as_table_mut().ok_or_else(|| anyhow!("a [[node]] is not a table"))?;
+    let p = t.entry("params").or_insert_with(|| toml::Value::Table(toml::Table::new()));
+    p.as_table_mut().ok_or_else(|| anyhow!("a node's params is not a table"))
 }
 
 fn field<'a>(node: &'a toml::Value, key: &str) -> Option<&'a str> {
@@ -126,13 +108,8 @@ fn variant_text(
     json: &Path,
 ) -> Result<String> {
     let mut doc = base.clone();
-    let graph = doc
-        .entry("graph")
-        .or_insert_with(|| toml::Value::Table(toml::Table::new()));
-    graph
-        .as_table_mut()
-        .ok_or_else(|| anyhow!("[graph] is not a table"))?
-        .insert("mode".into(), "lockstep".into());
+    let graph = doc.entry("graph").or_insert_with(|| toml::Value::Table(toml::Table::new()));
+    graph.as_table_mut().ok_or_else(|| anyhow!("[graph] is not a table"))?.insert("mode".into(), "lockstep".into());
     let nodes = nodes_mut(&mut doc)?;
     let (mut replays, mut compares) = (0, 0);
     for n in nodes.iter_mut() {
@@ -182,15 +159,13 @@ fn num(v: &serde_json::Value, key: &str) -> Option<f64> {
 
 /// Marks the points no other point beats on both latency p50 and RMSE.
 fn mark_pareto(points: &mut [Point]) {
-    let xy: Vec<Option<(f64, f64)>> = points
-        .iter()
-        .map(|p| p.latency_us_p50.zip(p.rmse_n))
-        .collect();
+    let xy: Vec<Option<(f64, f64)>> = points.iter().map(|p| p.latency_us_p50.zip(p.rmse_n)).collect();
     for (i, p) in points.iter_mut().enumerate() {
         let Some((x, y)) = xy[i] else { continue };
-        p.pareto = !xy.iter().enumerate().any(|(j, o)| {
-            j != i && o.is_some_and(|(ox, oy)| ox <= x && oy <= y && (ox < x || oy < y))
-        });
+        p.pareto = !xy
+            .iter()
+            .enumerate()
+            .any(|(j, o)| j != i && o.is_some_and(|(ox, oy)| ox <= x && oy <= y && (ox < x || oy < y)));
     }
 }
 
@@ -213,11 +188,7 @@ fn opt(v: Option<f64>, digits: usize) -> String {
 }
 
 fn markdown(graph: &Path, replay: &Path, points: &[Point]) -> String {
-    let mut s = format!(
-        "# skinflow bench\n\ngraph `{}`, recording `{}`\n\n",
-        graph.display(),
-        replay.display()
-    );
+    let mut s = format!("# skinflow bench\n\ngraph `{}`, recording `{}`\n\n", graph.display(), replay.display());
     s.push_str("| variant | lane | frames | p50 us | p99 us | RMSE N | loc. mm | Pareto |\n|---|---|---|---|---|---|---|---|\n");
     for p in points {
         let _ = writeln!(
@@ -240,9 +211,7 @@ fn plot(path: &Path, points: &[Point]) -> Result<()> {
     let xy: Vec<(f64, f64, bool, String)> = points
         .iter()
         .filter_map(|p| {
-            p.latency_us_p50
-                .zip(p.rmse_n)
-                .map(|(x, y)| (x, y, p.pareto, format!("{} / {}", p.variant, p.lane)))
+            p.latency_us_p50.zip(p.rmse_n).map(|(x, y)| (x, y, p.pareto, format!("{} / {}", p.variant, p.lane)))
         })
         .collect();
     if xy.is_empty() {
@@ -273,28 +242,15 @@ fn plot(path: &Path, points: &[Point]) -> Result<()> {
         .y_label_area_size(60)
         .build_cartesian_2d(x0.max(0.0)..x1, y0.max(0.0)..y1)
         .map_err(|e| err(&e))?;
-    chart
-        .configure_mesh()
-        .x_desc("latency p50, us")
-        .y_desc("force RMSE, N")
-        .draw()
-        .map_err(|e| err(&e))?;
+    chart.configure_mesh().x_desc("latency p50, us").y_desc("force RMSE, N").draw().map_err(|e| err(&e))?;
     let mut front: Vec<(f64, f64)> = xy.iter().filter(|p| p.2).map(|p| (p.0, p.1)).collect();
     front.sort_by(|a, b| a.0.total_cmp(&b.0));
-    chart
-        .draw_series(LineSeries::new(front, RED.stroke_width(2)))
-        .map_err(|e| err(&e))?;
+    chart.draw_series(LineSeries::new(front, RED.stroke_width(2))).map_err(|e| err(&e))?;
     for (x, y, pareto, label) in &xy {
         let color = if *pareto { RED } else { BLUE };
+        chart.draw_series(std::iter::once(Circle::new((*x, *y), 5, color.filled()))).map_err(|e| err(&e))?;
         chart
-            .draw_series(std::iter::once(Circle::new((*x, *y), 5, color.filled())))
-            .map_err(|e| err(&e))?;
-        chart
-            .draw_series(std::iter::once(Text::new(
-                label.clone(),
-                (*x, *y),
-                ("sans-serif", 12),
-            )))
+            .draw_series(std::iter::once(Text::new(label.clone(), (*x, *y), ("sans-serif", 12))))
             .map_err(|e| err(&e))?;
     }
     root.present().map_err(|e| err(&e))?;
@@ -304,17 +260,13 @@ fn plot(path: &Path, points: &[Point]) -> Result<()> {
 /// Runs the variants and writes `bench.md`, `bench.json` and `pareto.png` into `out_dir`.
 pub fn run(graph: &Path, replay: &Path, vary: &[String], out_dir: &Path) -> Result<()> {
     let vary: Vec<Vary> = vary.iter().map(|s| s.parse()).collect::<Result<_>>()?;
-    let text = std::fs::read_to_string(graph)
-        .with_context(|| format!("{}: cannot read", graph.display()))?;
-    let base: toml::Table =
-        toml::from_str(&text).map_err(|e| anyhow!("{}: {}", graph.display(), e.message()))?;
-    let replay =
-        std::path::absolute(replay).with_context(|| format!("{}: bad path", replay.display()))?;
+    let text = std::fs::read_to_string(graph).with_context(|| format!("{}: cannot read", graph.display()))?;
+    let base: toml::Table = toml::from_str(&text).map_err(|e| anyhow!("{}: {}", graph.display(), e.message()))?;
+    let replay = std::path::absolute(replay).with_context(|| format!("{}: bad path", replay.display()))?;
     if !replay.is_file() {
         bail!("{}: recording not found", replay.display());
     }
-    std::fs::create_dir_all(out_dir)
-        .with_context(|| format!("{}: cannot create", out_dir.display()))?;
+    std::fs::create_dir_all(out_dir).with_context(|| format!("{}: cannot create", out_dir.display()))?;
     let out_abs = std::path::absolute(out_dir)?;
     let reg = registry_for(&SourceFile::new(graph, text.clone()))?;
     let mut points = Vec::new();
@@ -323,14 +275,13 @@ pub fn run(graph: &Path, replay: &Path, vary: &[String], out_dir: &Path) -> Resu
         let src = SourceFile::new(graph, variant_text(&base, &replay, &set, &json)?);
         let spec = GraphSpec::parse(src, &reg).map_err(|e| anyhow!("variant \"{label}\": {e}"))?;
         eprintln!("bench: variant {k}: {label}");
-        let report = skinflow_core::run(&spec, &RunOptions::default())
-            .map_err(|e| anyhow!("variant \"{label}\": {e}"))?;
+        let report =
+            skinflow_core::run(&spec, &RunOptions::default()).map_err(|e| anyhow!("variant \"{label}\": {e}"))?;
         if let Some(f) = report.failures.first() {
             bail!("variant \"{label}\": {f}");
         }
         let lanes: serde_json::Value = serde_json::from_str(
-            &std::fs::read_to_string(&json)
-                .with_context(|| format!("{}: cannot read", json.display()))?,
+            &std::fs::read_to_string(&json).with_context(|| format!("{}: cannot read", json.display()))?,
         )?;
         for l in lanes["lanes"].as_array().into_iter().flatten() {
             points.push(Point {
@@ -353,15 +304,9 @@ pub fn run(graph: &Path, replay: &Path, vary: &[String], out_dir: &Path) -> Resu
             .with_context(|| format!("{}: cannot write", out_dir.join(name).display()))
     };
     write("bench.md", &md)?;
-    write(
-        "bench.json",
-        &serde_json::to_string_pretty(&points_json(&points))?,
-    )?;
+    write("bench.json", &serde_json::to_string_pretty(&points_json(&points))?)?;
     plot(&out_dir.join("pareto.png"), &points)?;
-    eprintln!(
-        "bench: wrote bench.md, bench.json and pareto.png to {}",
-        out_dir.display()
-    );
+    eprintln!("bench: wrote bench.md, bench.json and pareto.png to {}", out_dir.display());
     Ok(())
 }
 
@@ -373,20 +318,9 @@ mod tests {
     fn vary_parses_values_as_toml_or_strings() {
         let v: Vary = "recon.lambda=0.01, 0.1".parse().unwrap();
         assert_eq!((v.node.as_str(), v.param.as_str()), ("recon", "lambda"));
-        assert_eq!(
-            v.values,
-            vec![toml::Value::Float(0.01), toml::Value::Float(0.1)]
-        );
-        let s: Vary = "split.strategy=proportional,\"sensitivity-compensated\""
-            .parse()
-            .unwrap();
-        assert_eq!(
-            s.values,
-            vec![
-                toml::Value::from("proportional"),
-                toml::Value::from("sensitivity-compensated")
-            ]
-        );
+        assert_eq!(v.values, vec![toml::Value::Float(0.01), toml::Value::Float(0.1)]);
+        let s: Vary = "split.strategy=proportional,\"sensitivity-compensated\"".parse().unwrap();
+        assert_eq!(s.values, vec![toml::Value::from("proportional"), toml::Value::from("sensitivity-compensated")]);
         assert!("recon=0.1".parse::<Vary>().is_err());
         assert!("recon.lambda=".parse::<Vary>().is_err());
     }
@@ -414,19 +348,9 @@ mod tests {
             localization_mean_mm: None,
             pareto: false,
         };
-        let mut pts = vec![
-            p(1.0, 5.0),
-            p(2.0, 2.0),
-            p(3.0, 3.0),
-            p(4.0, 1.0),
-            p(2.0, 2.0),
-        ];
+        let mut pts = vec![p(1.0, 5.0), p(2.0, 2.0), p(3.0, 3.0), p(4.0, 1.0), p(2.0, 2.0)];
         mark_pareto(&mut pts);
         let marks: Vec<bool> = pts.iter().map(|p| p.pareto).collect();
-        assert_eq!(
-            marks,
-            vec![true, true, false, true, true],
-            "(3, 3) is beaten by (2, 2); equal points both stay"
-        );
+        assert_eq!(marks, vec![true, true, false, true, true], "(3, 3) is beaten by (2, 2); equal points both stay");
     }
 }

@@ -5,8 +5,8 @@ use std::path::Path;
 
 use anyhow::{Context as _, Result, bail};
 use sha2::{Digest, Sha256};
-use skinflow_contact::correct::{CalibParams, Calibrated, Provenance, calibrate};
 use skinflow_contact::CalibSample;
+use skinflow_contact::correct::{CalibParams, Calibrated, Provenance, calibrate};
 use skinflow_nodes::payload::Contacts;
 use skinflow_record::read::Recording;
 
@@ -26,7 +26,10 @@ pub fn require_truth(path: &Path) -> Result<Recording> {
         bail!("{}: the recording has no EIT frames (/eit/v is missing or empty)", path.display());
     }
     if rec.truth.as_ref().is_none_or(|t| t.is_empty()) {
-        bail!("{}: the recording has no ground truth (/truth/*); calibrate and eval need the true contacts", path.display());
+        bail!(
+            "{}: the recording has no ground truth (/truth/*); calibrate and eval need the true contacts",
+            path.display()
+        );
     }
     Ok(rec)
 }

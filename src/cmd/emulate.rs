@@ -8,7 +8,9 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
 use anyhow::Result;
-use skinflow_serial::{Device, Emulator, EmulatorConfig, EmulatorFeed, Fault, FaultPlan, Pacing, TimedForce, TimedFrame, TimedPressure};
+use skinflow_serial::{
+    Device, Emulator, EmulatorConfig, EmulatorFeed, Fault, FaultPlan, Pacing, TimedForce, TimedFrame, TimedPressure,
+};
 use skinflow_sim::{Scene, SimEvent, Simulator};
 
 /// The scene's streams as the boards would send them: an EIT frame at the end of its window.
@@ -21,7 +23,9 @@ pub fn feed(scene_path: &Path, seed: u64) -> Result<(Vec<TimedFrame>, Vec<TimedP
         match e {
             SimEvent::Eit { t_s, v, .. } => eit.push(TimedFrame { t_s: t_s + half, volts: v }),
             SimEvent::Pressure { t_s, kpa } => pressure.push(TimedPressure { t_s, kpa }),
-            SimEvent::Truth { t_s, contacts } => force.push(TimedForce { t_s, force_n: contacts.iter().map(|c| c.force_n).sum() }),
+            SimEvent::Truth { t_s, contacts } => {
+                force.push(TimedForce { t_s, force_n: contacts.iter().map(|c| c.force_n).sum() })
+            }
         }
     }
     Ok((eit, pressure, force))
@@ -30,7 +34,11 @@ pub fn feed(scene_path: &Path, seed: u64) -> Result<(Vec<TimedFrame>, Vec<TimedP
 /// Parses `--fault device:index:kind[=value]`, e.g. `eit:10:crc`, `eit:20:unplug=0.5`,
 /// `pressure:5:garbage`, `loadcell:3:stall=2`.
 fn parse_fault(s: &str) -> Result<(Device, usize, Fault)> {
-    let bad = || anyhow::anyhow!("--fault \"{s}\": expected device:index:kind[=value] (kinds: garbage, crc, drop, truncate, skip, unplug=S, stall=S)");
+    let bad = || {
+        anyhow::anyhow!(
+            "--fault \"{s}\": expected device:index:kind[=value] (kinds: garbage, crc, drop, truncate, skip, unplug=S, stall=S)"
+        )
+    };
     let mut it = s.splitn(3, ':');
     let (dev, idx, kind) = (it.next().ok_or_else(bad)?, it.next().ok_or_else(bad)?, it.next().ok_or_else(bad)?);
     let device = match dev {
@@ -55,7 +63,14 @@ fn parse_fault(s: &str) -> Result<(Device, usize, Fault)> {
     Ok((device, index, fault))
 }
 
-pub fn run(scene: &Path, seed: u64, fast: bool, dir: Option<PathBuf>, faults: &[String], stop: Arc<AtomicBool>) -> Result<()> {
+pub fn run(
+    scene: &Path,
+    seed: u64,
+    fast: bool,
+    dir: Option<PathBuf>,
+    faults: &[String],
+    stop: Arc<AtomicBool>,
+) -> Result<()> {
     let (eit, pressure, force) = feed(scene, seed)?;
     let mut plan = FaultPlan::default();
     for f in faults {
@@ -66,14 +81,25 @@ pub fn run(scene: &Path, seed: u64, fast: bool, dir: Option<PathBuf>, faults: &[
             Device::Loadcell => plan.loadcell.push((index, fault)),
         }
     }
-    let config = EmulatorConfig { dir, pacing: if fast { Pacing::AsFastAsPossible } else { Pacing::RealTime }, first_counter: 0 };
+    let config = EmulatorConfig {
+        dir,
+        pacing: if fast { Pacing::AsFastAsPossible } else { Pacing::RealTime },
+        first_counter: 0,
+    };
     let (n_eit, n_p, n_f) = (eit.len(), pressure.len(), force.len());
-    let emu = Emulator::spawn(config, EmulatorFeed::default().with_eit(eit).with_pressure(pressure).with_loadcell(force), plan)
-        .map_err(anyhow::Error::msg)?;
+    let emu = Emulator::spawn(
+        config,
+        EmulatorFeed::default().with_eit(eit).with_pressure(pressure).with_loadcell(force),
+        plan,
+    )
+    .map_err(anyhow::Error::msg)?;
     for (device, path) in emu.paths() {
         println!("{} {}", device.name(), path.display());
     }
-    eprintln!("emulating {}: {n_eit} EIT frames, {n_p} pressure samples, {n_f} load-cell readings (Ctrl-C to stop)", scene.display());
+    eprintln!(
+        "emulating {}: {n_eit} EIT frames, {n_p} pressure samples, {n_f} load-cell readings (Ctrl-C to stop)",
+        scene.display()
+    );
     while !emu.finished() && !stop.load(Ordering::SeqCst) {
         std::thread::sleep(Duration::from_millis(50));
     }

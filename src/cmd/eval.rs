@@ -20,7 +20,12 @@ pub const LANES: [(&str, &str, &str, &str); 7] = [
     ("pneumatic-nocal", "proportional", "pneumatic-nocal", "Pneumatic-NoCal"),
     ("eit-locaware", "proportional", "eit-locaware", "EIT-LocAware"),
     ("pneumatic-locaware", "proportional", "pneumatic-locaware", "Pneumatic-LocAware (proposed)"),
-    ("pneumatic-locaware-sensitivity", "sensitivity-compensated", "pneumatic-locaware", "Pneumatic-LocAware, sens.-comp. split"),
+    (
+        "pneumatic-locaware-sensitivity",
+        "sensitivity-compensated",
+        "pneumatic-locaware",
+        "Pneumatic-LocAware, sens.-comp. split",
+    ),
     ("pneumatic-locaware-eitforce", "eit-force", "pneumatic-locaware", "Pneumatic-LocAware, EIT-force split"),
     ("pneumatic-area-aware", "proportional", "pneumatic-area-aware", "Pneumatic-AreaAware"),
 ];
@@ -66,28 +71,52 @@ pub fn evaluate(recording: &Path, calib: &Path, args: &PipelineArgs) -> Result<E
         }
         truth.clear();
         if let Some(t) = &synced.truth {
-            truth.extend(t.contacts.iter().map(|c| TruthContact { x_mm: c.x_mm, y_mm: c.y_mm, force_n: c.force_n, diameter_mm: c.diameter_mm }));
+            truth.extend(t.contacts.iter().map(|c| TruthContact {
+                x_mm: c.x_mm,
+                y_mm: c.y_mm,
+                force_n: c.force_n,
+                diameter_mm: c.diameter_mm,
+            }));
         }
         detected.clear();
         detected.extend(contacts.contacts.iter().map(|c| (c.x_mm, c.y_mm)));
         let per_lane: Vec<Vec<f64>> = forces.iter().map(|f| f.forces.iter().map(|e| e.force_n).collect()).collect();
         let per_lane_ref: Vec<&[f64]> = per_lane.iter().map(Vec::as_slice).collect();
         let latency: Vec<f64> = forces.iter().map(|f| f.pipeline_ns() as f64 / 1e3).collect();
-        let res = if truth.len() == 1 && contacts.contacts.len() == 1 { resolution(&contacts.image.pixels, &contacts.contacts) } else { None };
-        ev.push(&FrameInput { truth: &truth, detected_mm: &detected, forces_n: &per_lane_ref, latency_us: &latency, resolution: res })
-            .map_err(anyhow::Error::msg)?;
+        let res = if truth.len() == 1 && contacts.contacts.len() == 1 {
+            resolution(&contacts.image.pixels, &contacts.contacts)
+        } else {
+            None
+        };
+        ev.push(&FrameInput {
+            truth: &truth,
+            detected_mm: &detected,
+            forces_n: &per_lane_ref,
+            latency_us: &latency,
+            resolution: res,
+        })
+        .map_err(anyhow::Error::msg)?;
         let better = example.as_ref().is_none_or(|(_, t)| truth.len() > t.len());
         if better && !contacts.contacts.is_empty() {
             example = Some((contacts.image.clone(), truth.iter().map(|t| (t.x_mm, t.y_mm)).collect()));
         }
     }
     if transitions > 0 {
-        eprintln!("{}: {transitions} frames acquired while the load changed were not evaluated (--all-frames includes them)", recording.display());
+        eprintln!(
+            "{}: {transitions} frames acquired while the load changed were not evaluated (--all-frames includes them)",
+            recording.display()
+        );
     }
     Ok(EvalOutcome { evaluator: ev, example })
 }
 
-pub fn run(recording: &Path, calib: &Path, json: Option<&Path>, plots_dir: Option<&Path>, args: &PipelineArgs) -> Result<()> {
+pub fn run(
+    recording: &Path,
+    calib: &Path,
+    json: Option<&Path>,
+    plots_dir: Option<&Path>,
+    args: &PipelineArgs,
+) -> Result<()> {
     let outcome = evaluate(recording, calib, args)?;
     let report = outcome.evaluator.report(&recording.display().to_string());
     println!("{report}");
@@ -110,13 +139,15 @@ fn write_plots(dir: &Path, calib: &Path, o: &EvalOutcome, args: &PipelineArgs) -
     if let Some((img, truth)) = &o.example {
         let grid = ImageGrid::centred(img.width, img.height, img.width_mm, img.height_mm);
         let (hx, hy) = (img.width_mm / 2.0, img.height_mm / 2.0);
-        plots::localization_map(&p("localization.png"), &o.evaluator, (-hx, hx, -hy, hy)).map_err(anyhow::Error::msg)?;
+        plots::localization_map(&p("localization.png"), &o.evaluator, (-hx, hx, -hy, hy))
+            .map_err(anyhow::Error::msg)?;
         let seg_params: skinflow_nodes::segment::SegmenterParams =
             toml::from_str(&args.segment).map_err(|e| anyhow::anyhow!("--segment: {}", e.message()))?;
         let mut seg = Segmenter::new(grid, &seg_params.math()).map_err(anyhow::Error::msg)?;
         let mut found = seg.new_contacts();
         seg.segment_into(&img.pixels, &mut found).map_err(anyhow::Error::msg)?;
-        plots::conductivity(&p("conductivity.png"), &img.pixels, &grid, seg.labels(), found.as_slice(), truth).map_err(anyhow::Error::msg)?;
+        plots::conductivity(&p("conductivity.png"), &img.pixels, &grid, seg.labels(), found.as_slice(), truth)
+            .map_err(anyhow::Error::msg)?;
     }
     eprintln!("plots written to {}", dir.display());
     Ok(())

@@ -41,7 +41,8 @@ pub fn apply_edit(old: &GraphSpec, new: &GraphSpec, handle: &GraphHandle) -> Res
     if ids(&a) != ids(&b) {
         return Err("nodes were added, removed or reordered: that needs a restart".into());
     }
-    let (ea, eb): (Vec<_>, Vec<_>) = (old.edges.iter().map(edge_key).collect(), new.edges.iter().map(edge_key).collect());
+    let (ea, eb): (Vec<_>, Vec<_>) =
+        (old.edges.iter().map(edge_key).collect(), new.edges.iter().map(edge_key).collect());
     if ea != eb {
         return Err("edges were added, removed or changed: that needs a restart".into());
     }
@@ -122,7 +123,10 @@ fn reply(handle: &GraphHandle, registry: &Registry, line: &str) -> Value {
                 Some(f) => {
                     let params = req.get("params").cloned().unwrap_or(json!({}));
                     match toml::Table::try_from(params) {
-                        Ok(t) => handle.swap(n, f.clone(), Params::from_table(t)).map(|()| json!({})).map_err(|e| e.to_string()),
+                        Ok(t) => handle
+                            .swap(n, f.clone(), Params::from_table(t))
+                            .map(|()| json!({}))
+                            .map_err(|e| e.to_string()),
                         Err(e) => Err(format!("params: {e}")),
                     }
                 }
@@ -157,11 +161,17 @@ fn serve(stream: UnixStream, handle: GraphHandle, registry: Registry) {
 }
 
 /// Serves the control socket until `done`; removes the socket file at the end.
-pub fn control_socket(path: &Path, registry: Registry, handle: GraphHandle, done: Arc<AtomicBool>) -> Result<std::thread::JoinHandle<()>> {
+pub fn control_socket(
+    path: &Path,
+    registry: Registry,
+    handle: GraphHandle,
+    done: Arc<AtomicBool>,
+) -> Result<std::thread::JoinHandle<()>> {
     if path.exists() {
         std::fs::remove_file(path).with_context(|| format!("{}: cannot replace the old socket", path.display()))?;
     }
-    let listener = UnixListener::bind(path).with_context(|| format!("{}: cannot bind the control socket", path.display()))?;
+    let listener =
+        UnixListener::bind(path).with_context(|| format!("{}: cannot bind the control socket", path.display()))?;
     listener.set_nonblocking(true)?;
     let path = path.to_path_buf();
     Ok(std::thread::spawn(move || {

@@ -54,7 +54,11 @@ impl Settled {
         let mut d: Vec<f64> = eit_t.windows(2).map(|w| w[1] - w[0]).filter(|d| *d > 0.0).collect();
         d.sort_by(f64::total_cmp);
         let period = d.get(d.len() / 2).copied().unwrap_or(1.0 / 1.3);
-        Settled { truth_t: rec.truth.as_ref().map_or_else(Vec::new, |t| t.t_s.clone()), half_period_s: 0.5 * period, all_frames }
+        Settled {
+            truth_t: rec.truth.as_ref().map_or_else(Vec::new, |t| t.t_s.clone()),
+            half_period_s: 0.5 * period,
+            all_frames,
+        }
     }
 
     /// Whether no truth row starts within the acquisition window of a frame stamped `t_s`.

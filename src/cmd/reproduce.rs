@@ -72,13 +72,34 @@ pub fn run(scenes_dir: &Path, out: &Path, seed: u64, args: &PipelineArgs) -> Res
         t0.elapsed().as_secs_f64()
     );
     let _ = writeln!(md, "## Signal-force correlation R^2 (paper Table II; calibration scene)\n");
-    let _ = writeln!(md, "| signal | centre (paper) | centre (ours) | all (paper) | all (ours) |\n|---|---|---|---|---|");
-    let _ = writeln!(md, "| EIT conductivity sum | {:.3} | {} | {:.3} | {} |", paper::R2_EIT.0, f(cal.r2.eit_center, 3), paper::R2_EIT.1, f(cal.r2.eit_all, 3));
-    let _ = writeln!(md, "| pneumatic pressure | {:.3} | {} | {:.3} | {} |\n", paper::R2_PNEUMATIC.0, f(cal.r2.pneumatic_center, 3), paper::R2_PNEUMATIC.1, f(cal.r2.pneumatic_all, 3));
+    let _ =
+        writeln!(md, "| signal | centre (paper) | centre (ours) | all (paper) | all (ours) |\n|---|---|---|---|---|");
+    let _ = writeln!(
+        md,
+        "| EIT conductivity sum | {:.3} | {} | {:.3} | {} |",
+        paper::R2_EIT.0,
+        f(cal.r2.eit_center, 3),
+        paper::R2_EIT.1,
+        f(cal.r2.eit_all, 3)
+    );
+    let _ = writeln!(
+        md,
+        "| pneumatic pressure | {:.3} | {} | {:.3} | {} |\n",
+        paper::R2_PNEUMATIC.0,
+        f(cal.r2.pneumatic_center, 3),
+        paper::R2_PNEUMATIC.1,
+        f(cal.r2.pneumatic_all, 3)
+    );
     let _ = writeln!(md, "## Cross-diameter force RMSE, N (paper Table III; 10/20/25 mm indenters)\n");
-    let _ = writeln!(md, "| strategy | paper | ours | ours: 10 mm | 20 mm | 25 mm | rel. err % | latency p50 / p99 us |\n|---|---|---|---|---|---|---|---|");
+    let _ = writeln!(
+        md,
+        "| strategy | paper | ours | ours: 10 mm | 20 mm | 25 mm | rel. err % | latency p50 / p99 us |\n|---|---|---|---|---|---|---|---|"
+    );
     for (name, s) in &cross.strategies {
-        let p = paper::RMSE.iter().find(|(n, _, _)| n == name).map_or("-".to_string(), |(_, m, sd)| format!("{m:.2} ± {sd:.2}"));
+        let p = paper::RMSE
+            .iter()
+            .find(|(n, _, _)| n == name)
+            .map_or("-".to_string(), |(_, m, sd)| format!("{m:.2} ± {sd:.2}"));
         let d = |k: &str| s.per_diameter_rmse_n.get(k).map_or("-".into(), |v| format!("{v:.2}"));
         let _ = writeln!(
             md,
@@ -98,14 +119,27 @@ pub fn run(scenes_dir: &Path, out: &Path, seed: u64, args: &PipelineArgs) -> Res
     let _ = writeln!(md, "## Single contact (paper section IV-A; 7 x 7 grid at 5 N)\n");
     let _ = writeln!(md, "| metric | paper | ours |\n|---|---|---|");
     let l = &single.localization;
-    let _ = writeln!(md, "| localization error, mm | {:.1} ± {:.1} | {} ± {} (matched {}, missed {}, spurious {}) |", paper::LOCALIZATION_MM.0, paper::LOCALIZATION_MM.1, f(l.mean_mm, 1), f(l.sd_mm, 1), l.matched, l.missed, l.spurious);
+    let _ = writeln!(
+        md,
+        "| localization error, mm | {:.1} ± {:.1} | {} ± {} (matched {}, missed {}, spurious {}) |",
+        paper::LOCALIZATION_MM.0,
+        paper::LOCALIZATION_MM.1,
+        f(l.mean_mm, 1),
+        f(l.sd_mm, 1),
+        l.matched,
+        l.missed,
+        l.spurious
+    );
     let _ = writeln!(md, "| RES50, % | {:.2} | {} |", paper::RES50, f(single.resolution.res50_pct, 2));
     let _ = writeln!(md, "| RES75, % | {:.2} | {} |", paper::RES75, f(single.resolution.res75_pct, 2));
     if let Some(s) = single.strategies.get("pneumatic-locaware") {
         let _ = writeln!(md, "| Pneumatic-LocAware RMSE at 5 N, N | - | {} |", f(s.rmse_n, 2));
     }
     let _ = writeln!(md, "\n## Multi-contact (paper section IV-B; its eight cases)\n");
-    let _ = writeln!(md, "| strategy | per-contact RMSE, N (paper) | ours | rel. err % (paper) | ours |\n|---|---|---|---|---|");
+    let _ = writeln!(
+        md,
+        "| strategy | per-contact RMSE, N (paper) | ours | rel. err % (paper) | ours |\n|---|---|---|---|---|"
+    );
     for (name, s) in &multi.strategies {
         let pm = paper::MULTI.iter().find(|(n, _)| n == name).map_or("-".into(), |(_, v)| format!("{v:.2}"));
         let pr = paper::MULTI_REL.iter().find(|(n, _)| n == name).map_or("-".into(), |(_, v)| format!("{v:.2}"));
@@ -113,7 +147,15 @@ pub fn run(scenes_dir: &Path, out: &Path, seed: u64, args: &PipelineArgs) -> Res
         let _ = writeln!(md, "| {name} | {pm} | {} | {pr} | {} |", f(ours, 2), f(s.relative_error_pct, 1));
     }
     let l = &multi.localization;
-    let _ = writeln!(md, "\nMulti-contact localization: {} ± {} mm (matched {}, missed {}, spurious {}).", f(l.mean_mm, 1), f(l.sd_mm, 1), l.matched, l.missed, l.spurious);
+    let _ = writeln!(
+        md,
+        "\nMulti-contact localization: {} ± {} mm (matched {}, missed {}, spurious {}).",
+        f(l.mean_mm, 1),
+        f(l.sd_mm, 1),
+        l.matched,
+        l.missed,
+        l.spurious
+    );
     if !fitted.warnings.is_empty() {
         let _ = writeln!(md, "\n## Calibration warnings\n");
         for w in &fitted.warnings {

@@ -11,12 +11,14 @@ use skinflow_sim::{Scene, SimEvent, Simulator};
 pub fn run(scene_path: &Path, out: &Path, seed: u64, overwrite: bool) -> Result<()> {
     let t0 = Instant::now();
     let scene = Scene::from_file(scene_path).map_err(anyhow::Error::msg)?;
-    let mut sim = Simulator::new(&scene, seed).with_context(|| format!("{}: preparing the simulation", scene_path.display()))?;
+    let mut sim =
+        Simulator::new(&scene, seed).with_context(|| format!("{}: preparing the simulation", scene_path.display()))?;
     let mut o = WriterOptions::new(sim.sensor().toml.clone());
     o.software_version = concat!("skinflow ", env!("CARGO_PKG_VERSION")).to_owned();
     o.overwrite = overwrite;
     o.truth_max_contacts = sim.max_contacts().max(1);
-    o.streams = Streams { eit: scene.channels.eit, pressure: scene.channels.pressure, truth: true, ..Streams::default() };
+    o.streams =
+        Streams { eit: scene.channels.eit, pressure: scene.channels.pressure, truth: true, ..Streams::default() };
     o.graph_toml = Some(format!("# skinflow simulate {} --seed {seed}\n", scene_path.display()));
     let mut w = RecordingWriter::create(out, &o).map_err(anyhow::Error::msg)?;
     let mut truth = Vec::new();
@@ -33,7 +35,12 @@ pub fn run(scene_path: &Path, out: &Path, seed: u64, overwrite: bool) -> Result<
             }
             SimEvent::Truth { t_s, contacts } => {
                 truth.clear();
-                truth.extend(contacts.iter().map(|c| TruthContact { x_mm: c.x_mm, y_mm: c.y_mm, force_n: c.force_n, diameter_mm: c.diameter_mm }));
+                truth.extend(contacts.iter().map(|c| TruthContact {
+                    x_mm: c.x_mm,
+                    y_mm: c.y_mm,
+                    force_n: c.force_n,
+                    diameter_mm: c.diameter_mm,
+                }));
                 w.append_truth(t_s, &truth).map_err(anyhow::Error::msg)?;
                 rows += 1;
             }

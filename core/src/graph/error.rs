@@ -50,7 +50,12 @@ pub struct GraphError {
 }
 
 impl GraphError {
-    pub(crate) fn at(src: &SourceFile, span: Option<Range<usize>>, node: Option<&str>, kind: GraphErrorKind) -> GraphError {
+    pub(crate) fn at(
+        src: &SourceFile,
+        span: Option<Range<usize>>,
+        node: Option<&str>,
+        kind: GraphErrorKind,
+    ) -> GraphError {
         let (line, col) = span.map_or((1, 1), |s| src.line_col(s.start));
         GraphError { file: src.path.clone(), line, col, node: node.map(str::to_owned), kind }
     }

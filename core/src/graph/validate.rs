@@ -32,7 +32,8 @@ fn valid_id(id: &str) -> bool {
 pub(super) fn validate(src: SourceFile, registry: &Registry) -> Result<GraphSpec, GraphErrors> {
     let file = parse_file(&src)?;
     let mut errs: Vec<GraphError> = Vec::new();
-    let mut err = |span: Option<Range<usize>>, node: Option<&str>, kind: K| errs.push(GraphError::at(&src, span, node, kind));
+    let mut err =
+        |span: Option<Range<usize>>, node: Option<&str>, kind: K| errs.push(GraphError::at(&src, span, node, kind));
 
     // Nodes: ids, kinds, params, trigger options.
     let mut nodes: Vec<Option<NodeSpec>> = Vec::with_capacity(file.node.len());
@@ -71,7 +72,11 @@ pub(super) fn validate(src: SourceFile, registry: &Registry) -> Result<GraphSpec
         if let Some(d) = &n.deadline_us
             && !(d.get_ref().is_finite() && *d.get_ref() > 0.0)
         {
-            err(Some(d.span()), Some(&id), K::Option(format!("deadline_us must be finite and > 0 (got {})", d.get_ref())));
+            err(
+                Some(d.span()),
+                Some(&id),
+                K::Option(format!("deadline_us must be finite and > 0 (got {})", d.get_ref())),
+            );
         }
         if let Some(p) = &n.rt_priority
             && !(1..=99).contains(p.get_ref())
@@ -112,41 +117,57 @@ pub(super) fn validate(src: SourceFile, registry: &Registry) -> Result<GraphSpec
         let tport = tinfo.input_index(&tport_name);
         if fport.is_none() {
             let known = finfo.outputs.iter().map(|p| p.name.as_ref()).collect::<Vec<_>>().join(", ");
-            err(Some(ed.from.span()), None, K::UnknownPort {
-                node: fspec.id.clone(),
-                kind: fspec.kind.clone(),
-                dir: "output",
-                port: fport_name.clone(),
-                known: if known.is_empty() { "none".into() } else { known },
-            });
+            err(
+                Some(ed.from.span()),
+                None,
+                K::UnknownPort {
+                    node: fspec.id.clone(),
+                    kind: fspec.kind.clone(),
+                    dir: "output",
+                    port: fport_name.clone(),
+                    known: if known.is_empty() { "none".into() } else { known },
+                },
+            );
         }
         if tport.is_none() {
             let known = tinfo.inputs.iter().map(|p| p.name.as_ref()).collect::<Vec<_>>().join(", ");
-            err(Some(ed.to.span()), None, K::UnknownPort {
-                node: tspec.id.clone(),
-                kind: tspec.kind.clone(),
-                dir: "input",
-                port: tport_name.clone(),
-                known: if known.is_empty() { "none".into() } else { known },
-            });
+            err(
+                Some(ed.to.span()),
+                None,
+                K::UnknownPort {
+                    node: tspec.id.clone(),
+                    kind: tspec.kind.clone(),
+                    dir: "input",
+                    port: tport_name.clone(),
+                    known: if known.is_empty() { "none".into() } else { known },
+                },
+            );
         }
         let (Some(fport), Some(tport)) = (fport, tport) else { continue };
         let (fp, tp) = (&finfo.outputs[fport], &tinfo.inputs[tport]);
         if !tp.accepts(&fp.ty) {
-            err(Some(ed.to.span()), None, K::TypeMismatch {
-                from: ed.from.get_ref().clone(),
-                from_ty: fp.ty.to_string(),
-                to: ed.to.get_ref().clone(),
-                to_ty: tp.ty.to_string(),
-            });
+            err(
+                Some(ed.to.span()),
+                None,
+                K::TypeMismatch {
+                    from: ed.from.get_ref().clone(),
+                    from_ty: fp.ty.to_string(),
+                    to: ed.to.get_ref().clone(),
+                    to_ty: tp.ty.to_string(),
+                },
+            );
         }
         if !tp.multi {
             if let Some(first) = first_into.get(&(tnode, tport)) {
-                err(Some(ed.to.span()), None, K::SecondEdge {
-                    to: ed.to.get_ref().clone(),
-                    from: ed.from.get_ref().clone(),
-                    first: first.clone(),
-                });
+                err(
+                    Some(ed.to.span()),
+                    None,
+                    K::SecondEdge {
+                        to: ed.to.get_ref().clone(),
+                        from: ed.from.get_ref().clone(),
+                        first: first.clone(),
+                    },
+                );
             } else {
                 first_into.insert((tnode, tport), ed.from.get_ref().clone());
             }
@@ -168,7 +189,11 @@ pub(super) fn validate(src: SourceFile, registry: &Registry) -> Result<GraphSpec
         let Some(n) = n else { continue };
         for (p, port) in n.factory.info().inputs.iter().enumerate() {
             if port.required && !edges.iter().any(|e| e.to_node == i && e.to_port == p) {
-                err(Some(file.node[i].get_ref().id.span()), Some(&n.id), K::Unconnected(format!("{}.{}", n.id, port.name)));
+                err(
+                    Some(file.node[i].get_ref().id.span()),
+                    Some(&n.id),
+                    K::Unconnected(format!("{}.{}", n.id, port.name)),
+                );
             }
         }
     }
@@ -186,7 +211,11 @@ pub(super) fn validate(src: SourceFile, registry: &Registry) -> Result<GraphSpec
                 .find(|x| x.get_ref().from.get_ref() == from && x.get_ref().to.get_ref() == to)
                 .map(|x| x.get_ref().from.span())
         });
-        err(span, None, K::Cycle(format!("nodes {} feed each other; a dataflow graph must be acyclic", names.join(", "))));
+        err(
+            span,
+            None,
+            K::Cycle(format!("nodes {} feed each other; a dataflow graph must be acyclic", names.join(", "))),
+        );
     }
 
     if !errs.is_empty() {
@@ -195,7 +224,11 @@ pub(super) fn validate(src: SourceFile, registry: &Registry) -> Result<GraphSpec
     }
     let base = src.base_dir();
     Ok(GraphSpec {
-        name: file.graph.name.clone().unwrap_or_else(|| src.path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default()),
+        name: file
+            .graph
+            .name
+            .clone()
+            .unwrap_or_else(|| src.path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default()),
         mode: file.graph.mode,
         workers: file.graph.workers.unwrap_or(0),
         plugins: file.plugin.iter().map(|p| base.join(p.path.get_ref())).collect(),
@@ -207,7 +240,9 @@ pub(super) fn validate(src: SourceFile, registry: &Registry) -> Result<GraphSpec
 }
 
 fn trigger_of(n: &NodeEntry) -> Result<Trigger, (Option<Range<usize>>, String)> {
-    let misplaced = |what: &str, span: Range<usize>, t: &str| Err((Some(span), format!("{what} applies only to trigger = \"{t}\"")));
+    let misplaced = |what: &str, span: Range<usize>, t: &str| {
+        Err((Some(span), format!("{what} applies only to trigger = \"{t}\"")))
+    };
     match n.trigger {
         TriggerKind::Any => {
             if let Some(w) = &n.align_window_us {
@@ -222,7 +257,10 @@ fn trigger_of(n: &NodeEntry) -> Result<Trigger, (Option<Range<usize>>, String)> 
             if let Some(p) = &n.period_ms {
                 return misplaced("period_ms", p.span(), "periodic");
             }
-            match (n.align.unwrap_or(if n.align_window_us.is_some() { AlignBy::Time } else { AlignBy::Seq }), &n.align_window_us) {
+            match (
+                n.align.unwrap_or(if n.align_window_us.is_some() { AlignBy::Time } else { AlignBy::Seq }),
+                &n.align_window_us,
+            ) {
                 (AlignBy::Seq, None) => Ok(Trigger::AlignedSeq),
                 (AlignBy::Seq, Some(w)) => Err((Some(w.span()), "align_window_us needs align = \"time\"".into())),
                 (AlignBy::Time, None) => Err((None, "align = \"time\" needs align_window_us".into())),

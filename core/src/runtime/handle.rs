@@ -11,9 +11,9 @@ use std::sync::atomic::Ordering::SeqCst;
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
+use super::RunError;
 use super::cell::Recipe;
 use super::pool::{Control, Shared, Swap};
-use super::RunError;
 use crate::edge::EdgeShared;
 use crate::error::NodeError;
 use crate::node::{Context, Mode};
@@ -93,15 +93,20 @@ impl GraphHandle {
             )));
         }
         factory.check(&params).map_err(|e| swap_err(e.to_string()))?;
-        let build = BuildContext { base_dir: self.inner.base_dir.clone(), mode: self.inner.mode, node_id: node.to_owned() };
+        let build =
+            BuildContext { base_dir: self.inner.base_dir.clone(), mode: self.inner.mode, node_id: node.to_owned() };
         let mut imp = factory.build(&params, &build).map_err(|e| swap_err(format!("build failed: {e}")))?;
         if imp.role() != info.role {
             return Err(swap_err(format!("factory built a {:?} for a kind declared {:?}", imp.role(), info.role)));
         }
-        let mut ctx = Context::new(i as u32, Arc::from(node), self.inner.t0, self.inner.mode, self.inner.shared.stop.clone());
+        let mut ctx =
+            Context::new(i as u32, Arc::from(node), self.inner.t0, self.inner.mode, self.inner.shared.stop.clone());
         imp.start(&mut ctx).map_err(|e: NodeError| swap_err(format!("start failed: {e}")))?;
         let kind = info.name.to_string();
-        self.push(i, Control::Swap(Box::new(Swap { imp, recipe: Recipe { factory, params, build }, kind: kind.clone() })));
+        self.push(
+            i,
+            Control::Swap(Box::new(Swap { imp, recipe: Recipe { factory, params, build }, kind: kind.clone() })),
+        );
         self.inner.kinds.lock().unwrap_or_else(|p| p.into_inner())[i] = kind;
         Ok(())
     }
@@ -122,7 +127,13 @@ impl GraphHandle {
             .iter()
             .map(|e| EdgeReport::from_stats(&e.spec.from, &e.spec.to, e.spec.policy, e.spec.capacity, &e.stats))
             .collect();
-        StatsReport { graph: inner.name.clone(), mode: inner.mode, wall_s: inner.t0.elapsed().as_secs_f64(), nodes, edges }
+        StatsReport {
+            graph: inner.name.clone(),
+            mode: inner.mode,
+            wall_s: inner.t0.elapsed().as_secs_f64(),
+            nodes,
+            edges,
+        }
     }
 
     pub(crate) fn new(inner: Inner) -> GraphHandle {

@@ -34,11 +34,8 @@ fn run_controls(shared: &Shared, i: usize, cell: &mut Cell) {
 }
 
 pub(crate) fn run(shared: &Shared, topo: &[usize], external_stop: &AtomicBool, until: Option<Instant>) {
-    let mut cells: Vec<Box<Cell>> = shared
-        .slots
-        .iter()
-        .map(|s| s.cell.take().expect("cells are in their slots before a lockstep run"))
-        .collect();
+    let mut cells: Vec<Box<Cell>> =
+        shared.slots.iter().map(|s| s.cell.take().expect("cells are in their slots before a lockstep run")).collect();
     let sources: Vec<usize> = topo.iter().copied().filter(|&i| shared.slots[i].exec == Exec::Source).collect();
     let others: Vec<usize> = topo.iter().copied().filter(|&i| shared.slots[i].exec != Exec::Source).collect();
     let mut finished = vec![false; cells.len()];

@@ -170,11 +170,8 @@ impl RunningGraph {
             started.push(i);
         }
 
-        let workers = if spec.workers == 0 {
-            std::thread::available_parallelism().map_or(2, |p| p.get())
-        } else {
-            spec.workers
-        };
+        let workers =
+            if spec.workers == 0 { std::thread::available_parallelism().map_or(2, |p| p.get()) } else { spec.workers };
         let locals: Vec<Worker<usize>> = (0..workers).map(|_| Worker::new_lifo()).collect();
         let parkers: Vec<Parker> = (0..workers).map(|_| Parker::new()).collect();
         let slots = spec
@@ -418,10 +415,11 @@ impl RunningGraph {
             slot.cell.store(Some(cell));
         }
         let stats = self.stats();
-        let mut failures: Vec<RunError> = std::mem::take(&mut *self.shared.failures.lock().unwrap_or_else(|p| p.into_inner()))
-            .into_iter()
-            .map(|(i, error)| RunError::Node { node: self.ids[i].clone(), error })
-            .collect();
+        let mut failures: Vec<RunError> =
+            std::mem::take(&mut *self.shared.failures.lock().unwrap_or_else(|p| p.into_inner()))
+                .into_iter()
+                .map(|(i, error)| RunError::Node { node: self.ids[i].clone(), error })
+                .collect();
         failures.extend(stop_failures);
         RunReport { stats, failures }
     }

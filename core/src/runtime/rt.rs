@@ -28,7 +28,11 @@ pub(crate) fn apply(node: &str, cpu: Option<usize>, rt_priority: Option<u8>) {
         });
         match result {
             Ok(()) => tracing::info!(node, priority = p, "running with SCHED_FIFO"),
-            Err(e) => tracing::warn!(node, priority = p, "cannot set SCHED_FIFO priority {p} ({e}); running with normal priority"),
+            Err(e) => tracing::warn!(
+                node,
+                priority = p,
+                "cannot set SCHED_FIFO priority {p} ({e}); running with normal priority"
+            ),
         }
     }
 }

@@ -8,9 +8,7 @@ mod synth;
 use criterion::{Criterion, criterion_group, criterion_main};
 use skinflow_contact::correct::calibrate::{CalibParams, calibrate};
 use skinflow_contact::correct::calibration::Provenance;
-use skinflow_contact::{
-    ForceEstimate, ImageGrid, SegmentParams, Segmenter, Strategy, StrategyKind,
-};
+use skinflow_contact::{ForceEstimate, ImageGrid, SegmentParams, Segmenter, Strategy, StrategyKind};
 use std::hint::black_box;
 
 fn bench(c: &mut Criterion) {
@@ -20,22 +18,12 @@ fn bench(c: &mut Criterion) {
     let one = synth::image(&[(10.0, -5.0, 4.0)]);
     let three = synth::image(&[(-30.0, 0.0, 2.0), (30.0, 20.0, 6.0), (0.0, -35.0, 3.0)]);
     let empty = synth::image(&[]);
-    for (name, img) in [
-        ("segment_64x64_empty", &empty),
-        ("segment_64x64_1contact", &one),
-        ("segment_64x64_3contacts", &three),
-    ] {
-        c.bench_function(name, |b| {
-            b.iter(|| seg.segment_into(black_box(img), &mut contacts).unwrap())
-        });
+    for (name, img) in
+        [("segment_64x64_empty", &empty), ("segment_64x64_1contact", &one), ("segment_64x64_3contacts", &three)]
+    {
+        c.bench_function(name, |b| b.iter(|| seg.segment_into(black_box(img), &mut contacts).unwrap()));
     }
-    let cal = calibrate(
-        &synth::paper_like(1),
-        &CalibParams::default(),
-        Provenance::default(),
-    )
-    .unwrap()
-    .calibration;
+    let cal = calibrate(&synth::paper_like(1), &CalibParams::default(), Provenance::default()).unwrap().calibration;
     let proposed = Strategy::new(&cal, StrategyKind::PneumaticLocAware);
     let all = Strategy::all(&cal);
     let mut forces = [ForceEstimate::default(); 8];

@@ -34,14 +34,7 @@ pub struct SensitivityField {
 impl SensitivityField {
     /// Uniform sensitivity 1 (makes the compensated splitter proportional).
     pub fn uniform(region: Region) -> Self {
-        Self {
-            region,
-            field: QuadField::constant(1.0),
-            floor: 0.1,
-            force_a1: 1.0,
-            force_a2: 0.0,
-            ratio_max: 1.0,
-        }
+        Self { region, field: QuadField::constant(1.0), floor: 0.1, force_a1: 1.0, force_a2: 0.0, ratio_max: 1.0 }
     }
 
     /// Force equivalent (N, >= 0) of a conductivity sum at a point: w(C / s(x, y)).
@@ -65,16 +58,8 @@ impl SensitivityField {
     /// Fits s to C / F over single-contact samples `(x_mm, y_mm, cond_sum, force_n)` by ridge
     /// (constant unpenalized, spatial terms shrunk to 0, weight chosen by CV over `grid`).
     /// `None` with fewer than 2 * 6 usable samples (F > 0, C > 0).
-    pub fn fit(
-        region: Region,
-        samples: &[(f64, f64, f64, f64)],
-        grid: &[f64],
-        folds: usize,
-    ) -> Option<Self> {
-        let used: Vec<_> = samples
-            .iter()
-            .filter(|s| s.2 > 0.0 && s.3 > 0.0 && s.2.is_finite())
-            .collect();
+    pub fn fit(region: Region, samples: &[(f64, f64, f64, f64)], grid: &[f64], folds: usize) -> Option<Self> {
+        let used: Vec<_> = samples.iter().filter(|s| s.2 > 0.0 && s.3 > 0.0 && s.2.is_finite()).collect();
         if used.len() < 2 * NPHI {
             return None;
         }
@@ -87,39 +72,17 @@ impl SensitivityField {
             y.push(s.2 / s.3 / mean);
         }
         let prior = [1.0, 0.0, 0.0, 0.0, 0.0, 0.0];
-        let problem = RidgeProblem {
-            design: &design,
-            y: &y,
-            p: NPHI,
-            prior: &prior,
-            base_penalty: &[0.0; NPHI],
-        };
-        let cv = cross_validate(
-            &problem,
-            &CvSearch {
-                blocks: std::slice::from_ref(&(1..NPHI)),
-                grid,
-                folds,
-            },
-        )?;
+        let problem = RidgeProblem { design: &design, y: &y, p: NPHI, prior: &prior, base_penalty: &[0.0; NPHI] };
+        let cv = cross_validate(&problem, &CvSearch { blocks: std::slice::from_ref(&(1..NPHI)), grid, folds })?;
         let mut coeffs = [0.0; NPHI];
         coeffs.copy_from_slice(&cv.coeffs);
-        let mut out = Self {
-            region,
-            field: QuadField { coeffs },
-            floor: 0.1,
-            force_a1: 1.0,
-            force_a2: 0.0,
-            ratio_max: 1.0,
-        };
+        let mut out =
+            Self { region, field: QuadField { coeffs }, floor: 0.1, force_a1: 1.0, force_a2: 0.0, ratio_max: 1.0 };
         // F ~ a1 r + a2 r^2 through the origin, on r scaled by its maximum for conditioning.
         let r: Vec<f64> = used.iter().map(|s| s.2 / out.at(s.0, s.1)).collect();
         let f: Vec<f64> = used.iter().map(|s| s.3).collect();
         let r_max = r.iter().copied().fold(0.0, f64::max);
-        let scaled: Vec<f64> = r
-            .iter()
-            .flat_map(|&v| [v / r_max, (v / r_max).powi(2)])
-            .collect();
+        let scaled: Vec<f64> = r.iter().flat_map(|&v| [v / r_max, (v / r_max).powi(2)]).collect();
         let fit = ridge(&scaled, &f, 2, &[0.0; 2], &[0.0; 2]);
         let monotone = |a: &[f64]| a[0] > 0.0 && a[0] + 2.0 * a[1] > 0.0;
         match fit {
@@ -157,11 +120,7 @@ impl Splitter {
 
     /// Unnormalized weight of one contact (>= 0).
     pub fn weight(&self, c: &Contact) -> f64 {
-        let sum = if c.sum.is_finite() {
-            c.sum.max(0.0)
-        } else {
-            0.0
-        };
+        let sum = if c.sum.is_finite() { c.sum.max(0.0) } else { 0.0 };
         match self {
             Splitter::Proportional => sum,
             Splitter::SensitivityCompensated(s) => s.force_equivalent(sum, c.x_mm, c.y_mm),
@@ -174,11 +133,7 @@ impl Splitter {
         let total: f64 = contacts.iter().map(|c| self.weight(c)).sum();
         let n = contacts.len() as f64;
         for (o, c) in out.iter_mut().zip(contacts) {
-            *o = if total > 0.0 {
-                self.weight(c) / total * dp_kpa
-            } else {
-                dp_kpa / n
-            };
+            *o = if total > 0.0 { self.weight(c) / total * dp_kpa } else { dp_kpa / n };
         }
     }
 }
@@ -188,23 +143,11 @@ mod tests {
     use super::*;
 
     fn contact(x_mm: f64, sum: f64) -> Contact {
-        Contact {
-            x_mm,
-            y_mm: 0.0,
-            sum,
-            area_mm2: 100.0,
-            peak: 1.0,
-            label: 1,
-        }
+        Contact { x_mm, y_mm: 0.0, sum, area_mm2: 100.0, peak: 1.0, label: 1 }
     }
 
     fn region() -> Region {
-        Region {
-            x_min_mm: -40.0,
-            x_max_mm: 40.0,
-            y_min_mm: -40.0,
-            y_max_mm: 40.0,
-        }
+        Region { x_min_mm: -40.0, x_max_mm: 40.0, y_min_mm: -40.0, y_max_mm: 40.0 }
     }
 
     #[test]
@@ -226,9 +169,7 @@ mod tests {
         // the right at u = 1, and the compensated split must be equal again.
         let field = SensitivityField {
             region: region(),
-            field: QuadField {
-                coeffs: [1.0, 1.0, 0.0, 0.0, 0.0, 0.0],
-            },
+            field: QuadField { coeffs: [1.0, 1.0, 0.0, 0.0, 0.0, 0.0] },
             floor: 0.1,
             force_a1: 1.0,
             force_a2: 0.0,

@@ -38,13 +38,7 @@ static GLOBAL: Counting = Counting;
 
 #[test]
 fn segment_split_and_correct_do_not_allocate_per_frame() {
-    let cal = calibrate(
-        &synth::paper_like(1),
-        &CalibParams::default(),
-        Provenance::default(),
-    )
-    .unwrap()
-    .calibration;
+    let cal = calibrate(&synth::paper_like(1), &CalibParams::default(), Provenance::default()).unwrap().calibration;
     let strategies = Strategy::all(&cal);
     let grid = ImageGrid::centred(64, 64, 100.0, 100.0);
     let mut seg = Segmenter::new(grid, &SegmentParams::with_floor(synth::FLOOR)).unwrap();
@@ -70,11 +64,6 @@ fn segment_split_and_correct_do_not_allocate_per_frame() {
         }
     }
     let after = ALLOCATIONS.load(Ordering::SeqCst);
-    assert_eq!(
-        after - before,
-        0,
-        "per-frame path allocated {} times",
-        after - before
-    );
+    assert_eq!(after - before, 0, "per-frame path allocated {} times", after - before);
     assert_eq!(contacts.len(), 0, "last image is empty");
 }

@@ -18,24 +18,11 @@ fn provenance() -> Provenance {
 }
 
 fn fitted() -> Calibration {
-    calibrate(
-        &synth::paper_like(11),
-        &CalibParams::default(),
-        provenance(),
-    )
-    .unwrap()
-    .calibration
+    calibrate(&synth::paper_like(11), &CalibParams::default(), provenance()).unwrap().calibration
 }
 
 fn contact(x_mm: f64, y_mm: f64, sum: f64) -> Contact {
-    Contact {
-        x_mm,
-        y_mm,
-        sum,
-        area_mm2: 400.0,
-        peak: 1.0,
-        label: 1,
-    }
+    Contact { x_mm, y_mm, sum, area_mm2: 400.0, peak: 1.0, label: 1 }
 }
 
 /// Rows [f Phi, Phi] over a 7 x 7 grid of normalized points and 4 signal levels.
@@ -66,25 +53,9 @@ fn field_problem(noise_sd: f64, seed: u64) -> (Vec<f64>, Vec<f64>, [f64; 6], [f6
 fn cv_fit(d: &[f64], y: &[f64]) -> skinflow_contact::correct::fit::CvFit {
     let mut prior = vec![0.0; 2 * NPHI];
     prior[0] = 1.0;
-    let grid: Vec<f64> = (0..=16)
-        .map(|i| 10f64.powf(-4.0 + 0.5 * i as f64) * y.len() as f64)
-        .collect();
-    let problem = RidgeProblem {
-        design: d,
-        y,
-        p: 2 * NPHI,
-        prior: &prior,
-        base_penalty: &[0.0; 2 * NPHI],
-    };
-    cross_validate(
-        &problem,
-        &CvSearch {
-            blocks: &[0..NPHI, NPHI..2 * NPHI],
-            grid: &grid,
-            folds: 5,
-        },
-    )
-    .unwrap()
+    let grid: Vec<f64> = (0..=16).map(|i| 10f64.powf(-4.0 + 0.5 * i as f64) * y.len() as f64).collect();
+    let problem = RidgeProblem { design: d, y, p: 2 * NPHI, prior: &prior, base_penalty: &[0.0; 2 * NPHI] };
+    cross_validate(&problem, &CvSearch { blocks: &[0..NPHI, NPHI..2 * NPHI], grid: &grid, folds: 5 }).unwrap()
 }
 
 #[test]
@@ -94,18 +65,8 @@ fn ridge_cv_recovers_known_gain_and_offset_fields() {
     // Noise-free: CV picks the smallest weights (1e-4 x T); the prior's pull then biases
     // the coefficients by ~1e-4 relative, far below the 2e-3 tolerance.
     for k in 0..NPHI {
-        assert!(
-            (fit.coeffs[k] - alpha[k]).abs() < 2e-3,
-            "alpha[{k}] {} vs {}",
-            fit.coeffs[k],
-            alpha[k]
-        );
-        assert!(
-            (fit.coeffs[NPHI + k] - beta[k]).abs() < 2e-3,
-            "beta[{k}] {} vs {}",
-            fit.coeffs[NPHI + k],
-            beta[k]
-        );
+        assert!((fit.coeffs[k] - alpha[k]).abs() < 2e-3, "alpha[{k}] {} vs {}", fit.coeffs[k], alpha[k]);
+        assert!((fit.coeffs[NPHI + k] - beta[k]).abs() < 2e-3, "beta[{k}] {} vs {}", fit.coeffs[NPHI + k], beta[k]);
     }
     assert_eq!(fit.lambdas[0], 1e-4 * y.len() as f64);
 }
@@ -116,12 +77,7 @@ fn cross_validation_picks_larger_weights_on_noisy_data() {
     let (_, noisy, _, _) = field_problem(3.0, 2);
     let a = cv_fit(&d, &clean);
     let b = cv_fit(&d, &noisy);
-    assert!(
-        b.lambdas[0] > a.lambdas[0] && b.lambdas[1] > a.lambdas[1],
-        "clean {:?}, noisy {:?}",
-        a.lambdas,
-        b.lambdas
-    );
+    assert!(b.lambdas[0] > a.lambdas[0] && b.lambdas[1] > a.lambdas[1], "clean {:?}, noisy {:?}", a.lambdas, b.lambdas);
 }
 
 #[test]
@@ -129,11 +85,7 @@ fn holds_are_averaged_and_their_spread_reported() {
     let frames = synth::paper_like(3);
     let holds = average_holds(&frames);
     assert_eq!(holds.samples.len(), 25 * 5);
-    assert!(
-        holds.sd_dp_kpa > 0.005 && holds.sd_dp_kpa < 0.015,
-        "{}",
-        holds.sd_dp_kpa
-    );
+    assert!(holds.sd_dp_kpa > 0.005 && holds.sd_dp_kpa < 0.015, "{}", holds.sd_dp_kpa);
     let first = &frames[..6];
     let mean_dp = first.iter().map(|s| s.dp_kpa).sum::<f64>() / 6.0;
     assert!((holds.samples[0].dp_kpa - mean_dp).abs() < 1e-12);
@@ -144,31 +96,15 @@ fn calibration_reproduces_the_paper_ordering_on_training_data() {
     let cal = fitted();
     let rmse = &cal.training.train_rmse_n;
     let r = |k: StrategyKind| rmse[k.name()];
-    assert!(
-        r(StrategyKind::PneumaticLocAware) < 0.5 * r(StrategyKind::PneumaticNoCal),
-        "{rmse:?}"
-    );
-    assert!(
-        r(StrategyKind::PneumaticNoCal) < r(StrategyKind::EitNoCal),
-        "{rmse:?}"
-    );
-    assert!(
-        r(StrategyKind::EitLocAware) < r(StrategyKind::EitNoCal),
-        "{rmse:?}"
-    );
+    assert!(r(StrategyKind::PneumaticLocAware) < 0.5 * r(StrategyKind::PneumaticNoCal), "{rmse:?}");
+    assert!(r(StrategyKind::PneumaticNoCal) < r(StrategyKind::EitNoCal), "{rmse:?}");
+    assert!(r(StrategyKind::EitLocAware) < r(StrategyKind::EitNoCal), "{rmse:?}");
     // Table II shape: pneumatic beats EIT, the centre beats all locations.
     let t = cal.r2;
     assert!(t.pneumatic_all.unwrap() > t.eit_all.unwrap());
     assert!(t.pneumatic_center.unwrap() >= t.pneumatic_all.unwrap());
     assert_eq!(cal.training.center_location_mm, Some([0.0, 0.0]));
-    assert_eq!(
-        (
-            cal.training.samples,
-            cal.training.locations,
-            cal.training.frames
-        ),
-        (125, 25, 750)
-    );
+    assert_eq!((cal.training.samples, cal.training.locations, cal.training.frames), (125, 25, 750));
     assert!(!cal.pneumatic.locaware.prior_fallback);
     // Edges are less sensitive (k < 1), so the gain is higher at a corner than at the centre.
     let g = &cal.pneumatic.locaware.gain;
@@ -181,9 +117,7 @@ fn table_two_layout() {
     let lines: Vec<&str> = text.lines().collect();
     assert_eq!(lines.len(), 4);
     assert!(
-        lines[1].starts_with("Signal")
-            && lines[1].contains("Center location")
-            && lines[1].ends_with("All locations")
+        lines[1].starts_with("Signal") && lines[1].contains("Center location") && lines[1].ends_with("All locations")
     );
     assert!(lines[2].starts_with("EIT conductivity change sum"));
     assert!(lines[3].starts_with("Pneumatic pressure"));
@@ -197,13 +131,8 @@ fn calibration_file_round_trips_and_rejects_unknown_keys() {
     assert_eq!(back, cal);
     assert!(text.contains("recording_hash = \"sha256:0000\""));
     let bad = text.replacen("[provenance]", "[provenance]\nsurprise = 1", 1);
-    let err = Calibration::from_toml_str(&bad, "calib.toml")
-        .unwrap_err()
-        .to_string();
-    assert!(
-        err.starts_with("calib.toml:") && err.contains("surprise"),
-        "{err}"
-    );
+    let err = Calibration::from_toml_str(&bad, "calib.toml").unwrap_err().to_string();
+    assert!(err.starts_with("calib.toml:") && err.contains("surprise"), "{err}");
     let wrong = text.replacen("format_version = 1", "format_version = 99", 1);
     assert!(Calibration::from_toml_str(&wrong, "calib.toml").is_err());
 }
@@ -212,31 +141,18 @@ fn calibration_file_round_trips_and_rejects_unknown_keys() {
 fn all_samples_at_one_location_fall_back_to_the_prior() {
     let frames = synth::frames(5, 1, &[1.0, 3.0, 5.0, 7.0, 9.0], 6, 0.01);
     let out = calibrate(&frames, &CalibParams::default(), provenance()).unwrap();
-    assert!(
-        out.warnings
-            .iter()
-            .any(|w| matches!(w, CalibWarning::TooFewLocations { locations: 1, .. }))
-    );
-    assert!(
-        out.warnings
-            .iter()
-            .any(|w| matches!(w, CalibWarning::NarrowRegion { .. }))
-    );
+    assert!(out.warnings.iter().any(|w| matches!(w, CalibWarning::TooFewLocations { locations: 1, .. })));
+    assert!(out.warnings.iter().any(|w| matches!(w, CalibWarning::NarrowRegion { .. })));
     let la = &out.calibration.pneumatic.locaware;
     assert!(la.prior_fallback && la.lambda_g.is_none());
     assert_eq!(la.gain.coeffs, [1.0, 0.0, 0.0, 0.0, 0.0, 0.0]);
     assert_eq!(la.offset.coeffs, [0.0; 6]);
     assert_eq!(out.calibration.warnings.len(), out.warnings.len());
     let text = out.calibration.to_toml_string().unwrap();
-    assert_eq!(
-        Calibration::from_toml_str(&text, "<test>").unwrap(),
-        out.calibration
-    );
+    assert_eq!(Calibration::from_toml_str(&text, "<test>").unwrap(), out.calibration);
     // Still a usable pneumatic map.
     let s = Strategy::new(&out.calibration, StrategyKind::PneumaticLocAware);
-    let f = s
-        .estimate(&contact(0.0, 0.0, 100.0), synth::dp_of(5.0, 0.0, 0.0))
-        .force_n;
+    let f = s.estimate(&contact(0.0, 0.0, 100.0), synth::dp_of(5.0, 0.0, 0.0)).force_n;
     assert!((f - 5.0).abs() < 0.1, "{f}");
 }
 
@@ -244,11 +160,7 @@ fn all_samples_at_one_location_fall_back_to_the_prior() {
 fn too_few_samples_fall_back_and_too_few_for_a_map_is_an_error() {
     let frames = synth::frames(6, 2, &[2.0, 6.0, 9.0], 1, 0.01);
     let out = calibrate(&frames, &CalibParams::default(), provenance()).unwrap();
-    assert!(
-        out.warnings
-            .iter()
-            .any(|w| matches!(w, CalibWarning::TooFewSamples { samples: 12, .. }))
-    );
+    assert!(out.warnings.iter().any(|w| matches!(w, CalibWarning::TooFewSamples { samples: 12, .. })));
     assert!(out.calibration.pneumatic.locaware.prior_fallback);
     let err = calibrate(&frames[..2], &CalibParams::default(), provenance()).unwrap_err();
     assert!(err.to_string().contains("force map needs >= 3"), "{err}");
@@ -264,14 +176,7 @@ fn outliers_are_rejected_with_a_warning() {
     frames[12].cond_sum = f64::NAN;
     let out = calibrate(&frames, &CalibParams::default(), provenance()).unwrap();
     assert!(
-        out.warnings.iter().any(|w| matches!(
-            w,
-            CalibWarning::Rejected {
-                count: 2,
-                total: 125,
-                ..
-            }
-        )),
+        out.warnings.iter().any(|w| matches!(w, CalibWarning::Rejected { count: 2, total: 125, .. })),
         "{:?}",
         out.warnings
     );
@@ -297,21 +202,14 @@ fn no_load_and_negative_drift_give_zero_force() {
 fn large_pressure_extrapolates_monotonically_and_is_flagged() {
     let cal = fitted();
     let hi = cal.pneumatic.map.signal_max;
-    for kind in [
-        StrategyKind::PneumaticNoCal,
-        StrategyKind::PneumaticLocAware,
-        StrategyKind::PneumaticAreaAware,
-    ] {
+    for kind in [StrategyKind::PneumaticNoCal, StrategyKind::PneumaticLocAware, StrategyKind::PneumaticAreaAware] {
         let s = Strategy::new(&cal, kind);
         let c = contact(10.0, -5.0, 100.0);
         let mut prev = 0.0;
         for i in 1..=400 {
             let dp = hi * 3.0 * i as f64 / 400.0;
             let e = s.estimate(&c, dp);
-            assert!(
-                e.force_n >= prev - 1e-12,
-                "{kind:?} not monotone at dp {dp}"
-            );
+            assert!(e.force_n >= prev - 1e-12, "{kind:?} not monotone at dp {dp}");
             assert_eq!(e.flags.above_range, dp > hi);
             prev = e.force_n;
         }
@@ -322,17 +220,14 @@ fn large_pressure_extrapolates_monotonically_and_is_flagged() {
 fn centroid_outside_the_calibrated_region_is_clamped_and_flagged() {
     let cal = fitted();
     let s = Strategy::new(&cal, StrategyKind::PneumaticLocAware);
-    let Region {
-        x_max_mm, y_max_mm, ..
-    } = cal.region;
+    let Region { x_max_mm, y_max_mm, .. } = cal.region;
     let dp = synth::dp_of(5.0, 0.0, 0.0);
     let edge = s.estimate(&contact(x_max_mm, y_max_mm, 100.0), dp);
     let outside = s.estimate(&contact(x_max_mm + 20.0, y_max_mm + 20.0, 100.0), dp);
     assert!(!edge.flags.location_clamped && outside.flags.location_clamped);
     assert_eq!(edge.force_n, outside.force_n);
     // NoCal ignores the location, so it never clamps.
-    let nocal =
-        Strategy::new(&cal, StrategyKind::PneumaticNoCal).estimate(&contact(99.0, 99.0, 100.0), dp);
+    let nocal = Strategy::new(&cal, StrategyKind::PneumaticNoCal).estimate(&contact(99.0, 99.0, 100.0), dp);
     assert!(!nocal.flags.location_clamped);
 }
 
@@ -341,10 +236,7 @@ fn sensitivity_compensated_split_fixes_eit_bias_between_two_equal_contacts() {
     let cal = fitted();
     // Two 4 N contacts where EIT is weak (x = -30) and strong (x = +30).
     let (xl, xr, f) = (-30.0, 30.0, 4.0);
-    let cs = [
-        contact(xl, 0.0, synth::cond_of(f, xl, 0.0)),
-        contact(xr, 0.0, synth::cond_of(f, xr, 0.0)),
-    ];
+    let cs = [contact(xl, 0.0, synth::cond_of(f, xl, 0.0)), contact(xr, 0.0, synth::cond_of(f, xr, 0.0))];
     let dp = synth::dp_of(f, xl, 0.0) + synth::dp_of(f, xr, 0.0);
     let err = |kind| {
         let mut o = [Default::default(); 2];
@@ -353,37 +245,17 @@ fn sensitivity_compensated_split_fixes_eit_bias_between_two_equal_contacts() {
     };
     let proportional = err(StrategyKind::PneumaticLocAware);
     let compensated = err(StrategyKind::PneumaticLocAwareSensitivity);
-    assert!(
-        compensated < 0.5 * proportional,
-        "compensated {compensated} vs proportional {proportional}"
-    );
+    assert!(compensated < 0.5 * proportional, "compensated {compensated} vs proportional {proportional}");
 }
 
 #[test]
 fn bad_calibration_params_are_rejected_by_name() {
-    let params = CalibParams {
-        folds: 1,
-        ..CalibParams::default()
-    };
-    let err = calibrate(&synth::paper_like(1), &params, provenance())
-        .unwrap_err()
-        .to_string();
+    let params = CalibParams { folds: 1, ..CalibParams::default() };
+    let err = calibrate(&synth::paper_like(1), &params, provenance()).unwrap_err().to_string();
     assert!(err.contains("\"folds\""), "{err}");
-    let params = CalibParams {
-        lambda_grid_rel: vec![1.0, -1.0],
-        ..CalibParams::default()
-    };
-    assert!(
-        params
-            .validate()
-            .unwrap_err()
-            .to_string()
-            .contains("lambda_grid_rel")
-    );
-    let params = CalibParams {
-        max_location_error_mm: f64::NAN,
-        ..CalibParams::default()
-    };
+    let params = CalibParams { lambda_grid_rel: vec![1.0, -1.0], ..CalibParams::default() };
+    assert!(params.validate().unwrap_err().to_string().contains("lambda_grid_rel"));
+    let params = CalibParams { max_location_error_mm: f64::NAN, ..CalibParams::default() };
     assert!(params.validate().is_err());
 }
 
@@ -393,24 +265,15 @@ fn sensitivity_compensated_split_recovers_unequal_forces() {
     // split overweights the right contact twice over (sensitivity and C ~ F^0.7 both bias it).
     let cal = fitted();
     let truth = [(-30.0, 10.0, 2.0), (30.0, -10.0, 6.0)];
-    let cs: Vec<Contact> = truth
-        .iter()
-        .map(|&(x, y, f)| contact(x, y, synth::cond_of(f, x, y)))
-        .collect();
+    let cs: Vec<Contact> = truth.iter().map(|&(x, y, f)| contact(x, y, synth::cond_of(f, x, y))).collect();
     let dp: f64 = truth.iter().map(|&(x, y, f)| synth::dp_of(f, x, y)).sum();
     let worst = |kind| {
         let mut o = [Default::default(); 2];
         Strategy::new(&cal, kind).estimate_frame_into(dp, &cs, &mut o);
-        o.iter()
-            .zip(&truth)
-            .map(|(e, t)| (e.force_n - t.2).abs())
-            .fold(0.0, f64::max)
+        o.iter().zip(&truth).map(|(e, t)| (e.force_n - t.2).abs()).fold(0.0, f64::max)
     };
     let proportional = worst(StrategyKind::PneumaticLocAware);
     let compensated = worst(StrategyKind::PneumaticLocAwareSensitivity);
     assert!(compensated < 0.3, "compensated worst error {compensated} N");
-    assert!(
-        proportional > 3.0 * compensated,
-        "proportional {proportional} vs compensated {compensated}"
-    );
+    assert!(proportional > 3.0 * compensated, "proportional {proportional} vs compensated {compensated}");
 }

@@ -22,22 +22,14 @@ fn keys(v: &Value) -> BTreeSet<String> {
 }
 
 fn truth(x_mm: f64, force_n: f64, diameter_mm: f64) -> TruthContact {
-    TruthContact {
-        x_mm,
-        y_mm: 0.0,
-        force_n,
-        diameter_mm,
-    }
+    TruthContact { x_mm, y_mm: 0.0, force_n, diameter_mm }
 }
 
 /// Two strategies; frame 0: one 10 mm contact (errors +1 / -2 N), frame 1: two 12.5 mm
 /// contacts (errors 0, +2 / -1, +1 N) plus a spurious detection, frame 2: a missed contact.
 fn evaluator() -> Evaluator {
     let mut e = Evaluator::new(&[("a", "Strategy A"), ("b", "Strategy B")]);
-    let res = Some(Resolution {
-        res50_pct: 70.0,
-        res75_pct: 80.0,
-    });
+    let res = Some(Resolution { res50_pct: 70.0, res75_pct: 80.0 });
     e.push(&FrameInput {
         truth: &[truth(0.0, 4.0, 10.0)],
         detected_mm: &[(3.0, 4.0)],
@@ -77,10 +69,7 @@ fn json_has_exactly_the_contract_keys() {
     for s in ["a", "b"] {
         assert_eq!(keys(&ours["strategies"][s]), keys(full), "strategy {s}");
     }
-    assert_eq!(
-        keys(&ours["multi_contact"]["per_contact_rmse_n"]),
-        ["a", "b"].map(String::from).into()
-    );
+    assert_eq!(keys(&ours["multi_contact"]["per_contact_rmse_n"]), ["a", "b"].map(String::from).into());
 }
 
 #[test]
@@ -104,14 +93,7 @@ fn metrics_match_hand_computation() {
     let l = &r["localization"];
     // Distances 5, 0, 1 mm.
     assert!(close(&l["mean_mm"], 2.0));
-    assert_eq!(
-        (
-            l["matched"].as_u64(),
-            l["missed"].as_u64(),
-            l["spurious"].as_u64()
-        ),
-        (Some(3), Some(1), Some(1))
-    );
+    assert_eq!((l["matched"].as_u64(), l["missed"].as_u64(), l["spurious"].as_u64()), (Some(3), Some(1), Some(1)));
     let m = &r["multi_contact"];
     assert_eq!(m["frames"], 1);
     assert!(close(&m["per_contact_rmse_n"]["a"], 2f64.sqrt()));
@@ -123,14 +105,8 @@ fn metrics_match_hand_computation() {
 #[test]
 fn absent_quantities_are_null() {
     let mut e = Evaluator::new(&[("a", "A")]);
-    e.push(&FrameInput {
-        truth: &[],
-        detected_mm: &[],
-        forces_n: &[&[]],
-        latency_us: &[5.0],
-        resolution: None,
-    })
-    .unwrap();
+    e.push(&FrameInput { truth: &[], detected_mm: &[], forces_n: &[&[]], latency_us: &[5.0], resolution: None })
+        .unwrap();
     let r: Value = serde_json::from_str(&e.report("x").to_json()).unwrap();
     assert!(r["multi_contact"].is_null());
     assert!(r["strategies"]["a"]["rmse_n"].is_null());
@@ -143,20 +119,9 @@ fn absent_quantities_are_null() {
 fn table_three_layout_lists_strategies_in_order() {
     let text = evaluator().report("rec.h5").to_string();
     let lines: Vec<&str> = text.lines().collect();
-    assert!(
-        lines[1].starts_with("Method")
-            && lines[1].contains("RMSE [N]")
-            && lines[1].contains("p50 [us]")
-    );
-    assert!(
-        lines[2].starts_with("Strategy A") && lines[2].contains("1.29 ± 1.00"),
-        "{}",
-        lines[2]
-    );
+    assert!(lines[1].starts_with("Method") && lines[1].contains("RMSE [N]") && lines[1].contains("p50 [us]"));
+    assert!(lines[2].starts_with("Strategy A") && lines[2].contains("1.29 ± 1.00"), "{}", lines[2]);
     assert!(lines[3].starts_with("Strategy B"));
     assert!(text.contains("10 mm") && text.contains("12.5 mm"));
-    assert!(
-        text.contains("Localization: 2.0 ± 2.6 mm over 3 matched contacts (1 missed, 1 spurious)"),
-        "{text}"
-    );
+    assert!(text.contains("Localization: 2.0 ± 2.6 mm over 3 matched contacts (1 missed, 1 spurious)"), "{text}");
 }

@@ -6,9 +6,7 @@ mod synth;
 use skinflow_contact::correct::calibrate::{CalibParams, calibrate};
 use skinflow_contact::correct::calibration::{Calibration, Provenance};
 use skinflow_contact::eval::{Evaluator, FrameInput, TruthContact, resolution};
-use skinflow_contact::{
-    Contacts, ForceEstimate, ImageGrid, SegmentParams, Segmenter, Strategy, StrategyKind,
-};
+use skinflow_contact::{Contacts, ForceEstimate, ImageGrid, SegmentParams, Segmenter, Strategy, StrategyKind};
 
 struct Chain {
     seg: Segmenter,
@@ -22,19 +20,12 @@ impl Chain {
         let grid = ImageGrid::centred(64, 64, 100.0, 100.0);
         let seg = Segmenter::new(grid, &SegmentParams::with_floor(synth::FLOOR)).unwrap();
         let contacts = seg.new_contacts();
-        Self {
-            seg,
-            contacts,
-            strategies: Strategy::all(cal),
-            out: vec![ForceEstimate::default(); 8],
-        }
+        Self { seg, contacts, strategies: Strategy::all(cal), out: vec![ForceEstimate::default(); 8] }
     }
 
     /// Forces per strategy for one frame.
     fn run(&mut self, truth: &[(f64, f64, f64)], dp_kpa: f64) -> Vec<Vec<ForceEstimate>> {
-        self.seg
-            .segment_into(&synth::image(truth), &mut self.contacts)
-            .unwrap();
+        self.seg.segment_into(&synth::image(truth), &mut self.contacts).unwrap();
         let n = self.contacts.len();
         self.strategies
             .iter()
@@ -47,13 +38,7 @@ impl Chain {
 }
 
 fn calibration() -> Calibration {
-    calibrate(
-        &synth::segmented_frames(),
-        &CalibParams::default(),
-        Provenance::default(),
-    )
-    .unwrap()
-    .calibration
+    calibrate(&synth::segmented_frames(), &CalibParams::default(), Provenance::default()).unwrap().calibration
 }
 
 fn by_kind(forces: &[Vec<ForceEstimate>], kind: StrategyKind) -> &[ForceEstimate] {
@@ -70,24 +55,11 @@ fn single_contacts_across_the_sensor_evaluate_like_the_paper() {
             let (x, y) = (-36.0 + 12.0 * i as f64, -36.0 + 12.0 * j as f64);
             let truth = [(x, y, 5.0)];
             let forces = chain.run(&truth, synth::dp_of(5.0, x, y));
-            let per: Vec<Vec<f64>> = forces
-                .iter()
-                .map(|f| f.iter().map(|e| e.force_n).collect())
-                .collect();
+            let per: Vec<Vec<f64>> = forces.iter().map(|f| f.iter().map(|e| e.force_n).collect()).collect();
             let slices: Vec<&[f64]> = per.iter().map(|v| v.as_slice()).collect();
-            let det: Vec<(f64, f64)> = chain
-                .contacts
-                .as_slice()
-                .iter()
-                .map(|c| (c.x_mm, c.y_mm))
-                .collect();
+            let det: Vec<(f64, f64)> = chain.contacts.as_slice().iter().map(|c| (c.x_mm, c.y_mm)).collect();
             eval.push(&FrameInput {
-                truth: &[TruthContact {
-                    x_mm: x,
-                    y_mm: y,
-                    force_n: 5.0,
-                    diameter_mm: 10.0,
-                }],
+                truth: &[TruthContact { x_mm: x, y_mm: y, force_n: 5.0, diameter_mm: 10.0 }],
                 detected_mm: &det,
                 forces_n: &slices,
                 latency_us: &vec![0.0; slices.len()],
@@ -98,42 +70,23 @@ fn single_contacts_across_the_sensor_evaluate_like_the_paper() {
     }
     let report = eval.report("synthetic");
     let rmse = |k: StrategyKind| report.strategies[k.name()].rmse_n.unwrap();
-    assert_eq!(
-        (report.localization.matched, report.localization.missed),
-        (49, 0)
-    );
-    assert!(
-        rmse(StrategyKind::PneumaticLocAware) < rmse(StrategyKind::PneumaticNoCal),
-        "{report}"
-    );
-    assert!(
-        rmse(StrategyKind::PneumaticLocAware) < rmse(StrategyKind::EitNoCal),
-        "{report}"
-    );
+    assert_eq!((report.localization.matched, report.localization.missed), (49, 0));
+    assert!(rmse(StrategyKind::PneumaticLocAware) < rmse(StrategyKind::PneumaticNoCal), "{report}");
+    assert!(rmse(StrategyKind::PneumaticLocAware) < rmse(StrategyKind::EitNoCal), "{report}");
     let res = report.resolution;
-    assert!(
-        res.res75_pct.unwrap() > res.res50_pct.unwrap(),
-        "RES75 > RES50 by definition"
-    );
+    assert!(res.res75_pct.unwrap() > res.res50_pct.unwrap(), "RES75 > RES50 by definition");
 
     #[cfg(feature = "plots")]
     {
         use skinflow_contact::eval::plots;
-        let dir =
-            std::env::temp_dir().join(format!("skinflow-contact-plots-{}", std::process::id()));
+        let dir = std::env::temp_dir().join(format!("skinflow-contact-plots-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let truth = [(-20.0, 10.0, 6.0), (25.0, -15.0, 3.0)];
         chain.run(&truth, 1.0);
         let files = [
-            (
-                "pred.png",
-                plots::predicted_vs_true(&dir.join("pred.png"), &eval),
-            ),
+            ("pred.png", plots::predicted_vs_true(&dir.join("pred.png"), &eval)),
             ("fields.png", plots::fields(&dir.join("fields.png"), &cal)),
-            (
-                "loc.png",
-                plots::localization_map(&dir.join("loc.png"), &eval, (-50.0, 50.0, -50.0, 50.0)),
-            ),
+            ("loc.png", plots::localization_map(&dir.join("loc.png"), &eval, (-50.0, 50.0, -50.0, 50.0))),
             (
                 "image.png",
                 plots::conductivity(
@@ -196,11 +149,7 @@ fn hard_case_two_contacts_14mm_apart_merge_and_the_merged_roi_takes_all_the_pres
     let x = chain.contacts.as_slice()[0].x_mm;
     assert!(x > -7.0 && x < 7.0, "merged centroid x = {x}");
     let f = by_kind(&forces, StrategyKind::PneumaticLocAware)[0].force_n;
-    assert!(
-        (f - (f1 + f2)).abs() < 0.15 * (f1 + f2),
-        "merged force {f} vs sum {}",
-        f1 + f2
-    );
+    assert!((f - (f1 + f2)).abs() < 0.15 * (f1 + f2), "merged force {f} vs sum {}", f1 + f2);
 }
 
 #[test]

@@ -45,10 +45,7 @@ fn gaussian_blob_gives_one_contact_within_a_pixel() {
         let c = segment(&image(&[(x, y, 1.0, 8.0)], 0.0, 1), 0.05);
         assert_eq!(c.len(), 1, "blob at ({x}, {y})");
         let err = ((c[0].x_mm - x).powi(2) + (c[0].y_mm - y).powi(2)).sqrt();
-        assert!(
-            err < pitch,
-            "centroid error {err} mm >= one pixel ({pitch} mm)"
-        );
+        assert!(err < pitch, "centroid error {err} mm >= one pixel ({pitch} mm)");
         assert!(c[0].sum > 0.0 && c[0].area_mm2 > 0.0);
         assert!((c[0].peak - 1.0).abs() < 0.05, "peak {}", c[0].peak);
     }
@@ -64,16 +61,9 @@ fn row_zero_is_the_bottom_of_the_sensor() {
 
 #[test]
 fn two_separated_blobs_give_two_contacts_with_proportional_sums() {
-    let c = segment(
-        &image(&[(-25.0, 0.0, 1.0, 6.0), (25.0, 10.0, 2.0, 6.0)], 0.0, 1),
-        0.05,
-    );
+    let c = segment(&image(&[(-25.0, 0.0, 1.0, 6.0), (25.0, 10.0, 2.0, 6.0)], 0.0, 1), 0.05);
     assert_eq!(c.len(), 2);
-    let (left, right) = if c[0].x_mm < c[1].x_mm {
-        (c[0], c[1])
-    } else {
-        (c[1], c[0])
-    };
+    let (left, right) = if c[0].x_mm < c[1].x_mm { (c[0], c[1]) } else { (c[1], c[0]) };
     assert!((left.x_mm + 25.0).abs() < 1.6 && left.y_mm.abs() < 1.6);
     assert!((right.x_mm - 25.0).abs() < 1.6 && (right.y_mm - 10.0).abs() < 1.6);
     // Same shape, twice the amplitude: the stronger ROI is larger (lower relative
@@ -108,9 +98,7 @@ fn noise_only_image_has_no_contact_because_of_the_floor() {
 fn noisy_blob_is_still_found_once() {
     let c = segment(&image(&[(10.0, 10.0, 1.0, 8.0)], 0.02, 3), 0.15);
     assert_eq!(c.len(), 1);
-    assert!(
-        ((c[0].x_mm - 10.0).powi(2) + (c[0].y_mm - 10.0).powi(2)).sqrt() < 2.0 * grid().dx_mm()
-    );
+    assert!(((c[0].x_mm - 10.0).powi(2) + (c[0].y_mm - 10.0).powi(2)).sqrt() < 2.0 * grid().dx_mm());
 }
 
 #[test]
@@ -129,47 +117,23 @@ fn corner_contact_is_found_and_pulled_inward_by_truncation() {
 fn contacts_14mm_apart_merge_at_paper_blur_and_separate_when_sharp() {
     // Paper-like blur: RES50 ~ 70 % means a half-maximum area of ~9 % of the sensor,
     // i.e. sigma ~ 14 mm; even sigma = 8 mm (14 mm < 2 sigma) has a single maximum.
-    let merged = segment(
-        &image(&[(-7.0, 0.0, 1.0, 8.0), (7.0, 0.0, 1.0, 8.0)], 0.0, 1),
-        0.05,
-    );
-    assert_eq!(
-        merged.len(),
-        1,
-        "two blobs 14 mm apart at sigma 8 mm merge into one ROI"
-    );
-    assert!(
-        merged[0].x_mm.abs() < 0.5,
-        "merged centroid at the midpoint: {:?}",
-        merged[0]
-    );
+    let merged = segment(&image(&[(-7.0, 0.0, 1.0, 8.0), (7.0, 0.0, 1.0, 8.0)], 0.0, 1), 0.05);
+    assert_eq!(merged.len(), 1, "two blobs 14 mm apart at sigma 8 mm merge into one ROI");
+    assert!(merged[0].x_mm.abs() < 0.5, "merged centroid at the midpoint: {:?}", merged[0]);
     // A sharp reconstruction (sigma = 3 mm) resolves them.
-    let sharp = segment(
-        &image(&[(-7.0, 0.0, 1.0, 3.0), (7.0, 0.0, 1.0, 3.0)], 0.0, 1),
-        0.05,
-    );
+    let sharp = segment(&image(&[(-7.0, 0.0, 1.0, 3.0), (7.0, 0.0, 1.0, 3.0)], 0.0, 1), 0.05);
     assert_eq!(sharp.len(), 2);
 }
 
 #[test]
 fn more_components_than_capacity_keep_the_strongest() {
-    let blobs = [
-        (-30.0, -30.0, 0.5, 4.0),
-        (30.0, -30.0, 1.0, 4.0),
-        (0.0, 30.0, 0.8, 4.0),
-    ];
-    let params = SegmentParams {
-        max_contacts: 2,
-        ..SegmentParams::with_floor(0.05)
-    };
+    let blobs = [(-30.0, -30.0, 0.5, 4.0), (30.0, -30.0, 1.0, 4.0), (0.0, 30.0, 0.8, 4.0)];
+    let params = SegmentParams { max_contacts: 2, ..SegmentParams::with_floor(0.05) };
     let mut seg = Segmenter::new(grid(), &params).unwrap();
     let mut out = seg.new_contacts();
     seg.segment_into(&image(&blobs, 0.0, 1), &mut out).unwrap();
     assert_eq!((out.len(), out.dropped), (2, 1));
-    assert!(
-        out.as_slice().iter().all(|c| c.y_mm > 0.0 || c.x_mm > 0.0),
-        "weakest (-30, -30) dropped"
-    );
+    assert!(out.as_slice().iter().all(|c| c.y_mm > 0.0 || c.x_mm > 0.0), "weakest (-30, -30) dropped");
 }
 
 #[test]

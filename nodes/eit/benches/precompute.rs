@@ -3,8 +3,8 @@
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use skinflow_eit::{
-    CemParams, DualSystem, ForwardModel, ImageGrid, ImageMap, Mesh, MeshParams, Prior, ReconParams,
-    Reconstructor, Sensor, jacobian,
+    CemParams, DualSystem, ForwardModel, ImageGrid, ImageMap, Mesh, MeshParams, Prior, ReconParams, Reconstructor,
+    Sensor, jacobian,
 };
 use std::hint::black_box;
 
@@ -16,35 +16,22 @@ fn bench(c: &mut Criterion) {
         b.iter(|| Reconstructor::new(black_box(&s), &ReconParams::default()).unwrap())
     });
     let mp = MeshParams::default();
-    g.bench_function("mesh_4000", |b| {
-        b.iter(|| Mesh::generate(black_box(&s), &mp).unwrap())
-    });
+    g.bench_function("mesh_4000", |b| b.iter(|| Mesh::generate(black_box(&s), &mp).unwrap()));
     let mesh = Mesh::generate(&s, &mp).unwrap();
     let fwd = ForwardModel::new(&s, &mesh, &CemParams::default()).unwrap();
     g.bench_function("forward_new_4000", |b| {
         b.iter(|| ForwardModel::new(&s, black_box(&mesh), &CemParams::default()).unwrap())
     });
     let sigma = fwd.background();
-    g.bench_function("forward_solve_4000", |b| {
-        b.iter(|| fwd.solve(black_box(&sigma)).unwrap())
-    });
+    g.bench_function("forward_solve_4000", |b| b.iter(|| fwd.solve(black_box(&sigma)).unwrap()));
     let sol = fwd.solve(&sigma).unwrap();
-    g.bench_function("jacobian_4000", |b| {
-        b.iter(|| jacobian(&mesh, &fwd, black_box(&sol)).unwrap())
-    });
+    g.bench_function("jacobian_4000", |b| b.iter(|| jacobian(&mesh, &fwd, black_box(&sol)).unwrap()));
     let j = jacobian(&mesh, &fwd, &sol).unwrap();
     g.bench_function("dual_noser_4000", |b| {
-        b.iter(|| {
-            DualSystem::new(black_box(j.as_ref()), &Prior::default(), &mesh)
-                .unwrap()
-                .matrix(0.1)
-                .unwrap()
-        })
+        b.iter(|| DualSystem::new(black_box(j.as_ref()), &Prior::default(), &mesh).unwrap().matrix(0.1).unwrap())
     });
     let grid = ImageGrid::new(&s, 64, 64).unwrap();
-    g.bench_function("image_map_4000", |b| {
-        b.iter(|| ImageMap::new(black_box(&mesh), &grid).unwrap())
-    });
+    g.bench_function("image_map_4000", |b| b.iter(|| ImageMap::new(black_box(&mesh), &grid).unwrap()));
     g.finish();
 }
 

@@ -25,10 +25,7 @@ pub fn path_of(dir: &Path, key: &str) -> PathBuf {
 }
 
 fn cache_err(path: &Path, cause: impl ToString) -> EitError {
-    EitError::Cache {
-        path: path.display().to_string(),
-        cause: cause.to_string(),
-    }
+    EitError::Cache { path: path.display().to_string(), cause: cause.to_string() }
 }
 
 /// Reads a cached entry; `Ok(None)` when there is none.
@@ -40,18 +37,11 @@ pub fn load(dir: &Path, key: &str) -> Result<Option<Folded>, EitError> {
         Err(e) => return Err(cache_err(&path, e)),
     };
     if bytes.len() < 40 || &bytes[..8] != MAGIC {
-        return Err(cache_err(
-            &path,
-            "not a skinflow-eit matrix file (bad magic); delete it",
-        ));
+        return Err(cache_err(&path, "not a skinflow-eit matrix file (bad magic); delete it"));
     }
-    let word = |i: usize| {
-        u64::from_le_bytes(bytes[8 + 8 * i..16 + 8 * i].try_into().expect("8 bytes")) as usize
-    };
+    let word = |i: usize| u64::from_le_bytes(bytes[8 + 8 * i..16 + 8 * i].try_into().expect("8 bytes")) as usize;
     let (m, pixels, elements, clipped) = (word(0), word(1), word(2), word(3));
-    let values = (pixels + elements)
-        .checked_mul(m)
-        .ok_or_else(|| cache_err(&path, "sizes overflow"))?;
+    let values = (pixels + elements).checked_mul(m).ok_or_else(|| cache_err(&path, "sizes overflow"))?;
     if bytes.len() != 40 + 8 * values {
         return Err(cache_err(
             &path,
@@ -62,17 +52,10 @@ pub fn load(dir: &Path, key: &str) -> Result<Option<Folded>, EitError> {
             ),
         ));
     }
-    let floats: Vec<f64> = bytes[40..]
-        .chunks_exact(8)
-        .map(|c| f64::from_le_bytes(c.try_into().expect("8 bytes")))
-        .collect();
+    let floats: Vec<f64> =
+        bytes[40..].chunks_exact(8).map(|c| f64::from_le_bytes(c.try_into().expect("8 bytes"))).collect();
     let (image, el) = floats.split_at(pixels * m);
-    Ok(Some(Folded::from_parts(
-        m,
-        image.to_vec(),
-        el.to_vec(),
-        clipped,
-    )))
+    Ok(Some(Folded::from_parts(m, image.to_vec(), el.to_vec(), clipped)))
 }
 
 /// Writes an entry (creating `dir` if needed).
@@ -82,26 +65,15 @@ pub fn store(dir: &Path, key: &str, folded: &Folded) -> Result<(), EitError> {
     let m = folded.measurements;
     let mut bytes = Vec::with_capacity(40 + 8 * (folded.image.len() + folded.elements.len()));
     bytes.extend_from_slice(MAGIC);
-    for w in [
-        m,
-        folded.image.len() / m,
-        folded.elements.len() / m,
-        folded.clipped,
-    ] {
+    for w in [m, folded.image.len() / m, folded.elements.len() / m, folded.clipped] {
         bytes.extend_from_slice(&(w as u64).to_le_bytes());
     }
     for v in folded.image.iter().chain(&folded.elements) {
         bytes.extend_from_slice(&v.to_le_bytes());
     }
     // Unique per process and thread: two writers of the same key never share a temporary file.
-    let thread: String = format!("{:?}", std::thread::current().id())
-        .chars()
-        .filter(char::is_ascii_digit)
-        .collect();
-    let tmp = dir.join(format!(
-        ".skinflow-eit-{key}.{}-{thread}.tmp",
-        std::process::id()
-    ));
+    let thread: String = format!("{:?}", std::thread::current().id()).chars().filter(char::is_ascii_digit).collect();
+    let tmp = dir.join(format!(".skinflow-eit-{key}.{}-{thread}.tmp", std::process::id()));
     std::fs::write(&tmp, &bytes).map_err(|e| cache_err(&tmp, e))?;
     std::fs::rename(&tmp, &path).map_err(|e| cache_err(&path, e))
 }

@@ -11,20 +11,13 @@ pub enum EitError {
     Sensor(#[from] SensorError),
     /// A parameter is out of range.
     #[error("parameter \"{param}\": {problem}")]
-    InvalidParam {
-        param: &'static str,
-        problem: String,
-    },
+    InvalidParam { param: &'static str, problem: String },
     /// The mesher could not produce a valid mesh.
     #[error("mesh: {problem}")]
     Mesh { problem: String },
     /// A slice has the wrong length.
     #[error("\"{what}\": expected length {expected}, got {got}")]
-    Length {
-        what: &'static str,
-        expected: usize,
-        got: usize,
-    },
+    Length { what: &'static str, expected: usize, got: usize },
     /// A conductivity value is not finite and positive.
     #[error("conductivity of element {element} must be finite and > 0 (got {value})")]
     Conductivity { element: usize, value: f64 },
@@ -43,17 +36,10 @@ pub enum EitError {
 }
 
 pub(crate) fn invalid(param: &'static str, problem: impl Into<String>) -> EitError {
-    EitError::InvalidParam {
-        param,
-        problem: problem.into(),
-    }
+    EitError::InvalidParam { param, problem: problem.into() }
 }
 
 /// `x.is_finite() && x > 0.0`, else an `InvalidParam` naming `param`.
 pub(crate) fn check_positive(param: &'static str, x: f64) -> Result<(), EitError> {
-    if x.is_finite() && x > 0.0 {
-        Ok(())
-    } else {
-        Err(invalid(param, format!("must be finite and > 0 (got {x})")))
-    }
+    if x.is_finite() && x > 0.0 { Ok(()) } else { Err(invalid(param, format!("must be finite and > 0 (got {x})"))) }
 }

@@ -71,10 +71,7 @@ impl CemParams {
 
     /// Contact impedance of electrode `l`, ohm*mm^2.
     pub fn contact_impedance_of(&self, l: usize) -> f64 {
-        self.electrode_contact_impedance_ohm_mm2
-            .get(l)
-            .copied()
-            .unwrap_or(self.contact_impedance_ohm_mm2)
+        self.electrode_contact_impedance_ohm_mm2.get(l).copied().unwrap_or(self.contact_impedance_ohm_mm2)
     }
 
     /// Drive current, A.
@@ -183,9 +180,8 @@ impl ForwardModel {
             // t / z in 1/(ohm mm); times a length in mm gives siemens.
             let g = params.thickness_mm / params.contact_impedance_of(l);
             for &[a, b] in edges {
-                let h = ((mesh.nodes[a][0] - mesh.nodes[b][0]).powi(2)
-                    + (mesh.nodes[a][1] - mesh.nodes[b][1]).powi(2))
-                .sqrt();
+                let h = ((mesh.nodes[a][0] - mesh.nodes[b][0]).powi(2) + (mesh.nodes[a][1] - mesh.nodes[b][1]).powi(2))
+                    .sqrt();
                 electrode_values[slot(a, a)] += g * h / 3.0;
                 electrode_values[slot(b, b)] += g * h / 3.0;
                 electrode_values[slot(a, b)] += g * h / 6.0;
@@ -196,13 +192,9 @@ impl ForwardModel {
                 }
             }
         }
-        let symbolic = SymbolicLlt::try_new(
-            SymbolicSparseColMatRef::new_checked(dim, dim, &col_ptr, None, &row_idx),
-            Side::Lower,
-        )
-        .map_err(|e| EitError::Mesh {
-            problem: format!("symbolic factorization: {e:?}"),
-        })?;
+        let symbolic =
+            SymbolicLlt::try_new(SymbolicSparseColMatRef::new_checked(dim, dim, &col_ptr, None, &row_idx), Side::Lower)
+                .map_err(|e| EitError::Mesh { problem: format!("symbolic factorization: {e:?}") })?;
         Ok(ForwardModel {
             params: params.clone(),
             measurements: sensor.measurements(),
@@ -246,20 +238,13 @@ impl ForwardModel {
     /// Solves the L-1 unit-current patterns for a per-element conductivity, S/m.
     pub fn solve(&self, sigma_s_per_m: &[f64]) -> Result<ForwardSolution, EitError> {
         if sigma_s_per_m.len() != self.element_count() {
-            return Err(EitError::Length {
-                what: "sigma",
-                expected: self.element_count(),
-                got: sigma_s_per_m.len(),
-            });
+            return Err(EitError::Length { what: "sigma", expected: self.element_count(), got: sigma_s_per_m.len() });
         }
         let thickness_m = self.params.thickness_mm * 1e-3;
         let mut values = self.electrode_values.clone();
         for (e, &s) in sigma_s_per_m.iter().enumerate() {
             if !(s.is_finite() && s > 0.0) {
-                return Err(EitError::Conductivity {
-                    element: e,
-                    value: s,
-                });
+                return Err(EitError::Conductivity { element: e, value: s });
             }
             let k = s * thickness_m;
             for (slot, g) in self.element_slots[e].iter().zip(&self.element_stiffness[e]) {
@@ -267,14 +252,9 @@ impl ForwardModel {
             }
         }
         let dim = self.col_ptr.len() - 1;
-        let sym =
-            SymbolicSparseColMatRef::new_checked(dim, dim, &self.col_ptr, None, &self.row_idx);
-        let llt = Llt::try_new_with_symbolic(
-            self.symbolic.clone(),
-            SparseColMatRef::new(sym, &values),
-            Side::Lower,
-        )
-        .map_err(|_| EitError::NotPositiveDefinite { what: "cem system" })?;
+        let sym = SymbolicSparseColMatRef::new_checked(dim, dim, &self.col_ptr, None, &self.row_idx);
+        let llt = Llt::try_new_with_symbolic(self.symbolic.clone(), SparseColMatRef::new(sym, &values), Side::Lower)
+            .map_err(|_| EitError::NotPositiveDefinite { what: "cem system" })?;
         let l1 = self.electrodes - 1;
         let mut basis = Mat::<f64>::zeros(dim, l1);
         for k in 0..l1 {
@@ -303,20 +283,14 @@ impl ForwardSolution {
     /// electrode L-1 (zero when either is L-1). Symmetric in (a, b) by reciprocity.
     pub fn transfer_ohm(&self, a: usize, b: usize) -> f64 {
         let l1 = self.electrodes - 1;
-        if a >= l1 || b >= l1 {
-            0.0
-        } else {
-            self.basis[(self.nodes + a, b)]
-        }
+        if a >= l1 || b >= l1 { 0.0 } else { self.basis[(self.nodes + a, b)] }
     }
 
     /// Electrode potentials (V, electrode L-1 at 0 V) when the drive current enters at
     /// `drive.0` and leaves at `drive.1`.
     pub fn electrode_voltages(&self, drive: (usize, usize)) -> Vec<f64> {
         (0..self.electrodes)
-            .map(|a| {
-                self.current_a * (self.transfer_ohm(a, drive.0) - self.transfer_ohm(a, drive.1))
-            })
+            .map(|a| self.current_a * (self.transfer_ohm(a, drive.0) - self.transfer_ohm(a, drive.1)))
             .collect()
     }
 
@@ -341,11 +315,7 @@ impl ForwardSolution {
         if k + 1 >= self.electrodes {
             return None;
         }
-        let col = self
-            .basis
-            .col(k)
-            .try_as_col_major()
-            .expect("owned matrix columns are contiguous");
+        let col = self.basis.col(k).try_as_col_major().expect("owned matrix columns are contiguous");
         Some(&col.as_slice()[..self.nodes])
     }
 

@@ -28,18 +28,10 @@ impl ImageGrid {
     /// A grid of `nx` x `ny` pixels over the sensor.
     pub fn new(sensor: &Sensor, nx: usize, ny: usize) -> Result<ImageGrid, EitError> {
         if nx == 0 || ny == 0 || nx > 4096 || ny > 4096 {
-            return Err(invalid(
-                "image size",
-                format!("must be in [1, 4096] per side (got {nx} x {ny})"),
-            ));
+            return Err(invalid("image size", format!("must be in [1, 4096] per side (got {nx} x {ny})")));
         }
         let (hx_mm, hy_mm) = sensor.half_extents_mm();
-        Ok(ImageGrid {
-            nx,
-            ny,
-            hx_mm,
-            hy_mm,
-        })
+        Ok(ImageGrid { nx, ny, hx_mm, hy_mm })
     }
 
     pub fn pixel_count(&self) -> usize {
@@ -48,10 +40,7 @@ impl ImageGrid {
 
     /// Pixel width and height, mm.
     pub fn pixel_size_mm(&self) -> (f64, f64) {
-        (
-            2.0 * self.hx_mm / self.nx as f64,
-            2.0 * self.hy_mm / self.ny as f64,
-        )
+        (2.0 * self.hx_mm / self.nx as f64, 2.0 * self.hy_mm / self.ny as f64)
     }
 
     /// Pixel area, mm^2.
@@ -64,17 +53,12 @@ impl ImageGrid {
     pub fn pixel_centre_mm(&self, index: usize) -> [f64; 2] {
         let (w, h) = self.pixel_size_mm();
         let (ix, iy) = (index % self.nx, index / self.nx);
-        [
-            -self.hx_mm + (ix as f64 + 0.5) * w,
-            -self.hy_mm + (iy as f64 + 0.5) * h,
-        ]
+        [-self.hx_mm + (ix as f64 + 0.5) * w, -self.hy_mm + (iy as f64 + 0.5) * h]
     }
 
     /// All pixel centres in index order, mm.
     pub fn pixel_centres_mm(&self) -> Vec<[f64; 2]> {
-        (0..self.pixel_count())
-            .map(|i| self.pixel_centre_mm(i))
-            .collect()
+        (0..self.pixel_count()).map(|i| self.pixel_centre_mm(i)).collect()
     }
 
     /// The pixel containing a point (mm), clamped to the grid.
@@ -101,12 +85,7 @@ impl ImageMap {
     pub fn new(mesh: &Mesh, grid: &ImageGrid) -> Result<ImageMap, EitError> {
         let (snx, sny) = (grid.nx * SUBSAMPLES, grid.ny * SUBSAMPLES);
         let (w, h) = (2.0 * grid.hx_mm / snx as f64, 2.0 * grid.hy_mm / sny as f64);
-        let point = |ix: usize, iy: usize| {
-            [
-                -grid.hx_mm + (ix as f64 + 0.5) * w,
-                -grid.hy_mm + (iy as f64 + 0.5) * h,
-            ]
-        };
+        let point = |ix: usize, iy: usize| [-grid.hx_mm + (ix as f64 + 0.5) * w, -grid.hy_mm + (iy as f64 + 0.5) * h];
         let mut owner = vec![usize::MAX; snx * sny];
         for (e, t) in mesh.triangles.iter().enumerate() {
             let [a, b, c] = t.map(|i| mesh.nodes[i]);
@@ -116,20 +95,8 @@ impl ImageMap {
                 let i1 = (((hi - o) / d - 0.5).ceil().max(0.0) as usize).min(n - 1);
                 (i0, i1)
             };
-            let (x0, x1) = range(
-                a[0].min(b[0]).min(c[0]),
-                a[0].max(b[0]).max(c[0]),
-                -grid.hx_mm,
-                w,
-                snx,
-            );
-            let (y0, y1) = range(
-                a[1].min(b[1]).min(c[1]),
-                a[1].max(b[1]).max(c[1]),
-                -grid.hy_mm,
-                h,
-                sny,
-            );
+            let (x0, x1) = range(a[0].min(b[0]).min(c[0]), a[0].max(b[0]).max(c[0]), -grid.hx_mm, w, snx);
+            let (y0, y1) = range(a[1].min(b[1]).min(c[1]), a[1].max(b[1]).max(c[1]), -grid.hy_mm, h, sny);
             for iy in y0..=y1 {
                 for ix in x0..=x1 {
                     let k = iy * snx + ix;
@@ -147,9 +114,7 @@ impl ImageMap {
         }
         if let Some(k) = owner.iter().position(|&e| e == usize::MAX) {
             let q = point(k % snx, k / snx);
-            return Err(EitError::Mesh {
-                problem: format!("no element contains the point ({}, {}) mm", q[0], q[1]),
-            });
+            return Err(EitError::Mesh { problem: format!("no element contains the point ({}, {}) mm", q[0], q[1]) });
         }
         let mut row_ptr = Vec::with_capacity(grid.pixel_count() + 1);
         let mut entries = Vec::with_capacity(grid.pixel_count() * 4);
@@ -160,8 +125,7 @@ impl ImageMap {
             let (px, py) = (p % grid.nx, p / grid.nx);
             for sy in 0..SUBSAMPLES {
                 for sx in 0..SUBSAMPLES {
-                    hits[sy * SUBSAMPLES + sx] =
-                        owner[(py * SUBSAMPLES + sy) * snx + px * SUBSAMPLES + sx];
+                    hits[sy * SUBSAMPLES + sx] = owner[(py * SUBSAMPLES + sy) * snx + px * SUBSAMPLES + sx];
                 }
             }
             hits.sort_unstable();
@@ -179,10 +143,7 @@ impl ImageMap {
     /// image = P * element_values.
     pub fn apply(&self, element_values: &[f64], image: &mut [f64]) {
         for (p, out) in image.iter_mut().enumerate() {
-            *out = self.entries[self.row_ptr[p]..self.row_ptr[p + 1]]
-                .iter()
-                .map(|&(e, w)| w * element_values[e])
-                .sum();
+            *out = self.entries[self.row_ptr[p]..self.row_ptr[p + 1]].iter().map(|&(e, w)| w * element_values[e]).sum();
         }
     }
 }
@@ -199,21 +160,11 @@ mod tests {
     #[test]
     fn weights_sum_to_one_and_linear_fields_map_to_pixel_means() {
         let s = Sensor::paper_100mm();
-        let mesh = Mesh::generate(
-            &s,
-            &MeshParams {
-                elements: 1000,
-                ..Default::default()
-            },
-        )
-        .unwrap();
+        let mesh = Mesh::generate(&s, &MeshParams { elements: 1000, ..Default::default() }).unwrap();
         let grid = ImageGrid::new(&s, 64, 64).unwrap();
         let map = ImageMap::new(&mesh, &grid).unwrap();
         for p in 0..grid.pixel_count() {
-            let w: f64 = map.entries[map.row_ptr[p]..map.row_ptr[p + 1]]
-                .iter()
-                .map(|e| e.1)
-                .sum();
+            let w: f64 = map.entries[map.row_ptr[p]..map.row_ptr[p + 1]].iter().map(|e| e.1).sum();
             assert!((w - 1.0).abs() < 1e-12);
         }
         // A constant maps to the same constant.
@@ -221,10 +172,7 @@ mod tests {
         map.apply(&vec![3.5; mesh.element_count()], &mut img);
         assert!(img.iter().all(|v| (v - 3.5).abs() < 1e-12));
         // Pixel geometry: index 0 is bottom-left, the last is top-right.
-        assert_eq!(
-            grid.pixel_centre_mm(0),
-            [-50.0 + 100.0 / 128.0, -50.0 + 100.0 / 128.0]
-        );
+        assert_eq!(grid.pixel_centre_mm(0), [-50.0 + 100.0 / 128.0, -50.0 + 100.0 / 128.0]);
         assert_eq!(grid.pixel_at(49.9, 49.9), grid.pixel_count() - 1);
         assert!((grid.pixel_area_mm2() - (100.0f64 / 64.0).powi(2)).abs() < 1e-12);
     }

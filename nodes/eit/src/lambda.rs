@@ -30,9 +30,7 @@ pub fn log_sweep(lo: f64, hi: f64, n: usize) -> Vec<f64> {
         return vec![lo];
     }
     let (a, b) = (lo.ln(), hi.ln());
-    (0..n)
-        .map(|k| (a + (b - a) * k as f64 / (n - 1) as f64).exp())
-        .collect()
+    (0..n).map(|k| (a + (b - a) * k as f64 / (n - 1) as f64).exp()).collect()
 }
 
 /// GCV over `lambdas` for difference frames `dvs` (each M values, in the dual system's units
@@ -40,56 +38,29 @@ pub fn log_sweep(lo: f64, hi: f64, n: usize) -> Vec<f64> {
 pub fn gcv(dual: &DualSystem, dvs: &[&[f64]], lambdas: &[f64]) -> Result<LambdaChoice, EitError> {
     let m = dual.measurement_count();
     if dvs.is_empty() || lambdas.is_empty() {
-        return Err(invalid(
-            "lambda sweep",
-            "needs at least one frame and one lambda",
-        ));
+        return Err(invalid("lambda sweep", "needs at least one frame and one lambda"));
     }
     let u = dual.eigenvectors();
     let mut projections = Vec::with_capacity(dvs.len());
     for dv in dvs {
         if dv.len() != m {
-            return Err(EitError::Length {
-                what: "difference frame",
-                expected: m,
-                got: dv.len(),
-            });
+            return Err(EitError::Length { what: "difference frame", expected: m, got: dv.len() });
         }
-        let b: Vec<f64> = (0..m)
-            .map(|k| u.col(k).iter().zip(dv.iter()).map(|(a, b)| a * b).sum())
-            .collect();
+        let b: Vec<f64> = (0..m).map(|k| u.col(k).iter().zip(dv.iter()).map(|(a, b)| a * b).sum()).collect();
         projections.push(b);
     }
     let s = dual.eigenvalues();
     let mut curve = Vec::with_capacity(lambdas.len());
     for &lambda in lambdas {
         if !(lambda.is_finite() && lambda > 0.0) {
-            return Err(invalid(
-                "lambda sweep",
-                format!("values must be finite and > 0 (got {lambda})"),
-            ));
+            return Err(invalid("lambda sweep", format!("values must be finite and > 0 (got {lambda})")));
         }
         let l2 = lambda * lambda;
         let trace: f64 = s.iter().map(|&x| l2 / (x + l2)).sum();
-        let resid: f64 = projections
-            .iter()
-            .map(|b| {
-                b.iter()
-                    .zip(s)
-                    .map(|(bk, &x)| (l2 / (x + l2) * bk).powi(2))
-                    .sum::<f64>()
-            })
-            .sum();
+        let resid: f64 =
+            projections.iter().map(|b| b.iter().zip(s).map(|(bk, &x)| (l2 / (x + l2) * bk).powi(2)).sum::<f64>()).sum();
         curve.push((lambda, m as f64 * resid / (trace * trace)));
     }
-    let best = curve
-        .iter()
-        .copied()
-        .min_by(|a, b| a.1.total_cmp(&b.1))
-        .expect("non-empty sweep");
-    Ok(LambdaChoice {
-        lambda: best.0,
-        method: LambdaMethod::Gcv,
-        curve,
-    })
+    let best = curve.iter().copied().min_by(|a, b| a.1.total_cmp(&b.1)).expect("non-empty sweep");
+    Ok(LambdaChoice { lambda: best.0, method: LambdaMethod::Gcv, curve })
 }

@@ -22,10 +22,7 @@ pub struct MaskParams {
 
 impl Default for MaskParams {
     fn default() -> Self {
-        MaskParams {
-            saturation_v: 2.0,
-            dead_electrode_fraction: 0.5,
-        }
+        MaskParams { saturation_v: 2.0, dead_electrode_fraction: 0.5 }
     }
 }
 
@@ -34,10 +31,7 @@ impl MaskParams {
         check_positive("saturation_v", self.saturation_v)?;
         let f = self.dead_electrode_fraction;
         if !(f > 0.0 && f <= 1.0) {
-            return Err(invalid(
-                "dead_electrode_fraction",
-                format!("must be in (0, 1] (got {f})"),
-            ));
+            return Err(invalid("dead_electrode_fraction", format!("must be in (0, 1] (got {f})")));
         }
         Ok(())
     }
@@ -55,10 +49,7 @@ pub struct ChannelMask {
 impl ChannelMask {
     /// A mask that excludes nothing.
     pub fn none(channels: usize, electrodes: usize) -> ChannelMask {
-        ChannelMask {
-            excluded: vec![false; channels],
-            dead: vec![false; electrodes],
-        }
+        ChannelMask { excluded: vec![false; channels], dead: vec![false; electrodes] }
     }
 
     /// A mask excluding every channel that uses one of `electrodes_dead`.
@@ -81,9 +72,7 @@ impl ChannelMask {
 
     /// Indices of the excluded channels.
     pub fn excluded_channels(&self) -> Vec<usize> {
-        (0..self.excluded.len())
-            .filter(|&k| self.excluded[k])
-            .collect()
+        (0..self.excluded.len()).filter(|&k| self.excluded[k]).collect()
     }
 
     /// Indices of the dead electrodes.
@@ -101,12 +90,7 @@ fn uses_any(m: &Measurement, dead: &[bool]) -> bool {
 }
 
 /// Fills `out` (sized by `ChannelMask::none`) from frame `v`; allocates nothing.
-pub fn detect_into(
-    v: &[f64],
-    measurements: &[Measurement],
-    params: &MaskParams,
-    out: &mut ChannelMask,
-) {
+pub fn detect_into(v: &[f64], measurements: &[Measurement], params: &MaskParams, out: &mut ChannelMask) {
     for (x, &val) in out.excluded.iter_mut().zip(v) {
         *x = !val.is_finite() || val.abs() >= params.saturation_v;
     }

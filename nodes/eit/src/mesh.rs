@@ -11,9 +11,7 @@
 use crate::error::{EitError, check_positive, invalid};
 use crate::sensor::Sensor;
 use serde::Deserialize;
-use spade::{
-    AngleLimit, ConstrainedDelaunayTriangulation, Point2, RefinementParameters, Triangulation,
-};
+use spade::{AngleLimit, ConstrainedDelaunayTriangulation, Point2, RefinementParameters, Triangulation};
 
 /// Mesh generation parameters (TOML table `[mesh]` of a reconstructor or a simulator).
 #[derive(Debug, Clone, PartialEq, Deserialize)]
@@ -49,28 +47,19 @@ impl MeshParams {
     /// Checks every field; called by `Mesh::generate`.
     pub fn validate(&self) -> Result<(), EitError> {
         if self.elements < 20 || self.elements > 2_000_000 {
-            return Err(invalid(
-                "elements",
-                format!("must be in [20, 2000000] (got {})", self.elements),
-            ));
+            return Err(invalid("elements", format!("must be in [20, 2000000] (got {})", self.elements)));
         }
         check_positive("count_tolerance", self.count_tolerance)?;
         check_positive("min_angle_deg", self.min_angle_deg)?;
         if self.min_angle_deg > 33.0 {
             return Err(invalid(
                 "min_angle_deg",
-                format!(
-                    "must be <= 33 for the refinement to end (got {})",
-                    self.min_angle_deg
-                ),
+                format!("must be <= 33 for the refinement to end (got {})", self.min_angle_deg),
             ));
         }
         check_positive("electrode_size_ratio", self.electrode_size_ratio)?;
         if self.electrode_size_ratio > 1.0 {
-            return Err(invalid(
-                "electrode_size_ratio",
-                format!("must be <= 1 (got {})", self.electrode_size_ratio),
-            ));
+            return Err(invalid("electrode_size_ratio", format!("must be <= 1 (got {})", self.electrode_size_ratio)));
         }
         check_positive("grading", self.grading)
     }
@@ -107,9 +96,8 @@ impl Mesh {
         for _ in 0..MAX_COUNT_ROUNDS {
             let mesh = triangulate(sensor, params, h_max)?;
             let ratio = mesh.triangles.len() as f64 / target;
-            let better = best.as_ref().is_none_or(|b| {
-                (b.triangles.len() as f64 / target - 1.0).abs() > (ratio - 1.0).abs()
-            });
+            let better =
+                best.as_ref().is_none_or(|b| (b.triangles.len() as f64 / target - 1.0).abs() > (ratio - 1.0).abs());
             if better {
                 best = Some(mesh);
             }
@@ -119,18 +107,12 @@ impl Mesh {
             // Triangle count scales as 1 / h^2 when every size scales with h.
             h_max *= ratio.sqrt();
         }
-        best.ok_or_else(|| EitError::Mesh {
-            problem: "no refinement round ran".into(),
-        })
+        best.ok_or_else(|| EitError::Mesh { problem: "no refinement round ran".into() })
     }
 
     /// Builds a mesh from given nodes (mm) and triangles, e.g. one made by another mesher.
     /// Triangles are reoriented counter-clockwise; every electrode end must be a node.
-    pub fn from_parts(
-        sensor: &Sensor,
-        nodes: Vec<[f64; 2]>,
-        mut triangles: Vec<[usize; 3]>,
-    ) -> Result<Mesh, EitError> {
+    pub fn from_parts(sensor: &Sensor, nodes: Vec<[f64; 2]>, mut triangles: Vec<[usize; 3]>) -> Result<Mesh, EitError> {
         for (k, t) in triangles.iter_mut().enumerate() {
             if t.iter().any(|&i| i >= nodes.len()) {
                 return Err(EitError::Mesh {
@@ -139,25 +121,15 @@ impl Mesh {
             }
             let a = signed_area(nodes[t[0]], nodes[t[1]], nodes[t[2]]);
             if a == 0.0 || !a.is_finite() {
-                return Err(EitError::Mesh {
-                    problem: format!("triangle {k} is degenerate"),
-                });
+                return Err(EitError::Mesh { problem: format!("triangle {k} is degenerate") });
             }
             if a < 0.0 {
                 t.swap(1, 2);
             }
         }
         let electrode_edges = find_electrode_edges(sensor, &nodes, &triangles)?;
-        let min_angle_deg = triangles
-            .iter()
-            .map(|t| min_angle_deg(&nodes, t))
-            .fold(f64::INFINITY, f64::min);
-        Ok(Mesh {
-            nodes,
-            triangles,
-            electrode_edges,
-            min_angle_deg,
-        })
+        let min_angle_deg = triangles.iter().map(|t| min_angle_deg(&nodes, t)).fold(f64::INFINITY, f64::min);
+        Ok(Mesh { nodes, triangles, electrode_edges, min_angle_deg })
     }
 
     pub fn node_count(&self) -> usize {
@@ -181,10 +153,7 @@ impl Mesh {
 
     /// Element areas, mm^2.
     pub fn element_areas_mm2(&self) -> Vec<f64> {
-        self.triangles
-            .iter()
-            .map(|t| signed_area(self.nodes[t[0]], self.nodes[t[1]], self.nodes[t[2]]))
-            .collect()
+        self.triangles.iter().map(|t| signed_area(self.nodes[t[0]], self.nodes[t[1]], self.nodes[t[2]])).collect()
     }
 
     /// Pairs of elements that share an edge (the element adjacency graph), each pair once, `a < b`.
@@ -197,11 +166,7 @@ impl Mesh {
             }
         }
         edges.sort_unstable();
-        edges
-            .windows(2)
-            .filter(|w| w[0].0 == w[1].0 && w[0].1 == w[1].1)
-            .map(|w| [w[0].2, w[1].2])
-            .collect()
+        edges.windows(2).filter(|w| w[0].0 == w[1].0 && w[0].1 == w[1].1).map(|w| [w[0].2, w[1].2]).collect()
     }
 }
 
@@ -217,9 +182,7 @@ fn min_angle_deg(nodes: &[[f64; 2]], t: &[usize; 3]) -> f64 {
         let (o, a, b) = (p[k], p[(k + 1) % 3], p[(k + 2) % 3]);
         let u = [a[0] - o[0], a[1] - o[1]];
         let v = [b[0] - o[0], b[1] - o[1]];
-        let ang = (u[0] * v[1] - u[1] * v[0])
-            .abs()
-            .atan2(u[0] * v[0] + u[1] * v[1]);
+        let ang = (u[0] * v[1] - u[1] * v[0]).abs().atan2(u[0] * v[0] + u[1] * v[1]);
         m = m.min(ang.to_degrees());
     }
     m
@@ -237,19 +200,12 @@ fn segment_distance(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> (f64, f64) {
 /// Boundary nodes counter-clockwise from the bottom-left corner, graded by the size function.
 fn boundary_nodes(sensor: &Sensor, params: &MeshParams, h_max: f64) -> Vec<[f64; 2]> {
     let (hx, hy) = sensor.half_extents_mm();
-    let min_el = sensor
-        .electrodes
-        .iter()
-        .map(|e| e.length_mm())
-        .fold(f64::INFINITY, f64::min);
+    let min_el = sensor.electrodes.iter().map(|e| e.length_mm()).fold(f64::INFINITY, f64::min);
     // At least one edge per electrode; coarse meshes (a few hundred elements) need that freedom.
     let h_el = (params.electrode_size_ratio * h_max).min(min_el);
     let size = |p: [f64; 2]| {
-        let d = sensor
-            .electrodes
-            .iter()
-            .map(|e| segment_distance(p, e.start_mm, e.end_mm).0)
-            .fold(f64::INFINITY, f64::min);
+        let d =
+            sensor.electrodes.iter().map(|e| segment_distance(p, e.start_mm, e.end_mm).0).fold(f64::INFINITY, f64::min);
         (h_el + params.grading * d).min(h_max)
     };
     let corners = [[-hx, -hy], [hx, -hy], [hx, hy], [-hx, hy]];
@@ -257,12 +213,7 @@ fn boundary_nodes(sensor: &Sensor, params: &MeshParams, h_max: f64) -> Vec<[f64;
     for side in 0..4 {
         let (a, b) = (corners[side], corners[(side + 1) % 4]);
         let len = ((b[0] - a[0]).powi(2) + (b[1] - a[1]).powi(2)).sqrt();
-        let at = |s: f64| {
-            [
-                a[0] + (b[0] - a[0]) * s / len,
-                a[1] + (b[1] - a[1]) * s / len,
-            ]
-        };
+        let at = |s: f64| [a[0] + (b[0] - a[0]) * s / len, a[1] + (b[1] - a[1]) * s / len];
         // Breakpoints: the corners and every electrode end on this side.
         let mut breaks = vec![0.0, len];
         for e in &sensor.electrodes {
@@ -304,9 +255,7 @@ fn triangulate(sensor: &Sensor, params: &MeshParams, h_max: f64) -> Result<Mesh,
     for p in &boundary {
         let h = cdt
             .insert(Point2::new(p[0], p[1]))
-            .map_err(|e| EitError::Mesh {
-                problem: format!("boundary node ({}, {}): {e:?}", p[0], p[1]),
-            })?;
+            .map_err(|e| EitError::Mesh { problem: format!("boundary node ({}, {}): {e:?}", p[0], p[1]) })?;
         handles.push(h);
     }
     for k in 0..handles.len() {
@@ -320,16 +269,10 @@ fn triangulate(sensor: &Sensor, params: &MeshParams, h_max: f64) -> Result<Mesh,
         .exclude_outer_faces(true);
     let result = cdt.refine(refinement);
     if !result.refinement_complete {
-        return Err(EitError::Mesh {
-            problem: format!("refinement did not reach {} degrees", params.min_angle_deg),
-        });
+        return Err(EitError::Mesh { problem: format!("refinement did not reach {} degrees", params.min_angle_deg) });
     }
-    let nodes: Vec<[f64; 2]> = cdt
-        .vertices()
-        .map(|v| [v.position().x, v.position().y])
-        .collect();
-    let excluded: std::collections::HashSet<_> =
-        result.excluded_faces.iter().map(|f| f.index()).collect();
+    let nodes: Vec<[f64; 2]> = cdt.vertices().map(|v| [v.position().x, v.position().y]).collect();
+    let excluded: std::collections::HashSet<_> = result.excluded_faces.iter().map(|f| f.index()).collect();
     let triangles: Vec<[usize; 3]> = cdt
         .inner_faces()
         .filter(|f| !excluded.contains(&f.fix().index()))
@@ -367,21 +310,15 @@ fn find_electrode_edges(
     let mut out = vec![Vec::new(); sensor.electrodes.len()];
     for (l, el) in sensor.electrodes.iter().enumerate() {
         for &(a, b) in &boundary {
-            let on =
-                |p: [f64; 2]| segment_distance(p, el.start_mm, el.end_mm).0 <= ON_SEGMENT_TOL_MM;
-            let mid = [
-                0.5 * (nodes[a][0] + nodes[b][0]),
-                0.5 * (nodes[a][1] + nodes[b][1]),
-            ];
+            let on = |p: [f64; 2]| segment_distance(p, el.start_mm, el.end_mm).0 <= ON_SEGMENT_TOL_MM;
+            let mid = [0.5 * (nodes[a][0] + nodes[b][0]), 0.5 * (nodes[a][1] + nodes[b][1])];
             if on(nodes[a]) && on(nodes[b]) && on(mid) {
                 out[l].push([a, b]);
             }
         }
         let covered: f64 = out[l]
             .iter()
-            .map(|&[a, b]| {
-                ((nodes[a][0] - nodes[b][0]).powi(2) + (nodes[a][1] - nodes[b][1]).powi(2)).sqrt()
-            })
+            .map(|&[a, b]| ((nodes[a][0] - nodes[b][0]).powi(2) + (nodes[a][1] - nodes[b][1]).powi(2)).sqrt())
             .sum();
         if (covered - el.length_mm()).abs() > 1e-6 * el.length_mm().max(1.0) {
             return Err(EitError::Mesh {
@@ -408,11 +345,7 @@ mod tests {
         assert!(m.min_angle_deg >= 27.0, "min angle {}", m.min_angle_deg);
         for e in &s.electrodes {
             for p in [e.start_mm, e.end_mm] {
-                assert!(
-                    m.nodes
-                        .iter()
-                        .any(|q| (q[0] - p[0]).abs() < 1e-12 && (q[1] - p[1]).abs() < 1e-12)
-                );
+                assert!(m.nodes.iter().any(|q| (q[0] - p[0]).abs() < 1e-12 && (q[1] - p[1]).abs() < 1e-12));
             }
         }
         // The areas tile the rectangle exactly.
@@ -427,34 +360,19 @@ mod tests {
         let c = m.element_centroids_mm();
         let a = m.element_areas_mm2();
         let mean_in = |pred: &dyn Fn([f64; 2]) -> bool| {
-            let v: Vec<f64> = c
-                .iter()
-                .zip(&a)
-                .filter(|(p, _)| pred(**p))
-                .map(|(_, a)| *a)
-                .collect();
+            let v: Vec<f64> = c.iter().zip(&a).filter(|(p, _)| pred(**p)).map(|(_, a)| *a).collect();
             v.iter().sum::<f64>() / v.len() as f64
         };
         let near = mean_in(&|p| (p[0] + 37.5).abs() < 2.5 && p[1] < -48.5);
         let centre = mean_in(&|p| p[0].abs() < 10.0 && p[1].abs() < 10.0);
-        assert!(
-            near < 0.5 * centre,
-            "near {near} mm^2 vs centre {centre} mm^2"
-        );
+        assert!(near < 0.5 * centre, "near {near} mm^2 vs centre {centre} mm^2");
     }
 
     #[test]
     fn element_counts_from_200_to_20000() {
         let s = Sensor::paper_100mm();
         for n in [200usize, 20_000] {
-            let m = Mesh::generate(
-                &s,
-                &MeshParams {
-                    elements: n,
-                    ..Default::default()
-                },
-            )
-            .unwrap();
+            let m = Mesh::generate(&s, &MeshParams { elements: n, ..Default::default() }).unwrap();
             let r = m.element_count() as f64 / n as f64;
             // Below ~500 elements the graded boundary nodes alone fix much of the count: allow 15 %.
             let tol = if n < 500 { 0.15 } else { 0.05 };
@@ -465,19 +383,9 @@ mod tests {
 
     #[test]
     fn bad_params_are_rejected_by_name() {
-        let e = MeshParams {
-            min_angle_deg: 40.0,
-            ..Default::default()
-        }
-        .validate()
-        .unwrap_err();
+        let e = MeshParams { min_angle_deg: 40.0, ..Default::default() }.validate().unwrap_err();
         assert!(e.to_string().contains("min_angle_deg"), "{e}");
-        let e = MeshParams {
-            grading: f64::NAN,
-            ..Default::default()
-        }
-        .validate()
-        .unwrap_err();
+        let e = MeshParams { grading: f64::NAN, ..Default::default() }.validate().unwrap_err();
         assert!(e.to_string().contains("grading"), "{e}");
     }
 }

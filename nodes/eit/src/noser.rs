@@ -42,10 +42,7 @@ impl Prior {
                 Err(invalid("prior.p", format!("must be in [0, 2] (got {p})")))
             }
             Prior::Laplacian { epsilon } if !(epsilon.is_finite() && epsilon > 0.0) => {
-                Err(invalid(
-                    "prior.epsilon",
-                    format!("must be finite and > 0 (got {epsilon})"),
-                ))
+                Err(invalid("prior.epsilon", format!("must be finite and > 0 (got {epsilon})")))
             }
             _ => Ok(()),
         }
@@ -84,11 +81,7 @@ impl DualSystem {
         prior.validate()?;
         let (m, e) = (j.nrows(), j.ncols());
         if e != mesh.element_count() {
-            return Err(EitError::Length {
-                what: "jacobian columns",
-                expected: mesh.element_count(),
-                got: e,
-            });
+            return Err(EitError::Length { what: "jacobian columns", expected: mesh.element_count(), got: e });
         }
         let mut x = j.transpose().to_owned();
         match *prior {
@@ -101,24 +94,18 @@ impl DualSystem {
                 let r = laplacian(mesh, epsilon)?;
                 let llt = Llt::try_new_with_symbolic(
                     faer::sparse::linalg::solvers::SymbolicLlt::try_new(r.symbolic(), Side::Lower)
-                        .map_err(|_| EitError::NotPositiveDefinite {
-                            what: "laplacian prior",
-                        })?,
+                        .map_err(|_| EitError::NotPositiveDefinite { what: "laplacian prior" })?,
                     r.as_ref(),
                     Side::Lower,
                 )
-                .map_err(|_| EitError::NotPositiveDefinite {
-                    what: "laplacian prior",
-                })?;
+                .map_err(|_| EitError::NotPositiveDefinite { what: "laplacian prior" })?;
                 llt.solve_in_place(x.as_mut());
             }
         }
         let mut k = j * &x;
         let trace: f64 = (0..m).map(|i| k[(i, i)]).sum();
         if !(trace.is_finite() && trace > 0.0) {
-            return Err(EitError::NotPositiveDefinite {
-                what: "J R^-1 J^T (zero jacobian?)",
-            });
+            return Err(EitError::NotPositiveDefinite { what: "J R^-1 J^T (zero jacobian?)" });
         }
         let c = trace / m as f64;
         x *= faer::Scale(1.0 / c);
@@ -133,9 +120,7 @@ impl DualSystem {
         }
         let evd = k
             .self_adjoint_eigen(Side::Lower)
-            .map_err(|_| EitError::NotPositiveDefinite {
-                what: "J R^-1 J^T eigen",
-            })?;
+            .map_err(|_| EitError::NotPositiveDefinite { what: "J R^-1 J^T eigen" })?;
         let mut s: Vec<f64> = (0..m).map(|i| evd.S()[i]).collect();
         let smax = s.iter().copied().fold(0.0, f64::max);
         let mut clipped = 0;
@@ -145,13 +130,7 @@ impl DualSystem {
                 clipped += 1;
             }
         }
-        Ok(DualSystem {
-            x,
-            u: evd.U().to_owned(),
-            s,
-            clipped,
-            prior_scale: c,
-        })
+        Ok(DualSystem { x, u: evd.U().to_owned(), s, clipped, prior_scale: c })
     }
 
     /// Number of measurements M.
@@ -172,10 +151,7 @@ impl DualSystem {
     /// The reconstruction matrix for `lambda` (E x M): ds = matrix * dv.
     pub fn matrix(&self, lambda: f64) -> Result<Mat<f64>, EitError> {
         if !(lambda.is_finite() && lambda > 0.0) {
-            return Err(invalid(
-                "lambda",
-                format!("must be finite and > 0 (got {lambda})"),
-            ));
+            return Err(invalid("lambda", format!("must be finite and > 0 (got {lambda})")));
         }
         let l2 = lambda * lambda;
         // U diag(1 / (s + l2)) U^T, then X times it.
@@ -191,14 +167,8 @@ impl DualSystem {
 /// diag(J^T J)^p per element, with zero columns floored to the smallest positive entry so R is
 /// invertible (an element no measurement sees gets the strongest regularisation).
 pub fn noser_diagonal(j: MatRef<'_, f64>, p: f64) -> Vec<f64> {
-    let mut d: Vec<f64> = (0..j.ncols())
-        .map(|e| j.col(e).iter().map(|v| v * v).sum::<f64>().powf(p))
-        .collect();
-    let floor = d
-        .iter()
-        .copied()
-        .filter(|&v| v > 0.0)
-        .fold(f64::INFINITY, f64::min);
+    let mut d: Vec<f64> = (0..j.ncols()).map(|e| j.col(e).iter().map(|v| v * v).sum::<f64>().powf(p)).collect();
+    let floor = d.iter().copied().filter(|&v| v > 0.0).fold(f64::INFINITY, f64::min);
     let floor = if floor.is_finite() { floor } else { 1.0 };
     for v in &mut d {
         if v.is_nan() || *v <= 0.0 {
@@ -230,7 +200,6 @@ pub fn laplacian(mesh: &Mesh, epsilon: f64) -> Result<SparseColMat<usize, f64>, 
     for (i, d) in deg.iter().enumerate() {
         trip.push(Triplet::new(i, i, d + epsilon));
     }
-    SparseColMat::try_new_from_triplets(e, e, &trip).map_err(|err| EitError::Mesh {
-        problem: format!("laplacian: {err:?}"),
-    })
+    SparseColMat::try_new_from_triplets(e, e, &trip)
+        .map_err(|err| EitError::Mesh { problem: format!("laplacian: {err:?}") })
 }

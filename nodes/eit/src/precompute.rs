@@ -67,43 +67,23 @@ impl Model {
             }
         }
         let map = ImageMap::new(&mesh, grid)?;
-        Ok(Model {
-            mesh,
-            forward,
-            v0,
-            jacobian: jac,
-            map,
-            background_s_per_m: sigma0,
-        })
+        Ok(Model { mesh, forward, v0, jacobian: jac, map, background_s_per_m: sigma0 })
     }
 
     /// Reconstruction matrices for the channels not in `excluded` (true = excluded).
     pub fn fold(&self, prior: &Prior, lambda: f64, excluded: &[bool]) -> Result<Folded, EitError> {
         let m = self.jacobian.nrows();
         if excluded.len() != m {
-            return Err(EitError::Length {
-                what: "channel mask",
-                expected: m,
-                got: excluded.len(),
-            });
+            return Err(EitError::Length { what: "channel mask", expected: m, got: excluded.len() });
         }
         let kept: Vec<usize> = (0..m).filter(|&i| !excluded[i]).collect();
         if kept.is_empty() {
             return Err(EitError::NoChannels { total: m });
         }
-        let j_kept = Mat::<f64>::from_fn(kept.len(), self.jacobian.ncols(), |r, c| {
-            self.jacobian[(kept[r], c)]
-        });
+        let j_kept = Mat::<f64>::from_fn(kept.len(), self.jacobian.ncols(), |r, c| self.jacobian[(kept[r], c)]);
         let dual = DualSystem::new(j_kept.as_ref(), prior, &self.mesh)?;
         let d = dual.matrix(lambda)?;
-        Ok(Folded::new(
-            &d,
-            &kept,
-            m,
-            &self.map,
-            self.background_s_per_m,
-            dual.clipped,
-        ))
+        Ok(Folded::new(&d, &kept, m, &self.map, self.background_s_per_m, dual.clipped))
     }
 }
 
@@ -125,14 +105,7 @@ pub struct Folded {
 
 impl Folded {
     /// Folds the E x M' matrix `d` (columns = kept channels) with the image map and sigma0.
-    fn new(
-        d: &Mat<f64>,
-        kept: &[usize],
-        m: usize,
-        map: &ImageMap,
-        sigma0: f64,
-        clipped: usize,
-    ) -> Folded {
+    fn new(d: &Mat<f64>, kept: &[usize], m: usize, map: &ImageMap, sigma0: f64, clipped: usize) -> Folded {
         let e_count = d.nrows();
         let pixels = map.row_ptr.len() - 1;
         let mut elements = vec![0.0; e_count * m];
@@ -144,29 +117,15 @@ impl Folded {
             }
             let img = &mut image[ch * pixels..(ch + 1) * pixels];
             for (p, o) in img.iter_mut().enumerate() {
-                *o = map.entries[map.row_ptr[p]..map.row_ptr[p + 1]]
-                    .iter()
-                    .map(|&(e, w)| w * col[e])
-                    .sum();
+                *o = map.entries[map.row_ptr[p]..map.row_ptr[p + 1]].iter().map(|&(e, w)| w * col[e]).sum();
             }
         }
         Folded::from_parts(m, image, elements, clipped)
     }
 
     /// Assembles a folded set from its f64 matrices (e.g. read from the cache).
-    pub fn from_parts(
-        measurements: usize,
-        image: Vec<f64>,
-        elements: Vec<f64>,
-        clipped: usize,
-    ) -> Folded {
+    pub fn from_parts(measurements: usize, image: Vec<f64>, elements: Vec<f64>, clipped: usize) -> Folded {
         let image_f32 = image.iter().map(|&v| v as f32).collect();
-        Folded {
-            measurements,
-            image,
-            image_f32,
-            elements,
-            clipped,
-        }
+        Folded { measurements, image, image_f32, elements, clipped }
     }
 }

@@ -169,11 +169,7 @@ impl Reconstructor {
     fn cache_description(&self, excluded: &[bool]) -> String {
         let p = &self.params;
         let s = &self.sensor;
-        let el: Vec<_> = s
-            .electrodes
-            .iter()
-            .map(|e| (e.start_mm, e.end_mm))
-            .collect();
+        let el: Vec<_> = s.electrodes.iter().map(|e| (e.start_mm, e.end_mm)).collect();
         let ex: Vec<usize> = (0..excluded.len()).filter(|&k| excluded[k]).collect();
         format!(
             "skinflow-eit {} matrix v2|sensor {:?}x{:?} {} {:?}|mesh {:?}|cem {:?}|prior {}|lambda {:?}|mode {:?}|image {}x{} sub {}|excluded {:?}",
@@ -319,9 +315,7 @@ impl Reconstructor {
         v_ref: &[f64],
         lambdas: &[f64],
     ) -> Result<LambdaChoice, EitError> {
-        let kept: Vec<usize> = (0..self.measurements.len())
-            .filter(|&k| !self.mask.excluded[k])
-            .collect();
+        let kept: Vec<usize> = (0..self.measurements.len()).filter(|&k| !self.mask.excluded[k]).collect();
         let mut dvs = Vec::with_capacity(frames.len());
         for v in frames {
             self.difference(v, v_ref)?;
@@ -329,9 +323,7 @@ impl Reconstructor {
         }
         let prior = self.params.prior;
         let model = self.model()?;
-        let j = Mat::<f64>::from_fn(kept.len(), model.jacobian.ncols(), |r, c| {
-            model.jacobian[(kept[r], c)]
-        });
+        let j = Mat::<f64>::from_fn(kept.len(), model.jacobian.ncols(), |r, c| model.jacobian[(kept[r], c)]);
         let dual = DualSystem::new(j.as_ref(), &prior, &model.mesh)?;
         let refs: Vec<&[f64]> = dvs.iter().map(|d| &d[..]).collect();
         gcv(&dual, &refs, lambdas)
@@ -341,18 +333,10 @@ impl Reconstructor {
     fn difference(&mut self, v: &[f64], v_ref: &[f64]) -> Result<(), EitError> {
         let m = self.measurements.len();
         if v.len() != m {
-            return Err(EitError::Length {
-                what: "frame",
-                expected: m,
-                got: v.len(),
-            });
+            return Err(EitError::Length { what: "frame", expected: m, got: v.len() });
         }
         if v_ref.len() != m {
-            return Err(EitError::Length {
-                what: "reference frame",
-                expected: m,
-                got: v_ref.len(),
-            });
+            return Err(EitError::Length { what: "reference frame", expected: m, got: v_ref.len() });
         }
         let normalized = self.params.mode == DifferenceMode::Normalized;
         for k in 0..m {
@@ -364,10 +348,7 @@ impl Reconstructor {
                 v[k] - v_ref[k]
             };
             if !d.is_finite() {
-                return Err(EitError::NonFinite {
-                    channel: k,
-                    value: d,
-                });
+                return Err(EitError::NonFinite { channel: k, value: d });
             }
             self.dv[k] = d;
         }
@@ -375,18 +356,9 @@ impl Reconstructor {
     }
 
     /// Reconstructs frame `v` against `v_ref` into `image` (pixels, S/m; layout in `image`).
-    pub fn reconstruct_image_into(
-        &mut self,
-        v: &[f64],
-        v_ref: &[f64],
-        image: &mut [f64],
-    ) -> Result<(), EitError> {
+    pub fn reconstruct_image_into(&mut self, v: &[f64], v_ref: &[f64], image: &mut [f64]) -> Result<(), EitError> {
         if image.len() != self.grid.pixel_count() {
-            return Err(EitError::Length {
-                what: "image",
-                expected: self.grid.pixel_count(),
-                got: image.len(),
-            });
+            return Err(EitError::Length { what: "image", expected: self.grid.pixel_count(), got: image.len() });
         }
         self.difference(v, v_ref)?;
         match self.params.precision {
@@ -414,11 +386,7 @@ impl Reconstructor {
     ) -> Result<(), EitError> {
         self.reconstruct_image_into(v, v_ref, image)?;
         if elements.len() != self.info.elements {
-            return Err(EitError::Length {
-                what: "elements",
-                expected: self.info.elements,
-                got: elements.len(),
-            });
+            return Err(EitError::Length { what: "elements", expected: self.info.elements, got: elements.len() });
         }
         // `dv` is still the frame's difference vector.
         matvec(&self.active.elements, &self.dv, elements);
@@ -433,11 +401,7 @@ impl Reconstructor {
         elements: &mut [f64],
     ) -> Result<(), EitError> {
         if elements.len() != self.info.elements {
-            return Err(EitError::Length {
-                what: "elements",
-                expected: self.info.elements,
-                got: elements.len(),
-            });
+            return Err(EitError::Length { what: "elements", expected: self.info.elements, got: elements.len() });
         }
         self.difference(v, v_ref)?;
         matvec(&self.active.elements, &self.dv, elements);

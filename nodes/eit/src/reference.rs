@@ -37,10 +37,7 @@ impl ReferenceTracker {
     /// A tracker for M channels that averages the first `n` frames (n >= 1).
     pub fn new(m: usize, n: usize) -> Result<ReferenceTracker, EitError> {
         if n == 0 {
-            return Err(crate::error::invalid(
-                "reference_frames",
-                "must be >= 1 (got 0)",
-            ));
+            return Err(crate::error::invalid("reference_frames", "must be >= 1 (got 0)"));
         }
         Ok(ReferenceTracker {
             reference: vec![0.0; m],
@@ -66,11 +63,7 @@ impl ReferenceTracker {
 
     fn check(&self, frame: &[f64]) -> Result<(), EitError> {
         if frame.len() != self.reference.len() {
-            return Err(EitError::Length {
-                what: "frame",
-                expected: self.reference.len(),
-                got: frame.len(),
-            });
+            return Err(EitError::Length { what: "frame", expected: self.reference.len(), got: frame.len() });
         }
         Ok(())
     }
@@ -149,10 +142,7 @@ mod tests {
         r.accumulate(&[9.0, 9.0]).unwrap();
         assert_eq!(r.reference(), Some(&[2.0, 3.0][..]));
         r.tare(&[5.0, 6.0]).unwrap();
-        assert_eq!(
-            (r.reference(), r.source()),
-            (Some(&[5.0, 6.0][..]), ReferenceSource::Tare)
-        );
+        assert_eq!((r.reference(), r.source()), (Some(&[5.0, 6.0][..]), ReferenceSource::Tare));
         assert!(r.tare(&[1.0]).is_err());
     }
 

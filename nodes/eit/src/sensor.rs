@@ -22,10 +22,7 @@ pub enum SensorError {
 }
 
 fn invalid(field: impl Into<String>, problem: impl Into<String>) -> SensorError {
-    SensorError::Invalid {
-        field: field.into(),
-        problem: problem.into(),
-    }
+    SensorError::Invalid { field: field.into(), problem: problem.into() }
 }
 
 /// Measurement protocol. Each has a name used in TOML.
@@ -73,10 +70,7 @@ impl Electrode {
     }
 
     pub fn centre_mm(&self) -> [f64; 2] {
-        [
-            0.5 * (self.start_mm[0] + self.end_mm[0]),
-            0.5 * (self.start_mm[1] + self.end_mm[1]),
-        ]
+        [0.5 * (self.start_mm[0] + self.end_mm[0]), 0.5 * (self.start_mm[1] + self.end_mm[1])]
     }
 }
 
@@ -167,16 +161,10 @@ impl Sensor {
         let s = file.sensor;
         let ok = |x: f64| x.is_finite() && x > 0.0;
         if !ok(s.width_mm) {
-            return Err(invalid(
-                "width_mm",
-                format!("must be finite and > 0 (got {})", s.width_mm),
-            ));
+            return Err(invalid("width_mm", format!("must be finite and > 0 (got {})", s.width_mm)));
         }
         if !ok(s.height_mm) {
-            return Err(invalid(
-                "height_mm",
-                format!("must be finite and > 0 (got {})", s.height_mm),
-            ));
+            return Err(invalid("height_mm", format!("must be finite and > 0 (got {})", s.height_mm)));
         }
         let (hw, hh) = (0.5 * s.width_mm, 0.5 * s.height_mm);
         let electrodes = if s.electrode.is_empty() {
@@ -189,9 +177,7 @@ impl Sensor {
             if !ok(len) || len * n as f64 >= min_side {
                 return Err(invalid(
                     "electrode_length_mm",
-                    format!(
-                        "must be > 0 and leave gaps between {n} electrodes on a {min_side} mm side (got {len})"
-                    ),
+                    format!("must be > 0 and leave gaps between {n} electrodes on a {min_side} mm side (got {len})"),
                 ));
             }
             generate(hw, hh, n, len)
@@ -209,10 +195,7 @@ impl Sensor {
                         ));
                     }
                 }
-                let el = Electrode {
-                    start_mm: e.start_mm,
-                    end_mm: e.end_mm,
-                };
+                let el = Electrode { start_mm: e.start_mm, end_mm: e.end_mm };
                 if el.length_mm().is_nan() || el.length_mm() <= 0.0 {
                     return Err(invalid(format!("electrode[{i}]"), "has zero length"));
                 }
@@ -220,23 +203,14 @@ impl Sensor {
                     && !is_corner(e.start_mm, hw, hh)
                     && !is_corner(e.end_mm, hw, hh)
                 {
-                    return Err(invalid(
-                        format!("electrode[{i}]"),
-                        "must lie on one side (it may not wrap a corner)",
-                    ));
+                    return Err(invalid(format!("electrode[{i}]"), "must lie on one side (it may not wrap a corner)"));
                 }
                 v.push(el);
             }
             v
         };
         if electrodes.len() < 3 {
-            return Err(invalid(
-                "electrode",
-                format!(
-                    "at least 3 electrodes are needed (got {})",
-                    electrodes.len()
-                ),
-            ));
+            return Err(invalid("electrode", format!("at least 3 electrodes are needed (got {})", electrodes.len())));
         }
         if s.protocol == Protocol::Adjacent && electrodes.len() < 4 {
             return Err(invalid("protocol", "adjacent needs at least 4 electrodes"));
@@ -288,10 +262,7 @@ pub fn protocol_measurements(protocol: Protocol, l: usize) -> Vec<Measurement> {
         Protocol::Pairwise => {
             for i in 0..l {
                 for j in (i + 1)..l {
-                    out.push(Measurement {
-                        drive: (i, j),
-                        sense: (i, j),
-                    });
+                    out.push(Measurement { drive: (i, j), sense: (i, j) });
                 }
             }
         }
@@ -319,34 +290,22 @@ fn generate(hw: f64, hh: f64, n: usize, len: f64) -> Vec<Electrode> {
     // bottom: left to right
     for k in 0..n {
         let c = centre(hw, k);
-        v.push(Electrode {
-            start_mm: [c - len / 2.0, -hh],
-            end_mm: [c + len / 2.0, -hh],
-        });
+        v.push(Electrode { start_mm: [c - len / 2.0, -hh], end_mm: [c + len / 2.0, -hh] });
     }
     // right: bottom to top
     for k in 0..n {
         let c = centre(hh, k);
-        v.push(Electrode {
-            start_mm: [hw, c - len / 2.0],
-            end_mm: [hw, c + len / 2.0],
-        });
+        v.push(Electrode { start_mm: [hw, c - len / 2.0], end_mm: [hw, c + len / 2.0] });
     }
     // top: right to left
     for k in 0..n {
         let c = -centre(hw, k);
-        v.push(Electrode {
-            start_mm: [c + len / 2.0, hh],
-            end_mm: [c - len / 2.0, hh],
-        });
+        v.push(Electrode { start_mm: [c + len / 2.0, hh], end_mm: [c - len / 2.0, hh] });
     }
     // left: top to bottom
     for k in 0..n {
         let c = -centre(hh, k);
-        v.push(Electrode {
-            start_mm: [-hw, c + len / 2.0],
-            end_mm: [-hw, c - len / 2.0],
-        });
+        v.push(Electrode { start_mm: [-hw, c + len / 2.0], end_mm: [-hw, c - len / 2.0] });
     }
     v
 }
@@ -415,13 +374,7 @@ mod tests {
     fn adjacent_has_l_times_l_minus_3() {
         let m = protocol_measurements(Protocol::Adjacent, 16);
         assert_eq!(m.len(), 208);
-        assert_eq!(
-            m[0],
-            Measurement {
-                drive: (0, 1),
-                sense: (2, 3)
-            }
-        );
+        assert_eq!(m[0], Measurement { drive: (0, 1), sense: (2, 3) });
     }
 
     #[test]
@@ -429,10 +382,8 @@ mod tests {
         assert!(Sensor::from_toml("[sensor]\nwidht_mm = 3.0\n").is_err());
         let e = Sensor::from_toml("[sensor]\nwidth_mm = -1.0\n").unwrap_err();
         assert!(e.to_string().contains("width_mm"), "{e}");
-        let e = Sensor::from_toml(
-            "[sensor]\n[[sensor.electrode]]\nstart_mm=[0.0,0.0]\nend_mm=[1.0,0.0]\n",
-        )
-        .unwrap_err();
+        let e =
+            Sensor::from_toml("[sensor]\n[[sensor.electrode]]\nstart_mm=[0.0,0.0]\nend_mm=[1.0,0.0]\n").unwrap_err();
         assert!(e.to_string().contains("not on the boundary"), "{e}");
     }
 

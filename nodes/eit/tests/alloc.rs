@@ -36,14 +36,8 @@ static GLOBAL: Counting = Counting;
 fn frames_allocate_nothing() {
     let s = Sensor::paper_100mm();
     for precision in [Precision::F64, Precision::F32] {
-        let params = ReconParams {
-            mesh: MeshParams {
-                elements: 600,
-                ..Default::default()
-            },
-            precision,
-            ..Default::default()
-        };
+        let params =
+            ReconParams { mesh: MeshParams { elements: 600, ..Default::default() }, precision, ..Default::default() };
         let mut r = Reconstructor::new(&s, &params).unwrap();
         let m = r.measurement_count();
         let v_ref: Vec<f64> = (0..m).map(|k| 0.3 + 1e-3 * k as f64).collect();
@@ -62,18 +56,12 @@ fn frames_allocate_nothing() {
             r.detect_mask_into(&v, &mut mask);
             r.set_mask(&mask).unwrap();
             r.reconstruct_image_into(&v, &v_ref, &mut image).unwrap();
-            r.reconstruct_elements_into(&v, &v_ref, &mut elements)
-                .unwrap();
+            r.reconstruct_elements_into(&v, &v_ref, &mut elements).unwrap();
         }
         r.set_mask(&masked).unwrap();
         r.reconstruct_image_into(&v, &v_ref, &mut image).unwrap();
         let after = ALLOCATIONS.load(Ordering::SeqCst);
-        assert_eq!(
-            after - before,
-            0,
-            "{precision:?}: {} allocations in the frame loop",
-            after - before
-        );
+        assert_eq!(after - before, 0, "{precision:?}: {} allocations in the frame loop", after - before);
         assert!(image.iter().any(|x| *x != 0.0));
     }
 }

@@ -4,14 +4,7 @@
 use skinflow_eit::{CemParams, ForwardModel, Mesh, MeshParams, Sensor};
 
 fn model(sensor: &Sensor, elements: usize) -> (Mesh, ForwardModel) {
-    let mesh = Mesh::generate(
-        sensor,
-        &MeshParams {
-            elements,
-            ..Default::default()
-        },
-    )
-    .unwrap();
+    let mesh = Mesh::generate(sensor, &MeshParams { elements, ..Default::default() }).unwrap();
     let fwd = ForwardModel::new(sensor, &mesh, &CemParams::default()).unwrap();
     (mesh, fwd)
 }
@@ -34,11 +27,7 @@ fn uniform_strip_matches_closed_form() {
     let r_bulk = 20.0 / (p.background_s_per_m * t_m * 10.0);
     let r_contact = p.contact_impedance_ohm_mm2 / (10.0 * p.thickness_mm);
     let expected = p.current_a() * (r_bulk + 2.0 * r_contact);
-    assert!(
-        (v[0] / expected - 1.0).abs() < 1e-3,
-        "{} vs {expected}",
-        v[0]
-    );
+    assert!((v[0] / expected - 1.0).abs() < 1e-3, "{} vs {expected}", v[0]);
 }
 
 /// Transfer resistances are symmetric (the CEM operator is self-adjoint), also for a
@@ -76,12 +65,7 @@ fn symmetric_pairs_agree() {
     let s = Sensor::paper_100mm();
     let (_, fwd) = model(&s, 4000);
     let v = fwd.measure(&fwd.background()).unwrap();
-    let idx = |i: usize, j: usize| {
-        fwd.measurements()
-            .iter()
-            .position(|m| m.drive == (i, j))
-            .unwrap()
-    };
+    let idx = |i: usize, j: usize| fwd.measurements().iter().position(|m| m.drive == (i, j)).unwrap();
     assert!(v.iter().all(|&x| x > 0.0));
     // Adjacent pairs on each side's middle: (1,2), (5,6), (9,10), (13,14) by 90-degree rotation.
     let r = [v[idx(1, 2)], v[idx(5, 6)], v[idx(9, 10)], v[idx(13, 14)]];
@@ -106,20 +90,10 @@ fn cem_values_converge_under_refinement() {
     for n in [250, 1000, 4000] {
         let (_, f) = model(&s, n);
         let v = f.measure(&f.background()).unwrap();
-        let e = v
-            .iter()
-            .zip(&fine)
-            .map(|(a, b)| ((a - b) / b).abs())
-            .fold(0.0, f64::max);
-        assert!(
-            v.iter().zip(&fine).all(|(a, b)| a < b),
-            "{n} elements: not below the fine values"
-        );
+        let e = v.iter().zip(&fine).map(|(a, b)| ((a - b) / b).abs()).fold(0.0, f64::max);
+        assert!(v.iter().zip(&fine).all(|(a, b)| a < b), "{n} elements: not below the fine values");
         errs.push(e);
     }
-    assert!(
-        errs[0] > 2.0 * errs[1] && errs[1] > 2.0 * errs[2],
-        "{errs:?}"
-    );
+    assert!(errs[0] > 2.0 * errs[1] && errs[1] > 2.0 * errs[2], "{errs:?}");
     assert!(errs[2] < 0.03, "{errs:?}");
 }

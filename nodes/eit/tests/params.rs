@@ -2,8 +2,8 @@
 //! and the adjacent protocol end to end.
 
 use skinflow_eit::{
-    CemParams, DifferenceMode, ForwardModel, Mesh, MeshParams, Precision, Prior, ReconParams,
-    Reconstructor, Sensor, sensor::PAPER_100MM_TOML,
+    CemParams, DifferenceMode, ForwardModel, Mesh, MeshParams, Precision, Prior, ReconParams, Reconstructor, Sensor,
+    sensor::PAPER_100MM_TOML,
 };
 
 #[test]
@@ -40,13 +40,8 @@ fn full_params_parse_and_unknown_keys_fail() {
     assert!(e.to_string().contains("lamda"), "{e}");
     let e = toml::from_str::<ReconParams>("[mesh]\nelemnts = 3").unwrap_err();
     assert!(e.to_string().contains("elemnts"), "{e}");
-    let bad = ReconParams {
-        lambda: -1.0,
-        ..Default::default()
-    };
-    let e = Reconstructor::new(&Sensor::paper_100mm(), &bad)
-        .err()
-        .unwrap();
+    let bad = ReconParams { lambda: -1.0, ..Default::default() };
+    let e = Reconstructor::new(&Sensor::paper_100mm(), &bad).err().unwrap();
     assert!(e.to_string().contains("lambda"), "{e}");
 }
 
@@ -59,27 +54,14 @@ fn reconstructor_is_send() {
 #[test]
 fn adjacent_protocol_reconstructs_an_inclusion() {
     let s = Sensor::from_toml(&PAPER_100MM_TOML.replace("pairwise", "adjacent")).unwrap();
-    let truth = Mesh::generate(
-        &s,
-        &MeshParams {
-            elements: 7000,
-            ..Default::default()
-        },
-    )
-    .unwrap();
+    let truth = Mesh::generate(&s, &MeshParams { elements: 7000, ..Default::default() }).unwrap();
     let fwd = ForwardModel::new(&s, &truth, &CemParams::default()).unwrap();
     let v_ref = fwd.measure(&fwd.background()).unwrap();
     let c = [-15.0, 20.0];
     let sigma: Vec<f64> = truth
         .element_centroids_mm()
         .iter()
-        .map(|p| {
-            if (p[0] - c[0]).hypot(p[1] - c[1]) <= 7.5 {
-                0.01
-            } else {
-                0.02
-            }
-        })
+        .map(|p| if (p[0] - c[0]).hypot(p[1] - c[1]) <= 7.5 { 0.01 } else { 0.02 })
         .collect();
     let v = fwd.measure(&sigma).unwrap();
     let mut r = Reconstructor::new(&s, &ReconParams::default()).unwrap();
@@ -87,13 +69,8 @@ fn adjacent_protocol_reconstructs_an_inclusion() {
     let mut img = vec![0.0; r.pixel_count()];
     let mut el = vec![0.0; r.element_count()];
     r.reconstruct_into(&v, &v_ref, &mut img, &mut el).unwrap();
-    let k = (0..img.len())
-        .min_by(|&a, &b| img[a].total_cmp(&img[b]))
-        .unwrap();
+    let k = (0..img.len()).min_by(|&a, &b| img[a].total_cmp(&img[b])).unwrap();
     let peak = r.grid().pixel_centre_mm(k);
-    assert!(
-        img[k] < 0.0 && (peak[0] - c[0]).hypot(peak[1] - c[1]) <= 5.0,
-        "{peak:?}"
-    );
+    assert!(img[k] < 0.0 && (peak[0] - c[0]).hypot(peak[1] - c[1]) <= 5.0, "{peak:?}");
     assert!(el.iter().all(|x| x.is_finite()));
 }

@@ -9,8 +9,7 @@ use rand_distr::{Distribution, Normal};
 use skinflow_eit::lambda::log_sweep;
 use skinflow_eit::mask::ChannelMask;
 use skinflow_eit::{
-    CacheStatus, CemParams, ForwardModel, Mesh, MeshParams, Precision, ReconParams, Reconstructor,
-    Sensor,
+    CacheStatus, CemParams, ForwardModel, Mesh, MeshParams, Precision, ReconParams, Reconstructor, Sensor,
 };
 use std::path::PathBuf;
 use std::sync::OnceLock;
@@ -25,14 +24,7 @@ fn truth() -> &'static Truth {
     static T: OnceLock<Truth> = OnceLock::new();
     T.get_or_init(|| {
         let s = Sensor::paper_100mm();
-        let mesh = Mesh::generate(
-            &s,
-            &MeshParams {
-                elements: 9000,
-                ..Default::default()
-            },
-        )
-        .unwrap();
+        let mesh = Mesh::generate(&s, &MeshParams { elements: 9000, ..Default::default() }).unwrap();
         let fwd = ForwardModel::new(&s, &mesh, &CemParams::default()).unwrap();
         let v_ref = fwd.measure(&fwd.background()).unwrap();
         Truth { mesh, fwd, v_ref }
@@ -65,13 +57,10 @@ fn recon(params: ReconParams) -> Reconstructor {
 /// Image of a frame, and the centre (mm) of its most negative pixel (or most positive).
 fn image_of(r: &mut Reconstructor, v: &[f64], negative: bool) -> (Vec<f64>, [f64; 2], f64) {
     let mut img = vec![0.0; r.pixel_count()];
-    r.reconstruct_image_into(v, &truth().v_ref, &mut img)
-        .unwrap();
+    r.reconstruct_image_into(v, &truth().v_ref, &mut img).unwrap();
     assert!(img.iter().all(|x| x.is_finite()));
     let sign = if negative { -1.0 } else { 1.0 };
-    let k = (0..img.len())
-        .max_by(|&a, &b| (sign * img[a]).total_cmp(&(sign * img[b])))
-        .unwrap();
+    let k = (0..img.len()).max_by(|&a, &b| (sign * img[a]).total_cmp(&(sign * img[b]))).unwrap();
     (img.clone(), r.grid().pixel_centre_mm(k), img[k])
 }
 
@@ -91,10 +80,7 @@ fn centre_inclusion_peaks_within_5mm_and_decrease_is_negative() {
     assert!(-value > 2.0 * max_pos, "min {value} max {max_pos}");
     // An increase images positive at the same place.
     let (_, peak_up, value_up) = image_of(&mut r, &frame(c, 7.5, 2.0), false);
-    assert!(
-        value_up > 0.0 && dist(peak_up, c) <= 5.0,
-        "{peak_up:?} {value_up}"
-    );
+    assert!(value_up > 0.0 && dist(peak_up, c) <= 5.0, "{peak_up:?} {value_up}");
 }
 
 #[test]
@@ -102,10 +88,7 @@ fn edge_inclusion_peaks_within_8mm() {
     let mut r = recon(ReconParams::default());
     for c in [[0.0, -40.0], [40.0, 10.0], [-25.0, 40.0]] {
         let (_, peak, value) = image_of(&mut r, &frame(c, 7.5, 0.5), true);
-        assert!(
-            value < 0.0 && dist(peak, c) <= 8.0,
-            "truth {c:?} peak {peak:?}"
-        );
+        assert!(value < 0.0 && dist(peak, c) <= 8.0, "truth {c:?} peak {peak:?}");
     }
 }
 
@@ -115,10 +98,7 @@ fn corner_inclusions_are_found_in_their_corner() {
     for c in [[40.0, 40.0], [-40.0, -40.0], [40.0, -40.0], [-40.0, 40.0]] {
         let (_, peak, value) = image_of(&mut r, &frame(c, 7.5, 0.5), true);
         // Corners are the least sensitive region; 10 mm is the bound asked there.
-        assert!(
-            value < 0.0 && dist(peak, c) <= 10.0,
-            "truth {c:?} peak {peak:?}"
-        );
+        assert!(value < 0.0 && dist(peak, c) <= 10.0, "truth {c:?} peak {peak:?}");
     }
 }
 
@@ -130,10 +110,7 @@ fn hundredfold_contrast_in_the_forward_model() {
         let v = frame(c, 7.5, factor);
         assert!(v.iter().all(|x| x.is_finite() && *x > 0.0));
         let (_, peak, value) = image_of(&mut r, &v, factor < 1.0);
-        assert!(
-            dist(peak, c) <= 8.0 && (value < 0.0) == (factor < 1.0),
-            "{factor}: {peak:?} {value}"
-        );
+        assert!(dist(peak, c) <= 8.0 && (value < 0.0) == (factor < 1.0), "{factor}: {peak:?} {value}");
     }
 }
 
@@ -149,10 +126,7 @@ fn dead_electrode_is_masked_and_reconstruction_continues() {
         }
     }
     let mut img = vec![0.0; r.pixel_count()];
-    assert!(
-        r.reconstruct_image_into(&v, &truth().v_ref, &mut img)
-            .is_err()
-    );
+    assert!(r.reconstruct_image_into(&v, &truth().v_ref, &mut img).is_err());
     let mut mask = ChannelMask::none(ms.len(), 16);
     r.detect_mask_into(&v, &mut mask);
     assert_eq!(mask.dead_electrodes(), vec![6]);
@@ -184,49 +158,28 @@ fn noise_only_frames_stay_below_a_real_inclusion() {
     let noise = Normal::new(0.0, 1e-4).unwrap();
     let mut worst: f64 = 0.0;
     for _ in 0..20 {
-        let v: Vec<f64> = truth()
-            .v_ref
-            .iter()
-            .map(|x| x * (1.0 + noise.sample(&mut rng)))
-            .collect();
+        let v: Vec<f64> = truth().v_ref.iter().map(|x| x * (1.0 + noise.sample(&mut rng))).collect();
         let (img, _, _) = image_of(&mut r, &v, true);
         worst = worst.max(img.iter().fold(0.0, |a, x| a.max(x.abs())));
     }
     // An Otsu-style threshold sits near half the contact's peak; noise must stay well below it.
-    assert!(
-        worst < 0.25 * peak.abs(),
-        "noise max {worst} vs inclusion peak {peak}"
-    );
+    assert!(worst < 0.25 * peak.abs(), "noise max {worst} vs inclusion peak {peak}");
 }
 
 #[test]
 fn f32_matrix_agrees_with_f64() {
     let v = frame([12.0, -20.0], 7.5, 0.5);
     let (a, _, _) = image_of(&mut recon(ReconParams::default()), &v, true);
-    let (b, _, _) = image_of(
-        &mut recon(ReconParams {
-            precision: Precision::F32,
-            ..Default::default()
-        }),
-        &v,
-        true,
-    );
+    let (b, _, _) = image_of(&mut recon(ReconParams { precision: Precision::F32, ..Default::default() }), &v, true);
     let scale = a.iter().fold(0.0f64, |m, x| m.max(x.abs()));
-    let diff = a
-        .iter()
-        .zip(&b)
-        .fold(0.0f64, |m, (x, y)| m.max((x - y).abs()));
+    let diff = a.iter().zip(&b).fold(0.0f64, |m, (x, y)| m.max((x - y).abs()));
     assert!(diff <= 1e-4 * scale, "max diff {diff} vs peak {scale}");
 }
 
 #[test]
 fn disk_cache_hits_with_the_same_key_and_misses_otherwise() {
     let dir = cache_dir();
-    let params = ReconParams {
-        lambda: 0.05,
-        cache_dir: Some(dir.clone()),
-        ..Default::default()
-    };
+    let params = ReconParams { lambda: 0.05, cache_dir: Some(dir.clone()), ..Default::default() };
     let s = Sensor::paper_100mm();
     let mut first = Reconstructor::new(&s, &params).unwrap();
     assert_eq!(first.info().cache, CacheStatus::Stored);
@@ -236,14 +189,7 @@ fn disk_cache_hits_with_the_same_key_and_misses_otherwise() {
     let (a, _, _) = image_of(&mut first, &v, true);
     let (b, _, _) = image_of(&mut second, &v, true);
     assert_eq!(a, b);
-    let other = Reconstructor::new(
-        &s,
-        &ReconParams {
-            lambda: 0.06,
-            ..params
-        },
-    )
-    .unwrap();
+    let other = Reconstructor::new(&s, &ReconParams { lambda: 0.06, ..params }).unwrap();
     assert_eq!(other.info().cache, CacheStatus::Stored);
     std::fs::remove_dir_all(dir).unwrap();
 }
@@ -255,25 +201,14 @@ fn gcv_picks_a_moderate_lambda_for_noisy_inclusions() {
     let noise = Normal::new(0.0, 1e-3).unwrap();
     let frames: Vec<Vec<f64>> = [[0.0, 0.0], [30.0, -20.0], [-25.0, 30.0]]
         .iter()
-        .map(|c| {
-            frame(*c, 7.5, 0.5)
-                .iter()
-                .map(|x| x * (1.0 + noise.sample(&mut rng)))
-                .collect()
-        })
+        .map(|c| frame(*c, 7.5, 0.5).iter().map(|x| x * (1.0 + noise.sample(&mut rng))).collect())
         .collect();
     let refs: Vec<&[f64]> = frames.iter().map(|f| &f[..]).collect();
-    let choice = r
-        .choose_lambda(&refs, &truth().v_ref, &log_sweep(1e-6, 1e1, 43))
-        .unwrap();
+    let choice = r.choose_lambda(&refs, &truth().v_ref, &log_sweep(1e-6, 1e1, 43)).unwrap();
     assert!(choice.lambda > 1e-4 && choice.lambda < 1.0, "{choice:?}");
     r.set_lambda(choice.lambda).unwrap();
     let (_, peak, _) = image_of(&mut r, &frames[0], true);
-    assert!(
-        dist(peak, [0.0, 0.0]) <= 5.0,
-        "{peak:?} at lambda {}",
-        choice.lambda
-    );
+    assert!(dist(peak, [0.0, 0.0]) <= 5.0, "{peak:?} at lambda {}", choice.lambda);
 }
 
 #[test]
@@ -283,19 +218,9 @@ fn identity_and_laplacian_priors_localise_too() {
     let v = frame(c, 7.5, 0.5);
     // Plain Tikhonov (identity) pulls images towards the electrodes, where the sensitivity is
     // largest; compensating that is NOSER's purpose, so the identity prior gets 10 mm.
-    for (prior, bound) in [
-        (Prior::Identity, 10.0),
-        (Prior::Laplacian { epsilon: 0.01 }, 8.0),
-    ] {
-        let mut r = recon(ReconParams {
-            prior,
-            ..Default::default()
-        });
+    for (prior, bound) in [(Prior::Identity, 10.0), (Prior::Laplacian { epsilon: 0.01 }, 8.0)] {
+        let mut r = recon(ReconParams { prior, ..Default::default() });
         let (_, peak, value) = image_of(&mut r, &v, true);
-        assert!(
-            value < 0.0 && dist(peak, c) <= bound,
-            "{}: {peak:?}",
-            prior.describe()
-        );
+        assert!(value < 0.0 && dist(peak, c) <= bound, "{}: {peak:?}", prior.describe());
     }
 }

@@ -38,18 +38,13 @@ fn log_eit(c: &mut Criterion) {
     group.throughput(Throughput::Elements(FRAMES as u64));
     for level in [0u8, 1, 4] {
         let path: PathBuf = dir.join(format!("bench-deflate{level}.h5"));
-        let opts = WriterOptions {
-            deflate_level: level,
-            overwrite: true,
-            ..WriterOptions::new(PAPER_100MM_TOML)
-        };
+        let opts = WriterOptions { deflate_level: level, overwrite: true, ..WriterOptions::new(PAPER_100MM_TOML) };
         group.bench_function(format!("eit_120x{FRAMES}_deflate{level}"), |b| {
             b.iter_batched(
                 || RecordingWriter::create(&path, &opts).unwrap(),
                 |mut w| {
                     for i in 0..FRAMES {
-                        w.append_eit(i as f64 * 1e-3, i as u64, &pool[i % pool.len()])
-                            .unwrap();
+                        w.append_eit(i as f64 * 1e-3, i as u64, &pool[i % pool.len()]).unwrap();
                     }
                     w.close().unwrap()
                 },
@@ -67,17 +62,12 @@ fn log_eit(c: &mut Criterion) {
     // Criterion reports wall time, which on a shared machine includes time spent waiting for a
     // core; the logger thread's cost is its CPU time, printed here from /proc (Linux only).
     for level in [1u8, 4] {
-        let opts = WriterOptions {
-            deflate_level: level,
-            overwrite: true,
-            ..WriterOptions::new(PAPER_100MM_TOML)
-        };
+        let opts = WriterOptions { deflate_level: level, overwrite: true, ..WriterOptions::new(PAPER_100MM_TOML) };
         let Some(cpu0) = process_cpu_s() else { break };
         let n = 10 * FRAMES;
         let mut w = RecordingWriter::create(dir.join("cpu.h5"), &opts).unwrap();
         for i in 0..n {
-            w.append_eit(i as f64 * 1e-3, i as u64, &pool[i % pool.len()])
-                .unwrap();
+            w.append_eit(i as f64 * 1e-3, i as u64, &pool[i % pool.len()]).unwrap();
         }
         w.close().unwrap();
         if let Some(cpu) = process_cpu_s().map(|c| c - cpu0).filter(|c| *c > 0.0) {

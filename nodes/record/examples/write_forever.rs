@@ -28,15 +28,11 @@ fn main() {
             *v = (i * 1000 + j as u64) as f64;
         }
         writer.append_eit(t_s, i, &frame).expect("append eit");
-        writer
-            .append_pressure(t_s, -(i as f64))
-            .expect("append pressure");
+        writer.append_pressure(t_s, -(i as f64)).expect("append pressure");
         let stats = writer.stats();
         if stats.flushes != flushes {
             flushes = stats.flushes;
-            writeln!(stdout, "durable {}", stats.rows_written)
-                .and_then(|_| stdout.flush())
-                .expect("stdout");
+            writeln!(stdout, "durable {}", stats.rows_written).and_then(|_| stdout.flush()).expect("stdout");
         }
         // About 5000 frames per second: a realistic-to-fast EIT rate, files stay small.
         if i % 10 == 0 {

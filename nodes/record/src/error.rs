@@ -27,25 +27,11 @@ pub enum SchemaProblem {
     #[error("has rank {found}, expected {expected}")]
     WrongRank { found: usize, expected: usize },
     #[error("has {found} rows, but {other} has {expected}")]
-    LengthMismatch {
-        found: usize,
-        other: String,
-        expected: usize,
-    },
+    LengthMismatch { found: usize, other: String, expected: usize },
     #[error("has {found} columns, but {other} has {expected}")]
-    ColumnMismatch {
-        found: usize,
-        other: String,
-        expected: usize,
-    },
-    #[error(
-        "width {found} disagrees with the sensor's protocol {protocol:?} ({expected} measurements)"
-    )]
-    WidthMismatch {
-        found: usize,
-        expected: usize,
-        protocol: String,
-    },
+    ColumnMismatch { found: usize, other: String, expected: usize },
+    #[error("width {found} disagrees with the sensor's protocol {protocol:?} ({expected} measurements)")]
+    WidthMismatch { found: usize, expected: usize, protocol: String },
     #[error("is not a valid sensor description: {reason}")]
     BadSensor { reason: String },
     #[error("time {t_s} is not finite")]
@@ -59,11 +45,7 @@ pub enum SchemaProblem {
 pub enum RecordError {
     /// The file's content violates the format.
     #[error("{}: {path}: {problem}", file.display())]
-    Schema {
-        file: PathBuf,
-        path: String,
-        problem: SchemaProblem,
-    },
+    Schema { file: PathBuf, path: String, problem: SchemaProblem },
     /// The HDF5 library failed (file missing, truncated, corrupt, disk full...).
     #[error("{}: {path}: {source}", file.display())]
     Hdf5 {
@@ -77,23 +59,14 @@ pub enum RecordError {
     InvalidOption { name: &'static str, problem: String },
     /// A row handed to the writer has the wrong number of values.
     #[error("{}: {path}: row has {found} values, expected {expected}", file.display())]
-    RowWidth {
-        file: PathBuf,
-        path: String,
-        found: usize,
-        expected: usize,
-    },
+    RowWidth { file: PathBuf, path: String, found: usize, expected: usize },
     /// A truth row has more contacts than `truth_max_contacts` allows.
     #[error(
         "{}: /truth: row has {found} contacts, more than truth_max_contacts = {max} \
          (hint: raise truth_max_contacts)",
         file.display()
     )]
-    TooManyTruthContacts {
-        file: PathBuf,
-        found: usize,
-        max: usize,
-    },
+    TooManyTruthContacts { file: PathBuf, found: usize, max: usize },
     /// An append to a stream that was not declared in `WriterOptions::streams`.
     #[error("{}: {path}: stream was not declared in the writer options", file.display())]
     NotDeclared { file: PathBuf, path: String },
@@ -118,18 +91,10 @@ pub enum RecordError {
 
 impl RecordError {
     pub(crate) fn schema(file: &std::path::Path, path: &str, problem: SchemaProblem) -> Self {
-        RecordError::Schema {
-            file: file.to_path_buf(),
-            path: path.to_owned(),
-            problem,
-        }
+        RecordError::Schema { file: file.to_path_buf(), path: path.to_owned(), problem }
     }
 
     pub(crate) fn hdf5(file: &std::path::Path, path: &str, source: hdf5::Error) -> Self {
-        RecordError::Hdf5 {
-            file: file.to_path_buf(),
-            path: path.to_owned(),
-            source,
-        }
+        RecordError::Hdf5 { file: file.to_path_buf(), path: path.to_owned(), source }
     }
 }

@@ -40,9 +40,7 @@ impl StreamSummary {
             rows: t_s.len(),
             first_t_s: first,
             last_t_s: last,
-            mean_rate_hz: span
-                .filter(|s| *s > 0.0)
-                .map(|s| (t_s.len() - 1) as f64 / s),
+            mean_rate_hz: span.filter(|s| *s > 0.0).map(|s| (t_s.len() - 1) as f64 / s),
             median_period_s,
             backward_steps,
         }
@@ -135,27 +133,16 @@ impl Summary {
             streams.push(StreamSummary::of("/derived/contacts", &s.t_s));
         }
         for f in &rec.derived.forces {
-            streams.push(StreamSummary::of(
-                &format!("/derived/forces/{}", f.name),
-                &f.t_s,
-            ));
+            streams.push(StreamSummary::of(&format!("/derived/forces/{}", f.name), &f.t_s));
         }
-        let first = streams
-            .iter()
-            .filter_map(|s| s.first_t_s)
-            .fold(f64::INFINITY, f64::min);
-        let last = streams
-            .iter()
-            .filter_map(|s| s.last_t_s)
-            .fold(f64::NEG_INFINITY, f64::max);
+        let first = streams.iter().filter_map(|s| s.first_t_s).fold(f64::INFINITY, f64::min);
+        let last = streams.iter().filter_map(|s| s.last_t_s).fold(f64::NEG_INFINITY, f64::max);
         let truth = rec.truth.as_ref().map(|t| {
             let eit_t = rec.eit.as_ref().map_or(&[][..], |e| &e.t_s[..]);
             TruthCoverage {
                 rows: t.len(),
                 max_contacts: t.max_contacts,
-                rows_with_contact: (0..t.len())
-                    .filter(|&i| t.row(i).contact_count() > 0)
-                    .count(),
+                rows_with_contact: (0..t.len()).filter(|&i| t.row(i).contact_count() > 0).count(),
                 eit_frames_covered: eit_t.iter().filter(|&&te| t.index_at(te).is_some()).count(),
                 eit_frames: eit_t.len(),
             }
@@ -186,26 +173,14 @@ impl fmt::Display for Summary {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         writeln!(f, "file:     {}", self.path.display())?;
         writeln!(f, "format:   skinflow-recording v{}", self.format_version)?;
-        writeln!(
-            f,
-            "sensor:   {} ({}, M = {})",
-            self.sensor_name, self.protocol, self.eit_width
-        )?;
+        writeln!(f, "sensor:   {} ({}, M = {})", self.sensor_name, self.protocol, self.eit_width)?;
         writeln!(f, "created:  {}", self.created.as_deref().unwrap_or("-"))?;
-        writeln!(
-            f,
-            "software: {}",
-            self.software_version.as_deref().unwrap_or("-")
-        )?;
+        writeln!(f, "software: {}", self.software_version.as_deref().unwrap_or("-"))?;
         if let Some(part) = self.part {
             writeln!(f, "part:     {part}")?;
         }
         writeln!(f, "duration: {:.3} s", self.duration_s)?;
-        writeln!(
-            f,
-            "{:<36} {:>9} {:>11} {:>11} {:>11} {:>12}",
-            "stream", "rows", "first", "last", "rate", "period"
-        )?;
+        writeln!(f, "{:<36} {:>9} {:>11} {:>11} {:>11} {:>12}", "stream", "rows", "first", "last", "rate", "period")?;
         for s in &self.streams {
             write!(
                 f,
@@ -223,11 +198,7 @@ impl fmt::Display for Summary {
             writeln!(f)?;
         }
         if let Some(g) = &self.eit_gaps {
-            write!(
-                f,
-                "eit gaps: {} gaps, {} frames lost",
-                g.gaps, g.lost_frames
-            )?;
+            write!(f, "eit gaps: {} gaps, {} frames lost", g.gaps, g.lost_frames)?;
             if g.gaps > 0 {
                 write!(f, ", largest {}", g.largest_gap)?;
             }
@@ -239,19 +210,12 @@ impl fmt::Display for Summary {
         writeln!(
             f,
             "reference: {}",
-            if self.has_reference {
-                "/eit/reference"
-            } else {
-                "none (leading no-load frames)"
-            }
+            if self.has_reference { "/eit/reference" } else { "none (leading no-load frames)" }
         )?;
         match &self.truth {
             Some(t) => {
-                let pct = if t.eit_frames > 0 {
-                    100.0 * t.eit_frames_covered as f64 / t.eit_frames as f64
-                } else {
-                    0.0
-                };
+                let pct =
+                    if t.eit_frames > 0 { 100.0 * t.eit_frames_covered as f64 / t.eit_frames as f64 } else { 0.0 };
                 writeln!(
                     f,
                     "truth:    {} rows (C = {}), {} with contact; covers {}/{} EIT frames ({pct:.1} %)",

@@ -75,8 +75,7 @@ pub mod write;
 pub use error::{RecordError, SchemaProblem};
 pub use inspect::{FrameGaps, StreamSummary, Summary, TruthCoverage, inspect};
 pub use read::{
-    ContactsStream, Derived, EitStream, ForceStream, ImageStream, PressureStream, Recording,
-    TruthRow, TruthStream,
+    ContactsStream, Derived, EitStream, ForceStream, ImageStream, PressureStream, Recording, TruthRow, TruthStream,
 };
 pub use replay::{Event, Events};
 pub use tare::{DEFAULT_TARE_S, NoLoad, NoLoadSource};

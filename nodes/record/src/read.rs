@@ -85,14 +85,12 @@ pub struct TruthRow<'a> {
 impl<'a> TruthRow<'a> {
     pub fn contacts(&self) -> impl Iterator<Item = TruthContact> + 'a {
         let row = *self;
-        (0..row.x_mm.len())
-            .filter(move |&j| !row.x_mm[j].is_nan())
-            .map(move |j| TruthContact {
-                x_mm: row.x_mm[j],
-                y_mm: row.y_mm[j],
-                force_n: row.force_n[j],
-                diameter_mm: row.diameter_mm[j],
-            })
+        (0..row.x_mm.len()).filter(move |&j| !row.x_mm[j].is_nan()).map(move |j| TruthContact {
+            x_mm: row.x_mm[j],
+            y_mm: row.y_mm[j],
+            force_n: row.force_n[j],
+            diameter_mm: row.diameter_mm[j],
+        })
     }
 
     pub fn contact_count(&self) -> usize {
@@ -153,16 +151,11 @@ pub struct Recording {
 /// mode, which HDF5 allows on such files.
 fn open_file(path: &Path) -> Result<File, RecordError> {
     if let Err(source) = std::fs::metadata(path) {
-        return Err(RecordError::Io {
-            path: path.to_path_buf(),
-            source,
-        });
+        return Err(RecordError::Io { path: path.to_path_buf(), source });
     }
     match File::open(path) {
         Ok(f) => Ok(f),
-        Err(first) => {
-            File::open_as(path, OpenMode::ReadSWMR).map_err(|_| RecordError::hdf5(path, "/", first))
-        }
+        Err(first) => File::open_as(path, OpenMode::ReadSWMR).map_err(|_| RecordError::hdf5(path, "/", first)),
     }
 }
 
@@ -172,44 +165,28 @@ impl Recording {
         let fpath = path.as_ref();
         let file = open_file(fpath)?;
         let root = |name: &str| format!("/ attr {name}");
-        let format = attr::read_string(&file, fpath, layout::ATTR_FORMAT)?.ok_or_else(|| {
-            RecordError::schema(fpath, &root(layout::ATTR_FORMAT), SchemaProblem::Missing)
-        })?;
+        let format = attr::read_string(&file, fpath, layout::ATTR_FORMAT)?
+            .ok_or_else(|| RecordError::schema(fpath, &root(layout::ATTR_FORMAT), SchemaProblem::Missing))?;
         if format != FORMAT {
             let problem = SchemaProblem::WrongFormat { found: format };
-            return Err(RecordError::schema(
-                fpath,
-                &root(layout::ATTR_FORMAT),
-                problem,
-            ));
+            return Err(RecordError::schema(fpath, &root(layout::ATTR_FORMAT), problem));
         }
         let version_path = root(layout::ATTR_FORMAT_VERSION);
         let format_version = attr::read_integer(&file, fpath, layout::ATTR_FORMAT_VERSION)?
             .ok_or_else(|| RecordError::schema(fpath, &version_path, SchemaProblem::Missing))?;
         if format_version > FORMAT_VERSION {
-            let problem = SchemaProblem::NewerVersion {
-                found: format_version,
-                supported: FORMAT_VERSION,
-            };
+            let problem = SchemaProblem::NewerVersion { found: format_version, supported: FORMAT_VERSION };
             return Err(RecordError::schema(fpath, &version_path, problem));
         }
         if format_version < 1 {
-            let problem = SchemaProblem::BadVersion {
-                found: format_version.to_string(),
-            };
+            let problem = SchemaProblem::BadVersion { found: format_version.to_string() };
             return Err(RecordError::schema(fpath, &version_path, problem));
         }
         let sensor_path = root(layout::ATTR_SENSOR);
         let sensor_toml = attr::read_string(&file, fpath, layout::ATTR_SENSOR)?
             .ok_or_else(|| RecordError::schema(fpath, &sensor_path, SchemaProblem::Missing))?;
         let sensor = Sensor::from_toml(&sensor_toml).map_err(|e| {
-            RecordError::schema(
-                fpath,
-                &sensor_path,
-                SchemaProblem::BadSensor {
-                    reason: e.to_string(),
-                },
-            )
+            RecordError::schema(fpath, &sensor_path, SchemaProblem::BadSensor { reason: e.to_string() })
         })?;
         let eit = read_eit(&file, fpath, &sensor)?;
         let reference = match eit.as_ref() {
@@ -250,9 +227,7 @@ impl Recording {
     }
 
     pub fn require_pressure(&self) -> Result<&PressureStream, RecordError> {
-        self.pressure
-            .as_ref()
-            .ok_or_else(|| self.missing("/pressure"))
+        self.pressure.as_ref().ok_or_else(|| self.missing("/pressure"))
     }
 
     pub fn require_truth(&self) -> Result<&TruthStream, RecordError> {
@@ -260,10 +235,7 @@ impl Recording {
     }
 
     fn missing(&self, path: &str) -> RecordError {
-        RecordError::MissingStream {
-            file: self.path.clone(),
-            path: path.to_owned(),
-        }
+        RecordError::MissingStream { file: self.path.clone(), path: path.to_owned() }
     }
 }
 
@@ -278,19 +250,11 @@ fn read_eit(file: &File, fpath: &Path, sensor: &Sensor) -> Result<Option<EitStre
     data::expect_rows(fpath, layout::EIT_V, &v, layout::EIT_T, t.rows())?;
     let expected = sensor.measurement_count();
     if v.width() != expected {
-        let problem = SchemaProblem::WidthMismatch {
-            found: v.width(),
-            expected,
-            protocol: sensor.protocol.name().to_owned(),
-        };
+        let problem =
+            SchemaProblem::WidthMismatch { found: v.width(), expected, protocol: sensor.protocol.name().to_owned() };
         return Err(RecordError::schema(fpath, layout::EIT_V, problem));
     }
-    Ok(Some(EitStream {
-        width: v.width(),
-        t_s: t.values,
-        seq: seq.values,
-        v: v.values,
-    }))
+    Ok(Some(EitStream { width: v.width(), t_s: t.values, seq: seq.values, v: v.values }))
 }
 
 fn read_pressure(file: &File, fpath: &Path) -> Result<Option<PressureStream>, RecordError> {
@@ -299,17 +263,8 @@ fn read_pressure(file: &File, fpath: &Path) -> Result<Option<PressureStream>, Re
     }
     let t = data::read::<f64>(file, fpath, layout::PRESSURE_T, 1)?;
     let kpa = data::read::<f64>(file, fpath, layout::PRESSURE_KPA, 1)?;
-    data::expect_rows(
-        fpath,
-        layout::PRESSURE_KPA,
-        &kpa,
-        layout::PRESSURE_T,
-        t.rows(),
-    )?;
-    Ok(Some(PressureStream {
-        t_s: t.values,
-        kpa: kpa.values,
-    }))
+    data::expect_rows(fpath, layout::PRESSURE_KPA, &kpa, layout::PRESSURE_T, t.rows())?;
+    Ok(Some(PressureStream { t_s: t.values, kpa: kpa.values }))
 }
 
 fn read_truth(file: &File, fpath: &Path) -> Result<Option<TruthStream>, RecordError> {
@@ -325,17 +280,7 @@ fn read_truth(file: &File, fpath: &Path) -> Result<Option<TruthStream>, RecordEr
         data::expect_width(fpath, path, &d, layout::TRUTH_X_MM, x.width())?;
         Ok(d.values)
     };
-    let (y_mm, force_n, diameter_mm) = (
-        column(layout::TRUTH_Y_MM)?,
-        column(layout::TRUTH_FORCE_N)?,
-        column(layout::TRUTH_DIAMETER_MM)?,
-    );
-    Ok(Some(TruthStream {
-        max_contacts: x.width(),
-        t_s: t.values,
-        x_mm: x.values,
-        y_mm,
-        force_n,
-        diameter_mm,
-    }))
+    let (y_mm, force_n, diameter_mm) =
+        (column(layout::TRUTH_Y_MM)?, column(layout::TRUTH_FORCE_N)?, column(layout::TRUTH_DIAMETER_MM)?);
+    Ok(Some(TruthStream { max_contacts: x.width(), t_s: t.values, x_mm: x.values, y_mm, force_n, diameter_mm }))
 }

@@ -16,9 +16,7 @@ pub enum Event<'a> {
 impl Event<'_> {
     pub fn t_s(&self) -> f64 {
         match *self {
-            Event::Truth { t_s, .. }
-            | Event::Pressure { t_s, .. }
-            | Event::EitFrame { t_s, .. } => t_s,
+            Event::Truth { t_s, .. } | Event::Pressure { t_s, .. } | Event::EitFrame { t_s, .. } => t_s,
         }
     }
 }
@@ -35,12 +33,7 @@ pub struct Events<'a> {
 impl Recording {
     /// All events of the recording in time order.
     pub fn events(&self) -> Events<'_> {
-        Events {
-            rec: self,
-            next_truth: 0,
-            next_pressure: 0,
-            next_eit: 0,
-        }
+        Events { rec: self, next_truth: 0, next_pressure: 0, next_eit: 0 }
     }
 }
 
@@ -67,28 +60,18 @@ impl<'a> Iterator for Events<'a> {
             0 => {
                 let i = self.next_truth;
                 self.next_truth += 1;
-                Event::Truth {
-                    t_s,
-                    row: rec.truth.as_ref()?.row(i),
-                }
+                Event::Truth { t_s, row: rec.truth.as_ref()?.row(i) }
             }
             1 => {
                 let i = self.next_pressure;
                 self.next_pressure += 1;
-                Event::Pressure {
-                    t_s,
-                    kpa: rec.pressure.as_ref()?.kpa[i],
-                }
+                Event::Pressure { t_s, kpa: rec.pressure.as_ref()?.kpa[i] }
             }
             _ => {
                 let i = self.next_eit;
                 self.next_eit += 1;
                 let eit = rec.eit.as_ref()?;
-                Event::EitFrame {
-                    t_s,
-                    seq: eit.seq[i],
-                    v: eit.frame(i),
-                }
+                Event::EitFrame { t_s, seq: eit.seq[i], v: eit.frame(i) }
             }
         })
     }

@@ -8,10 +8,7 @@ use crate::RecordError;
 
 /// Path of rotated part `index` (1-based) of `base`: `dir/rec.h5` -> `dir/rec-0001.h5`.
 pub fn part_path(base: &Path, index: u32) -> PathBuf {
-    let stem = base
-        .file_stem()
-        .map(|s| s.to_string_lossy().into_owned())
-        .unwrap_or_default();
+    let stem = base.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
     let name = match base.extension() {
         Some(ext) => format!("{stem}-{index:04}.{}", ext.to_string_lossy()),
         None => format!("{stem}-{index:04}"),
@@ -44,14 +41,8 @@ pub fn recording_files(base: &Path) -> Result<Vec<PathBuf>, RecordError> {
     }
     let parts = find_parts(base)?;
     if parts.is_empty() {
-        let source = std::io::Error::new(
-            std::io::ErrorKind::NotFound,
-            "no such file, and no rotated parts (-0001...)",
-        );
-        return Err(RecordError::Io {
-            path: base.to_path_buf(),
-            source,
-        });
+        let source = std::io::Error::new(std::io::ErrorKind::NotFound, "no such file, and no rotated parts (-0001...)");
+        return Err(RecordError::Io { path: base.to_path_buf(), source });
     }
     Ok(parts)
 }
@@ -62,21 +53,9 @@ mod tests {
 
     #[test]
     fn part_names_are_sequential_and_keep_the_extension() {
-        assert_eq!(
-            part_path(Path::new("/d/rec.h5"), 1),
-            PathBuf::from("/d/rec-0001.h5")
-        );
-        assert_eq!(
-            part_path(Path::new("rec.h5"), 12),
-            PathBuf::from("rec-0012.h5")
-        );
-        assert_eq!(
-            part_path(Path::new("a.b.hdf5"), 3),
-            PathBuf::from("a.b-0003.hdf5")
-        );
-        assert_eq!(
-            part_path(Path::new("rec"), 10000),
-            PathBuf::from("rec-10000")
-        );
+        assert_eq!(part_path(Path::new("/d/rec.h5"), 1), PathBuf::from("/d/rec-0001.h5"));
+        assert_eq!(part_path(Path::new("rec.h5"), 12), PathBuf::from("rec-0012.h5"));
+        assert_eq!(part_path(Path::new("a.b.hdf5"), 3), PathBuf::from("a.b-0003.hdf5"));
+        assert_eq!(part_path(Path::new("rec"), 10000), PathBuf::from("rec-10000"));
     }
 }

@@ -6,18 +6,10 @@ use std::time::{SystemTime, UNIX_EPOCH};
 
 /// `SystemTime` as `YYYY-MM-DDTHH:MM:SSZ` (UTC, whole seconds). Times before 1970 clamp to it.
 pub fn iso8601_utc(time: SystemTime) -> String {
-    let secs = time
-        .duration_since(UNIX_EPOCH)
-        .map(|d| d.as_secs())
-        .unwrap_or(0);
+    let secs = time.duration_since(UNIX_EPOCH).map(|d| d.as_secs()).unwrap_or(0);
     let (days, rem) = (secs / 86_400, secs % 86_400);
     let (y, m, d) = civil_from_days(days as i64);
-    format!(
-        "{y:04}-{m:02}-{d:02}T{:02}:{:02}:{:02}Z",
-        rem / 3600,
-        rem % 3600 / 60,
-        rem % 60
-    )
+    format!("{y:04}-{m:02}-{d:02}T{:02}:{:02}:{:02}Z", rem / 3600, rem % 3600 / 60, rem % 60)
 }
 
 fn civil_from_days(z: i64) -> (i64, u32, u32) {
@@ -42,14 +34,8 @@ mod tests {
     fn known_dates() {
         assert_eq!(iso8601_utc(UNIX_EPOCH), "1970-01-01T00:00:00Z");
         // 2000-02-29 (leap day of a year divisible by 400) 12:34:56 UTC = 951827696 s.
-        assert_eq!(
-            iso8601_utc(UNIX_EPOCH + Duration::from_secs(951_827_696)),
-            "2000-02-29T12:34:56Z"
-        );
+        assert_eq!(iso8601_utc(UNIX_EPOCH + Duration::from_secs(951_827_696)), "2000-02-29T12:34:56Z");
         // 2026-11-21T00:00:00Z = 20778 days.
-        assert_eq!(
-            iso8601_utc(UNIX_EPOCH + Duration::from_secs(20_778 * 86_400)),
-            "2026-11-21T00:00:00Z"
-        );
+        assert_eq!(iso8601_utc(UNIX_EPOCH + Duration::from_secs(20_778 * 86_400)), "2026-11-21T00:00:00Z");
     }
 }

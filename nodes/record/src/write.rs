@@ -62,10 +62,7 @@ pub struct RecordingWriter {
 impl RecordingWriter {
     /// Validates the options and creates the file (or its first part `rec-0001.h5` when
     /// rotating) with every declared dataset, empty.
-    pub fn create(
-        path: impl AsRef<Path>,
-        opts: &WriterOptions,
-    ) -> Result<RecordingWriter, RecordError> {
+    pub fn create(path: impl AsRef<Path>, opts: &WriterOptions) -> Result<RecordingWriter, RecordError> {
         let eit_width = opts.validate()?;
         let base = path.as_ref().to_path_buf();
         let rotating = opts.rotate_mb.is_some() || opts.rotate_s.is_some();
@@ -78,49 +75,20 @@ impl RecordingWriter {
                 let v = vec![ColumnSpec::new(layout::EIT_V, &[eit_width])];
                 Table::new(layout::EIT_T, Some(layout::EIT_SEQ), v, rows)
             }),
-            pressure: s.pressure.then(|| {
-                Table::new(
-                    layout::PRESSURE_T,
-                    None,
-                    vec![ColumnSpec::new(layout::PRESSURE_KPA, &[])],
-                    rows,
-                )
-            }),
+            pressure: s
+                .pressure
+                .then(|| Table::new(layout::PRESSURE_T, None, vec![ColumnSpec::new(layout::PRESSURE_KPA, &[])], rows)),
             truth: s.truth.then(|| {
-                let cols = [
-                    layout::TRUTH_X_MM,
-                    layout::TRUTH_Y_MM,
-                    layout::TRUTH_FORCE_N,
-                    layout::TRUTH_DIAMETER_MM,
-                ];
-                Table::new(
-                    layout::TRUTH_T,
-                    None,
-                    cols.iter().map(|p| ColumnSpec::new(*p, &[tc])).collect(),
-                    rows,
-                )
+                let cols = [layout::TRUTH_X_MM, layout::TRUTH_Y_MM, layout::TRUTH_FORCE_N, layout::TRUTH_DIAMETER_MM];
+                Table::new(layout::TRUTH_T, None, cols.iter().map(|p| ColumnSpec::new(*p, &[tc])).collect(), rows)
             }),
             image: s.image_hw.map(|[h, w]| {
-                Table::new(
-                    layout::DERIVED_IMAGE_T,
-                    None,
-                    vec![ColumnSpec::new(layout::DERIVED_IMAGE, &[h, w])],
-                    rows,
-                )
+                Table::new(layout::DERIVED_IMAGE_T, None, vec![ColumnSpec::new(layout::DERIVED_IMAGE, &[h, w])], rows)
             }),
             contacts: s.contacts.then(|| {
-                let cols = [
-                    layout::CONTACTS_X_MM,
-                    layout::CONTACTS_Y_MM,
-                    layout::CONTACTS_SUM,
-                    layout::CONTACTS_AREA_MM2,
-                ];
-                Table::new(
-                    layout::CONTACTS_T,
-                    None,
-                    cols.iter().map(|p| ColumnSpec::new(*p, &[dc])).collect(),
-                    rows,
-                )
+                let cols =
+                    [layout::CONTACTS_X_MM, layout::CONTACTS_Y_MM, layout::CONTACTS_SUM, layout::CONTACTS_AREA_MM2];
+                Table::new(layout::CONTACTS_T, None, cols.iter().map(|p| ColumnSpec::new(*p, &[dc])).collect(), rows)
             }),
             forces: s
                 .force_strategies
@@ -135,8 +103,7 @@ impl RecordingWriter {
             base,
             eit_width,
             // Validated finite and > 0; absurdly long intervals saturate instead of panicking.
-            flush_interval: Duration::try_from_secs_f64(opts.flush_interval_s)
-                .unwrap_or(Duration::MAX),
+            flush_interval: Duration::try_from_secs_f64(opts.flush_interval_s).unwrap_or(Duration::MAX),
             part,
             file: None,
             reference: None,
@@ -162,11 +129,7 @@ impl RecordingWriter {
 
     /// Index of a force strategy for `append_forces`, in `Streams::force_strategies` order.
     pub fn strategy_index(&self, name: &str) -> Option<usize> {
-        self.opts
-            .streams
-            .force_strategies
-            .iter()
-            .position(|s| s == name)
+        self.opts.streams.force_strategies.iter().position(|s| s == name)
     }
 
     pub fn stats(&self) -> WriterStats {
@@ -210,21 +173,15 @@ impl RecordingWriter {
     pub fn append_truth(&mut self, t_s: f64, contacts: &[TruthContact]) -> Result<(), RecordError> {
         let max = self.opts.truth_max_contacts;
         if contacts.len() > max {
-            return Err(RecordError::TooManyTruthContacts {
-                file: self.path.clone(),
-                found: contacts.len(),
-                max,
-            });
+            return Err(RecordError::TooManyTruthContacts { file: self.path.clone(), found: contacts.len(), max });
         }
         self.before_append(Slot::Truth, t_s)?;
         if let Some(table) = self.truth.as_mut() {
             table.t.buf.push(t_s);
-            let fields: [fn(&TruthContact) -> f64; 4] =
-                [|c| c.x_mm, |c| c.y_mm, |c| c.force_n, |c| c.diameter_mm];
+            let fields: [fn(&TruthContact) -> f64; 4] = [|c| c.x_mm, |c| c.y_mm, |c| c.force_n, |c| c.diameter_mm];
             for (col, field) in table.values.iter_mut().zip(fields) {
                 col.buf.extend(contacts.iter().map(field));
-                col.buf
-                    .extend(std::iter::repeat_n(f64::NAN, max - contacts.len()));
+                col.buf.extend(std::iter::repeat_n(f64::NAN, max - contacts.len()));
             }
         }
         self.after_append(Slot::Truth)
@@ -256,19 +213,14 @@ impl RecordingWriter {
             table.t.buf.push(t_s);
             for c in contacts {
                 if count < max {
-                    for (col, v) in table
-                        .values
-                        .iter_mut()
-                        .zip([c.x_mm, c.y_mm, c.sum, c.area_mm2])
-                    {
+                    for (col, v) in table.values.iter_mut().zip([c.x_mm, c.y_mm, c.sum, c.area_mm2]) {
                         col.buf.push(v);
                     }
                 }
                 count += 1;
             }
             for col in &mut table.values {
-                col.buf
-                    .extend(std::iter::repeat_n(f64::NAN, max.saturating_sub(count)));
+                col.buf.extend(std::iter::repeat_n(f64::NAN, max.saturating_sub(count)));
             }
         }
         self.stats.contacts_dropped += count.saturating_sub(max) as u64;
@@ -277,21 +229,14 @@ impl RecordingWriter {
 
     /// Per-contact forces (N) of strategy `strategy` (see `strategy_index`), in the order of
     /// the frame's contacts.
-    pub fn append_forces(
-        &mut self,
-        strategy: usize,
-        t_s: f64,
-        forces_n: &[f64],
-    ) -> Result<(), RecordError> {
+    pub fn append_forces(&mut self, strategy: usize, t_s: f64, forces_n: &[f64]) -> Result<(), RecordError> {
         self.before_append(Slot::Force(strategy), t_s)?;
         let max = self.opts.derived_max_contacts;
         let kept = forces_n.len().min(max);
         if let Some(table) = self.forces.get_mut(strategy) {
             table.t.buf.push(t_s);
             table.values[0].buf.extend_from_slice(&forces_n[..kept]);
-            table.values[0]
-                .buf
-                .extend(std::iter::repeat_n(f64::NAN, max - kept));
+            table.values[0].buf.extend(std::iter::repeat_n(f64::NAN, max - kept));
         }
         self.stats.contacts_dropped += (forces_n.len() - kept) as u64;
         self.after_append(Slot::Force(strategy))
@@ -300,16 +245,9 @@ impl RecordingWriter {
     /// Stores the no-load frame `/eit/reference` `[M]` (also in every later part). With SWMR it
     /// must come before the first flush, since SWMR writers cannot create datasets.
     pub fn set_reference(&mut self, reference: &[f64]) -> Result<(), RecordError> {
-        self.check_width(
-            Slot::Eit,
-            layout::EIT_REFERENCE,
-            reference.len(),
-            self.eit_width,
-        )?;
+        self.check_width(Slot::Eit, layout::EIT_REFERENCE, reference.len(), self.eit_width)?;
         if self.swmr_started {
-            return Err(RecordError::ReferenceAfterSwmr {
-                file: self.path.clone(),
-            });
+            return Err(RecordError::ReferenceAfterSwmr { file: self.path.clone() });
         }
         if let Some(file) = self.file.as_ref() {
             write_reference(file, &self.path, reference)?;
@@ -320,13 +258,7 @@ impl RecordingWriter {
 
     /// Writes every buffered row and flushes the file.
     pub fn flush(&mut self) -> Result<(), RecordError> {
-        for slot in [
-            Slot::Eit,
-            Slot::Pressure,
-            Slot::Truth,
-            Slot::Image,
-            Slot::Contacts,
-        ] {
+        for slot in [Slot::Eit, Slot::Pressure, Slot::Truth, Slot::Image, Slot::Contacts] {
             self.write_table(slot)?;
         }
         for i in 0..self.forces.len() {
@@ -338,11 +270,7 @@ impl RecordingWriter {
     /// Flushes if `flush_interval_s` has passed since the last flush: for callers whose
     /// streams may pause (appends check this themselves).
     pub fn flush_if_due(&mut self) -> Result<(), RecordError> {
-        if self.last_flush.elapsed() >= self.flush_interval {
-            self.flush()
-        } else {
-            Ok(())
-        }
+        if self.last_flush.elapsed() >= self.flush_interval { self.flush() } else { Ok(()) }
     }
 
     /// Flushes and closes the file; returns the final counters.
@@ -364,16 +292,10 @@ impl RecordingWriter {
     }
 
     fn all_tables_mut(&mut self) -> impl Iterator<Item = &mut Table> {
-        [
-            &mut self.eit,
-            &mut self.pressure,
-            &mut self.truth,
-            &mut self.image,
-            &mut self.contacts,
-        ]
-        .into_iter()
-        .filter_map(Option::as_mut)
-        .chain(self.forces.iter_mut())
+        [&mut self.eit, &mut self.pressure, &mut self.truth, &mut self.image, &mut self.contacts]
+            .into_iter()
+            .filter_map(Option::as_mut)
+            .chain(self.forces.iter_mut())
     }
 
     fn not_declared(&self, slot: Slot) -> RecordError {
@@ -385,29 +307,15 @@ impl RecordingWriter {
             Slot::Contacts => "/derived/contacts".to_owned(),
             Slot::Force(i) => format!("{}/#{i}", layout::FORCES_GROUP),
         };
-        RecordError::NotDeclared {
-            file: self.path.clone(),
-            path,
-        }
+        RecordError::NotDeclared { file: self.path.clone(), path }
     }
 
-    fn check_width(
-        &mut self,
-        slot: Slot,
-        path: &str,
-        found: usize,
-        expected: usize,
-    ) -> Result<(), RecordError> {
+    fn check_width(&mut self, slot: Slot, path: &str, found: usize, expected: usize) -> Result<(), RecordError> {
         if self.table_mut(slot).is_none() {
             return Err(self.not_declared(slot));
         }
         if found != expected {
-            return Err(RecordError::RowWidth {
-                file: self.path.clone(),
-                path: path.to_owned(),
-                found,
-                expected,
-            });
+            return Err(RecordError::RowWidth { file: self.path.clone(), path: path.to_owned(), found, expected });
         }
         Ok(())
     }
@@ -418,10 +326,7 @@ impl RecordingWriter {
             return Err(self.not_declared(slot));
         }
         if !t_s.is_finite() {
-            let path = self
-                .table_mut(slot)
-                .map(|t| t.t.spec.path.clone())
-                .unwrap_or_default();
+            let path = self.table_mut(slot).map(|t| t.t.spec.path.clone()).unwrap_or_default();
             return Err(RecordError::Schema {
                 file: self.path.clone(),
                 path,
@@ -456,8 +361,7 @@ impl RecordingWriter {
         };
         if self.opts.swmr && !self.swmr_started {
             // All datasets exist by now; from here on the file's structure is frozen.
-            file.start_swmr()
-                .map_err(|e| RecordError::hdf5(path, "/", e))?;
+            file.start_swmr().map_err(|e| RecordError::hdf5(path, "/", e))?;
             self.swmr_started = true;
         }
         let path = self.path.clone();
@@ -473,8 +377,7 @@ impl RecordingWriter {
         let Some(file) = self.file.as_ref() else {
             return Ok(());
         };
-        file.flush()
-            .map_err(|e| RecordError::hdf5(&self.path, "/", e))?;
+        file.flush().map_err(|e| RecordError::hdf5(&self.path, "/", e))?;
         self.stats.flushes += 1;
         self.last_flush = Instant::now();
         if let Some(mb) = self.opts.rotate_mb
@@ -487,11 +390,7 @@ impl RecordingWriter {
 
     fn open_part(&mut self) -> Result<(), RecordError> {
         let file = create_file(&self.path, self.opts.swmr, self.opts.overwrite)?;
-        let created = self
-            .opts
-            .created
-            .clone()
-            .unwrap_or_else(|| iso8601_utc(SystemTime::now()));
+        let created = self.opts.created.clone().unwrap_or_else(|| iso8601_utc(SystemTime::now()));
         let attrs = RootAttrs {
             sensor_toml: &self.opts.sensor_toml,
             graph_toml: self.opts.graph_toml.as_deref(),
@@ -500,9 +399,7 @@ impl RecordingWriter {
             part: self.part,
         };
         write_root_attrs(&file, &self.path, &attrs)?;
-        let storage = Storage {
-            deflate_level: self.opts.deflate_level,
-        };
+        let storage = Storage { deflate_level: self.opts.deflate_level };
         let path = self.path.clone();
         for table in self.all_tables_mut() {
             let paths: Vec<String> = table.paths().map(str::to_owned).collect();
@@ -527,9 +424,7 @@ impl RecordingWriter {
             table.detach();
         }
         match self.file.take() {
-            Some(file) => file
-                .close()
-                .map_err(|e| RecordError::hdf5(&self.path, "/", e)),
+            Some(file) => file.close().map_err(|e| RecordError::hdf5(&self.path, "/", e)),
             None => Ok(()),
         }
     }

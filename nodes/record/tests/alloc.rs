@@ -51,12 +51,7 @@ fn appends_between_chunk_writes_do_not_allocate() {
     let mut w = RecordingWriter::create(dir.join("rec.h5"), &opts).unwrap();
     let frame = [0.25; 120];
     let image = [1.0; 64];
-    let truth = [TruthContact {
-        x_mm: 1.0,
-        y_mm: 2.0,
-        force_n: 3.0,
-        diameter_mm: 10.0,
-    }; 2];
+    let truth = [TruthContact { x_mm: 1.0, y_mm: 2.0, force_n: 3.0, diameter_mm: 10.0 }; 2];
     let strategy = w.strategy_index("pneumatic-locaware").unwrap();
     let before = ALLOCATIONS.load(Ordering::Relaxed);
     for i in 0..500u64 {
@@ -65,12 +60,7 @@ fn appends_between_chunk_writes_do_not_allocate() {
         w.append_pressure(t, 1.0).unwrap();
         w.append_truth(t, &truth).unwrap();
         w.append_image(t, &image).unwrap();
-        let contacts = (0..3).map(|k| ContactRow {
-            x_mm: k as f64,
-            y_mm: 0.0,
-            sum: 1.0,
-            area_mm2: 20.0,
-        });
+        let contacts = (0..3).map(|k| ContactRow { x_mm: k as f64, y_mm: 0.0, sum: 1.0, area_mm2: 20.0 });
         w.append_contacts(t, contacts).unwrap();
         w.append_forces(strategy, t, &[1.0, 2.0, 3.0]).unwrap();
     }

@@ -26,14 +26,8 @@ fn valid_bytes(dir: &Path) -> Vec<u8> {
 fn assert_refused(path: &Path, what: &str) {
     let err = Recording::open(path).expect_err(what);
     let msg = err.to_string();
-    assert!(
-        msg.starts_with(&path.display().to_string()),
-        "{what}: message does not name the file: {msg}"
-    );
-    assert!(
-        !msg.contains('\n'),
-        "{what}: message is not one line: {msg}"
-    );
+    assert!(msg.starts_with(&path.display().to_string()), "{what}: message does not name the file: {msg}");
+    assert!(!msg.contains('\n'), "{what}: message is not one line: {msg}");
 }
 
 #[test]
@@ -54,27 +48,13 @@ fn garbage_empty_and_missing_files_are_refused() {
     let bytes = valid_bytes(&dir);
     let mut bad_signature = bytes.clone();
     bad_signature[1] ^= 0xff; // "\x89HDF" signature
-    let garbage: Vec<u8> = (0..100_000u32)
-        .map(|i| (i.wrapping_mul(2_654_435_761) >> 13) as u8)
-        .collect();
-    for (name, content) in [
-        ("bad-signature.h5", bad_signature),
-        ("garbage.h5", garbage),
-        ("empty.h5", vec![]),
-    ] {
+    let garbage: Vec<u8> = (0..100_000u32).map(|i| (i.wrapping_mul(2_654_435_761) >> 13) as u8).collect();
+    for (name, content) in [("bad-signature.h5", bad_signature), ("garbage.h5", garbage), ("empty.h5", vec![])] {
         let path = dir.join(name);
         std::fs::write(&path, content).unwrap();
         assert_refused(&path, name);
     }
     let missing = dir.join("missing.h5");
-    assert!(matches!(
-        Recording::open(&missing),
-        Err(RecordError::Io { .. })
-    ));
-    assert!(
-        inspect(&missing)
-            .unwrap_err()
-            .to_string()
-            .starts_with(&missing.display().to_string())
-    );
+    assert!(matches!(Recording::open(&missing), Err(RecordError::Io { .. })));
+    assert!(inspect(&missing).unwrap_err().to_string().starts_with(&missing.display().to_string()));
 }

@@ -11,31 +11,18 @@ fn example_binary() -> PathBuf {
     // target/<profile>/deps/crash-<hash> -> target/<profile>/examples/write_forever
     let exe = std::env::current_exe().unwrap();
     let profile_dir = exe.parent().and_then(|d| d.parent()).unwrap();
-    let bin = profile_dir
-        .join("examples")
-        .join(format!("write_forever{}", std::env::consts::EXE_SUFFIX));
-    assert!(
-        bin.exists(),
-        "{} not found: run `cargo test -p skinflow-record` (it builds the examples)",
-        bin.display()
-    );
+    let bin = profile_dir.join("examples").join(format!("write_forever{}", std::env::consts::EXE_SUFFIX));
+    assert!(bin.exists(), "{} not found: run `cargo test -p skinflow-record` (it builds the examples)", bin.display());
     bin
 }
 
 fn kill_after_flushes(mode: &str, flushes: usize) {
-    let dir = std::env::temp_dir().join(format!(
-        "skinflow-record-crash-{mode}-{}",
-        std::process::id()
-    ));
+    let dir = std::env::temp_dir().join(format!("skinflow-record-crash-{mode}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
     let path = dir.join("rec.h5");
-    let mut child = Command::new(example_binary())
-        .arg(&path)
-        .arg(mode)
-        .stdout(Stdio::piped())
-        .spawn()
-        .expect("spawn writer");
+    let mut child =
+        Command::new(example_binary()).arg(&path).arg(mode).stdout(Stdio::piped()).spawn().expect("spawn writer");
     let mut lines = BufReader::new(child.stdout.take().unwrap()).lines();
     let mut durable = 0u64;
     let mut seen = 0;
@@ -55,18 +42,11 @@ fn kill_after_flushes(mode: &str, flushes: usize) {
     let rec = Recording::open(&path).unwrap_or_else(|e| panic!("killed file does not open: {e}"));
     let eit = rec.eit.as_ref().unwrap();
     let p = rec.pressure.as_ref().unwrap();
-    assert!(
-        (eit.len() + p.len()) as u64 >= durable,
-        "{} + {} rows < {durable} flushed",
-        eit.len(),
-        p.len()
-    );
+    assert!((eit.len() + p.len()) as u64 >= durable, "{} + {} rows < {durable} flushed", eit.len(), p.len());
     for i in 0..eit.len() {
         assert_eq!(eit.t_s[i], i as f64 * 1e-3);
         assert_eq!(eit.seq[i], i as u64);
-        let expected: Vec<f64> = (0..eit.width)
-            .map(|j| (i as u64 * 1000 + j as u64) as f64)
-            .collect();
+        let expected: Vec<f64> = (0..eit.width).map(|j| (i as u64 * 1000 + j as u64) as f64).collect();
         assert_eq!(eit.frame(i), &expected[..], "frame {i}");
     }
     for i in 0..p.len() {

@@ -14,10 +14,7 @@ fn fixture() -> PathBuf {
 #[test]
 fn attributes_of_every_string_kind_read_back() {
     let rec = Recording::open(fixture()).unwrap();
-    assert_eq!(
-        rec.format_version, 1,
-        "float64 1.0 is accepted as version 1"
-    );
+    assert_eq!(rec.format_version, 1, "float64 1.0 is accepted as version 1");
     // Fixed-length UTF-8, null-padded with 3 extra NULs.
     assert_eq!(rec.sensor_toml, PAPER_100MM_TOML);
     assert_eq!(rec.sensor.name, "paper-100mm");
@@ -41,12 +38,7 @@ fn streams_read_back_with_type_conversion() {
         }
     }
     let reference = rec.reference.as_ref().unwrap();
-    assert!(
-        reference
-            .iter()
-            .enumerate()
-            .all(|(j, r)| *r == j as f64 * -0.5)
-    );
+    assert!(reference.iter().enumerate().all(|(j, r)| *r == j as f64 * -0.5));
     let p = rec.pressure.as_ref().unwrap();
     assert_eq!(p.len(), 100);
     assert!((0..100).all(|j| p.t_s[j] == 0.005 * j as f64 && p.kpa[j] == 0.25 * j as f64));
@@ -55,10 +47,7 @@ fn streams_read_back_with_type_conversion() {
     let counts: Vec<usize> = (0..5).map(|i| truth.row(i).contact_count()).collect();
     assert_eq!(counts, [0, 1, 1, 0, 1]);
     let c = truth.row(4).contacts().next().unwrap();
-    assert_eq!(
-        (c.x_mm, c.y_mm, c.force_n, c.diameter_mm),
-        (-20.0, 30.0, 0.5, 6.0)
-    );
+    assert_eq!((c.x_mm, c.y_mm, c.force_n, c.diameter_mm), (-20.0, 30.0, 0.5, 6.0));
     assert!(rec.derived.image.is_none() && rec.derived.forces.is_empty());
 }
 
@@ -81,14 +70,7 @@ fn events_are_time_ordered_with_truth_before_pressure_before_eit_at_equal_times(
     // t = 0: truth row 0, then pressure sample 0, then EIT frame 0.
     assert!(matches!(events[0], Event::Truth { t_s: 0.0, .. }));
     assert!(matches!(events[1], Event::Pressure { t_s: 0.0, kpa: 0.0 }));
-    assert!(matches!(
-        events[2],
-        Event::EitFrame {
-            t_s: 0.0,
-            seq: 0,
-            ..
-        }
-    ));
+    assert!(matches!(events[2], Event::EitFrame { t_s: 0.0, seq: 0, .. }));
     let last_frame = events.iter().rev().find_map(|e| match e {
         Event::EitFrame { seq, v, .. } => Some((*seq, v[119])),
         _ => None,
@@ -101,39 +83,14 @@ fn inspect_reports_gaps_and_truth_coverage() {
     let rec = Recording::open(fixture()).unwrap();
     let s = Summary::of(&rec);
     let gaps = s.eit_gaps.unwrap();
-    assert_eq!(
-        (
-            gaps.gaps,
-            gaps.lost_frames,
-            gaps.largest_gap,
-            gaps.non_increasing
-        ),
-        (1, 3, 3, 0)
-    );
+    assert_eq!((gaps.gaps, gaps.lost_frames, gaps.largest_gap, gaps.non_increasing), (1, 3, 3, 0));
     let truth = s.truth.unwrap();
-    assert_eq!(
-        (
-            truth.rows,
-            truth.rows_with_contact,
-            truth.eit_frames_covered,
-            truth.eit_frames
-        ),
-        (5, 3, 50, 50)
-    );
-    assert_eq!(
-        s.streams.iter().map(|x| x.rows).collect::<Vec<_>>(),
-        [50, 100, 5]
-    );
+    assert_eq!((truth.rows, truth.rows_with_contact, truth.eit_frames_covered, truth.eit_frames), (5, 3, 50, 50));
+    assert_eq!(s.streams.iter().map(|x| x.rows).collect::<Vec<_>>(), [50, 100, 5]);
     let eit = &s.streams[0];
     assert!((eit.mean_rate_hz.unwrap() - 100.0).abs() < 1e-9);
-    assert!(
-        (s.duration_s - 0.495).abs() < 1e-12,
-        "pressure ends last, at 0.495 s"
-    );
+    assert!((s.duration_s - 0.495).abs() < 1e-12, "pressure ends last, at 0.495 s");
     let text = s.to_string();
-    assert!(
-        text.contains("eit gaps: 1 gaps, 3 frames lost, largest 3"),
-        "{text}"
-    );
+    assert!(text.contains("eit gaps: 1 gaps, 3 frames lost, largest 3"), "{text}");
     assert!(text.contains("covers 50/50 EIT frames (100.0 %)"), "{text}");
 }

@@ -28,22 +28,14 @@ fn write(base: &Path, opts: &WriterOptions, n: u64) -> Vec<PathBuf> {
         w.append_eit(t, i, &frame(i, 120)).unwrap();
         w.append_pressure(t, i as f64).unwrap();
         if i % 50 == 0 {
-            let c = TruthContact {
-                x_mm: i as f64,
-                y_mm: 0.0,
-                force_n: 1.0,
-                diameter_mm: 10.0,
-            };
+            let c = TruthContact { x_mm: i as f64, y_mm: 0.0, force_n: 1.0, diameter_mm: 10.0 };
             w.append_truth(t, &[c]).unwrap();
         }
     }
     let stats = w.close().unwrap();
     let parts = find_parts(base).unwrap();
     assert_eq!(stats.parts as usize, parts.len());
-    assert!(
-        !base.exists(),
-        "with rotation the base path itself is never written"
-    );
+    assert!(!base.exists(), "with rotation the base path itself is never written");
     parts
 }
 
@@ -54,11 +46,7 @@ fn check_concatenation(parts: &[PathBuf], n: u64) {
         let rec = Recording::open(path).unwrap();
         assert_eq!(rec.part, Some(k as i64 + 1));
         assert_eq!(rec.sensor_toml, PAPER_100MM_TOML);
-        assert_eq!(
-            rec.reference.as_deref(),
-            Some(&frame(7, 120)[..]),
-            "reference repeated in every part"
-        );
+        assert_eq!(rec.reference.as_deref(), Some(&frame(7, 120)[..]), "reference repeated in every part");
         let eit = rec.eit.as_ref().unwrap();
         assert!(!eit.is_empty(), "part {k} has no frame");
         for (i, &s) in eit.seq.iter().enumerate() {
@@ -71,13 +59,7 @@ fn check_concatenation(parts: &[PathBuf], n: u64) {
     }
     assert_eq!(seq, (0..n).collect::<Vec<_>>());
     assert_eq!(p_kpa, (0..n).map(|i| i as f64).collect::<Vec<_>>());
-    assert_eq!(
-        truth_t,
-        (0..n)
-            .step_by(50)
-            .map(|i| i as f64 * 0.01)
-            .collect::<Vec<_>>()
-    );
+    assert_eq!(truth_t, (0..n).step_by(50).map(|i| i as f64 * 0.01).collect::<Vec<_>>());
 }
 
 #[test]
@@ -85,30 +67,17 @@ fn rotation_by_duration_splits_at_rotate_s() {
     let dir = tempdir("rotate-time");
     let base = dir.join("rec.h5");
     let mut opts = WriterOptions::new(PAPER_100MM_TOML);
-    opts.streams = Streams {
-        truth: true,
-        ..Streams::default()
-    };
+    opts.streams = Streams { truth: true, ..Streams::default() };
     opts.rotate_s = Some(1.0);
     opts.chunk_rows = 64;
     let parts = write(&base, &opts, 350);
-    assert_eq!(
-        parts,
-        (1..=4).map(|i| part_path(&base, i)).collect::<Vec<_>>()
-    );
-    assert_eq!(
-        recording_files(&base).unwrap(),
-        parts,
-        "the base path resolves to its parts"
-    );
+    assert_eq!(parts, (1..=4).map(|i| part_path(&base, i)).collect::<Vec<_>>());
+    assert_eq!(recording_files(&base).unwrap(), parts, "the base path resolves to its parts");
     let missing = dir.join("other.h5");
     let err = recording_files(&missing).unwrap_err().to_string();
     assert!(err.starts_with(&missing.display().to_string()), "{err}");
     // Part k starts with the first frame at or after k seconds: 100 frames per part.
-    let firsts: Vec<f64> = parts
-        .iter()
-        .map(|p| Recording::open(p).unwrap().eit.unwrap().t_s[0])
-        .collect();
+    let firsts: Vec<f64> = parts.iter().map(|p| Recording::open(p).unwrap().eit.unwrap().t_s[0]).collect();
     assert_eq!(firsts, [0.0, 1.0, 2.0, 3.0]);
     check_concatenation(&parts, 350);
 }
@@ -118,25 +87,14 @@ fn rotation_by_size_keeps_every_row_once() {
     let dir = tempdir("rotate-size");
     let base = dir.join("rec.h5");
     let mut opts = WriterOptions::new(PAPER_100MM_TOML);
-    opts.streams = Streams {
-        truth: true,
-        ..Streams::default()
-    };
+    opts.streams = Streams { truth: true, ..Streams::default() };
     opts.rotate_mb = Some(0.2);
     opts.deflate_level = 0; // predictable sizes: 64 frames x 960 B per chunk
     opts.chunk_rows = 64;
     let parts = write(&base, &opts, 1500);
-    assert!(
-        parts.len() >= 5,
-        "1.4 MB of frames in 0.2 MB parts gave {} parts",
-        parts.len()
-    );
+    assert!(parts.len() >= 5, "1.4 MB of frames in 0.2 MB parts gave {} parts", parts.len());
     for p in &parts[..parts.len() - 1] {
-        assert!(
-            std::fs::metadata(p).unwrap().len() >= 200_000,
-            "{} is below rotate_mb",
-            p.display()
-        );
+        assert!(std::fs::metadata(p).unwrap().len() >= 200_000, "{} is below rotate_mb", p.display());
     }
     check_concatenation(&parts, 1500);
 }

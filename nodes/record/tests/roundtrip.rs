@@ -1,9 +1,7 @@
 //! Write then read gives back identical data, bit for bit, for every stream.
 
 use skinflow_eit::sensor::PAPER_100MM_TOML;
-use skinflow_record::{
-    ContactRow, Recording, RecordingWriter, Streams, TruthContact, WriterOptions,
-};
+use skinflow_record::{ContactRow, Recording, RecordingWriter, Streams, TruthContact, WriterOptions};
 
 /// Deterministic "random" f64 bit patterns (xorshift), including awkward values.
 struct Bits(u64);
@@ -17,10 +15,7 @@ impl Bits {
             0 => -0.0,
             1 => f64::MIN_POSITIVE / 3.0, // subnormal
             2 => f64::MAX,
-            _ => {
-                f64::from_bits(self.0 & !(0x7ff << 52) | (0x3ff << 52)) - 1.5
-                    + (self.0 % 1000) as f64 * 1e-3
-            }
+            _ => f64::from_bits(self.0 & !(0x7ff << 52) | (0x3ff << 52)) - 1.5 + (self.0 % 1000) as f64 * 1e-3,
         }
     }
 }
@@ -86,21 +81,12 @@ fn every_stream_reads_back_bit_exact() {
         let img: Vec<f64> = (0..12).map(|_| rng.next()).collect();
         w.append_image(t, &img).unwrap();
         images.extend_from_slice(&img);
-        let contacts = (0..(i % 4)).map(|j| ContactRow {
-            x_mm: j as f64,
-            y_mm: -(j as f64),
-            sum: 2.0,
-            area_mm2: 30.0,
-        });
+        let contacts = (0..(i % 4)).map(|j| ContactRow { x_mm: j as f64, y_mm: -(j as f64), sum: 2.0, area_mm2: 30.0 });
         w.append_contacts(t, contacts).unwrap();
-        w.append_forces(1, t, &[0.25, 0.5, 0.75][..(i % 4) as usize])
-            .unwrap();
+        w.append_forces(1, t, &[0.25, 0.5, 0.75][..(i % 4) as usize]).unwrap();
     }
     let stats = w.close().unwrap();
-    assert_eq!(
-        (stats.eit_rows, stats.pressure_rows, stats.truth_rows),
-        (40, 120, 10)
-    );
+    assert_eq!((stats.eit_rows, stats.pressure_rows, stats.truth_rows), (40, 120, 10));
     assert_eq!(stats.rows_written, 40 + 120 + 10 + 40 + 40 + 40);
     // Rows with 3 contacts (i % 4 == 3) lose one contact and one force each: 10 rows x 2.
     assert_eq!(stats.contacts_dropped, 20);
@@ -110,18 +96,10 @@ fn every_stream_reads_back_bit_exact() {
     assert_eq!(rec.sensor_toml, PAPER_100MM_TOML);
     assert_eq!(rec.graph_toml.as_deref(), Some("[nodes]\n# graph text\n"));
     assert_eq!(rec.created.as_deref(), Some("2026-01-02T03:04:05Z"));
-    assert!(
-        rec.software_version
-            .as_deref()
-            .unwrap()
-            .starts_with("skinflow-record ")
-    );
+    assert!(rec.software_version.as_deref().unwrap().starts_with("skinflow-record "));
     assert_eq!(rec.part, None);
     let eit = rec.eit.as_ref().unwrap();
-    assert_eq!(
-        (bits(&eit.t_s), &eit.seq, bits(&eit.v)),
-        (bits(&eit_t), &eit_seq, bits(&eit_v))
-    );
+    assert_eq!((bits(&eit.t_s), &eit.seq, bits(&eit.v)), (bits(&eit_t), &eit_seq, bits(&eit_v)));
     assert_eq!(bits(rec.reference.as_ref().unwrap()), bits(&reference));
     let p = rec.pressure.as_ref().unwrap();
     assert_eq!((bits(&p.t_s), bits(&p.kpa)), (bits(&p_t), bits(&p_kpa)));
@@ -143,25 +121,16 @@ fn every_stream_reads_back_bit_exact() {
     }
     let image = rec.derived.image.as_ref().unwrap();
     assert_eq!(image.hw, [3, 4]);
-    assert_eq!(
-        (bits(&image.t_s), bits(&image.pixels)),
-        (bits(&eit_t), bits(&images))
-    );
+    assert_eq!((bits(&image.t_s), bits(&image.pixels)), (bits(&eit_t), bits(&images)));
     let contacts = rec.derived.contacts.as_ref().unwrap();
     assert_eq!(contacts.max_contacts, 2);
-    assert_eq!(
-        bits(&contacts.x_mm[..8]),
-        bits(&[f64::NAN, f64::NAN, 0.0, f64::NAN, 0.0, 1.0, 0.0, 1.0])
-    );
+    assert_eq!(bits(&contacts.x_mm[..8]), bits(&[f64::NAN, f64::NAN, 0.0, f64::NAN, 0.0, 1.0, 0.0, 1.0]));
     let names: Vec<&str> = rec.derived.forces.iter().map(|f| f.name.as_str()).collect();
     assert_eq!(names, ["eit-nocal", "pneumatic-locaware"]);
     let forces = &rec.derived.forces[0];
     assert_eq!(forces.t_s.len(), 40);
     let nan = f64::NAN;
-    assert_eq!(
-        bits(&forces.force_n[..8]),
-        bits(&[nan, nan, 0.25, nan, 0.25, 0.5, 0.25, 0.5])
-    );
+    assert_eq!(bits(&forces.force_n[..8]), bits(&[nan, nan, 0.25, nan, 0.25, 0.5, 0.25, 0.5]));
     assert!(rec.derived.forces[1].t_s.is_empty());
 }
 

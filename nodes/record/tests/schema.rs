@@ -5,17 +5,12 @@ use std::path::{Path, PathBuf};
 
 use hdf5::types::VarLenUnicode;
 use skinflow_eit::sensor::PAPER_100MM_TOML;
-use skinflow_record::{
-    RecordError, Recording, RecordingWriter, SchemaProblem, Streams, TruthContact, WriterOptions,
-};
+use skinflow_record::{RecordError, Recording, RecordingWriter, SchemaProblem, Streams, TruthContact, WriterOptions};
 
 fn valid_file(dir: &Path, name: &str) -> PathBuf {
     let path = dir.join(name);
     let mut opts = WriterOptions::new(PAPER_100MM_TOML);
-    opts.streams = Streams {
-        truth: true,
-        ..Streams::default()
-    };
+    opts.streams = Streams { truth: true, ..Streams::default() };
     let mut w = RecordingWriter::create(&path, &opts).unwrap();
     w.set_reference(&[0.5; 120]).unwrap();
     for i in 0..10u64 {
@@ -23,16 +18,7 @@ fn valid_file(dir: &Path, name: &str) -> PathBuf {
         w.append_pressure(i as f64 * 0.1, 2.0).unwrap();
     }
     w.append_truth(0.0, &[]).unwrap();
-    w.append_truth(
-        0.5,
-        &[TruthContact {
-            x_mm: 1.0,
-            y_mm: 2.0,
-            force_n: 3.0,
-            diameter_mm: 4.0,
-        }],
-    )
-    .unwrap();
+    w.append_truth(0.5, &[TruthContact { x_mm: 1.0, y_mm: 2.0, force_n: 3.0, diameter_mm: 4.0 }]).unwrap();
     w.close().unwrap();
     path
 }
@@ -42,21 +28,13 @@ fn set_str_attr(f: &hdf5::File, name: &str, value: &str) {
         f.delete_attr(name).unwrap();
     }
     let v: VarLenUnicode = value.parse().unwrap();
-    f.new_attr::<VarLenUnicode>()
-        .shape(())
-        .create(name)
-        .unwrap()
-        .write_scalar(&v)
-        .unwrap();
+    f.new_attr::<VarLenUnicode>().shape(()).create(name).unwrap().write_scalar(&v).unwrap();
 }
 
 fn replace_dataset(f: &hdf5::File, path: &str, values: &[f64], shape: &[usize]) {
     f.unlink(path).unwrap();
     let arr = ndarray::ArrayD::from_shape_vec(shape.to_vec(), values.to_vec()).unwrap();
-    f.new_dataset_builder()
-        .with_data(&arr)
-        .create(path)
-        .unwrap();
+    f.new_dataset_builder().with_data(&arr).create(path).unwrap();
 }
 
 type Break = fn(&hdf5::File);
@@ -72,156 +50,86 @@ fn every_violation_is_refused_with_file_path_and_problem() {
             "other format",
             |f| set_str_attr(f, "format", "other-thing"),
             "/ attr format",
-            SchemaProblem::WrongFormat {
-                found: "other-thing".into(),
-            },
+            SchemaProblem::WrongFormat { found: "other-thing".into() },
         ),
-        (
-            "no format",
-            |f| f.delete_attr("format").unwrap(),
-            "/ attr format",
-            SchemaProblem::Missing,
-        ),
+        ("no format", |f| f.delete_attr("format").unwrap(), "/ attr format", SchemaProblem::Missing),
         (
             "format is a number",
             |f| {
                 f.delete_attr("format").unwrap();
-                f.new_attr::<i32>()
-                    .shape(())
-                    .create("format")
-                    .unwrap()
-                    .write_scalar(&7)
-                    .unwrap();
+                f.new_attr::<i32>().shape(()).create("format").unwrap().write_scalar(&7).unwrap();
             },
             "/ attr format",
-            SchemaProblem::NotString {
-                found: "int32".into(),
-            },
+            SchemaProblem::NotString { found: "int32".into() },
         ),
         (
             "newer version",
             |f| {
                 f.delete_attr("format_version").unwrap();
-                f.new_attr::<i64>()
-                    .shape(())
-                    .create("format_version")
-                    .unwrap()
-                    .write_scalar(&2)
-                    .unwrap();
+                f.new_attr::<i64>().shape(()).create("format_version").unwrap().write_scalar(&2).unwrap();
             },
             "/ attr format_version",
-            SchemaProblem::NewerVersion {
-                found: 2,
-                supported: 1,
-            },
+            SchemaProblem::NewerVersion { found: 2, supported: 1 },
         ),
         (
             "fractional version",
             |f| {
                 f.delete_attr("format_version").unwrap();
-                f.new_attr::<f64>()
-                    .shape(())
-                    .create("format_version")
-                    .unwrap()
-                    .write_scalar(&1.5)
-                    .unwrap();
+                f.new_attr::<f64>().shape(()).create("format_version").unwrap().write_scalar(&1.5).unwrap();
             },
             "/ attr format_version",
-            SchemaProblem::NotNumeric {
-                found: "1.5".into(),
-            },
+            SchemaProblem::NotNumeric { found: "1.5".into() },
         ),
-        (
-            "no sensor",
-            |f| f.delete_attr("sensor").unwrap(),
-            "/ attr sensor",
-            SchemaProblem::Missing,
-        ),
+        ("no sensor", |f| f.delete_attr("sensor").unwrap(), "/ attr sensor", SchemaProblem::Missing),
         (
             "eit/seq shorter",
             |f| {
                 f.unlink("/eit/seq").unwrap();
-                f.new_dataset_builder()
-                    .with_data(&[0u64, 1, 2][..])
-                    .create("/eit/seq")
-                    .unwrap();
+                f.new_dataset_builder().with_data(&[0u64, 1, 2][..]).create("/eit/seq").unwrap();
             },
             "/eit/seq",
-            SchemaProblem::LengthMismatch {
-                found: 3,
-                other: "/eit/t".into(),
-                expected: 10,
-            },
+            SchemaProblem::LengthMismatch { found: 3, other: "/eit/t".into(), expected: 10 },
         ),
         (
             "pressure/kpa longer",
             |f| replace_dataset(f, "/pressure/kpa", &[0.0; 11], &[11]),
             "/pressure/kpa",
-            SchemaProblem::LengthMismatch {
-                found: 11,
-                other: "/pressure/t".into(),
-                expected: 10,
-            },
+            SchemaProblem::LengthMismatch { found: 11, other: "/pressure/t".into(), expected: 10 },
         ),
         (
             "eit/v one-dimensional",
             |f| replace_dataset(f, "/eit/v", &[0.0; 1200], &[1200]),
             "/eit/v",
-            SchemaProblem::WrongRank {
-                found: 1,
-                expected: 2,
-            },
+            SchemaProblem::WrongRank { found: 1, expected: 2 },
         ),
         (
             "eit/v narrower than the protocol",
             |f| replace_dataset(f, "/eit/v", &[0.0; 1190], &[10, 119]),
             "/eit/v",
-            SchemaProblem::WidthMismatch {
-                found: 119,
-                expected: 120,
-                protocol: "pairwise".into(),
-            },
+            SchemaProblem::WidthMismatch { found: 119, expected: 120, protocol: "pairwise".into() },
         ),
         (
             "truth/force_n narrower",
             |f| replace_dataset(f, "/truth/force_n", &[0.0; 2], &[2, 1]),
             "/truth/force_n",
-            SchemaProblem::ColumnMismatch {
-                found: 1,
-                other: "/truth/x_mm".into(),
-                expected: 8,
-            },
+            SchemaProblem::ColumnMismatch { found: 1, other: "/truth/x_mm".into(), expected: 8 },
         ),
-        (
-            "truth/t missing",
-            |f| f.unlink("/truth/t").unwrap(),
-            "/truth/t",
-            SchemaProblem::Missing,
-        ),
+        ("truth/t missing", |f| f.unlink("/truth/t").unwrap(), "/truth/t", SchemaProblem::Missing),
         (
             "reference of the wrong length",
             |f| replace_dataset(f, "/eit/reference", &[0.0; 119], &[119]),
             "/eit/reference",
-            SchemaProblem::ColumnMismatch {
-                found: 119,
-                other: "/eit/v".into(),
-                expected: 120,
-            },
+            SchemaProblem::ColumnMismatch { found: 119, other: "/eit/v".into(), expected: 120 },
         ),
         (
             "eit/t holds strings",
             |f| {
                 f.unlink("/eit/t").unwrap();
                 let s: Vec<VarLenUnicode> = (0..10).map(|_| "x".parse().unwrap()).collect();
-                f.new_dataset_builder()
-                    .with_data(&s)
-                    .create("/eit/t")
-                    .unwrap();
+                f.new_dataset_builder().with_data(&s).create("/eit/t").unwrap();
             },
             "/eit/t",
-            SchemaProblem::NotNumericData {
-                found: "unicode (var len)".into(),
-            },
+            SchemaProblem::NotNumericData { found: "unicode (var len)".into() },
         ),
     ];
     for (i, (what, break_it, path, problem)) in cases.into_iter().enumerate() {
@@ -229,21 +137,10 @@ fn every_violation_is_refused_with_file_path_and_problem() {
         break_it(&hdf5::File::open_rw(&file).unwrap());
         let err = Recording::open(&file).expect_err(what);
         let msg = err.to_string();
-        assert!(
-            msg.starts_with(&format!("{}: {path}: ", file.display())),
-            "{what}: {msg}"
-        );
+        assert!(msg.starts_with(&format!("{}: {path}: ", file.display())), "{what}: {msg}");
         match err {
-            RecordError::Schema {
-                path: p,
-                problem: got,
-                file: f,
-            } => {
-                assert_eq!(
-                    (f, p.as_str(), got),
-                    (file.clone(), path, problem),
-                    "{what}"
-                );
+            RecordError::Schema { path: p, problem: got, file: f } => {
+                assert_eq!((f, p.as_str(), got), (file.clone(), path, problem), "{what}");
             }
             other => panic!("{what}: expected a schema error, got {other}"),
         }
@@ -260,17 +157,10 @@ fn every_violation_is_refused_with_file_path_and_problem() {
         )
     );
     let file = valid_file(&dir, "badsensor.h5");
-    set_str_attr(
-        &hdf5::File::open_rw(&file).unwrap(),
-        "sensor",
-        "[sensor]\nwidth_mm = -1.0\n",
-    );
+    set_str_attr(&hdf5::File::open_rw(&file).unwrap(), "sensor", "[sensor]\nwidth_mm = -1.0\n");
     assert!(matches!(
         Recording::open(&file),
-        Err(RecordError::Schema {
-            problem: SchemaProblem::BadSensor { .. },
-            ..
-        })
+        Err(RecordError::Schema { problem: SchemaProblem::BadSensor { .. }, .. })
     ));
 }
 
@@ -283,17 +173,9 @@ fn extra_groups_and_attributes_are_ignored() {
     let before = Recording::open(&file).unwrap();
     let f = hdf5::File::open_rw(&file).unwrap();
     set_str_attr(&f, "operator", "someone");
-    f.create_group("calibration")
-        .unwrap()
-        .new_dataset_builder()
-        .with_data(&[1.0, 2.0][..])
-        .create("g")
-        .unwrap();
+    f.create_group("calibration").unwrap().new_dataset_builder().with_data(&[1.0, 2.0][..]).create("g").unwrap();
     drop(f);
     let after = Recording::open(&file).unwrap();
     // Debug text compares NaN padding too (NaN != NaN under PartialEq).
-    assert!(
-        format!("{before:?}") == format!("{after:?}"),
-        "extra content changed what was read"
-    );
+    assert!(format!("{before:?}") == format!("{after:?}"), "extra content changed what was read");
 }

@@ -1,9 +1,7 @@
 //! The writer refuses bad options and bad rows with errors that name the file and the path.
 
 use skinflow_eit::sensor::PAPER_100MM_TOML;
-use skinflow_record::{
-    RecordError, Recording, RecordingWriter, Streams, TruthContact, WriterOptions,
-};
+use skinflow_record::{RecordError, Recording, RecordingWriter, Streams, TruthContact, WriterOptions};
 
 fn tempdir(name: &str) -> std::path::PathBuf {
     let dir = std::env::temp_dir().join(format!("skinflow-record-{name}-{}", std::process::id()));
@@ -17,69 +15,21 @@ fn invalid_options_are_named() {
     let dir = tempdir("bad-options");
     let base = WriterOptions::new(PAPER_100MM_TOML);
     let cases: Vec<(&str, WriterOptions)> = vec![
-        (
-            "sensor_toml",
-            WriterOptions::new("[sensor]\nwidth_mm = 0.0\n"),
-        ),
-        (
-            "flush_interval_s",
-            WriterOptions {
-                flush_interval_s: f64::NAN,
-                ..base.clone()
-            },
-        ),
-        (
-            "rotate_mb",
-            WriterOptions {
-                rotate_mb: Some(-1.0),
-                ..base.clone()
-            },
-        ),
-        (
-            "rotate_s",
-            WriterOptions {
-                rotate_s: Some(0.0),
-                ..base.clone()
-            },
-        ),
-        (
-            "chunk_rows",
-            WriterOptions {
-                chunk_rows: 0,
-                ..base.clone()
-            },
-        ),
-        (
-            "deflate_level",
-            WriterOptions {
-                deflate_level: 10,
-                ..base.clone()
-            },
-        ),
-        (
-            "truth_max_contacts",
-            WriterOptions {
-                truth_max_contacts: 0,
-                ..base.clone()
-            },
-        ),
+        ("sensor_toml", WriterOptions::new("[sensor]\nwidth_mm = 0.0\n")),
+        ("flush_interval_s", WriterOptions { flush_interval_s: f64::NAN, ..base.clone() }),
+        ("rotate_mb", WriterOptions { rotate_mb: Some(-1.0), ..base.clone() }),
+        ("rotate_s", WriterOptions { rotate_s: Some(0.0), ..base.clone() }),
+        ("chunk_rows", WriterOptions { chunk_rows: 0, ..base.clone() }),
+        ("deflate_level", WriterOptions { deflate_level: 10, ..base.clone() }),
+        ("truth_max_contacts", WriterOptions { truth_max_contacts: 0, ..base.clone() }),
         (
             "streams.image_hw",
-            WriterOptions {
-                streams: Streams {
-                    image_hw: Some([0, 4]),
-                    ..Streams::default()
-                },
-                ..base.clone()
-            },
+            WriterOptions { streams: Streams { image_hw: Some([0, 4]), ..Streams::default() }, ..base.clone() },
         ),
         (
             "streams.force_strategies",
             WriterOptions {
-                streams: Streams {
-                    force_strategies: vec!["a/b".into()],
-                    ..Streams::default()
-                },
+                streams: Streams { force_strategies: vec!["a/b".into()], ..Streams::default() },
                 ..base.clone()
             },
         ),
@@ -91,10 +41,7 @@ fn invalid_options_are_named() {
             Ok(_) => panic!("{name}: accepted"),
         }
     }
-    assert!(
-        !dir.join("x.h5").exists(),
-        "no file is created for invalid options"
-    );
+    assert!(!dir.join("x.h5").exists(), "no file is created for invalid options");
 }
 
 #[test]
@@ -102,44 +49,17 @@ fn bad_rows_are_refused_and_the_file_stays_valid() {
     let dir = tempdir("bad-rows");
     let path = dir.join("rec.h5");
     let mut opts = WriterOptions::new(PAPER_100MM_TOML);
-    opts.streams = Streams {
-        truth: true,
-        pressure: false,
-        ..Streams::default()
-    };
+    opts.streams = Streams { truth: true, pressure: false, ..Streams::default() };
     opts.truth_max_contacts = 2;
     let mut w = RecordingWriter::create(&path, &opts).unwrap();
     let shown = path.display().to_string();
     let e = w.append_eit(0.0, 0, &[0.0; 119]).unwrap_err().to_string();
-    assert_eq!(
-        e,
-        format!("{shown}: /eit/v: row has 119 values, expected 120")
-    );
+    assert_eq!(e, format!("{shown}: /eit/v: row has 119 values, expected 120"));
     let e = w.append_pressure(0.0, 1.0).unwrap_err().to_string();
-    assert_eq!(
-        e,
-        format!("{shown}: /pressure: stream was not declared in the writer options")
-    );
-    let c = TruthContact {
-        x_mm: 0.0,
-        y_mm: 0.0,
-        force_n: 1.0,
-        diameter_mm: 10.0,
-    };
-    assert!(matches!(
-        w.append_truth(0.0, &[c; 3]),
-        Err(RecordError::TooManyTruthContacts {
-            found: 3,
-            max: 2,
-            ..
-        })
-    ));
-    assert!(
-        w.append_eit(f64::NAN, 0, &[0.0; 120])
-            .unwrap_err()
-            .to_string()
-            .contains("/eit/t: time NaN is not finite")
-    );
+    assert_eq!(e, format!("{shown}: /pressure: stream was not declared in the writer options"));
+    let c = TruthContact { x_mm: 0.0, y_mm: 0.0, force_n: 1.0, diameter_mm: 10.0 };
+    assert!(matches!(w.append_truth(0.0, &[c; 3]), Err(RecordError::TooManyTruthContacts { found: 3, max: 2, .. })));
+    assert!(w.append_eit(f64::NAN, 0, &[0.0; 120]).unwrap_err().to_string().contains("/eit/t: time NaN is not finite"));
     assert!(w.append_image(0.0, &[]).is_err() && w.append_forces(0, 0.0, &[]).is_err());
     w.append_eit(0.0, 0, &[0.0; 120]).unwrap();
     w.append_truth(0.0, &[c; 2]).unwrap();
@@ -157,22 +77,11 @@ fn existing_files_are_not_overwritten_unless_asked() {
     let path = dir.join("rec.h5");
     std::fs::write(&path, b"precious").unwrap();
     let opts = WriterOptions::new(PAPER_100MM_TOML);
-    let err = RecordingWriter::create(&path, &opts)
-        .err()
-        .expect("existing file refused");
-    assert!(
-        err.to_string().starts_with(&path.display().to_string()),
-        "{err}"
-    );
+    let err = RecordingWriter::create(&path, &opts).err().expect("existing file refused");
+    assert!(err.to_string().starts_with(&path.display().to_string()), "{err}");
     assert_eq!(std::fs::read(&path).unwrap(), b"precious");
-    let opts = WriterOptions {
-        overwrite: true,
-        ..opts
-    };
-    RecordingWriter::create(&path, &opts)
-        .unwrap()
-        .close()
-        .unwrap();
+    let opts = WriterOptions { overwrite: true, ..opts };
+    RecordingWriter::create(&path, &opts).unwrap().close().unwrap();
     assert!(Recording::open(&path).unwrap().eit.unwrap().is_empty());
 }
 
@@ -180,18 +89,12 @@ fn existing_files_are_not_overwritten_unless_asked() {
 fn reference_after_swmr_start_is_refused() {
     let dir = tempdir("swmr-reference");
     let path = dir.join("rec.h5");
-    let opts = WriterOptions {
-        swmr: true,
-        ..WriterOptions::new(PAPER_100MM_TOML)
-    };
+    let opts = WriterOptions { swmr: true, ..WriterOptions::new(PAPER_100MM_TOML) };
     let mut w = RecordingWriter::create(&path, &opts).unwrap();
     w.set_reference(&[1.0; 120]).unwrap();
     w.append_eit(0.0, 0, &[2.0; 120]).unwrap();
     w.flush().unwrap();
-    assert!(matches!(
-        w.set_reference(&[1.0; 120]),
-        Err(RecordError::ReferenceAfterSwmr { .. })
-    ));
+    assert!(matches!(w.set_reference(&[1.0; 120]), Err(RecordError::ReferenceAfterSwmr { .. })));
     w.close().unwrap();
     let rec = Recording::open(&path).unwrap();
     assert_eq!(rec.reference.as_deref(), Some(&[1.0; 120][..]));

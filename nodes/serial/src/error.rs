@@ -8,11 +8,7 @@ pub enum ParamError {
     MeasurementCount { got: usize },
     /// A duration parameter must be finite and positive (or >= 0 where stated).
     #[error("param \"{param}\": must be a finite number of seconds {rule} (got {got})")]
-    Seconds {
-        param: &'static str,
-        rule: &'static str,
-        got: f64,
-    },
+    Seconds { param: &'static str, rule: &'static str, got: f64 },
     /// A count or size parameter must be positive.
     #[error("param \"{param}\": must be > 0 (got {got})")]
     Positive { param: &'static str, got: u64 },

@@ -13,15 +13,14 @@ pub mod error;
 pub mod read;
 
 pub use decode::{
-    Decode, DecodeStats, EitDecoder, EitFrame, ForceDecoder, ForceReading, PressureDecoder,
-    PressureReading, Step, StreamMismatch, decode_all,
+    Decode, DecodeStats, EitDecoder, EitFrame, ForceDecoder, ForceReading, PressureDecoder, PressureReading, Step,
+    StreamMismatch, decode_all,
 };
 pub use emulate::{
-    Device, DeviceStats, EmulateError, Emulator, EmulatorConfig, EmulatorFeed, Fault, FaultPlan,
-    Pacing, TimedForce, TimedFrame, TimedPressure,
+    Device, DeviceStats, EmulateError, Emulator, EmulatorConfig, EmulatorFeed, Fault, FaultPlan, Pacing, TimedForce,
+    TimedFrame, TimedPressure,
 };
 pub use error::ParamError;
 pub use read::{
-    EitReader, LinkStats, LoadcellReader, PressureReader, ReaderConfig, Reading, SerialError,
-    SerialReader,
+    EitReader, LinkStats, LoadcellReader, PressureReader, ReaderConfig, Reading, SerialError, SerialReader,
 };

@@ -57,10 +57,7 @@ fn allocations(f: impl FnOnce()) -> u64 {
 #[test]
 fn decoders_and_reader_do_not_allocate_per_record() {
     // The counter sees allocations at all.
-    assert_eq!(
-        allocations(|| drop(std::hint::black_box(Vec::<u8>::with_capacity(16)))),
-        1
-    );
+    assert_eq!(allocations(|| drop(std::hint::black_box(Vec::<u8>::with_capacity(16)))), 1);
 
     // Decoders, on streams with garbage, CRC errors and torn frames, fed in small pieces.
     let volts: Vec<f64> = (0..120).map(|k| 1e-3 * k as f64).collect();
@@ -98,10 +95,7 @@ fn decoders_and_reader_do_not_allocate_per_record() {
     // timeout is long so no timed-out read (whose io::Error allocates) happens while data flows.
     let feed = EmulatorFeed::default().with_eit(feeds::busy_frames(120, 200, 0.01));
     let emulator = Emulator::spawn(
-        EmulatorConfig {
-            pacing: Pacing::AsFastAsPossible,
-            ..Default::default()
-        },
+        EmulatorConfig { pacing: Pacing::AsFastAsPossible, ..Default::default() },
         feed,
         FaultPlan::default(),
     )

@@ -6,18 +6,14 @@
 use proptest::prelude::*;
 use proptest::test_runner::{Config, FileFailurePersistence, RngSeed};
 use skinflow_serial::decode::{Decode, EitDecoder, ForceDecoder, PressureDecoder, decode_all};
-use skinflow_serial::encode::{
-    eit_frame_len, encode_eit_frame, encode_force_line, encode_pressure_line,
-};
+use skinflow_serial::encode::{eit_frame_len, encode_eit_frame, encode_force_line, encode_pressure_line};
 
 fn config(cases: u32) -> Config {
     Config {
         cases,
         rng_seed: RngSeed::Fixed(0x5EED_0007),
         // Relative to the package root (cargo test's working directory); commit it if it appears.
-        failure_persistence: Some(Box::new(FileFailurePersistence::Direct(
-            "proptest-regressions/decode_props.txt",
-        ))),
+        failure_persistence: Some(Box::new(FileFailurePersistence::Direct("proptest-regressions/decode_props.txt"))),
         ..Config::default()
     }
 }
@@ -35,16 +31,8 @@ fn garbage(max_len: usize) -> impl Strategy<Value = Vec<u8>> {
 }
 
 /// Splits `bytes` at the given cut fractions and feeds the pieces one by one.
-fn feed_in_pieces<D: Decode>(
-    d: &mut D,
-    bytes: &[u8],
-    cuts: &[f64],
-    mut on: impl FnMut(D::Record<'_>),
-) {
-    let mut at: Vec<usize> = cuts
-        .iter()
-        .map(|c| (c * bytes.len() as f64) as usize)
-        .collect();
+fn feed_in_pieces<D: Decode>(d: &mut D, bytes: &[u8], cuts: &[f64], mut on: impl FnMut(D::Record<'_>)) {
+    let mut at: Vec<usize> = cuts.iter().map(|c| (c * bytes.len() as f64) as usize).collect();
     at.push(0);
     at.push(bytes.len());
     at.sort_unstable();
@@ -56,14 +44,12 @@ fn feed_in_pieces<D: Decode>(
 /// Garbage followed by a torn frame of width `m`: a real frame cut after `keep` bytes, the
 /// hardest case for resynchronization (its header is valid, its CRC is not).
 fn torn_garbage(max_len: usize, m: usize) -> impl Strategy<Value = Vec<u8>> {
-    (garbage(max_len), any::<u32>(), 0..eit_frame_len(m)).prop_map(
-        move |(mut junk, counter, keep)| {
-            let mut frame = Vec::new();
-            encode_eit_frame(&mut frame, counter, counter, &vec![0.5; m]);
-            junk.extend_from_slice(&frame[..keep]);
-            junk
-        },
-    )
+    (garbage(max_len), any::<u32>(), 0..eit_frame_len(m)).prop_map(move |(mut junk, counter, keep)| {
+        let mut frame = Vec::new();
+        encode_eit_frame(&mut frame, counter, counter, &vec![0.5; m]);
+        junk.extend_from_slice(&frame[..keep]);
+        junk
+    })
 }
 
 fn cuts() -> impl Strategy<Value = Vec<f64>> {

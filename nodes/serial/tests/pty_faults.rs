@@ -8,18 +8,15 @@ use std::time::{Duration, Instant};
 use skinflow_serial::encode::eit_frame_len;
 use skinflow_serial::read::{ReaderConfig, SerialReader};
 use skinflow_serial::{
-    Device, EitDecoder, Emulator, EmulatorConfig, EmulatorFeed, Fault, FaultPlan, ForceDecoder,
-    Pacing, PressureDecoder, SerialError, StreamMismatch,
+    Device, EitDecoder, Emulator, EmulatorConfig, EmulatorFeed, Fault, FaultPlan, ForceDecoder, Pacing,
+    PressureDecoder, SerialError, StreamMismatch,
 };
 
 const LIMIT: Duration = Duration::from_secs(30);
 const M: usize = 16;
 
 fn fast() -> EmulatorConfig {
-    EmulatorConfig {
-        pacing: Pacing::AsFastAsPossible,
-        ..Default::default()
-    }
+    EmulatorConfig { pacing: Pacing::AsFastAsPossible, ..Default::default() }
 }
 
 /// Reads EIT frames until the emulator is done, checking each against the feed (no
@@ -28,11 +25,7 @@ fn drain_eit(reader: &mut SerialReader<EitDecoder>, emulator: &Emulator, m: usiz
     let mut counters = Vec::new();
     feeds::read_until_idle(reader, emulator, LIMIT, |r| {
         let i = r.record.counter as usize;
-        assert_eq!(
-            r.record.volts,
-            feeds::plain_values(i, m).as_slice(),
-            "frame {i} mis-assembled"
-        );
+        assert_eq!(r.record.volts, feeds::plain_values(i, m).as_slice(), "frame {i} mis-assembled");
         counters.push(r.record.counter);
     });
     counters
@@ -46,29 +39,11 @@ fn eit_byte_faults_give_exact_counters() {
             (5, Fault::Garbage(vec![0xAA, 0x55, 0x00, 0xAA, 1, 2, 3])),
             (10, Fault::CorruptCrc),
             (15, Fault::DropBytes { offset: 20, len: 1 }),
-            (
-                20,
-                Fault::DropBytes {
-                    offset: 30,
-                    len: 40,
-                },
-            ),
-            (
-                25,
-                Fault::FlipBits {
-                    offset: 14,
-                    mask: 0x10,
-                },
-            ),
+            (20, Fault::DropBytes { offset: 30, len: 40 }),
+            (25, Fault::FlipBits { offset: 14, mask: 0x10 }),
             (30, Fault::Skip),
             (35, Fault::Truncate { keep: 6 }),
-            (
-                40,
-                Fault::FlipBits {
-                    offset: 0,
-                    mask: 0xFF,
-                },
-            ),
+            (40, Fault::FlipBits { offset: 0, mask: 0xFF }),
             (45, Fault::Garbage(vec![0x55; 3])),
             (45, Fault::Garbage(vec![0xAA])),
         ],
@@ -77,8 +52,7 @@ fn eit_byte_faults_give_exact_counters() {
     let feed = EmulatorFeed::default().with_eit(feeds::plain_frames(M, n));
     let emulator = Emulator::spawn(fast(), feed, faults).unwrap();
     let path = emulator.path(Device::Eit).unwrap();
-    let mut reader =
-        SerialReader::open(ReaderConfig::new(path), EitDecoder::new(M), Instant::now()).unwrap();
+    let mut reader = SerialReader::open(ReaderConfig::new(path), EitDecoder::new(M), Instant::now()).unwrap();
     let counters = drain_eit(&mut reader, &emulator, M);
 
     let lost = [10, 15, 20, 25, 30, 35, 40];
@@ -97,10 +71,7 @@ fn eit_byte_faults_give_exact_counters() {
     assert_eq!(s.length_mismatches, 2);
     assert_eq!(s.counter_resets, 0);
     // Every byte is either in an accepted frame or counted as discarded.
-    assert_eq!(
-        s.discarded_bytes,
-        sent.bytes_written - s.frames * eit_frame_len(M) as u64
-    );
+    assert_eq!(s.discarded_bytes, sent.bytes_written - s.frames * eit_frame_len(M) as u64);
     // Lock lost at 5, 10, 15, 20, 25, 35, 40, 45 (the skip at 30 loses no lock).
     assert_eq!(s.resyncs, 8);
     assert_eq!(reader.link_stats().disconnects, 0);
@@ -121,8 +92,7 @@ fn unplug_and_replug_recovers_and_counts_the_torn_frame() {
     let emulator = Emulator::spawn(fast(), feed, faults).unwrap();
     let path = emulator.path(Device::Eit).unwrap().to_path_buf();
     let origin = Instant::now();
-    let mut reader =
-        SerialReader::open(ReaderConfig::new(&path), EitDecoder::new(M), origin).unwrap();
+    let mut reader = SerialReader::open(ReaderConfig::new(&path), EitDecoder::new(M), origin).unwrap();
 
     let mut counters = Vec::new();
     let mut host_t_s = Vec::new();
@@ -130,11 +100,7 @@ fn unplug_and_replug_recovers_and_counts_the_torn_frame() {
     while counters.len() < n - 1 && Instant::now() < until {
         if let Some(r) = reader.poll_next(until).expect("reader error") {
             let i = r.record.counter as usize;
-            assert_eq!(
-                r.record.volts,
-                feeds::plain_values(i, M).as_slice(),
-                "frame {i} mis-assembled"
-            );
+            assert_eq!(r.record.volts, feeds::plain_values(i, M).as_slice(), "frame {i} mis-assembled");
             counters.push(r.record.counter);
             host_t_s.push(r.host_t_s);
         }
@@ -142,15 +108,7 @@ fn unplug_and_replug_recovers_and_counts_the_torn_frame() {
     let expected: Vec<u32> = (0..n as u32).filter(|&c| c != 10).collect();
     assert_eq!(counters, expected);
     let s = *reader.decode_stats();
-    assert_eq!(
-        (
-            s.torn_frames,
-            s.lost_frames,
-            s.crc_errors,
-            s.discarded_bytes
-        ),
-        (1, 1, 0, 20)
-    );
+    assert_eq!((s.torn_frames, s.lost_frames, s.crc_errors, s.discarded_bytes), (1, 1, 0, 20));
     let link = reader.link_stats();
     assert_eq!((link.disconnects, link.reconnects), (2, 2));
     assert_eq!(emulator.stats(Device::Eit).unwrap().unplugs, 2);
@@ -163,24 +121,14 @@ fn unplug_and_replug_recovers_and_counts_the_torn_frame() {
 #[test]
 fn stalled_device_counts_a_stall_and_loses_nothing() {
     let n = 30;
-    let faults = FaultPlan {
-        pressure: vec![(10, Fault::Stall { silent_s: 1.5 })],
-        ..Default::default()
-    };
+    let faults = FaultPlan { pressure: vec![(10, Fault::Stall { silent_s: 1.5 })], ..Default::default() };
     let feed = EmulatorFeed::default().with_pressure(feeds::pressures(n, 0.01));
     let emulator = Emulator::spawn(EmulatorConfig::default(), feed, faults).unwrap();
     let mut config = ReaderConfig::new(emulator.path(Device::Pressure).unwrap());
     config.stall_after_s = 0.2;
-    let mut reader = SerialReader::open(
-        config,
-        PressureDecoder::try_new(Some(10)).unwrap(),
-        Instant::now(),
-    )
-    .unwrap();
+    let mut reader = SerialReader::open(config, PressureDecoder::try_new(Some(10)).unwrap(), Instant::now()).unwrap();
     let mut times = Vec::new();
-    let got = feeds::read_n(&mut reader, n, LIMIT, |r| {
-        times.push(r.record.device_time_ms)
-    });
+    let got = feeds::read_n(&mut reader, n, LIMIT, |r| times.push(r.record.device_time_ms));
     assert_eq!(got, n);
     assert_eq!(times, (0..n as u32).map(|i| i * 10).collect::<Vec<_>>());
     let link = reader.link_stats();
@@ -195,25 +143,14 @@ fn line_faults_are_counted_and_resynced() {
         // "0.5000" -> flip '.' (0x2E) to 0x0E: the line no longer parses.
         pressure: vec![
             (3, Fault::Garbage(b"\x00\xffboot v1.2\r\n".to_vec())),
-            (
-                7,
-                Fault::FlipBits {
-                    offset: 3,
-                    mask: 0x20,
-                },
-            ),
+            (7, Fault::FlipBits { offset: 3, mask: 0x20 }),
             (12, Fault::Skip),
             (20, Fault::Truncate { keep: 4 }),
         ],
-        loadcell: vec![
-            (4, Fault::Garbage(b"\r\n 1.0 kgf\r\n".to_vec())),
-            (9, Fault::DropBytes { offset: 11, len: 2 }),
-        ],
+        loadcell: vec![(4, Fault::Garbage(b"\r\n 1.0 kgf\r\n".to_vec())), (9, Fault::DropBytes { offset: 11, len: 2 })],
         ..Default::default()
     };
-    let feed = EmulatorFeed::default()
-        .with_pressure(feeds::pressures(n, 0.05))
-        .with_loadcell(feeds::forces(n, 0.05));
+    let feed = EmulatorFeed::default().with_pressure(feeds::pressures(n, 0.05)).with_loadcell(feeds::forces(n, 0.05));
     let emulator = Emulator::spawn(fast(), feed, faults).unwrap();
     let origin = Instant::now();
 
@@ -224,35 +161,22 @@ fn line_faults_are_counted_and_resynced() {
     )
     .unwrap();
     let mut times = Vec::new();
-    feeds::read_until_idle(&mut p, &emulator, LIMIT, |r| {
-        times.push(r.record.device_time_ms / 50)
-    });
+    feeds::read_until_idle(&mut p, &emulator, LIMIT, |r| times.push(r.record.device_time_ms / 50));
     // 7 is unparseable, 12 never sent; 20's first 4 bytes run into 21, which is lost with it.
     let lost = [7, 12, 20, 21];
-    assert_eq!(
-        times,
-        (0..n as u32)
-            .filter(|i| !lost.contains(i))
-            .collect::<Vec<_>>()
-    );
+    assert_eq!(times, (0..n as u32).filter(|i| !lost.contains(i)).collect::<Vec<_>>());
     let s = *p.decode_stats();
     // "boot v1.2", 7, and the merged 20+21 line; loss is seen from the time-stamp gaps.
     assert_eq!((s.bad_lines, s.lost_frames), (3, 4));
 
-    let mut f = SerialReader::open(
-        ReaderConfig::new(emulator.path(Device::Loadcell).unwrap()),
-        ForceDecoder::new(),
-        origin,
-    )
-    .unwrap();
+    let mut f =
+        SerialReader::open(ReaderConfig::new(emulator.path(Device::Loadcell).unwrap()), ForceDecoder::new(), origin)
+            .unwrap();
     let forces = feeds::forces(n, 0.05);
     let mut got = Vec::new();
     feeds::read_until_idle(&mut f, &emulator, LIMIT, |r| got.push(r.record.force_n));
     // Record 9 (`   x.xxx N\r\n`) lost its line end, so it merged with record 10 into one bad line.
-    let expected: Vec<f64> = (0..n)
-        .filter(|&i| i != 9 && i != 10)
-        .map(|i| forces[i].force_n)
-        .collect();
+    let expected: Vec<f64> = (0..n).filter(|&i| i != 9 && i != 10).map(|i| forces[i].force_n).collect();
     assert_eq!(got.len(), expected.len());
     for (g, e) in got.iter().zip(&expected) {
         assert!((g - e).abs() <= 0.5e-3 + 1e-12, "{g} vs {e}");
@@ -266,12 +190,7 @@ fn wrong_measurement_count_is_an_error_naming_both_counts() {
     let feed = EmulatorFeed::default().with_eit(feeds::plain_frames(M, 10));
     let emulator = Emulator::spawn(fast(), feed, FaultPlan::default()).unwrap();
     let path = emulator.path(Device::Eit).unwrap();
-    let mut reader = SerialReader::open(
-        ReaderConfig::new(path),
-        EitDecoder::new(120),
-        Instant::now(),
-    )
-    .unwrap();
+    let mut reader = SerialReader::open(ReaderConfig::new(path), EitDecoder::new(120), Instant::now()).unwrap();
     let until = Instant::now() + LIMIT;
     let err = match reader.poll_next(until) {
         Err(e) => e,
@@ -281,13 +200,7 @@ fn wrong_measurement_count_is_an_error_naming_both_counts() {
     assert!(
         matches!(
             err,
-            SerialError::Mismatch {
-                mismatch: StreamMismatch::MeasurementCount {
-                    expected: 120,
-                    got: 16
-                },
-                ..
-            }
+            SerialError::Mismatch { mismatch: StreamMismatch::MeasurementCount { expected: 120, got: 16 }, .. }
         ),
         "{err}"
     );
@@ -297,10 +210,7 @@ fn wrong_measurement_count_is_an_error_naming_both_counts() {
 #[test]
 fn crc_fault_on_a_line_device_is_rejected_at_spawn() {
     let feed = EmulatorFeed::default().with_pressure(feeds::pressures(3, 0.05));
-    let faults = FaultPlan {
-        pressure: vec![(1, Fault::CorruptCrc)],
-        ..Default::default()
-    };
+    let faults = FaultPlan { pressure: vec![(1, Fault::CorruptCrc)], ..Default::default() };
     let err = Emulator::spawn(fast(), feed, faults).unwrap_err();
     assert!(err.to_string().contains("pressure record 1"), "{err}");
 }

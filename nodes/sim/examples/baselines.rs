@@ -43,34 +43,22 @@ fn samples(scene: &Scene, seed: u64, recon: &mut Reconstructor) -> Vec<Sample> {
     for e in Simulator::new(scene, seed).unwrap() {
         match e.unwrap() {
             SimEvent::Eit { t_s, v, .. } => frames.push((t_s, v)),
-            SimEvent::Truth { t_s, contacts } => truth.push((
-                t_s,
-                contacts
-                    .iter()
-                    .map(|c| [c.x_mm, c.y_mm, c.force_n, c.diameter_mm])
-                    .collect(),
-            )),
+            SimEvent::Truth { t_s, contacts } => {
+                truth.push((t_s, contacts.iter().map(|c| [c.x_mm, c.y_mm, c.force_n, c.diameter_mm]).collect()))
+            }
             SimEvent::Pressure { .. } => {}
         }
     }
     let first_contact = truth.iter().find(|r| !r.1.is_empty()).unwrap().0;
-    let noload: Vec<&Vec<f64>> = frames
-        .iter()
-        .filter(|f| f.0 + 0.5 * period <= first_contact)
-        .map(|f| &f.1)
-        .collect();
+    let noload: Vec<&Vec<f64>> = frames.iter().filter(|f| f.0 + 0.5 * period <= first_contact).map(|f| &f.1).collect();
     let m = noload[0].len();
-    let reference: Vec<f64> = (0..m)
-        .map(|k| noload.iter().map(|v| v[k]).sum::<f64>() / noload.len() as f64)
-        .collect();
+    let reference: Vec<f64> = (0..m).map(|k| noload.iter().map(|v| v[k]).sum::<f64>() / noload.len() as f64).collect();
     let g = recon.grid();
     let (nx, ny) = (g.nx, g.ny);
     let mut image = vec![0.0; nx * ny];
     let mut peak_noise: f64 = 0.0;
     for v in &noload {
-        recon
-            .reconstruct_image_into(v, &reference, &mut image)
-            .unwrap();
+        recon.reconstruct_image_into(v, &reference, &mut image).unwrap();
         peak_noise = peak_noise.max(skinflow_contact::segment::peak_decrease(&image));
     }
     let seg_grid = SegGrid::centred(nx, ny, scene.sensor.width_mm, scene.sensor.height_mm);
@@ -84,14 +72,9 @@ fn samples(scene: &Scene, seed: u64, recon: &mut Reconstructor) -> Vec<Sample> {
         if row != row_at(t + 0.5 * period - 1e-9) || truth[row].1.len() != 1 {
             continue;
         }
-        recon
-            .reconstruct_image_into(v, &reference, &mut image)
-            .unwrap();
+        recon.reconstruct_image_into(v, &reference, &mut image).unwrap();
         seg.segment_into(&image, &mut contacts).unwrap();
-        let best = contacts
-            .as_slice()
-            .iter()
-            .max_by(|a, b| a.sum.total_cmp(&b.sum));
+        let best = contacts.as_slice().iter().max_by(|a, b| a.sum.total_cmp(&b.sum));
         out.push(Sample {
             truth: truth[row].1[0],
             row,
@@ -104,11 +87,7 @@ fn samples(scene: &Scene, seed: u64, recon: &mut Reconstructor) -> Vec<Sample> {
 
 /// Quadratic least squares y = c0 x^2 + c1 x + c2 (normal equations, x scaled by its max).
 fn quadratic(points: &[(f64, f64)]) -> (impl Fn(f64) -> f64, f64) {
-    let s = points
-        .iter()
-        .map(|p| p.0.abs())
-        .fold(0.0, f64::max)
-        .max(1e-300);
+    let s = points.iter().map(|p| p.0.abs()).fold(0.0, f64::max).max(1e-300);
     let mut a = [[0.0; 4]; 3];
     for &(x, y) in points {
         let r = [(x / s).powi(2), x / s, 1.0];
@@ -158,39 +137,24 @@ pub fn measure(seed: u64, overrides: &[String]) -> EitFigures {
     let mut points: Vec<([f64; 4], f64)> = Vec::new();
     let mut i = 0;
     while i < cal_samples.len() {
-        let j = cal_samples[i..]
-            .iter()
-            .position(|s| s.row != cal_samples[i].row)
-            .map_or(cal_samples.len(), |p| i + p);
+        let j = cal_samples[i..].iter().position(|s| s.row != cal_samples[i].row).map_or(cal_samples.len(), |p| i + p);
         let c = cal_samples[i..j].iter().map(|s| s.sum).sum::<f64>() / (j - i) as f64;
         points.push((cal_samples[i].truth, c));
         i = j;
     }
-    let centre: Vec<(f64, f64)> = points
-        .iter()
-        .filter(|p| p.0[0] == 0.0 && p.0[1] == 0.0)
-        .map(|p| (p.1, p.0[2]))
-        .collect();
+    let centre: Vec<(f64, f64)> =
+        points.iter().filter(|p| p.0[0] == 0.0 && p.0[1] == 0.0).map(|p| (p.1, p.0[2])).collect();
     let all: Vec<(f64, f64)> = points.iter().map(|p| (p.1, p.0[2])).collect();
     let (_, r2_centre) = quadratic(&centre);
     let (f_all, r2_all) = quadratic(&all);
     let errs: Vec<f64> = cal_samples
         .iter()
-        .filter_map(|s| {
-            s.centroid
-                .map(|c| ((c[0] - s.truth[0]).powi(2) + (c[1] - s.truth[1]).powi(2)).sqrt())
-        })
+        .filter_map(|s| s.centroid.map(|c| ((c[0] - s.truth[0]).powi(2) + (c[1] - s.truth[1]).powi(2)).sqrt()))
         .collect();
     let pe_mean = errs.iter().sum::<f64>() / errs.len() as f64;
-    let pe_sd =
-        (errs.iter().map(|e| (e - pe_mean).powi(2)).sum::<f64>() / errs.len() as f64).sqrt();
+    let pe_sd = (errs.iter().map(|e| (e - pe_mean).powi(2)).sum::<f64>() / errs.len() as f64).sqrt();
     let test = samples(&load("cross-diameter", overrides), seed, &mut recon);
-    let rmse = (test
-        .iter()
-        .map(|s| (f_all(s.sum) - s.truth[2]).powi(2))
-        .sum::<f64>()
-        / test.len() as f64)
-        .sqrt();
+    let rmse = (test.iter().map(|s| (f_all(s.sum) - s.truth[2]).powi(2)).sum::<f64>() / test.len() as f64).sqrt();
     EitFigures {
         r2_centre,
         r2_all,
@@ -205,9 +169,7 @@ pub fn measure(seed: u64, overrides: &[String]) -> EitFigures {
 #[allow(dead_code)] // the pinning test includes this file for `measure`
 fn main() {
     let mut args = std::env::args().skip(1);
-    let seed: u64 = args
-        .next()
-        .map_or(1, |s| s.parse().expect("SEED is an integer"));
+    let seed: u64 = args.next().map_or(1, |s| s.parse().expect("SEED is an integer"));
     let overrides: Vec<String> = args.collect();
     let f = measure(seed, &overrides);
     println!("seed {seed} overrides {overrides:?}");
@@ -215,10 +177,7 @@ fn main() {
         "EIT conductivity-sum R^2: centre {:.3} (paper 0.935), all positions {:.3} (paper 0.781)",
         f.r2_centre, f.r2_all
     );
-    println!(
-        "EIT-NoCal RMSE on cross-diameter: {:.3} N over {} frames (paper 1.45 N)",
-        f.nocal_rmse_n, f.test_frames
-    );
+    println!("EIT-NoCal RMSE on cross-diameter: {:.3} N over {} frames (paper 1.45 N)", f.nocal_rmse_n, f.test_frames);
     println!(
         "localisation on calibration frames: {:.2} +- {:.2} mm, {} of {} frames without contact (paper 4.4 +- 1.9 mm)",
         f.localisation_mm.0, f.localisation_mm.1, f.missed, f.calibration_frames

@@ -30,11 +30,7 @@ const SIM_MESH_ELECTRODE_RATIO: f64 = 0.5;
 
 /// Element count of the simulation mesh for the smallest indenter of a scene: equilateral
 /// triangles of edge `mesh_edge_per_diameter * d_min`, clamped to the profile's bounds.
-pub fn sim_mesh_elements(
-    profile: &Profile,
-    sensor: &Sensor,
-    smallest_diameter_mm: Option<f64>,
-) -> usize {
+pub fn sim_mesh_elements(profile: &Profile, sensor: &Sensor, smallest_diameter_mm: Option<f64>) -> usize {
     let Some(d) = smallest_diameter_mm else {
         return profile.mesh_min_elements;
     };
@@ -48,10 +44,7 @@ pub fn sim_mesh_elements(
 fn same_state(a: &[Load], b: &[Load]) -> bool {
     a.len() == b.len()
         && a.iter().zip(b).all(|(p, q)| {
-            p.x_mm == q.x_mm
-                && p.y_mm == q.y_mm
-                && p.diameter_mm == q.diameter_mm
-                && p.force_n == q.force_n
+            p.x_mm == q.x_mm && p.y_mm == q.y_mm && p.diameter_mm == q.diameter_mm && p.force_n == q.force_n
         })
 }
 
@@ -69,12 +62,8 @@ pub fn misplace_electrodes(sensor: &Sensor, sd_mm: f64, seed: u64) -> Sensor {
     let mut rng = stream(seed, Stream::ElectrodePlacement);
     for e in &mut built.electrodes {
         let len = e.length_mm();
-        let dir = [
-            (e.end_mm[0] - e.start_mm[0]) / len,
-            (e.end_mm[1] - e.start_mm[1]) / len,
-        ];
-        let mut shift = (sd_mm * normal(&mut rng))
-            .clamp(-MISPLACEMENT_CLIP_SD * sd_mm, MISPLACEMENT_CLIP_SD * sd_mm);
+        let dir = [(e.end_mm[0] - e.start_mm[0]) / len, (e.end_mm[1] - e.start_mm[1]) / len];
+        let mut shift = (sd_mm * normal(&mut rng)).clamp(-MISPLACEMENT_CLIP_SD * sd_mm, MISPLACEMENT_CLIP_SD * sd_mm);
         // keep both ends on the side (the electrode may not wrap a corner)
         for p in [e.start_mm, e.end_mm] {
             for (axis, half) in [(0, hx), (1, hy)] {
@@ -123,12 +112,7 @@ pub struct EitChannel {
 
 impl EitChannel {
     /// Meshes the sensor for the timeline's smallest indenter and prepares the forward model.
-    pub fn new(
-        profile: &Profile,
-        sensor: &Sensor,
-        timeline: &Timeline,
-        seed: u64,
-    ) -> Result<EitChannel, EitError> {
+    pub fn new(profile: &Profile, sensor: &Sensor, timeline: &Timeline, seed: u64) -> Result<EitChannel, EitError> {
         let elements = sim_mesh_elements(profile, sensor, timeline.smallest_diameter_mm());
         let sensor = &misplace_electrodes(sensor, profile.electrode_misplacement_mm, seed);
         let mesh = Mesh::generate(
@@ -155,11 +139,8 @@ impl EitChannel {
             current_ua: profile.current_ua,
         };
         let forward = ForwardModel::new(sensor, &mesh, &cem)?;
-        let mut diameters: Vec<f64> = timeline
-            .segments
-            .iter()
-            .flat_map(|s| s.contacts.iter().map(|c| c.diameter_mm))
-            .collect();
+        let mut diameters: Vec<f64> =
+            timeline.segments.iter().flat_map(|s| s.contacts.iter().map(|c| c.diameter_mm)).collect();
         diameters.sort_by(f64::total_cmp);
         diameters.dedup();
         let foam = crate::randomness::SmoothField::new(
@@ -167,13 +148,7 @@ impl EitChannel {
             profile.foam_heterogeneity,
             profile.foam_heterogeneity_length_mm,
         );
-        let compressor = Compressor::new(
-            profile,
-            mesh.element_centroids_mm(),
-            &diameters,
-            &foam,
-            seed,
-        );
+        let compressor = Compressor::new(profile, mesh.element_centroids_mm(), &diameters, &foam, seed);
         let n = compressor.element_count();
         let max_contacts = timeline.max_contacts();
         Ok(EitChannel {
@@ -182,11 +157,7 @@ impl EitChannel {
             compressor,
             noise_rel: profile.eit_noise_rel,
             noise_abs_v: profile.eit_noise_abs_v,
-            drift: Drift::new(
-                stream(seed, Stream::EitDrift),
-                profile.eit_drift_rel,
-                profile.eit_drift_tau_s,
-            ),
+            drift: Drift::new(stream(seed, Stream::EitDrift), profile.eit_drift_rel, profile.eit_drift_tau_s),
             noise: stream(seed, Stream::EitNoise),
             cache: Vec::with_capacity(CACHE_STATES),
             clock: 0,
@@ -223,11 +194,7 @@ impl EitChannel {
     ) -> Result<(), EitError> {
         let m = self.measurements.len();
         if out.len() != m {
-            return Err(EitError::Length {
-                what: "eit frame buffer",
-                expected: m,
-                got: out.len(),
-            });
+            return Err(EitError::Length { what: "eit frame buffer", expected: m, got: out.len() });
         }
         let start = t_s - 0.5 * period_s;
         let mut hint = 0;
@@ -243,11 +210,7 @@ impl EitChannel {
         for v in out.iter_mut() {
             let clean = *v * scale;
             let sd = self.noise_rel * clean.abs() + self.noise_abs_v;
-            *v = if sd > 0.0 {
-                clean + sd * normal(&mut self.noise)
-            } else {
-                clean
-            };
+            *v = if sd > 0.0 { clean + sd * normal(&mut self.noise) } else { clean };
         }
         Ok(())
     }
@@ -255,16 +218,11 @@ impl EitChannel {
     /// Cache slot holding the noiseless values of `self.block_loads`, solving on a miss.
     fn solved(&mut self) -> Result<usize, EitError> {
         self.clock += 1;
-        if let Some(i) = self
-            .cache
-            .iter()
-            .position(|c| same_state(&c.loads, &self.block_loads))
-        {
+        if let Some(i) = self.cache.iter().position(|c| same_state(&c.loads, &self.block_loads)) {
             self.cache[i].last_used = self.clock;
             return Ok(i);
         }
-        self.compressor
-            .conductivity_into(&self.block_loads, &mut self.sigma);
+        self.compressor.conductivity_into(&self.block_loads, &mut self.sigma);
         let solution = self.forward.solve(&self.sigma)?;
         self.solves += 1;
         let slot = if self.cache.len() < CACHE_STATES {
@@ -275,9 +233,7 @@ impl EitChannel {
             });
             self.cache.len() - 1
         } else {
-            (0..self.cache.len())
-                .min_by_key(|&i| self.cache[i].last_used)
-                .expect("cache is not empty")
+            (0..self.cache.len()).min_by_key(|&i| self.cache[i].last_used).expect("cache is not empty")
         };
         let entry = &mut self.cache[slot];
         entry.loads.clear();
@@ -310,22 +266,18 @@ mod tests {
             } else {
                 assert_eq!(a.start_mm[0], b.start_mm[0]);
             }
-            moved += (a.centre_mm()[0] - b.centre_mm()[0]).abs()
-                + (a.centre_mm()[1] - b.centre_mm()[1]).abs();
+            moved += (a.centre_mm()[0] - b.centre_mm()[0]).abs() + (a.centre_mm()[1] - b.centre_mm()[1]).abs();
         }
         let mean = moved / 16.0;
-        assert!(
-            mean > 0.5 && mean < 4.0,
-            "mean displacement {mean} mm for sd 2 mm"
-        );
+        assert!(mean > 0.5 && mean < 4.0, "mean displacement {mean} mm for sd 2 mm");
         // a tight sensor: an electrode at a corner cannot be pushed past it
-        let tight = Sensor::from_toml("[sensor]\nwidth_mm = 22.0\nheight_mm = 22.0\nelectrodes_per_side = 1\nelectrode_length_mm = 20.0\n").unwrap();
+        let tight = Sensor::from_toml(
+            "[sensor]\nwidth_mm = 22.0\nheight_mm = 22.0\nelectrodes_per_side = 1\nelectrode_length_mm = 20.0\n",
+        )
+        .unwrap();
         for e in misplace_electrodes(&tight, 5.0, 1).electrodes {
             for p in [e.start_mm, e.end_mm] {
-                assert!(
-                    p[0].abs() <= 11.0 + 1e-9 && p[1].abs() <= 11.0 + 1e-9,
-                    "{p:?}"
-                );
+                assert!(p[0].abs() <= 11.0 + 1e-9 && p[1].abs() <= 11.0 + 1e-9, "{p:?}");
             }
         }
     }
@@ -336,12 +288,7 @@ mod tests {
         let s = Sensor::paper_100mm();
         assert_eq!(sim_mesh_elements(&p, &s, None), p.mesh_min_elements);
         assert_eq!(sim_mesh_elements(&p, &s, Some(2.0)), p.mesh_max_elements);
-        let fine = Profile {
-            mesh_min_elements: 100,
-            ..p.clone()
-        };
-        assert!(
-            sim_mesh_elements(&fine, &s, Some(10.0)) > sim_mesh_elements(&fine, &s, Some(20.0))
-        );
+        let fine = Profile { mesh_min_elements: 100, ..p.clone() };
+        assert!(sim_mesh_elements(&fine, &s, Some(10.0)) > sim_mesh_elements(&fine, &s, Some(20.0)));
     }
 }

@@ -62,11 +62,7 @@ impl RadialKernel {
                 prob / area
             })
             .collect();
-        RadialKernel {
-            diameter_mm,
-            step_mm,
-            values,
-        }
+        RadialKernel { diameter_mm, step_mm, values }
     }
 
     fn at(&self, rho_mm: f64) -> f64 {
@@ -117,10 +113,7 @@ impl Compressor {
                 kernels.push(RadialKernel::new(d, blur_mm));
             }
         }
-        let compliance = centroids_mm
-            .iter()
-            .map(|c| (1.0 + foam.at(c[0], c[1])).max(0.0))
-            .collect();
+        let compliance = centroids_mm.iter().map(|c| (1.0 + foam.at(c[0], c[1])).max(0.0)).collect();
         let n = centroids_mm.len();
         Compressor {
             sigma0_s_per_m: profile.sigma0_s_per_m,
@@ -153,9 +146,8 @@ impl Compressor {
         self.seated_kpa.fill(0.0);
         for load in loads {
             let seating = if self.seating_jitter > 0.0 {
-                (1.0 + self.seating_jitter
-                    * indexed_normal(self.seed, Stream::FoamSeating, u64::from(load.level)))
-                .max(0.0)
+                (1.0 + self.seating_jitter * indexed_normal(self.seed, Stream::FoamSeating, u64::from(load.level)))
+                    .max(0.0)
             } else {
                 1.0
             };
@@ -165,11 +157,7 @@ impl Compressor {
                 .find(|k| k.diameter_mm == load.diameter_mm)
                 .expect("every diameter of the timeline has a kernel");
             let n_per_mm2_to_kpa = 1000.0;
-            let elements = self
-                .pressure_kpa
-                .iter_mut()
-                .zip(&mut self.seated_kpa)
-                .zip(&self.centroids_mm);
+            let elements = self.pressure_kpa.iter_mut().zip(&mut self.seated_kpa).zip(&self.centroids_mm);
             for ((p, q), c) in elements {
                 let rho = ((c[0] - load.x_mm).powi(2) + (c[1] - load.y_mm).powi(2)).sqrt();
                 let dp = n_per_mm2_to_kpa * load.force_n * k.at(rho);
@@ -177,11 +165,7 @@ impl Compressor {
                 *q += dp * seating;
             }
         }
-        let elements = sigma
-            .iter_mut()
-            .zip(&self.pressure_kpa)
-            .zip(&self.seated_kpa)
-            .zip(&self.compliance);
+        let elements = sigma.iter_mut().zip(&self.pressure_kpa).zip(&self.seated_kpa).zip(&self.compliance);
         for (((s, p), q), c) in elements {
             // pressure-weighted seating factor of the contacts that load this element
             let seating = if *p > 0.0 { q / p } else { 1.0 };
@@ -198,14 +182,7 @@ mod tests {
     use crate::randomness::stream;
 
     fn load(x: f64, y: f64, d: f64, f: f64) -> Load {
-        Load {
-            x_mm: x,
-            y_mm: y,
-            diameter_mm: d,
-            force_n: f,
-            press: 0,
-            level: 0,
-        }
+        Load { x_mm: x, y_mm: y, diameter_mm: d, force_n: f, press: 0, level: 0 }
     }
 
     #[test]

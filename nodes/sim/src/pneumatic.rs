@@ -101,8 +101,7 @@ impl Pneumatic {
         for (frac, n) in FOOTPRINT_RINGS {
             for k in 0..n {
                 let a = std::f64::consts::TAU * (k as f64 + 0.5) / n as f64;
-                sum += self
-                    .sensitivity_kpa_per_n(x_mm + frac * r * a.cos(), y_mm + frac * r * a.sin());
+                sum += self.sensitivity_kpa_per_n(x_mm + frac * r * a.cos(), y_mm + frac * r * a.sin());
                 count += 1;
             }
         }
@@ -114,8 +113,7 @@ impl Pneumatic {
         if self.seating_jitter == 0.0 {
             return 1.0;
         }
-        (1.0 + self.seating_jitter * indexed_normal(self.seed, Stream::Seating, u64::from(level)))
-            .max(0.0)
+        (1.0 + self.seating_jitter * indexed_normal(self.seed, Stream::Seating, u64::from(level))).max(0.0)
     }
 
     /// Pressure change of the loads with no history (quasi-static, noiseless), kPa.
@@ -124,9 +122,7 @@ impl Pneumatic {
             .iter()
             .map(|l| {
                 let s = self.footprint_sensitivity_kpa_per_n(l.x_mm, l.y_mm, l.diameter_mm);
-                let area = (self.reference_diameter_mm / l.diameter_mm)
-                    .powf(self.area_exponent)
-                    .min(1.0);
+                let area = (self.reference_diameter_mm / l.diameter_mm).powf(self.area_exponent).min(1.0);
                 let f_nl = self.nonlinearity_force_n * area;
                 s * self.seating_gain(l.level) * l.force_n / (1.0 + l.force_n / f_nl)
             })
@@ -147,11 +143,7 @@ impl Pneumatic {
         }
         // and creeps towards the input (viscoelastic relaxation of the shell)
         self.play_kpa += (x - self.play_kpa) * (1.0 - (-dt / self.hysteresis_tau_s).exp());
-        let noise = if self.noise_kpa > 0.0 {
-            self.noise_kpa * normal(&mut self.noise)
-        } else {
-            0.0
-        };
+        let noise = if self.noise_kpa > 0.0 { self.noise_kpa * normal(&mut self.noise) } else { 0.0 };
         self.p0_kpa + self.play_kpa + self.drift.at(t_s) + noise
     }
 }
@@ -161,14 +153,7 @@ mod tests {
     use super::*;
 
     fn load(x: f64, y: f64, d: f64, f: f64) -> Load {
-        Load {
-            x_mm: x,
-            y_mm: y,
-            diameter_mm: d,
-            force_n: f,
-            press: 0,
-            level: 0,
-        }
+        Load { x_mm: x, y_mm: y, diameter_mm: d, force_n: f, press: 0, level: 0 }
     }
 
     #[test]
@@ -176,19 +161,13 @@ mod tests {
         let p = Profile::ideal();
         let mut pn = Pneumatic::new(&p, &Sensor::paper_100mm(), 7);
         assert_eq!(pn.sample(0.0, &[]), p.p0_kpa);
-        let dps: Vec<f64> = (1..=10)
-            .map(|f| pn.static_dp_kpa(&[load(0.0, 0.0, 15.0, f as f64)]))
-            .collect();
+        let dps: Vec<f64> = (1..=10).map(|f| pn.static_dp_kpa(&[load(0.0, 0.0, 15.0, f as f64)])).collect();
         assert!(dps.windows(2).all(|w| w[1] > w[0]));
         // mild: slope at 10 N is within 25 % of the slope at 1 N
         let (s1, s10) = (dps[1] - dps[0], dps[9] - dps[8]);
         assert!(s10 < s1 && s10 > 0.75 * s1, "{s1} {s10}");
         // centre slope close to the nominal sensitivity (edge term ~ 2 exp(-50/18) at the centre)
-        assert!(
-            (dps[0] / p.sensitivity_kpa_per_n - 1.0).abs() < 0.15,
-            "{}",
-            dps[0]
-        );
+        assert!((dps[0] / p.sensitivity_kpa_per_n - 1.0).abs() < 0.15, "{}", dps[0]);
         assert!((pn.sample(1.0, &[load(0.0, 0.0, 15.0, 5.0)]) - p.p0_kpa - dps[4]).abs() < 1e-12);
     }
 
@@ -199,25 +178,19 @@ mod tests {
         let edge = pn.static_dp_kpa(&[load(45.0, 0.0, 15.0, 5.0)]);
         let corner = pn.static_dp_kpa(&[load(45.0, 45.0, 15.0, 5.0)]);
         assert!(centre > edge && edge > corner, "{centre} {edge} {corner}");
-        let ratio = |d: f64, f: f64| {
-            pn.static_dp_kpa(&[load(0.0, 0.0, d, f)]) / pn.static_dp_kpa(&[load(0.0, 0.0, 15.0, f)])
-        };
+        let ratio =
+            |d: f64, f: f64| pn.static_dp_kpa(&[load(0.0, 0.0, d, f)]) / pn.static_dp_kpa(&[load(0.0, 0.0, 15.0, f)]);
         assert!(ratio(25.0, 10.0) < ratio(25.0, 1.0));
         assert!(ratio(25.0, 10.0) < 0.95);
         // two contacts add
         let both = pn.static_dp_kpa(&[load(-20.0, 0.0, 10.0, 2.0), load(20.0, 0.0, 10.0, 3.0)]);
-        let sum = pn.static_dp_kpa(&[load(-20.0, 0.0, 10.0, 2.0)])
-            + pn.static_dp_kpa(&[load(20.0, 0.0, 10.0, 3.0)]);
+        let sum = pn.static_dp_kpa(&[load(-20.0, 0.0, 10.0, 2.0)]) + pn.static_dp_kpa(&[load(20.0, 0.0, 10.0, 3.0)]);
         assert!((both - sum).abs() < 1e-12);
     }
 
     #[test]
     fn hysteresis_lags_loading_and_relaxes() {
-        let p = Profile {
-            hysteresis_kpa: 0.05,
-            hysteresis_tau_s: 2.0,
-            ..Profile::ideal()
-        };
+        let p = Profile { hysteresis_kpa: 0.05, hysteresis_tau_s: 2.0, ..Profile::ideal() };
         let mut pn = Pneumatic::new(&p, &Sensor::paper_100mm(), 1);
         let target = pn.static_dp_kpa(&[load(0.0, 0.0, 15.0, 5.0)]);
         let first = pn.sample(0.05, &[load(0.0, 0.0, 15.0, 5.0)]) - p.p0_kpa;

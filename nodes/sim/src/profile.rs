@@ -185,18 +185,10 @@ impl Profile {
     /// Checks every constant's range; the error names the field.
     pub fn validate(&self) -> Result<(), (&'static str, String)> {
         let pos = |name: &'static str, x: f64| {
-            if x.is_finite() && x > 0.0 {
-                Ok(())
-            } else {
-                Err((name, format!("must be finite and > 0 (got {x})")))
-            }
+            if x.is_finite() && x > 0.0 { Ok(()) } else { Err((name, format!("must be finite and > 0 (got {x})"))) }
         };
         let nonneg = |name: &'static str, x: f64| {
-            if x.is_finite() && x >= 0.0 {
-                Ok(())
-            } else {
-                Err((name, format!("must be finite and >= 0 (got {x})")))
-            }
+            if x.is_finite() && x >= 0.0 { Ok(()) } else { Err((name, format!("must be finite and >= 0 (got {x})"))) }
         };
         let frac = |name: &'static str, x: f64| {
             if x.is_finite() && (0.0..1.0).contains(&x) {
@@ -215,10 +207,7 @@ impl Profile {
         pos("pressure_sat_kpa", self.pressure_sat_kpa)?;
         nonneg("archie_exponent", self.archie_exponent)?;
         frac("foam_heterogeneity", self.foam_heterogeneity)?;
-        pos(
-            "foam_heterogeneity_length_mm",
-            self.foam_heterogeneity_length_mm,
-        )?;
+        pos("foam_heterogeneity_length_mm", self.foam_heterogeneity_length_mm)?;
         pos("contact_impedance_ohm_mm2", self.contact_impedance_ohm_mm2)?;
         frac("contact_impedance_spread", self.contact_impedance_spread)?;
         nonneg("electrode_misplacement_mm", self.electrode_misplacement_mm)?;
@@ -242,10 +231,7 @@ impl Profile {
         frac("edge_stiffening", self.edge_stiffening)?;
         pos("edge_length_mm", self.edge_length_mm)?;
         frac("sensitivity_heterogeneity", self.sensitivity_heterogeneity)?;
-        pos(
-            "sensitivity_heterogeneity_length_mm",
-            self.sensitivity_heterogeneity_length_mm,
-        )?;
+        pos("sensitivity_heterogeneity_length_mm", self.sensitivity_heterogeneity_length_mm)?;
         pos("nonlinearity_force_n", self.nonlinearity_force_n)?;
         pos("reference_diameter_mm", self.reference_diameter_mm)?;
         nonneg("area_exponent", self.area_exponent)?;
@@ -277,10 +263,7 @@ mod tests {
 
     #[test]
     fn validate_names_the_field() {
-        let p = Profile {
-            strain_max: 1.5,
-            ..Profile::paper()
-        };
+        let p = Profile { strain_max: 1.5, ..Profile::paper() };
         assert_eq!(p.validate().unwrap_err().0, "strain_max");
     }
 }

@@ -65,10 +65,7 @@ impl SmoothField {
     /// A field of standard deviation `sd` and correlation length `length_mm` (sd 0: zero).
     pub fn new(rng: &mut ChaCha8Rng, sd: f64, length_mm: f64) -> SmoothField {
         if sd == 0.0 {
-            return SmoothField {
-                modes: Vec::new(),
-                scale: 0.0,
-            };
+            return SmoothField { modes: Vec::new(), scale: 0.0 };
         }
         let modes = (0..FIELD_MODES)
             .map(|_| {
@@ -76,20 +73,12 @@ impl SmoothField {
                 (k, rng.random::<f64>() * std::f64::consts::TAU)
             })
             .collect();
-        SmoothField {
-            modes,
-            scale: sd * (2.0 / FIELD_MODES as f64).sqrt(),
-        }
+        SmoothField { modes, scale: sd * (2.0 / FIELD_MODES as f64).sqrt() }
     }
 
     /// Value at (x, y) mm.
     pub fn at(&self, x_mm: f64, y_mm: f64) -> f64 {
-        self.scale
-            * self
-                .modes
-                .iter()
-                .map(|(k, p)| (k[0] * x_mm + k[1] * y_mm + p).cos())
-                .sum::<f64>()
+        self.scale * self.modes.iter().map(|(k, p)| (k[0] * x_mm + k[1] * y_mm + p).cos()).sum::<f64>()
     }
 }
 
@@ -107,13 +96,7 @@ impl Drift {
     /// Starts at t = 0 from the stationary distribution (the pipeline tares whatever it is).
     pub fn new(mut rng: ChaCha8Rng, sd: f64, tau_s: f64) -> Drift {
         let value = if sd > 0.0 { sd * normal(&mut rng) } else { 0.0 };
-        Drift {
-            sd,
-            tau_s,
-            t_s: 0.0,
-            value,
-            rng,
-        }
+        Drift { sd, tau_s, t_s: 0.0, value, rng }
     }
 
     /// Value at `t_s` (times must not decrease; an earlier time returns the current value).
@@ -138,19 +121,13 @@ mod tests {
         let trials = 40;
         for seed in 0..trials {
             let f = SmoothField::new(&mut stream(seed, Stream::FoamField), 0.2, 20.0);
-            let v: Vec<f64> = (0..200)
-                .map(|i| f.at((i % 20) as f64 * 50.0, (i / 20) as f64 * 50.0))
-                .collect();
+            let v: Vec<f64> = (0..200).map(|i| f.at((i % 20) as f64 * 50.0, (i / 20) as f64 * 50.0)).collect();
             sd_sum += (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt();
             // 1 mm apart is much closer than 20 mm correlation: values nearly equal
             assert!((f.at(0.0, 0.0) - f.at(1.0, 0.0)).abs() < 0.05);
         }
         // mean of sample sds of far-apart points ~ 0.2 (Monte-Carlo tolerance)
-        assert!(
-            (sd_sum / trials as f64 - 0.2).abs() < 0.03,
-            "{}",
-            sd_sum / trials as f64
-        );
+        assert!((sd_sum / trials as f64 - 0.2).abs() < 0.03, "{}", sd_sum / trials as f64);
     }
 
     #[test]

@@ -34,10 +34,7 @@ pub enum SimEvent {
     /// A gauge-pressure sample, kPa (includes the no-load offset P0).
     Pressure { t_s: f64, kpa: f64 },
     /// A ground-truth row: these contacts hold from `t_s` until the next row (empty: none).
-    Truth {
-        t_s: f64,
-        contacts: Vec<TruthContact>,
-    },
+    Truth { t_s: f64, contacts: Vec<TruthContact> },
 }
 
 /// What `next_into` produced; EIT values and truth contacts are in the caller's buffers.
@@ -74,20 +71,13 @@ impl Simulator {
     pub fn new(scene: &Scene, seed: u64) -> Result<Simulator, SimError> {
         let eit = if scene.channels.eit {
             Some(
-                EitChannel::new(&scene.profile, &scene.sensor, &scene.timeline, seed).map_err(
-                    |source| SimError::Eit {
-                        scene: scene.name.clone(),
-                        source,
-                    },
-                )?,
+                EitChannel::new(&scene.profile, &scene.sensor, &scene.timeline, seed)
+                    .map_err(|source| SimError::Eit { scene: scene.name.clone(), source })?,
             )
         } else {
             None
         };
-        let pneumatic = scene
-            .channels
-            .pressure
-            .then(|| Pneumatic::new(&scene.profile, &scene.sensor, seed));
+        let pneumatic = scene.channels.pressure.then(|| Pneumatic::new(&scene.profile, &scene.sensor, seed));
         Ok(Simulator {
             sensor: scene.sensor.clone(),
             rates: scene.rates,
@@ -145,26 +135,17 @@ impl Simulator {
 
     /// Time of the next EIT frame, if it completes before the end.
     fn next_frame_t(&self) -> Option<f64> {
-        let t = self
-            .eit
-            .as_ref()
-            .map(|_| (self.next_frame as f64 + 0.5) * self.frame_period_s())?;
+        let t = self.eit.as_ref().map(|_| (self.next_frame as f64 + 0.5) * self.frame_period_s())?;
         ((self.next_frame + 1) as f64 * self.frame_period_s() <= self.duration_s).then_some(t)
     }
 
     fn next_sample_t(&self) -> Option<f64> {
-        let t = self
-            .pneumatic
-            .as_ref()
-            .map(|_| self.next_sample as f64 / self.rates.pressure_hz)?;
+        let t = self.pneumatic.as_ref().map(|_| self.next_sample as f64 / self.rates.pressure_hz)?;
         (t < self.duration_s).then_some(t)
     }
 
     fn next_truth_t(&self) -> Option<f64> {
-        self.truth
-            .get(self.next_truth)
-            .map(|r| r.t_s)
-            .filter(|&t| t < self.duration_s)
+        self.truth.get(self.next_truth).map(|r| r.t_s).filter(|&t| t < self.duration_s)
     }
 
     /// The next event; an EIT frame's values go into `eit_v` (length M), a truth row's
@@ -174,11 +155,7 @@ impl Simulator {
         eit_v: &mut [f64],
         truth: &mut Vec<TruthContact>,
     ) -> Result<Option<EventKind>, SimError> {
-        let (tt, tp, te) = (
-            self.next_truth_t(),
-            self.next_sample_t(),
-            self.next_frame_t(),
-        );
+        let (tt, tp, te) = (self.next_truth_t(), self.next_sample_t(), self.next_frame_t());
         let first = [tt, tp, te].into_iter().flatten().reduce(f64::min);
         let Some(t) = first else { return Ok(None) };
         if tt == Some(t) {
@@ -190,24 +167,15 @@ impl Simulator {
         if tp == Some(t) {
             self.hint = self.timeline.loads_into(t, self.hint, &mut self.loads);
             self.stage.place(&mut self.loads);
-            let pn = self
-                .pneumatic
-                .as_mut()
-                .expect("a sample time implies the pressure channel");
+            let pn = self.pneumatic.as_mut().expect("a sample time implies the pressure channel");
             let kpa = pn.sample(t, &self.loads);
             self.next_sample += 1;
             return Ok(Some(EventKind::Pressure { t_s: t, kpa }));
         }
         let period = self.frame_period_s();
-        let eit = self
-            .eit
-            .as_mut()
-            .expect("a frame time implies the eit channel");
+        let eit = self.eit.as_mut().expect("a frame time implies the eit channel");
         eit.frame_into(&self.timeline, &self.stage, t, period, eit_v)
-            .map_err(|source| SimError::Eit {
-                scene: self.scene.clone(),
-                source,
-            })?;
+            .map_err(|source| SimError::Eit { scene: self.scene.clone(), source })?;
         let seq = self.next_frame;
         self.next_frame += 1;
         Ok(Some(EventKind::Eit { t_s: t, seq }))
@@ -221,10 +189,7 @@ impl Simulator {
         match self.eit.as_mut() {
             Some(eit) => eit
                 .frame_into(&self.timeline, &self.stage, t_s, period, v)
-                .map_err(|source| SimError::Eit {
-                    scene: self.scene.clone(),
-                    source,
-                }),
+                .map_err(|source| SimError::Eit { scene: self.scene.clone(), source }),
             None => Ok(()),
         }
     }

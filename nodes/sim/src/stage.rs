@@ -22,18 +22,9 @@ pub struct Stage {
 impl Stage {
     pub fn new(profile: &Profile, seed: u64) -> Stage {
         let mut rng = stream(seed, Stream::StageMount);
-        let offset_mm = [
-            profile.stage_offset_mm * normal(&mut rng),
-            profile.stage_offset_mm * normal(&mut rng),
-        ];
+        let offset_mm = [profile.stage_offset_mm * normal(&mut rng), profile.stage_offset_mm * normal(&mut rng)];
         let angle = (profile.stage_rotation_deg * normal(&mut rng)).to_radians();
-        Stage {
-            offset_mm,
-            cos: angle.cos(),
-            sin: angle.sin(),
-            repeatability_mm: profile.stage_repeatability_mm,
-            seed,
-        }
+        Stage { offset_mm, cos: angle.cos(), sin: angle.sin(), repeatability_mm: profile.stage_repeatability_mm, seed }
     }
 
     /// Whether `place` changes anything.
@@ -48,10 +39,8 @@ impl Stage {
         }
         for l in loads {
             let (x, y) = (l.x_mm, l.y_mm);
-            let (mut ax, mut ay) = (
-                self.cos * x - self.sin * y + self.offset_mm[0],
-                self.sin * x + self.cos * y + self.offset_mm[1],
-            );
+            let (mut ax, mut ay) =
+                (self.cos * x - self.sin * y + self.offset_mm[0], self.sin * x + self.cos * y + self.offset_mm[1]);
             if self.repeatability_mm > 0.0 {
                 let k = 2 * u64::from(l.press);
                 ax += self.repeatability_mm * indexed_normal(self.seed, Stream::StageRepeat, k);
@@ -68,14 +57,7 @@ mod tests {
     use super::*;
 
     fn load(x: f64, y: f64, press: u32) -> Load {
-        Load {
-            x_mm: x,
-            y_mm: y,
-            diameter_mm: 10.0,
-            force_n: 1.0,
-            press,
-            level: 0,
-        }
+        Load { x_mm: x, y_mm: y, diameter_mm: 10.0, force_n: 1.0, press, level: 0 }
     }
 
     #[test]
@@ -83,12 +65,8 @@ mod tests {
         let mut l = [load(10.0, -5.0, 0)];
         Stage::new(&Profile::ideal(), 1).place(&mut l);
         assert_eq!(l[0], load(10.0, -5.0, 0));
-        let p = Profile {
-            stage_offset_mm: 2.0,
-            stage_rotation_deg: 2.0,
-            stage_repeatability_mm: 0.0,
-            ..Profile::ideal()
-        };
+        let p =
+            Profile { stage_offset_mm: 2.0, stage_rotation_deg: 2.0, stage_repeatability_mm: 0.0, ..Profile::ideal() };
         let stage = Stage::new(&p, 1);
         let mut a = [load(0.0, 0.0, 0), load(30.0, 40.0, 1)];
         stage.place(&mut a);
@@ -96,16 +74,9 @@ mod tests {
         let d = ((a[1].x_mm - a[0].x_mm).powi(2) + (a[1].y_mm - a[0].y_mm).powi(2)).sqrt();
         assert!((d - 50.0).abs() < 1e-9);
         // same press, same place; repeatability differs per press
-        let q = Profile {
-            stage_repeatability_mm: 0.5,
-            ..p
-        };
+        let q = Profile { stage_repeatability_mm: 0.5, ..p };
         let stage = Stage::new(&q, 1);
-        let (mut b, mut c, mut e) = (
-            [load(5.0, 5.0, 7)],
-            [load(5.0, 5.0, 7)],
-            [load(5.0, 5.0, 8)],
-        );
+        let (mut b, mut c, mut e) = ([load(5.0, 5.0, 7)], [load(5.0, 5.0, 7)], [load(5.0, 5.0, 8)]);
         stage.place(&mut b);
         stage.place(&mut c);
         stage.place(&mut e);

@@ -41,19 +41,13 @@ pub struct Segment {
 impl Segment {
     /// True when no force changes during the segment (a hold or a rest).
     pub fn is_static(&self) -> bool {
-        self.contacts
-            .iter()
-            .all(|c| c.start_force_n == c.end_force_n)
+        self.contacts.iter().all(|c| c.start_force_n == c.end_force_n)
     }
 
     /// Fraction of the segment elapsed at time `t_s` (0 for zero-length segments).
     pub fn fraction(&self, t_s: f64) -> f64 {
         let len = self.end_s - self.start_s;
-        if len > 0.0 {
-            ((t_s - self.start_s) / len).clamp(0.0, 1.0)
-        } else {
-            1.0
-        }
+        if len > 0.0 { ((t_s - self.start_s) / len).clamp(0.0, 1.0) } else { 1.0 }
     }
 }
 
@@ -121,20 +115,12 @@ impl Timeline {
 
     /// Smallest indenter diameter in the timeline, mm (None without contacts).
     pub fn smallest_diameter_mm(&self) -> Option<f64> {
-        self.segments
-            .iter()
-            .flat_map(|s| s.contacts.iter())
-            .map(|c| c.diameter_mm)
-            .reduce(f64::min)
+        self.segments.iter().flat_map(|s| s.contacts.iter()).map(|c| c.diameter_mm).reduce(f64::min)
     }
 
     /// Largest number of simultaneous contacts.
     pub fn max_contacts(&self) -> usize {
-        self.segments
-            .iter()
-            .map(|s| s.contacts.len())
-            .max()
-            .unwrap_or(0)
+        self.segments.iter().map(|s| s.contacts.len()).max().unwrap_or(0)
     }
 }
 
@@ -158,21 +144,9 @@ mod tests {
     fn loads_interpolate_ramps_and_skip_zero_force() {
         let tl = Timeline {
             segments: vec![
-                Segment {
-                    start_s: 0.0,
-                    end_s: 2.0,
-                    contacts: vec![],
-                },
-                Segment {
-                    start_s: 2.0,
-                    end_s: 3.0,
-                    contacts: vec![contact(0.0, 4.0)],
-                },
-                Segment {
-                    start_s: 3.0,
-                    end_s: 5.0,
-                    contacts: vec![contact(4.0, 4.0)],
-                },
+                Segment { start_s: 0.0, end_s: 2.0, contacts: vec![] },
+                Segment { start_s: 2.0, end_s: 3.0, contacts: vec![contact(0.0, 4.0)] },
+                Segment { start_s: 3.0, end_s: 5.0, contacts: vec![contact(4.0, 4.0)] },
             ],
         };
         let mut out = Vec::new();

@@ -30,12 +30,7 @@ pub fn truth_rows(timeline: &Timeline, sample_hz: f64) -> Vec<TruthRow> {
     let push = |t_s: f64, loads: &[Load], rows: &mut Vec<TruthRow>| {
         let contacts: Vec<TruthContact> = loads
             .iter()
-            .map(|l| TruthContact {
-                x_mm: l.x_mm,
-                y_mm: l.y_mm,
-                force_n: l.force_n,
-                diameter_mm: l.diameter_mm,
-            })
+            .map(|l| TruthContact { x_mm: l.x_mm, y_mm: l.y_mm, force_n: l.force_n, diameter_mm: l.diameter_mm })
             .collect();
         if rows.last().is_none_or(|r| r.contacts != contacts) {
             rows.push(TruthRow { t_s, contacts });
@@ -81,31 +76,11 @@ mod tests {
         };
         let tl = Timeline {
             segments: vec![
-                Segment {
-                    start_s: 0.0,
-                    end_s: 1.0,
-                    contacts: vec![],
-                },
-                Segment {
-                    start_s: 1.0,
-                    end_s: 1.2,
-                    contacts: vec![c(0.0, 4.0)],
-                },
-                Segment {
-                    start_s: 1.2,
-                    end_s: 3.0,
-                    contacts: vec![c(4.0, 4.0)],
-                },
-                Segment {
-                    start_s: 3.0,
-                    end_s: 4.0,
-                    contacts: vec![],
-                },
-                Segment {
-                    start_s: 4.0,
-                    end_s: 5.0,
-                    contacts: vec![],
-                },
+                Segment { start_s: 0.0, end_s: 1.0, contacts: vec![] },
+                Segment { start_s: 1.0, end_s: 1.2, contacts: vec![c(0.0, 4.0)] },
+                Segment { start_s: 1.2, end_s: 3.0, contacts: vec![c(4.0, 4.0)] },
+                Segment { start_s: 3.0, end_s: 4.0, contacts: vec![] },
+                Segment { start_s: 4.0, end_s: 5.0, contacts: vec![] },
             ],
         };
         let rows = truth_rows(&tl, 10.0);
@@ -114,9 +89,7 @@ mod tests {
         // with the first row), hold at 1.2, release at 3.0; the second rest repeats nothing
         assert_eq!(times.len(), 4, "{times:?}");
         assert!(rows[0].contacts.is_empty());
-        assert!(
-            (rows[1].t_s - 1.1).abs() < 1e-12 && (rows[1].contacts[0].force_n - 2.0).abs() < 1e-9
-        );
+        assert!((rows[1].t_s - 1.1).abs() < 1e-12 && (rows[1].contacts[0].force_n - 2.0).abs() < 1e-9);
         assert_eq!(rows[2].contacts[0].force_n, 4.0);
         assert!(rows[3].contacts.is_empty() && rows[3].t_s == 3.0);
     }

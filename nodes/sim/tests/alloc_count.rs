@@ -43,8 +43,7 @@ fn static_hold_frames_do_not_allocate() {
     let mut t = 0.0;
     while t < 10.0 {
         match sim.next_into(&mut v, &mut truth).unwrap().unwrap() {
-            skinflow_sim::EventKind::Eit { t_s, .. }
-            | skinflow_sim::EventKind::Pressure { t_s, .. } => t = t_s,
+            skinflow_sim::EventKind::Eit { t_s, .. } | skinflow_sim::EventKind::Pressure { t_s, .. } => t = t_s,
             skinflow_sim::EventKind::Truth { t_s } => t = t_s,
         }
     }
@@ -53,8 +52,7 @@ fn static_hold_frames_do_not_allocate() {
     let mut events = 0;
     loop {
         let t_s = match sim.next_into(&mut v, &mut truth).unwrap().unwrap() {
-            skinflow_sim::EventKind::Eit { t_s, .. }
-            | skinflow_sim::EventKind::Pressure { t_s, .. } => t_s,
+            skinflow_sim::EventKind::Eit { t_s, .. } | skinflow_sim::EventKind::Pressure { t_s, .. } => t_s,
             skinflow_sim::EventKind::Truth { t_s } => t_s,
         };
         if t_s > 32.5 {
@@ -64,10 +62,5 @@ fn static_hold_frames_do_not_allocate() {
     }
     let after = ALLOCATIONS.load(Ordering::Relaxed);
     assert!(events > 400, "{events} events");
-    assert_eq!(
-        after - before,
-        0,
-        "{} allocations in {events} events of a static hold",
-        after - before
-    );
+    assert_eq!(after - before, 0, "{} allocations in {events} events of a static hold", after - before);
 }

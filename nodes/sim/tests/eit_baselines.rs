@@ -19,19 +19,7 @@ fn paper_profile_eit_baselines_are_pinned() {
         "R2 centre {:.3} (0.935), R2 all {:.3} (0.781), EIT-NoCal {:.3} N (1.45), localisation {:.2} mm",
         f.r2_centre, f.r2_all, f.nocal_rmse_n, f.localisation_mm.0
     );
-    assert!(
-        (f.r2_centre - 0.935).abs() <= 0.03,
-        "centre R^2 {}",
-        f.r2_centre
-    );
-    assert!(
-        (f.r2_all - 0.781).abs() <= 0.03,
-        "all-positions R^2 {}",
-        f.r2_all
-    );
-    assert!(
-        (f.nocal_rmse_n / 1.45 - 1.0).abs() <= 0.25,
-        "EIT-NoCal RMSE {} N",
-        f.nocal_rmse_n
-    );
+    assert!((f.r2_centre - 0.935).abs() <= 0.03, "centre R^2 {}", f.r2_centre);
+    assert!((f.r2_all - 0.781).abs() <= 0.03, "all-positions R^2 {}", f.r2_all);
+    assert!((f.nocal_rmse_n / 1.45 - 1.0).abs() <= 0.25, "EIT-NoCal RMSE {} N", f.nocal_rmse_n);
 }

@@ -29,22 +29,14 @@ fn frames(name: &str, seed: u64) -> Vec<Frame> {
     for e in Simulator::new(&scene, seed).unwrap() {
         match e.unwrap() {
             SimEvent::Pressure { t_s, kpa } => samples.push((t_s, kpa)),
-            SimEvent::Truth { t_s, contacts } => truth.push((
-                t_s,
-                contacts
-                    .iter()
-                    .map(|c| [c.x_mm, c.y_mm, c.force_n, c.diameter_mm])
-                    .collect(),
-            )),
+            SimEvent::Truth { t_s, contacts } => {
+                truth.push((t_s, contacts.iter().map(|c| [c.x_mm, c.y_mm, c.force_n, c.diameter_mm]).collect()))
+            }
             SimEvent::Eit { .. } => unreachable!(),
         }
     }
     let first_contact = truth.iter().find(|r| !r.1.is_empty()).unwrap().0;
-    let tare: Vec<f64> = samples
-        .iter()
-        .filter(|s| s.0 < first_contact)
-        .map(|s| s.1)
-        .collect();
+    let tare: Vec<f64> = samples.iter().filter(|s| s.0 < first_contact).map(|s| s.1).collect();
     let p0 = tare.iter().sum::<f64>() / tare.len() as f64;
     let row_at = |t: f64| truth.partition_point(|r| r.0 <= t) - 1;
     let mut out: Vec<Frame> = Vec::new();
@@ -55,17 +47,9 @@ fn frames(name: &str, seed: u64) -> Vec<Frame> {
         if row != row_at(b - 1e-9) || truth[row].1.is_empty() {
             continue;
         }
-        let window: Vec<f64> = samples
-            .iter()
-            .filter(|s| s.0 >= a && s.0 < b)
-            .map(|s| s.1)
-            .collect();
+        let window: Vec<f64> = samples.iter().filter(|s| s.0 >= a && s.0 < b).map(|s| s.1).collect();
         let dp = window.iter().sum::<f64>() / window.len() as f64 - p0;
-        out.push(Frame {
-            contacts: truth[row].1.clone(),
-            dp_kpa: dp,
-            hold: row,
-        });
+        out.push(Frame { contacts: truth[row].1.clone(), dp_kpa: dp, hold: row });
     }
     out
 }
@@ -75,10 +59,7 @@ fn hold_means(frames: &[Frame]) -> Vec<[f64; 4]> {
     let mut out: Vec<[f64; 4]> = Vec::new();
     let mut i = 0;
     while i < frames.len() {
-        let j = frames[i..]
-            .iter()
-            .position(|f| f.hold != frames[i].hold)
-            .map_or(frames.len(), |p| i + p);
+        let j = frames[i..].iter().position(|f| f.hold != frames[i].hold).map_or(frames.len(), |p| i + p);
         let c = frames[i].contacts[0];
         let dp = frames[i..j].iter().map(|f| f.dp_kpa).sum::<f64>() / (j - i) as f64;
         out.push([c[0], c[1], c[2], dp]);
@@ -103,9 +84,7 @@ fn least_squares(rows: &[Vec<f64>], y: &[f64], ridge: &[f64]) -> Vec<f64> {
         a[i][i] += ridge[i];
     }
     for c in 0..p {
-        let piv = (c..p)
-            .max_by(|&i, &j| a[i][c].abs().total_cmp(&a[j][c].abs()))
-            .unwrap();
+        let piv = (c..p).max_by(|&i, &j| a[i][c].abs().total_cmp(&a[j][c].abs())).unwrap();
         a.swap(c, piv);
         let pivot_row = a[c].clone();
         for (r, row) in a.iter_mut().enumerate() {
@@ -122,18 +101,12 @@ fn least_squares(rows: &[Vec<f64>], y: &[f64], ridge: &[f64]) -> Vec<f64> {
 
 /// Quadratic F = a2 dP^2 + a1 dP + a0 fitted to (dP, F); returns coefficients and R^2.
 fn quadratic_fit(points: &[(f64, f64)]) -> ([f64; 3], f64) {
-    let rows: Vec<Vec<f64>> = points
-        .iter()
-        .map(|&(dp, _)| vec![dp * dp, dp, 1.0])
-        .collect();
+    let rows: Vec<Vec<f64>> = points.iter().map(|&(dp, _)| vec![dp * dp, dp, 1.0]).collect();
     let y: Vec<f64> = points.iter().map(|p| p.1).collect();
     let c = least_squares(&rows, &y, &[0.0; 3]);
     let mean = y.iter().sum::<f64>() / y.len() as f64;
     let ss_tot: f64 = y.iter().map(|v| (v - mean).powi(2)).sum();
-    let ss_res: f64 = points
-        .iter()
-        .map(|&(dp, f)| (f - (c[0] * dp * dp + c[1] * dp + c[2])).powi(2))
-        .sum();
+    let ss_res: f64 = points.iter().map(|&(dp, f)| (f - (c[0] * dp * dp + c[1] * dp + c[2])).powi(2)).sum();
     ([c[0], c[1], c[2]], 1.0 - ss_res / ss_tot)
 }
 
@@ -153,11 +126,7 @@ struct Figures {
 
 fn figures(seed: u64) -> Figures {
     let cal = hold_means(&frames("calibration", seed));
-    let centre: Vec<(f64, f64)> = cal
-        .iter()
-        .filter(|p| p[0] == 0.0 && p[1] == 0.0)
-        .map(|p| (p[3], p[2]))
-        .collect();
+    let centre: Vec<(f64, f64)> = cal.iter().filter(|p| p[0] == 0.0 && p[1] == 0.0).map(|p| (p[3], p[2])).collect();
     assert_eq!(centre.len(), 9);
     let all: Vec<(f64, f64)> = cal.iter().map(|p| (p[3], p[2])).collect();
     assert_eq!(all.len(), 225);
@@ -169,10 +138,7 @@ fn figures(seed: u64) -> Figures {
         .iter()
         .map(|p| {
             let ph = phi(p[0], p[1]);
-            ph.iter()
-                .map(|v| v * f(p[3]))
-                .chain(ph.iter().copied())
-                .collect()
+            ph.iter().map(|v| v * f(p[3])).chain(ph.iter().copied()).collect()
         })
         .collect();
     let (lg, lb) = (1.0, 1.0);
@@ -191,10 +157,7 @@ fn figures(seed: u64) -> Figures {
     };
     let test = frames("cross-diameter", seed);
     let rmse = |errs: &[f64]| (errs.iter().map(|e| e * e).sum::<f64>() / errs.len() as f64).sqrt();
-    let nocal: Vec<f64> = test
-        .iter()
-        .map(|fr| f(fr.dp_kpa) - fr.contacts[0][2])
-        .collect();
+    let nocal: Vec<f64> = test.iter().map(|fr| f(fr.dp_kpa) - fr.contacts[0][2]).collect();
     let loc: Vec<(f64, f64)> = test
         .iter()
         .map(|fr| {
@@ -204,17 +167,7 @@ fn figures(seed: u64) -> Figures {
         .collect();
     let per_d = [10.0, 20.0, 25.0]
         .iter()
-        .map(|&d| {
-            (
-                d,
-                rmse(
-                    &loc.iter()
-                        .filter(|e| e.0 == d)
-                        .map(|e| e.1)
-                        .collect::<Vec<_>>(),
-                ),
-            )
-        })
+        .map(|&d| (d, rmse(&loc.iter().filter(|e| e.0 == d).map(|e| e.1).collect::<Vec<_>>())))
         .collect();
     Figures {
         r2_centre,
@@ -235,20 +188,8 @@ fn paper_profile_pneumatic_baselines_are_pinned() {
              LocAware with true positions {:.3} N (paper with EIT centroids 0.59), per diameter {:?} (0.47, 0.43, 0.80)",
             f.r2_centre, f.r2_all, f.nocal_rmse_n, f.locaware_rmse_n, f.locaware_per_diameter
         );
-        assert!(
-            (f.r2_centre - 0.996).abs() <= 0.03,
-            "seed {seed}: centre R^2 {}",
-            f.r2_centre
-        );
-        assert!(
-            (f.r2_all - 0.923).abs() <= 0.03,
-            "seed {seed}: all-positions R^2 {}",
-            f.r2_all
-        );
-        assert!(
-            (f.nocal_rmse_n / 0.91 - 1.0).abs() <= 0.25,
-            "seed {seed}: Pneumatic-NoCal RMSE {} N",
-            f.nocal_rmse_n
-        );
+        assert!((f.r2_centre - 0.996).abs() <= 0.03, "seed {seed}: centre R^2 {}", f.r2_centre);
+        assert!((f.r2_all - 0.923).abs() <= 0.03, "seed {seed}: all-positions R^2 {}", f.r2_all);
+        assert!((f.nocal_rmse_n / 0.91 - 1.0).abs() <= 0.25, "seed {seed}: Pneumatic-NoCal RMSE {} N", f.nocal_rmse_n);
     }
 }

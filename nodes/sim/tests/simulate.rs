@@ -7,17 +7,12 @@ use skinflow_sim::{Scene, SimEvent, Simulator};
 const SMALL_MESH: &str = "[model]\nmesh_min_elements = 600\nmesh_max_elements = 700\n";
 
 fn scene(steps: &str, profile: &str) -> Scene {
-    let text = format!(
-        "[scene]\nname = \"t\"\nprofile = \"{profile}\"\n{SMALL_MESH}[[step]]\nrest_s = 4.0\n{steps}"
-    );
+    let text = format!("[scene]\nname = \"t\"\nprofile = \"{profile}\"\n{SMALL_MESH}[[step]]\nrest_s = 4.0\n{steps}");
     Scene::from_str(&text, "t.toml").unwrap()
 }
 
 fn run(scene: &Scene, seed: u64) -> Vec<SimEvent> {
-    Simulator::new(scene, seed)
-        .unwrap()
-        .collect::<Result<Vec<_>, _>>()
-        .unwrap()
+    Simulator::new(scene, seed).unwrap().collect::<Result<Vec<_>, _>>().unwrap()
 }
 
 #[test]
@@ -29,23 +24,13 @@ fn ideal_centred_contact_raises_pairwise_values_and_pressure_rises_with_force() 
     let events = run(&s, 1);
     let frames: Vec<(f64, &Vec<f64>)> = events
         .iter()
-        .filter_map(|e| {
-            if let SimEvent::Eit { t_s, v, .. } = e {
-                Some((*t_s, v))
-            } else {
-                None
-            }
-        })
+        .filter_map(|e| if let SimEvent::Eit { t_s, v, .. } = e { Some((*t_s, v)) } else { None })
         .collect();
     let reference = frames[0].1;
     assert_eq!(reference.len(), 120);
     // a frame wholly inside the 5 N hold (window [t - T/2, t + T/2) within [8.5, 12.5))
     let period = 1.0 / 1.3;
-    let loaded = frames
-        .iter()
-        .find(|(t, _)| t - period / 2.0 >= 9.0 && t + period / 2.0 <= 12.5)
-        .unwrap()
-        .1;
+    let loaded = frames.iter().find(|(t, _)| t - period / 2.0 >= 9.0 && t + period / 2.0 <= 12.5).unwrap().1;
     let dv: Vec<f64> = loaded.iter().zip(reference).map(|(a, b)| a - b).collect();
     // conductivity falls under the contact, so no two-terminal resistance falls (Rayleigh
     // monotonicity) and the pairs across the centre rise the most
@@ -54,36 +39,20 @@ fn ideal_centred_contact_raises_pairwise_values_and_pressure_rises_with_force() 
     let pair = |i: usize, j: usize| i * 16 - i * (i + 1) / 2 + (j - i - 1);
     let across = dv[pair(1, 9)]; // bottom (-12.5, -50) to top (12.5, 50)
     let corner = dv[pair(0, 15)]; // neighbours at the bottom-left corner
-    assert!(
-        across > 0.0 && across > 5.0 * corner.max(0.0),
-        "across {across} corner {corner}"
-    );
+    assert!(across > 0.0 && across > 5.0 * corner.max(0.0), "across {across} corner {corner}");
     // pressure: mean over each hold rises with force, and equals P0 before the contact
     let p: Vec<(f64, f64)> = events
         .iter()
-        .filter_map(|e| {
-            if let SimEvent::Pressure { t_s, kpa } = e {
-                Some((*t_s, *kpa))
-            } else {
-                None
-            }
-        })
+        .filter_map(|e| if let SimEvent::Pressure { t_s, kpa } = e { Some((*t_s, *kpa)) } else { None })
         .collect();
     let mean = |a: f64, b: f64| {
-        let v: Vec<f64> = p
-            .iter()
-            .filter(|(t, _)| *t >= a && *t < b)
-            .map(|x| x.1)
-            .collect();
+        let v: Vec<f64> = p.iter().filter(|(t, _)| *t >= a && *t < b).map(|x| x.1).collect();
         v.iter().sum::<f64>() / v.len() as f64
     };
     let p0 = mean(0.0, 4.0);
     assert!((p0 - s.profile.p0_kpa).abs() < 1e-12);
     let holds = [mean(4.5, 8.5), mean(9.0, 13.0), mean(13.5, 17.5)];
-    assert!(
-        p0 < holds[0] && holds[0] < holds[1] && holds[1] < holds[2],
-        "{p0} {holds:?}"
-    );
+    assert!(p0 < holds[0] && holds[0] < holds[1] && holds[1] < holds[2], "{p0} {holds:?}");
 }
 
 #[test]
@@ -94,65 +63,34 @@ fn events_are_ordered_timed_and_complete() {
     );
     let events = run(&s, 2);
     let t = |e: &SimEvent| match e {
-        SimEvent::Eit { t_s, .. }
-        | SimEvent::Pressure { t_s, .. }
-        | SimEvent::Truth { t_s, .. } => *t_s,
+        SimEvent::Eit { t_s, .. } | SimEvent::Pressure { t_s, .. } | SimEvent::Truth { t_s, .. } => *t_s,
     };
     assert!(events.windows(2).all(|w| t(&w[0]) <= t(&w[1])));
     let d = s.duration_s(); // 4 + 0.5 + 3 + 0.5 + 1
     assert!((d - 9.0).abs() < 1e-12);
-    let n_eit = events
-        .iter()
-        .filter(|e| matches!(e, SimEvent::Eit { .. }))
-        .count();
-    let n_p = events
-        .iter()
-        .filter(|e| matches!(e, SimEvent::Pressure { .. }))
-        .count();
+    let n_eit = events.iter().filter(|e| matches!(e, SimEvent::Eit { .. })).count();
+    let n_p = events.iter().filter(|e| matches!(e, SimEvent::Pressure { .. })).count();
     assert_eq!(n_eit, (d * 1.3).floor() as usize);
     assert_eq!(n_p, (d * 20.0).ceil() as usize);
-    let seqs: Vec<u64> = events
-        .iter()
-        .filter_map(|e| {
-            if let SimEvent::Eit { seq, .. } = e {
-                Some(*seq)
-            } else {
-                None
-            }
-        })
-        .collect();
+    let seqs: Vec<u64> =
+        events.iter().filter_map(|e| if let SimEvent::Eit { seq, .. } = e { Some(*seq) } else { None }).collect();
     assert_eq!(seqs, (0..n_eit as u64).collect::<Vec<_>>());
-    if let SimEvent::Eit { t_s, .. } = events
-        .iter()
-        .find(|e| matches!(e, SimEvent::Eit { .. }))
-        .unwrap()
-    {
-        assert!(
-            (t_s - 0.5 / 1.3).abs() < 1e-12,
-            "first frame stamped at the middle of its window"
-        );
+    if let SimEvent::Eit { t_s, .. } = events.iter().find(|e| matches!(e, SimEvent::Eit { .. })).unwrap() {
+        assert!((t_s - 0.5 / 1.3).abs() < 1e-12, "first frame stamped at the middle of its window");
     }
     // truth: starts with no contact at 0, has the 3 N hold, ends with no contact
     let truth: Vec<(f64, usize, f64)> = events
         .iter()
         .filter_map(|e| {
             if let SimEvent::Truth { t_s, contacts } = e {
-                Some((
-                    *t_s,
-                    contacts.len(),
-                    contacts.first().map_or(0.0, |c| c.force_n),
-                ))
+                Some((*t_s, contacts.len(), contacts.first().map_or(0.0, |c| c.force_n)))
             } else {
                 None
             }
         })
         .collect();
     assert_eq!(truth[0], (0.0, 0, 0.0));
-    assert!(
-        truth
-            .iter()
-            .any(|&(t, n, f)| t == 4.5 && n == 1 && f == 3.0)
-    );
+    assert!(truth.iter().any(|&(t, n, f)| t == 4.5 && n == 1 && f == 3.0));
     assert_eq!(truth.last().unwrap().1, 0);
     // same seed, same events; another seed, other noise
     assert_eq!(events, run(&s, 2));
@@ -168,13 +106,7 @@ fn channels_not_asked_for_are_not_computed() {
     assert_eq!(sim.sim_mesh_elements(), 0);
     let events: Vec<SimEvent> = sim.collect::<Result<_, _>>().unwrap();
     assert!(events.iter().all(|e| !matches!(e, SimEvent::Eit { .. })));
-    assert_eq!(
-        events
-            .iter()
-            .filter(|e| matches!(e, SimEvent::Pressure { .. }))
-            .count(),
-        40
-    );
+    assert_eq!(events.iter().filter(|e| matches!(e, SimEvent::Pressure { .. })).count(), 40);
 }
 
 #[test]
@@ -184,17 +116,10 @@ fn static_holds_are_solved_once() {
         "paper",
     );
     let mut sim = Simulator::new(&s, 0).unwrap();
-    let frames = sim
-        .by_ref()
-        .filter(|e| matches!(e, Ok(SimEvent::Eit { .. })))
-        .count();
+    let frames = sim.by_ref().filter(|e| matches!(e, Ok(SimEvent::Eit { .. }))).count();
     assert!(frames > 30);
     // no load, the hold, and the frames straddling the two steps (at most 2 states each)
-    assert!(
-        sim.solve_count() <= 2 + 2 * 2,
-        "{} solves for {frames} frames",
-        sim.solve_count()
-    );
+    assert!(sim.solve_count() <= 2 + 2 * 2, "{} solves for {frames} frames", sim.solve_count());
 }
 
 #[test]
@@ -205,11 +130,7 @@ fn shipped_scenes_parse() {
         let path = entry.unwrap().path();
         if path.extension().is_some_and(|e| e == "toml") {
             let s = Scene::from_file(&path).unwrap_or_else(|e| panic!("{e}"));
-            assert!(
-                s.timeline.segments[0].contacts.is_empty(),
-                "{}: starts with no load",
-                path.display()
-            );
+            assert!(s.timeline.segments[0].contacts.is_empty(), "{}: starts with no load", path.display());
             n += 1;
         }
     }
@@ -232,11 +153,7 @@ fn holds(scene_name: &str, min_s: f64) -> Vec<(Vec<skinflow_sim::TruthContact>, 
         }
     }
     let mean = |a: f64, b: f64| {
-        let v: Vec<f64> = p
-            .iter()
-            .filter(|x| x.0 >= a && x.0 < b)
-            .map(|x| x.1)
-            .collect();
+        let v: Vec<f64> = p.iter().filter(|x| x.0 >= a && x.0 < b).map(|x| x.1).collect();
         v.iter().sum::<f64>() / v.len() as f64
     };
     let p0 = mean(0.0, truth[1].0);
@@ -268,16 +185,9 @@ fn hard_cases_light_touch_heavy_press_corners() {
     // corners are stiffer: 5 N there reads less than half of 12 N at the centre * 5/12
     for (x, y) in [(-42.0, -42.0), (42.0, -42.0), (42.0, 42.0), (-42.0, 42.0)] {
         let corner = single(x, y, 5.0);
-        assert!(
-            corner > 0.0 && corner < 0.8 * heavy * 5.0 / 12.0,
-            "corner ({x}, {y}): {corner}"
-        );
+        assert!(corner > 0.0 && corner < 0.8 * heavy * 5.0 / 12.0, "corner ({x}, {y}): {corner}");
     }
     // two contacts 14 mm apart: both count
-    let pair = h
-        .iter()
-        .find(|(c, _)| c.len() == 2 && c[0].force_n == 3.0)
-        .unwrap()
-        .1;
+    let pair = h.iter().find(|(c, _)| c.len() == 2 && c[0].force_n == 3.0).unwrap().1;
     assert!(pair > 1.5 * single(20.0, -15.0, 0.3) * 10.0, "{pair}");
 }

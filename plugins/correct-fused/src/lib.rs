@@ -102,55 +102,29 @@ impl PluginNode for Fused {
     type Params = FusedParams;
 
     fn spec() -> KindSpec {
-        KindSpec::new(
-            "fused-corrector",
-            "per-contact force fusing the pneumatic and EIT global force maps",
-        )
-        .input("split", "split", "dP_i per contact")
-        .output("forces", "forces", "per-contact forces, N")
-        .param(
-            "calibration",
-            "path",
-            "",
-            "calibration TOML from `skinflow calibrate`",
-        )
-        .param(
-            "weight_pneumatic",
-            "float",
-            "0.8",
-            "weight of the pneumatic estimate, in [0, 1]",
-        )
+        KindSpec::new("fused-corrector", "per-contact force fusing the pneumatic and EIT global force maps")
+            .input("split", "split", "dP_i per contact")
+            .output("forces", "forces", "per-contact forces, N")
+            .param("calibration", "path", "", "calibration TOML from `skinflow calibrate`")
+            .param("weight_pneumatic", "float", "0.8", "weight of the pneumatic estimate, in [0, 1]")
     }
 
     fn validate(p: &FusedParams) -> Result<(), String> {
         if (0.0..=1.0).contains(&p.weight_pneumatic) {
             Ok(())
         } else {
-            Err(format!(
-                "param \"weight_pneumatic\": must be in [0, 1] (got {})",
-                p.weight_pneumatic
-            ))
+            Err(format!("param \"weight_pneumatic\": must be in [0, 1] (got {})", p.weight_pneumatic))
         }
     }
 
     fn new(p: FusedParams, base_dir: &Path) -> Result<Self, String> {
         let path = base_dir.join(&p.calibration);
-        let text =
-            std::fs::read_to_string(&path).map_err(|e| format!("{}: {e}", path.display()))?;
-        let cal: CalibrationMaps =
-            toml::from_str(&text).map_err(|e| format!("{}: {}", path.display(), e.message()))?;
+        let text = std::fs::read_to_string(&path).map_err(|e| format!("{}: {e}", path.display()))?;
+        let cal: CalibrationMaps = toml::from_str(&text).map_err(|e| format!("{}: {}", path.display(), e.message()))?;
         if cal.format != "skinflow-calibration" {
-            return Err(format!(
-                "{}: not a calibration file (format \"{}\")",
-                path.display(),
-                cal.format
-            ));
+            return Err(format!("{}: not a calibration file (format \"{}\")", path.display(), cal.format));
         }
-        Ok(Fused {
-            pneumatic: cal.pneumatic.map,
-            eit: cal.eit.map,
-            w: p.weight_pneumatic,
-        })
+        Ok(Fused { pneumatic: cal.pneumatic.map, eit: cal.eit.map, w: p.weight_pneumatic })
     }
 
     fn process(&mut self, inputs: &[Columns<'_>], out: &mut Outputs) -> Result<(), String> {
@@ -172,11 +146,7 @@ mod tests {
     use super::*;
 
     fn map(a0: f64, a1: f64, a2: f64) -> SignalMap {
-        SignalMap {
-            quadratic: Quadratic { a0, a1, a2 },
-            signal_min: 0.5,
-            signal_max: 2.0,
-        }
+        SignalMap { quadratic: Quadratic { a0, a1, a2 }, signal_min: 0.5, signal_max: 2.0 }
     }
 
     #[test]
@@ -191,19 +161,11 @@ mod tests {
 
     #[test]
     fn fusion_weights_the_two_maps_and_guards_no_load() {
-        let f = Fused {
-            pneumatic: map(0.0, 1.0, 0.0),
-            eit: map(0.0, 3.0, 0.0),
-            w: 0.25,
-        };
+        let f = Fused { pneumatic: map(0.0, 1.0, 0.0), eit: map(0.0, 3.0, 0.0), w: 0.25 };
         assert!((f.force(1.0, 1.0) - (0.25 + 0.75 * 3.0)).abs() < 1e-12);
         assert_eq!(f.force(0.0, 1.0), 0.0);
         assert_eq!(f.force(f64::NAN, 1.0), 0.0);
-        let neg = Fused {
-            pneumatic: map(-5.0, 0.0, 0.0),
-            eit: map(-5.0, 0.0, 0.0),
-            w: 0.5,
-        };
+        let neg = Fused { pneumatic: map(-5.0, 0.0, 0.0), eit: map(-5.0, 0.0, 0.0), w: 0.5 };
         assert_eq!(neg.force(1.0, 1.0), 0.0, "negative forces clamp to 0");
     }
 }

@@ -20,13 +20,7 @@ pub fn share(dp_kpa: f64, weights: impl Iterator<Item = f64> + Clone, out: &mut 
     let total: f64 = weights.clone().map(clean).sum();
     let n = weights.clone().count() as f64;
     out.clear();
-    out.extend(weights.map(|w| {
-        if total > 0.0 {
-            clean(w) / total * dp_kpa
-        } else {
-            dp_kpa / n
-        }
-    }));
+    out.extend(weights.map(|w| if total > 0.0 { clean(w) / total * dp_kpa } else { dp_kpa / n }));
 }
 
 #[derive(Deserialize)]
@@ -40,16 +34,9 @@ impl PluginNode for AreaWeighted {
     type Params = AreaParams;
 
     fn spec() -> KindSpec {
-        KindSpec::new(
-            "area-weighted-splitter",
-            "splits dP among contacts in proportion to their ROI areas",
-        )
-        .input(
-            "contacts",
-            "contacts",
-            "segmented contacts (carry the synced dP)",
-        )
-        .output("split", "split", "dP_i per contact, kPa")
+        KindSpec::new("area-weighted-splitter", "splits dP among contacts in proportion to their ROI areas")
+            .input("contacts", "contacts", "segmented contacts (carry the synced dP)")
+            .output("split", "split", "dP_i per contact, kPa")
     }
 
     fn new(_: AreaParams, _: &Path) -> Result<Self, String> {
@@ -88,39 +75,22 @@ impl PluginNode for PeakWeighted {
     type Params = PeakParams;
 
     fn spec() -> KindSpec {
-        KindSpec::new(
-            "peak-weighted-splitter",
-            "splits dP among contacts in proportion to peak^exponent",
-        )
-        .input(
-            "contacts",
-            "contacts",
-            "segmented contacts (carry the synced dP)",
-        )
-        .output("split", "split", "dP_i per contact, kPa")
-        .param(
-            "exponent",
-            "float",
-            "1.0",
-            "weight = peak^exponent, in [0, 4]",
-        )
+        KindSpec::new("peak-weighted-splitter", "splits dP among contacts in proportion to peak^exponent")
+            .input("contacts", "contacts", "segmented contacts (carry the synced dP)")
+            .output("split", "split", "dP_i per contact, kPa")
+            .param("exponent", "float", "1.0", "weight = peak^exponent, in [0, 4]")
     }
 
     fn validate(p: &PeakParams) -> Result<(), String> {
         if (0.0..=4.0).contains(&p.exponent) {
             Ok(())
         } else {
-            Err(format!(
-                "param \"exponent\": must be in [0, 4] (got {})",
-                p.exponent
-            ))
+            Err(format!("param \"exponent\": must be in [0, 4] (got {})", p.exponent))
         }
     }
 
     fn new(p: PeakParams, _: &Path) -> Result<Self, String> {
-        Ok(PeakWeighted {
-            exponent: p.exponent,
-        })
+        Ok(PeakWeighted { exponent: p.exponent })
     }
 
     fn process(&mut self, inputs: &[Columns<'_>], out: &mut Outputs) -> Result<(), String> {
@@ -130,19 +100,12 @@ impl PluginNode for PeakWeighted {
         }
         let (peak, dp) = (c.require("peak")?, c.scalar("frame_dp_kpa")?);
         let e = self.exponent;
-        share(
-            dp,
-            peak.iter().map(|p| p.max(0.0).powf(e)),
-            out.port(0).column("dp_kpa"),
-        );
+        share(dp, peak.iter().map(|p| p.max(0.0).powf(e)), out.port(0).column("dp_kpa"));
         Ok(())
     }
 }
 
-skinflow_plugin_sdk::export_plugin!(
-    name = "split-weighted",
-    kinds = [AreaWeighted, PeakWeighted]
-);
+skinflow_plugin_sdk::export_plugin!(name = "split-weighted", kinds = [AreaWeighted, PeakWeighted]);
 
 #[cfg(test)]
 mod tests {

@@ -36,11 +36,7 @@ pub fn average_holds(frames: &[CalibSample]) -> Holds {
         let n = run.len() as f64;
         let mean = |f: fn(&CalibSample) -> f64| run.iter().map(f).sum::<f64>() / n;
         let sd = |f: fn(&CalibSample) -> f64, m: f64| {
-            if run.len() < 2 {
-                0.0
-            } else {
-                (run.iter().map(|s| (f(s) - m).powi(2)).sum::<f64>() / (n - 1.0)).sqrt()
-            }
+            if run.len() < 2 { 0.0 } else { (run.iter().map(|s| (f(s) - m).powi(2)).sum::<f64>() / (n - 1.0)).sqrt() }
         };
         let avg = CalibSample {
             x_mm: mean(|s| s.x_mm),
@@ -56,20 +52,14 @@ pub fn average_holds(frames: &[CalibSample]) -> Holds {
         start = end;
     }
     let holds = samples.len().max(1) as f64;
-    Holds {
-        samples,
-        sd_dp_kpa: sd_dp / holds,
-        sd_cond_sum: sd_c / holds,
-    }
+    Holds { samples, sd_dp_kpa: sd_dp / holds, sd_cond_sum: sd_c / holds }
 }
 
 /// Distinct true locations (greedy clustering within `tol_mm`) and each sample's location.
 pub fn locations(samples: &[CalibSample], tol_mm: f64) -> (Vec<(f64, f64)>, Vec<usize>) {
     let (mut locs, mut of): (Vec<(f64, f64)>, Vec<usize>) = (Vec::new(), Vec::new());
     for s in samples {
-        let near = locs
-            .iter()
-            .position(|l| (l.0 - s.true_x_mm).hypot(l.1 - s.true_y_mm) <= tol_mm);
+        let near = locs.iter().position(|l| (l.0 - s.true_x_mm).hypot(l.1 - s.true_y_mm) <= tol_mm);
         of.push(near.unwrap_or_else(|| {
             locs.push((s.true_x_mm, s.true_y_mm));
             locs.len() - 1
@@ -99,12 +89,7 @@ mod tests {
     #[test]
     fn consecutive_identical_truth_is_one_hold() {
         // Two holds at x = 0 (1 N: dP 1, 3; 2 N: dP 5) and a return to 1 N that is a new hold.
-        let frames = [
-            frame(0.0, 1.0, 1.0),
-            frame(0.0, 1.0, 3.0),
-            frame(0.0, 2.0, 5.0),
-            frame(0.0, 1.0, 7.0),
-        ];
+        let frames = [frame(0.0, 1.0, 1.0), frame(0.0, 1.0, 3.0), frame(0.0, 2.0, 5.0), frame(0.0, 1.0, 7.0)];
         let h = average_holds(&frames);
         let dp: Vec<f64> = h.samples.iter().map(|s| s.dp_kpa).collect();
         assert_eq!(dp, [2.0, 5.0, 7.0]);
@@ -114,11 +99,7 @@ mod tests {
 
     #[test]
     fn nearby_positions_are_one_location() {
-        let s = [
-            frame(0.0, 1.0, 1.0),
-            frame(1.5, 1.0, 1.0),
-            frame(10.0, 1.0, 1.0),
-        ];
+        let s = [frame(0.0, 1.0, 1.0), frame(1.5, 1.0, 1.0), frame(10.0, 1.0, 1.0)];
         let (locs, of) = locations(&s, 2.0);
         assert_eq!(locs.len(), 2);
         assert_eq!(of, [0, 0, 1]);

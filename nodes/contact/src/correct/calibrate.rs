@@ -10,8 +10,7 @@
 
 use super::average::{Holds, average_holds, locations};
 use super::calibration::{
-    AreaAware, Calibration, FORMAT, FORMAT_VERSION, LocAware, Provenance, R2Table,
-    SignalCalibration, TrainingSummary,
+    AreaAware, Calibration, FORMAT, FORMAT_VERSION, LocAware, Provenance, R2Table, SignalCalibration, TrainingSummary,
 };
 use super::field::{NPHI, QuadField, Region, phi};
 use super::fit::{CvSearch, RidgeProblem, cross_validate, fit_quadratic, r_squared};
@@ -47,14 +46,7 @@ pub struct CalibSample {
 
 impl CalibSample {
     fn contact(&self) -> Contact {
-        Contact {
-            x_mm: self.x_mm,
-            y_mm: self.y_mm,
-            sum: self.cond_sum,
-            area_mm2: self.area_mm2,
-            peak: 0.0,
-            label: 0,
-        }
+        Contact { x_mm: self.x_mm, y_mm: self.y_mm, sum: self.cond_sum, area_mm2: self.area_mm2, peak: 0.0, label: 0 }
     }
 }
 
@@ -85,9 +77,7 @@ impl Default for CalibParams {
         Self {
             average_holds: true,
             folds: 5,
-            lambda_grid_rel: (0..=16)
-                .map(|i| 10f64.powf(-4.0 + 0.5 * i as f64))
-                .collect(),
+            lambda_grid_rel: (0..=16).map(|i| 10f64.powf(-4.0 + 0.5 * i as f64)).collect(),
             min_samples: 4 * NPHI,
             min_locations: NPHI,
             min_span_mm: 5.0,
@@ -104,12 +94,7 @@ impl CalibParams {
         if self.folds < 2 {
             return bad("folds", "must be >= 2");
         }
-        if self.lambda_grid_rel.is_empty()
-            || self
-                .lambda_grid_rel
-                .iter()
-                .any(|l| !(l.is_finite() && *l > 0.0))
-        {
+        if self.lambda_grid_rel.is_empty() || self.lambda_grid_rel.iter().any(|l| !(l.is_finite() && *l > 0.0)) {
             return bad("lambda_grid_rel", "must be non-empty, finite and > 0");
         }
         for (name, v) in [
@@ -132,30 +117,18 @@ pub enum CalibWarning {
     #[error(
         "rejected {count} of {total} samples (non-finite, C <= 0, F <= 0 or centroid > {max_error_mm} mm from truth)"
     )]
-    Rejected {
-        count: usize,
-        total: usize,
-        max_error_mm: f64,
-    },
+    Rejected { count: usize, total: usize, max_error_mm: f64 },
     /// Too few samples for the fields.
-    #[error(
-        "only {samples} samples (need {min}): location fields fall back to the prior g = 1, b = 0"
-    )]
+    #[error("only {samples} samples (need {min}): location fields fall back to the prior g = 1, b = 0")]
     TooFewSamples { samples: usize, min: usize },
     /// Too few locations for the fields.
-    #[error(
-        "only {locations} distinct locations (need {min}): location fields fall back to the prior g = 1, b = 0"
-    )]
+    #[error("only {locations} distinct locations (need {min}): location fields fall back to the prior g = 1, b = 0")]
     TooFewLocations { locations: usize, min: usize },
     /// Centroids span too small a region.
     #[error(
         "centroids span {span_x_mm:.1} x {span_y_mm:.1} mm (need {min_mm} mm): location fields fall back to the prior"
     )]
-    NarrowRegion {
-        span_x_mm: f64,
-        span_y_mm: f64,
-        min_mm: f64,
-    },
+    NarrowRegion { span_x_mm: f64, span_y_mm: f64, min_mm: f64 },
     /// A ridge fit could not be solved; its prior is used.
     #[error("{what}: ridge fit failed, prior kept")]
     FitFailed { what: &'static str },
@@ -174,17 +147,10 @@ pub enum CalibrateError {
     #[error(
         "calibrate: {usable} usable samples (of {frames} frames); the {signal} force map needs >= 3 with 3 distinct signal values"
     )]
-    SignalFit {
-        signal: &'static str,
-        usable: usize,
-        frames: usize,
-    },
+    SignalFit { signal: &'static str, usable: usize, frames: usize },
     /// A parameter out of range.
     #[error("calibrate: param \"{name}\": {problem}")]
-    Param {
-        name: &'static str,
-        problem: &'static str,
-    },
+    Param { name: &'static str, problem: &'static str },
 }
 
 /// A fitted calibration and the warnings raised on the way.
@@ -200,11 +166,7 @@ fn fit_map(signal: &[f64], force: &[f64]) -> Option<SignalMap> {
     let quadratic = fit_quadratic(signal, force)?;
     let lo = signal.iter().copied().fold(f64::INFINITY, f64::min);
     let hi = signal.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-    Some(SignalMap {
-        quadratic,
-        signal_min: lo,
-        signal_max: hi,
-    })
+    Some(SignalMap { quadratic, signal_min: lo, signal_max: hi })
 }
 
 fn quad_r2(signal: &[f64], force: &[f64]) -> Option<f64> {
@@ -221,12 +183,7 @@ fn split_fields(coeffs: &[f64]) -> (QuadField, QuadField) {
 }
 
 /// Rows [f(s) Phi, Phi] (plus [f(s) a, a] when `rel_area` is given).
-fn design(
-    samples: &[CalibSample],
-    region: &Region,
-    fs: &[f64],
-    rel_area: Option<&[f64]>,
-) -> Vec<f64> {
+fn design(samples: &[CalibSample], region: &Region, fs: &[f64], rel_area: Option<&[f64]>) -> Vec<f64> {
     let mut d = Vec::new();
     for (t, s) in samples.iter().enumerate() {
         let n = region.normalize(s.x_mm, s.y_mm);
@@ -257,26 +214,13 @@ pub fn calibrate(
     let holds = if params.average_holds {
         average_holds(frames)
     } else {
-        Holds {
-            samples: frames.to_vec(),
-            sd_dp_kpa: 0.0,
-            sd_cond_sum: 0.0,
-        }
+        Holds { samples: frames.to_vec(), sd_dp_kpa: 0.0, sd_cond_sum: 0.0 }
     };
     let total = holds.samples.len();
     let ok = |s: &CalibSample| {
-        [
-            s.x_mm,
-            s.y_mm,
-            s.true_x_mm,
-            s.true_y_mm,
-            s.force_n,
-            s.dp_kpa,
-            s.cond_sum,
-            s.area_mm2,
-        ]
-        .iter()
-        .all(|v| v.is_finite())
+        [s.x_mm, s.y_mm, s.true_x_mm, s.true_y_mm, s.force_n, s.dp_kpa, s.cond_sum, s.area_mm2]
+            .iter()
+            .all(|v| v.is_finite())
             && s.cond_sum > 0.0
             && s.force_n > 0.0
             && (s.x_mm - s.true_x_mm).hypot(s.y_mm - s.true_y_mm) <= params.max_location_error_mm
@@ -293,52 +237,32 @@ pub fn calibrate(
     let force: Vec<f64> = samples.iter().map(|s| s.force_n).collect();
     let dp: Vec<f64> = samples.iter().map(|s| s.dp_kpa).collect();
     let cond: Vec<f64> = samples.iter().map(|s| s.cond_sum).collect();
-    let err = |signal| CalibrateError::SignalFit {
-        signal,
-        usable: t,
-        frames: frames.len(),
-    };
+    let err = |signal| CalibrateError::SignalFit { signal, usable: t, frames: frames.len() };
     let map_p = fit_map(&dp, &force).ok_or(err("pneumatic"))?;
     let map_c = fit_map(&cond, &force).ok_or(err("eit"))?;
 
     // Region and degeneracy.
-    let raw =
-        Region::bounding(samples.iter().map(|s| (s.x_mm, s.y_mm)), 0.0).ok_or(err("pneumatic"))?;
-    let region = Region::bounding(samples.iter().map(|s| (s.x_mm, s.y_mm)), params.min_span_mm)
-        .ok_or(err("pneumatic"))?;
+    let raw = Region::bounding(samples.iter().map(|s| (s.x_mm, s.y_mm)), 0.0).ok_or(err("pneumatic"))?;
+    let region =
+        Region::bounding(samples.iter().map(|s| (s.x_mm, s.y_mm)), params.min_span_mm).ok_or(err("pneumatic"))?;
     let (locs, loc_of) = locations(&samples, params.location_tolerance_mm);
     let mut degenerate = false;
     if t < params.min_samples {
-        warnings.push(CalibWarning::TooFewSamples {
-            samples: t,
-            min: params.min_samples,
-        });
+        warnings.push(CalibWarning::TooFewSamples { samples: t, min: params.min_samples });
         degenerate = true;
     }
     if locs.len() < params.min_locations {
-        warnings.push(CalibWarning::TooFewLocations {
-            locations: locs.len(),
-            min: params.min_locations,
-        });
+        warnings.push(CalibWarning::TooFewLocations { locations: locs.len(), min: params.min_locations });
         degenerate = true;
     }
     let (sx, sy) = raw.span_mm();
     if sx < params.min_span_mm || sy < params.min_span_mm {
-        warnings.push(CalibWarning::NarrowRegion {
-            span_x_mm: sx,
-            span_y_mm: sy,
-            min_mm: params.min_span_mm,
-        });
+        warnings.push(CalibWarning::NarrowRegion { span_x_mm: sx, span_y_mm: sy, min_mm: params.min_span_mm });
         degenerate = true;
     }
 
     // R^2 table: centre = the true location nearest the origin.
-    let centre = (0..locs.len()).min_by(|&a, &b| {
-        locs[a]
-            .0
-            .hypot(locs[a].1)
-            .total_cmp(&locs[b].0.hypot(locs[b].1))
-    });
+    let centre = (0..locs.len()).min_by(|&a, &b| locs[a].0.hypot(locs[a].1).total_cmp(&locs[b].0.hypot(locs[b].1)));
     let at_centre: Vec<usize> = (0..t).filter(|&i| Some(loc_of[i]) == centre).collect();
     let pick = |v: &[f64]| at_centre.iter().map(|&i| v[i]).collect::<Vec<f64>>();
     let r2 = R2Table {
@@ -351,64 +275,42 @@ pub fn calibrate(
         warnings.push(CalibWarning::NoCenter);
     }
 
-    let grid: Vec<f64> = params
-        .lambda_grid_rel
-        .iter()
-        .map(|l| l * t as f64)
-        .collect();
-    let search = |blocks| CvSearch {
-        blocks,
-        grid: &grid,
-        folds: params.folds,
-    };
-    let fit_locaware =
-        |map: &SignalMap, signal: &[f64], what: &'static str, warnings: &mut Vec<CalibWarning>| {
-            if degenerate {
-                return LocAware::prior();
-            }
-            let fs: Vec<f64> = signal.iter().map(|&s| map.eval(s).0).collect();
-            let d = design(&samples, &region, &fs, None);
-            let prior = prior_vec(2 * NPHI);
-            let problem = RidgeProblem {
-                design: &d,
-                y: &force,
-                p: 2 * NPHI,
-                prior: &prior,
-                base_penalty: &[0.0; 2 * NPHI],
-            };
-            match cross_validate(&problem, &search(&[0..NPHI, NPHI..2 * NPHI])) {
-                Some(cv) => {
-                    let (gain, offset) = split_fields(&cv.coeffs);
-                    LocAware {
-                        gain,
-                        offset,
-                        lambda_g: Some(cv.lambdas[0]),
-                        lambda_b: Some(cv.lambdas[1]),
-                        cv_rmse_n: Some(cv.cv_mse.sqrt()),
-                        prior_fallback: false,
-                    }
-                }
-                None => {
-                    warnings.push(CalibWarning::FitFailed { what });
-                    LocAware::prior()
+    let grid: Vec<f64> = params.lambda_grid_rel.iter().map(|l| l * t as f64).collect();
+    let search = |blocks| CvSearch { blocks, grid: &grid, folds: params.folds };
+    let fit_locaware = |map: &SignalMap, signal: &[f64], what: &'static str, warnings: &mut Vec<CalibWarning>| {
+        if degenerate {
+            return LocAware::prior();
+        }
+        let fs: Vec<f64> = signal.iter().map(|&s| map.eval(s).0).collect();
+        let d = design(&samples, &region, &fs, None);
+        let prior = prior_vec(2 * NPHI);
+        let problem =
+            RidgeProblem { design: &d, y: &force, p: 2 * NPHI, prior: &prior, base_penalty: &[0.0; 2 * NPHI] };
+        match cross_validate(&problem, &search(&[0..NPHI, NPHI..2 * NPHI])) {
+            Some(cv) => {
+                let (gain, offset) = split_fields(&cv.coeffs);
+                LocAware {
+                    gain,
+                    offset,
+                    lambda_g: Some(cv.lambdas[0]),
+                    lambda_b: Some(cv.lambdas[1]),
+                    cv_rmse_n: Some(cv.cv_mse.sqrt()),
+                    prior_fallback: false,
                 }
             }
-        };
-    let pneumatic = SignalCalibration {
-        map: map_p,
-        locaware: fit_locaware(&map_p, &dp, "pneumatic fields", &mut warnings),
+            None => {
+                warnings.push(CalibWarning::FitFailed { what });
+                LocAware::prior()
+            }
+        }
     };
-    let eit = SignalCalibration {
-        map: map_c,
-        locaware: fit_locaware(&map_c, &cond, "eit fields", &mut warnings),
-    };
+    let pneumatic =
+        SignalCalibration { map: map_p, locaware: fit_locaware(&map_p, &dp, "pneumatic fields", &mut warnings) };
+    let eit = SignalCalibration { map: map_c, locaware: fit_locaware(&map_c, &cond, "eit fields", &mut warnings) };
 
     // Area-aware: the pneumatic fields' weights are kept; only the area weight is searched.
     let area_ref_mm2 = samples.iter().map(|s| s.area_mm2).sum::<f64>() / t as f64;
-    let rel: Vec<f64> = samples
-        .iter()
-        .map(|s| s.area_mm2 / area_ref_mm2 - 1.0)
-        .collect();
+    let rel: Vec<f64> = samples.iter().map(|s| s.area_mm2 / area_ref_mm2 - 1.0).collect();
     let rel_min = rel.iter().copied().fold(f64::INFINITY, f64::min);
     let rel_max = rel.iter().copied().fold(f64::NEG_INFINITY, f64::max);
     let mut area_aware = AreaAware {
@@ -420,11 +322,7 @@ pub fn calibrate(
         rel_area_max: rel_max,
         lambda_a: None,
     };
-    if let (false, Some(lg), Some(lb)) = (
-        degenerate,
-        pneumatic.locaware.lambda_g,
-        pneumatic.locaware.lambda_b,
-    ) {
+    if let (false, Some(lg), Some(lb)) = (degenerate, pneumatic.locaware.lambda_g, pneumatic.locaware.lambda_b) {
         let fs: Vec<f64> = dp.iter().map(|&s| map_p.eval(s).0).collect();
         let d = design(&samples, &region, &fs, Some(&rel));
         let p = 2 * NPHI + 2;
@@ -432,13 +330,7 @@ pub fn calibrate(
         let mut base = vec![lg; p];
         base[NPHI..2 * NPHI].fill(lb);
         base[2 * NPHI..].fill(0.0);
-        let problem = RidgeProblem {
-            design: &d,
-            y: &force,
-            p,
-            prior: &prior,
-            base_penalty: &base,
-        };
+        let problem = RidgeProblem { design: &d, y: &force, p, prior: &prior, base_penalty: &base };
         match cross_validate(&problem, &search(std::slice::from_ref(&(2 * NPHI..p)))) {
             Some(cv) => {
                 let (gain, offset) = split_fields(&cv.coeffs);
@@ -454,31 +346,18 @@ pub fn calibrate(
                 area_aware.area_offset = cv.coeffs[2 * NPHI + 1];
                 area_aware.lambda_a = Some(cv.lambdas[0]);
             }
-            None => warnings.push(CalibWarning::FitFailed {
-                what: "area-aware fields",
-            }),
+            None => warnings.push(CalibWarning::FitFailed { what: "area-aware fields" }),
         }
     }
 
-    let quads: Vec<(f64, f64, f64, f64)> = samples
-        .iter()
-        .map(|s| (s.x_mm, s.y_mm, s.cond_sum, s.force_n))
-        .collect();
-    let sensitivity = if degenerate {
-        None
-    } else {
-        SensitivityField::fit(region, &quads, &grid, params.folds)
-    };
+    let quads: Vec<(f64, f64, f64, f64)> = samples.iter().map(|s| (s.x_mm, s.y_mm, s.cond_sum, s.force_n)).collect();
+    let sensitivity = if degenerate { None } else { SensitivityField::fit(region, &quads, &grid, params.folds) };
     let sensitivity = sensitivity.unwrap_or_else(|| {
         warnings.push(CalibWarning::UniformSensitivity);
         SensitivityField::uniform(region)
     });
 
-    let mut diameters: Vec<f64> = samples
-        .iter()
-        .map(|s| s.diameter_mm)
-        .filter(|d| d.is_finite())
-        .collect();
+    let mut diameters: Vec<f64> = samples.iter().map(|s| s.diameter_mm).filter(|d| d.is_finite()).collect();
     diameters.sort_by(f64::total_cmp);
     diameters.dedup();
     let training = TrainingSummary {
@@ -512,20 +391,12 @@ pub fn calibrate(
     };
     for kind in StrategyKind::ALL {
         let strategy = Strategy::new(&calibration, kind);
-        let sse: f64 = samples
-            .iter()
-            .map(|s| (strategy.estimate(&s.contact(), s.dp_kpa).force_n - s.force_n).powi(2))
-            .sum();
-        calibration
-            .training
-            .train_rmse_n
-            .insert(kind.name().to_string(), (sse / t as f64).sqrt());
+        let sse: f64 =
+            samples.iter().map(|s| (strategy.estimate(&s.contact(), s.dp_kpa).force_n - s.force_n).powi(2)).sum();
+        calibration.training.train_rmse_n.insert(kind.name().to_string(), (sse / t as f64).sqrt());
     }
     for w in &warnings {
         tracing::warn!(target: "skinflow::calibrate", "{w}");
     }
-    Ok(Calibrated {
-        calibration,
-        warnings,
-    })
+    Ok(Calibrated { calibration, warnings })
 }

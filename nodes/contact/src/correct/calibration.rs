@@ -111,25 +111,9 @@ impl fmt::Display for R2Table {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let cell = |v: Option<f64>| v.map_or_else(|| "-".to_string(), |v| format!("{v:.3}"));
         writeln!(f, "Signal-force correlation (R^2)")?;
-        writeln!(
-            f,
-            "{:<30} {:>16} {:>14}",
-            "Signal", "Center location", "All locations"
-        )?;
-        writeln!(
-            f,
-            "{:<30} {:>16} {:>14}",
-            "EIT conductivity change sum",
-            cell(self.eit_center),
-            cell(self.eit_all)
-        )?;
-        write!(
-            f,
-            "{:<30} {:>16} {:>14}",
-            "Pneumatic pressure",
-            cell(self.pneumatic_center),
-            cell(self.pneumatic_all)
-        )
+        writeln!(f, "{:<30} {:>16} {:>14}", "Signal", "Center location", "All locations")?;
+        writeln!(f, "{:<30} {:>16} {:>14}", "EIT conductivity change sum", cell(self.eit_center), cell(self.eit_all))?;
+        write!(f, "{:<30} {:>16} {:>14}", "Pneumatic pressure", cell(self.pneumatic_center), cell(self.pneumatic_all))
     }
 }
 
@@ -200,10 +184,7 @@ pub struct Calibration {
 pub enum CalibrationFileError {
     /// File system error.
     #[error("{path}: {source}")]
-    Io {
-        path: String,
-        source: std::io::Error,
-    },
+    Io { path: String, source: std::io::Error },
     /// Not valid TOML for a calibration.
     #[error("{path}: {message}")]
     Parse { path: String, message: String },
@@ -211,11 +192,7 @@ pub enum CalibrationFileError {
     #[error(
         "{path}: not a skinflow calibration (format \"{format}\", version {version}; expected \"{FORMAT}\" <= {FORMAT_VERSION})"
     )]
-    Format {
-        path: String,
-        format: String,
-        version: u32,
-    },
+    Format { path: String, format: String, version: u32 },
     /// Serialization failed.
     #[error("calibration: cannot serialize: {0}")]
     Serialize(String),
@@ -245,18 +222,14 @@ impl Calibration {
 
     /// Reads a calibration file.
     pub fn read(path: &Path) -> Result<Self, CalibrationFileError> {
-        let text = std::fs::read_to_string(path).map_err(|source| CalibrationFileError::Io {
-            path: path.display().to_string(),
-            source,
-        })?;
+        let text = std::fs::read_to_string(path)
+            .map_err(|source| CalibrationFileError::Io { path: path.display().to_string(), source })?;
         Self::from_toml_str(&text, &path.display().to_string())
     }
 
     /// Writes a calibration file.
     pub fn write(&self, path: &Path) -> Result<(), CalibrationFileError> {
-        std::fs::write(path, self.to_toml_string()?).map_err(|source| CalibrationFileError::Io {
-            path: path.display().to_string(),
-            source,
-        })
+        std::fs::write(path, self.to_toml_string()?)
+            .map_err(|source| CalibrationFileError::Io { path: path.display().to_string(), source })
     }
 }

@@ -95,11 +95,7 @@ impl Region {
         };
         let (u, cu) = map(x_mm, self.x_min_mm, self.x_max_mm);
         let (v, cv) = map(y_mm, self.y_min_mm, self.y_max_mm);
-        Normalized {
-            u,
-            v,
-            clamped: cu || cv,
-        }
+        Normalized { u, v, clamped: cu || cv }
     }
 
     /// Inverse of [`Region::normalize`] for points inside: (u, v) -> (x_mm, y_mm).
@@ -122,9 +118,7 @@ pub struct QuadField {
 impl QuadField {
     /// The constant field `c`.
     pub fn constant(c: f64) -> Self {
-        Self {
-            coeffs: [c, 0.0, 0.0, 0.0, 0.0, 0.0],
-        }
+        Self { coeffs: [c, 0.0, 0.0, 0.0, 0.0, 0.0] }
     }
 
     /// Value at normalized coordinates.
@@ -139,12 +133,7 @@ mod tests {
 
     #[test]
     fn normalize_maps_corners_and_clamps_outside() {
-        let r = Region {
-            x_min_mm: -40.0,
-            x_max_mm: 40.0,
-            y_min_mm: -20.0,
-            y_max_mm: 20.0,
-        };
+        let r = Region { x_min_mm: -40.0, x_max_mm: 40.0, y_min_mm: -20.0, y_max_mm: 20.0 };
         let n = r.normalize(40.0, -20.0);
         assert_eq!((n.u, n.v, n.clamped), (1.0, -1.0, false));
         let n = r.normalize(0.0, 0.0);
@@ -158,23 +147,13 @@ mod tests {
     #[test]
     fn bounding_box_widens_a_single_point() {
         let r = Region::bounding([(3.0, 4.0), (3.0, 4.0)].into_iter(), 10.0).unwrap();
-        assert_eq!(
-            r,
-            Region {
-                x_min_mm: -2.0,
-                x_max_mm: 8.0,
-                y_min_mm: -1.0,
-                y_max_mm: 9.0
-            }
-        );
+        assert_eq!(r, Region { x_min_mm: -2.0, x_max_mm: 8.0, y_min_mm: -1.0, y_max_mm: 9.0 });
         assert!(Region::bounding(std::iter::empty(), 1.0).is_none());
     }
 
     #[test]
     fn field_evaluates_the_basis() {
-        let f = QuadField {
-            coeffs: [1.0, 2.0, 3.0, 4.0, 5.0, 6.0],
-        };
+        let f = QuadField { coeffs: [1.0, 2.0, 3.0, 4.0, 5.0, 6.0] };
         // 1 + 2u + 3v + 4u^2 + 5uv + 6v^2 at (0.5, -1) = 1 + 1 - 3 + 1 - 2.5 + 6
         assert!((f.at(0.5, -1.0) - 3.5).abs() < 1e-12);
     }

@@ -47,16 +47,9 @@ pub fn fit_quadratic(s: &[f64], y: &[f64]) -> Option<Quadratic> {
     if distinct.len() < 3 {
         return None;
     }
-    let design: Vec<f64> = s
-        .iter()
-        .flat_map(|&v| [1.0, v / scale, (v / scale).powi(2)])
-        .collect();
+    let design: Vec<f64> = s.iter().flat_map(|&v| [1.0, v / scale, (v / scale).powi(2)]).collect();
     let c = ridge(&design, y, 3, &[0.0; 3], &[0.0; 3])?;
-    Some(Quadratic {
-        a0: c[0],
-        a1: c[1] / scale,
-        a2: c[2] / scale / scale,
-    })
+    Some(Quadratic { a0: c[0], a1: c[1] / scale, a2: c[2] / scale / scale })
 }
 
 /// Coefficient of determination of predictions `pred` for observations `y`
@@ -110,12 +103,7 @@ pub fn solve_spd(m: &mut [f64], b: &mut [f64], p: usize) -> bool {
 }
 
 /// Normal equations `X^T X` and `X^T y` of the rows in `rows`.
-fn gram(
-    design: &[f64],
-    y: &[f64],
-    p: usize,
-    rows: impl Iterator<Item = usize>,
-) -> (Vec<f64>, Vec<f64>) {
+fn gram(design: &[f64], y: &[f64], p: usize, rows: impl Iterator<Item = usize>) -> (Vec<f64>, Vec<f64>) {
     let (mut g, mut r) = (vec![0.0; p * p], vec![0.0; p]);
     for t in rows {
         let x = &design[t * p..(t + 1) * p];
@@ -129,13 +117,7 @@ fn gram(
     (g, r)
 }
 
-fn solve_penalized(
-    g: &[f64],
-    r: &[f64],
-    p: usize,
-    penalty: &[f64],
-    prior: &[f64],
-) -> Option<Vec<f64>> {
+fn solve_penalized(g: &[f64], r: &[f64], p: usize, penalty: &[f64], prior: &[f64]) -> Option<Vec<f64>> {
     let mut m = g.to_vec();
     let mut b = r.to_vec();
     for i in 0..p {
@@ -147,13 +129,7 @@ fn solve_penalized(
 
 /// Ridge regression: argmin ||X c - y||^2 + sum_i penalty_i (c_i - prior_i)^2.
 /// `None` if the penalized normal matrix is not positive definite.
-pub fn ridge(
-    design: &[f64],
-    y: &[f64],
-    p: usize,
-    penalty: &[f64],
-    prior: &[f64],
-) -> Option<Vec<f64>> {
+pub fn ridge(design: &[f64], y: &[f64], p: usize, penalty: &[f64], prior: &[f64]) -> Option<Vec<f64>> {
     let (g, r) = gram(design, y, p, 0..y.len());
     solve_penalized(&g, &r, p, penalty, prior)
 }
@@ -224,18 +200,8 @@ pub struct CvSearch<'a> {
 /// weights win), then refits on all samples. `None` when no weight combination gives a
 /// solvable system.
 pub fn cross_validate(problem: &RidgeProblem, search: &CvSearch) -> Option<CvFit> {
-    let RidgeProblem {
-        design,
-        y,
-        p,
-        prior,
-        base_penalty,
-    } = *problem;
-    let CvSearch {
-        blocks,
-        grid,
-        folds,
-    } = *search;
+    let RidgeProblem { design, y, p, prior, base_penalty } = *problem;
+    let CvSearch { blocks, grid, folds } = *search;
     let n = y.len();
     let k = folds.clamp(2, n.max(2));
     let fold = fold_of(n, k);
@@ -244,10 +210,7 @@ pub fn cross_validate(problem: &RidgeProblem, search: &CvSearch) -> Option<CvFit
     let train: Vec<(Vec<f64>, Vec<f64>)> = (0..k)
         .map(|f| {
             let (g, r) = gram(design, y, p, (0..n).filter(|&t| fold[t] == f));
-            (
-                g_all.iter().zip(&g).map(|(a, b)| a - b).collect(),
-                r_all.iter().zip(&r).map(|(a, b)| a - b).collect(),
-            )
+            (g_all.iter().zip(&g).map(|(a, b)| a - b).collect(), r_all.iter().zip(&r).map(|(a, b)| a - b).collect())
         })
         .collect();
     let combos = grid.len().pow(blocks.len() as u32);
@@ -288,8 +251,7 @@ pub fn cross_validate(problem: &RidgeProblem, search: &CvSearch) -> Option<CvFit
             None => true,
             Some((b, bl)) => {
                 let tol = 1e-12 * b.abs().max(f64::MIN_POSITIVE);
-                mse < b - tol
-                    || (mse <= b + tol && lambdas.iter().sum::<f64>() > bl.iter().sum::<f64>())
+                mse < b - tol || (mse <= b + tol && lambdas.iter().sum::<f64>() > bl.iter().sum::<f64>())
             }
         };
         if better {
@@ -302,12 +264,7 @@ pub fn cross_validate(problem: &RidgeProblem, search: &CvSearch) -> Option<CvFit
         penalty[block.clone()].iter_mut().for_each(|v| *v += l);
     }
     let coeffs = solve_penalized(&g_all, &r_all, p, &penalty, prior)?;
-    Some(CvFit {
-        coeffs,
-        lambdas,
-        cv_mse,
-        folds: k,
-    })
+    Some(CvFit { coeffs, lambdas, cv_mse, folds: k })
 }
 
 #[cfg(test)]
@@ -319,9 +276,7 @@ mod tests {
         let s: Vec<f64> = (0..10).map(|i| i as f64 * 0.7).collect();
         let y: Vec<f64> = s.iter().map(|v| 0.3 + 2.0 * v - 0.1 * v * v).collect();
         let q = fit_quadratic(&s, &y).unwrap();
-        assert!(
-            (q.a0 - 0.3).abs() < 1e-9 && (q.a1 - 2.0).abs() < 1e-9 && (q.a2 + 0.1).abs() < 1e-9
-        );
+        assert!((q.a0 - 0.3).abs() < 1e-9 && (q.a1 - 2.0).abs() < 1e-9 && (q.a2 + 0.1).abs() < 1e-9);
         let pred: Vec<f64> = s.iter().map(|&v| q.at(v)).collect();
         assert!((r_squared(&y, &pred).unwrap() - 1.0).abs() < 1e-12);
         assert!((q.slope(1.0) - 1.8).abs() < 1e-9);

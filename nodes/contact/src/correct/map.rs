@@ -38,17 +38,9 @@ impl SignalMap {
     fn inside(&self, s: f64) -> f64 {
         let q = &self.quadratic;
         let lo = self.signal_min;
-        let vertex = if q.a2 != 0.0 {
-            -q.a1 / (2.0 * q.a2)
-        } else {
-            f64::INFINITY
-        };
+        let vertex = if q.a2 != 0.0 { -q.a1 / (2.0 * q.a2) } else { f64::INFINITY };
         // Concave with its top before s: the running max is the top (or lo if the top is left of lo).
-        let s_eff = if q.a2 < 0.0 && vertex < s {
-            vertex.max(lo)
-        } else {
-            s
-        };
+        let s_eff = if q.a2 < 0.0 && vertex < s { vertex.max(lo) } else { s };
         // Convex with its bottom after lo: values dip below f(lo) and the running max holds f(lo).
         q.at(s_eff).max(q.at(lo))
     }
@@ -56,26 +48,16 @@ impl SignalMap {
     /// Slope of the envelope at `s` inside the range, never negative.
     fn inside_slope(&self, s: f64) -> f64 {
         let q = &self.quadratic;
-        if self.inside(s) > q.at(s) {
-            0.0
-        } else {
-            q.slope(s).max(0.0)
-        }
+        if self.inside(s) > q.at(s) { 0.0 } else { q.slope(s).max(0.0) }
     }
 
     /// Force for signal `s` and whether it was extrapolated.
     pub fn eval(&self, s: f64) -> (f64, Range) {
         let (lo, hi) = (self.signal_min, self.signal_max);
         if s > hi {
-            (
-                self.inside(hi) + self.inside_slope(hi) * (s - hi),
-                Range::Above,
-            )
+            (self.inside(hi) + self.inside_slope(hi) * (s - hi), Range::Above)
         } else if s < lo {
-            (
-                self.inside(lo) + self.inside_slope(lo) * (s - lo),
-                Range::Below,
-            )
+            (self.inside(lo) + self.inside_slope(lo) * (s - lo), Range::Below)
         } else {
             (self.inside(s), Range::Inside)
         }
@@ -87,22 +69,14 @@ mod tests {
     use super::*;
 
     fn map(a0: f64, a1: f64, a2: f64) -> SignalMap {
-        SignalMap {
-            quadratic: Quadratic { a0, a1, a2 },
-            signal_min: 1.0,
-            signal_max: 3.0,
-        }
+        SignalMap { quadratic: Quadratic { a0, a1, a2 }, signal_min: 1.0, signal_max: 3.0 }
     }
 
     fn assert_monotone(m: &SignalMap) {
         let mut prev = f64::NEG_INFINITY;
         for i in 0..=600 {
             let (f, _) = m.eval(0.01 * i as f64);
-            assert!(
-                f >= prev - 1e-12,
-                "not monotone at s = {}: {f} < {prev}",
-                0.01 * i as f64
-            );
+            assert!(f >= prev - 1e-12, "not monotone at s = {}: {f} < {prev}", 0.01 * i as f64);
             prev = f;
         }
     }

@@ -14,8 +14,6 @@ pub mod map;
 pub mod strategy;
 
 pub use average::{Holds, average_holds};
-pub use calibrate::{
-    CalibParams, CalibSample, CalibWarning, CalibrateError, Calibrated, calibrate,
-};
+pub use calibrate::{CalibParams, CalibSample, CalibWarning, CalibrateError, Calibrated, calibrate};
 pub use calibration::{Calibration, CalibrationFileError, Provenance, R2Table};
 pub use strategy::{ForceEstimate, ForceFlags, Strategy, StrategyKind};

@@ -151,27 +151,15 @@ impl Strategy {
             });
         }
         let splitter = match kind {
-            StrategyKind::PneumaticLocAwareSensitivity => {
-                Splitter::SensitivityCompensated(cal.sensitivity)
-            }
+            StrategyKind::PneumaticLocAwareSensitivity => Splitter::SensitivityCompensated(cal.sensitivity),
             _ => Splitter::Proportional,
         };
-        Self {
-            kind,
-            map: sig.map,
-            fields,
-            area,
-            region: cal.region,
-            splitter,
-        }
+        Self { kind, map: sig.map, fields, area, region: cal.region, splitter }
     }
 
     /// Every strategy of a calibration, in [`StrategyKind::ALL`] order.
     pub fn all(cal: &Calibration) -> Vec<Strategy> {
-        StrategyKind::ALL
-            .iter()
-            .map(|&k| Strategy::new(cal, k))
-            .collect()
+        StrategyKind::ALL.iter().map(|&k| Strategy::new(cal, k)).collect()
     }
 
     /// Which strategy this is.
@@ -187,18 +175,10 @@ impl Strategy {
     /// Force of one contact given its pressure share `dp_i_kpa` (ignored by EIT strategies).
     pub fn estimate(&self, contact: &Contact, dp_i_kpa: f64) -> ForceEstimate {
         let mut flags = ForceFlags::default();
-        let signal = if self.kind.is_pneumatic() {
-            dp_i_kpa
-        } else {
-            contact.sum
-        };
+        let signal = if self.kind.is_pneumatic() { dp_i_kpa } else { contact.sum };
         if !(signal > 0.0 && signal.is_finite()) {
             flags.no_load = true;
-            return ForceEstimate {
-                force_n: 0.0,
-                dp_kpa: dp_i_kpa,
-                flags,
-            };
+            return ForceEstimate { force_n: 0.0, dp_kpa: dp_i_kpa, flags };
         }
         let (f, range) = self.map.eval(signal);
         flags.above_range = range == Range::Above;
@@ -211,11 +191,7 @@ impl Strategy {
             let mut b = offset.at(n.u, n.v);
             if let Some(a) = &self.area {
                 let rel = contact.area_mm2 / a.area_ref_mm2 - 1.0;
-                let rel_c = if rel.is_finite() {
-                    rel.clamp(a.rel_min, a.rel_max)
-                } else {
-                    0.0
-                };
+                let rel_c = if rel.is_finite() { rel.clamp(a.rel_min, a.rel_max) } else { 0.0 };
                 flags.area_clamped = rel_c != rel;
                 g += a.gain * rel_c;
                 b += a.offset * rel_c;
@@ -226,29 +202,16 @@ impl Strategy {
             flags.negative_clamped = true;
             force = 0.0;
         }
-        ForceEstimate {
-            force_n: force,
-            dp_kpa: dp_i_kpa,
-            flags,
-        }
+        ForceEstimate { force_n: force, dp_kpa: dp_i_kpa, flags }
     }
 
     /// Splits `dp_kpa` with this strategy's splitter and estimates every contact into
     /// `out[..contacts.len()]`. No allocation.
-    pub fn estimate_frame_into(
-        &self,
-        dp_kpa: f64,
-        contacts: &[Contact],
-        out: &mut [ForceEstimate],
-    ) {
+    pub fn estimate_frame_into(&self, dp_kpa: f64, contacts: &[Contact], out: &mut [ForceEstimate]) {
         let total: f64 = contacts.iter().map(|c| self.splitter.weight(c)).sum();
         let n = contacts.len() as f64;
         for (o, c) in out.iter_mut().zip(contacts) {
-            let share = if total > 0.0 {
-                self.splitter.weight(c) / total * dp_kpa
-            } else {
-                dp_kpa / n
-            };
+            let share = if total > 0.0 { self.splitter.weight(c) / total * dp_kpa } else { dp_kpa / n };
             *o = self.estimate(c, share);
         }
     }

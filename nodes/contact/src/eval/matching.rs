@@ -98,11 +98,7 @@ pub fn match_contacts(pred: &[(f64, f64)], truth: &[(f64, f64)], max_dist_mm: f6
     (0..pred.len())
         .filter_map(|i| {
             let j = cols[i];
-            (j < truth.len() && dist(i, j) <= max_dist_mm).then(|| Pair {
-                pred: i,
-                truth: j,
-                dist_mm: dist(i, j),
-            })
+            (j < truth.len() && dist(i, j) <= max_dist_mm).then(|| Pair { pred: i, truth: j, dist_mm: dist(i, j) })
         })
         .collect()
 }
@@ -113,13 +109,7 @@ mod tests {
 
     /// Exhaustive reference: best (pairs, -distance) over all injective partial assignments.
     fn brute(pred: &[(f64, f64)], truth: &[(f64, f64)], max: f64) -> (usize, f64) {
-        fn rec(
-            i: usize,
-            pred: &[(f64, f64)],
-            truth: &[(f64, f64)],
-            used: &mut Vec<bool>,
-            max: f64,
-        ) -> (usize, f64) {
+        fn rec(i: usize, pred: &[(f64, f64)], truth: &[(f64, f64)], used: &mut Vec<bool>, max: f64) -> (usize, f64) {
             if i == pred.len() {
                 return (0, 0.0);
             }
@@ -165,9 +155,7 @@ mod tests {
         // Deterministic pseudo-random layouts with up to 5 x 6 contacts.
         let mut state = 12345u64;
         let mut next = || {
-            state = state
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
             ((state >> 33) as f64 / (1u64 << 31) as f64) * 40.0
         };
         for case in 0..300 {

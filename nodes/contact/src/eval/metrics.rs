@@ -72,12 +72,7 @@ pub struct MatchRecord {
 pub enum EvalError {
     /// Force or latency arrays do not match the strategies or detections.
     #[error("eval: frame {frame}: {what} has {got} entries, expected {expected}")]
-    Shape {
-        frame: usize,
-        what: &'static str,
-        got: usize,
-        expected: usize,
-    },
+    Shape { frame: usize, what: &'static str, got: usize, expected: usize },
 }
 
 /// Accumulates frames for a fixed list of strategies.
@@ -130,16 +125,7 @@ impl Evaluator {
     pub fn push(&mut self, f: &FrameInput) -> Result<Vec<Pair>, EvalError> {
         let frame = self.frames;
         let shape = |what, got, expected| {
-            if got == expected {
-                Ok(())
-            } else {
-                Err(EvalError::Shape {
-                    frame,
-                    what,
-                    got,
-                    expected,
-                })
-            }
+            if got == expected { Ok(()) } else { Err(EvalError::Shape { frame, what, got, expected }) }
         };
         shape("forces_n", f.forces_n.len(), self.names.len())?;
         shape("latency_us", f.latency_us.len(), self.names.len())?;
@@ -225,24 +211,15 @@ pub fn resolution_pct(image: &[f64], peak: f64, fraction: f64) -> Option<f64> {
         return None;
     }
     let total = image.iter().filter(|v| v.is_finite()).count();
-    let above = image
-        .iter()
-        .filter(|v| v.is_finite() && -**v >= fraction * peak)
-        .count();
+    let above = image.iter().filter(|v| v.is_finite() && -**v >= fraction * peak).count();
     (total > 0).then(|| 100.0 * (1.0 - (above as f64 / total as f64).sqrt()))
 }
 
 /// RES50 and RES75 of one frame, with the peak = the largest contact amplitude (CONTRACTS.md
 /// §4: the largest [`Contact::peak`] of the frame's segmented contacts); `None` without contacts.
 pub fn resolution(image: &[f64], contacts: &[Contact]) -> Option<Resolution> {
-    let peak = contacts
-        .iter()
-        .map(|c| c.peak)
-        .fold(f64::NEG_INFINITY, f64::max);
-    Some(Resolution {
-        res50_pct: resolution_pct(image, peak, 0.5)?,
-        res75_pct: resolution_pct(image, peak, 0.75)?,
-    })
+    let peak = contacts.iter().map(|c| c.peak).fold(f64::NEG_INFINITY, f64::max);
+    Some(Resolution { res50_pct: resolution_pct(image, peak, 0.5)?, res75_pct: resolution_pct(image, peak, 0.75)? })
 }
 
 #[cfg(test)]
@@ -275,14 +252,7 @@ mod tests {
                 img[r * 10 + c] = -1.0;
             }
         }
-        let c = Contact {
-            x_mm: 0.0,
-            y_mm: 0.0,
-            sum: 1.0,
-            area_mm2: 1.0,
-            peak: 1.0,
-            label: 1,
-        };
+        let c = Contact { x_mm: 0.0, y_mm: 0.0, sum: 1.0, area_mm2: 1.0, peak: 1.0, label: 1 };
         let res = resolution(&img, &[c]).unwrap();
         assert!((res.res50_pct - 60.0).abs() < 1e-12 && (res.res75_pct - 80.0).abs() < 1e-12);
         assert!(resolution(&img, &[]).is_none());
@@ -292,12 +262,7 @@ mod tests {
     #[test]
     fn missed_spurious_and_shapes() {
         let mut e = Evaluator::new(&[("a", "A")]);
-        let truth = [TruthContact {
-            x_mm: 0.0,
-            y_mm: 0.0,
-            force_n: 2.0,
-            diameter_mm: 10.0,
-        }];
+        let truth = [TruthContact { x_mm: 0.0, y_mm: 0.0, force_n: 2.0, diameter_mm: 10.0 }];
         let det = [(1.0, 0.0), (40.0, 0.0)];
         let pairs = e
             .push(&FrameInput {
@@ -320,13 +285,8 @@ mod tests {
         })
         .unwrap();
         assert_eq!((e.spurious, e.missed, e.frames), (2, 0, 2));
-        let bad = FrameInput {
-            truth: &[],
-            detected_mm: &det,
-            forces_n: &[&[1.0]],
-            latency_us: &[1.0],
-            resolution: None,
-        };
+        let bad =
+            FrameInput { truth: &[], detected_mm: &det, forces_n: &[&[1.0]], latency_us: &[1.0], resolution: None };
         assert!(e.push(&bad).is_err());
     }
 }

@@ -12,7 +12,6 @@ pub mod report;
 
 pub use matching::{Pair, match_contacts};
 pub use metrics::{
-    EvalError, Evaluator, FrameInput, MatchRecord, Resolution, TruthContact, resolution,
-    resolution_pct,
+    EvalError, Evaluator, FrameInput, MatchRecord, Resolution, TruthContact, resolution, resolution_pct,
 };
 pub use report::EvalReport;

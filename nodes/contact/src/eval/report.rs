@@ -86,11 +86,7 @@ pub struct EvalReport {
 
 /// Diameter as a JSON key: "10" when whole, else the shortest decimal ("12.5").
 pub fn diameter_key(d_mm: f64) -> String {
-    if d_mm.fract() == 0.0 && d_mm.abs() < 1e15 {
-        format!("{}", d_mm as i64)
-    } else {
-        format!("{d_mm}")
-    }
+    if d_mm.fract() == 0.0 && d_mm.abs() < 1e15 { format!("{}", d_mm as i64) } else { format!("{d_mm}") }
 }
 
 fn finite(v: Option<f64>) -> Option<f64> {
@@ -105,29 +101,17 @@ impl Evaluator {
             let err = |r: &super::metrics::MatchRecord| r.forces_n[s] - r.truth.force_n;
             let abs: Vec<f64> = self.records.iter().map(|r| err(r).abs()).collect();
             let mut per_diameter = BTreeMap::new();
-            let mut diameters: Vec<f64> = self
-                .records
-                .iter()
-                .map(|r| r.truth.diameter_mm)
-                .filter(|d| d.is_finite())
-                .collect();
+            let mut diameters: Vec<f64> =
+                self.records.iter().map(|r| r.truth.diameter_mm).filter(|d| d.is_finite()).collect();
             diameters.sort_by(f64::total_cmp);
             diameters.dedup();
             for d in diameters {
-                if let Some(v) = finite(rms(self
-                    .records
-                    .iter()
-                    .filter(|r| r.truth.diameter_mm == d)
-                    .map(err)))
-                {
+                if let Some(v) = finite(rms(self.records.iter().filter(|r| r.truth.diameter_mm == d).map(err))) {
                     per_diameter.insert(diameter_key(d), v);
                 }
             }
             let rel = mean(
-                self.records
-                    .iter()
-                    .filter(|r| r.truth.force_n > 0.0)
-                    .map(|r| 100.0 * err(r).abs() / r.truth.force_n),
+                self.records.iter().filter(|r| r.truth.force_n > 0.0).map(|r| 100.0 * err(r).abs() / r.truth.force_n),
             );
             strategies.insert(
                 name.clone(),
@@ -149,11 +133,8 @@ impl Evaluator {
                 .iter()
                 .enumerate()
                 .map(|(s, n)| {
-                    let e = self
-                        .records
-                        .iter()
-                        .filter(|r| r.truth_in_frame >= 2)
-                        .map(|r| r.forces_n[s] - r.truth.force_n);
+                    let e =
+                        self.records.iter().filter(|r| r.truth_in_frame >= 2).map(|r| r.forces_n[s] - r.truth.force_n);
                     (n.clone(), finite(rms(e)))
                 })
                 .collect(),
@@ -174,12 +155,7 @@ impl Evaluator {
                 res50_pct: finite(mean(self.resolutions.iter().map(|r| r.res50_pct))),
                 res75_pct: finite(mean(self.resolutions.iter().map(|r| r.res75_pct))),
             },
-            order: self
-                .names
-                .iter()
-                .cloned()
-                .zip(self.labels.iter().cloned())
-                .collect(),
+            order: self.names.iter().cloned().zip(self.labels.iter().cloned()).collect(),
         }
     }
 }
@@ -199,19 +175,12 @@ fn num(v: Option<f64>, prec: usize) -> String {
 impl fmt::Display for EvalReport {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let order: Vec<(String, String)> = if self.order.is_empty() {
-            self.strategies
-                .keys()
-                .map(|k| (k.clone(), k.clone()))
-                .collect()
+            self.strategies.keys().map(|k| (k.clone(), k.clone())).collect()
         } else {
             self.order.clone()
         };
         let matched = self.localization.matched;
-        writeln!(
-            f,
-            "Force estimation ({} frames, {matched} matched contacts). Lower is better.",
-            self.frames
-        )?;
+        writeln!(f, "Force estimation ({} frames, {matched} matched contacts). Lower is better.", self.frames)?;
         writeln!(
             f,
             "{:<38} {:>14} {:>13} {:>10} {:>10}",
@@ -233,16 +202,8 @@ impl fmt::Display for EvalReport {
                 num(s.latency_us_p99, 1)
             )?;
         }
-        let mut diameters: Vec<&String> = self
-            .strategies
-            .values()
-            .flat_map(|s| s.per_diameter_rmse_n.keys())
-            .collect();
-        diameters.sort_by(|a, b| {
-            a.parse::<f64>()
-                .unwrap_or(f64::NAN)
-                .total_cmp(&b.parse::<f64>().unwrap_or(f64::NAN))
-        });
+        let mut diameters: Vec<&String> = self.strategies.values().flat_map(|s| s.per_diameter_rmse_n.keys()).collect();
+        diameters.sort_by(|a, b| a.parse::<f64>().unwrap_or(f64::NAN).total_cmp(&b.parse::<f64>().unwrap_or(f64::NAN)));
         diameters.dedup();
         if !diameters.is_empty() {
             writeln!(f)?;
@@ -276,11 +237,7 @@ impl fmt::Display for EvalReport {
         match &self.multi_contact {
             None => writeln!(f, "Multi-contact: no frame with two or more true contacts")?,
             Some(m) => {
-                write!(
-                    f,
-                    "Multi-contact ({} frames), per-contact RMSE [N]:",
-                    m.frames
-                )?;
+                write!(f, "Multi-contact ({} frames), per-contact RMSE [N]:", m.frames)?;
                 for (name, label) in &order {
                     if let Some(v) = m.per_contact_rmse_n.get(name) {
                         write!(f, "\n  {label:<36} {}", num(*v, 2))?;

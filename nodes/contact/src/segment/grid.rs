@@ -36,12 +36,7 @@ pub enum GridError {
     #[error(
         "image grid: extent must be finite with min < max (got x [{x_min_mm}, {x_max_mm}], y [{y_min_mm}, {y_max_mm}])"
     )]
-    Extent {
-        x_min_mm: f64,
-        x_max_mm: f64,
-        y_min_mm: f64,
-        y_max_mm: f64,
-    },
+    Extent { x_min_mm: f64, x_max_mm: f64, y_min_mm: f64, y_max_mm: f64 },
 }
 
 impl ImageGrid {
@@ -60,10 +55,7 @@ impl ImageGrid {
     /// Checks sizes and extents; call once at construction.
     pub fn validate(&self) -> Result<(), GridError> {
         if self.width == 0 || self.height == 0 {
-            return Err(GridError::Empty {
-                width: self.width,
-                height: self.height,
-            });
+            return Err(GridError::Empty { width: self.width, height: self.height });
         }
         let ok = |a: f64, b: f64| a.is_finite() && b.is_finite() && a < b;
         if !ok(self.x_min_mm, self.x_max_mm) || !ok(self.y_min_mm, self.y_max_mm) {
@@ -117,11 +109,7 @@ impl ImageGrid {
         let c = ((x_mm - self.x_min_mm) / self.dx_mm()).floor();
         let r = ((y_mm - self.y_min_mm) / self.dy_mm()).floor();
         let clamp = |v: f64, n: usize| {
-            if v.is_nan() || v < 0.0 {
-                0
-            } else {
-                (v as usize).min(n - 1)
-            }
+            if v.is_nan() || v < 0.0 { 0 } else { (v as usize).min(n - 1) }
         };
         (clamp(c, self.width), clamp(r, self.height))
     }

@@ -46,21 +46,13 @@ fn default_max_contacts() -> usize {
 impl SegmentParams {
     /// Paper defaults with the given absolute floor.
     pub fn with_floor(floor: f64) -> Self {
-        Self {
-            floor,
-            radius_frac: default_radius_frac(),
-            max_contacts: default_max_contacts(),
-        }
+        Self { floor, radius_frac: default_radius_frac(), max_contacts: default_max_contacts() }
     }
 
     /// Checks every field; run at load.
     pub fn validate(&self) -> Result<(), SegmentError> {
         if !(self.floor.is_finite() && self.floor > 0.0) {
-            return Err(SegmentError::Param {
-                name: "floor",
-                expected: "finite and > 0",
-                got: self.floor,
-            });
+            return Err(SegmentError::Param { name: "floor", expected: "finite and > 0", got: self.floor });
         }
         if !(self.radius_frac.is_finite() && (0.0..0.5).contains(&self.radius_frac)) {
             return Err(SegmentError::Param {
@@ -70,11 +62,7 @@ impl SegmentParams {
             });
         }
         if self.max_contacts == 0 {
-            return Err(SegmentError::Param {
-                name: "max_contacts",
-                expected: ">= 1",
-                got: 0.0,
-            });
+            return Err(SegmentError::Param { name: "max_contacts", expected: ">= 1", got: 0.0 });
         }
         Ok(())
     }
@@ -85,22 +73,13 @@ impl SegmentParams {
 pub enum SegmentError {
     /// A parameter out of range.
     #[error("segment: param \"{name}\": must be {expected} (got {got})")]
-    Param {
-        name: &'static str,
-        expected: &'static str,
-        got: f64,
-    },
+    Param { name: &'static str, expected: &'static str, got: f64 },
     /// The grid is invalid.
     #[error("segment: {0}")]
     Grid(#[from] GridError),
     /// The image has the wrong number of pixels.
     #[error("segment: image has {got} pixels, grid {width} x {height} needs {expected}")]
-    ImageSize {
-        got: usize,
-        expected: usize,
-        width: usize,
-        height: usize,
-    },
+    ImageSize { got: usize, expected: usize, width: usize, height: usize },
 }
 
 /// One segmented contact (ROI).
@@ -176,12 +155,7 @@ impl Contacts {
             return;
         }
         self.dropped += 1;
-        let weakest = self
-            .items
-            .iter()
-            .enumerate()
-            .min_by(|a, b| a.1.sum.total_cmp(&b.1.sum))
-            .map(|(i, _)| i);
+        let weakest = self.items.iter().enumerate().min_by(|a, b| a.1.sum.total_cmp(&b.1.sum)).map(|(i, _)| i);
         if let Some(i) = weakest
             && self.items[i].sum < c.sum
         {
@@ -192,10 +166,7 @@ impl Contacts {
 
 /// Largest conductivity decrease (`max(-image)`, non-finite pixels skipped); 0 when none.
 pub fn peak_decrease(image: &[f64]) -> f64 {
-    let peak = image
-        .iter()
-        .filter(|v| v.is_finite())
-        .fold(f64::NEG_INFINITY, |m, &v| m.max(-v));
+    let peak = image.iter().filter(|v| v.is_finite()).fold(f64::NEG_INFINITY, |m, &v| m.max(-v));
     if peak.is_finite() { peak } else { 0.0 }
 }
 
@@ -333,30 +304,16 @@ impl Segmenter {
             // NaN compares false: pixels outside the domain never become foreground.
             *m = u8::from(-v >= cut);
         }
-        morphology::open_then_close(
-            &self.disk,
-            g.width,
-            g.height,
-            &mut self.mask,
-            &mut self.scratch,
-        );
+        morphology::open_then_close(&self.disk, g.width, g.height, &mut self.mask, &mut self.scratch);
         let mut acc = Accum::default();
         let pixel_area = g.pixel_area_mm2();
         let (x0, dx, y0, dy) = (g.x_mm(0), g.dx_mm(), g.y_mm(0), g.dy_mm());
-        label::label_components(
-            g.width,
-            g.height,
-            &self.mask,
-            &mut self.labels,
-            &mut self.stack,
-            |label, visit| match visit {
+        label::label_components(g.width, g.height, &self.mask, &mut self.labels, &mut self.stack, |label, visit| {
+            match visit {
                 label::Visit::Pixel(p) => {
                     let d = image[p];
                     let d = if d.is_finite() { (-d).max(0.0) } else { 0.0 };
-                    let (x, y) = (
-                        x0 + (p % g.width) as f64 * dx,
-                        y0 + (p / g.width) as f64 * dy,
-                    );
+                    let (x, y) = (x0 + (p % g.width) as f64 * dx, y0 + (p / g.width) as f64 * dy);
                     acc.w += d;
                     acc.wx += d * x;
                     acc.wy += d * y;
@@ -370,22 +327,11 @@ impl Segmenter {
                     let n = a.n as f64;
                     // Weights are > 0 in practice (every component keeps pixels >= floor > 0);
                     // the geometric centroid is the guard against an all-zero component.
-                    let (x_mm, y_mm) = if a.w > 0.0 {
-                        (a.wx / a.w, a.wy / a.w)
-                    } else {
-                        (a.x / n, a.y / n)
-                    };
-                    out.offer(Contact {
-                        x_mm,
-                        y_mm,
-                        sum: a.w,
-                        area_mm2: n * pixel_area,
-                        peak: a.peak,
-                        label,
-                    });
+                    let (x_mm, y_mm) = if a.w > 0.0 { (a.wx / a.w, a.wy / a.w) } else { (a.x / n, a.y / n) };
+                    out.offer(Contact { x_mm, y_mm, sum: a.w, area_mm2: n * pixel_area, peak: a.peak, label });
                 }
-            },
-        );
+            }
+        });
         Ok(())
     }
 }

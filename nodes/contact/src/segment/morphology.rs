@@ -79,13 +79,7 @@ pub fn dilate(disk: &Disk, width: usize, height: usize, src: &[u8], dst: &mut [u
 }
 
 /// In place: `mask = ((mask o disk) . disk)`, opening then closing; `scratch` has the mask's size.
-pub fn open_then_close(
-    disk: &Disk,
-    width: usize,
-    height: usize,
-    mask: &mut [u8],
-    scratch: &mut [u8],
-) {
+pub fn open_then_close(disk: &Disk, width: usize, height: usize, mask: &mut [u8], scratch: &mut [u8]) {
     erode(disk, width, height, mask, scratch);
     dilate(disk, width, height, scratch, mask);
     dilate(disk, width, height, mask, scratch);
@@ -121,12 +115,8 @@ mod tests {
     fn opening_then_closing_removes_a_speck_and_keeps_a_cross() {
         // A radius-1 cross is exactly one disk, so opening keeps it; the isolated
         // speck is removed; closing a cross by the same disk gives the cross back.
-        let (w, h, mut m) = parse(&[
-            ".......", ".......", "...#...", "..###..", "...#...", ".......", "......#",
-        ]);
-        let (_, _, expected) = parse(&[
-            ".......", ".......", "...#...", "..###..", "...#...", ".......", ".......",
-        ]);
+        let (w, h, mut m) = parse(&[".......", ".......", "...#...", "..###..", "...#...", ".......", "......#"]);
+        let (_, _, expected) = parse(&[".......", ".......", "...#...", "..###..", "...#...", ".......", "......."]);
         let mut scratch = vec![0u8; w * h];
         open_then_close(&Disk::new(1.0), w, h, &mut m, &mut scratch);
         assert_eq!(m, expected);
@@ -134,12 +124,8 @@ mod tests {
 
     #[test]
     fn closing_fills_a_one_pixel_hole() {
-        let (w, h, m) = parse(&[
-            ".......", ".......", "..###..", "..#.#..", "..###..", ".......", ".......",
-        ]);
-        let (_, _, filled) = parse(&[
-            ".......", ".......", "..###..", "..###..", "..###..", ".......", ".......",
-        ]);
+        let (w, h, m) = parse(&[".......", ".......", "..###..", "..#.#..", "..###..", ".......", "......."]);
+        let (_, _, filled) = parse(&[".......", ".......", "..###..", "..###..", "..###..", ".......", "......."]);
         let disk = Disk::new(1.0);
         let mut grown = vec![0u8; w * h];
         let mut closed = vec![0u8; w * h];
@@ -175,16 +161,13 @@ mod tests {
         let mut out = vec![0u8; w * h];
         for r in 0..h as isize {
             for c in 0..w as isize {
-                let inside = disk.offsets().iter().filter(|(dx, dy)| {
-                    (0..w as isize).contains(&(c + dx)) && (0..h as isize).contains(&(r + dy))
-                });
-                let mut vals =
-                    inside.map(|(dx, dy)| src[((r + dy) * w as isize + c + dx) as usize]);
-                out[(r * w as isize + c) as usize] = u8::from(if erode {
-                    vals.all(|v| v == 1)
-                } else {
-                    vals.any(|v| v == 1)
-                });
+                let inside = disk
+                    .offsets()
+                    .iter()
+                    .filter(|(dx, dy)| (0..w as isize).contains(&(c + dx)) && (0..h as isize).contains(&(r + dy)));
+                let mut vals = inside.map(|(dx, dy)| src[((r + dy) * w as isize + c + dx) as usize]);
+                out[(r * w as isize + c) as usize] =
+                    u8::from(if erode { vals.all(|v| v == 1) } else { vals.any(|v| v == 1) });
             }
         }
         out
@@ -198,25 +181,15 @@ mod tests {
                 let disk = Disk::new(radius);
                 let src: Vec<u8> = (0..w * h)
                     .map(|_| {
-                        state = state
-                            .wrapping_mul(6364136223846793005)
-                            .wrapping_add(1442695040888963407);
+                        state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
                         u8::from(!(state >> 40).is_multiple_of(3))
                     })
                     .collect();
                 let mut out = vec![0u8; w * h];
                 erode(&disk, w, h, &src, &mut out);
-                assert_eq!(
-                    out,
-                    naive(true, &disk, w, h, &src),
-                    "erode {w}x{h} r {radius}"
-                );
+                assert_eq!(out, naive(true, &disk, w, h, &src), "erode {w}x{h} r {radius}");
                 dilate(&disk, w, h, &src, &mut out);
-                assert_eq!(
-                    out,
-                    naive(false, &disk, w, h, &src),
-                    "dilate {w}x{h} r {radius}"
-                );
+                assert_eq!(out, naive(false, &disk, w, h, &src), "dilate {w}x{h} r {radius}");
             }
         }
     }

@@ -22,11 +22,7 @@ pub fn otsu_threshold(hist: &[u32; BINS]) -> Option<f64> {
     if total == 0.0 {
         return None;
     }
-    let sum_all: f64 = hist
-        .iter()
-        .enumerate()
-        .map(|(k, &c)| k as f64 * c as f64)
-        .sum();
+    let sum_all: f64 = hist.iter().enumerate().map(|(k, &c)| k as f64 * c as f64).sum();
     let (mut w0, mut sum0) = (0.0, 0.0);
     let mut best = -1.0_f64;
     let (mut first, mut last) = (0usize, 0usize);
@@ -69,10 +65,7 @@ mod tests {
         h[bin_of(0.8)] = 10;
         assert_eq!(bin_of(0.2), 51);
         assert_eq!(bin_of(0.8), 204);
-        assert_eq!(
-            (bin_of(-0.1), bin_of(f64::NAN), bin_of(1.0), bin_of(7.0)),
-            (0, 0, 255, 255)
-        );
+        assert_eq!((bin_of(-0.1), bin_of(f64::NAN), bin_of(1.0), bin_of(7.0)), (0, 0, 255, 255));
         assert_eq!(otsu_threshold(&h), Some(0.5));
     }
 

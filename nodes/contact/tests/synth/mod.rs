@@ -29,27 +29,14 @@ pub fn cond_of(force_n: f64, x_mm: f64, y_mm: f64) -> f64 {
 }
 
 /// Frames in recording order: location by location, force by force, `per_hold` frames each.
-pub fn frames(
-    seed: u64,
-    grid: usize,
-    forces: &[f64],
-    per_hold: usize,
-    dp_noise_kpa: f64,
-) -> Vec<CalibSample> {
+pub fn frames(seed: u64, grid: usize, forces: &[f64], per_hold: usize, dp_noise_kpa: f64) -> Vec<CalibSample> {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let n = Normal::new(0.0, 1.0).unwrap();
     let mut out = Vec::new();
     for i in 0..grid {
         for j in 0..grid {
-            let step = if grid > 1 {
-                80.0 / (grid - 1) as f64
-            } else {
-                0.0
-            };
-            let (tx, ty) = (
-                -40.0 + step * i as f64 * f64::from(u8::from(grid > 1)),
-                -40.0 + step * j as f64,
-            );
+            let step = if grid > 1 { 80.0 / (grid - 1) as f64 } else { 0.0 };
+            let (tx, ty) = (-40.0 + step * i as f64 * f64::from(u8::from(grid > 1)), -40.0 + step * j as f64);
             let (tx, ty) = if grid == 1 { (0.0, 0.0) } else { (tx, ty) };
             for &f in forces {
                 for _ in 0..per_hold {
@@ -96,9 +83,7 @@ pub fn image(contacts: &[(f64, f64, f64)]) -> Vec<f64> {
             img[row * g.width + col] = -contacts
                 .iter()
                 .map(|&(cx, cy, f)| {
-                    amplitude(f, cx, cy)
-                        * (-((x - cx).powi(2) + (y - cy).powi(2)) / (2.0 * SIGMA_MM * SIGMA_MM))
-                            .exp()
+                    amplitude(f, cx, cy) * (-((x - cx).powi(2) + (y - cy).powi(2)) / (2.0 * SIGMA_MM * SIGMA_MM)).exp()
                 })
                 .sum::<f64>();
         }
@@ -110,9 +95,7 @@ pub fn image(contacts: &[(f64, f64, f64)]) -> Vec<f64> {
 /// 5 x 5 locations over [-40, 40], forces 2..10 N, 2 frames per hold, 15 mm indenter.
 pub fn segmented_frames() -> Vec<CalibSample> {
     let grid = skinflow_contact::ImageGrid::centred(64, 64, 100.0, 100.0);
-    let mut seg =
-        skinflow_contact::Segmenter::new(grid, &skinflow_contact::SegmentParams::with_floor(FLOOR))
-            .unwrap();
+    let mut seg = skinflow_contact::Segmenter::new(grid, &skinflow_contact::SegmentParams::with_floor(FLOOR)).unwrap();
     let mut out = seg.new_contacts();
     let mut frames = Vec::new();
     for i in 0..5 {
@@ -120,10 +103,7 @@ pub fn segmented_frames() -> Vec<CalibSample> {
             let (tx, ty) = (-40.0 + 20.0 * i as f64, -40.0 + 20.0 * j as f64);
             for f in [2.0, 4.0, 6.0, 8.0, 10.0] {
                 seg.segment_into(&image(&[(tx, ty, f)]), &mut out).unwrap();
-                let c = *out
-                    .as_slice()
-                    .first()
-                    .expect("every calibration contact is above the floor");
+                let c = *out.as_slice().first().expect("every calibration contact is above the floor");
                 for _ in 0..2 {
                     frames.push(CalibSample {
                         x_mm: c.x_mm,

@@ -14,19 +14,13 @@ pub const MAX_FIXED_STRING_BYTES: usize = 1 << 20;
 
 fn open_attr(file: &File, fpath: &Path, name: &str) -> Result<Option<Attribute>, RecordError> {
     let at = format!("/ attr {name}");
-    let names = file
-        .attr_names()
-        .map_err(|e| RecordError::hdf5(fpath, "/", e))?;
+    let names = file.attr_names().map_err(|e| RecordError::hdf5(fpath, "/", e))?;
     if !names.iter().any(|n| n == name) {
         return Ok(None);
     }
-    let attr = file
-        .attr(name)
-        .map_err(|e| RecordError::hdf5(fpath, &at, e))?;
+    let attr = file.attr(name).map_err(|e| RecordError::hdf5(fpath, &at, e))?;
     if attr.size() != 1 {
-        let problem = SchemaProblem::NotString {
-            found: format!("{} values", attr.size()),
-        };
+        let problem = SchemaProblem::NotString { found: format!("{} values", attr.size()) };
         return Err(RecordError::schema(fpath, &at, problem));
     }
     Ok(Some(attr))
@@ -41,33 +35,20 @@ pub fn read_string(file: &File, fpath: &Path, name: &str) -> Result<Option<Strin
     let h5 = |e| RecordError::hdf5(fpath, &at, e);
     let desc = attr.dtype().and_then(|t| t.to_descriptor()).map_err(h5)?;
     let bytes: Vec<u8> = match desc {
-        TypeDescriptor::VarLenUnicode => {
-            first_bytes::<VarLenUnicode>(&attr, |s| s.as_bytes()).map_err(h5)?
-        }
-        TypeDescriptor::VarLenAscii => {
-            first_bytes::<VarLenAscii>(&attr, |s| s.as_bytes()).map_err(h5)?
-        }
+        TypeDescriptor::VarLenUnicode => first_bytes::<VarLenUnicode>(&attr, |s| s.as_bytes()).map_err(h5)?,
+        TypeDescriptor::VarLenAscii => first_bytes::<VarLenAscii>(&attr, |s| s.as_bytes()).map_err(h5)?,
         TypeDescriptor::FixedAscii(n) | TypeDescriptor::FixedUnicode(n) => {
             let unicode = matches!(desc, TypeDescriptor::FixedUnicode(_));
             read_fixed(&attr, n, unicode).map_err(h5)?.ok_or_else(|| {
-                let found = format!(
-                    "fixed-length string of {n} bytes, longer than {MAX_FIXED_STRING_BYTES}"
-                );
+                let found = format!("fixed-length string of {n} bytes, longer than {MAX_FIXED_STRING_BYTES}");
                 RecordError::schema(fpath, &at, SchemaProblem::NotString { found })
             })?
         }
         other => {
-            return Err(RecordError::schema(
-                fpath,
-                &at,
-                SchemaProblem::NotString {
-                    found: other.to_string(),
-                },
-            ));
+            return Err(RecordError::schema(fpath, &at, SchemaProblem::NotString { found: other.to_string() }));
         }
     };
-    let mut text = String::from_utf8(bytes)
-        .map_err(|_| RecordError::schema(fpath, &at, SchemaProblem::NotUtf8))?;
+    let mut text = String::from_utf8(bytes).map_err(|_| RecordError::schema(fpath, &at, SchemaProblem::NotUtf8))?;
     // Fixed-length strings written null-terminated or padded keep their padding in some tools.
     let kept = text.trim_end_matches('\0').len();
     text.truncate(kept);
@@ -76,10 +57,7 @@ pub fn read_string(file: &File, fpath: &Path, name: &str) -> Result<Option<Strin
 
 fn first_bytes<T: H5Type>(attr: &Attribute, bytes: impl Fn(&T) -> &[u8]) -> hdf5::Result<Vec<u8>> {
     let values = attr.read_raw::<T>()?;
-    Ok(values
-        .first()
-        .map(|v| bytes(v).to_vec())
-        .unwrap_or_default())
+    Ok(values.first().map(|v| bytes(v).to_vec()).unwrap_or_default())
 }
 
 /// Reads a fixed-length string of `n` bytes through a memory type at least as long (HDF5
@@ -115,30 +93,13 @@ pub fn read_integer(file: &File, fpath: &Path, name: &str) -> Result<Option<i64>
             Ok(attr.read_raw::<i64>().map_err(h5)?.first().copied())
         }
         TypeDescriptor::Float(_) => {
-            let x = attr
-                .read_raw::<f64>()
-                .map_err(h5)?
-                .first()
-                .copied()
-                .unwrap_or(f64::NAN);
+            let x = attr.read_raw::<f64>().map_err(h5)?.first().copied().unwrap_or(f64::NAN);
             if x.is_finite() && x.fract() == 0.0 && x.abs() < 2f64.powi(53) {
                 Ok(Some(x as i64))
             } else {
-                Err(RecordError::schema(
-                    fpath,
-                    &at,
-                    SchemaProblem::NotNumeric {
-                        found: format!("{x}"),
-                    },
-                ))
+                Err(RecordError::schema(fpath, &at, SchemaProblem::NotNumeric { found: format!("{x}") }))
             }
         }
-        other => Err(RecordError::schema(
-            fpath,
-            &at,
-            SchemaProblem::NotNumeric {
-                found: other.to_string(),
-            },
-        )),
+        other => Err(RecordError::schema(fpath, &at, SchemaProblem::NotNumeric { found: other.to_string() })),
     }
 }

@@ -31,87 +31,40 @@ fn open(file: &File, fpath: &Path, path: &str, rank: usize) -> Result<Dataset, R
     if !file.link_exists(path) {
         return Err(RecordError::schema(fpath, path, SchemaProblem::Missing));
     }
-    let ds = file
-        .dataset(path)
-        .map_err(|e| RecordError::hdf5(fpath, path, e))?;
+    let ds = file.dataset(path).map_err(|e| RecordError::hdf5(fpath, path, e))?;
     let found = ds.ndim();
     if found != rank {
-        return Err(RecordError::schema(
-            fpath,
-            path,
-            SchemaProblem::WrongRank {
-                found,
-                expected: rank,
-            },
-        ));
+        return Err(RecordError::schema(fpath, path, SchemaProblem::WrongRank { found, expected: rank }));
     }
-    let desc = ds
-        .dtype()
-        .and_then(|t| t.to_descriptor())
-        .map_err(|e| RecordError::hdf5(fpath, path, e))?;
+    let desc = ds.dtype().and_then(|t| t.to_descriptor()).map_err(|e| RecordError::hdf5(fpath, path, e))?;
     match desc {
-        TypeDescriptor::Integer(_) | TypeDescriptor::Unsigned(_) | TypeDescriptor::Float(_) => {
-            Ok(ds)
-        }
-        other => Err(RecordError::schema(
-            fpath,
-            path,
-            SchemaProblem::NotNumericData {
-                found: other.to_string(),
-            },
-        )),
+        TypeDescriptor::Integer(_) | TypeDescriptor::Unsigned(_) | TypeDescriptor::Float(_) => Ok(ds),
+        other => Err(RecordError::schema(fpath, path, SchemaProblem::NotNumericData { found: other.to_string() })),
     }
 }
 
 /// Reads a numeric dataset of the given rank.
-pub fn read<T: H5Type>(
-    file: &File,
-    fpath: &Path,
-    path: &str,
-    rank: usize,
-) -> Result<Data<T>, RecordError> {
+pub fn read<T: H5Type>(file: &File, fpath: &Path, path: &str, rank: usize) -> Result<Data<T>, RecordError> {
     let ds = open(file, fpath, path, rank)?;
     let shape = ds.shape();
-    let values = ds
-        .read_raw::<T>()
-        .map_err(|e| RecordError::hdf5(fpath, path, e))?;
+    let values = ds.read_raw::<T>().map_err(|e| RecordError::hdf5(fpath, path, e))?;
     Ok(Data { values, shape })
 }
 
 /// Refuses `data` unless it has `rows` rows (`other` names the dataset that set the count).
-pub fn expect_rows<T>(
-    fpath: &Path,
-    path: &str,
-    data: &Data<T>,
-    other: &str,
-    rows: usize,
-) -> Result<(), RecordError> {
+pub fn expect_rows<T>(fpath: &Path, path: &str, data: &Data<T>, other: &str, rows: usize) -> Result<(), RecordError> {
     if data.rows() == rows {
         return Ok(());
     }
-    let problem = SchemaProblem::LengthMismatch {
-        found: data.rows(),
-        other: other.to_owned(),
-        expected: rows,
-    };
+    let problem = SchemaProblem::LengthMismatch { found: data.rows(), other: other.to_owned(), expected: rows };
     Err(RecordError::schema(fpath, path, problem))
 }
 
 /// Refuses `data` unless its width (columns) is `width`.
-pub fn expect_width<T>(
-    fpath: &Path,
-    path: &str,
-    data: &Data<T>,
-    other: &str,
-    width: usize,
-) -> Result<(), RecordError> {
+pub fn expect_width<T>(fpath: &Path, path: &str, data: &Data<T>, other: &str, width: usize) -> Result<(), RecordError> {
     if data.width() == width {
         return Ok(());
     }
-    let problem = SchemaProblem::ColumnMismatch {
-        found: data.width(),
-        other: other.to_owned(),
-        expected: width,
-    };
+    let problem = SchemaProblem::ColumnMismatch { found: data.width(), other: other.to_owned(), expected: width };
     Err(RecordError::schema(fpath, path, problem))
 }

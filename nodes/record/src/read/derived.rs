@@ -56,29 +56,13 @@ pub fn read(file: &File, fpath: &Path) -> Result<Derived, RecordError> {
     if file.link_exists(layout::DERIVED_IMAGE) {
         let t = data::read::<f64>(file, fpath, layout::DERIVED_IMAGE_T, 1)?;
         let img = data::read::<f64>(file, fpath, layout::DERIVED_IMAGE, 3)?;
-        data::expect_rows(
-            fpath,
-            layout::DERIVED_IMAGE,
-            &img,
-            layout::DERIVED_IMAGE_T,
-            t.rows(),
-        )?;
-        derived.image = Some(ImageStream {
-            t_s: t.values,
-            hw: [img.shape[1], img.shape[2]],
-            pixels: img.values,
-        });
+        data::expect_rows(fpath, layout::DERIVED_IMAGE, &img, layout::DERIVED_IMAGE_T, t.rows())?;
+        derived.image = Some(ImageStream { t_s: t.values, hw: [img.shape[1], img.shape[2]], pixels: img.values });
     }
     if file.link_exists("/derived/contacts") {
         let t = data::read::<f64>(file, fpath, layout::CONTACTS_T, 1)?;
         let x = data::read::<f64>(file, fpath, layout::CONTACTS_X_MM, 2)?;
-        data::expect_rows(
-            fpath,
-            layout::CONTACTS_X_MM,
-            &x,
-            layout::CONTACTS_T,
-            t.rows(),
-        )?;
+        data::expect_rows(fpath, layout::CONTACTS_X_MM, &x, layout::CONTACTS_T, t.rows())?;
         let column = |path: &str| -> Result<Vec<f64>, RecordError> {
             let d = data::read::<f64>(file, fpath, path, 2)?;
             data::expect_rows(fpath, path, &d, layout::CONTACTS_T, t.rows())?;
@@ -95,23 +79,14 @@ pub fn read(file: &File, fpath: &Path) -> Result<Derived, RecordError> {
         });
     }
     if file.link_exists(layout::FORCES_GROUP) {
-        let group = file
-            .group(layout::FORCES_GROUP)
-            .map_err(|e| RecordError::hdf5(fpath, layout::FORCES_GROUP, e))?;
-        let names = group
-            .member_names()
-            .map_err(|e| RecordError::hdf5(fpath, layout::FORCES_GROUP, e))?;
+        let group = file.group(layout::FORCES_GROUP).map_err(|e| RecordError::hdf5(fpath, layout::FORCES_GROUP, e))?;
+        let names = group.member_names().map_err(|e| RecordError::hdf5(fpath, layout::FORCES_GROUP, e))?;
         for name in names {
             let (t_path, f_path) = (layout::forces_t(&name), layout::forces_force_n(&name));
             let t = data::read::<f64>(file, fpath, &t_path, 1)?;
             let f = data::read::<f64>(file, fpath, &f_path, 2)?;
             data::expect_rows(fpath, &f_path, &f, &t_path, t.rows())?;
-            derived.forces.push(ForceStream {
-                max_contacts: f.width(),
-                name,
-                t_s: t.values,
-                force_n: f.values,
-            });
+            derived.forces.push(ForceStream { max_contacts: f.width(), name, t_s: t.values, force_n: f.values });
         }
     }
     Ok(derived)

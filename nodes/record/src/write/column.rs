@@ -26,10 +26,7 @@ pub(crate) struct ColumnSpec {
 
 impl ColumnSpec {
     pub fn new(path: impl Into<String>, tail: &[usize]) -> Self {
-        ColumnSpec {
-            path: path.into(),
-            tail: tail.to_vec(),
-        }
+        ColumnSpec { path: path.into(), tail: tail.to_vec() }
     }
 
     pub fn width(&self) -> usize {
@@ -55,33 +52,16 @@ pub(crate) struct Column<T> {
 impl<T: H5Type + Copy> Column<T> {
     pub fn new(spec: ColumnSpec, chunk_rows: usize) -> Self {
         let cap = chunk_rows * spec.width();
-        Column {
-            spec,
-            ds: None,
-            buf: Vec::with_capacity(cap),
-            rows_in_file: 0,
-        }
+        Column { spec, ds: None, buf: Vec::with_capacity(cap), rows_in_file: 0 }
     }
 
     /// Creates this column's empty dataset in `file` (a new file or rotated part).
-    pub fn create(
-        &mut self,
-        file: &File,
-        storage: Storage,
-        chunk_rows: usize,
-        fill: T,
-    ) -> Result<(), RecordError> {
+    pub fn create(&mut self, file: &File, storage: Storage, chunk_rows: usize, fill: T) -> Result<(), RecordError> {
         self.create_dataset(file, storage, chunk_rows, fill)
             .map_err(|e| RecordError::hdf5(Path::new(&file.filename()), &self.spec.path, e))
     }
 
-    fn create_dataset(
-        &mut self,
-        file: &File,
-        storage: Storage,
-        chunk_rows: usize,
-        fill: T,
-    ) -> hdf5::Result<()> {
+    fn create_dataset(&mut self, file: &File, storage: Storage, chunk_rows: usize, fill: T) -> hdf5::Result<()> {
         let mut dims = vec![Extent::resizable(0)];
         dims.extend(self.spec.tail.iter().map(|&d| Extent::fixed(d)));
         let mut chunk = vec![chunk_rows];
@@ -108,8 +88,7 @@ impl<T: H5Type + Copy> Column<T> {
 
     /// Appends the pending rows to the dataset (resize, then one hyperslab write).
     pub fn write_pending(&mut self, file: &Path) -> Result<(), RecordError> {
-        self.write_pending_rows()
-            .map_err(|e| RecordError::hdf5(file, &self.spec.path, e))
+        self.write_pending_rows().map_err(|e| RecordError::hdf5(file, &self.spec.path, e))
     }
 
     fn write_pending_rows(&mut self) -> hdf5::Result<()> {
@@ -132,15 +111,11 @@ impl<T: H5Type + Copy> Column<T> {
                 ds.write_slice(view, (start..end, ..))?
             }
             [h, w] => {
-                let view =
-                    ArrayView3::from_shape((n, *h, *w), &self.buf[..]).map_err(shape_error)?;
+                let view = ArrayView3::from_shape((n, *h, *w), &self.buf[..]).map_err(shape_error)?;
                 ds.write_slice(view, (start..end, .., ..))?
             }
             other => {
-                return Err(hdf5::Error::from(format!(
-                    "unsupported column rank {}",
-                    other.len() + 1
-                )));
+                return Err(hdf5::Error::from(format!("unsupported column rank {}", other.len() + 1)));
             }
         }
         self.rows_in_file = end;
@@ -174,26 +149,13 @@ pub(crate) struct Table {
 }
 
 impl Table {
-    pub fn new(
-        t_path: &str,
-        seq_path: Option<&str>,
-        values: Vec<ColumnSpec>,
-        max_chunk_rows: usize,
-    ) -> Self {
-        let widest = values
-            .iter()
-            .map(ColumnSpec::width)
-            .max()
-            .unwrap_or(1)
-            .max(1);
+    pub fn new(t_path: &str, seq_path: Option<&str>, values: Vec<ColumnSpec>, max_chunk_rows: usize) -> Self {
+        let widest = values.iter().map(ColumnSpec::width).max().unwrap_or(1).max(1);
         let chunk_rows = (CHUNK_TARGET_BYTES / (8 * widest)).clamp(1, max_chunk_rows.max(1));
         Table {
             t: Column::new(ColumnSpec::new(t_path, &[]), chunk_rows),
             seq: seq_path.map(|p| Column::new(ColumnSpec::new(p, &[]), chunk_rows)),
-            values: values
-                .into_iter()
-                .map(|s| Column::new(s, chunk_rows))
-                .collect(),
+            values: values.into_iter().map(|s| Column::new(s, chunk_rows)).collect(),
             chunk_rows,
             rows_appended: 0,
         }

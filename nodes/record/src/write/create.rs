@@ -8,8 +8,8 @@ use hdf5::types::VarLenUnicode;
 
 use crate::RecordError;
 use crate::layout::{
-    ATTR_CREATED, ATTR_FORMAT, ATTR_FORMAT_VERSION, ATTR_GRAPH, ATTR_PART, ATTR_SENSOR,
-    ATTR_SOFTWARE_VERSION, EIT_REFERENCE, FORMAT, FORMAT_VERSION,
+    ATTR_CREATED, ATTR_FORMAT, ATTR_FORMAT_VERSION, ATTR_GRAPH, ATTR_PART, ATTR_SENSOR, ATTR_SOFTWARE_VERSION,
+    EIT_REFERENCE, FORMAT, FORMAT_VERSION,
 };
 
 /// Root attributes of one part.
@@ -33,19 +33,11 @@ pub(crate) fn create_file(path: &Path, swmr: bool, overwrite: bool) -> Result<Fi
     };
     let mut builder = File::with_options();
     builder.with_fapl(|fapl| fapl.libver_bounds(low, high));
-    let made = if overwrite {
-        builder.create(path)
-    } else {
-        builder.create_excl(path)
-    };
+    let made = if overwrite { builder.create(path) } else { builder.create_excl(path) };
     made.map_err(|e| RecordError::hdf5(path, "/", e))
 }
 
-pub(crate) fn write_root_attrs(
-    file: &File,
-    path: &Path,
-    attrs: &RootAttrs,
-) -> Result<(), RecordError> {
+pub(crate) fn write_root_attrs(file: &File, path: &Path, attrs: &RootAttrs) -> Result<(), RecordError> {
     let at = |name: &'static str| move |e| RecordError::hdf5(path, &format!("/ attr {name}"), e);
     write_str_attr(file, ATTR_FORMAT, FORMAT).map_err(at(ATTR_FORMAT))?;
     file.new_attr::<i64>()
@@ -58,8 +50,7 @@ pub(crate) fn write_root_attrs(
     if let Some(graph) = attrs.graph_toml {
         write_str_attr(file, ATTR_GRAPH, graph).map_err(at(ATTR_GRAPH))?;
     }
-    write_str_attr(file, ATTR_SOFTWARE_VERSION, attrs.software_version)
-        .map_err(at(ATTR_SOFTWARE_VERSION))?;
+    write_str_attr(file, ATTR_SOFTWARE_VERSION, attrs.software_version).map_err(at(ATTR_SOFTWARE_VERSION))?;
     if let Some(part) = attrs.part {
         file.new_attr::<u32>()
             .shape(())
@@ -72,46 +63,30 @@ pub(crate) fn write_root_attrs(
 
 /// A scalar variable-length UTF-8 string attribute (CONTRACTS.md: writers write these).
 fn write_str_attr(file: &File, name: &str, value: &str) -> hdf5::Result<()> {
-    let value: VarLenUnicode = value
-        .parse()
-        .map_err(|e| hdf5::Error::from(format!("{e}")))?;
-    file.new_attr::<VarLenUnicode>()
-        .shape(())
-        .create(name)?
-        .write_scalar(&value)
+    let value: VarLenUnicode = value.parse().map_err(|e| hdf5::Error::from(format!("{e}")))?;
+    file.new_attr::<VarLenUnicode>().shape(()).create(name)?.write_scalar(&value)
 }
 
 /// Creates the groups above a dataset path (`/derived/forces/x/t` -> `/derived`,
 /// `/derived/forces`, `/derived/forces/x`) where they don't exist yet.
-pub(crate) fn ensure_parent_groups(
-    file: &File,
-    path: &Path,
-    dataset: &str,
-) -> Result<(), RecordError> {
+pub(crate) fn ensure_parent_groups(file: &File, path: &Path, dataset: &str) -> Result<(), RecordError> {
     let mut prefix = String::new();
     let parts: Vec<&str> = dataset.split('/').filter(|s| !s.is_empty()).collect();
     for name in &parts[..parts.len().saturating_sub(1)] {
         prefix.push('/');
         prefix.push_str(name);
         if !file.link_exists(&prefix) {
-            file.create_group(&prefix)
-                .map_err(|e| RecordError::hdf5(path, &prefix, e))?;
+            file.create_group(&prefix).map_err(|e| RecordError::hdf5(path, &prefix, e))?;
         }
     }
     Ok(())
 }
 
 /// Writes `/eit/reference` [M], creating it if needed.
-pub(crate) fn write_reference(
-    file: &File,
-    path: &Path,
-    reference: &[f64],
-) -> Result<(), RecordError> {
+pub(crate) fn write_reference(file: &File, path: &Path, reference: &[f64]) -> Result<(), RecordError> {
     let err = |e| RecordError::hdf5(path, EIT_REFERENCE, e);
     if file.link_exists(EIT_REFERENCE) {
-        file.dataset(EIT_REFERENCE)
-            .and_then(|ds| ds.write(reference))
-            .map_err(err)
+        file.dataset(EIT_REFERENCE).and_then(|ds| ds.write(reference)).map_err(err)
     } else {
         ensure_parent_groups(file, path, EIT_REFERENCE)?;
         file.new_dataset_builder()

@@ -116,10 +116,7 @@ impl WriterOptions {
             Err(e) => return bad("sensor_toml", e.to_string()),
         };
         if !(self.flush_interval_s.is_finite() && self.flush_interval_s > 0.0) {
-            return bad(
-                "flush_interval_s",
-                format!("must be finite and > 0 (got {})", self.flush_interval_s),
-            );
+            return bad("flush_interval_s", format!("must be finite and > 0 (got {})", self.flush_interval_s));
         }
         if let Some(mb) = self.rotate_mb.filter(|mb| !(mb.is_finite() && *mb > 0.0)) {
             return bad("rotate_mb", format!("must be finite and > 0 (got {mb})"));
@@ -131,10 +128,7 @@ impl WriterOptions {
             return bad("chunk_rows", "must be >= 1 (got 0)".into());
         }
         if self.deflate_level > 9 {
-            return bad(
-                "deflate_level",
-                format!("must be 0..=9 (got {})", self.deflate_level),
-            );
+            return bad("deflate_level", format!("must be 0..=9 (got {})", self.deflate_level));
         }
         if self.truth_max_contacts == 0 {
             return bad("truth_max_contacts", "must be >= 1 (got 0)".into());
@@ -143,23 +137,14 @@ impl WriterOptions {
             return bad("derived_max_contacts", "must be >= 1 (got 0)".into());
         }
         if let Some([h, w]) = self.streams.image_hw.filter(|[h, w]| *h == 0 || *w == 0) {
-            return bad(
-                "streams.image_hw",
-                format!("must be >= 1 x 1 pixels (got {h} x {w})"),
-            );
+            return bad("streams.image_hw", format!("must be >= 1 x 1 pixels (got {h} x {w})"));
         }
         for (i, name) in self.streams.force_strategies.iter().enumerate() {
             if name.is_empty() || name.contains('/') || name == "." || name == ".." {
-                return bad(
-                    "streams.force_strategies",
-                    format!("{name:?} is not a valid group name"),
-                );
+                return bad("streams.force_strategies", format!("{name:?} is not a valid group name"));
             }
             if self.streams.force_strategies[..i].contains(name) {
-                return bad(
-                    "streams.force_strategies",
-                    format!("{name:?} appears twice"),
-                );
+                return bad("streams.force_strategies", format!("{name:?} appears twice"));
             }
         }
         Ok(sensor.measurement_count())

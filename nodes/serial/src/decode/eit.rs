@@ -227,27 +227,17 @@ impl Decode for EitDecoder {
                     }
                 }
                 len => {
-                    let target = if len < EIT_HEADER_LEN {
-                        EIT_HEADER_LEN
-                    } else {
-                        self.frame_len
-                    };
+                    let target = if len < EIT_HEADER_LEN { EIT_HEADER_LEN } else { self.frame_len };
                     let take = (target - len).min(bytes.len() - i);
                     self.buf.extend_from_slice(&bytes[i..i + take]);
                     i += take;
                     if self.settle() {
-                        return Step {
-                            consumed: i,
-                            complete: true,
-                        };
+                        return Step { consumed: i, complete: true };
                     }
                 }
             }
         }
-        Step {
-            consumed: i,
-            complete: false,
-        }
+        Step { consumed: i, complete: false }
     }
 
     fn record(&self) -> EitFrame<'_> {
@@ -274,10 +264,9 @@ impl Decode for EitDecoder {
 
     fn mismatch(&self) -> Option<StreamMismatch> {
         match self.wrong_count {
-            Some((got, n)) if n >= MISMATCH_PROOF_RUN => Some(StreamMismatch::MeasurementCount {
-                expected: self.measurements,
-                got: usize::from(got),
-            }),
+            Some((got, n)) if n >= MISMATCH_PROOF_RUN => {
+                Some(StreamMismatch::MeasurementCount { expected: self.measurements, got: usize::from(got) })
+            }
             _ => None,
         }
     }
@@ -310,18 +299,10 @@ mod tests {
         let stream: Vec<u8> = (0..3).flat_map(|c| frame(c, c as f64)).collect();
         let mut got = Vec::new();
         for b in &stream {
-            decode_all(&mut d, std::slice::from_ref(b), |f| {
-                got.push((f.counter, f.volts[3]))
-            });
+            decode_all(&mut d, std::slice::from_ref(b), |f| got.push((f.counter, f.volts[3])));
         }
         assert_eq!(got, vec![(0, 0.75), (1, 1.75), (2, 2.75)]);
-        assert_eq!(
-            *d.stats(),
-            DecodeStats {
-                frames: 3,
-                ..DecodeStats::default()
-            }
-        );
+        assert_eq!(*d.stats(), DecodeStats { frames: 3, ..DecodeStats::default() });
     }
 
     #[test]
@@ -370,25 +351,13 @@ mod tests {
         let stream: Vec<u8> = (0..3).flat_map(|c| frame(c, 0.0)).collect();
         assert!(decode(&mut d, &stream).is_empty());
         assert_eq!(d.stats().length_mismatches, 3);
-        assert_eq!(
-            d.mismatch(),
-            Some(StreamMismatch::MeasurementCount {
-                expected: M + 1,
-                got: M
-            })
-        );
+        assert_eq!(d.mismatch(), Some(StreamMismatch::MeasurementCount { expected: M + 1, got: M }));
     }
 
     #[test]
     fn counter_wrap_is_not_a_loss_and_restart_is_a_reset() {
         let mut d = EitDecoder::new(M);
-        let stream: Vec<u8> = [
-            frame(u32::MAX, 0.0),
-            frame(0, 0.0),
-            frame(3, 0.0),
-            frame(1, 0.0),
-        ]
-        .concat();
+        let stream: Vec<u8> = [frame(u32::MAX, 0.0), frame(0, 0.0), frame(3, 0.0), frame(1, 0.0)].concat();
         assert_eq!(decode(&mut d, &stream).len(), 4);
         let s = d.stats();
         assert_eq!((s.lost_frames, s.counter_resets), (2, 1));
@@ -419,10 +388,7 @@ mod tests {
 
     #[test]
     fn invalid_counts_are_rejected() {
-        assert_eq!(
-            EitDecoder::try_new(0).unwrap_err(),
-            ParamError::MeasurementCount { got: 0 }
-        );
+        assert_eq!(EitDecoder::try_new(0).unwrap_err(), ParamError::MeasurementCount { got: 0 });
         assert!(EitDecoder::try_new(70_000).is_err());
     }
 }

@@ -32,10 +32,7 @@ impl ForceDecoder {
     /// A decoder.
     #[must_use]
     pub fn new() -> Self {
-        Self {
-            lines: LineSplitter::new(),
-            reading: ForceReading { force_n: 0.0 },
-        }
+        Self { lines: LineSplitter::new(), reading: ForceReading { force_n: 0.0 } }
     }
 }
 
@@ -82,11 +79,7 @@ mod tests {
     fn accepts_newtons_rejects_other_units() {
         let mut d = ForceDecoder::new();
         let mut got = Vec::new();
-        decode_all(
-            &mut d,
-            b"   12.345 N\r\n-0.5\r\n+3N\n 1.0 kgf\r\n2.0 lbf\n N\n",
-            |r| got.push(r.force_n),
-        );
+        decode_all(&mut d, b"   12.345 N\r\n-0.5\r\n+3N\n 1.0 kgf\r\n2.0 lbf\n N\n", |r| got.push(r.force_n));
         assert_eq!(got, vec![12.345, -0.5, 3.0]);
         assert_eq!(d.stats().bad_lines, 3);
     }

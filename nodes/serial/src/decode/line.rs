@@ -31,30 +31,18 @@ impl LineSplitter {
 
     /// A placeholder without capacity, for moving a splitter out of its owner for a call.
     pub(super) fn empty() -> Self {
-        Self {
-            buf: Vec::new(),
-            overflow: false,
-            run: DiscardRun::default(),
-            stats: DecodeStats::default(),
-        }
+        Self { buf: Vec::new(), overflow: false, run: DiscardRun::default(), stats: DecodeStats::default() }
     }
 
     /// Consumes bytes until a line is accepted by `parse` (which stores the record and returns
     /// true) or the input ends.
-    pub(super) fn step(
-        &mut self,
-        bytes: &[u8],
-        mut parse: impl FnMut(&[u8], &mut DecodeStats) -> bool,
-    ) -> Step {
+    pub(super) fn step(&mut self, bytes: &[u8], mut parse: impl FnMut(&[u8], &mut DecodeStats) -> bool) -> Step {
         let mut i = 0;
         while i < bytes.len() {
             let rest = &bytes[i..];
             let Some(nl) = rest.iter().position(|&b| b == b'\n') else {
                 self.append(rest);
-                return Step {
-                    consumed: bytes.len(),
-                    complete: false,
-                };
+                return Step { consumed: bytes.len(), complete: false };
             };
             self.append(&rest[..nl]);
             i += nl + 1;
@@ -70,10 +58,7 @@ impl LineSplitter {
                     self.stats.frames += 1;
                     self.run.accept();
                     self.buf.clear();
-                    return Step {
-                        consumed: i,
-                        complete: true,
-                    };
+                    return Step { consumed: i, complete: true };
                 } else {
                     self.stats.bad_lines += 1;
                     self.run.discard(&mut self.stats, line_bytes);
@@ -82,10 +67,7 @@ impl LineSplitter {
             self.buf.clear();
             self.overflow = false;
         }
-        Step {
-            consumed: i,
-            complete: false,
-        }
+        Step { consumed: i, complete: false }
     }
 
     fn append(&mut self, bytes: &[u8]) {
@@ -96,8 +78,7 @@ impl LineSplitter {
         }
         if self.buf.len() + bytes.len() > MAX_LINE_LEN {
             self.overflow = true;
-            self.run
-                .discard(&mut self.stats, self.buf.len() + bytes.len());
+            self.run.discard(&mut self.stats, self.buf.len() + bytes.len());
             self.buf.clear();
         } else {
             self.buf.extend_from_slice(bytes);
@@ -116,10 +97,7 @@ impl LineSplitter {
 pub(super) fn parse_finite(bytes: &[u8]) -> Option<f64> {
     let s = std::str::from_utf8(bytes).ok()?.trim();
     // `f64::from_str` also takes "inf", "nan" and exponents; boards print plain decimals.
-    if !s
-        .bytes()
-        .all(|b| b.is_ascii_digit() || matches!(b, b'.' | b'-' | b'+'))
-    {
+    if !s.bytes().all(|b| b.is_ascii_digit() || matches!(b, b'.' | b'-' | b'+')) {
         return None;
     }
     s.parse::<f64>().ok().filter(|v| v.is_finite())

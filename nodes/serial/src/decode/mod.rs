@@ -84,11 +84,7 @@ pub trait Decode {
 }
 
 /// Feeds all of `bytes` to `decoder`, calling `on_record` for each completed record.
-pub fn decode_all<D: Decode>(
-    decoder: &mut D,
-    mut bytes: &[u8],
-    mut on_record: impl FnMut(D::Record<'_>),
-) {
+pub fn decode_all<D: Decode>(decoder: &mut D, mut bytes: &[u8], mut on_record: impl FnMut(D::Record<'_>)) {
     while !bytes.is_empty() {
         let step = decoder.step(bytes);
         bytes = &bytes[step.consumed..];

@@ -61,26 +61,16 @@ impl PressureDecoder {
     /// [`ParamError::Positive`] if `period_ms` is `Some(0)` or `max_jump_ms` is 0.
     pub fn with_max_jump(period_ms: Option<u32>, max_jump_ms: u32) -> Result<Self, ParamError> {
         if period_ms == Some(0) {
-            return Err(ParamError::Positive {
-                param: "period_ms",
-                got: 0,
-            });
+            return Err(ParamError::Positive { param: "period_ms", got: 0 });
         }
         if max_jump_ms == 0 {
-            return Err(ParamError::Positive {
-                param: "max_jump_ms",
-                got: 0,
-            });
+            return Err(ParamError::Positive { param: "max_jump_ms", got: 0 });
         }
         Ok(Self {
             period_ms,
             max_jump_ms,
             lines: LineSplitter::new(),
-            reading: PressureReading {
-                device_time_ms: 0,
-                device_t_s: 0.0,
-                kpa: 0.0,
-            },
+            reading: PressureReading { device_time_ms: 0, device_t_s: 0.0, kpa: 0.0 },
             last_ms: None,
             held_ms: None,
             rebase: false,
@@ -126,9 +116,7 @@ impl PressureDecoder {
                 self.epoch_ms = 0;
             }
             Some(_) => {
-                let confirmed = self
-                    .held_ms
-                    .is_some_and(|h| follows(h, t_ms, self.max_jump_ms));
+                let confirmed = self.held_ms.is_some_and(|h| follows(h, t_ms, self.max_jump_ms));
                 if !confirmed {
                     self.held_ms = Some(t_ms);
                     return false;
@@ -141,11 +129,8 @@ impl PressureDecoder {
         self.last_ms = Some(t_ms);
         self.held_ms = None;
         self.rebase = false;
-        self.reading = PressureReading {
-            device_time_ms: t_ms,
-            device_t_s: (self.epoch_ms + u64::from(t_ms)) as f64 * 1e-3,
-            kpa,
-        };
+        self.reading =
+            PressureReading { device_time_ms: t_ms, device_t_s: (self.epoch_ms + u64::from(t_ms)) as f64 * 1e-3, kpa };
         true
     }
 }
@@ -194,22 +179,13 @@ mod tests {
         let mut d = PressureDecoder::try_new(Some(50)).unwrap();
         let got = decode(&mut d, b"0,0.5\r\n50,-1.25\n100,  2\r\n");
         assert_eq!(got, vec![(0, 0.5), (50, -1.25), (100, 2.0)]);
-        assert_eq!(
-            *d.stats(),
-            DecodeStats {
-                frames: 3,
-                ..DecodeStats::default()
-            }
-        );
+        assert_eq!(*d.stats(), DecodeStats { frames: 3, ..DecodeStats::default() });
     }
 
     #[test]
     fn garbage_and_bad_lines_are_counted_and_resync_at_newline() {
         let mut d = PressureDecoder::try_new(None).unwrap();
-        let got = decode(
-            &mut d,
-            b"\x00\xffjunk\n1,nan\n2,inf\n,3\n4,1e3\n\r\n5,1.5\r\n",
-        );
+        let got = decode(&mut d, b"\x00\xffjunk\n1,nan\n2,inf\n,3\n4,1e3\n\r\n5,1.5\r\n");
         assert_eq!(got, vec![(5, 1.5)]);
         let s = d.stats();
         assert_eq!(s.bad_lines, 5);
@@ -231,10 +207,7 @@ mod tests {
         let mut d = PressureDecoder::try_new(Some(50)).unwrap();
         let got = decode(&mut d, b"0,1\n50,1\n200,1\n260,1\n10,1\n60,1\n110,1\n");
         // 10 goes back: held as a bad line until 60 confirms the restart.
-        assert_eq!(
-            got.iter().map(|g| g.0).collect::<Vec<_>>(),
-            vec![0, 50, 200, 260, 60, 110]
-        );
+        assert_eq!(got.iter().map(|g| g.0).collect::<Vec<_>>(), vec![0, 50, 200, 260, 60, 110]);
         let s = d.stats();
         assert_eq!((s.lost_frames, s.counter_resets, s.bad_lines), (2, 1, 1));
     }

@@ -14,9 +14,7 @@ use super::fault::{Fault, corrupt};
 use super::feed::{Samples, TimedForce, TimedFrame, TimedPressure};
 use super::pty::{StablePty, Written};
 use super::{Device, EmulateError, Pacing};
-use crate::encode::{
-    device_time_ms, device_time_us, encode_eit_frame, encode_force_line, encode_pressure_line,
-};
+use crate::encode::{device_time_ms, device_time_us, encode_eit_frame, encode_force_line, encode_pressure_line};
 
 /// Granularity of interruptible sleeps.
 const TICK: Duration = Duration::from_millis(20);
@@ -100,11 +98,7 @@ fn sleep_until(due: Instant, stop: &AtomicBool) -> bool {
 
 /// Seconds as a Duration, 0 for values Duration cannot hold (validated plans never have them).
 fn secs(s: f64) -> Duration {
-    if s.is_finite() && (0.0..1e9).contains(&s) {
-        Duration::from_secs_f64(s)
-    } else {
-        Duration::ZERO
-    }
+    if s.is_finite() && (0.0..1e9).contains(&s) { Duration::from_secs_f64(s) } else { Duration::ZERO }
 }
 
 impl<T: Sample> DeviceRun<T> {
@@ -118,10 +112,7 @@ impl<T: Sample> DeviceRun<T> {
     }
 
     fn pty_error(&self, source: std::io::Error) -> EmulateError {
-        EmulateError::Pty {
-            device: self.device,
-            source,
-        }
+        EmulateError::Pty { device: self.device, source }
     }
 
     /// Writes to the pty and counts; false when the emulator is stopping. Real-time boards drop
@@ -133,21 +124,16 @@ impl<T: Sample> DeviceRun<T> {
             Pacing::RealTime => Some(FULL_GIVE_UP),
             Pacing::AsFastAsPossible => None,
         };
-        let written = self
-            .pty
-            .write(bytes, &self.stop, give_up)
-            .map_err(|e| self.pty_error(e))?;
+        let written = self.pty.write(bytes, &self.stop, give_up).map_err(|e| self.pty_error(e))?;
         let c = &self.counters;
         match written {
             Written::All => {
                 self.overflowing = false;
-                c.bytes_written
-                    .fetch_add(bytes.len() as u64, Ordering::Relaxed);
+                c.bytes_written.fetch_add(bytes.len() as u64, Ordering::Relaxed);
             }
             Written::Dropped { bytes: dropped } => {
                 self.overflowing = true;
-                c.bytes_written
-                    .fetch_add((bytes.len() - dropped) as u64, Ordering::Relaxed);
+                c.bytes_written.fetch_add((bytes.len() - dropped) as u64, Ordering::Relaxed);
                 c.bytes_dropped.fetch_add(dropped as u64, Ordering::Relaxed);
             }
             Written::Stopped => return Ok(false),
@@ -185,9 +171,7 @@ impl<T: Sample> DeviceRun<T> {
                 match fault {
                     Fault::Unplug { down_s } => {
                         let began = Instant::now();
-                        self.pty
-                            .wait_drained(DRAIN_TIMEOUT, &stop)
-                            .map_err(|e| self.pty_error(e))?;
+                        self.pty.wait_drained(DRAIN_TIMEOUT, &stop).map_err(|e| self.pty_error(e))?;
                         self.pty.unplug().map_err(|e| self.pty_error(e))?;
                         c.unplugs.fetch_add(1, Ordering::Relaxed);
                         if !sleep_until(Instant::now() + secs(*down_s), &stop) {

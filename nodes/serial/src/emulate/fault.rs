@@ -38,18 +38,12 @@ impl Fault {
                 Err(FaultError::Param {
                     device,
                     index,
-                    source: ParamError::Seconds {
-                        param,
-                        rule: "in [0, 1e6)",
-                        got,
-                    },
+                    source: ParamError::Seconds { param, rule: "in [0, 1e6)", got },
                 })
             }
         };
         match self {
-            Self::CorruptCrc if device != Device::Eit => {
-                Err(FaultError::NotApplicable { device, index })
-            }
+            Self::CorruptCrc if device != Device::Eit => Err(FaultError::NotApplicable { device, index }),
             Self::Unplug { down_s } => seconds("down_s", *down_s),
             Self::Stall { silent_s } => seconds("silent_s", *silent_s),
             _ => Ok(()),
@@ -77,11 +71,7 @@ pub enum FaultError {
     NotApplicable { device: Device, index: usize },
     /// A fault parameter is out of range.
     #[error("fault plan: {device} record {index}: {source}")]
-    Param {
-        device: Device,
-        index: usize,
-        source: ParamError,
-    },
+    Param { device: Device, index: usize, source: ParamError },
 }
 
 /// Applies the byte faults at one record to its encoding; returns false if it must not be sent.
@@ -113,13 +103,7 @@ mod tests {
         let mut r = vec![0, 1, 2, 3, 4];
         assert!(corrupt(&mut r, &Fault::DropBytes { offset: 7, len: 2 }));
         assert_eq!(r, vec![0, 1, 4]);
-        assert!(corrupt(
-            &mut r,
-            &Fault::FlipBits {
-                offset: 1,
-                mask: 0x80
-            }
-        ));
+        assert!(corrupt(&mut r, &Fault::FlipBits { offset: 1, mask: 0x80 }));
         assert_eq!(r, vec![0, 0x81, 4]);
         assert!(corrupt(&mut r, &Fault::CorruptCrc));
         assert_eq!(r, vec![0, 0x81, 5]);
@@ -132,15 +116,8 @@ mod tests {
     fn crc_fault_on_a_line_protocol_is_rejected() {
         assert_eq!(
             Fault::CorruptCrc.validate(Device::Pressure, 3),
-            Err(FaultError::NotApplicable {
-                device: Device::Pressure,
-                index: 3
-            })
+            Err(FaultError::NotApplicable { device: Device::Pressure, index: 3 })
         );
-        assert!(
-            Fault::Unplug { down_s: f64::NAN }
-                .validate(Device::Eit, 0)
-                .is_err()
-        );
+        assert!(Fault::Unplug { down_s: f64::NAN }.validate(Device::Eit, 0).is_err());
     }
 }

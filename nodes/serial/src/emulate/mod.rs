@@ -78,16 +78,10 @@ pub struct EmulatorConfig {
 pub enum EmulateError {
     /// The link directory could not be created.
     #[error("emulator: cannot create directory {path:?}: {source}")]
-    Dir {
-        path: PathBuf,
-        source: std::io::Error,
-    },
+    Dir { path: PathBuf, source: std::io::Error },
     /// A pseudo-terminal could not be created, published or written.
     #[error("emulator: {device} pty: {source}")]
-    Pty {
-        device: Device,
-        source: std::io::Error,
-    },
+    Pty { device: Device, source: std::io::Error },
     /// The fault plan is invalid.
     #[error(transparent)]
     Fault(#[from] FaultError),
@@ -130,10 +124,7 @@ pub struct Emulator {
     devices: Vec<DeviceHandle>,
 }
 
-fn sorted(
-    mut faults: Vec<(usize, Fault)>,
-    device: Device,
-) -> Result<Vec<(usize, Fault)>, FaultError> {
+fn sorted(mut faults: Vec<(usize, Fault)>, device: Device) -> Result<Vec<(usize, Fault)>, FaultError> {
     for (index, fault) in &faults {
         fault.validate(device, *index)?;
     }
@@ -146,37 +137,23 @@ impl Emulator {
     ///
     /// # Errors
     /// An invalid fault plan, or a directory or pty that cannot be created.
-    pub fn spawn(
-        config: EmulatorConfig,
-        feed: EmulatorFeed,
-        faults: FaultPlan,
-    ) -> Result<Self, EmulateError> {
+    pub fn spawn(config: EmulatorConfig, feed: EmulatorFeed, faults: FaultPlan) -> Result<Self, EmulateError> {
         let eit_faults = sorted(faults.eit, Device::Eit)?;
         let pressure_faults = sorted(faults.pressure, Device::Pressure)?;
         let loadcell_faults = sorted(faults.loadcell, Device::Loadcell)?;
         let (dir, owns_dir) = match &config.dir {
             Some(dir) => {
-                std::fs::create_dir_all(dir).map_err(|source| EmulateError::Dir {
-                    path: dir.clone(),
-                    source,
-                })?;
+                std::fs::create_dir_all(dir).map_err(|source| EmulateError::Dir { path: dir.clone(), source })?;
                 (dir.clone(), false)
             }
             None => {
                 let template = std::env::temp_dir().join("skinflow-emu-XXXXXX");
-                let dir = nix::unistd::mkdtemp(&template).map_err(|e| EmulateError::Dir {
-                    path: template.clone(),
-                    source: e.into(),
-                })?;
+                let dir = nix::unistd::mkdtemp(&template)
+                    .map_err(|e| EmulateError::Dir { path: template.clone(), source: e.into() })?;
                 (dir, true)
             }
         };
-        let mut emulator = Self {
-            dir,
-            owns_dir,
-            stop: Arc::new(AtomicBool::new(false)),
-            devices: Vec::new(),
-        };
+        let mut emulator = Self { dir, owns_dir, stop: Arc::new(AtomicBool::new(false)), devices: Vec::new() };
         if let Some(samples) = feed.eit {
             emulator.start(Device::Eit, samples, eit_faults, &config)?;
         }
@@ -197,8 +174,7 @@ impl Emulator {
         config: &EmulatorConfig,
     ) -> Result<(), EmulateError> {
         let path = self.dir.join(device.name());
-        let pty = StablePty::create(path.clone())
-            .map_err(|source| EmulateError::Pty { device, source })?;
+        let pty = StablePty::create(path.clone()).map_err(|source| EmulateError::Pty { device, source })?;
         let counters = Arc::new(DeviceCounters::default());
         let run = DeviceRun {
             device,
@@ -215,12 +191,7 @@ impl Emulator {
             .name(format!("emulate-{device}"))
             .spawn(move || run.run())
             .map_err(|source| EmulateError::Pty { device, source })?;
-        self.devices.push(DeviceHandle {
-            device,
-            path,
-            counters,
-            thread: Some(thread),
-        });
+        self.devices.push(DeviceHandle { device, path, counters, thread: Some(thread) });
         Ok(())
     }
 
@@ -233,10 +204,7 @@ impl Emulator {
     /// The stable path of `device`, if it is emulated; open this with a reader.
     #[must_use]
     pub fn path(&self, device: Device) -> Option<&Path> {
-        self.devices
-            .iter()
-            .find(|d| d.device == device)
-            .map(|d| d.path.as_path())
+        self.devices.iter().find(|d| d.device == device).map(|d| d.path.as_path())
     }
 
     /// The emulated devices and their stable paths, in EIT, pressure, load-cell order.
@@ -263,9 +231,7 @@ impl Emulator {
     /// Whether every device has sent its whole feed (or failed).
     #[must_use]
     pub fn finished(&self) -> bool {
-        self.devices
-            .iter()
-            .all(|d| d.counters.finished.load(Ordering::Acquire))
+        self.devices.iter().all(|d| d.counters.finished.load(Ordering::Acquire))
     }
 
     /// Waits until [`Emulator::finished`] or `timeout`; returns whether finished.
@@ -285,9 +251,7 @@ impl Emulator {
         let mut first_error = None;
         for d in &mut self.devices {
             if let Some(thread) = d.thread.take() {
-                let result = thread
-                    .join()
-                    .unwrap_or(Err(EmulateError::Panicked { device: d.device }));
+                let result = thread.join().unwrap_or(Err(EmulateError::Panicked { device: d.device }));
                 if let Err(e) = result {
                     first_error.get_or_insert(e);
                 }
@@ -317,9 +281,6 @@ impl Drop for Emulator {
 
 impl std::fmt::Debug for Emulator {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Emulator")
-            .field("dir", &self.dir)
-            .field("devices", &self.paths().collect::<Vec<_>>())
-            .finish()
+        f.debug_struct("Emulator").field("dir", &self.dir).field("devices", &self.paths().collect::<Vec<_>>()).finish()
     }
 }

@@ -66,10 +66,7 @@ fn open_pair(link: &Path) -> io::Result<PtyPair> {
     let _ = std::fs::remove_file(&tmp);
     std::os::unix::fs::symlink(&slave_path, &tmp)?;
     std::fs::rename(&tmp, link)?;
-    Ok(PtyPair {
-        master: pty.master,
-        slave: pty.slave,
-    })
+    Ok(PtyPair { master: pty.master, slave: pty.slave })
 }
 
 impl StablePty {
@@ -85,10 +82,7 @@ impl StablePty {
             ));
         }
         let pair = open_pair(&link)?;
-        Ok(Self {
-            link,
-            pair: Some(pair),
-        })
+        Ok(Self { link, pair: Some(pair) })
     }
 
     /// The device disappears: the link is removed first (so a reader cannot reopen the dying
@@ -116,10 +110,7 @@ impl StablePty {
         stop: &AtomicBool,
         give_up: Option<Duration>,
     ) -> io::Result<Written> {
-        let pair = self
-            .pair
-            .as_ref()
-            .ok_or_else(|| io::Error::other("pty is unplugged"))?;
+        let pair = self.pair.as_ref().ok_or_else(|| io::Error::other("pty is unplugged"))?;
         let until = give_up.map(|d| Instant::now() + d);
         while !bytes.is_empty() {
             if stop.load(Ordering::Relaxed) {
@@ -132,10 +123,7 @@ impl StablePty {
                         return Ok(Written::Dropped { bytes: bytes.len() });
                     }
                     let mut fds = [PollFd::new(pair.master.as_fd(), PollFlags::POLLOUT)];
-                    poll(
-                        &mut fds,
-                        PollTimeout::try_from(STOP_POLL).unwrap_or(PollTimeout::NONE),
-                    )?;
+                    poll(&mut fds, PollTimeout::try_from(STOP_POLL).unwrap_or(PollTimeout::NONE))?;
                 }
                 Err(e) => return Err(e.into()),
             }

@@ -20,12 +20,7 @@ impl Backoff {
     /// A schedule whose delays run `initial, 2 initial, 4 initial, ... max, max, ...`.
     #[must_use]
     pub fn new(initial: Duration, max: Duration, now: Instant) -> Self {
-        Self {
-            initial,
-            max: max.max(initial),
-            delay: initial,
-            next_attempt: now,
-        }
+        Self { initial, max: max.max(initial), delay: initial, next_attempt: now }
     }
 
     /// The link went down at `now`: the first attempt is immediate, delays restart at `initial`.
@@ -81,11 +76,7 @@ mod tests {
                 b.failed(now);
                 now = b.next_attempt();
             }
-            assert!(
-                now - back <= max,
-                "outage {outage_ms} ms: retried {:?} after return",
-                now - back
-            );
+            assert!(now - back <= max, "outage {outage_ms} ms: retried {:?} after return", now - back);
         }
     }
 }

@@ -15,9 +15,7 @@ use std::time::{Duration, Instant};
 pub use backoff::Backoff;
 use serialport::SerialPort;
 
-use crate::decode::{
-    Decode, DecodeStats, EitDecoder, ForceDecoder, PressureDecoder, StreamMismatch,
-};
+use crate::decode::{Decode, DecodeStats, EitDecoder, ForceDecoder, PressureDecoder, StreamMismatch};
 use crate::error::ParamError;
 
 /// Bytes read from the port per call; a few EIT frames.
@@ -60,10 +58,7 @@ impl ReaderConfig {
     /// The first offending parameter.
     pub fn validate(&self) -> Result<(), ParamError> {
         if self.baud == 0 {
-            return Err(ParamError::Positive {
-                param: "baud",
-                got: 0,
-            });
+            return Err(ParamError::Positive { param: "baud", got: 0 });
         }
         for (param, got) in [
             ("read_timeout_s", self.read_timeout_s),
@@ -73,11 +68,7 @@ impl ReaderConfig {
         ] {
             // Also bounds the value so Duration::from_secs_f64 cannot panic.
             if !(got.is_finite() && got > 0.0 && got < 1e9) {
-                return Err(ParamError::Seconds {
-                    param,
-                    rule: "in (0, 1e9)",
-                    got,
-                });
+                return Err(ParamError::Seconds { param, rule: "in (0, 1e9)", got });
             }
         }
         Ok(())
@@ -88,22 +79,14 @@ impl ReaderConfig {
 #[derive(Debug, thiserror::Error)]
 pub enum SerialError {
     /// The device path does not exist at start.
-    #[error(
-        "serial port {path:?}: does not exist (hint: is the board plugged in? ls /dev/serial/by-id)"
-    )]
+    #[error("serial port {path:?}: does not exist (hint: is the board plugged in? ls /dev/serial/by-id)")]
     PortNotFound { path: PathBuf },
     /// The device exists but could not be opened or configured at start.
     #[error("serial port {path:?}: cannot open: {source}")]
-    Open {
-        path: PathBuf,
-        source: serialport::Error,
-    },
+    Open { path: PathBuf, source: serialport::Error },
     /// The stream proves the reader is configured for another protocol variant.
     #[error("serial port {path:?}: {mismatch}")]
-    Mismatch {
-        path: PathBuf,
-        mismatch: StreamMismatch,
-    },
+    Mismatch { path: PathBuf, mismatch: StreamMismatch },
     /// A reader parameter is out of range.
     #[error("serial port {path:?}: {source}")]
     Param { path: PathBuf, source: ParamError },
@@ -173,9 +156,7 @@ pub type PressureReader = SerialReader<PressureDecoder>;
 pub type LoadcellReader = SerialReader<ForceDecoder>;
 
 fn open_port(config: &ReaderConfig, timeout: Duration) -> serialport::Result<Box<dyn SerialPort>> {
-    serialport::new(config.path.to_string_lossy(), config.baud)
-        .timeout(timeout)
-        .open()
+    serialport::new(config.path.to_string_lossy(), config.baud).timeout(timeout).open()
 }
 
 impl<D: Decode> SerialReader<D> {
@@ -186,22 +167,14 @@ impl<D: Decode> SerialReader<D> {
     /// does not exist, [`SerialError::Open`] when it exists but cannot be opened.
     pub fn open(config: ReaderConfig, decoder: D, origin: Instant) -> Result<Self, SerialError> {
         let path = config.path.clone();
-        config.validate().map_err(|source| SerialError::Param {
-            path: path.clone(),
-            source,
-        })?;
+        config.validate().map_err(|source| SerialError::Param { path: path.clone(), source })?;
         if !config.path.exists() {
             return Err(SerialError::PortNotFound { path });
         }
         let read_timeout = Duration::from_secs_f64(config.read_timeout_s);
         let port = open_port(&config, read_timeout).map_err(|source| match source.kind {
-            serialport::ErrorKind::Io(ErrorKind::NotFound) => {
-                SerialError::PortNotFound { path: path.clone() }
-            }
-            _ => SerialError::Open {
-                path: path.clone(),
-                source,
-            },
+            serialport::ErrorKind::Io(ErrorKind::NotFound) => SerialError::PortNotFound { path: path.clone() },
+            _ => SerialError::Open { path: path.clone(), source },
         })?;
         let now = Instant::now();
         Ok(Self {
@@ -269,10 +242,7 @@ impl<D: Decode> SerialReader<D> {
     /// # Errors
     /// [`SerialError::Mismatch`] when the stream proves a configuration mismatch (e.g. the
     /// board sends another measurement count); the reader cannot recover from that by itself.
-    pub fn poll_next(
-        &mut self,
-        deadline: Instant,
-    ) -> Result<Option<Reading<D::Record<'_>>>, SerialError> {
+    pub fn poll_next(&mut self, deadline: Instant) -> Result<Option<Reading<D::Record<'_>>>, SerialError> {
         loop {
             if self.rx_start < self.rx_end {
                 let step = self.decoder.step(&self.rx[self.rx_start..self.rx_end]);
@@ -283,10 +253,7 @@ impl<D: Decode> SerialReader<D> {
                 continue;
             }
             if let Some(mismatch) = self.decoder.mismatch() {
-                return Err(SerialError::Mismatch {
-                    path: self.config.path.clone(),
-                    mismatch,
-                });
+                return Err(SerialError::Mismatch { path: self.config.path.clone(), mismatch });
             }
             let now = Instant::now();
             if now >= deadline {
@@ -329,12 +296,7 @@ impl<D: Decode> SerialReader<D> {
                     self.stalled = false;
                     self.link.bytes += n as u64;
                 }
-                Err(e)
-                    if matches!(
-                        e.kind(),
-                        ErrorKind::TimedOut | ErrorKind::Interrupted | ErrorKind::WouldBlock
-                    ) =>
-                {
+                Err(e) if matches!(e.kind(), ErrorKind::TimedOut | ErrorKind::Interrupted | ErrorKind::WouldBlock) => {
                     let at = Instant::now();
                     if !self.stalled && at.duration_since(self.last_rx) >= self.stall_after {
                         self.stalled = true;
@@ -344,10 +306,7 @@ impl<D: Decode> SerialReader<D> {
                 Err(_) => self.disconnect(Instant::now()),
             }
         }
-        Ok(Some(Reading {
-            host_t_s: self.rx_t_s,
-            record: self.decoder.record(),
-        }))
+        Ok(Some(Reading { host_t_s: self.rx_t_s, record: self.decoder.record() }))
     }
 }
 

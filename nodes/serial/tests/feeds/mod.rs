@@ -18,12 +18,7 @@ pub fn plain_values(i: usize, m: usize) -> Vec<f64> {
 }
 
 pub fn plain_frames(m: usize, n: usize) -> Vec<TimedFrame> {
-    (0..n)
-        .map(|i| TimedFrame {
-            t_s: i as f64 * 256e-6,
-            volts: plain_values(i, m),
-        })
-        .collect()
+    (0..n).map(|i| TimedFrame { t_s: i as f64 * 256e-6, volts: plain_values(i, m) }).collect()
 }
 
 /// Frames with arbitrary-looking values, for value round trips.
@@ -31,29 +26,17 @@ pub fn busy_frames(m: usize, n: usize, period_s: f64) -> Vec<TimedFrame> {
     (0..n)
         .map(|i| TimedFrame {
             t_s: i as f64 * period_s,
-            volts: (0..m)
-                .map(|k| 1e-3 * ((i * 31 + k * 7) as f64).sin() + 0.1 * k as f64)
-                .collect(),
+            volts: (0..m).map(|k| 1e-3 * ((i * 31 + k * 7) as f64).sin() + 0.1 * k as f64).collect(),
         })
         .collect()
 }
 
 pub fn pressures(n: usize, period_s: f64) -> Vec<TimedPressure> {
-    (0..n)
-        .map(|i| TimedPressure {
-            t_s: i as f64 * period_s,
-            kpa: 0.25 * (i as f64 * 0.3).sin() + 1.0,
-        })
-        .collect()
+    (0..n).map(|i| TimedPressure { t_s: i as f64 * period_s, kpa: 0.25 * (i as f64 * 0.3).sin() + 1.0 }).collect()
 }
 
 pub fn forces(n: usize, period_s: f64) -> Vec<TimedForce> {
-    (0..n)
-        .map(|i| TimedForce {
-            t_s: i as f64 * period_s,
-            force_n: 5.0 * (i as f64 * 0.2).cos(),
-        })
-        .collect()
+    (0..n).map(|i| TimedForce { t_s: i as f64 * period_s, force_n: 5.0 * (i as f64 * 0.2).cos() }).collect()
 }
 
 /// Polls `reader` until `want` records were taken by `take` or `limit` passed (a hang guard,

@@ -13,11 +13,7 @@ use toml::Spanned;
 const DEFAULT_RAMP_S: f64 = 0.5;
 
 pub(super) fn has_contacts(s: &RawStep) -> bool {
-    s.contacts.is_some()
-        || s.grid.is_some()
-        || s.at_mm.is_some()
-        || s.forces_n.is_some()
-        || s.force_profile.is_some()
+    s.contacts.is_some() || s.grid.is_some() || s.at_mm.is_some() || s.forces_n.is_some() || s.force_profile.is_some()
 }
 
 #[derive(Default)]
@@ -59,11 +55,7 @@ impl Builder {
                 })
                 .collect()
         };
-        self.segments.push(Segment {
-            start_s: self.t_s,
-            end_s: self.t_s + len_s,
-            contacts,
-        });
+        self.segments.push(Segment { start_s: self.t_s, end_s: self.t_s + len_s, contacts });
         self.t_s += len_s;
     }
 
@@ -80,12 +72,7 @@ pub(super) fn expand_step(
     b: &mut Builder,
     err: &ErrFn<'_>,
 ) -> Result<(), SceneError> {
-    let rest_s = s
-        .rest_s
-        .as_ref()
-        .map(|v| non_negative("rest_s", v, err))
-        .transpose()?
-        .unwrap_or(0.0);
+    let rest_s = s.rest_s.as_ref().map(|v| non_negative("rest_s", v, err)).transpose()?.unwrap_or(0.0);
     if !has_contacts(s) {
         for (key, present) in [
             ("diameter_mm", s.diameter_mm.is_some()),
@@ -98,17 +85,12 @@ pub(super) fn expand_step(
             if present {
                 return Err(err(
                     step_span,
-                    format!(
-                        "\"{key}\" given but the step has no contacts (hint: add `grid`, `at_mm` or `contacts`)"
-                    ),
+                    format!("\"{key}\" given but the step has no contacts (hint: add `grid`, `at_mm` or `contacts`)"),
                 ));
             }
         }
         if s.rest_s.is_none() {
-            return Err(err(
-                step_span,
-                "empty [[step]]: give `rest_s` or contacts".into(),
-            ));
+            return Err(err(step_span, "empty [[step]]: give `rest_s` or contacts".into()));
         }
         b.rest(rest_s);
         return Ok(());
@@ -121,35 +103,17 @@ pub(super) fn expand_step(
             let (hx, hy) = sensor.half_extents_mm();
             Err(err(
                 span,
-                format!(
-                    "contact at ({x}, {y}) mm is outside the sensor (x in [-{hx}, {hx}], y in [-{hy}, {hy}])"
-                ),
+                format!("contact at ({x}, {y}) mm is outside the sensor (x in [-{hx}, {hx}], y in [-{hy}, {hy}])"),
             ))
         }
     };
-    let ramp_s = s
-        .ramp_s
-        .as_ref()
-        .map(|v| non_negative("ramp_s", v, err))
-        .transpose()?
-        .unwrap_or(DEFAULT_RAMP_S);
-    let release_s = s
-        .release_s
-        .as_ref()
-        .map(|v| non_negative("release_s", v, err))
-        .transpose()?
-        .unwrap_or(ramp_s);
+    let ramp_s = s.ramp_s.as_ref().map(|v| non_negative("ramp_s", v, err)).transpose()?.unwrap_or(DEFAULT_RAMP_S);
+    let release_s = s.release_s.as_ref().map(|v| non_negative("release_s", v, err)).transpose()?.unwrap_or(ramp_s);
     let repeat = match &s.repeat {
         None => 1,
         Some(r) if *r.get_ref() >= 1 && *r.get_ref() <= 100_000 => *r.get_ref() as usize,
         Some(r) => {
-            return Err(err(
-                r.span(),
-                format!(
-                    "\"repeat\": must be an integer in [1, 100000] (got {})",
-                    r.get_ref()
-                ),
-            ));
+            return Err(err(r.span(), format!("\"repeat\": must be an integer in [1, 100000] (got {})", r.get_ref())));
         }
     };
 
@@ -178,28 +142,15 @@ pub(super) fn expand_step(
         let mut spots = Vec::new();
         let mut forces = Vec::new();
         for c in list.get_ref() {
-            let RawContact {
-                x_mm,
-                y_mm,
-                diameter_mm,
-                force_n,
-            } = c.get_ref();
+            let RawContact { x_mm, y_mm, diameter_mm, force_n } = c.get_ref();
             inside(*x_mm.get_ref(), *y_mm.get_ref(), c.span())?;
             let d = positive("diameter_mm", diameter_mm, err)?;
             let f = non_negative("force_n", force_n, err)?;
-            spots.push(Spot {
-                x_mm: *x_mm.get_ref(),
-                y_mm: *y_mm.get_ref(),
-                diameter_mm: d,
-            });
+            spots.push(Spot { x_mm: *x_mm.get_ref(), y_mm: *y_mm.get_ref(), diameter_mm: d });
             forces.push(f);
         }
-        let hold_s = hold(s, eit_fps, err)?.ok_or_else(|| {
-            err(
-                step_span.clone(),
-                "a contact step needs `hold_s` or `hold_frames`".into(),
-            )
-        })?;
+        let hold_s = hold(s, eit_fps, err)?
+            .ok_or_else(|| err(step_span.clone(), "a contact step needs `hold_s` or `hold_frames`".into()))?;
         let zeros = vec![0.0; spots.len()];
         for _ in 0..repeat {
             b.level += 1;
@@ -216,10 +167,7 @@ pub(super) fn expand_step(
     let diameter = match &s.diameter_mm {
         Some(d) => positive("diameter_mm", d, err)?,
         None => {
-            return Err(err(
-                step_span,
-                "a contact step needs \"diameter_mm\"".into(),
-            ));
+            return Err(err(step_span, "a contact step needs \"diameter_mm\"".into()));
         }
     };
     let positions = positions(s, step_span.clone(), err)?;
@@ -234,10 +182,7 @@ pub(super) fn expand_step(
             ("loading", s.loading.is_some()),
         ] {
             if present {
-                return Err(err(
-                    profile.span(),
-                    format!("\"force_profile\" cannot be combined with \"{key}\""),
-                ));
+                return Err(err(profile.span(), format!("\"force_profile\" cannot be combined with \"{key}\"")));
             }
         }
         let pts = profile.get_ref();
@@ -258,19 +203,12 @@ pub(super) fn expand_step(
             if !(p[1].is_finite() && p[1] >= 0.0) {
                 return Err(err(
                     profile.span(),
-                    format!(
-                        "\"force_profile\": point {i}: force must be finite and >= 0 (got {} N)",
-                        p[1]
-                    ),
+                    format!("\"force_profile\": point {i}: force must be finite and >= 0 (got {} N)", p[1]),
                 ));
             }
         }
         for (x, y, _) in &positions {
-            let spot = [Spot {
-                x_mm: *x,
-                y_mm: *y,
-                diameter_mm: diameter,
-            }];
+            let spot = [Spot { x_mm: *x, y_mm: *y, diameter_mm: diameter }];
             for _ in 0..repeat {
                 b.level += 1;
                 b.push(pts[0][0], &spot, &[0.0], &[0.0]);
@@ -288,19 +226,12 @@ pub(super) fn expand_step(
 
     let forces = match &s.forces_n {
         None => {
-            return Err(err(
-                step_span,
-                "a contact step needs \"forces_n\" or \"force_profile\"".into(),
-            ));
+            return Err(err(step_span, "a contact step needs \"forces_n\" or \"force_profile\"".into()));
         }
         Some(f) => forces(f, err)?,
     };
-    let hold_s = hold(s, eit_fps, err)?.ok_or_else(|| {
-        err(
-            step_span.clone(),
-            "a contact step needs `hold_s` or `hold_frames`".into(),
-        )
-    })?;
+    let hold_s = hold(s, eit_fps, err)?
+        .ok_or_else(|| err(step_span.clone(), "a contact step needs `hold_s` or `hold_frames`".into()))?;
     let staircase = match &s.loading {
         None => false,
         Some(l) => match l.get_ref().as_str() {
@@ -309,19 +240,13 @@ pub(super) fn expand_step(
             other => {
                 return Err(err(
                     l.span(),
-                    format!(
-                        "\"loading\": expected \"separate\" or \"staircase\" (got \"{other}\")"
-                    ),
+                    format!("\"loading\": expected \"separate\" or \"staircase\" (got \"{other}\")"),
                 ));
             }
         },
     };
     for (x, y, _) in &positions {
-        let spot = [Spot {
-            x_mm: *x,
-            y_mm: *y,
-            diameter_mm: diameter,
-        }];
+        let spot = [Spot { x_mm: *x, y_mm: *y, diameter_mm: diameter }];
         for _ in 0..repeat {
             if staircase {
                 let mut prev = 0.0;
@@ -351,10 +276,7 @@ pub(super) fn expand_step(
 
 fn hold(s: &RawStep, eit_fps: f64, err: &ErrFn<'_>) -> Result<Option<f64>, SceneError> {
     match (&s.hold_s, &s.hold_frames) {
-        (Some(a), Some(_)) => Err(err(
-            a.span(),
-            "give either \"hold_s\" or \"hold_frames\", not both".into(),
-        )),
+        (Some(a), Some(_)) => Err(err(a.span(), "give either \"hold_s\" or \"hold_frames\", not both".into())),
         (Some(a), None) => Ok(Some(non_negative("hold_s", a, err)?)),
         (None, Some(f)) => Ok(Some(non_negative("hold_frames", f, err)? / eit_fps)),
         (None, None) => Ok(None),
@@ -366,89 +288,52 @@ fn forces(f: &Spanned<RawForces>, err: &ErrFn<'_>) -> Result<Vec<f64>, SceneErro
         RawForces::List(v) => v.clone(),
         RawForces::Range { from, to, n } => {
             if *n < 1 || *n > 10_000 {
-                return Err(err(
-                    f.span(),
-                    format!("\"forces_n\": n must be in [1, 10000] (got {n})"),
-                ));
+                return Err(err(f.span(), format!("\"forces_n\": n must be in [1, 10000] (got {n})")));
             }
             let n = *n as usize;
-            (0..n)
-                .map(|i| {
-                    if n == 1 {
-                        *from
-                    } else {
-                        from + (to - from) * i as f64 / (n - 1) as f64
-                    }
-                })
-                .collect()
+            (0..n).map(|i| if n == 1 { *from } else { from + (to - from) * i as f64 / (n - 1) as f64 }).collect()
         }
     };
     if list.is_empty() {
         return Err(err(f.span(), "\"forces_n\": empty list".into()));
     }
     if let Some(bad) = list.iter().find(|x| !(x.is_finite() && **x >= 0.0)) {
-        return Err(err(
-            f.span(),
-            format!("\"forces_n\": a force must be finite and >= 0 (got {bad} N)"),
-        ));
+        return Err(err(f.span(), format!("\"forces_n\": a force must be finite and >= 0 (got {bad} N)")));
     }
     Ok(list)
 }
 
 type Positions = Vec<(f64, f64, std::ops::Range<usize>)>;
 
-fn positions(
-    s: &RawStep,
-    step_span: std::ops::Range<usize>,
-    err: &ErrFn<'_>,
-) -> Result<Positions, SceneError> {
+fn positions(s: &RawStep, step_span: std::ops::Range<usize>, err: &ErrFn<'_>) -> Result<Positions, SceneError> {
     match (&s.grid, &s.at_mm) {
-        (Some(g), Some(_)) => Err(err(
-            g.span(),
-            "give either \"grid\" or \"at_mm\", not both".into(),
-        )),
-        (None, None) => Err(err(
-            step_span,
-            "a contact step needs \"grid\", \"at_mm\" or \"contacts\"".into(),
-        )),
+        (Some(g), Some(_)) => Err(err(g.span(), "give either \"grid\" or \"at_mm\", not both".into())),
+        (None, None) => Err(err(step_span, "a contact step needs \"grid\", \"at_mm\" or \"contacts\"".into())),
         (None, Some(list)) => {
             if list.get_ref().is_empty() {
                 return Err(err(list.span(), "\"at_mm\": empty list".into()));
             }
-            Ok(list
-                .get_ref()
-                .iter()
-                .map(|p| (p[0], p[1], list.span()))
-                .collect())
+            Ok(list.get_ref().iter().map(|p| (p[0], p[1], list.span())).collect())
         }
         (Some(g), None) => {
             let grid = g.get_ref();
             let [nx, ny] = grid.n;
             if !(1..=1000).contains(&nx) || !(1..=1000).contains(&ny) {
-                return Err(err(
-                    g.span(),
-                    format!("\"grid\": n must be two integers in [1, 1000] (got [{nx}, {ny}])"),
-                ));
+                return Err(err(g.span(), format!("\"grid\": n must be two integers in [1, 1000] (got [{nx}, {ny}])")));
             }
-            let axis = |r: [f64; 2], n: i64| -> Vec<f64> {
-                let n = n as usize;
-                (0..n)
-                    .map(|i| {
-                        if n == 1 {
-                            0.5 * (r[0] + r[1])
-                        } else {
-                            r[0] + (r[1] - r[0]) * i as f64 / (n - 1) as f64
-                        }
-                    })
-                    .collect()
-            };
+            let axis =
+                |r: [f64; 2], n: i64| -> Vec<f64> {
+                    let n = n as usize;
+                    (0..n)
+                        .map(|i| {
+                            if n == 1 { 0.5 * (r[0] + r[1]) } else { r[0] + (r[1] - r[0]) * i as f64 / (n - 1) as f64 }
+                        })
+                        .collect()
+                };
             let xs = axis(grid.x_mm, nx);
             let ys = axis(grid.y_mm, ny);
             // row by row from the bottom, left to right (a raster scan of the stage)
-            Ok(ys
-                .iter()
-                .flat_map(|&y| xs.iter().map(move |&x| (x, y, g.span())))
-                .collect())
+            Ok(ys.iter().flat_map(|&y| xs.iter().map(move |&x| (x, y, g.span()))).collect())
         }
     }
 }

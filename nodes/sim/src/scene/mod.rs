@@ -25,12 +25,7 @@ pub enum SceneError {
     Read { file: String, cause: String },
     /// Parsing or validation failed at a place in the file (1-based line and column).
     #[error("{file}:{line}:{column}: {problem}")]
-    At {
-        file: String,
-        line: usize,
-        column: usize,
-        problem: String,
-    },
+    At { file: String, line: usize, column: usize, problem: String },
 }
 
 /// Whether a live source paces events to the clock or emits them as fast as possible.
@@ -82,16 +77,11 @@ impl Scene {
     pub fn from_file(path: impl AsRef<Path>) -> Result<Scene, SceneError> {
         let path = path.as_ref();
         let file = path.display().to_string();
-        let text = std::fs::read_to_string(path).map_err(|e| SceneError::Read {
-            file: file.clone(),
-            cause: e.to_string(),
-        })?;
+        let text =
+            std::fs::read_to_string(path).map_err(|e| SceneError::Read { file: file.clone(), cause: e.to_string() })?;
         let mut scene = Scene::from_str(&text, &file)?;
         if scene.name.is_empty() {
-            scene.name = path
-                .file_stem()
-                .map(|s| s.to_string_lossy().into_owned())
-                .unwrap_or_default();
+            scene.name = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
         }
         Ok(scene)
     }
@@ -100,8 +90,7 @@ impl Scene {
     #[allow(clippy::should_implement_trait)] // needs the file name, FromStr cannot take it
     pub fn from_str(text: &str, file: &str) -> Result<Scene, SceneError> {
         let at = Locator { text, file };
-        let raw: RawScene =
-            toml::from_str(text).map_err(|e| at.error(e.span(), e.message().to_owned()))?;
+        let raw: RawScene = toml::from_str(text).map_err(|e| at.error(e.span(), e.message().to_owned()))?;
         validate::validate(raw, text, &at)
     }
 
@@ -120,12 +109,7 @@ pub(crate) struct Locator<'a> {
 impl Locator<'_> {
     pub(crate) fn error(&self, span: Option<Range<usize>>, problem: String) -> SceneError {
         let (line, column) = span.map_or((1, 1), |s| line_column(self.text, s.start));
-        SceneError::At {
-            file: self.file.to_owned(),
-            line,
-            column,
-            problem,
-        }
+        SceneError::At { file: self.file.to_owned(), line, column, problem }
     }
 }
 

@@ -7,12 +7,7 @@ fn parse(text: &str) -> Result<Scene, SceneError> {
 /// The error's `file:line:column` prefix and message.
 fn fails(text: &str) -> (usize, usize, String) {
     match parse(text).unwrap_err() {
-        SceneError::At {
-            file,
-            line,
-            column,
-            problem,
-        } => {
+        SceneError::At { file, line, column, problem } => {
             assert_eq!(file, "t.toml");
             (line, column, problem)
         }
@@ -49,10 +44,7 @@ fn staircase_grid_expands_to_holds_and_ramps() {
     assert_eq!((first.x_mm, first.y_mm), (-20.0, -20.0));
     assert_eq!((first.start_force_n, first.end_force_n), (0.0, 1.0));
     let second_hold = &tl.segments[4].contacts[0];
-    assert_eq!(
-        (second_hold.start_force_n, second_hold.end_force_n),
-        (2.0, 2.0)
-    );
+    assert_eq!((second_hold.start_force_n, second_hold.end_force_n), (2.0, 2.0));
     // the second position is to the right of the first (raster scan from the bottom left)
     let second_pos = &tl.segments[9].contacts[0];
     assert_eq!((second_pos.x_mm, second_pos.y_mm), (20.0, -20.0));
@@ -66,12 +58,8 @@ fn separate_indentations_repeat_at_each_position() {
         "{HEAD}[[step]]\nat_mm = [[0.0, 0.0], [10.0, 5.0]]\ndiameter_mm = 10.0\nforces_n = [5.0]\nhold_frames = 6\nrepeat = 3\nrest_s = 0.5\n"
     );
     let s = parse(&text).unwrap();
-    let presses: std::collections::BTreeSet<u32> = s
-        .timeline
-        .segments
-        .iter()
-        .flat_map(|g| g.contacts.iter().map(|c| c.press))
-        .collect();
+    let presses: std::collections::BTreeSet<u32> =
+        s.timeline.segments.iter().flat_map(|g| g.contacts.iter().map(|c| c.press)).collect();
     assert_eq!(presses.len(), 6);
     let hold = &s.timeline.segments[2];
     assert!((hold.end_s - hold.start_s - 6.0 / 1.3).abs() < 1e-12);
@@ -90,13 +78,7 @@ fn multi_contact_and_profile_steps() {
     assert_eq!(s.timeline.max_contacts(), 2);
     let hold = &s.timeline.segments[2];
     assert_eq!(hold.contacts[1].end_force_n, 1.96);
-    let last_ramp = s
-        .timeline
-        .segments
-        .iter()
-        .rev()
-        .find(|g| !g.is_static())
-        .unwrap();
+    let last_ramp = s.timeline.segments.iter().rev().find(|g| !g.is_static()).unwrap();
     assert_eq!(last_ramp.contacts[0].start_force_n, 4.0);
 }
 
@@ -117,9 +99,8 @@ fn negative_force_and_diameter_are_rejected() {
     ));
     assert_eq!(line, 11);
     assert!(msg.contains("forces_n") && msg.contains("-2"), "{msg}");
-    let (line, col, msg) = fails(&format!(
-        "{HEAD}[[step]]\nat_mm = [[0.0, 0.0]]\ndiameter_mm = -10.0\nforces_n = [1.0]\nhold_s = 1.0\n"
-    ));
+    let (line, col, msg) =
+        fails(&format!("{HEAD}[[step]]\nat_mm = [[0.0, 0.0]]\ndiameter_mm = -10.0\nforces_n = [1.0]\nhold_s = 1.0\n"));
     assert_eq!((line, col), (10, 15));
     assert!(msg.contains("diameter_mm") && msg.contains("> 0"), "{msg}");
 }
@@ -134,9 +115,8 @@ fn empty_timeline_is_rejected() {
 
 #[test]
 fn first_step_must_be_no_load() {
-    let (line, _, msg) = fails(
-        "[scene]\n[[step]]\nat_mm = [[0.0, 0.0]]\ndiameter_mm = 10.0\nforces_n = [1.0]\nhold_s = 1.0\n",
-    );
+    let (line, _, msg) =
+        fails("[scene]\n[[step]]\nat_mm = [[0.0, 0.0]]\ndiameter_mm = 10.0\nforces_n = [1.0]\nhold_s = 1.0\n");
     assert_eq!(line, 2);
     assert!(msg.contains("no-load"), "{msg}");
 }
@@ -162,13 +142,7 @@ fn model_overrides_and_rates() {
     assert_eq!(s.profile_name, "paper");
     assert_eq!(s.rates.pacing, Pacing::Fast);
     assert_eq!(s.rates.pressure_hz, 50.0);
-    assert_eq!(
-        s.channels,
-        Channels {
-            eit: false,
-            pressure: true
-        }
-    );
+    assert_eq!(s.channels, Channels { eit: false, pressure: true });
     let (line, _, msg) = fails("[scene]\n[model]\nbogus = 1.0\n[[step]]\nrest_s = 1.0\n");
     assert_eq!(line, 2);
     assert!(msg.contains("bogus"), "{msg}");

@@ -21,11 +21,7 @@ pub(super) fn validate(raw: RawScene, text: &str, at: &Locator<'_>) -> Result<Sc
             None => {
                 return Err(err(
                     p.span(),
-                    format!(
-                        "\"profile\": unknown profile \"{}\" (expected one of {:?})",
-                        p.get_ref(),
-                        Profile::NAMES
-                    ),
+                    format!("\"profile\": unknown profile \"{}\" (expected one of {:?})", p.get_ref(), Profile::NAMES),
                 ));
             }
         },
@@ -34,10 +30,7 @@ pub(super) fn validate(raw: RawScene, text: &str, at: &Locator<'_>) -> Result<Sc
         profile = override_profile(&profile, model).map_err(|p| err(model.span(), p))?;
     }
     profile.validate().map_err(|(field, p)| {
-        err(
-            raw.model.as_ref().map_or(0..0, |m| m.span()),
-            format!("[model] \"{field}\": {p}"),
-        )
+        err(raw.model.as_ref().map_or(0..0, |m| m.span()), format!("[model] \"{field}\": {p}"))
     })?;
 
     let sensor = match &raw.sensor {
@@ -45,8 +38,7 @@ pub(super) fn validate(raw: RawScene, text: &str, at: &Locator<'_>) -> Result<Sc
         Some(table) => {
             let mut doc = toml::Table::new();
             doc.insert("sensor".into(), toml::Value::Table(table.get_ref().clone()));
-            let sensor_text =
-                toml::to_string(&doc).map_err(|e| err(table.span(), format!("[sensor]: {e}")))?;
+            let sensor_text = toml::to_string(&doc).map_err(|e| err(table.span(), format!("[sensor]: {e}")))?;
             Sensor::from_toml(&sensor_text).map_err(|e| err(table.span(), e.to_string()))?
         }
     };
@@ -57,8 +49,7 @@ pub(super) fn validate(raw: RawScene, text: &str, at: &Locator<'_>) -> Result<Sc
     if raw.step.is_empty() {
         return Err(at.error(
             None,
-            "empty timeline: the scene has no [[step]] (hint: start with `[[step]] rest_s = 5.0`)"
-                .into(),
+            "empty timeline: the scene has no [[step]] (hint: start with `[[step]] rest_s = 5.0`)".into(),
         ));
     }
     let mut builder = Builder::default();
@@ -67,14 +58,13 @@ pub(super) fn validate(raw: RawScene, text: &str, at: &Locator<'_>) -> Result<Sc
         if k == 0 && has_contacts(s) {
             return Err(err(
                 step.span(),
-                "the first [[step]] must be a no-load period (hint: `[[step]] rest_s = 5.0`), the pipeline tares on it".into(),
+                "the first [[step]] must be a no-load period (hint: `[[step]] rest_s = 5.0`), the pipeline tares on it"
+                    .into(),
             ));
         }
         expand_step(s, step.span(), &sensor, rates.eit_fps, &mut builder, &err)?;
     }
-    let timeline = Timeline {
-        segments: builder.segments,
-    };
+    let timeline = Timeline { segments: builder.segments };
     if timeline.duration_s() <= 0.0 {
         return Err(at.error(None, "empty timeline: the steps add up to 0 s".into()));
     }
@@ -98,9 +88,7 @@ fn override_profile(base: &Profile, model: &Spanned<toml::Table>) -> Result<Prof
     let mut table = toml::Table::try_from(base).map_err(|e| format!("[model]: {e}"))?;
     for (k, v) in model.get_ref() {
         if !table.contains_key(k) {
-            return Err(format!(
-                "[model]: unknown constant \"{k}\" (see the fields of Profile in MODEL.md)"
-            ));
+            return Err(format!("[model]: unknown constant \"{k}\" (see the fields of Profile in MODEL.md)"));
         }
         // integers written where a float is expected are accepted
         let v = match (table.get(k), v) {
@@ -109,17 +97,11 @@ fn override_profile(base: &Profile, model: &Spanned<toml::Table>) -> Result<Prof
         };
         table.insert(k.clone(), v);
     }
-    toml::Value::Table(table)
-        .try_into::<Profile>()
-        .map_err(|e| format!("[model]: {}", e.message()))
+    toml::Value::Table(table).try_into::<Profile>().map_err(|e| format!("[model]: {}", e.message()))
 }
 
 fn rates(raw: &RawScene, err: &ErrFn<'_>) -> Result<Rates, SceneError> {
-    let mut rates = Rates {
-        eit_fps: DEFAULT_EIT_FPS,
-        pressure_hz: DEFAULT_PRESSURE_HZ,
-        pacing: Pacing::Realtime,
-    };
+    let mut rates = Rates { eit_fps: DEFAULT_EIT_FPS, pressure_hz: DEFAULT_PRESSURE_HZ, pacing: Pacing::Realtime };
     let Some(r) = &raw.rates else {
         return Ok(rates);
     };
@@ -134,10 +116,7 @@ fn rates(raw: &RawScene, err: &ErrFn<'_>) -> Result<Rates, SceneError> {
             "realtime" => Pacing::Realtime,
             "fast" => Pacing::Fast,
             other => {
-                return Err(err(
-                    p.span(),
-                    format!("\"pacing\": expected \"realtime\" or \"fast\" (got \"{other}\")"),
-                ));
+                return Err(err(p.span(), format!("\"pacing\": expected \"realtime\" or \"fast\" (got \"{other}\")")));
             }
         };
     }
@@ -146,15 +125,9 @@ fn rates(raw: &RawScene, err: &ErrFn<'_>) -> Result<Rates, SceneError> {
 
 fn channels(raw: &RawScene, err: &ErrFn<'_>) -> Result<Channels, SceneError> {
     let Some(list) = &raw.scene.channels else {
-        return Ok(Channels {
-            eit: true,
-            pressure: true,
-        });
+        return Ok(Channels { eit: true, pressure: true });
     };
-    let mut ch = Channels {
-        eit: false,
-        pressure: false,
-    };
+    let mut ch = Channels { eit: false, pressure: false };
     for c in list.get_ref() {
         match c.get_ref().as_str() {
             "eit" => ch.eit = true,
@@ -162,18 +135,13 @@ fn channels(raw: &RawScene, err: &ErrFn<'_>) -> Result<Channels, SceneError> {
             other => {
                 return Err(err(
                     c.span(),
-                    format!(
-                        "\"channels\": unknown channel \"{other}\" (expected \"eit\" or \"pressure\")"
-                    ),
+                    format!("\"channels\": unknown channel \"{other}\" (expected \"eit\" or \"pressure\")"),
                 ));
             }
         }
     }
     if !ch.eit && !ch.pressure {
-        return Err(err(
-            list.span(),
-            "\"channels\": at least one of \"eit\", \"pressure\" is needed".into(),
-        ));
+        return Err(err(list.span(), "\"channels\": at least one of \"eit\", \"pressure\" is needed".into()));
     }
     Ok(ch)
 }
@@ -183,25 +151,15 @@ pub(super) fn positive(name: &str, v: &Spanned<f64>, err: &ErrFn<'_>) -> Result<
     if x.is_finite() && x > 0.0 {
         Ok(x)
     } else {
-        Err(err(
-            v.span(),
-            format!("\"{name}\": must be finite and > 0 (got {x})"),
-        ))
+        Err(err(v.span(), format!("\"{name}\": must be finite and > 0 (got {x})")))
     }
 }
 
-pub(super) fn non_negative(
-    name: &str,
-    v: &Spanned<f64>,
-    err: &ErrFn<'_>,
-) -> Result<f64, SceneError> {
+pub(super) fn non_negative(name: &str, v: &Spanned<f64>, err: &ErrFn<'_>) -> Result<f64, SceneError> {
     let x = *v.get_ref();
     if x.is_finite() && x >= 0.0 {
         Ok(x)
     } else {
-        Err(err(
-            v.span(),
-            format!("\"{name}\": must be finite and >= 0 (got {x})"),
-        ))
+        Err(err(v.span(), format!("\"{name}\": must be finite and >= 0 (got {x})")))
     }
 }

@@ -67,7 +67,7 @@ pub(crate) fn load_calibration(path: &std::path::Path, ctx: &BuildContext) -> Re
 enum Weights {
     Math(SplitMath),
     /// EIT-LocAware force estimates.
-    EitForce(Strategy),
+    EitForce(Box<Strategy>),
 }
 
 pub struct Splitter {
@@ -129,7 +129,7 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
                 SplitStrategy::SensitivityCompensated => {
                     Weights::Math(SplitMath::SensitivityCompensated(cal()?.sensitivity))
                 }
-                SplitStrategy::EitForce => Weights::EitForce(Strategy::new(&cal()?, StrategyKind::EitLocAware)),
+                SplitStrategy::EitForce => Weights::EitForce(Box::new(Strategy::new(&cal()?, StrategyKind::EitLocAware))),
             };
             Ok(NodeImpl::Processor(Box::new(Splitter { weights, ring: Recycler::new(128, Split::default) })))
         },

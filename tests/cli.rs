@@ -161,3 +161,30 @@ fn a_missing_recording_stops_run_before_data_flows() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("\"replay\"") && err.contains("nope.h5"), "{err}");
 }
+
+/// The `paper` profile must keep reproducing the paper's baselines through the project's own
+/// calibrate and eval (CONTRACTS.md pipeline), within R^2 +- 0.03 and RMSE +- 25 %, so no change
+/// can quietly make the simulated skin easier (or harder).
+#[test]
+fn reproduce_pins_the_paper_baselines() {
+    let d = workdir("reproduce");
+    let scenes = Path::new(env!("CARGO_MANIFEST_DIR")).join("graphs/scenes");
+    let out = skinflow(&d, &["reproduce", "--out", "r", "--scenes", scenes.to_str().unwrap()]);
+    ok(&out);
+    let calib: toml::Table = std::fs::read_to_string(d.join("r/calib.toml")).unwrap().parse().unwrap();
+    let r2 = |k: &str| calib["r2"][k].as_float().unwrap_or_else(|| panic!("r2.{k} missing"));
+    let band = |what: &str, got: f64, paper: f64, tol: f64| {
+        assert!((got - paper).abs() <= tol, "{what}: {got:.3} is outside {paper} +- {tol:.3}");
+    };
+    band("R^2 pneumatic, centre", r2("pneumatic_center"), 0.996, 0.03);
+    band("R^2 pneumatic, all", r2("pneumatic_all"), 0.923, 0.03);
+    band("R^2 EIT, centre", r2("eit_center"), 0.935, 0.03);
+    band("R^2 EIT, all", r2("eit_all"), 0.781, 0.03);
+    let cross: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(d.join("r/cross-diameter.json")).unwrap()).unwrap();
+    let rmse = |s: &str| cross["strategies"][s]["rmse_n"].as_f64().unwrap();
+    band("Pneumatic-NoCal RMSE", rmse("pneumatic-nocal"), 0.91, 0.25 * 0.91);
+    band("EIT-NoCal RMSE", rmse("eit-nocal"), 1.45, 0.25 * 1.45);
+    let report = std::fs::read_to_string(d.join("r/report.md")).unwrap();
+    assert!(report.contains("Table III") && report.contains("Multi-contact"), "{report}");
+}

@@ -129,7 +129,9 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
                 SplitStrategy::SensitivityCompensated => {
                     Weights::Math(SplitMath::SensitivityCompensated(cal()?.sensitivity))
                 }
-                SplitStrategy::EitForce => Weights::EitForce(Box::new(Strategy::new(&cal()?, StrategyKind::EitLocAware))),
+                SplitStrategy::EitForce => {
+                    Weights::EitForce(Box::new(Strategy::new(&cal()?, StrategyKind::EitLocAware)))
+                }
             };
             Ok(NodeImpl::Processor(Box::new(Splitter { weights, ring: Recycler::new(128, Split::default) })))
         },

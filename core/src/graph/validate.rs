@@ -100,16 +100,25 @@ pub(super) fn validate(src: SourceFile, registry: &Registry) -> Result<GraphSpec
     // Edges: endpoints, ports, types, capacities, single inputs.
     let mut edges: Vec<EdgeSpec> = Vec::new();
     let mut first_into: HashMap<(usize, usize), String> = HashMap::new();
+    let mut attempted: Vec<(usize, String)> = Vec::new();
     for e in &file.edge {
         let ed = e.get_ref();
         let from = resolve(&ed.from, "from", &by_id, &nodes, &mut err);
         let to = resolve(&ed.to, "to", &by_id, &nodes, &mut err);
+        let (from_ok, to_ok) = (from.as_ref().map(|_| ()), to.clone());
         let capacity = ed.capacity.as_ref().map_or(DEFAULT_CAPACITY, |c| *c.get_ref());
         if capacity == 0 {
             let span = ed.capacity.as_ref().map(|c| c.span());
             err(span, None, K::Option("edge capacity must be >= 1 (got 0)".into()));
         }
-        let (Some((fnode, fport_name)), Some((tnode, tport_name))) = (from, to) else { continue };
+        let (Some((fnode, fport_name)), Some((tnode, tport_name))) = (from, to) else {
+            // An input whose edge failed for another reason (reported above) is not also
+            // "unconnected": one mistake, one error.
+            if let (None, Some((tnode, tport))) = (from_ok, &to_ok) {
+                attempted.push((*tnode, tport.clone()));
+            }
+            continue;
+        };
         let (Some(fspec), Some(tspec)) = (&nodes[fnode], &nodes[tnode]) else { continue };
         let finfo = fspec.factory.info();
         let tinfo = tspec.factory.info();
@@ -188,7 +197,8 @@ pub(super) fn validate(src: SourceFile, registry: &Registry) -> Result<GraphSpec
     for (i, n) in nodes.iter().enumerate() {
         let Some(n) = n else { continue };
         for (p, port) in n.factory.info().inputs.iter().enumerate() {
-            if port.required && !edges.iter().any(|e| e.to_node == i && e.to_port == p) {
+            let tried = attempted.iter().any(|(t, name)| *t == i && *name == port.name);
+            if port.required && !tried && !edges.iter().any(|e| e.to_node == i && e.to_port == p) {
                 err(
                     Some(file.node[i].get_ref().id.span()),
                     Some(&n.id),

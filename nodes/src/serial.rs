@@ -138,7 +138,21 @@ fn open<D: Decode>(p: &PortParams, decoder: D, ctx: &Context) -> Result<SerialRe
         .map_err(|e| NodeError::Path { path: p.port.clone(), problem: e.to_string() })
 }
 
-fn report<D: Decode>(ctx: &Context, r: &SerialReader<D>) {
+/// The next record, waiting at most [`POLL_SLICE`]; a configuration mismatch the stream
+/// proves (e.g. another frame width) stops the graph.
+fn next<'a, D: Decode>(
+    reader: &'a mut Option<SerialReader<D>>,
+    port: &std::path::Path,
+) -> Result<Option<skinflow_serial::Reading<D::Record<'a>>>, NodeError> {
+    let reader = reader.as_mut().ok_or_else(|| NodeError::msg("polled before start"))?;
+    reader
+        .poll_next(Instant::now() + POLL_SLICE)
+        .map_err(|e| NodeError::Path { path: port.to_path_buf(), problem: e.to_string() }.fatal())
+}
+
+/// Logs the link's counters at stop: a warning when anything was lost.
+fn report<D: Decode>(ctx: &Context, r: Option<&SerialReader<D>>) {
+    let Some(r) = r else { return };
     let d = r.decode_stats();
     let l = r.link_stats();
     let lossy = d.crc_errors + d.lost_frames + d.torn_frames + d.bad_lines + l.disconnects > 0;
@@ -180,11 +194,7 @@ impl Source for SerialEit {
     }
 
     fn poll(&mut self, ctx: &mut Context, out: &mut Outputs) -> Result<SourcePoll, NodeError> {
-        let reader = self.reader.as_mut().ok_or_else(|| NodeError::msg("polled before start"))?;
-        let got = reader
-            .poll_next(Instant::now() + POLL_SLICE)
-            .map_err(|e| NodeError::Path { path: self.p.port.clone(), problem: e.to_string() }.fatal())?;
-        let Some(r) = got else { return Ok(SourcePoll::Idle) };
+        let Some(r) = next(&mut self.reader, &self.p.port)? else { return Ok(SourcePoll::Idle) };
         let c = r.record.counter;
         self.seq = match self.last_counter {
             Some(prev) => self.seq + u64::from(c.wrapping_sub(prev)),
@@ -202,9 +212,7 @@ impl Source for SerialEit {
     }
 
     fn stop(&mut self, ctx: &mut Context) -> Result<(), NodeError> {
-        if let Some(r) = &self.reader {
-            report(ctx, r);
-        }
+        report(ctx, self.reader.as_ref());
         Ok(())
     }
 }
@@ -224,11 +232,7 @@ impl Source for SerialPressure {
     }
 
     fn poll(&mut self, ctx: &mut Context, out: &mut Outputs) -> Result<SourcePoll, NodeError> {
-        let reader = self.reader.as_mut().ok_or_else(|| NodeError::msg("polled before start"))?;
-        let got = reader
-            .poll_next(Instant::now() + POLL_SLICE)
-            .map_err(|e| NodeError::Path { path: self.p.port.clone(), problem: e.to_string() }.fatal())?;
-        let Some(r) = got else { return Ok(SourcePoll::Idle) };
+        let Some(r) = next(&mut self.reader, &self.p.port)? else { return Ok(SourcePoll::Idle) };
         self.seq += 1;
         out.send(
             0,
@@ -241,9 +245,7 @@ impl Source for SerialPressure {
     }
 
     fn stop(&mut self, ctx: &mut Context) -> Result<(), NodeError> {
-        if let Some(r) = &self.reader {
-            report(ctx, r);
-        }
+        report(ctx, self.reader.as_ref());
         Ok(())
     }
 }
@@ -261,11 +263,7 @@ impl Source for SerialLoadcell {
     }
 
     fn poll(&mut self, ctx: &mut Context, out: &mut Outputs) -> Result<SourcePoll, NodeError> {
-        let reader = self.reader.as_mut().ok_or_else(|| NodeError::msg("polled before start"))?;
-        let got = reader
-            .poll_next(Instant::now() + POLL_SLICE)
-            .map_err(|e| NodeError::Path { path: self.p.port.clone(), problem: e.to_string() }.fatal())?;
-        let Some(r) = got else { return Ok(SourcePoll::Idle) };
+        let Some(r) = next(&mut self.reader, &self.p.port)? else { return Ok(SourcePoll::Idle) };
         self.seq += 1;
         let f = r.record.force_n;
         let contacts = if f >= self.p.contact_threshold_n {
@@ -281,9 +279,7 @@ impl Source for SerialLoadcell {
     }
 
     fn stop(&mut self, ctx: &mut Context) -> Result<(), NodeError> {
-        if let Some(r) = &self.reader {
-            report(ctx, r);
-        }
+        report(ctx, self.reader.as_ref());
         Ok(())
     }
 }

@@ -58,7 +58,7 @@ pub struct SyncedFrame {
     pub dp_kpa: f64,
     /// Pressure samples averaged.
     pub pressure_samples: u32,
-    /// The no-load offset in use, kPa.
+    /// The no-load offset in use, kPa (NaN until a no-load sample was seen).
     pub p0_kpa: f64,
     /// The frame lies in the leading no-load period (a reference, not evaluated).
     pub no_load: bool,

@@ -137,8 +137,10 @@ impl Sync {
         if self.truth_connected { self.first_contact_s.is_none_or(|t0| t_s < t0) } else { t_s < self.p.tare_s }
     }
 
+    /// The no-load offset, kPa; NaN while no no-load sample has been seen (P0 is never
+    /// assumed zero: such frames carry a NaN dP, which correctors turn into 0 N, flagged).
     fn p0(&self) -> f64 {
-        self.p0_fixed.unwrap_or(if self.p0_n > 0 { self.p0_sum / self.p0_n as f64 } else { 0.0 })
+        self.p0_fixed.unwrap_or(if self.p0_n > 0 { self.p0_sum / self.p0_n as f64 } else { f64::NAN })
     }
 
     fn on_pressure(&mut self, t_s: f64, kpa: f64) {

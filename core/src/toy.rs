@@ -253,7 +253,7 @@ pub fn register(r: &mut Registry) -> Result<(), crate::registry::DuplicateKind> 
             .output(out())
             .param(ParamDoc::new("count", "u64", "100", "messages to emit"))
             .param(ParamDoc::new("start", "u64", "0", "first value"))
-            .param(ParamDoc::new("rate_hz", "f64", "", "pace to this rate (absent: as fast as possible)")),
+            .param(ParamDoc::new("rate_hz", "f64", "none", "pace to this rate (absent: as fast as possible)")),
         |p: CounterParams, _| {
             let next = p.start;
             Ok(NodeImpl::Source(Box::new(Counter { p, next, ring: Recycler::new(RING, Count::default) })))

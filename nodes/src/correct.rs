@@ -106,7 +106,7 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
             "eit-nocal | pneumatic-nocal | eit-locaware | pneumatic-locaware | pneumatic-area-aware",
         ))
         .param(ParamDoc::new("calibration", "path", "", "calibration TOML from `skinflow calibrate`"))
-        .param(ParamDoc::new("name", "string", "", "name on the output (default: strategy[-splitter])")),
+        .param(ParamDoc::new("name", "string", "none", "name on the output (default: strategy[-splitter])")),
         |p: CorrectorParams, ctx| {
             let kind =
                 kind_of(&p.strategy).map_err(|e| NodeError::Param { param: "strategy".into(), problem: e.problem })?;

@@ -246,10 +246,15 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
             .input(PortSpec::input::<Contacts>("contacts", "segmented contacts").optional())
             .input(PortSpec::input::<Forces>("forces", "per-strategy forces").optional().multi())
             .param(ParamDoc::new("path", "path", "", "output file"))
-            .param(ParamDoc::new("sensor", "path", "", "sensor TOML for the `sensor` attribute (default paper-100mm)"))
+            .param(ParamDoc::new(
+                "sensor",
+                "path",
+                "none",
+                "sensor TOML for the `sensor` attribute (default paper-100mm)",
+            ))
             .param(ParamDoc::new("flush_interval_s", "f64", "1.0", "longest time rows stay in memory, s"))
-            .param(ParamDoc::new("rotate_mb", "f64", "", "start a new part at this size, MB"))
-            .param(ParamDoc::new("rotate_s", "f64", "", "start a new part after this many seconds"))
+            .param(ParamDoc::new("rotate_mb", "f64", "none", "start a new part at this size, MB"))
+            .param(ParamDoc::new("rotate_s", "f64", "none", "start a new part after this many seconds"))
             .param(ParamDoc::new("swmr", "bool", "false", "single-writer/multiple-reader mode for live readers"))
             .param(ParamDoc::new("overwrite", "bool", "false", "replace an existing file"))
             .param(ParamDoc::new("strategies", "[string]", "[]", "force strategies to log"))

@@ -133,7 +133,7 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
             .output(PortSpec::output::<Truth>("truth", "ground-truth rows"))
             .param(ParamDoc::new("scene", "path", "", "scene TOML (relative to the graph file)"))
             .param(ParamDoc::new("seed", "u64", "1", "noise and drift seed"))
-            .param(ParamDoc::new("pacing", "string", "", "override the scene: realtime | fast")),
+            .param(ParamDoc::new("pacing", "string", "none", "override the scene: realtime | fast")),
         |p: SimParams, ctx| {
             let path = ctx.resolve(&p.scene);
             let scene =

@@ -121,7 +121,12 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
                 "\"proportional\"",
                 "proportional | sensitivity-compensated | eit-force",
             ))
-            .param(ParamDoc::new("calibration", "path", "", "calibration TOML (needed by sensitivity-compensated)")),
+            .param(ParamDoc::new(
+                "calibration",
+                "path",
+                "none",
+                "calibration TOML (needed by sensitivity-compensated)",
+            )),
         |p: SplitterParams, ctx| {
             let cal = || load_calibration(p.calibration.as_ref().expect("validated: calibration is set"), ctx);
             let weights = match p.strategy {

@@ -318,7 +318,7 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
         .param(ParamDoc::new(
             "frame_period_s",
             "f64",
-            "",
+            "none",
             "acquisition window T, s (absent: median of frame intervals)",
         ))
         .param(ParamDoc::new("tare_window_s", "f64", "1.0", "pressure history a tare command averages, s")),

@@ -71,7 +71,6 @@ pub struct RunOptions {
 /// A graph whose nodes are built and started.
 pub struct RunningGraph {
     shared: Arc<Shared>,
-    ids: Vec<String>,
     topo: Vec<usize>,
     mode: Mode,
     sources: Vec<JoinHandle<()>>,
@@ -227,7 +226,6 @@ impl RunningGraph {
             base_dir: spec.source.base_dir(),
         });
         let mut g = RunningGraph {
-            ids: spec.nodes.iter().map(|n| n.id.clone()).collect(),
             topo: spec.topo.clone(),
             mode: spec.mode,
             sources: Vec::new(),
@@ -301,12 +299,12 @@ impl RunningGraph {
 
     /// Index of a node by id.
     pub fn node_index(&self, id: &str) -> Option<usize> {
-        self.ids.iter().position(|x| x == id)
+        self.handle.node_index(id)
     }
 
     /// The id of node `index` (as in `Header::origin`).
     pub fn node_name(&self, index: u32) -> Option<&str> {
-        self.ids.get(index as usize).map(String::as_str)
+        self.handle.node_ids().get(index as usize).map(String::as_str)
     }
 
     /// Sends a control command (e.g. `tare`) to a node; it runs between two of its calls.
@@ -410,7 +408,7 @@ impl RunningGraph {
             if slot.exec != Exec::Source
                 && let Err(error) = cell.imp.stop(&mut cell.ctx)
             {
-                stop_failures.push(RunError::Stop { node: self.ids[i].clone(), error });
+                stop_failures.push(RunError::Stop { node: self.handle.node_ids()[i].clone(), error });
             }
             slot.cell.store(Some(cell));
         }
@@ -418,7 +416,7 @@ impl RunningGraph {
         let mut failures: Vec<RunError> =
             std::mem::take(&mut *self.shared.failures.lock().unwrap_or_else(|p| p.into_inner()))
                 .into_iter()
-                .map(|(i, error)| RunError::Node { node: self.ids[i].clone(), error })
+                .map(|(i, error)| RunError::Node { node: self.handle.node_ids()[i].clone(), error })
                 .collect();
         failures.extend(stop_failures);
         RunReport { stats, failures }

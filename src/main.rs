@@ -125,6 +125,9 @@ enum Cmd {
         /// Write PNG plots into this directory.
         #[arg(long)]
         plots: Option<PathBuf>,
+        /// Write one CSV row per matched, missed or spurious contact (truth, EIT features, every strategy's force).
+        #[arg(long, value_name = "CSV")]
+        contacts_csv: Option<PathBuf>,
         #[command(flatten)]
         pipeline: cmd::pipeline::PipelineArgs,
     },
@@ -185,8 +188,9 @@ fn dispatch(cmd: Cmd) -> Result<ExitCode> {
         Cmd::Calibrate { recording, out, pipeline } => {
             cmd::calibrate::run(&recording, &out, &pipeline).map(|()| ExitCode::SUCCESS)
         }
-        Cmd::Eval { recording, calib, json, plots, pipeline } => {
-            cmd::eval::run(&recording, &calib, json.as_deref(), plots.as_deref(), &pipeline).map(|()| ExitCode::SUCCESS)
+        Cmd::Eval { recording, calib, json, plots, contacts_csv, pipeline } => {
+            cmd::eval::run(&recording, &calib, json.as_deref(), plots.as_deref(), contacts_csv.as_deref(), &pipeline)
+                .map(|()| ExitCode::SUCCESS)
         }
         Cmd::Dot { graph } => match load(&graph)? {
             Ok(spec) => {

@@ -7,7 +7,8 @@
 //! pressure sample can fall into its window (the newest sample is within one pressure period
 //! of the window's end), when a newer frame proves the window is past, or at once when no
 //! pressure is connected. P0 is the mean pressure of the leading no-load period: before the
-//! first truth row with a contact, or the first `tare_s` seconds without truth; a `tare`
+//! first truth row with a contact, or the first `tare_s` seconds without truth. A frame is a
+//! no-load frame (an EIT reference candidate) only when its whole window lies in that period; a `tare`
 //! control command re-tares from the last `tare_window_s` seconds of pressure.
 //!
 //! ```toml
@@ -133,6 +134,7 @@ impl Sync {
         self.scratch[self.scratch.len() / 2]
     }
 
+    /// Whether time `t_s` lies in the leading no-load period (for a frame: its window's end).
     fn in_no_load(&self, t_s: f64) -> bool {
         if self.truth_connected { self.first_contact_s.is_none_or(|t0| t_s < t0) } else { t_s < self.p.tare_s }
     }
@@ -225,7 +227,9 @@ impl Sync {
             self.truth.pop_front();
         }
         let truth = self.truth.front().filter(|(tt, _)| *tt <= t).map(|(_, r)| r.clone());
-        let no_load = self.in_no_load(t);
+        // The whole window must precede the first contact: a frame whose acquisition saw the
+        // first press begin would put part of that contact into the EIT reference.
+        let no_load = self.in_no_load(hi);
         let p0 = self.p0();
         let dp_kpa = if n > 0 { sum / n as f64 - p0 } else { f64::NAN };
         let payload = self.ring.fill(|s| {

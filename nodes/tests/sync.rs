@@ -38,13 +38,17 @@ fn frames_carry_tared_pressure_truth_and_the_no_load_flag() {
     // Leading rest: no-load frames, tared to ~0 (the ideal skin has no noise or drift).
     let rest: Vec<&SyncedFrame> = frames.iter().take_while(|f| f.no_load).collect();
     assert!(rest.len() >= 3, "{} no-load frames", rest.len());
-    // The last no-load frame's window reaches into the press (the frame is stamped at its
-    // window's middle, before the first contact row): only the earlier ones are flat.
-    for f in &rest[..rest.len() - 1] {
+    // A frame is no-load only when its whole window precedes the press (a frame stamped
+    // before the first contact row whose window reaches into the press is not: it would put
+    // part of the contact into the EIT reference). So every no-load frame is flat.
+    for f in &rest {
         assert!(f.dp_kpa.abs() < 1e-9, "no-load dP {}", f.dp_kpa);
         assert!(f.pressure_samples >= 10, "window of a 20 Hz stream at 1.3 frames/s: {}", f.pressure_samples);
         assert!(f.p0_kpa.is_finite());
     }
+    // The first loaded frame's window does contain the start of the press.
+    let first_loaded = &frames[rest.len()];
+    assert!(first_loaded.dp_kpa > 1e-6, "first frame after the rest: dP {}", first_loaded.dp_kpa);
     // The hold: truth says 6 N at (10, -5) and the pressure has risen.
     let held: Vec<&SyncedFrame> = frames
         .iter()

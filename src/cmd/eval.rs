@@ -35,6 +35,8 @@ pub type Example = (Arc<Image>, Vec<(f64, f64)>);
 
 pub struct EvalOutcome {
     pub evaluator: Evaluator,
+    /// One CSV line per matched, missed or spurious contact of every evaluated frame.
+    pub contact_rows: Vec<String>,
     /// A loaded frame's image with its contacts and truth, for the conductivity plot.
     pub example: Option<Example>,
 }
@@ -57,6 +59,7 @@ pub fn evaluate(recording: &Path, calib: &Path, args: &PipelineArgs) -> Result<E
     let mut truth = Vec::new();
     let mut detected = Vec::new();
     let mut transitions = 0usize;
+    let mut contact_rows = Vec::new();
     for row in &rows {
         let forces: Vec<&Forces> = row.iter().filter_map(|m| m.get::<Forces>()).collect();
         let Some(first) = forces.first() else { continue };
@@ -88,14 +91,29 @@ pub fn evaluate(recording: &Path, calib: &Path, args: &PipelineArgs) -> Result<E
         } else {
             None
         };
-        ev.push(&FrameInput {
-            truth: &truth,
-            detected_mm: &detected,
-            forces_n: &per_lane_ref,
-            latency_us: &latency,
-            resolution: res,
-        })
-        .map_err(anyhow::Error::msg)?;
+        let frame = ev.frames();
+        let pairs = ev
+            .push(&FrameInput {
+                truth: &truth,
+                detected_mm: &detected,
+                forces_n: &per_lane_ref,
+                latency_us: &latency,
+                resolution: res,
+            })
+            .map_err(anyhow::Error::msg)?;
+        let ctx = CsvFrame { frame, t_s: row[0].header.t_s(), dp_kpa: synced.dp_kpa, n_truth: truth.len() };
+        let matched_pred: Vec<Option<usize>> =
+            (0..truth.len()).map(|t| pairs.iter().find(|p| p.truth == t).map(|p| p.pred)).collect();
+        for (t, pred) in matched_pred.iter().enumerate() {
+            let lane_forces: Vec<f64> = pred.map_or_else(Vec::new, |p| per_lane.iter().map(|l| l[p]).collect());
+            contact_rows.push(ctx.line(Some(&truth[t]), pred.map(|p| &contacts.contacts[p]), &lane_forces));
+        }
+        for (p, c) in contacts.contacts.iter().enumerate() {
+            if !pairs.iter().any(|m| m.pred == p) {
+                let lane_forces: Vec<f64> = per_lane.iter().map(|l| l[p]).collect();
+                contact_rows.push(ctx.line(None, Some(c), &lane_forces));
+            }
+        }
         let better = example.as_ref().is_none_or(|(_, t)| truth.len() > t.len());
         if better && !contacts.contacts.is_empty() {
             example = Some((contacts.image.clone(), truth.iter().map(|t| (t.x_mm, t.y_mm)).collect()));
@@ -107,7 +125,57 @@ pub fn evaluate(recording: &Path, calib: &Path, args: &PipelineArgs) -> Result<E
             recording.display()
         );
     }
-    Ok(EvalOutcome { evaluator: ev, example })
+    Ok(EvalOutcome { evaluator: ev, contact_rows, example })
+}
+
+/// Per-frame columns of the `--contacts-csv` table.
+struct CsvFrame {
+    frame: usize,
+    t_s: f64,
+    dp_kpa: f64,
+    n_truth: usize,
+}
+
+impl CsvFrame {
+    /// One row: `kind` is `matched`, `missed` (truth without detection) or `spurious`.
+    fn line(&self, truth: Option<&TruthContact>, det: Option<&skinflow_contact::Contact>, forces: &[f64]) -> String {
+        let kind = match (truth, det) {
+            (Some(_), Some(_)) => "matched",
+            (Some(_), None) => "missed",
+            _ => "spurious",
+        };
+        let opt = |v: Option<f64>| v.map_or_else(String::new, |v| format!("{v:.6}"));
+        let mut cols = vec![
+            self.frame.to_string(),
+            format!("{:.6}", self.t_s),
+            kind.to_owned(),
+            self.n_truth.to_string(),
+            format!("{:.6}", self.dp_kpa),
+            opt(truth.map(|t| t.x_mm)),
+            opt(truth.map(|t| t.y_mm)),
+            opt(truth.map(|t| t.force_n)),
+            opt(truth.map(|t| t.diameter_mm)),
+            opt(det.map(|c| c.x_mm)),
+            opt(det.map(|c| c.y_mm)),
+            opt(det.map(|c| c.sum)),
+            opt(det.map(|c| c.area_mm2)),
+            opt(det.map(|c| c.peak)),
+        ];
+        cols.extend((0..LANES.len()).map(|i| opt(forces.get(i).copied())));
+        cols.join(",")
+    }
+}
+
+/// Header of the `--contacts-csv` table (units in the names).
+pub fn contacts_csv_header() -> String {
+    let mut h = String::from(
+        "frame,t_s,kind,truth_contacts,dp_kpa,true_x_mm,true_y_mm,true_force_n,true_diameter_mm,\
+         x_mm,y_mm,c_sum,area_mm2,peak",
+    );
+    for (name, ..) in LANES {
+        h.push_str(&format!(",{name}_n"));
+    }
+    h
 }
 
 pub fn run(
@@ -115,9 +183,20 @@ pub fn run(
     calib: &Path,
     json: Option<&Path>,
     plots_dir: Option<&Path>,
+    contacts_csv: Option<&Path>,
     args: &PipelineArgs,
 ) -> Result<()> {
     let outcome = evaluate(recording, calib, args)?;
+    if let Some(p) = contacts_csv {
+        let mut text = contacts_csv_header();
+        text.push('\n');
+        for line in &outcome.contact_rows {
+            text.push_str(line);
+            text.push('\n');
+        }
+        std::fs::write(p, text).with_context(|| format!("{}: cannot write", p.display()))?;
+        eprintln!("per-contact table written to {}", p.display());
+    }
     let report = outcome.evaluator.report(&recording.display().to_string());
     println!("{report}");
     if let Some(p) = json {

@@ -116,6 +116,11 @@ impl Evaluator {
         &self.names
     }
 
+    /// Frames pushed so far (the index the next frame will get).
+    pub fn frames(&self) -> usize {
+        self.frames
+    }
+
     /// Every matched pair so far.
     pub fn records(&self) -> &[MatchRecord] {
         &self.records

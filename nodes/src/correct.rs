@@ -1,7 +1,9 @@
 //! Node `corrector`: per-contact force from its pressure share (or its conductivity sum) by one
 //! strategy of the paper, or one of skinflow's: `eit-nocal`, `pneumatic-nocal`,
 //! `eit-locaware`, `pneumatic-locaware` (F = g(x, y) f(dP_i) + b(x, y)), and
-//! `pneumatic-area-aware` (the gain and offset also depend on the EIT contact area).
+//! `pneumatic-area-aware` (the gain and offset also depend on the EIT contact area), and
+//! `pneumatic-forward` (inverse of the forward pneumatic model dP = a(x, y) F + c F^2, through
+//! the origin and additive over contacts; pair it with the `force-balance` splitter).
 //! Guards: dP_i <= 0 gives 0 N; a signal beyond the calibrated range extrapolates
 //! monotonically and a centroid outside the calibrated region is clamped, both flagged.
 //! Math: `skinflow_contact::correct`.
@@ -103,7 +105,7 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
             "strategy",
             "string",
             "\"pneumatic-locaware\"",
-            "eit-nocal | pneumatic-nocal | eit-locaware | pneumatic-locaware | pneumatic-area-aware",
+            "eit-nocal | pneumatic-nocal | eit-locaware | pneumatic-locaware | pneumatic-area-aware | pneumatic-forward",
         ))
         .param(ParamDoc::new("calibration", "path", "", "calibration TOML from `skinflow calibrate`"))
         .param(ParamDoc::new("name", "string", "none", "name on the output (default: strategy[-splitter])")),

@@ -5,7 +5,10 @@
 //! take more than its share. `eit-force` weights each contact by its EIT-LocAware force
 //! estimate g_C(x, y) f_C(C_i) + b_C(x, y): the EIT calibration's own location-aware map from
 //! conductivity sum to force, so both the sensitivity field and the sub-linear C(F) response
-//! are undone before the pneumatic total is shared. Math: `skinflow_contact::split`.
+//! are undone before the pneumatic total is shared. `force-balance` takes the sensitivity-
+//! compensated force ratios and shares dP so that, under the calibration's forward pneumatic
+//! model (pressure adds over contacts), each share is the pressure its contact's force
+//! causes; pair it with the `pneumatic-forward` corrector. Math: `skinflow_contact::split`.
 //!
 //! ```toml
 //! params = { strategy = "sensitivity-compensated", calibration = "../out/calib.toml" }
@@ -30,6 +33,7 @@ pub enum SplitStrategy {
     Proportional,
     SensitivityCompensated,
     EitForce,
+    ForceBalance,
 }
 
 #[derive(Debug, Deserialize)]
@@ -37,7 +41,7 @@ pub enum SplitStrategy {
 pub struct SplitterParams {
     #[serde(default = "default_strategy")]
     pub strategy: SplitStrategy,
-    /// Calibration file (TOML from `skinflow calibrate`); required by `sensitivity-compensated`.
+    /// Calibration file (TOML from `skinflow calibrate`); required by every strategy but `proportional`.
     pub calibration: Option<PathBuf>,
 }
 
@@ -65,7 +69,7 @@ pub(crate) fn load_calibration(path: &std::path::Path, ctx: &BuildContext) -> Re
 
 /// How weights are computed.
 enum Weights {
-    Math(SplitMath),
+    Math(Box<SplitMath>),
     /// EIT-LocAware force estimates.
     EitForce(Box<Strategy>),
 }
@@ -119,20 +123,24 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
                 "strategy",
                 "string",
                 "\"proportional\"",
-                "proportional | sensitivity-compensated | eit-force",
+                "proportional | sensitivity-compensated | eit-force | force-balance",
             ))
             .param(ParamDoc::new(
                 "calibration",
                 "path",
                 "none",
-                "calibration TOML (needed by sensitivity-compensated)",
+                "calibration TOML (needed by every strategy but proportional)",
             )),
         |p: SplitterParams, ctx| {
             let cal = || load_calibration(p.calibration.as_ref().expect("validated: calibration is set"), ctx);
             let weights = match p.strategy {
-                SplitStrategy::Proportional => Weights::Math(SplitMath::Proportional),
+                SplitStrategy::Proportional => Weights::Math(Box::new(SplitMath::Proportional)),
                 SplitStrategy::SensitivityCompensated => {
-                    Weights::Math(SplitMath::SensitivityCompensated(cal()?.sensitivity))
+                    Weights::Math(Box::new(SplitMath::SensitivityCompensated(cal()?.sensitivity)))
+                }
+                SplitStrategy::ForceBalance => {
+                    let c = cal()?;
+                    Weights::Math(Box::new(SplitMath::ForceBalance { sensitivity: c.sensitivity, forward: c.forward }))
                 }
                 SplitStrategy::EitForce => {
                     Weights::EitForce(Box::new(Strategy::new(&cal()?, StrategyKind::EitLocAware)))

@@ -15,7 +15,7 @@ use super::calibrate::require_truth;
 use super::pipeline::{PipelineArgs, Settled};
 
 /// (lane name, splitter, corrector strategy, label), in report order: the paper's four, then ours.
-pub const LANES: [(&str, &str, &str, &str); 7] = [
+pub const LANES: [(&str, &str, &str, &str); 9] = [
     ("eit-nocal", "proportional", "eit-nocal", "EIT-NoCal"),
     ("pneumatic-nocal", "proportional", "pneumatic-nocal", "Pneumatic-NoCal"),
     ("eit-locaware", "proportional", "eit-locaware", "EIT-LocAware"),
@@ -28,6 +28,8 @@ pub const LANES: [(&str, &str, &str, &str); 7] = [
     ),
     ("pneumatic-locaware-eitforce", "eit-force", "pneumatic-locaware", "Pneumatic-LocAware, EIT-force split"),
     ("pneumatic-area-aware", "proportional", "pneumatic-area-aware", "Pneumatic-AreaAware"),
+    ("pneumatic-forward", "proportional", "pneumatic-forward", "Pneumatic-Forward"),
+    ("pneumatic-forward-balance", "force-balance", "pneumatic-forward", "Pneumatic-Forward, force-balance split"),
 ];
 
 /// An image with the true contact centres of its frame, mm.

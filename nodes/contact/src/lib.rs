@@ -16,4 +16,4 @@ pub mod eval;
 pub mod split;
 
 pub use correct::{CalibSample, Calibration, ForceEstimate, ForceFlags, Strategy, StrategyKind};
-pub use split::{SensitivityField, Splitter};
+pub use split::{SensitivityField, SensitivitySample, Splitter};

@@ -1,100 +1,177 @@
-//! Sharing the pneumatic pressure change among contacts (paper eq. 15 and an alternative).
+//! Sharing the pneumatic pressure change among contacts (paper eq. 15 and two alternatives).
 //!
 //! `Proportional` is the paper: dP_i = C_i / sum_j C_j * dP. Its stated weakness is EIT's
-//! nonuniform sensitivity (the same force gives different C at different places).
-//! `SensitivityCompensated` divides each C_i by a relative sensitivity s(x_i, y_i) learned
-//! from the single-contact calibration (quadratic field fitted to C / F, mean 1, floored),
-//! then maps r = C / s through w(r) = a1 r + a2 r^2 (fitted to F through the origin, since C
-//! grows sub-linearly with force), so the weights estimate force, not conductivity.
-//! dP is in kPa and may be negative (drift); shares keep its sign.
+//! nonuniform sensitivity: the same force gives different C at different places (on the
+//! simulated skin, up to 2.5x between mirrored points, from the foam's local compliance).
+//!
+//! `SensitivityCompensated` turns each C_i into a force equivalent w_i = (C_i / k(x_i, y_i))^(1/gamma)
+//! with the single-contact EIT response C = k(x, y) F^gamma learned by `skinflow calibrate`
+//! ([`SensitivityField`]), and shares dP in proportion to w_i.
+//!
+//! `ForceBalance` (the paper's future work: a non-linear split) uses the same w_i as the
+//! *ratios of the forces* and the forward pneumatic model P(F, x, y) ([`ForwardModel`]) for
+//! how pressure adds up: it finds the scale s with sum_i P(s w_i, x_i) = dP and gives contact i
+//! the share P(s w_i, x_i). Pressure is what the chamber adds (the displaced volumes), so the
+//! shares stay consistent with the single-contact calibration however many contacts there are.
+//!
+//! dP is in kPa and may be negative (drift); then every splitter shares it in proportion to
+//! the weights, keeping its sign.
 
-use crate::correct::field::{NPHI, QuadField, Region, phi};
-use crate::correct::fit::{CvSearch, RidgeProblem, cross_validate, ridge};
+use crate::correct::field::Region;
+use crate::correct::forward::ForwardModel;
 use crate::segment::Contact;
 use serde::{Deserialize, Serialize};
 
-/// Relative EIT sensitivity s(x, y) (dimensionless, mean 1 over the calibration samples).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+/// Smallest and largest exponent gamma accepted from a fit of C = k F^gamma.
+const EXPONENT_RANGE: (f64, f64) = (0.25, 4.0);
+/// Kernel lengths (mm) and relative ridge weights searched by leave-one-site-out CV.
+const LENGTHS_MM: [f64; 7] = [8.0, 12.0, 16.0, 24.0, 32.0, 48.0, 64.0];
+const RIDGES: [f64; 6] = [0.01, 0.03, 0.1, 0.3, 1.0, 3.0];
+/// Relative leave-one-site-out improvement the kernel field needs over the constant one.
+const KERNEL_MARGIN: f64 = 0.05;
+
+/// The single-contact EIT response C = k(x, y) F^gamma (C in image units x pixels, F in N).
+///
+/// log k is a Gaussian-kernel smoother of per-site values: log k(x, y) = mean + sum_j alpha_j
+/// exp(-|p - p_j|^2 / (2 length^2)), p clamped onto the calibrated region, p_j the mean EIT
+/// centroid of calibration site j. A kernel field follows local structure (a soft patch of
+/// foam, a misplaced electrode) that a quadratic cannot, and reverts to the mean between
+/// sites farther apart than its length. No sites means uniform sensitivity.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SensitivityField {
-    /// Region of the normalized coordinates (clamped outside).
+    /// Region the evaluation point is clamped onto.
     pub region: Region,
-    /// Quadratic field of the relative sensitivity.
-    pub field: QuadField,
-    /// Smallest sensitivity used, so a weight never divides by ~0 or a negative value.
-    pub floor: f64,
-    /// Linear coefficient of the force equivalent w(r) = a1 r + a2 r^2 (N per unit of C).
-    pub force_a1: f64,
-    /// Quadratic coefficient of w(r).
-    pub force_a2: f64,
-    /// Largest calibration r; w continues linearly with its end slope beyond it.
-    pub ratio_max: f64,
+    /// gamma: C grows as F^gamma at a fixed place.
+    pub exponent: f64,
+    /// Mean of log k over the sites.
+    pub log_k_mean: f64,
+    /// Kernel length, mm.
+    pub length_mm: f64,
+    /// Kernel centres and weights, [x_mm, y_mm, alpha].
+    pub sites: Vec<[f64; 3]>,
+    /// Leave-one-site-out RMSE of log k (absent for a uniform field).
+    pub loo_rmse_log: Option<f64>,
+}
+
+/// One calibration sample for [`SensitivityField::fit`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SensitivitySample {
+    /// EIT centroid, mm.
+    pub x_mm: f64,
+    /// EIT centroid, mm.
+    pub y_mm: f64,
+    /// Index of the true location (samples of one site share it).
+    pub site: usize,
+    /// Conductivity decrease sum C.
+    pub cond_sum: f64,
+    /// True force, N.
+    pub force_n: f64,
 }
 
 impl SensitivityField {
-    /// Uniform sensitivity 1 (makes the compensated splitter proportional).
+    /// Uniform sensitivity 1 and gamma = 1 (makes the compensated splitter proportional).
     pub fn uniform(region: Region) -> Self {
-        Self { region, field: QuadField::constant(1.0), floor: 0.1, force_a1: 1.0, force_a2: 0.0, ratio_max: 1.0 }
+        Self { region, exponent: 1.0, log_k_mean: 0.0, length_mm: 1.0, sites: Vec::new(), loo_rmse_log: None }
     }
 
-    /// Force equivalent (N, >= 0) of a conductivity sum at a point: w(C / s(x, y)).
-    pub fn force_equivalent(&self, cond_sum: f64, x_mm: f64, y_mm: f64) -> f64 {
-        let r = cond_sum.max(0.0) / self.at(x_mm, y_mm);
-        let (a1, a2, r_max) = (self.force_a1, self.force_a2, self.ratio_max);
-        let w = if r <= r_max {
-            a1 * r + a2 * r * r
+    /// log k at a point (mm), clamped onto the region.
+    pub fn log_k(&self, x_mm: f64, y_mm: f64) -> f64 {
+        let r = &self.region;
+        let (x, y) = (x_mm.clamp(r.x_min_mm, r.x_max_mm), y_mm.clamp(r.y_min_mm, r.y_max_mm));
+        let (x, y) = if x.is_finite() && y.is_finite() {
+            (x, y)
         } else {
-            a1 * r_max + a2 * r_max * r_max + (a1 + 2.0 * a2 * r_max) * (r - r_max)
+            (0.5 * (r.x_min_mm + r.x_max_mm), 0.5 * (r.y_min_mm + r.y_max_mm))
         };
-        w.max(0.0)
+        let inv = -0.5 / (self.length_mm * self.length_mm);
+        self.log_k_mean
+            + self.sites.iter().map(|s| s[2] * (((x - s[0]).powi(2) + (y - s[1]).powi(2)) * inv).exp()).sum::<f64>()
     }
 
-    /// Sensitivity at a point (mm), floored.
-    pub fn at(&self, x_mm: f64, y_mm: f64) -> f64 {
-        let n = self.region.normalize(x_mm, y_mm);
-        self.field.at(n.u, n.v).max(self.floor)
+    /// Force equivalent (N, >= 0) of a conductivity sum at a point: (C / k)^(1 / gamma).
+    pub fn force_equivalent(&self, cond_sum: f64, x_mm: f64, y_mm: f64) -> f64 {
+        if !(cond_sum > 0.0 && cond_sum.is_finite()) {
+            return 0.0;
+        }
+        ((cond_sum.ln() - self.log_k(x_mm, y_mm)) / self.exponent).exp()
     }
 
-    /// Fits s to C / F over single-contact samples `(x_mm, y_mm, cond_sum, force_n)` by ridge
-    /// (constant unpenalized, spatial terms shrunk to 0, weight chosen by CV over `grid`).
-    /// `None` with fewer than 2 * 6 usable samples (F > 0, C > 0).
-    pub fn fit(region: Region, samples: &[(f64, f64, f64, f64)], grid: &[f64], folds: usize) -> Option<Self> {
-        let used: Vec<_> = samples.iter().filter(|s| s.2 > 0.0 && s.3 > 0.0 && s.2.is_finite()).collect();
-        if used.len() < 2 * NPHI {
+    /// Fits gamma (within-site regression of log C on log F), then per-site log k, then the
+    /// kernel smoother with length and ridge chosen by leave-one-site-out cross-validation
+    /// (against the constant field, which wins when the sites carry no spatial signal).
+    /// `None` with fewer than 2 usable samples (C > 0, F > 0, finite).
+    pub fn fit(region: Region, samples: &[SensitivitySample]) -> Option<Self> {
+        let used: Vec<&SensitivitySample> = samples
+            .iter()
+            .filter(|s| {
+                s.cond_sum > 0.0
+                    && s.force_n > 0.0
+                    && [s.x_mm, s.y_mm, s.cond_sum, s.force_n].iter().all(|v| v.is_finite())
+            })
+            .collect();
+        if used.len() < 2 {
             return None;
         }
-        let mean = used.iter().map(|s| s.2 / s.3).sum::<f64>() / used.len() as f64;
-        let mut design = Vec::with_capacity(used.len() * NPHI);
-        let mut y = Vec::with_capacity(used.len());
+        let n_sites = used.iter().map(|s| s.site).max()? + 1;
+        // Per site: count, sums of log F, log C, x, y.
+        let mut acc = vec![[0.0f64; 5]; n_sites];
         for s in &used {
-            let n = region.normalize(s.0, s.1);
-            design.extend_from_slice(&phi(n.u, n.v));
-            y.push(s.2 / s.3 / mean);
+            let a = &mut acc[s.site];
+            a[0] += 1.0;
+            a[1] += s.force_n.ln();
+            a[2] += s.cond_sum.ln();
+            a[3] += s.x_mm;
+            a[4] += s.y_mm;
         }
-        let prior = [1.0, 0.0, 0.0, 0.0, 0.0, 0.0];
-        let problem = RidgeProblem { design: &design, y: &y, p: NPHI, prior: &prior, base_penalty: &[0.0; NPHI] };
-        let cv = cross_validate(&problem, &CvSearch { blocks: std::slice::from_ref(&(1..NPHI)), grid, folds })?;
-        let mut coeffs = [0.0; NPHI];
-        coeffs.copy_from_slice(&cv.coeffs);
+        let (mut sxy, mut sxx) = (0.0, 0.0);
+        for s in &used {
+            let a = &acc[s.site];
+            let (df, dc) = (s.force_n.ln() - a[1] / a[0], s.cond_sum.ln() - a[2] / a[0]);
+            sxy += df * dc;
+            sxx += df * df;
+        }
+        let exponent = if sxx > 1e-9 { (sxy / sxx).clamp(EXPONENT_RANGE.0, EXPONENT_RANGE.1) } else { 1.0 };
+        let sites: Vec<[f64; 3]> = acc
+            .iter()
+            .filter(|a| a[0] > 0.0)
+            .map(|a| [a[3] / a[0], a[4] / a[0], (a[2] - exponent * a[1]) / a[0]])
+            .collect();
+        let mean = sites.iter().map(|s| s[2]).sum::<f64>() / sites.len() as f64;
         let mut out =
-            Self { region, field: QuadField { coeffs }, floor: 0.1, force_a1: 1.0, force_a2: 0.0, ratio_max: 1.0 };
-        // F ~ a1 r + a2 r^2 through the origin, on r scaled by its maximum for conditioning.
-        let r: Vec<f64> = used.iter().map(|s| s.2 / out.at(s.0, s.1)).collect();
-        let f: Vec<f64> = used.iter().map(|s| s.3).collect();
-        let r_max = r.iter().copied().fold(0.0, f64::max);
-        let scaled: Vec<f64> = r.iter().flat_map(|&v| [v / r_max, (v / r_max).powi(2)]).collect();
-        let fit = ridge(&scaled, &f, 2, &[0.0; 2], &[0.0; 2]);
-        let monotone = |a: &[f64]| a[0] > 0.0 && a[0] + 2.0 * a[1] > 0.0;
-        match fit {
-            // w' > 0 at r = 0 and r = r_max, hence on the whole range (w' is linear).
-            Some(a) if monotone(&a) => {
-                out.force_a1 = a[0] / r_max;
-                out.force_a2 = a[1] / (r_max * r_max);
-            }
-            // Not monotone: a straight line through the origin (mean force / mean r).
-            _ => out.force_a1 = f.iter().sum::<f64>() / r.iter().sum::<f64>(),
+            Self { region, exponent, log_k_mean: mean, length_mm: 1.0, sites: Vec::new(), loo_rmse_log: None };
+        let n = sites.len();
+        if n < 3 {
+            return Some(out);
         }
-        out.ratio_max = r_max;
+        let r = nalgebra::DVector::from_iterator(n, sites.iter().map(|s| s[2] - mean));
+        // Constant field: leaving site j out moves the mean, residual r_j n / (n - 1).
+        let scale = n as f64 / (n as f64 - 1.0);
+        let constant = (r.norm_squared() / n as f64).sqrt() * scale;
+        let mut best = (constant, None);
+        for &len in &LENGTHS_MM {
+            let inv = -0.5 / (len * len);
+            let k = nalgebra::DMatrix::from_fn(n, n, |i, j| {
+                (((sites[i][0] - sites[j][0]).powi(2) + (sites[i][1] - sites[j][1]).powi(2)) * inv).exp()
+            });
+            for &ridge in &RIDGES {
+                let m = &k + nalgebra::DMatrix::identity(n, n) * ridge;
+                let Some(chol) = m.cholesky() else { continue };
+                let m_inv = chol.inverse();
+                let alpha = &m_inv * &r;
+                let loo = (0..n).map(|j| (alpha[j] / m_inv[(j, j)]).powi(2)).sum::<f64>() / n as f64;
+                // The kernel must beat the constant field clearly (5 %) to be used, and a field
+                // whose sites agree to rounding is constant.
+                if constant > 1e-9 && loo.sqrt() < best.0 && loo.sqrt() < (1.0 - KERNEL_MARGIN) * constant {
+                    best = (loo.sqrt(), Some((len, alpha)));
+                }
+            }
+        }
+        out.loo_rmse_log = Some(best.0);
+        if let (_, Some((len, alpha))) = best {
+            out.length_mm = len;
+            out.sites = sites.iter().zip(alpha.iter()).map(|(s, a)| [s[0], s[1], *a]).collect();
+        }
         Some(out)
     }
 }
@@ -105,9 +182,19 @@ impl SensitivityField {
 pub enum Splitter {
     /// dP_i = C_i / sum C_j * dP (the paper).
     Proportional,
-    /// dP_i = w(C_i / s_i) / sum_j w(C_j / s_j) * dP.
+    /// dP_i = w_i / sum_j w_j * dP, w_i the force equivalent of C_i.
     SensitivityCompensated(SensitivityField),
+    /// dP_i = P(s w_i, x_i) with sum_i dP_i = dP.
+    ForceBalance {
+        /// Force ratios from the EIT response.
+        sensitivity: SensitivityField,
+        /// How each contact's force becomes pressure.
+        forward: ForwardModel,
+    },
 }
+
+/// Bisection steps of the force-balance scale (relative precision 2^-60).
+const BALANCE_STEPS: usize = 60;
 
 impl Splitter {
     /// The splitter's name as used in strategy names and reports.
@@ -115,25 +202,70 @@ impl Splitter {
         match self {
             Splitter::Proportional => "proportional",
             Splitter::SensitivityCompensated(_) => "sensitivity-compensated",
+            Splitter::ForceBalance { .. } => "force-balance",
         }
     }
 
-    /// Unnormalized weight of one contact (>= 0).
+    /// Unnormalized weight of one contact (>= 0): C_i, or its force equivalent.
     pub fn weight(&self, c: &Contact) -> f64 {
         let sum = if c.sum.is_finite() { c.sum.max(0.0) } else { 0.0 };
         match self {
             Splitter::Proportional => sum,
-            Splitter::SensitivityCompensated(s) => s.force_equivalent(sum, c.x_mm, c.y_mm),
+            Splitter::SensitivityCompensated(s) | Splitter::ForceBalance { sensitivity: s, .. } => {
+                s.force_equivalent(sum, c.x_mm, c.y_mm)
+            }
         }
     }
 
     /// Writes each contact's share of `dp_kpa` into `out[..contacts.len()]`. A single contact
     /// gets all of it; if every weight is 0 the change is shared equally. No allocation.
     pub fn split_into(&self, dp_kpa: f64, contacts: &[Contact], out: &mut [f64]) {
+        self.split_with(dp_kpa, contacts, |i, v| out[i] = v);
+    }
+
+    /// As [`Splitter::split_into`], handing each share (contact index, kPa) to `set`.
+    pub fn split_with(&self, dp_kpa: f64, contacts: &[Contact], mut set: impl FnMut(usize, f64)) {
+        let n = contacts.len();
+        if n == 1 {
+            set(0, dp_kpa);
+            return;
+        }
         let total: f64 = contacts.iter().map(|c| self.weight(c)).sum();
-        let n = contacts.len() as f64;
-        for (o, c) in out.iter_mut().zip(contacts) {
-            *o = if total > 0.0 { self.weight(c) / total * dp_kpa } else { dp_kpa / n };
+        if let Splitter::ForceBalance { forward, .. } = self
+            && dp_kpa > 0.0
+            && total > 0.0
+        {
+            let shares = |s: f64, set: &mut dyn FnMut(usize, f64)| {
+                let mut sum = 0.0;
+                for (i, c) in contacts.iter().enumerate() {
+                    let p = forward.at(c.x_mm, c.y_mm).0.pressure(s * self.weight(c));
+                    sum += p;
+                    set(i, p);
+                }
+                sum
+            };
+            let mut ignore = |_: usize, _: f64| {};
+            // Bracket: P is increasing in s with P(0) = 0.
+            let mut hi = 1.0 / total;
+            while shares(hi, &mut ignore) < dp_kpa && hi < 1e12 {
+                hi *= 2.0;
+            }
+            let mut lo = 0.0;
+            for _ in 0..BALANCE_STEPS {
+                let mid = 0.5 * (lo + hi);
+                if shares(mid, &mut ignore) < dp_kpa {
+                    lo = mid;
+                } else {
+                    hi = mid;
+                }
+            }
+            let sum = shares(0.5 * (lo + hi), &mut ignore);
+            let norm = if sum > 0.0 { dp_kpa / sum } else { 0.0 };
+            shares(0.5 * (lo + hi), &mut |i, p| set(i, p * norm));
+            return;
+        }
+        for (i, c) in contacts.iter().enumerate() {
+            set(i, if total > 0.0 { self.weight(c) / total * dp_kpa } else { dp_kpa / n as f64 });
         }
     }
 }
@@ -150,6 +282,27 @@ mod tests {
         Region { x_min_mm: -40.0, x_max_mm: 40.0, y_min_mm: -40.0, y_max_mm: 40.0 }
     }
 
+    /// Samples of C = k(x, y) F^gamma over a 5 x 5 grid of sites and forces 1..10 N.
+    fn grid_samples(k: impl Fn(f64, f64) -> f64, gamma: f64) -> Vec<SensitivitySample> {
+        let mut out = Vec::new();
+        for i in 0..5 {
+            for j in 0..5 {
+                let (x, y) = (-40.0 + 20.0 * f64::from(i), -40.0 + 20.0 * f64::from(j));
+                for f in 1..=10 {
+                    let f = f64::from(f);
+                    out.push(SensitivitySample {
+                        x_mm: x,
+                        y_mm: y,
+                        site: (5 * i + j) as usize,
+                        cond_sum: k(x, y) * f.powf(gamma),
+                        force_n: f,
+                    });
+                }
+            }
+        }
+        out
+    }
+
     #[test]
     fn proportional_follows_the_paper_equation() {
         let cs = [contact(-20.0, 1.0), contact(20.0, 3.0)];
@@ -164,58 +317,98 @@ mod tests {
     }
 
     #[test]
-    fn compensation_undoes_a_known_sensitivity() {
-        // Sensitivity 2 on the right (u > 0 -> 1 + u), equal forces: C is twice as large on
-        // the right at u = 1, and the compensated split must be equal again.
-        let field = SensitivityField {
-            region: region(),
-            field: QuadField { coeffs: [1.0, 1.0, 0.0, 0.0, 0.0, 0.0] },
-            floor: 0.1,
-            force_a1: 1.0,
-            force_a2: 0.0,
-            ratio_max: 10.0,
-        };
+    fn a_uniform_field_makes_the_compensated_split_proportional() {
         let cs = [contact(0.0, 1.0), contact(40.0, 2.0)];
         let mut out = [0.0; 2];
-        Splitter::SensitivityCompensated(field).split_into(2.0, &cs, &mut out);
-        assert!((out[0] - 1.0).abs() < 1e-12 && (out[1] - 1.0).abs() < 1e-12);
-        let uniform = Splitter::SensitivityCompensated(SensitivityField::uniform(region()));
-        uniform.split_into(2.0, &cs, &mut out);
-        assert!((out[0] - 2.0 / 3.0).abs() < 1e-12);
+        Splitter::SensitivityCompensated(SensitivityField::uniform(region())).split_into(3.0, &cs, &mut out);
+        assert!((out[0] - 1.0).abs() < 1e-12 && (out[1] - 2.0).abs() < 1e-12, "{out:?}");
     }
 
     #[test]
-    fn fitted_sensitivity_recovers_a_linear_trend() {
-        // C = F * (1 + 0.5 u) over a 5 x 5 grid and two forces: the normalized field is 1 + 0.5 u.
-        let mut samples = Vec::new();
-        for i in 0..5 {
-            for j in 0..5 {
-                for f in [2.0, 6.0] {
-                    let (x, y) = (-40.0 + 20.0 * i as f64, -40.0 + 20.0 * j as f64);
-                    samples.push((x, y, f * (1.0 + 0.5 * x / 40.0), f));
-                }
-            }
+    fn the_fit_recovers_exponent_and_a_local_hot_spot() {
+        // A hot patch at (-40, -40) (3x), gamma = 0.8: the quadratic the paper's fields use
+        // could not follow it; the kernel field must, at the sites and between them.
+        let k = |x: f64, y: f64| 0.1 * (1.0 + 2.0 * (-((x + 40.0).powi(2) + (y + 40.0).powi(2)) / 800.0).exp());
+        let f = SensitivityField::fit(region(), &grid_samples(k, 0.8)).unwrap();
+        assert!((f.exponent - 0.8).abs() < 1e-9, "{}", f.exponent);
+        assert!(!f.sites.is_empty());
+        for (x, y) in [(-40.0, -40.0), (40.0, 40.0), (0.0, -40.0), (-30.0, -30.0)] {
+            let rel = (f.log_k(x, y) - k(x, y).ln()).abs();
+            assert!(rel < 0.1, "log k at ({x}, {y}): {} vs {}", f.log_k(x, y), k(x, y).ln());
         }
-        let grid = [1e-6, 1e-3, 1.0, 1e3];
-        let s = SensitivityField::fit(region(), &samples, &grid, 5).unwrap();
-        assert!((s.at(40.0, 0.0) - 1.5).abs() < 1e-3 && (s.at(-40.0, 10.0) - 0.5).abs() < 1e-3);
-        // C / s = F exactly, so the force equivalent is the identity: a1 = 1, a2 = 0.
-        let w = s.force_equivalent(4.0 * 1.25, 20.0, 0.0);
-        assert!((w - 4.0).abs() < 1e-3, "{w}");
-        assert!(s.force_equivalent(0.0, 0.0, 0.0) == 0.0);
+        // The force equivalent undoes the response: w(k F^gamma) = F.
+        let w = f.force_equivalent(k(-40.0, -40.0) * 5f64.powf(0.8), -40.0, -40.0);
+        assert!((w - 5.0).abs() < 0.25, "{w}");
+        assert_eq!(f.force_equivalent(0.0, 0.0, 0.0), 0.0);
+        assert_eq!(f.force_equivalent(f64::NAN, 0.0, 0.0), 0.0);
     }
 
     #[test]
-    fn force_equivalent_is_monotone_and_linear_beyond_the_range() {
-        let mut s = SensitivityField::uniform(region());
-        (s.force_a1, s.force_a2, s.ratio_max) = (2.0, -0.5, 1.5);
-        // w(1.5) = 3 - 1.125 = 1.875, w'(1.5) = 2 - 1.5 = 0.5 -> w(3.5) = 1.875 + 1.0
-        assert!((s.force_equivalent(3.5, 0.0, 0.0) - 2.875).abs() < 1e-12);
-        let mut prev = 0.0;
-        for i in 0..100 {
-            let w = s.force_equivalent(0.05 * i as f64, 0.0, 0.0);
-            assert!(w >= prev);
-            prev = w;
+    fn a_flat_response_keeps_the_constant_field() {
+        // Equal sensitivity everywhere: cross-validation must prefer no kernel at all.
+        let f = SensitivityField::fit(region(), &grid_samples(|_, _| 0.2, 1.0)).unwrap();
+        assert!(f.sites.is_empty(), "{:?}", f.sites);
+        assert!((f.log_k(13.0, -7.0) - 0.2f64.ln()).abs() < 1e-9);
+        // One site, one force: gamma cannot be identified and stays 1.
+        let one = [SensitivitySample { x_mm: 0.0, y_mm: 0.0, site: 0, cond_sum: 1.0, force_n: 2.0 }; 3];
+        let f = SensitivityField::fit(region(), &one).unwrap();
+        assert_eq!(f.exponent, 1.0);
+        assert!(SensitivityField::fit(region(), &one[..1]).is_none());
+    }
+
+    #[test]
+    fn compensation_gives_equal_shares_to_equal_forces() {
+        let k = |x: f64, _: f64| 0.1 * (1.0 + 0.025 * (x + 40.0)); // 3x from left to right
+        let f = SensitivityField::fit(region(), &grid_samples(k, 1.0)).unwrap();
+        let cs = [contact(-20.0, k(-20.0, 0.0) * 3.0), contact(20.0, k(20.0, 0.0) * 3.0)];
+        let mut out = [0.0; 2];
+        Splitter::SensitivityCompensated(f).split_into(2.0, &cs, &mut out);
+        assert!((out[0] - 1.0).abs() < 0.02 && (out[1] - 1.0).abs() < 0.02, "{out:?}");
+    }
+
+    #[test]
+    fn force_balance_recovers_forces_under_an_additive_pneumatic_layer() {
+        // Pneumatic layer: P(F) = a(x) F - 0.004 F^2, stiffer on the right; uniform EIT.
+        let mut fwd = ForwardModel::linear(region(), 0.3, 10.0);
+        fwd.sensitivity.coeffs[1] = -0.1;
+        fwd.curvature = -0.004;
+        let sens = SensitivityField::uniform(region());
+        let forces = [2.0, 6.0, 3.0];
+        let xs = [-30.0, 10.0, 35.0];
+        let cs: Vec<Contact> = forces.iter().zip(xs).map(|(&f, x)| contact(x, f)).collect();
+        let dp: f64 = cs.iter().map(|c| fwd.at(c.x_mm, 0.0).0.pressure(c.sum)).sum();
+        let split = Splitter::ForceBalance { sensitivity: sens, forward: fwd };
+        let mut out = [0.0; 3];
+        split.split_into(dp, &cs, &mut out);
+        assert!((out.iter().sum::<f64>() - dp).abs() < 1e-12);
+        for ((share, c), f) in out.iter().zip(&cs).zip(forces) {
+            let (back, _) = fwd.at(c.x_mm, 0.0).0.force(*share);
+            assert!((back - f).abs() < 1e-9, "{back} vs {f}");
         }
+        // The paper's proportional split does not: shares follow C, the stiff side loses.
+        Splitter::Proportional.split_into(dp, &cs, &mut out);
+        let back = fwd.at(35.0, 0.0).0.force(out[2]).0;
+        assert!((back - 3.0).abs() > 0.05, "{back}");
+    }
+
+    #[test]
+    fn force_balance_edge_cases() {
+        let split = Splitter::ForceBalance {
+            sensitivity: SensitivityField::uniform(region()),
+            forward: ForwardModel::linear(region(), 0.3, 10.0),
+        };
+        let cs = [contact(-20.0, 1.0), contact(20.0, 3.0)];
+        let mut out = [0.0; 2];
+        // Negative dP (drift): proportional, sign kept; zero weights: equal.
+        split.split_into(-0.4, &cs, &mut out);
+        assert!((out[0] + 0.1).abs() < 1e-12 && (out[1] + 0.3).abs() < 1e-12, "{out:?}");
+        split.split_into(1.0, &[contact(0.0, 0.0), contact(1.0, 0.0)], &mut out);
+        assert_eq!(out, [0.5, 0.5]);
+        // A huge dP far beyond the calibrated range still balances (linear continuation).
+        split.split_into(1e4, &cs, &mut out);
+        assert!((out[1] / out[0] - 3.0).abs() < 1e-9 && (out[0] + out[1] - 1e4).abs() < 1e-6, "{out:?}");
+        let mut one = [0.0];
+        split.split_into(0.7, &cs[..1], &mut one);
+        assert_eq!(one, [0.7]);
     }
 }

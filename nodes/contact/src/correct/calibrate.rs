@@ -14,10 +14,11 @@ use super::calibration::{
 };
 use super::field::{NPHI, QuadField, Region, phi};
 use super::fit::{CvSearch, RidgeProblem, cross_validate, fit_quadratic, r_squared};
+use super::forward::ForwardModel;
 use super::map::SignalMap;
 use super::strategy::{Strategy, StrategyKind};
 use crate::segment::Contact;
-use crate::split::SensitivityField;
+use crate::split::{SensitivityField, SensitivitySample};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
@@ -350,11 +351,34 @@ pub fn calibrate(
         }
     }
 
-    let quads: Vec<(f64, f64, f64, f64)> = samples.iter().map(|s| (s.x_mm, s.y_mm, s.cond_sum, s.force_n)).collect();
-    let sensitivity = if degenerate { None } else { SensitivityField::fit(region, &quads, &grid, params.folds) };
+    let sens_samples: Vec<SensitivitySample> = samples
+        .iter()
+        .zip(&loc_of)
+        .map(|(s, &site)| SensitivitySample {
+            x_mm: s.x_mm,
+            y_mm: s.y_mm,
+            site,
+            cond_sum: s.cond_sum,
+            force_n: s.force_n,
+        })
+        .collect();
+    let sensitivity = if degenerate { None } else { SensitivityField::fit(region, &sens_samples) };
     let sensitivity = sensitivity.unwrap_or_else(|| {
         warnings.push(CalibWarning::UniformSensitivity);
         SensitivityField::uniform(region)
+    });
+
+    // Forward pneumatic model; degenerate data get a uniform line through the origin.
+    let force_max = force.iter().copied().fold(0.0, f64::max);
+    let quads: Vec<(f64, f64, f64, f64)> = samples.iter().map(|s| (s.x_mm, s.y_mm, s.force_n, s.dp_kpa)).collect();
+    let forward = if degenerate { None } else { ForwardModel::fit(region, &quads, &grid, params.folds) };
+    let forward = forward.unwrap_or_else(|| {
+        if !degenerate {
+            warnings.push(CalibWarning::FitFailed { what: "forward pneumatic model" });
+        }
+        let ff: f64 = force.iter().map(|f| f * f).sum();
+        let slope = force.iter().zip(&dp).map(|(f, p)| f * p).sum::<f64>() / ff;
+        ForwardModel::linear(region, if slope > 0.0 { slope } else { 1.0 }, force_max)
     });
 
     let mut diameters: Vec<f64> = samples.iter().map(|s| s.diameter_mm).filter(|d| d.is_finite()).collect();
@@ -384,6 +408,7 @@ pub fn calibrate(
         pneumatic,
         eit,
         area_aware,
+        forward,
         sensitivity,
         r2,
         training,

@@ -6,6 +6,7 @@
 //! [`R2Table`] prints the paper's Table II layout. Loading checks `format`/`format_version`.
 
 use super::field::{QuadField, Region};
+use super::forward::ForwardModel;
 use super::map::SignalMap;
 use crate::split::SensitivityField;
 use serde::{Deserialize, Serialize};
@@ -16,7 +17,7 @@ use std::path::Path;
 /// Value of the `format` key.
 pub const FORMAT: &str = "skinflow-calibration";
 /// Current `format_version`.
-pub const FORMAT_VERSION: u32 = 1;
+pub const FORMAT_VERSION: u32 = 2;
 
 /// Where a calibration came from (all given by the caller).
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
@@ -169,7 +170,10 @@ pub struct Calibration {
     pub eit: SignalCalibration,
     /// Area-aware pneumatic model.
     pub area_aware: AreaAware,
-    /// EIT sensitivity for the compensated splitter.
+    /// Forward pneumatic model P(F, x, y) (the `pneumatic-forward` corrector and the
+    /// `force-balance` splitter).
+    pub forward: ForwardModel,
+    /// EIT response C = k(x, y) F^gamma for the compensated and force-balance splitters.
     pub sensitivity: SensitivityField,
     /// Paper Table II.
     pub r2: R2Table,
@@ -188,9 +192,9 @@ pub enum CalibrationFileError {
     /// Not valid TOML for a calibration.
     #[error("{path}: {message}")]
     Parse { path: String, message: String },
-    /// Wrong `format` or a newer `format_version`.
+    /// Wrong `format` or another `format_version`.
     #[error(
-        "{path}: not a skinflow calibration (format \"{format}\", version {version}; expected \"{FORMAT}\" <= {FORMAT_VERSION})"
+        "{path}: not a skinflow calibration this version reads (format \"{format}\", version {version}; expected \"{FORMAT}\" version {FORMAT_VERSION}): re-run `skinflow calibrate` on the recording"
     )]
     Format { path: String, format: String, version: u32 },
     /// Serialization failed.
@@ -206,18 +210,27 @@ impl Calibration {
 
     /// Parses TOML text; `origin` names the source in errors (a path, or `<string>`).
     pub fn from_toml_str(text: &str, origin: &str) -> Result<Self, CalibrationFileError> {
-        let cal: Calibration = toml::from_str(text).map_err(|e| CalibrationFileError::Parse {
+        let parse = |e: toml::de::Error| CalibrationFileError::Parse {
             path: origin.to_string(),
             message: e.to_string().replace('\n', " "),
-        })?;
-        if cal.format != FORMAT || cal.format_version > FORMAT_VERSION {
+        };
+        // The header first, so a file of another version is named as such, not as a parse error.
+        #[derive(Deserialize)]
+        struct Header {
+            format: String,
+            format_version: u32,
+        }
+        let h: Header = toml::from_str::<toml::Table>(text)
+            .map_err(parse)
+            .and_then(|t| toml::Value::Table(t).try_into().map_err(parse))?;
+        if h.format != FORMAT || h.format_version != FORMAT_VERSION {
             return Err(CalibrationFileError::Format {
                 path: origin.to_string(),
-                format: cal.format,
-                version: cal.format_version,
+                format: h.format,
+                version: h.format_version,
             });
         }
-        Ok(cal)
+        toml::from_str(text).map_err(parse)
     }
 
     /// Reads a calibration file.

@@ -10,6 +10,7 @@ pub mod calibrate;
 pub mod calibration;
 pub mod field;
 pub mod fit;
+pub mod forward;
 pub mod map;
 pub mod strategy;
 

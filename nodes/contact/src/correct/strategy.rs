@@ -10,6 +10,7 @@
 
 use super::calibration::Calibration;
 use super::field::{QuadField, Region};
+use super::forward::ForwardModel;
 use super::map::{Range, SignalMap};
 use crate::segment::Contact;
 use crate::split::Splitter;
@@ -32,17 +33,23 @@ pub enum StrategyKind {
     PneumaticLocAwareSensitivity,
     /// Location- and contact-area-aware pneumatic model (the paper's future work).
     PneumaticAreaAware,
+    /// Inverse of the forward pneumatic model P(F, x, y), proportional split.
+    PneumaticForward,
+    /// As PneumaticForward, with the force-balance split (sensitivity-compensated ratios).
+    PneumaticForwardBalance,
 }
 
 impl StrategyKind {
     /// Every strategy, paper's four first.
-    pub const ALL: [StrategyKind; 6] = [
+    pub const ALL: [StrategyKind; 8] = [
         StrategyKind::EitNoCal,
         StrategyKind::PneumaticNoCal,
         StrategyKind::EitLocAware,
         StrategyKind::PneumaticLocAware,
         StrategyKind::PneumaticLocAwareSensitivity,
         StrategyKind::PneumaticAreaAware,
+        StrategyKind::PneumaticForward,
+        StrategyKind::PneumaticForwardBalance,
     ];
 
     /// Key used in the eval JSON and on the command line.
@@ -54,6 +61,8 @@ impl StrategyKind {
             StrategyKind::PneumaticLocAware => "pneumatic-locaware",
             StrategyKind::PneumaticLocAwareSensitivity => "pneumatic-locaware-sensitivity",
             StrategyKind::PneumaticAreaAware => "pneumatic-area-aware",
+            StrategyKind::PneumaticForward => "pneumatic-forward",
+            StrategyKind::PneumaticForwardBalance => "pneumatic-forward-balance",
         }
     }
 
@@ -66,6 +75,8 @@ impl StrategyKind {
             StrategyKind::PneumaticLocAware => "Pneumatic-LocAware (proposed)",
             StrategyKind::PneumaticLocAwareSensitivity => "Pneumatic-LocAware, sens.-comp. split",
             StrategyKind::PneumaticAreaAware => "Pneumatic-AreaAware",
+            StrategyKind::PneumaticForward => "Pneumatic-Forward",
+            StrategyKind::PneumaticForwardBalance => "Pneumatic-Forward, force-balance split",
         }
     }
 
@@ -124,6 +135,8 @@ pub struct Strategy {
     map: SignalMap,
     fields: Option<(QuadField, QuadField)>,
     area: Option<AreaTerms>,
+    /// The forward model, for the `pneumatic-forward` strategies.
+    forward: Option<ForwardModel>,
     region: Region,
     splitter: Splitter,
 }
@@ -150,11 +163,19 @@ impl Strategy {
                 rel_max: a.rel_area_max,
             });
         }
+        let forward = matches!(kind, StrategyKind::PneumaticForward | StrategyKind::PneumaticForwardBalance)
+            .then_some(cal.forward);
+        if forward.is_some() {
+            fields = None;
+        }
         let splitter = match kind {
-            StrategyKind::PneumaticLocAwareSensitivity => Splitter::SensitivityCompensated(cal.sensitivity),
+            StrategyKind::PneumaticLocAwareSensitivity => Splitter::SensitivityCompensated(cal.sensitivity.clone()),
+            StrategyKind::PneumaticForwardBalance => {
+                Splitter::ForceBalance { sensitivity: cal.sensitivity.clone(), forward: cal.forward }
+            }
             _ => Splitter::Proportional,
         };
-        Self { kind, map: sig.map, fields, area, region: cal.region, splitter }
+        Self { kind, map: sig.map, fields, area, forward, region: cal.region, splitter }
     }
 
     /// Every strategy of a calibration, in [`StrategyKind::ALL`] order.
@@ -179,6 +200,13 @@ impl Strategy {
         if !(signal > 0.0 && signal.is_finite()) {
             flags.no_load = true;
             return ForceEstimate { force_n: 0.0, dp_kpa: dp_i_kpa, flags };
+        }
+        if let Some(fwd) = &self.forward {
+            let (response, clamped) = fwd.at(contact.x_mm, contact.y_mm);
+            let (force, beyond) = response.force(signal);
+            flags.location_clamped = clamped;
+            flags.above_range = beyond;
+            return ForceEstimate { force_n: force, dp_kpa: dp_i_kpa, flags };
         }
         let (f, range) = self.map.eval(signal);
         flags.above_range = range == Range::Above;
@@ -208,11 +236,6 @@ impl Strategy {
     /// Splits `dp_kpa` with this strategy's splitter and estimates every contact into
     /// `out[..contacts.len()]`. No allocation.
     pub fn estimate_frame_into(&self, dp_kpa: f64, contacts: &[Contact], out: &mut [ForceEstimate]) {
-        let total: f64 = contacts.iter().map(|c| self.splitter.weight(c)).sum();
-        let n = contacts.len() as f64;
-        for (o, c) in out.iter_mut().zip(contacts) {
-            let share = if total > 0.0 { self.splitter.weight(c) / total * dp_kpa } else { dp_kpa / n };
-            *o = self.estimate(c, share);
-        }
+        self.splitter.split_with(dp_kpa, contacts, |i, share| out[i] = self.estimate(&contacts[i], share));
     }
 }

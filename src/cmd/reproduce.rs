@@ -132,8 +132,10 @@ pub fn run(scenes_dir: &Path, out: &Path, seed: u64, args: &PipelineArgs) -> Res
     );
     let _ = writeln!(md, "| RES50, % | {:.2} | {} |", paper::RES50, f(single.resolution.res50_pct, 2));
     let _ = writeln!(md, "| RES75, % | {:.2} | {} |", paper::RES75, f(single.resolution.res75_pct, 2));
-    if let Some(s) = single.strategies.get("pneumatic-locaware") {
-        let _ = writeln!(md, "| Pneumatic-LocAware RMSE at 5 N, N | - | {} |", f(s.rmse_n, 2));
+    for name in ["pneumatic-locaware", "pneumatic-forward"] {
+        if let Some(s) = single.strategies.get(name) {
+            let _ = writeln!(md, "| {name} RMSE at 5 N, N | - | {} |", f(s.rmse_n, 2));
+        }
     }
     let _ = writeln!(md, "\n## Multi-contact (paper section IV-B; its eight cases)\n");
     let _ = writeln!(
@@ -156,6 +158,7 @@ pub fn run(scenes_dir: &Path, out: &Path, seed: u64, args: &PipelineArgs) -> Res
         l.missed,
         l.spurious
     );
+    goals(&mut md, cross, single, multi);
     if !fitted.warnings.is_empty() {
         let _ = writeln!(md, "\n## Calibration warnings\n");
         for w in &fitted.warnings {
@@ -166,4 +169,68 @@ pub fn run(scenes_dir: &Path, out: &Path, seed: u64, args: &PipelineArgs) -> Res
     std::fs::write(&report, &md).with_context(|| format!("{}: cannot write", report.display()))?;
     eprintln!("report written to {}", report.display());
     Ok(())
+}
+
+/// The issue's goals for this report, each checked against the figures above.
+fn goals(md: &mut String, cross: &EvalReport, single: &EvalReport, multi: &EvalReport) {
+    let rmse = |r: &EvalReport, name: &str| r.strategies.get(name).and_then(|s| s.rmse_n);
+    let per_contact =
+        |name: &str| multi.multi_contact.as_ref().and_then(|m| m.per_contact_rmse_n.get(name).copied().flatten());
+    // Best of skinflow's strategies (those the paper does not have) on a figure.
+    let best = |fig: &dyn Fn(&str) -> Option<f64>| {
+        cross
+            .strategies
+            .keys()
+            .filter(|n| !paper::RMSE.iter().any(|(p, _, _)| p == n))
+            .filter_map(|n| fig(n).map(|v| (n.clone(), v)))
+            .min_by(|a, b| a.1.total_cmp(&b.1))
+    };
+    let verdict = |v: Option<f64>, goal: f64| match v {
+        Some(v) if v <= goal => format!("{v:.2}: met"),
+        Some(v) => format!("{v:.2}: not met"),
+        None => "-: not computed".into(),
+    };
+    let _ = writeln!(md, "\n## Goals (issue #5), checked on this run\n");
+    let _ = writeln!(md, "| goal | result |\n|---|---|");
+    let _ = writeln!(
+        md,
+        "| Pneumatic-LocAware cross-diameter RMSE <= 0.59 N | {} |",
+        verdict(rmse(cross, "pneumatic-locaware"), 0.59)
+    );
+    let best_cross = best(&|n| rmse(cross, n));
+    if let Some((n, v)) = &best_cross {
+        let _ = writeln!(md, "| best new strategy, cross-diameter RMSE <= 0.59 N | {n}, {} |", verdict(Some(*v), 0.59));
+    }
+    let _ = writeln!(
+        md,
+        "| mean localization error <= 4.4 mm (single contact) | {} |",
+        verdict(single.localization.mean_mm, 4.4)
+    );
+    let _ = writeln!(
+        md,
+        "| Pneumatic-LocAware multi-contact per-contact RMSE <= 0.55 N | {} |",
+        verdict(per_contact("pneumatic-locaware"), 0.55)
+    );
+    if let Some((n, v)) = best(&per_contact) {
+        let _ = writeln!(
+            md,
+            "| best new strategy, multi-contact per-contact RMSE <= 0.55 N | {n}, {} |",
+            verdict(Some(v), 0.55)
+        );
+    }
+    let beats = |ours: Option<(String, f64)>, paper: Option<f64>| match (ours, paper) {
+        (Some((n, o)), Some(p)) if o < p => format!("yes: {n} {o:.2} N < {p:.2} N"),
+        (Some((n, o)), Some(p)) => format!("no: {n} {o:.2} N >= {p:.2} N"),
+        _ => "-".into(),
+    };
+    let _ = writeln!(
+        md,
+        "| a new strategy beats Pneumatic-LocAware, cross-diameter | {} |",
+        beats(best_cross, rmse(cross, "pneumatic-locaware"))
+    );
+    let _ = writeln!(
+        md,
+        "| a new strategy beats Pneumatic-LocAware, multi-contact | {} |",
+        beats(best(&per_contact), per_contact("pneumatic-locaware"))
+    );
 }

@@ -4,7 +4,8 @@
 //! threshold splits it, a floor (image units, S/m: the larger of `floor` and
 //! `floor_over_noise` times the median peak decrease of the no-load images) keeps noise-only frames from
 //! inventing a contact, opening then closing with a disk of `radius_frac` of the image size
-//! cleans the mask, and each connected component gives a contact: intensity-weighted centroid
+//! cleans the mask, components with two maxima and a deep saddle between them are split
+//! (`separation`, 0 for the paper's plain components), and each component gives a contact: intensity-weighted centroid
 //! (mm), conductivity-change sum C_i and area (mm^2). Math: `skinflow_contact::segment`.
 //!
 //! ```toml
@@ -48,6 +49,22 @@ pub struct SegmenterParams {
     /// Most contacts per frame; further components are counted and dropped.
     #[serde(default = "default_max_contacts")]
     pub max_contacts: usize,
+    /// Split a component at a saddle when both peaks rise above it by this fraction of the
+    /// lower peak (0: the paper's plain connected components).
+    #[serde(default = "default_separation")]
+    pub separation: f64,
+    /// Keep regions whose peak reaches this fraction of the largest, each cut at Otsu's
+    /// fraction of its own peak (0: the paper's single global cut).
+    #[serde(default = "default_weak_peak")]
+    pub weak_peak: f64,
+}
+
+fn default_weak_peak() -> f64 {
+    SegmentParams::with_floor(1.0).weak_peak
+}
+
+fn default_separation() -> f64 {
+    SegmentParams::with_floor(1.0).separation
 }
 
 fn default_floor() -> f64 {
@@ -65,7 +82,13 @@ fn default_max_contacts() -> usize {
 
 impl SegmenterParams {
     pub fn math(&self) -> SegmentParams {
-        SegmentParams { floor: self.floor, radius_frac: self.radius_frac, max_contacts: self.max_contacts }
+        SegmentParams {
+            floor: self.floor,
+            radius_frac: self.radius_frac,
+            max_contacts: self.max_contacts,
+            separation: self.separation,
+            weak_peak: self.weak_peak,
+        }
     }
 }
 
@@ -176,7 +199,13 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
         .param(ParamDoc::new("floor", "f64", "0.0002", "smallest floor on the conductivity decrease, S/m"))
         .param(ParamDoc::new("floor_over_noise", "f64", "2.5", "floor >= this x the no-load images' peak decrease"))
         .param(ParamDoc::new("radius_frac", "f64", "0.02", "disk radius / image size"))
-        .param(ParamDoc::new("max_contacts", "usize", "8", "most contacts per frame")),
+        .param(ParamDoc::new("max_contacts", "usize", "8", "most contacts per frame"))
+        .param(ParamDoc::new(
+            "separation",
+            "f64",
+            "0.2",
+            "split touching contacts at saddles this deep (fraction of the lower peak); 0 = paper",
+        )),
         |p: SegmenterParams, _| Ok(NodeImpl::Processor(Box::new(Segmenter::new(&p)))),
     ))
 }

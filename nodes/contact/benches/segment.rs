@@ -23,6 +23,12 @@ fn bench(c: &mut Criterion) {
     {
         c.bench_function(name, |b| b.iter(|| seg.segment_into(black_box(img), &mut contacts).unwrap()));
     }
+    // The paper's plain connected components (no saddle separation), for comparison.
+    let paper = SegmentParams { separation: 0.0, ..SegmentParams::with_floor(synth::FLOOR) };
+    let mut seg_paper = Segmenter::new(grid, &paper).unwrap();
+    c.bench_function("segment_64x64_3contacts_no_separation", |b| {
+        b.iter(|| seg_paper.segment_into(black_box(&three), &mut contacts).unwrap())
+    });
     let cal = calibrate(&synth::paper_like(1), &CalibParams::default(), Provenance::default()).unwrap().calibration;
     let proposed = Strategy::new(&cal, StrategyKind::PneumaticLocAware);
     let all = Strategy::all(&cal);
@@ -35,6 +41,17 @@ fn bench(c: &mut Criterion) {
             black_box(&forces);
         })
     });
+    // Split + correct alone, per strategy of interest (3 contacts).
+    seg.segment_into(&three, &mut contacts).unwrap();
+    for kind in [StrategyKind::PneumaticLocAware, StrategyKind::PneumaticForwardBalance] {
+        let s = Strategy::new(&cal, kind);
+        c.bench_function(&format!("split_correct_3contacts_{}", kind.name()), |b| {
+            b.iter(|| {
+                s.estimate_frame_into(black_box(1.2), contacts.as_slice(), &mut forces[..3]);
+                black_box(&forces);
+            })
+        });
+    }
     c.bench_function("chain_64x64_3contacts_all_strategies", |b| {
         b.iter(|| {
             seg.segment_into(black_box(&three), &mut contacts).unwrap();

@@ -18,40 +18,26 @@
 //! the weights, keeping its sign.
 
 use crate::correct::field::Region;
-use crate::correct::forward::ForwardModel;
+use crate::correct::forward::{ForwardModel, LocalResponse};
+use crate::correct::kernel::KernelField;
 use crate::segment::Contact;
 use serde::{Deserialize, Serialize};
 
 /// Smallest and largest exponent gamma accepted from a fit of C = k F^gamma.
 const EXPONENT_RANGE: (f64, f64) = (0.25, 4.0);
-/// Kernel lengths (mm) and relative ridge weights searched by leave-one-site-out CV.
-const LENGTHS_MM: [f64; 7] = [8.0, 12.0, 16.0, 24.0, 32.0, 48.0, 64.0];
-const RIDGES: [f64; 6] = [0.01, 0.03, 0.1, 0.3, 1.0, 3.0];
-/// Relative leave-one-site-out improvement the kernel field needs over the constant one.
-const KERNEL_MARGIN: f64 = 0.05;
 
 /// The single-contact EIT response C = k(x, y) F^gamma (C in image units x pixels, F in N).
 ///
-/// log k is a Gaussian-kernel smoother of per-site values: log k(x, y) = mean + sum_j alpha_j
-/// exp(-|p - p_j|^2 / (2 length^2)), p clamped onto the calibrated region, p_j the mean EIT
-/// centroid of calibration site j. A kernel field follows local structure (a soft patch of
-/// foam, a misplaced electrode) that a quadratic cannot, and reverts to the mean between
-/// sites farther apart than its length. No sites means uniform sensitivity.
+/// log k is a [`KernelField`] through per-site values, the sites being the calibration's
+/// indenter positions at their mean EIT centroid: it follows local structure (a soft patch of
+/// foam, a misplaced electrode) that a quadratic cannot. No sites means uniform sensitivity.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SensitivityField {
-    /// Region the evaluation point is clamped onto.
-    pub region: Region,
     /// gamma: C grows as F^gamma at a fixed place.
     pub exponent: f64,
-    /// Mean of log k over the sites.
-    pub log_k_mean: f64,
-    /// Kernel length, mm.
-    pub length_mm: f64,
-    /// Kernel centres and weights, [x_mm, y_mm, alpha].
-    pub sites: Vec<[f64; 3]>,
-    /// Leave-one-site-out RMSE of log k (absent for a uniform field).
-    pub loo_rmse_log: Option<f64>,
+    /// log k over the sensor (clamped onto the calibrated region).
+    pub log_k: KernelField,
 }
 
 /// One calibration sample for [`SensitivityField::fit`].
@@ -72,21 +58,12 @@ pub struct SensitivitySample {
 impl SensitivityField {
     /// Uniform sensitivity 1 and gamma = 1 (makes the compensated splitter proportional).
     pub fn uniform(region: Region) -> Self {
-        Self { region, exponent: 1.0, log_k_mean: 0.0, length_mm: 1.0, sites: Vec::new(), loo_rmse_log: None }
+        Self { exponent: 1.0, log_k: KernelField::constant(region, 0.0) }
     }
 
     /// log k at a point (mm), clamped onto the region.
     pub fn log_k(&self, x_mm: f64, y_mm: f64) -> f64 {
-        let r = &self.region;
-        let (x, y) = (x_mm.clamp(r.x_min_mm, r.x_max_mm), y_mm.clamp(r.y_min_mm, r.y_max_mm));
-        let (x, y) = if x.is_finite() && y.is_finite() {
-            (x, y)
-        } else {
-            (0.5 * (r.x_min_mm + r.x_max_mm), 0.5 * (r.y_min_mm + r.y_max_mm))
-        };
-        let inv = -0.5 / (self.length_mm * self.length_mm);
-        self.log_k_mean
-            + self.sites.iter().map(|s| s[2] * (((x - s[0]).powi(2) + (y - s[1]).powi(2)) * inv).exp()).sum::<f64>()
+        self.log_k.at(x_mm, y_mm)
     }
 
     /// Force equivalent (N, >= 0) of a conductivity sum at a point: (C / k)^(1 / gamma).
@@ -98,9 +75,7 @@ impl SensitivityField {
     }
 
     /// Fits gamma (within-site regression of log C on log F), then per-site log k, then the
-    /// kernel smoother with length and ridge chosen by leave-one-site-out cross-validation
-    /// (against the constant field, which wins when the sites carry no spatial signal).
-    /// `None` with fewer than 2 usable samples (C > 0, F > 0, finite).
+    /// kernel field through them. `None` with fewer than 2 usable samples (C > 0, F > 0, finite).
     pub fn fit(region: Region, samples: &[SensitivitySample]) -> Option<Self> {
         let used: Vec<&SensitivitySample> = samples
             .iter()
@@ -132,47 +107,12 @@ impl SensitivityField {
             sxx += df * df;
         }
         let exponent = if sxx > 1e-9 { (sxy / sxx).clamp(EXPONENT_RANGE.0, EXPONENT_RANGE.1) } else { 1.0 };
-        let sites: Vec<[f64; 3]> = acc
+        let sites: Vec<(f64, f64, f64)> = acc
             .iter()
             .filter(|a| a[0] > 0.0)
-            .map(|a| [a[3] / a[0], a[4] / a[0], (a[2] - exponent * a[1]) / a[0]])
+            .map(|a| (a[3] / a[0], a[4] / a[0], (a[2] - exponent * a[1]) / a[0]))
             .collect();
-        let mean = sites.iter().map(|s| s[2]).sum::<f64>() / sites.len() as f64;
-        let mut out =
-            Self { region, exponent, log_k_mean: mean, length_mm: 1.0, sites: Vec::new(), loo_rmse_log: None };
-        let n = sites.len();
-        if n < 3 {
-            return Some(out);
-        }
-        let r = nalgebra::DVector::from_iterator(n, sites.iter().map(|s| s[2] - mean));
-        // Constant field: leaving site j out moves the mean, residual r_j n / (n - 1).
-        let scale = n as f64 / (n as f64 - 1.0);
-        let constant = (r.norm_squared() / n as f64).sqrt() * scale;
-        let mut best = (constant, None);
-        for &len in &LENGTHS_MM {
-            let inv = -0.5 / (len * len);
-            let k = nalgebra::DMatrix::from_fn(n, n, |i, j| {
-                (((sites[i][0] - sites[j][0]).powi(2) + (sites[i][1] - sites[j][1]).powi(2)) * inv).exp()
-            });
-            for &ridge in &RIDGES {
-                let m = &k + nalgebra::DMatrix::identity(n, n) * ridge;
-                let Some(chol) = m.cholesky() else { continue };
-                let m_inv = chol.inverse();
-                let alpha = &m_inv * &r;
-                let loo = (0..n).map(|j| (alpha[j] / m_inv[(j, j)]).powi(2)).sum::<f64>() / n as f64;
-                // The kernel must beat the constant field clearly (5 %) to be used, and a field
-                // whose sites agree to rounding is constant.
-                if constant > 1e-9 && loo.sqrt() < best.0 && loo.sqrt() < (1.0 - KERNEL_MARGIN) * constant {
-                    best = (loo.sqrt(), Some((len, alpha)));
-                }
-            }
-        }
-        out.loo_rmse_log = Some(best.0);
-        if let (_, Some((len, alpha))) = best {
-            out.length_mm = len;
-            out.sites = sites.iter().zip(alpha.iter()).map(|(s, a)| [s[0], s[1], *a]).collect();
-        }
-        Some(out)
+        Some(Self { exponent, log_k: KernelField::fit(region, &sites) })
     }
 }
 
@@ -195,6 +135,8 @@ pub enum Splitter {
 
 /// Bisection steps of the force-balance scale (relative precision 2^-60).
 const BALANCE_STEPS: usize = 60;
+/// Contacts whose weights and responses the force balance caches on the stack.
+const BALANCE_STACK: usize = 16;
 
 impl Splitter {
     /// The splitter's name as used in strategy names and reports.
@@ -231,37 +173,44 @@ impl Splitter {
             return;
         }
         let total: f64 = contacts.iter().map(|c| self.weight(c)).sum();
-        if let Splitter::ForceBalance { forward, .. } = self
+        if let Splitter::ForceBalance { sensitivity, forward } = self
             && dp_kpa > 0.0
             && total > 0.0
         {
-            let shares = |s: f64, set: &mut dyn FnMut(usize, f64)| {
-                let mut sum = 0.0;
-                for (i, c) in contacts.iter().enumerate() {
-                    let p = forward.at(c.x_mm, c.y_mm).0.pressure(s * self.weight(c));
-                    sum += p;
-                    set(i, p);
-                }
-                sum
+            // Weight and local response of each contact, resolved once (on the stack for up
+            // to BALANCE_STACK contacts; beyond that they are recomputed per step).
+            let mut cached = [(0.0, LocalResponse::ZERO); BALANCE_STACK];
+            for (slot, c) in cached.iter_mut().zip(contacts) {
+                *slot = (sensitivity.force_equivalent(c.sum, c.x_mm, c.y_mm), forward.at(c.x_mm, c.y_mm).0);
+            }
+            let term = |i: usize, s: f64| {
+                let (w, r) = match cached.get(i) {
+                    Some(&(w, r)) if i < n => (w, r),
+                    _ => (self.weight(&contacts[i]), forward.at(contacts[i].x_mm, contacts[i].y_mm).0),
+                };
+                r.pressure(s * w)
             };
-            let mut ignore = |_: usize, _: f64| {};
-            // Bracket: P is increasing in s with P(0) = 0.
+            let total_pressure = |s: f64| (0..n).map(|i| term(i, s)).sum::<f64>();
+            // Bracket: the summed pressure is increasing in s and 0 at s = 0.
             let mut hi = 1.0 / total;
-            while shares(hi, &mut ignore) < dp_kpa && hi < 1e12 {
+            while total_pressure(hi) < dp_kpa && hi < 1e12 {
                 hi *= 2.0;
             }
             let mut lo = 0.0;
             for _ in 0..BALANCE_STEPS {
                 let mid = 0.5 * (lo + hi);
-                if shares(mid, &mut ignore) < dp_kpa {
+                if total_pressure(mid) < dp_kpa {
                     lo = mid;
                 } else {
                     hi = mid;
                 }
             }
-            let sum = shares(0.5 * (lo + hi), &mut ignore);
+            let s = 0.5 * (lo + hi);
+            let sum = total_pressure(s);
             let norm = if sum > 0.0 { dp_kpa / sum } else { 0.0 };
-            shares(0.5 * (lo + hi), &mut |i, p| set(i, p * norm));
+            for i in 0..n {
+                set(i, term(i, s) * norm);
+            }
             return;
         }
         for (i, c) in contacts.iter().enumerate() {
@@ -331,7 +280,7 @@ mod tests {
         let k = |x: f64, y: f64| 0.1 * (1.0 + 2.0 * (-((x + 40.0).powi(2) + (y + 40.0).powi(2)) / 800.0).exp());
         let f = SensitivityField::fit(region(), &grid_samples(k, 0.8)).unwrap();
         assert!((f.exponent - 0.8).abs() < 1e-9, "{}", f.exponent);
-        assert!(!f.sites.is_empty());
+        assert!(!f.log_k.sites.is_empty());
         for (x, y) in [(-40.0, -40.0), (40.0, 40.0), (0.0, -40.0), (-30.0, -30.0)] {
             let rel = (f.log_k(x, y) - k(x, y).ln()).abs();
             assert!(rel < 0.1, "log k at ({x}, {y}): {} vs {}", f.log_k(x, y), k(x, y).ln());
@@ -347,7 +296,7 @@ mod tests {
     fn a_flat_response_keeps_the_constant_field() {
         // Equal sensitivity everywhere: cross-validation must prefer no kernel at all.
         let f = SensitivityField::fit(region(), &grid_samples(|_, _| 0.2, 1.0)).unwrap();
-        assert!(f.sites.is_empty(), "{:?}", f.sites);
+        assert!(f.log_k.sites.is_empty(), "{:?}", f.log_k.sites);
         assert!((f.log_k(13.0, -7.0) - 0.2f64.ln()).abs() < 1e-9);
         // One site, one force: gamma cannot be identified and stays 1.
         let one = [SensitivitySample { x_mm: 0.0, y_mm: 0.0, site: 0, cond_sum: 1.0, force_n: 2.0 }; 3];
@@ -368,16 +317,17 @@ mod tests {
 
     #[test]
     fn force_balance_recovers_forces_under_an_additive_pneumatic_layer() {
-        // Pneumatic layer: P(F) = a(x) F - 0.004 F^2, stiffer on the right; uniform EIT.
+        // Pneumatic layer: P(F) = a(x) F - 0.004 F^2, a varying along x; uniform EIT.
         let mut fwd = ForwardModel::linear(region(), 0.3, 10.0);
-        fwd.sensitivity.coeffs[1] = -0.1;
+        fwd.sensitivity.sites = vec![[40.0, 0.0, -0.1]]; // softer towards the right edge
+        fwd.sensitivity.length_mm = 40.0;
         fwd.curvature = -0.004;
         let sens = SensitivityField::uniform(region());
         let forces = [2.0, 6.0, 3.0];
         let xs = [-30.0, 10.0, 35.0];
         let cs: Vec<Contact> = forces.iter().zip(xs).map(|(&f, x)| contact(x, f)).collect();
         let dp: f64 = cs.iter().map(|c| fwd.at(c.x_mm, 0.0).0.pressure(c.sum)).sum();
-        let split = Splitter::ForceBalance { sensitivity: sens, forward: fwd };
+        let split = Splitter::ForceBalance { sensitivity: sens, forward: fwd.clone() };
         let mut out = [0.0; 3];
         split.split_into(dp, &cs, &mut out);
         assert!((out.iter().sum::<f64>() - dp).abs() < 1e-12);
@@ -385,7 +335,7 @@ mod tests {
             let (back, _) = fwd.at(c.x_mm, 0.0).0.force(*share);
             assert!((back - f).abs() < 1e-9, "{back} vs {f}");
         }
-        // The paper's proportional split does not: shares follow C, the stiff side loses.
+        // The paper's proportional split does not: shares follow C, not the local response.
         Splitter::Proportional.split_into(dp, &cs, &mut out);
         let back = fwd.at(35.0, 0.0).0.force(out[2]).0;
         assert!((back - 3.0).abs() > 0.05, "{back}");
@@ -410,5 +360,12 @@ mod tests {
         let mut one = [0.0];
         split.split_into(0.7, &cs[..1], &mut one);
         assert_eq!(one, [0.7]);
+        // More contacts than the stack cache holds: the same answer as the proportional split
+        // (uniform linear layer), through the uncached path.
+        let many: Vec<Contact> = (0..BALANCE_STACK + 4).map(|i| contact(i as f64, 1.0 + i as f64)).collect();
+        let (mut a, mut b) = (vec![0.0; many.len()], vec![0.0; many.len()]);
+        split.split_into(2.0, &many, &mut a);
+        Splitter::Proportional.split_into(2.0, &many, &mut b);
+        assert!(a.iter().zip(&b).all(|(x, y)| (x - y).abs() < 1e-12), "{a:?}");
     }
 }

@@ -14,7 +14,7 @@ use super::calibration::{
 };
 use super::field::{NPHI, QuadField, Region, phi};
 use super::fit::{CvSearch, RidgeProblem, cross_validate, fit_quadratic, r_squared};
-use super::forward::ForwardModel;
+use super::forward::{ForwardModel, ForwardSample};
 use super::map::SignalMap;
 use super::strategy::{Strategy, StrategyKind};
 use crate::segment::Contact;
@@ -370,8 +370,12 @@ pub fn calibrate(
 
     // Forward pneumatic model; degenerate data get a uniform line through the origin.
     let force_max = force.iter().copied().fold(0.0, f64::max);
-    let quads: Vec<(f64, f64, f64, f64)> = samples.iter().map(|s| (s.x_mm, s.y_mm, s.force_n, s.dp_kpa)).collect();
-    let forward = if degenerate { None } else { ForwardModel::fit(region, &quads, &grid, params.folds) };
+    let fwd_samples: Vec<ForwardSample> = samples
+        .iter()
+        .zip(&loc_of)
+        .map(|(s, &site)| ForwardSample { x_mm: s.x_mm, y_mm: s.y_mm, site, force_n: s.force_n, dp_kpa: s.dp_kpa })
+        .collect();
+    let forward = if degenerate { None } else { ForwardModel::fit(region, &fwd_samples) };
     let forward = forward.unwrap_or_else(|| {
         if !degenerate {
             warnings.push(CalibWarning::FitFailed { what: "forward pneumatic model" });

@@ -9,39 +9,50 @@
 //! P(F, x, y) = a(u, v) F + c F^2        (kPa; F in N; u, v the normalized coordinates)
 //! ```
 //!
-//! with `a` a quadratic field (kPa/N, the local sensitivity; stiffer near the rim) and `c` a
-//! global curvature (kPa/N^2, mild saturation). It passes through the origin: no force, no
+//! with `a` a kernel field (kPa/N, the local sensitivity; stiffer near the rim; see
+//! [`super::kernel`]) and `c` a global curvature (kPa/N^2, mild saturation). It passes through the origin: no force, no
 //! pressure. Its inverse is the `pneumatic-forward` corrector, and the `force-balance`
 //! splitter uses it to share dP so that the shares add up the way the chamber does.
 //!
 //! Guards: `a` is floored at [`A_FLOOR_REL`] of its mean; above the calibrated force range P
 //! continues linearly with its end slope (floored), so P is strictly increasing in F and its
-//! inverse is unique. Fit: ridge least squares on dP with the spatial terms of `a` shrunk
-//! towards 0 by a weight chosen by k-fold cross-validation (as for the paper's fields).
+//! inverse is unique. Fit: least squares of dP on (a_j F, c F^2) with one a_j per calibration
+//! site and a common c (closed form), then the kernel field through the a_j.
 
-use super::field::{NPHI, QuadField, Region, phi};
-use super::fit::{CvSearch, RidgeProblem, cross_validate};
+use super::field::Region;
+use super::kernel::KernelField;
 use serde::{Deserialize, Serialize};
 
-/// Smallest local sensitivity used, as a fraction of the field's constant term.
+/// Smallest local sensitivity used, as a fraction of the field's mean.
 pub const A_FLOOR_REL: f64 = 0.1;
 
 /// P(F, x, y) = a(u, v) F + c F^2 on `region`; linear above `force_max_n`.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ForwardModel {
-    /// Normalization of the coordinates (clamped outside).
-    pub region: Region,
-    /// Local sensitivity field a, kPa/N.
-    pub sensitivity: QuadField,
+    /// Local sensitivity field a, kPa/N (clamped onto the calibrated region).
+    pub sensitivity: KernelField,
     /// Curvature c, kPa/N^2.
     pub curvature: f64,
     /// Largest calibration force, N: P continues linearly beyond it.
     pub force_max_n: f64,
-    /// Ridge weight chosen for the spatial terms (absent when not cross-validated).
-    pub lambda: Option<f64>,
-    /// Cross-validated RMSE of dP, kPa.
-    pub cv_rmse_kpa: Option<f64>,
+    /// RMSE of dP over the calibration samples, kPa.
+    pub fit_rmse_kpa: Option<f64>,
+}
+
+/// One calibration sample for [`ForwardModel::fit`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ForwardSample {
+    /// EIT centroid, mm.
+    pub x_mm: f64,
+    /// EIT centroid, mm.
+    pub y_mm: f64,
+    /// Index of the true location (samples of one site share it).
+    pub site: usize,
+    /// True force, N.
+    pub force_n: f64,
+    /// Tared pressure change, kPa.
+    pub dp_kpa: f64,
 }
 
 /// The pressure response of one contact location, resolved once per contact.
@@ -53,6 +64,9 @@ pub struct LocalResponse {
 }
 
 impl LocalResponse {
+    /// A response that is 0 for every force (placeholder in fixed-size buffers).
+    pub const ZERO: LocalResponse = LocalResponse { a: 0.0, c: 0.0, f_max: 0.0 };
+
     /// dP for force `f_n` (>= 0), kPa.
     pub fn pressure(&self, f_n: f64) -> f64 {
         let f = f_n.max(0.0);
@@ -87,59 +101,68 @@ impl ForwardModel {
     /// A uniform linear response of `a_kpa_per_n` everywhere.
     pub fn linear(region: Region, a_kpa_per_n: f64, force_max_n: f64) -> Self {
         Self {
-            region,
-            sensitivity: QuadField::constant(a_kpa_per_n),
+            sensitivity: KernelField::constant(region, a_kpa_per_n),
             curvature: 0.0,
             force_max_n,
-            lambda: None,
-            cv_rmse_kpa: None,
+            fit_rmse_kpa: None,
         }
     }
 
     /// The response at a point (mm), clamped onto the region; the flag says it was clamped.
     pub fn at(&self, x_mm: f64, y_mm: f64) -> (LocalResponse, bool) {
-        let n = self.region.normalize(x_mm, y_mm);
-        let floor = A_FLOOR_REL * self.sensitivity.coeffs[0].abs();
-        let a = self.sensitivity.at(n.u, n.v).max(floor).max(f64::MIN_POSITIVE);
+        let r = &self.sensitivity.region;
+        let clamped = !(x_mm >= r.x_min_mm && x_mm <= r.x_max_mm && y_mm >= r.y_min_mm && y_mm <= r.y_max_mm);
+        let floor = A_FLOOR_REL * self.sensitivity.mean.abs();
+        let a = self.sensitivity.at(x_mm, y_mm).max(floor).max(f64::MIN_POSITIVE);
         // With c < 0 the parabola's top must lie beyond the calibrated range.
         let c = if self.curvature < 0.0 { self.curvature.max(-a / (2.0 * self.force_max_n)) } else { self.curvature };
-        (LocalResponse { a, c, f_max: self.force_max_n }, n.clamped)
+        (LocalResponse { a, c, f_max: self.force_max_n }, clamped)
     }
 
-    /// Fits the model to single-contact samples `(x_mm, y_mm, force_n, dp_kpa)`. `grid` holds
-    /// the ridge weights searched for the spatial terms. `None` with fewer than 2 (NPHI + 1)
-    /// usable samples (finite, F > 0) or when no fit is possible.
-    pub fn fit(region: Region, samples: &[(f64, f64, f64, f64)], grid: &[f64], folds: usize) -> Option<Self> {
-        const P: usize = NPHI + 1;
-        let used: Vec<_> =
-            samples.iter().filter(|s| s.2 > 0.0 && [s.0, s.1, s.2, s.3].iter().all(|v| v.is_finite())).collect();
-        if used.len() < 2 * P {
-            return None;
-        }
-        let mut design = Vec::with_capacity(used.len() * P);
-        let mut y = Vec::with_capacity(used.len());
+    /// Fits the model to single-contact samples. `None` without a usable sample (finite,
+    /// F > 0) or when the fitted mean sensitivity is not positive.
+    pub fn fit(region: Region, samples: &[ForwardSample]) -> Option<Self> {
+        let used: Vec<&ForwardSample> = samples
+            .iter()
+            .filter(|s| s.force_n > 0.0 && [s.x_mm, s.y_mm, s.force_n, s.dp_kpa].iter().all(|v| v.is_finite()))
+            .collect();
+        let n_sites = used.iter().map(|s| s.site).max()? + 1;
+        // Per site: sums of F^2, F^3, F dP, x, y and the count.
+        let mut acc = vec![[0.0f64; 6]; n_sites];
+        let (mut f4, mut f2dp) = (0.0, 0.0);
         for s in &used {
-            let n = region.normalize(s.0, s.1);
-            design.extend(phi(n.u, n.v).iter().map(|p| p * s.2));
-            design.push(s.2 * s.2);
-            y.push(s.3);
+            let (f, p) = (s.force_n, s.dp_kpa);
+            let a = &mut acc[s.site];
+            a[0] += f * f;
+            a[1] += f * f * f;
+            a[2] += f * p;
+            a[3] += s.x_mm;
+            a[4] += s.y_mm;
+            a[5] += 1.0;
+            f4 += f.powi(4);
+            f2dp += f * f * p;
         }
-        let prior = [0.0; P];
-        let problem = RidgeProblem { design: &design, y: &y, p: P, prior: &prior, base_penalty: &[0.0; P] };
-        let cv = cross_validate(&problem, &CvSearch { blocks: std::slice::from_ref(&(1..NPHI)), grid, folds })?;
-        let mut coeffs = [0.0; NPHI];
-        coeffs.copy_from_slice(&cv.coeffs[..NPHI]);
-        if coeffs[0].is_nan() || coeffs[0] <= 0.0 {
+        // Eliminating a_j = (S_j(F dP) - c S_j(F^3)) / S_j(F^2) from the normal equations.
+        let (mut den, mut num) = (f4, f2dp);
+        for a in acc.iter().filter(|a| a[5] > 0.0) {
+            den -= a[1] * a[1] / a[0];
+            num -= a[1] * a[2] / a[0];
+        }
+        let curvature = if den > 1e-12 * f4 { num / den } else { 0.0 };
+        let sites: Vec<(f64, f64, f64)> = acc
+            .iter()
+            .filter(|a| a[5] > 0.0)
+            .map(|a| (a[3] / a[5], a[4] / a[5], (a[2] - curvature * a[1]) / a[0]))
+            .collect();
+        let sensitivity = KernelField::fit(region, &sites);
+        if sensitivity.mean.is_nan() || sensitivity.mean <= 0.0 {
             return None;
         }
-        Some(Self {
-            region,
-            sensitivity: QuadField { coeffs },
-            curvature: cv.coeffs[NPHI],
-            force_max_n: used.iter().map(|s| s.2).fold(0.0, f64::max),
-            lambda: Some(cv.lambdas[0]),
-            cv_rmse_kpa: Some(cv.cv_mse.sqrt()),
-        })
+        let force_max_n = used.iter().map(|s| s.force_n).fold(0.0, f64::max);
+        let mut model = Self { sensitivity, curvature, force_max_n, fit_rmse_kpa: None };
+        let sse: f64 = used.iter().map(|s| (model.at(s.x_mm, s.y_mm).0.pressure(s.force_n) - s.dp_kpa).powi(2)).sum();
+        model.fit_rmse_kpa = Some((sse / used.len() as f64).sqrt());
+        Some(model)
     }
 }
 
@@ -190,22 +213,30 @@ mod tests {
             for j in 0..5 {
                 for k in 1..=10 {
                     let (x, y, f) = (-40.0 + 20.0 * f64::from(i), -40.0 + 20.0 * f64::from(j), f64::from(k));
-                    samples.push((x, y, f, truth(x / 40.0, f)));
+                    let site = (5 * i + j) as usize;
+                    samples.push(ForwardSample { x_mm: x, y_mm: y, site, force_n: f, dp_kpa: truth(x / 40.0, f) });
                 }
             }
         }
-        let m = ForwardModel::fit(region(), &samples, &[1e-9, 1e-3, 1.0], 5).unwrap();
-        assert!((m.curvature + 0.003).abs() < 1e-6, "{}", m.curvature);
-        let (r, _) = m.at(40.0, 20.0);
-        assert!((r.pressure(5.0) - truth(1.0, 5.0)).abs() < 1e-6);
+        let m = ForwardModel::fit(region(), &samples).unwrap();
+        assert!((m.curvature + 0.003).abs() < 1e-9, "{}", m.curvature);
+        // The kernel field smooths the per-site sensitivities slightly (its ridge): within 1 %
+        // of the pressure at the sites and between them.
+        assert!(m.fit_rmse_kpa.unwrap() < 0.01, "{:?}", m.fit_rmse_kpa);
+        for (x, u) in [(40.0, 1.0), (30.0, 0.75), (0.0, 0.0)] {
+            let (r, _) = m.at(x, 20.0);
+            let want = truth(u, 5.0);
+            assert!((r.pressure(5.0) - want).abs() < 0.01 * want, "x = {x}: {} vs {want}", r.pressure(5.0));
+        }
         assert_eq!(m.force_max_n, 10.0);
-        assert!(ForwardModel::fit(region(), &samples[..10], &[1.0], 5).is_none());
+        assert!(ForwardModel::fit(region(), &[]).is_none());
     }
 
     #[test]
     fn outside_the_region_the_response_is_clamped_and_flagged() {
         let mut m = ForwardModel::linear(region(), 0.3, 10.0);
-        m.sensitivity.coeffs[1] = 0.1; // a = 0.3 + 0.1 u
+        m.sensitivity.sites = vec![[40.0, 0.0, 0.1]]; // stiffer on the right
+        m.sensitivity.length_mm = 20.0;
         let (inside, _) = m.at(40.0, 0.0);
         let (outside, clamped) = m.at(60.0, 0.0);
         assert!(clamped);

@@ -11,6 +11,7 @@ pub mod calibration;
 pub mod field;
 pub mod fit;
 pub mod forward;
+pub mod kernel;
 pub mod map;
 pub mod strategy;
 

@@ -164,14 +164,14 @@ impl Strategy {
             });
         }
         let forward = matches!(kind, StrategyKind::PneumaticForward | StrategyKind::PneumaticForwardBalance)
-            .then_some(cal.forward);
+            .then(|| cal.forward.clone());
         if forward.is_some() {
             fields = None;
         }
         let splitter = match kind {
             StrategyKind::PneumaticLocAwareSensitivity => Splitter::SensitivityCompensated(cal.sensitivity.clone()),
             StrategyKind::PneumaticForwardBalance => {
-                Splitter::ForceBalance { sensitivity: cal.sensitivity.clone(), forward: cal.forward }
+                Splitter::ForceBalance { sensitivity: cal.sensitivity.clone(), forward: cal.forward.clone() }
             }
             _ => Splitter::Proportional,
         };

@@ -5,6 +5,8 @@
 //! to [0, 1] over the image, Otsu threshold, keep pixels with `d_norm >= t*` AND `d >= floor`
 //! (absolute floor, image units, so noise alone never makes a contact), opening then closing
 //! with a disk of radius `radius_frac * max(width, height)` pixels, 8-connected components,
+//! components split at deep saddles when `separation > 0` ([`separate`]; the paper keeps
+//! plain components, `separation = 0`),
 //! and per component the intensity-weighted centroid (mm), the decrease sum `C` (image units
 //! summed over ROI pixels, weights `max(d, 0)`), area (mm^2) and peak decrease. Pixel grid
 //! convention: see [`grid`]. No allocation after [`Segmenter::new`].
@@ -13,6 +15,7 @@ pub mod grid;
 pub mod label;
 pub mod morphology;
 pub mod otsu;
+pub mod separate;
 
 use grid::{GridError, ImageGrid};
 use morphology::Disk;
@@ -33,6 +36,26 @@ pub struct SegmentParams {
     /// Most contacts reported per frame; extra components (smallest sums) are counted as dropped.
     #[serde(default = "default_max_contacts")]
     pub max_contacts: usize,
+    /// Touching contacts: a component with several maxima is split at a saddle when both
+    /// peaks rise above it by at least this fraction of the lower peak ([`separate`]);
+    /// 0 keeps the paper's plain connected components.
+    #[serde(default = "default_separation")]
+    pub separation: f64,
+    /// Weak contacts: when > 0 (and `separation` > 0), regions are taken at the floor, split at
+    /// their saddles, and each region whose peak reaches this fraction of the image's largest
+    /// decrease becomes a contact whose ROI is cut at Otsu's fraction of its own peak; 0 keeps
+    /// the one global Otsu cut of the paper, under which a light press beside a heavy one
+    /// vanishes.
+    #[serde(default = "default_weak_peak")]
+    pub weak_peak: f64,
+}
+
+fn default_weak_peak() -> f64 {
+    0.15
+}
+
+fn default_separation() -> f64 {
+    0.2
 }
 
 fn default_radius_frac() -> f64 {
@@ -46,7 +69,13 @@ fn default_max_contacts() -> usize {
 impl SegmentParams {
     /// Paper defaults with the given absolute floor.
     pub fn with_floor(floor: f64) -> Self {
-        Self { floor, radius_frac: default_radius_frac(), max_contacts: default_max_contacts() }
+        Self {
+            floor,
+            radius_frac: default_radius_frac(),
+            max_contacts: default_max_contacts(),
+            separation: default_separation(),
+            weak_peak: default_weak_peak(),
+        }
     }
 
     /// Checks every field; run at load.
@@ -59,6 +88,20 @@ impl SegmentParams {
                 name: "radius_frac",
                 expected: "finite and in [0, 0.5)",
                 got: self.radius_frac,
+            });
+        }
+        if !(self.separation.is_finite() && (0.0..1.0).contains(&self.separation)) {
+            return Err(SegmentError::Param {
+                name: "separation",
+                expected: "finite and in [0, 1)",
+                got: self.separation,
+            });
+        }
+        if !(self.weak_peak.is_finite() && (0.0..=1.0).contains(&self.weak_peak)) {
+            return Err(SegmentError::Param {
+                name: "weak_peak",
+                expected: "finite and in [0, 1]",
+                got: self.weak_peak,
             });
         }
         if self.max_contacts == 0 {
@@ -170,7 +213,7 @@ pub fn peak_decrease(image: &[f64]) -> f64 {
     if peak.is_finite() { peak } else { 0.0 }
 }
 
-#[derive(Clone, Copy, Default)]
+#[derive(Debug, Clone, Copy, Default)]
 struct Accum {
     w: f64,
     wx: f64,
@@ -195,6 +238,9 @@ pub struct Segmenter {
     scratch: Vec<u8>,
     labels: Vec<u32>,
     stack: Vec<u32>,
+    separator: separate::Separator,
+    region_cut: Vec<f64>,
+    accums: Vec<Accum>,
 }
 
 impl Segmenter {
@@ -214,6 +260,9 @@ impl Segmenter {
             scratch: vec![0; n],
             labels: vec![0; n],
             stack: vec![0; n],
+            separator: separate::Separator::new(n),
+            region_cut: vec![0.0; n + 1],
+            accums: vec![Accum::default(); n + 1],
         })
     }
 
@@ -300,36 +349,87 @@ impl Segmenter {
         out.threshold = Some(d_min + t_norm * range);
         // d_norm >= t* and d >= floor, as one comparison on the decrease itself.
         let cut = (d_min + t_norm * range).max(self.params.floor);
+        // With `weak_peak` the regions come from the floor instead (each later thresholded at
+        // Otsu's fraction of its own peak), so a weak contact beside a strong one survives.
+        let region_cut = if self.params.weak_peak > 0.0 { self.params.floor } else { cut };
         for (m, &v) in self.mask.iter_mut().zip(image) {
             // NaN compares false: pixels outside the domain never become foreground.
-            *m = u8::from(-v >= cut);
+            *m = u8::from(-v >= region_cut);
         }
         morphology::open_then_close(&self.disk, g.width, g.height, &mut self.mask, &mut self.scratch);
-        let mut acc = Accum::default();
         let pixel_area = g.pixel_area_mm2();
         let (x0, dx, y0, dy) = (g.x_mm(0), g.dx_mm(), g.y_mm(0), g.dy_mm());
+        let add = |acc: &mut Accum, p: usize| {
+            let d = image[p];
+            let d = if d.is_finite() { (-d).max(0.0) } else { 0.0 };
+            let (x, y) = (x0 + (p % g.width) as f64 * dx, y0 + (p / g.width) as f64 * dy);
+            acc.w += d;
+            acc.wx += d * x;
+            acc.wy += d * y;
+            acc.x += x;
+            acc.y += y;
+            acc.n += 1;
+            acc.peak = acc.peak.max(d);
+        };
+        let finish = |a: Accum, label: u32, out: &mut Contacts| {
+            let n = a.n as f64;
+            // Weights are > 0 in practice (every component keeps pixels >= floor > 0);
+            // the geometric centroid is the guard against an all-zero component.
+            let (x_mm, y_mm) = if a.w > 0.0 { (a.wx / a.w, a.wy / a.w) } else { (a.x / n, a.y / n) };
+            out.offer(Contact { x_mm, y_mm, sum: a.w, area_mm2: n * pixel_area, peak: a.peak, label });
+        };
+        if self.params.separation > 0.0 {
+            let k = self.separator.run(g.width, g.height, image, &self.mask, self.params.separation, &mut self.labels)
+                as usize;
+            self.accums[..=k].fill(Accum::default());
+            if self.params.weak_peak > 0.0 {
+                // Each region's own Otsu cut: the same fraction t* of its peak's height above
+                // the image's smallest decrease as the global cut is of the largest peak's.
+                for (p, &l) in self.labels.iter().enumerate() {
+                    if l != 0 && image[p].is_finite() {
+                        let a = &mut self.accums[l as usize];
+                        a.peak = a.peak.max(-image[p]);
+                    }
+                }
+                let keep = self.params.weak_peak * d_max;
+                for a in self.accums[1..=k].iter_mut() {
+                    // `w` holds the region's cut until accumulation starts (NaN: dropped).
+                    a.w = if a.peak >= keep {
+                        (d_min + t_norm * (a.peak - d_min)).max(self.params.floor)
+                    } else {
+                        f64::NAN
+                    };
+                    a.peak = 0.0;
+                }
+                for r in 1..=k {
+                    self.region_cut[r] = self.accums[r].w;
+                    self.accums[r].w = 0.0;
+                }
+                for (p, &l) in self.labels.iter().enumerate() {
+                    let l = l as usize;
+                    if l != 0 && -image[p] >= self.region_cut[l] {
+                        add(&mut self.accums[l], p);
+                    }
+                }
+            } else {
+                for (p, &l) in self.labels.iter().enumerate() {
+                    if l != 0 {
+                        add(&mut self.accums[l as usize], p);
+                    }
+                }
+            }
+            for (label, a) in self.accums[1..=k].iter().enumerate() {
+                if a.n > 0 {
+                    finish(*a, label as u32 + 1, out);
+                }
+            }
+            return Ok(());
+        }
+        let mut acc = Accum::default();
         label::label_components(g.width, g.height, &self.mask, &mut self.labels, &mut self.stack, |label, visit| {
             match visit {
-                label::Visit::Pixel(p) => {
-                    let d = image[p];
-                    let d = if d.is_finite() { (-d).max(0.0) } else { 0.0 };
-                    let (x, y) = (x0 + (p % g.width) as f64 * dx, y0 + (p / g.width) as f64 * dy);
-                    acc.w += d;
-                    acc.wx += d * x;
-                    acc.wy += d * y;
-                    acc.x += x;
-                    acc.y += y;
-                    acc.n += 1;
-                    acc.peak = acc.peak.max(d);
-                }
-                label::Visit::End => {
-                    let a = std::mem::take(&mut acc);
-                    let n = a.n as f64;
-                    // Weights are > 0 in practice (every component keeps pixels >= floor > 0);
-                    // the geometric centroid is the guard against an all-zero component.
-                    let (x_mm, y_mm) = if a.w > 0.0 { (a.wx / a.w, a.wy / a.w) } else { (a.x / n, a.y / n) };
-                    out.offer(Contact { x_mm, y_mm, sum: a.w, area_mm2: n * pixel_area, peak: a.peak, label });
-                }
+                label::Visit::Pixel(p) => add(&mut acc, p),
+                label::Visit::End => finish(std::mem::take(&mut acc), label, out),
             }
         });
         Ok(())

@@ -69,7 +69,10 @@ fn calibrate_then_eval_writes_the_contract_json() {
     let calib = std::fs::read_to_string(d.join("calib.toml")).unwrap();
     assert!(calib.contains("sha256:"), "provenance hash missing");
 
-    let report = ok(&skinflow(&d, &["eval", "test.h5", "--calib", "calib.toml", "--json", "eval.json"]));
+    let report = ok(&skinflow(
+        &d,
+        &["eval", "test.h5", "--calib", "calib.toml", "--json", "eval.json", "--contacts-csv", "contacts.csv"],
+    ));
     assert!(report.contains("Pneumatic-LocAware"), "{report}");
     let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(d.join("eval.json")).unwrap()).unwrap();
     assert!(v["frames"].as_u64().unwrap() > 0);
@@ -88,6 +91,22 @@ fn calibrate_then_eval_writes_the_contract_json() {
     assert!(v["resolution"].get("res50_pct").is_some());
     let rmse = v["strategies"]["pneumatic-locaware"]["rmse_n"].as_f64().unwrap();
     assert!(rmse.is_finite() && rmse >= 0.0);
+
+    // The per-contact table: one row per matched, missed and spurious contact, as counted in
+    // the JSON, and one force column per strategy.
+    let csv = std::fs::read_to_string(d.join("contacts.csv")).unwrap();
+    let mut lines = csv.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    assert_eq!(&header[..3], ["frame", "t_s", "kind"]);
+    let n_strategies = v["strategies"].as_object().unwrap().len();
+    assert_eq!(header.iter().filter(|h| h.ends_with("_n") && !h.starts_with("true_")).count(), n_strategies);
+    let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
+    assert!(rows.iter().all(|r| r.len() == header.len()), "ragged CSV");
+    let count = |kind: &str| rows.iter().filter(|r| r[2] == kind).count() as u64;
+    let loc = &v["localization"];
+    assert_eq!(count("matched"), loc["matched"].as_u64().unwrap());
+    assert_eq!(count("missed"), loc["missed"].as_u64().unwrap());
+    assert_eq!(count("spurious"), loc["spurious"].as_u64().unwrap());
 }
 
 #[test]
@@ -185,6 +204,17 @@ fn reproduce_pins_the_paper_baselines() {
     let rmse = |s: &str| cross["strategies"][s]["rmse_n"].as_f64().unwrap();
     band("Pneumatic-NoCal RMSE", rmse("pneumatic-nocal"), 0.91, 0.25 * 0.91);
     band("EIT-NoCal RMSE", rmse("eit-nocal"), 1.45, 0.25 * 1.45);
+    // skinflow's strategies against the paper's on the same data (seed 1): the forward model
+    // on the cross-diameter test, the force-balance split on the multi-contact test.
+    assert!(rmse("pneumatic-forward") < rmse("pneumatic-locaware"), "{cross:#}");
+    let multi: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(d.join("r/multi-contact.json")).unwrap()).unwrap();
+    let per_contact = |s: &str| multi["multi_contact"]["per_contact_rmse_n"][s].as_f64().unwrap();
+    assert!(per_contact("pneumatic-forward-balance") < per_contact("pneumatic-locaware"), "{multi:#}");
+    assert!(per_contact("pneumatic-locaware-sensitivity") < per_contact("pneumatic-locaware"), "{multi:#}");
     let report = std::fs::read_to_string(d.join("r/report.md")).unwrap();
-    assert!(report.contains("Table III") && report.contains("Multi-contact"), "{report}");
+    assert!(
+        report.contains("Table III") && report.contains("Multi-contact") && report.contains("## Goals"),
+        "{report}"
+    );
 }

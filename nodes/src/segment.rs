@@ -2,14 +2,19 @@
 //!
 //! Theory: contacts are conductivity decreases. The decrease is normalised to [0, 1], Otsu's
 //! threshold splits it, a floor (image units, S/m: the larger of `floor` and
-//! `floor_over_noise` times the median peak decrease of the no-load images) keeps noise-only frames from
-//! inventing a contact, opening then closing with a disk of `radius_frac` of the image size
-//! cleans the mask, components with two maxima and a deep saddle between them are split
-//! (`separation`, 0 for the paper's plain components), and each component gives a contact: intensity-weighted centroid
-//! (mm), conductivity-change sum C_i and area (mm^2). Math: `skinflow_contact::segment`.
+//! `floor_over_noise` times the median peak decrease of the no-load images) keeps noise-only
+//! frames from inventing a contact, opening then closing with a disk of `radius_frac` of the
+//! image size cleans the mask, and each connected component gives a contact:
+//! intensity-weighted centroid (mm), conductivity-change sum C_i and area (mm^2). Two
+//! additions, both on by default and both off (0) for the paper's segmentation: `separation`
+//! splits a component with two maxima at a saddle that deep below the lower peak (two presses
+//! blurred into one blob), and `weak_peak` finds regions below the Otsu cut and keeps each
+//! whose peak reaches that fraction of the largest, cut at Otsu's fraction of its own peak (a
+//! light press beside a heavy one). Math: `skinflow_contact::segment`.
 //!
 //! ```toml
-//! params = { floor = 0.002, radius_frac = 0.02, max_contacts = 8 }
+//! params = { floor = 0.002, radius_frac = 0.02, max_contacts = 8, separation = 0.2, weak_peak = 0.15 }
+//! # the paper's segmentation: separation = 0.0, weak_peak = 0.0
 //! ```
 //! Input: `image` (image). Output: `contacts` (contacts).
 

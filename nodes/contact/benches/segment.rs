@@ -23,8 +23,23 @@ fn bench(c: &mut Criterion) {
     {
         c.bench_function(name, |b| b.iter(|| seg.segment_into(black_box(img), &mut contacts).unwrap()));
     }
+    // A reconstructed image (the pipeline's 64 x 64 NOSER image of multi-contact case 7,
+    // three contacts, from `skinflow reproduce`), segmented by the paper's plain connected
+    // components, with the saddle separation, and with separation and weak-contact regions.
+    let real: Vec<f64> = include_str!("multi3_64x64.txt").lines().map(|l| l.trim().parse().unwrap()).collect();
+    for (name, separation, weak_peak) in [
+        ("segment_real_3contacts_paper", 0.0, 0.0),
+        ("segment_real_3contacts_separation", 0.2, 0.0),
+        ("segment_real_3contacts_separation_weak", 0.2, 0.15),
+    ] {
+        let p = SegmentParams { separation, weak_peak, ..SegmentParams::with_floor(2e-4) };
+        let mut s = Segmenter::new(grid, &p).unwrap();
+        s.segment_into(&real, &mut contacts).unwrap();
+        assert_eq!(contacts.len(), 3, "{name}: {:?}", contacts.as_slice());
+        c.bench_function(name, |b| b.iter(|| s.segment_into(black_box(&real), &mut contacts).unwrap()));
+    }
     // The paper's plain connected components (no saddle separation), for comparison.
-    let paper = SegmentParams { separation: 0.0, ..SegmentParams::with_floor(synth::FLOOR) };
+    let paper = SegmentParams { separation: 0.0, weak_peak: 0.0, ..SegmentParams::with_floor(synth::FLOOR) };
     let mut seg_paper = Segmenter::new(grid, &paper).unwrap();
     c.bench_function("segment_64x64_3contacts_no_separation", |b| {
         b.iter(|| seg_paper.segment_into(black_box(&three), &mut contacts).unwrap())

@@ -159,3 +159,48 @@ fn pixels_outside_the_domain_and_invalid_values_are_ignored() {
     assert!((c[0].x_mm - 5.0).hypot(c[0].y_mm + 5.0) < grid().dx_mm());
     assert!(c[0].sum.is_finite() && (c[0].peak - 1.0).abs() < 0.05);
 }
+
+fn segment_with(img: &[f64], floor: f64, separation: f64, weak_peak: f64) -> Vec<skinflow_contact::Contact> {
+    let params = SegmentParams { separation, weak_peak, ..SegmentParams::with_floor(floor) };
+    let mut seg = Segmenter::new(grid(), &params).unwrap();
+    let mut out = seg.new_contacts();
+    seg.segment_into(img, &mut out).unwrap();
+    out.as_slice().to_vec()
+}
+
+#[test]
+fn two_maxima_in_one_blob_are_split_at_the_saddle_and_merge_in_the_paper_mode() {
+    // 10 mm-like blobs 36 mm apart with sigma 12 mm: one connected region above Otsu's cut,
+    // two maxima, the saddle ~45 % below the lower peak.
+    let img = image(&[(-18.0, 0.0, 1.0, 12.0), (18.0, 5.0, 0.8, 12.0)], 0.0, 1);
+    let paper = segment_with(&img, 0.05, 0.0, 0.0);
+    assert_eq!(paper.len(), 1, "{paper:?}");
+    let split = segment_with(&img, 0.05, 0.2, 0.0);
+    assert_eq!(split.len(), 2, "{split:?}");
+    let mut xs: Vec<f64> = split.iter().map(|c| c.x_mm).collect();
+    xs.sort_by(f64::total_cmp);
+    assert!(xs[0] < -10.0 && xs[1] > 10.0, "{xs:?}");
+    // Together they hold about the paper's merged sum (the same ROI pixels, shared).
+    let total: f64 = split.iter().map(|c| c.sum).sum();
+    assert!((total - paper[0].sum).abs() < 1e-9 * paper[0].sum.max(1.0), "{total} vs {}", paper[0].sum);
+}
+
+#[test]
+fn a_weak_contact_beside_a_strong_one_is_kept_only_with_weak_regions() {
+    // A light press at 25 % of a heavy one's amplitude, 60 mm away, with noise: Otsu's global
+    // cut drops it; weak-contact regions keep it, at its place, and noise alone adds nothing.
+    let img = image(&[(-30.0, 0.0, 0.25, 7.0), (30.0, 20.0, 1.0, 7.0)], 0.005, 3);
+    assert_eq!(segment_with(&img, 0.05, 0.2, 0.0).len(), 1);
+    let both = segment_with(&img, 0.05, 0.2, 0.15);
+    assert_eq!(both.len(), 2, "{both:?}");
+    let weak = both.iter().find(|c| c.x_mm < 0.0).unwrap();
+    assert!((weak.x_mm + 30.0).abs() < 2.0 && weak.y_mm.abs() < 2.0, "{weak:?}");
+    // Below weak_peak of the largest: not a contact.
+    let faint = image(&[(-30.0, 0.0, 0.1, 7.0), (30.0, 20.0, 1.0, 7.0)], 0.005, 3);
+    assert_eq!(segment_with(&faint, 0.05, 0.2, 0.15).len(), 1);
+    // A single blob stays one contact in every mode.
+    let one = image(&[(5.0, -5.0, 1.0, 9.0)], 0.005, 4);
+    for (sep, weak) in [(0.0, 0.0), (0.2, 0.0), (0.2, 0.15)] {
+        assert_eq!(segment_with(&one, 0.05, sep, weak).len(), 1, "separation {sep}, weak_peak {weak}");
+    }
+}

@@ -41,7 +41,7 @@ pub struct SegmentParams {
     /// 0 keeps the paper's plain connected components.
     #[serde(default = "default_separation")]
     pub separation: f64,
-    /// Weak contacts: when > 0 (and `separation` > 0), regions are taken at the floor, split at
+    /// Weak contacts: when > 0 and `separation` > 0, regions are taken below the Otsu cut, split at
     /// their saddles, and each region whose peak reaches this fraction of the image's largest
     /// decrease becomes a contact whose ROI is cut at Otsu's fraction of its own peak; 0 keeps
     /// the one global Otsu cut of the paper, under which a light press beside a heavy one
@@ -349,9 +349,13 @@ impl Segmenter {
         out.threshold = Some(d_min + t_norm * range);
         // d_norm >= t* and d >= floor, as one comparison on the decrease itself.
         let cut = (d_min + t_norm * range).max(self.params.floor);
-        // With `weak_peak` the regions come from the floor instead (each later thresholded at
-        // Otsu's fraction of its own peak), so a weak contact beside a strong one survives.
-        let region_cut = if self.params.weak_peak > 0.0 { self.params.floor } else { cut };
+        // With `weak_peak` the regions come from a lower level instead (each later thresholded
+        // at Otsu's fraction of its own peak), so a weak contact beside a strong one survives.
+        let weak = self.params.weak_peak > 0.0 && self.params.separation > 0.0;
+        // Regions are found at half the weakest kept peak (`weak_peak` of the largest): low
+        // enough to hold a weak contact's ROI, high enough to leave out the image's ripples
+        // (which would cost time and merge nothing useful).
+        let region_cut = if weak { (0.5 * self.params.weak_peak * d_max).max(self.params.floor) } else { cut };
         for (m, &v) in self.mask.iter_mut().zip(image) {
             // NaN compares false: pixels outside the domain never become foreground.
             *m = u8::from(-v >= region_cut);
@@ -382,40 +386,36 @@ impl Segmenter {
             let k = self.separator.run(g.width, g.height, image, &self.mask, self.params.separation, &mut self.labels)
                 as usize;
             self.accums[..=k].fill(Accum::default());
-            if self.params.weak_peak > 0.0 {
+            if weak {
                 // Each region's own Otsu cut: the same fraction t* of its peak's height above
                 // the image's smallest decrease as the global cut is of the largest peak's.
-                for (p, &l) in self.labels.iter().enumerate() {
-                    if l != 0 && image[p].is_finite() {
-                        let a = &mut self.accums[l as usize];
+                for &p in self.separator.foreground() {
+                    let p = p as usize;
+                    if image[p].is_finite() {
+                        let a = &mut self.accums[self.labels[p] as usize];
                         a.peak = a.peak.max(-image[p]);
                     }
                 }
                 let keep = self.params.weak_peak * d_max;
                 for a in self.accums[1..=k].iter_mut() {
                     // `w` holds the region's cut until accumulation starts (NaN: dropped).
-                    a.w = if a.peak >= keep {
-                        (d_min + t_norm * (a.peak - d_min)).max(self.params.floor)
-                    } else {
-                        f64::NAN
-                    };
+                    a.w = if a.peak >= keep { (d_min + t_norm * (a.peak - d_min)).max(region_cut) } else { f64::NAN };
                     a.peak = 0.0;
                 }
                 for r in 1..=k {
                     self.region_cut[r] = self.accums[r].w;
                     self.accums[r].w = 0.0;
                 }
-                for (p, &l) in self.labels.iter().enumerate() {
-                    let l = l as usize;
-                    if l != 0 && -image[p] >= self.region_cut[l] {
+                for &p in self.separator.foreground() {
+                    let (p, l) = (p as usize, self.labels[p as usize] as usize);
+                    if -image[p] >= self.region_cut[l] {
                         add(&mut self.accums[l], p);
                     }
                 }
             } else {
-                for (p, &l) in self.labels.iter().enumerate() {
-                    if l != 0 {
-                        add(&mut self.accums[l as usize], p);
-                    }
+                for &p in self.separator.foreground() {
+                    let p = p as usize;
+                    add(&mut self.accums[self.labels[p] as usize], p);
                 }
             }
             for (label, a) in self.accums[1..=k].iter().enumerate() {

@@ -29,6 +29,10 @@ pub struct Separator {
     saddles: Vec<(f64, u32, u32)>,
     /// Compact output label of each set root (0 = none yet).
     compact: Vec<u32>,
+    /// Foreground pixel indices of the current frame, row-major.
+    fg: Vec<u32>,
+    /// Decrease of the foreground pixels, -inf elsewhere.
+    dec: Vec<f64>,
 }
 
 const NONE: u32 = u32::MAX;
@@ -36,7 +40,14 @@ const NONE: u32 = u32::MAX;
 impl Separator {
     /// Buffers for images of `n` pixels.
     pub fn new(n: usize) -> Self {
-        Self { basin: vec![NONE; n], set: vec![NONE; n], saddles: Vec::with_capacity(4 * n), compact: vec![0; n] }
+        Self {
+            basin: vec![NONE; n],
+            set: vec![NONE; n],
+            saddles: Vec::with_capacity(4 * n),
+            compact: vec![0; n],
+            fg: Vec::with_capacity(n),
+            dec: vec![f64::NEG_INFINITY; n],
+        }
     }
 
     fn find(&mut self, mut p: u32) -> u32 {
@@ -61,20 +72,40 @@ impl Separator {
         labels: &mut [u32],
     ) -> u32 {
         let n = width * height;
-        let val = |p: usize| if image[p].is_finite() { -image[p] } else { 0.0 };
-        // 1. Steepest ascent.
+        // The decrease of every foreground pixel, -inf elsewhere, so one comparison both
+        // tests membership and height. A NaN pixel can become foreground through the
+        // closing; it counts as no decrease.
+        self.fg.clear();
         for p in 0..n {
-            self.basin[p] = NONE;
-            if mask[p] == 0 {
-                continue;
-            }
+            self.dec[p] = if mask[p] == 0 {
+                f64::NEG_INFINITY
+            } else {
+                self.fg.push(p as u32);
+                if image[p].is_finite() { -image[p] } else { 0.0 }
+            };
+        }
+        let dec = &self.dec;
+        // 1. Steepest ascent (interior pixels by fixed offsets, the border with bounds).
+        let w = width as isize;
+        let offsets = [-w - 1, -w, -w + 1, -1, 1, w - 1, w, w + 1];
+        for &p in &self.fg {
+            let p = p as usize;
             let (col, row) = (p % width, p / width);
-            let (mut best, mut best_v) = (p, val(p));
-            for r in row.saturating_sub(1)..=(row + 1).min(height - 1) {
-                for c in col.saturating_sub(1)..=(col + 1).min(width - 1) {
-                    let q = r * width + c;
-                    if mask[q] != 0 && val(q) > best_v {
-                        (best, best_v) = (q, val(q));
+            let (mut best, mut best_v) = (p, dec[p]);
+            if col > 0 && row > 0 && col + 1 < width && row + 1 < height {
+                for off in offsets {
+                    let q = (p as isize + off) as usize;
+                    if dec[q] > best_v {
+                        (best, best_v) = (q, dec[q]);
+                    }
+                }
+            } else {
+                for r in row.saturating_sub(1)..=(row + 1).min(height - 1) {
+                    for c in col.saturating_sub(1)..=(col + 1).min(width - 1) {
+                        let q = r * width + c;
+                        if dec[q] > best_v {
+                            (best, best_v) = (q, dec[q]);
+                        }
                     }
                 }
             }
@@ -82,10 +113,8 @@ impl Separator {
         }
         // Follow parents to the peak (values strictly increase, so this ends), compressing
         // each path so every pixel is walked over about once.
-        for p in 0..n {
-            if self.basin[p] == NONE {
-                continue;
-            }
+        for &p in &self.fg {
+            let p = p as usize;
             let mut top = p;
             while self.basin[top] as usize != top {
                 top = self.basin[top] as usize;
@@ -100,14 +129,13 @@ impl Separator {
         }
         // 2. Saddles between basins (each unordered pixel pair once: right and the row above).
         self.saddles.clear();
-        for p in 0..n {
-            if self.basin[p] == NONE {
-                continue;
-            }
+        for &p in &self.fg {
+            let p = p as usize;
             let (col, row) = (p % width, p / width);
+            let bp = self.basin[p];
             let mut look = |q: usize| {
-                if self.basin[q] != NONE && self.basin[q] != self.basin[p] {
-                    self.saddles.push((val(p).min(val(q)), self.basin[p], self.basin[q]));
+                if dec[q] > f64::NEG_INFINITY && self.basin[q] != bp {
+                    self.saddles.push((dec[p].min(dec[q]), bp, self.basin[q]));
                 }
             };
             if col + 1 < width {
@@ -132,7 +160,7 @@ impl Separator {
             if ra == rb {
                 continue;
             }
-            let (pa, pb) = (val(ra as usize), val(rb as usize));
+            let (pa, pb) = (self.dec[ra as usize], self.dec[rb as usize]);
             let lower = pa.min(pb);
             if lower - s < depth * lower {
                 // The lower peak is not a contact of its own: it joins the higher.
@@ -140,13 +168,11 @@ impl Separator {
                 self.set[lo as usize] = hi;
             }
         }
-        // Compact labels in row-major order of first appearance.
+        // Compact labels in row-major order of first appearance (`fg` is in row-major order).
+        labels.fill(0);
         let mut k = 0u32;
-        for p in 0..n {
-            labels[p] = 0;
-            if self.basin[p] == NONE {
-                continue;
-            }
+        for i in 0..self.fg.len() {
+            let p = self.fg[i] as usize;
             let root = self.find(self.basin[p]) as usize;
             if self.compact[root] == 0 {
                 k += 1;
@@ -154,13 +180,16 @@ impl Separator {
             }
             labels[p] = self.compact[root];
         }
-        for p in 0..n {
-            if self.basin[p] != NONE {
-                let root = self.find(self.basin[p]) as usize;
-                self.compact[root] = 0;
-            }
+        for i in 0..self.fg.len() {
+            let root = self.find(self.basin[self.fg[i] as usize]) as usize;
+            self.compact[root] = 0;
         }
         k
+    }
+
+    /// The foreground pixels of the last [`Separator::run`], row-major.
+    pub fn foreground(&self) -> &[u32] {
+        &self.fg
     }
 }
 

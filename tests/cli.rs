@@ -97,7 +97,7 @@ fn calibrate_then_eval_writes_the_contract_json() {
     let csv = std::fs::read_to_string(d.join("contacts.csv")).unwrap();
     let mut lines = csv.lines();
     let header: Vec<&str> = lines.next().unwrap().split(',').collect();
-    assert_eq!(&header[..3], ["frame", "t_s", "kind"]);
+    assert_eq!(&header[..3], ["eval_frame", "t_s", "kind"]);
     let n_strategies = v["strategies"].as_object().unwrap().len();
     assert_eq!(header.iter().filter(|h| h.ends_with("_n") && !h.starts_with("true_")).count(), n_strategies);
     let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();

@@ -8,7 +8,8 @@
 //! intensity-weighted centroid (mm), conductivity-change sum C_i and area (mm^2). Two
 //! additions, both on by default and both off (0) for the paper's segmentation: `separation`
 //! splits a component with two maxima at a saddle that deep below the lower peak (two presses
-//! blurred into one blob), and `weak_peak` finds regions below the Otsu cut and keeps each
+//! blurred into one blob), and `weak_peak` finds regions at half that fraction of the largest
+//! decrease (below the Otsu cut) and keeps each
 //! whose peak reaches that fraction of the largest, cut at Otsu's fraction of its own peak (a
 //! light press beside a heavy one). Math: `skinflow_contact::segment`.
 //!

@@ -85,6 +85,8 @@ pub struct Sync {
     truth: VecDeque<(f64, Arc<Truth>)>,
     /// Time of the first truth row with a contact: the no-load period ends there.
     first_contact_s: Option<f64>,
+    /// Newest time seen on the pressure or truth input.
+    latest_input_s: Option<f64>,
     /// No-load pressure accumulation for P0.
     p0_sum: f64,
     p0_n: u64,
@@ -109,6 +111,7 @@ impl Sync {
             pressure_period_s: None,
             truth: VecDeque::with_capacity(64),
             first_contact_s: None,
+            latest_input_s: None,
             p0_sum: 0.0,
             p0_n: 0,
             p0_recent: VecDeque::with_capacity(P0_RECENT + 1),
@@ -134,7 +137,13 @@ impl Sync {
         self.scratch[self.scratch.len() / 2]
     }
 
-    /// Whether time `t_s` lies in the leading no-load period (for a frame: its window's end).
+    /// Whether a frame window ending (exclusive) at `end_s` lies wholly in the leading
+    /// no-load period.
+    fn window_in_no_load(&self, end_s: f64) -> bool {
+        if self.truth_connected { self.first_contact_s.is_none_or(|t0| end_s <= t0) } else { end_s <= self.p.tare_s }
+    }
+
+    /// Whether the sample at `t_s` lies in the leading no-load period.
     fn in_no_load(&self, t_s: f64) -> bool {
         if self.truth_connected { self.first_contact_s.is_none_or(|t0| t_s < t0) } else { t_s < self.p.tare_s }
     }
@@ -145,7 +154,15 @@ impl Sync {
         self.p0_fixed.unwrap_or(if self.p0_n > 0 { self.p0_sum / self.p0_n as f64 } else { f64::NAN })
     }
 
+    /// Newest time seen on the pressure or truth input.
+    fn saw_input(&mut self, t_s: f64) {
+        if self.latest_input_s.is_none_or(|t| t_s > t) {
+            self.latest_input_s = Some(t_s);
+        }
+    }
+
     fn on_pressure(&mut self, t_s: f64, kpa: f64) {
+        self.saw_input(t_s);
         if let Some(&(last, _)) = self.pressure.back() {
             let dt = t_s - last;
             if dt > 0.0 {
@@ -165,6 +182,7 @@ impl Sync {
     }
 
     fn on_truth(&mut self, t_s: f64, row: Arc<Truth>) {
+        self.saw_input(t_s);
         if self.first_contact_s.is_none() && !row.contacts.is_empty() {
             self.first_contact_s = Some(t_s);
             // Samples at or after the first contact are loaded: out of P0.
@@ -196,10 +214,23 @@ impl Sync {
     /// Whether the oldest pending frame's window can receive no more samples.
     fn oldest_complete(&mut self) -> bool {
         let Some((h, _)) = self.pending.front() else { return false };
-        if !self.pressure_connected || self.pending.len() > MAX_PENDING {
+        let end = h.t_s() + 0.5 * self.frame_period_s();
+        if self.pending.len() > MAX_PENDING {
             return true;
         }
-        let end = h.t_s() + 0.5 * self.frame_period_s();
+        // Before the first contact, a frame is a no-load (reference) candidate: it waits until
+        // some input (or a newer frame) shows time past its window's end, so a first contact
+        // row stamped inside the window cannot arrive after the frame was judged.
+        if self.truth_connected
+            && self.first_contact_s.is_none()
+            && self.pending.len() < 2
+            && self.latest_input_s.is_none_or(|t| t < end)
+        {
+            return false;
+        }
+        if !self.pressure_connected {
+            return true;
+        }
         match (self.pressure.back(), self.pressure_period_s) {
             (Some(&(last, _)), Some(dt)) => last + dt >= end,
             (Some(&(last, _)), None) => last >= end,
@@ -229,7 +260,7 @@ impl Sync {
         let truth = self.truth.front().filter(|(tt, _)| *tt <= t).map(|(_, r)| r.clone());
         // The whole window must precede the first contact: a frame whose acquisition saw the
         // first press begin would put part of that contact into the EIT reference.
-        let no_load = self.in_no_load(hi);
+        let no_load = self.window_in_no_load(hi);
         let p0 = self.p0();
         let dp_kpa = if n > 0 { sum / n as f64 - p0 } else { f64::NAN };
         let payload = self.ring.fill(|s| {

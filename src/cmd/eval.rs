@@ -168,10 +168,11 @@ impl CsvFrame {
     }
 }
 
-/// Header of the `--contacts-csv` table (units in the names).
+/// Header of the `--contacts-csv` table (units in the names). `eval_frame` counts evaluated
+/// frames (no-load and load-change frames are skipped); `t_s` is the frame's time.
 pub fn contacts_csv_header() -> String {
     let mut h = String::from(
-        "frame,t_s,kind,truth_contacts,dp_kpa,true_x_mm,true_y_mm,true_force_n,true_diameter_mm,\
+        "eval_frame,t_s,kind,truth_contacts,dp_kpa,true_x_mm,true_y_mm,true_force_n,true_diameter_mm,\
          x_mm,y_mm,c_sum,area_mm2,peak",
     );
     for (name, ..) in LANES {

@@ -88,11 +88,10 @@ impl SensitivityField {
         if used.len() < 2 {
             return None;
         }
-        let n_sites = used.iter().map(|s| s.site).max()? + 1;
-        // Per site: count, sums of log F, log C, x, y.
-        let mut acc = vec![[0.0f64; 5]; n_sites];
+        // Per site (any indices: grouped by value): count, sums of log F, log C, x, y.
+        let mut by_site: std::collections::BTreeMap<usize, [f64; 5]> = std::collections::BTreeMap::new();
         for s in &used {
-            let a = &mut acc[s.site];
+            let a = by_site.entry(s.site).or_insert([0.0; 5]);
             a[0] += 1.0;
             a[1] += s.force_n.ln();
             a[2] += s.cond_sum.ln();
@@ -101,17 +100,14 @@ impl SensitivityField {
         }
         let (mut sxy, mut sxx) = (0.0, 0.0);
         for s in &used {
-            let a = &acc[s.site];
+            let a = &by_site[&s.site];
             let (df, dc) = (s.force_n.ln() - a[1] / a[0], s.cond_sum.ln() - a[2] / a[0]);
             sxy += df * dc;
             sxx += df * df;
         }
         let exponent = if sxx > 1e-9 { (sxy / sxx).clamp(EXPONENT_RANGE.0, EXPONENT_RANGE.1) } else { 1.0 };
-        let sites: Vec<(f64, f64, f64)> = acc
-            .iter()
-            .filter(|a| a[0] > 0.0)
-            .map(|a| (a[3] / a[0], a[4] / a[0], (a[2] - exponent * a[1]) / a[0]))
-            .collect();
+        let sites: Vec<(f64, f64, f64)> =
+            by_site.values().map(|a| (a[3] / a[0], a[4] / a[0], (a[2] - exponent * a[1]) / a[0])).collect();
         Some(Self { exponent, log_k: KernelField::fit(region, &sites) })
     }
 }
@@ -135,6 +131,8 @@ pub enum Splitter {
 
 /// Bisection steps of the force-balance scale (relative precision 2^-60).
 const BALANCE_STEPS: usize = 60;
+/// Doublings tried to bracket the force-balance scale (2^1100 covers every finite f64 ratio).
+const BRACKET_STEPS: usize = 1100;
 /// Contacts whose weights and responses the force balance caches on the stack.
 const BALANCE_STACK: usize = 16;
 
@@ -176,6 +174,7 @@ impl Splitter {
         if let Splitter::ForceBalance { sensitivity, forward } = self
             && dp_kpa > 0.0
             && total > 0.0
+            && total.is_finite()
         {
             // Weight and local response of each contact, resolved once (on the stack for up
             // to BALANCE_STACK contacts; beyond that they are recomputed per step).
@@ -191,30 +190,38 @@ impl Splitter {
                 r.pressure(s * w)
             };
             let total_pressure = |s: f64| (0..n).map(|i| term(i, s)).sum::<f64>();
-            // Bracket: the summed pressure is increasing in s and 0 at s = 0.
+            // Bracket: the summed pressure is increasing in s and 0 at s = 0. Weights that
+            // overflow or vanish (a corrupt calibration) leave no bracket: proportional below.
             let mut hi = 1.0 / total;
-            while total_pressure(hi) < dp_kpa && hi < 1e12 {
+            for _ in 0..BRACKET_STEPS {
+                if !(hi.is_finite() && hi > 0.0) || total_pressure(hi) >= dp_kpa {
+                    break;
+                }
                 hi *= 2.0;
             }
-            let mut lo = 0.0;
-            for _ in 0..BALANCE_STEPS {
-                let mid = 0.5 * (lo + hi);
-                if total_pressure(mid) < dp_kpa {
-                    lo = mid;
-                } else {
-                    hi = mid;
+            if hi.is_finite() && hi > 0.0 && total_pressure(hi) >= dp_kpa {
+                let mut lo = 0.0;
+                for _ in 0..BALANCE_STEPS {
+                    let mid = 0.5 * (lo + hi);
+                    if total_pressure(mid) < dp_kpa {
+                        lo = mid;
+                    } else {
+                        hi = mid;
+                    }
+                }
+                let s = 0.5 * (lo + hi);
+                let sum = total_pressure(s);
+                if sum > 0.0 && sum.is_finite() {
+                    for i in 0..n {
+                        set(i, term(i, s) * (dp_kpa / sum));
+                    }
+                    return;
                 }
             }
-            let s = 0.5 * (lo + hi);
-            let sum = total_pressure(s);
-            let norm = if sum > 0.0 { dp_kpa / sum } else { 0.0 };
-            for i in 0..n {
-                set(i, term(i, s) * norm);
-            }
-            return;
         }
+        let usable = total > 0.0 && total.is_finite();
         for (i, c) in contacts.iter().enumerate() {
-            set(i, if total > 0.0 { self.weight(c) / total * dp_kpa } else { dp_kpa / n as f64 });
+            set(i, if usable { self.weight(c) / total * dp_kpa } else { dp_kpa / n as f64 });
         }
     }
 }
@@ -360,6 +367,13 @@ mod tests {
         let mut one = [0.0];
         split.split_into(0.7, &cs[..1], &mut one);
         assert_eq!(one, [0.7]);
+        // Weights that overflow (a corrupt or extreme calibration) end in a finite split, never
+        // a hang: exponent 0.25 turns C = 1e200 into an infinite force equivalent.
+        let mut extreme = SensitivityField::uniform(region());
+        extreme.exponent = 0.25;
+        let wild = Splitter::ForceBalance { sensitivity: extreme, forward: ForwardModel::linear(region(), 0.3, 10.0) };
+        wild.split_into(1.0, &[contact(0.0, 1e200), contact(5.0, 1.0)], &mut out);
+        assert!(out.iter().all(|v| v.is_finite()) && (out[0] + out[1] - 1.0).abs() < 1e-12, "{out:?}");
         // More contacts than the stack cache holds: the same answer as the proportional split
         // (uniform linear layer), through the uncached path.
         let many: Vec<Contact> = (0..BALANCE_STACK + 4).map(|i| contact(i as f64, 1.0 + i as f64)).collect();

@@ -133,6 +133,10 @@ fn calibration_file_round_trips_and_rejects_unknown_keys() {
     let bad = text.replacen("[provenance]", "[provenance]\nsurprise = 1", 1);
     let err = Calibration::from_toml_str(&bad, "calib.toml").unwrap_err().to_string();
     assert!(err.starts_with("calib.toml:") && err.contains("surprise"), "{err}");
+    // Values the per-frame math cannot use are refused at load, named.
+    let bad = text.replacen("exponent = ", "exponent = -", 1);
+    let err = Calibration::from_toml_str(&bad, "calib.toml").unwrap_err().to_string();
+    assert!(err.starts_with("calib.toml:") && err.contains("sensitivity.exponent"), "{err}");
     // Another format version is named as such (with what to do), not reported as a parse error.
     for v in ["1", "99"] {
         let wrong = text.replacen("format_version = 2", &format!("format_version = {v}"), 1);

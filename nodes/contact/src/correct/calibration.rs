@@ -7,6 +7,7 @@
 
 use super::field::{QuadField, Region};
 use super::forward::ForwardModel;
+use super::kernel::KernelField;
 use super::map::SignalMap;
 use crate::split::SensitivityField;
 use serde::{Deserialize, Serialize};
@@ -197,6 +198,9 @@ pub enum CalibrationFileError {
         "{path}: not a skinflow calibration this version reads (format \"{format}\", version {version}; expected \"{FORMAT}\" version {FORMAT_VERSION}): re-run `skinflow calibrate` on the recording"
     )]
     Format { path: String, format: String, version: u32 },
+    /// Parsed, but a value is out of range (e.g. a hand-edited file).
+    #[error("{path}: {problem}")]
+    Invalid { path: String, problem: String },
     /// Serialization failed.
     #[error("calibration: cannot serialize: {0}")]
     Serialize(String),
@@ -230,7 +234,39 @@ impl Calibration {
                 version: h.format_version,
             });
         }
-        toml::from_str(text).map_err(parse)
+        let cal: Calibration = toml::from_str(text).map_err(parse)?;
+        cal.validate().map_err(|problem| CalibrationFileError::Invalid { path: origin.to_string(), problem })?;
+        Ok(cal)
+    }
+
+    /// Checks the values the per-frame math divides by or exponentiates: a hand-edited file
+    /// must fail here, at load, rather than give NaN forces (or no split) later.
+    pub fn validate(&self) -> Result<(), String> {
+        let kernel = |name: &str, k: &KernelField| -> Result<(), String> {
+            if !(k.length_mm.is_finite() && k.length_mm > 0.0) {
+                return Err(format!("{name}.length_mm must be finite and > 0 (got {})", k.length_mm));
+            }
+            if !k.mean.is_finite() || k.sites.iter().flatten().any(|v| !v.is_finite()) {
+                return Err(format!("{name}: mean and sites must be finite"));
+            }
+            Ok(())
+        };
+        let e = self.sensitivity.exponent;
+        if !(e.is_finite() && e > 0.0) {
+            return Err(format!("sensitivity.exponent must be finite and > 0 (got {e})"));
+        }
+        kernel("sensitivity.log_k", &self.sensitivity.log_k)?;
+        kernel("forward.sensitivity", &self.forward.sensitivity)?;
+        if self.forward.sensitivity.mean.is_nan() || self.forward.sensitivity.mean <= 0.0 {
+            return Err(format!("forward.sensitivity.mean must be > 0 kPa/N (got {})", self.forward.sensitivity.mean));
+        }
+        if !(self.forward.force_max_n.is_finite() && self.forward.force_max_n > 0.0) {
+            return Err(format!("forward.force_max_n must be finite and > 0 (got {})", self.forward.force_max_n));
+        }
+        if !self.forward.curvature.is_finite() {
+            return Err("forward.curvature must be finite".into());
+        }
+        Ok(())
     }
 
     /// Reads a calibration file.

@@ -6,7 +6,7 @@
 //! forward direction,
 //!
 //! ```text
-//! P(F, x, y) = a(u, v) F + c F^2        (kPa; F in N; u, v the normalized coordinates)
+//! P(F, x, y) = a(x, y) F + c F^2        (kPa; F in N; x, y in mm, clamped onto the region)
 //! ```
 //!
 //! with `a` a kernel field (kPa/N, the local sensitivity; stiffer near the rim; see
@@ -89,7 +89,9 @@ impl LocalResponse {
         }
         let p_max = self.pressure(self.f_max);
         if dp_kpa > p_max {
-            return (self.f_max + (dp_kpa - p_max) / self.end_slope(), true);
+            let f = self.f_max + (dp_kpa - p_max) / self.end_slope();
+            // Beyond the range by more than rounding (a sample at exactly f_max is inside).
+            return (f, f > self.f_max * (1.0 + 1e-9));
         }
         // Root of c F^2 + a F - dP = 0 in [0, f_max], in the cancellation-free form.
         let disc = self.a * self.a + 4.0 * self.c * dp_kpa;
@@ -126,34 +128,37 @@ impl ForwardModel {
             .iter()
             .filter(|s| s.force_n > 0.0 && [s.x_mm, s.y_mm, s.force_n, s.dp_kpa].iter().all(|v| v.is_finite()))
             .collect();
-        let n_sites = used.iter().map(|s| s.site).max()? + 1;
-        // Per site: sums of F^2, F^3, F dP, x, y and the count.
-        let mut acc = vec![[0.0f64; 6]; n_sites];
-        let (mut f4, mut f2dp) = (0.0, 0.0);
+        if used.is_empty() {
+            return None;
+        }
+        // Per site (any indices: grouped by value): sums of F^2, F^3, F dP, x, y, the count,
+        // F^4 and F^2 dP.
+        let mut by_site: std::collections::BTreeMap<usize, [f64; 8]> = std::collections::BTreeMap::new();
         for s in &used {
             let (f, p) = (s.force_n, s.dp_kpa);
-            let a = &mut acc[s.site];
+            let a = by_site.entry(s.site).or_insert([0.0; 8]);
             a[0] += f * f;
             a[1] += f * f * f;
             a[2] += f * p;
             a[3] += s.x_mm;
             a[4] += s.y_mm;
             a[5] += 1.0;
-            f4 += f.powi(4);
-            f2dp += f * f * p;
+            a[6] += f.powi(4);
+            a[7] += f * f * p;
         }
-        // Eliminating a_j = (S_j(F dP) - c S_j(F^3)) / S_j(F^2) from the normal equations.
-        let (mut den, mut num) = (f4, f2dp);
-        for a in acc.iter().filter(|a| a[5] > 0.0) {
-            den -= a[1] * a[1] / a[0];
-            num -= a[1] * a[2] / a[0];
+        // Eliminating a_j = (S_j(F dP) - c S_j(F^3)) / S_j(F^2) from the normal equations, site
+        // by site: each site's term S_j(F^4) - S_j(F^3)^2 / S_j(F^2) is >= 0 (Cauchy-Schwarz)
+        // and 0 when the site saw one force, so the sum cannot cancel to a negative value.
+        let acc: Vec<[f64; 8]> = by_site.into_values().collect();
+        let (mut den, mut num, mut f4) = (0.0, 0.0, 0.0);
+        for a in &acc {
+            den += (a[6] - a[1] * a[1] / a[0]).max(0.0);
+            num += a[7] - a[1] * a[2] / a[0];
+            f4 += a[6];
         }
         let curvature = if den > 1e-12 * f4 { num / den } else { 0.0 };
-        let sites: Vec<(f64, f64, f64)> = acc
-            .iter()
-            .filter(|a| a[5] > 0.0)
-            .map(|a| (a[3] / a[5], a[4] / a[5], (a[2] - curvature * a[1]) / a[0]))
-            .collect();
+        let sites: Vec<(f64, f64, f64)> =
+            acc.iter().map(|a| (a[3] / a[5], a[4] / a[5], (a[2] - curvature * a[1]) / a[0])).collect();
         let sensitivity = KernelField::fit(region, &sites);
         if sensitivity.mean.is_nan() || sensitivity.mean <= 0.0 {
             return None;

@@ -236,6 +236,10 @@ impl Strategy {
     /// Splits `dp_kpa` with this strategy's splitter and estimates every contact into
     /// `out[..contacts.len()]`. No allocation.
     pub fn estimate_frame_into(&self, dp_kpa: f64, contacts: &[Contact], out: &mut [ForceEstimate]) {
-        self.splitter.split_with(dp_kpa, contacts, |i, share| out[i] = self.estimate(&contacts[i], share));
+        self.splitter.split_with(dp_kpa, contacts, |i, share| {
+            if let Some(o) = out.get_mut(i) {
+                *o = self.estimate(&contacts[i], share);
+            }
+        });
     }
 }

@@ -41,11 +41,11 @@ pub struct SegmentParams {
     /// 0 keeps the paper's plain connected components.
     #[serde(default = "default_separation")]
     pub separation: f64,
-    /// Weak contacts: when > 0 and `separation` > 0, regions are taken below the Otsu cut, split at
-    /// their saddles, and each region whose peak reaches this fraction of the image's largest
-    /// decrease becomes a contact whose ROI is cut at Otsu's fraction of its own peak; 0 keeps
-    /// the one global Otsu cut of the paper, under which a light press beside a heavy one
-    /// vanishes.
+    /// Weak contacts: when > 0 and `separation` > 0, regions are taken at half this fraction of
+    /// the image's largest decrease (or the floor, if higher), split at their saddles, and each
+    /// region whose peak reaches this fraction becomes a contact whose ROI is cut at Otsu's
+    /// fraction of its own peak (never below the region level); 0 keeps the one global Otsu
+    /// cut of the paper, under which a light press beside a heavy one vanishes.
     #[serde(default = "default_weak_peak")]
     pub weak_peak: f64,
 }
@@ -276,12 +276,15 @@ impl Segmenter {
         &self.grid
     }
 
-    /// The final mask of the last frame (row-major, 0/1), for plotting.
+    /// The mask of the last frame after morphology (row-major, 0/1), for plotting. With weak
+    /// contacts on, it is the region-level mask; each ROI is the part of its region above the
+    /// region's own cut.
     pub fn mask(&self) -> &[u8] {
         &self.mask
     }
 
-    /// Component labels of the last frame (0 = background), for plotting.
+    /// Region labels of the last frame (0 = background; with weak contacts on, of the
+    /// region-level mask, including regions too weak to report), for plotting.
     pub fn labels(&self) -> &[u32] {
         &self.labels
     }
@@ -383,8 +386,15 @@ impl Segmenter {
             out.offer(Contact { x_mm, y_mm, sum: a.w, area_mm2: n * pixel_area, peak: a.peak, label });
         };
         if self.params.separation > 0.0 {
-            let k = self.separator.run(g.width, g.height, image, &self.mask, self.params.separation, &mut self.labels)
-                as usize;
+            let k = self.separator.run(
+                g.width,
+                g.height,
+                image,
+                &self.mask,
+                self.params.separation,
+                region_cut,
+                &mut self.labels,
+            ) as usize;
             self.accums[..=k].fill(Accum::default());
             if weak {
                 // Each region's own Otsu cut: the same fraction t* of its peak's height above

@@ -62,6 +62,10 @@ impl Separator {
     /// Labels the foreground of `mask` (row-major, 0/1) into `labels` (0 = background,
     /// 1..=k row-major by first pixel) with touching peaks separated. `image` is the
     /// conductivity change (a contact is a decrease: negative; NaN counts as 0). Returns k.
+    ///
+    /// `min_peak` is the decrease the mask was cut at: a basin whose peak is below it exists
+    /// only because the closing filled a dip (or a NaN pixel), and always merges.
+    #[allow(clippy::too_many_arguments)]
     pub fn run(
         &mut self,
         width: usize,
@@ -69,6 +73,7 @@ impl Separator {
         image: &[f64],
         mask: &[u8],
         depth: f64,
+        min_peak: f64,
         labels: &mut [u32],
     ) -> u32 {
         let n = width * height;
@@ -162,7 +167,7 @@ impl Separator {
             }
             let (pa, pb) = (self.dec[ra as usize], self.dec[rb as usize]);
             let lower = pa.min(pb);
-            if lower - s < depth * lower {
+            if lower <= 0.0 || lower < min_peak || lower - s < depth * lower {
                 // The lower peak is not a contact of its own: it joins the higher.
                 let (hi, lo) = if pa >= pb { (ra, rb) } else { (rb, ra) };
                 self.set[lo as usize] = hi;
@@ -212,7 +217,7 @@ mod tests {
         let mask: Vec<u8> = d.iter().map(|&v| u8::from(v > 0.05)).collect();
         let mut labels = vec![0; d.len()];
         let image: Vec<f64> = d.iter().map(|v| -v).collect();
-        let k = Separator::new(d.len()).run(40, 20, &image, &mask, depth, &mut labels);
+        let k = Separator::new(d.len()).run(40, 20, &image, &mask, depth, 0.05, &mut labels);
         (k, labels)
     }
 
@@ -248,9 +253,12 @@ mod tests {
         let mut labels = vec![0; 800];
         let mut sep = Separator::new(800);
         for _ in 0..3 {
-            assert_eq!(sep.run(40, 20, &d, &mask, 0.2, &mut labels), 2);
+            assert_eq!(sep.run(40, 20, &d, &mask, 0.2, 0.05, &mut labels), 2);
         }
-        assert_eq!(sep.run(40, 20, &d, &[0; 800], 0.2, &mut labels), 0);
+        assert_eq!(sep.run(40, 20, &d, &[0; 800], 0.2, 0.05, &mut labels), 0);
         assert!(labels.iter().all(|&l| l == 0));
+        // Flat NaN or sub-cut pixels the closing let in never make regions of their own.
+        let flat = vec![f64::NAN; 800];
+        assert_eq!(sep.run(40, 20, &flat, &[1; 800], 0.2, 0.05, &mut labels), 1);
     }
 }

@@ -112,8 +112,8 @@ pub struct Segmenter {
     params: SegmentParams,
     floor_min: f64,
     floor_over_noise: f64,
-    /// Peak decreases of the no-load images (their median is the noise level: robust to the
-    /// last no-load frame, whose acquisition window may reach into the first press).
+    /// Peak decreases of the no-load images (their median is the noise level, robust to an
+    /// odd frame).
     noise_peaks: Vec<f64>,
     scratch: Vec<f64>,
     math: Option<(ImageGrid, SegmentMath, ContactBuf)>,

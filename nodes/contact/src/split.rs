@@ -133,7 +133,7 @@ pub enum Splitter {
 const BALANCE_STEPS: usize = 60;
 /// Doublings tried to bracket the force-balance scale (2^1100 covers every finite f64 ratio).
 const BRACKET_STEPS: usize = 1100;
-/// Contacts whose weights and responses the force balance caches on the stack.
+/// Contacts whose weights (and force-balance responses) a split caches on the stack.
 const BALANCE_STACK: usize = 16;
 
 impl Splitter {
@@ -170,24 +170,26 @@ impl Splitter {
             set(0, dp_kpa);
             return;
         }
-        let total: f64 = contacts.iter().map(|c| self.weight(c)).sum();
-        if let Splitter::ForceBalance { sensitivity, forward } = self
+        // Each contact's weight (and, for the force balance, its local pressure response)
+        // resolved once: on the stack for up to BALANCE_STACK contacts, recomputed on use beyond.
+        let forward = match self {
+            Splitter::ForceBalance { forward, .. } => Some(forward),
+            _ => None,
+        };
+        let mut cached = [(0.0, LocalResponse::ZERO); BALANCE_STACK];
+        for (slot, c) in cached.iter_mut().zip(contacts) {
+            *slot = (self.weight(c), forward.map_or(LocalResponse::ZERO, |f| f.at(c.x_mm, c.y_mm).0));
+        }
+        let weight = |i: usize| cached.get(i).map_or_else(|| self.weight(&contacts[i]), |e| e.0);
+        let total: f64 = (0..n).map(weight).sum();
+        let usable = total > 0.0 && total.is_finite();
+        if let Some(forward) = forward
             && dp_kpa > 0.0
-            && total > 0.0
-            && total.is_finite()
+            && usable
         {
-            // Weight and local response of each contact, resolved once (on the stack for up
-            // to BALANCE_STACK contacts; beyond that they are recomputed per step).
-            let mut cached = [(0.0, LocalResponse::ZERO); BALANCE_STACK];
-            for (slot, c) in cached.iter_mut().zip(contacts) {
-                *slot = (sensitivity.force_equivalent(c.sum, c.x_mm, c.y_mm), forward.at(c.x_mm, c.y_mm).0);
-            }
             let term = |i: usize, s: f64| {
-                let (w, r) = match cached.get(i) {
-                    Some(&(w, r)) if i < n => (w, r),
-                    _ => (self.weight(&contacts[i]), forward.at(contacts[i].x_mm, contacts[i].y_mm).0),
-                };
-                r.pressure(s * w)
+                let r = cached.get(i).map_or_else(|| forward.at(contacts[i].x_mm, contacts[i].y_mm).0, |e| e.1);
+                r.pressure(s * weight(i))
             };
             let total_pressure = |s: f64| (0..n).map(|i| term(i, s)).sum::<f64>();
             // Bracket: the summed pressure is increasing in s and 0 at s = 0. Weights that
@@ -219,9 +221,8 @@ impl Splitter {
                 }
             }
         }
-        let usable = total > 0.0 && total.is_finite();
-        for (i, c) in contacts.iter().enumerate() {
-            set(i, if usable { self.weight(c) / total * dp_kpa } else { dp_kpa / n as f64 });
+        for i in 0..n {
+            set(i, if usable { weight(i) / total * dp_kpa } else { dp_kpa / n as f64 });
         }
     }
 }

@@ -407,14 +407,10 @@ impl Segmenter {
                     }
                 }
                 let keep = self.params.weak_peak * d_max;
-                for a in self.accums[1..=k].iter_mut() {
-                    // `w` holds the region's cut until accumulation starts (NaN: dropped).
-                    a.w = if a.peak >= keep { (d_min + t_norm * (a.peak - d_min)).max(region_cut) } else { f64::NAN };
-                    a.peak = 0.0;
-                }
-                for r in 1..=k {
-                    self.region_cut[r] = self.accums[r].w;
-                    self.accums[r].w = 0.0;
+                for (cut, a) in self.region_cut[1..=k].iter_mut().zip(&mut self.accums[1..=k]) {
+                    // NaN: no pixel passes, the region is too weak to report.
+                    *cut = if a.peak >= keep { (d_min + t_norm * (a.peak - d_min)).max(region_cut) } else { f64::NAN };
+                    *a = Accum::default();
                 }
                 for &p in self.separator.foreground() {
                     let (p, l) = (p as usize, self.labels[p as usize] as usize);

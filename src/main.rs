@@ -101,6 +101,9 @@ enum Cmd {
         scenes: PathBuf,
         #[arg(long, default_value_t = 1)]
         seed: u64,
+        /// Calibration fit params, e.g. 'f_fit = "sequential"' (the paper's fitting order).
+        #[arg(long, value_name = "TOML", default_value = "")]
+        fit: String,
         #[command(flatten)]
         pipeline: cmd::pipeline::PipelineArgs,
     },
@@ -111,6 +114,9 @@ enum Cmd {
         recording: PathBuf,
         #[arg(long)]
         out: PathBuf,
+        /// Calibration fit params, e.g. 'f_fit = "sequential"' (the paper's fitting order).
+        #[arg(long, value_name = "TOML", default_value = "")]
+        fit: String,
         #[command(flatten)]
         pipeline: cmd::pipeline::PipelineArgs,
     },
@@ -181,12 +187,12 @@ fn dispatch(cmd: Cmd) -> Result<ExitCode> {
         Cmd::Emulate { scene, seed, fast, dir, faults } => {
             cmd::emulate::run(&scene, seed, fast, dir, &faults, interrupt_flag()?).map(|()| ExitCode::SUCCESS)
         }
-        Cmd::Reproduce { out, scenes, seed, pipeline } => {
-            cmd::reproduce::run(&scenes, &out, seed, &pipeline).map(|()| ExitCode::SUCCESS)
+        Cmd::Reproduce { out, scenes, seed, fit, pipeline } => {
+            cmd::reproduce::run(&scenes, &out, seed, &fit, &pipeline).map(|()| ExitCode::SUCCESS)
         }
         Cmd::Inspect { recording } => cmd::inspect::run(&recording).map(|()| ExitCode::SUCCESS),
-        Cmd::Calibrate { recording, out, pipeline } => {
-            cmd::calibrate::run(&recording, &out, &pipeline).map(|()| ExitCode::SUCCESS)
+        Cmd::Calibrate { recording, out, fit, pipeline } => {
+            cmd::calibrate::run(&recording, &out, &fit, &pipeline).map(|()| ExitCode::SUCCESS)
         }
         Cmd::Eval { recording, calib, json, plots, contacts_csv, pipeline } => {
             cmd::eval::run(&recording, &calib, json.as_deref(), plots.as_deref(), contacts_csv.as_deref(), &pipeline)

@@ -6,7 +6,7 @@ use std::path::Path;
 use anyhow::{Context as _, Result, bail};
 use sha2::{Digest, Sha256};
 use skinflow_contact::CalibSample;
-use skinflow_contact::correct::{CalibParams, Calibrated, Provenance, calibrate};
+use skinflow_contact::correct::{CalibParams, Calibrated, FFit, Provenance, calibrate};
 use skinflow_nodes::payload::Contacts;
 use skinflow_record::read::Recording;
 
@@ -66,8 +66,15 @@ pub fn samples(rows: &[Vec<skinflow_core::Message>], settled: &Settled) -> Vec<C
     out
 }
 
+/// Parses the `--fit` TOML (fields of `CalibParams`; empty: the defaults).
+pub fn fit_params(text: &str) -> Result<CalibParams> {
+    let params: CalibParams = toml::from_str(text).map_err(|e| anyhow::anyhow!("--fit: {}", e.message()))?;
+    params.validate().map_err(|e| anyhow::anyhow!("--fit: {e}"))?;
+    Ok(params)
+}
+
 /// Runs the pipeline over a calibration recording and fits the calibration.
-pub fn fit(recording: &Path, args: &PipelineArgs) -> Result<Calibrated> {
+pub fn fit(recording: &Path, params: &CalibParams, args: &PipelineArgs) -> Result<Calibrated> {
     let rec = require_truth(recording)?;
     let settled = Settled::of(&rec, args.all_frames);
     drop(rec);
@@ -85,11 +92,11 @@ pub fn fit(recording: &Path, args: &PipelineArgs) -> Result<Calibrated> {
         recording_hash: content_hash(recording)?,
         software_version: concat!("skinflow ", env!("CARGO_PKG_VERSION")).to_owned(),
     };
-    calibrate(&samples, &CalibParams::default(), provenance).map_err(anyhow::Error::msg)
+    calibrate(&samples, params, provenance).map_err(anyhow::Error::msg)
 }
 
-pub fn run(recording: &Path, out: &Path, args: &PipelineArgs) -> Result<()> {
-    let fitted = fit(recording, args)?;
+pub fn run(recording: &Path, out: &Path, fit_toml: &str, args: &PipelineArgs) -> Result<()> {
+    let fitted = fit(recording, &fit_params(fit_toml)?, args)?;
     for w in &fitted.warnings {
         eprintln!("warning: {w}");
     }
@@ -107,6 +114,20 @@ pub fn run(recording: &Path, out: &Path, args: &PipelineArgs) -> Result<()> {
         lam(cal.eit.locaware.lambda_g),
         lam(cal.eit.locaware.lambda_b),
     );
+    for (name, la) in [("pneumatic", &cal.pneumatic.locaware), ("EIT", &cal.eit.locaware)] {
+        let q = la.map.quadratic;
+        println!(
+            "{name} location-aware f ({}): {:.4} + {:.4} s + {:.4} s^2; CV RMSE {} N",
+            match la.f_fit {
+                FFit::Joint => "fitted jointly with g and b",
+                FFit::Sequential => "pooled, the paper's order",
+            },
+            q.a0,
+            q.a1,
+            q.a2,
+            la.cv_rmse_n.map_or_else(|| "-".into(), |v| format!("{v:.3}")),
+        );
+    }
     cal.write(out).map_err(anyhow::Error::msg)?;
     eprintln!("calibration written to {}", out.display());
     Ok(())

@@ -8,6 +8,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{Context as _, Result};
+use skinflow_contact::correct::{CalibParams, FFit};
 use skinflow_contact::eval::EvalReport;
 
 use super::pipeline::PipelineArgs;
@@ -45,7 +46,8 @@ fn f(v: Option<f64>, p: usize) -> String {
     v.filter(|x| x.is_finite()).map_or_else(|| "-".into(), |v| format!("{v:.p$}"))
 }
 
-pub fn run(scenes_dir: &Path, out: &Path, seed: u64, args: &PipelineArgs) -> Result<()> {
+pub fn run(scenes_dir: &Path, out: &Path, seed: u64, fit_toml: &str, args: &PipelineArgs) -> Result<()> {
+    let params = super::calibrate::fit_params(fit_toml)?;
     let t0 = Instant::now();
     std::fs::create_dir_all(out).with_context(|| format!("{}: cannot create", out.display()))?;
     let rec = |s: &str| -> PathBuf { out.join(format!("{s}.h5")) };
@@ -53,7 +55,7 @@ pub fn run(scenes_dir: &Path, out: &Path, seed: u64, args: &PipelineArgs) -> Res
         super::simulate::run(&scenes_dir.join(format!("{s}.toml")), &rec(s), seed, true)?;
     }
     let calib_path = out.join("calib.toml");
-    let fitted = super::calibrate::fit(&rec("calibration"), args)?;
+    let fitted = super::calibrate::fit(&rec("calibration"), &params, args)?;
     fitted.calibration.write(&calib_path).map_err(anyhow::Error::msg)?;
     let cal = &fitted.calibration;
     let mut reports: Vec<(&str, EvalReport)> = Vec::new();
@@ -163,6 +165,43 @@ pub fn run(scenes_dir: &Path, out: &Path, seed: u64, args: &PipelineArgs) -> Res
         l.missed,
         l.spurious
     );
+    if params.f_fit == FFit::Joint {
+        // The same run with the paper's fitting order, so the joint fit's effect is on record.
+        let seq_params = CalibParams { f_fit: FFit::Sequential, ..params.clone() };
+        let seq_path = out.join("calib-sequential.toml");
+        super::calibrate::fit(&rec("calibration"), &seq_params, args)?
+            .calibration
+            .write(&seq_path)
+            .map_err(anyhow::Error::msg)?;
+        let seq_cross = super::eval::evaluate(&rec("cross-diameter"), &seq_path, args)?
+            .evaluator
+            .report(&rec("cross-diameter").display().to_string());
+        let seq_multi = super::eval::evaluate(&rec("multi-contact"), &seq_path, args)?
+            .evaluator
+            .report(&rec("multi-contact").display().to_string());
+        let la = "pneumatic-locaware";
+        let cross_of = |r: &EvalReport| r.strategies.get(la).and_then(|s| s.rmse_n);
+        let multi_of =
+            |r: &EvalReport| r.multi_contact.as_ref().and_then(|m| m.per_contact_rmse_n.get(la).copied().flatten());
+        let per_d = |r: &EvalReport| {
+            r.strategies.get(la).map_or("-".into(), |s| {
+                s.per_diameter_rmse_n.values().map(|v| f(Some(*v), 2)).collect::<Vec<_>>().join(" / ")
+            })
+        };
+        let _ = writeln!(md, "\n## Pneumatic-LocAware: joint f fit against the paper's fitting order\n");
+        let _ = writeln!(
+            md,
+            "This run fits f together with g and b (`f_fit = \"joint\"`, the default). The paper fits f on \
+             all locations pooled first, then g and b; `calib-sequential.toml` is that fit \
+             (`skinflow reproduce --fit 'f_fit = \"sequential\"'` gives the whole report with it).\n"
+        );
+        let _ =
+            writeln!(md, "| f fit | cross-diameter RMSE, N | 10 / 20 / 25 mm | multi-contact per-contact RMSE, N |");
+        let _ = writeln!(md, "|---|---|---|---|");
+        for (name, c, m) in [("joint", cross, multi), ("sequential (paper's order)", &seq_cross, &seq_multi)] {
+            let _ = writeln!(md, "| {name} | {} | {} | {} |", f(cross_of(c), 3), per_d(c), f(multi_of(m), 3));
+        }
+    }
     goals(&mut md, cross, single, multi);
     if !fitted.warnings.is_empty() {
         let _ = writeln!(md, "\n## Calibration warnings\n");
@@ -191,8 +230,8 @@ fn goals(md: &mut String, cross: &EvalReport, single: &EvalReport, multi: &EvalR
             .min_by(|a, b| a.1.total_cmp(&b.1))
     };
     let verdict = |v: Option<f64>, goal: f64| match v {
-        Some(v) if v <= goal => format!("{v:.2}: met"),
-        Some(v) => format!("{v:.2}: not met"),
+        Some(v) if v <= goal => format!("{v:.3}: met"),
+        Some(v) => format!("{v:.3}: not met"),
         None => "-: not computed".into(),
     };
     let _ = writeln!(md, "\n## Goals (issue #5), checked on this run\n");
@@ -238,8 +277,8 @@ fn goals(md: &mut String, cross: &EvalReport, single: &EvalReport, multi: &EvalR
         );
     }
     let beats = |ours: Option<(String, f64)>, paper: Option<f64>| match (ours, paper) {
-        (Some((n, o)), Some(p)) if o < p => format!("yes: {n} {o:.2} N < {p:.2} N"),
-        (Some((n, o)), Some(p)) => format!("no: {n} {o:.2} N >= {p:.2} N"),
+        (Some((n, o)), Some(p)) if o < p => format!("yes: {n} {o:.3} N < {p:.3} N"),
+        (Some((n, o)), Some(p)) => format!("no: {n} {o:.3} N >= {p:.3} N"),
         _ => "-".into(),
     };
     let _ = writeln!(

@@ -4,7 +4,7 @@ mod synth;
 
 use skinflow_contact::correct::average_holds;
 use skinflow_contact::correct::calibrate::{CalibParams, CalibWarning, calibrate};
-use skinflow_contact::correct::calibration::{Calibration, Provenance};
+use skinflow_contact::correct::calibration::{Calibration, FFit, FORMAT_VERSION, Provenance};
 use skinflow_contact::correct::field::{NPHI, Region, phi};
 use skinflow_contact::correct::fit::{CvSearch, RidgeProblem, cross_validate};
 use skinflow_contact::{Contact, Strategy, StrategyKind};
@@ -112,6 +112,31 @@ fn calibration_reproduces_the_paper_ordering_on_training_data() {
 }
 
 #[test]
+fn joint_f_fit_removes_the_pooled_curve_bias_and_sequential_keeps_the_papers_order() {
+    // dP = 0.3 F k(u, v): F = f(dP) / k is separable, but the pooled F(dP) mixes locations of
+    // different k and so bends; only the joint fit can find the straight f.
+    let frames = synth::paper_like(11);
+    let joint = calibrate(&frames, &CalibParams::default(), provenance()).unwrap().calibration;
+    let params = CalibParams { f_fit: FFit::Sequential, ..CalibParams::default() };
+    let seq = calibrate(&frames, &params, provenance()).unwrap().calibration;
+    assert_eq!(joint.pneumatic.locaware.f_fit, FFit::Joint);
+    assert_eq!(seq.pneumatic.locaware.f_fit, FFit::Sequential);
+    // Sequential: the fields multiply the pooled map, as in the paper.
+    assert_eq!(seq.pneumatic.locaware.map, seq.pneumatic.map);
+    // NoCal is untouched by the choice.
+    assert_eq!(joint.pneumatic.map, seq.pneumatic.map);
+    let name = StrategyKind::PneumaticLocAware.name();
+    let (j, s) = (joint.training.train_rmse_n[name], seq.training.train_rmse_n[name]);
+    assert!(j < 0.7 * s, "joint {j} N vs sequential {s} N");
+    // The joint f is nearly straight: its curvature over the range is small next to its slope.
+    let q = joint.pneumatic.locaware.map.quadratic;
+    let hi = joint.pneumatic.locaware.map.signal_max;
+    assert!((q.a2 * hi).abs() < 0.05 * q.a1, "{q:?}");
+    // And the area-aware strategy builds on the same f.
+    assert_eq!(joint.area_aware.fields.map, joint.pneumatic.locaware.map);
+}
+
+#[test]
 fn table_two_layout() {
     let text = fitted().r2.to_string();
     let lines: Vec<&str> = text.lines().collect();
@@ -138,8 +163,8 @@ fn calibration_file_round_trips_and_rejects_unknown_keys() {
     let err = Calibration::from_toml_str(&bad, "calib.toml").unwrap_err().to_string();
     assert!(err.starts_with("calib.toml:") && err.contains("sensitivity.exponent"), "{err}");
     // Another format version is named as such (with what to do), not reported as a parse error.
-    for v in ["1", "99"] {
-        let wrong = text.replacen("format_version = 2", &format!("format_version = {v}"), 1);
+    for v in ["2", "99"] {
+        let wrong = text.replacen(&format!("format_version = {FORMAT_VERSION}"), &format!("format_version = {v}"), 1);
         let err = Calibration::from_toml_str(&wrong, "calib.toml").unwrap_err().to_string();
         assert!(err.contains(&format!("version {v};")) && err.contains("re-run `skinflow calibrate`"), "{err}");
     }

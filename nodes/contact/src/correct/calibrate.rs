@@ -3,18 +3,23 @@
 //! Input: one [`CalibSample`] per EIT frame with a detected contact and ground truth. Frames
 //! of one hold are averaged ([`super::average`], the paper's 6-frame means), outliers are
 //! rejected (non-finite, C <= 0, F <= 0, centroid farther than `max_location_error_mm` from
-//! the truth), then per signal: f by least squares over all locations, and g, b by ridge
-//! towards alpha0 = (1, 0, 0, 0, 0, 0), beta = 0 with (lambda_g, lambda_b) = grid x T chosen by
-//! inner k-fold CV. Degenerate data (too few samples or locations, a region narrower than
+//! the truth), then per signal: f by least squares over all locations (the NoCal map), and
+//! g, b by ridge towards alpha0 = (1, 0, 0, 0, 0, 0), beta = 0 with (lambda_g, lambda_b) =
+//! grid x T chosen by inner k-fold CV. With `f_fit = "joint"` (the default) f is then
+//! re-estimated together with g and b on the same penalized objective ([`super::joint`]) and
+//! the weights are chosen again by CV on the final f; `"sequential"` stops after the paper's
+//! order. Degenerate data (too few samples or locations, a region narrower than
 //! `min_span_mm`) keep the prior, with a warning.
 
 use super::average::{Holds, average_holds, locations};
 use super::calibration::{
-    AreaAware, Calibration, FORMAT, FORMAT_VERSION, LocAware, Provenance, R2Table, SignalCalibration, TrainingSummary,
+    AreaAware, Calibration, FFit, FORMAT, FORMAT_VERSION, LocAware, Provenance, R2Table, SignalCalibration,
+    TrainingSummary,
 };
 use super::field::{NPHI, QuadField, Region, phi};
 use super::fit::{CvSearch, RidgeProblem, cross_validate, fit_quadratic, r_squared};
 use super::forward::{ForwardModel, ForwardSample};
+use super::joint::{JointProblem, fit_joint};
 use super::map::SignalMap;
 use super::strategy::{Strategy, StrategyKind};
 use crate::segment::Contact;
@@ -71,6 +76,8 @@ pub struct CalibParams {
     pub location_tolerance_mm: f64,
     /// Samples whose centroid is farther than this from the truth (mm) are rejected.
     pub max_location_error_mm: f64,
+    /// How the location-aware strategies' f is fitted: `"joint"` or `"sequential"`.
+    pub f_fit: FFit,
 }
 
 impl Default for CalibParams {
@@ -84,6 +91,7 @@ impl Default for CalibParams {
             min_span_mm: 5.0,
             location_tolerance_mm: 2.0,
             max_location_error_mm: 15.0,
+            f_fit: FFit::Joint,
         }
     }
 }
@@ -198,6 +206,9 @@ fn design(samples: &[CalibSample], region: &Region, fs: &[f64], rel_area: Option
     d
 }
 
+/// Most (joint fit, CV) passes of the joint f fit.
+const JOINT_PASSES: usize = 4;
+
 fn prior_vec(p: usize) -> Vec<f64> {
     let mut v = vec![0.0; p];
     v[0] = 1.0;
@@ -278,31 +289,62 @@ pub fn calibrate(
 
     let grid: Vec<f64> = params.lambda_grid_rel.iter().map(|l| l * t as f64).collect();
     let search = |blocks| CvSearch { blocks, grid: &grid, folds: params.folds };
-    let fit_locaware = |map: &SignalMap, signal: &[f64], what: &'static str, warnings: &mut Vec<CalibWarning>| {
-        if degenerate {
-            return LocAware::prior();
-        }
+    let phis: Vec<[f64; NPHI]> = samples
+        .iter()
+        .map(|s| {
+            let n = region.normalize(s.x_mm, s.y_mm);
+            phi(n.u, n.v)
+        })
+        .collect();
+    // g, b by CV-chosen ridge on a fixed f.
+    let cv_fields = |map: &SignalMap, signal: &[f64]| {
         let fs: Vec<f64> = signal.iter().map(|&s| map.eval(s).0).collect();
         let d = design(&samples, &region, &fs, None);
         let prior = prior_vec(2 * NPHI);
         let problem =
             RidgeProblem { design: &d, y: &force, p: 2 * NPHI, prior: &prior, base_penalty: &[0.0; 2 * NPHI] };
-        match cross_validate(&problem, &search(&[0..NPHI, NPHI..2 * NPHI])) {
-            Some(cv) => {
-                let (gain, offset) = split_fields(&cv.coeffs);
-                LocAware {
-                    gain,
-                    offset,
-                    lambda_g: Some(cv.lambdas[0]),
-                    lambda_b: Some(cv.lambdas[1]),
-                    cv_rmse_n: Some(cv.cv_mse.sqrt()),
-                    prior_fallback: false,
+        cross_validate(&problem, &search(&[0..NPHI, NPHI..2 * NPHI]))
+    };
+    let fit_locaware = |map: &SignalMap, signal: &[f64], what: &'static str, warnings: &mut Vec<CalibWarning>| {
+        if degenerate {
+            return LocAware::prior(*map);
+        }
+        let Some(mut cv) = cv_fields(map, signal) else {
+            warnings.push(CalibWarning::FitFailed { what });
+            return LocAware::prior(*map);
+        };
+        let mut f_map = *map;
+        let mut f_fit = FFit::Sequential;
+        if params.f_fit == FFit::Joint {
+            // Alternate at the chosen weights, then choose them again on the new f; the
+            // weights settle in one or two passes.
+            for _ in 0..JOINT_PASSES {
+                let problem = JointProblem {
+                    phi: &phis,
+                    signal,
+                    force: &force,
+                    lambda_g: cv.lambdas[0],
+                    lambda_b: cv.lambdas[1],
+                };
+                let Some(joint) = fit_joint(&problem, f_map) else { break };
+                let Some(next) = cv_fields(&joint.map, signal) else { break };
+                let settled = next.lambdas == cv.lambdas;
+                (f_map, cv, f_fit) = (joint.map, next, FFit::Joint);
+                if settled {
+                    break;
                 }
             }
-            None => {
-                warnings.push(CalibWarning::FitFailed { what });
-                LocAware::prior()
-            }
+        }
+        let (gain, offset) = split_fields(&cv.coeffs);
+        LocAware {
+            map: f_map,
+            f_fit,
+            gain,
+            offset,
+            lambda_g: Some(cv.lambdas[0]),
+            lambda_b: Some(cv.lambdas[1]),
+            cv_rmse_n: Some(cv.cv_mse.sqrt()),
+            prior_fallback: false,
         }
     };
     let pneumatic =
@@ -315,7 +357,7 @@ pub fn calibrate(
     let rel_min = rel.iter().copied().fold(f64::INFINITY, f64::min);
     let rel_max = rel.iter().copied().fold(f64::NEG_INFINITY, f64::max);
     let mut area_aware = AreaAware {
-        fields: LocAware::prior(),
+        fields: LocAware::prior(pneumatic.locaware.map),
         area_gain: 0.0,
         area_offset: 0.0,
         area_ref_mm2,
@@ -324,7 +366,8 @@ pub fn calibrate(
         lambda_a: None,
     };
     if let (false, Some(lg), Some(lb)) = (degenerate, pneumatic.locaware.lambda_g, pneumatic.locaware.lambda_b) {
-        let fs: Vec<f64> = dp.iter().map(|&s| map_p.eval(s).0).collect();
+        let f_map = pneumatic.locaware.map;
+        let fs: Vec<f64> = dp.iter().map(|&s| f_map.eval(s).0).collect();
         let d = design(&samples, &region, &fs, Some(&rel));
         let p = 2 * NPHI + 2;
         let prior = prior_vec(p);
@@ -336,6 +379,8 @@ pub fn calibrate(
             Some(cv) => {
                 let (gain, offset) = split_fields(&cv.coeffs);
                 area_aware.fields = LocAware {
+                    map: f_map,
+                    f_fit: pneumatic.locaware.f_fit,
                     gain,
                     offset,
                     lambda_g: Some(lg),

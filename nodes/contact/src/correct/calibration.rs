@@ -18,7 +18,7 @@ use std::path::Path;
 /// Value of the `format` key.
 pub const FORMAT: &str = "skinflow-calibration";
 /// Current `format_version`.
-pub const FORMAT_VERSION: u32 = 2;
+pub const FORMAT_VERSION: u32 = 3;
 
 /// Where a calibration came from (all given by the caller).
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
@@ -32,10 +32,26 @@ pub struct Provenance {
     pub software_version: String,
 }
 
+/// How the f of the location-aware model is fitted.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum FFit {
+    /// f, g and b minimize the paper's penalized objective together ([`super::joint`]).
+    #[default]
+    Joint,
+    /// The paper's order: f on all locations pooled, then g and b with f fixed.
+    Sequential,
+}
+
 /// Location-aware gain and offset fields F = g(u, v) f(s) + b(u, v) (paper eq. 12-14).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct LocAware {
+    /// The f these fields multiply: the pooled map (`sequential`) or re-estimated with them
+    /// (`joint`); same signal range as the pooled map.
+    pub map: SignalMap,
+    /// How `map` was fitted.
+    pub f_fit: FFit,
     /// Gain field g (dimensionless), coefficients alpha.
     pub gain: QuadField,
     /// Offset field b (N), coefficients beta.
@@ -51,9 +67,11 @@ pub struct LocAware {
 }
 
 impl LocAware {
-    /// The prior: g = 1, b = 0.
-    pub fn prior() -> Self {
+    /// The prior g = 1, b = 0 on the pooled map.
+    pub fn prior(map: SignalMap) -> Self {
         Self {
+            map,
+            f_fit: FFit::Sequential,
             gain: QuadField::constant(1.0),
             offset: QuadField::constant(0.0),
             lambda_g: None,
@@ -89,9 +107,9 @@ pub struct AreaAware {
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SignalCalibration {
-    /// f(signal) fitted on all locations.
+    /// f(signal) fitted on all locations pooled (the NoCal strategies).
     pub map: SignalMap,
-    /// g and b fitted on f(signal).
+    /// g and b, and the f they multiply.
     pub locaware: LocAware,
 }
 
@@ -251,6 +269,18 @@ impl Calibration {
             }
             Ok(())
         };
+        for (name, m) in [
+            ("pneumatic.map", &self.pneumatic.map),
+            ("pneumatic.locaware.map", &self.pneumatic.locaware.map),
+            ("eit.map", &self.eit.map),
+            ("eit.locaware.map", &self.eit.locaware.map),
+            ("area_aware.fields.map", &self.area_aware.fields.map),
+        ] {
+            let q = &m.quadratic;
+            if ![q.a0, q.a1, q.a2, m.signal_min, m.signal_max].iter().all(|v| v.is_finite()) {
+                return Err(format!("{name}: coefficients and signal range must be finite"));
+            }
+        }
         let e = self.sensitivity.exponent;
         if !(e.is_finite() && e > 0.0) {
             return Err(format!("sensitivity.exponent must be finite and > 0 (got {e})"));

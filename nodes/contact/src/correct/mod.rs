@@ -11,11 +11,12 @@ pub mod calibration;
 pub mod field;
 pub mod fit;
 pub mod forward;
+pub mod joint;
 pub mod kernel;
 pub mod map;
 pub mod strategy;
 
 pub use average::{Holds, average_holds};
 pub use calibrate::{CalibParams, CalibSample, CalibWarning, CalibrateError, Calibrated, calibrate};
-pub use calibration::{Calibration, CalibrationFileError, Provenance, R2Table};
+pub use calibration::{Calibration, CalibrationFileError, FFit, Provenance, R2Table};
 pub use strategy::{ForceEstimate, ForceFlags, Strategy, StrategyKind};

@@ -150,10 +150,13 @@ impl Strategy {
             StrategyKind::PneumaticNoCal => (&cal.pneumatic, false),
             _ => (&cal.pneumatic, true),
         };
+        // NoCal uses the pooled f; location-aware strategies the f fitted with their fields.
+        let mut map = if locaware { sig.locaware.map } else { sig.map };
         let mut fields = locaware.then_some((sig.locaware.gain, sig.locaware.offset));
         let mut area = None;
         if kind == StrategyKind::PneumaticAreaAware {
             let a = &cal.area_aware;
+            map = a.fields.map;
             fields = Some((a.fields.gain, a.fields.offset));
             area = Some(AreaTerms {
                 gain: a.area_gain,
@@ -175,7 +178,7 @@ impl Strategy {
             }
             _ => Splitter::Proportional,
         };
-        Self { kind, map: sig.map, fields, area, forward, region: cal.region, splitter }
+        Self { kind, map, fields, area, forward, region: cal.region, splitter }
     }
 
     /// Every strategy of a calibration, in [`StrategyKind::ALL`] order.

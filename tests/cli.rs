@@ -68,6 +68,16 @@ fn calibrate_then_eval_writes_the_contract_json() {
     assert!(table.contains("Pneumatic pressure"), "{table}");
     let calib = std::fs::read_to_string(d.join("calib.toml")).unwrap();
     assert!(calib.contains("sha256:"), "provenance hash missing");
+    assert!(calib.contains("f_fit = \"joint\""), "the default f fit is joint");
+    // --fit takes the calibration knobs as TOML; the paper's fitting order on request.
+    let seq = ok(&skinflow(&d, &["calibrate", "cal.h5", "--out", "seq.toml", "--fit", "f_fit = \"sequential\""]));
+    assert!(seq.contains("pooled, the paper's order"), "{seq}");
+    let text = std::fs::read_to_string(d.join("seq.toml")).unwrap();
+    assert!(text.contains("f_fit = \"sequential\"") && !text.contains("f_fit = \"joint\""), "{text}");
+    let bad = skinflow(&d, &["calibrate", "cal.h5", "--out", "bad.toml", "--fit", "f_fit = \"sideways\""]);
+    let err = String::from_utf8_lossy(&bad.stderr);
+    assert!(!bad.status.success() && err.contains("--fit") && err.contains("sideways"), "{err}");
+    assert!(!d.join("bad.toml").exists(), "nothing written on a bad --fit");
 
     let report = ok(&skinflow(
         &d,
@@ -217,4 +227,12 @@ fn reproduce_pins_the_paper_baselines() {
         report.contains("Table III") && report.contains("Multi-contact") && report.contains("## Goals"),
         "{report}"
     );
+    // The joint f fit beats the paper's fitting order for Pneumatic-LocAware on both tests.
+    let row = |name: &str| -> Vec<f64> {
+        let line = report.lines().find(|l| l.starts_with(&format!("| {name}"))).unwrap_or_else(|| panic!("{report}"));
+        let cells: Vec<&str> = line.split('|').map(str::trim).collect();
+        vec![cells[2].parse().unwrap(), cells[4].parse().unwrap()]
+    };
+    let (joint, seq) = (row("joint"), row("sequential"));
+    assert!(joint[0] < seq[0] && joint[1] < seq[1], "joint {joint:?} vs sequential {seq:?}");
 }

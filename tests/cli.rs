@@ -117,6 +117,16 @@ fn calibrate_then_eval_writes_the_contract_json() {
     assert_eq!(count("matched"), loc["matched"].as_u64().unwrap());
     assert_eq!(count("missed"), loc["missed"].as_u64().unwrap());
     assert_eq!(count("spurious"), loc["spurious"].as_u64().unwrap());
+
+    // The pressure-only settled criterion, as a live pipeline has it: eval reports how it
+    // agrees with the truth criterion and evaluates the frames it passes.
+    let out =
+        skinflow(&d, &["eval", "test.h5", "--calib", "calib.toml", "--settled-by", "pressure", "--json", "p.json"]);
+    ok(&out);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("settled frames by truth / by pressure"), "{err}");
+    let p: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(d.join("p.json")).unwrap()).unwrap();
+    assert!(p["frames"].as_u64().unwrap() > 0, "{p}");
 }
 
 #[test]

@@ -58,6 +58,11 @@ pub struct SyncedFrame {
     pub dp_kpa: f64,
     /// Pressure samples averaged.
     pub pressure_samples: u32,
+    /// Standard deviation of those samples, kPa (NaN with fewer than 2).
+    pub pressure_sd_kpa: f64,
+    /// The load did not change during the window, judged from the pressure alone (see the
+    /// `sync` node): false while the sensor noise is unknown or with fewer than 2 samples.
+    pub settled: bool,
     /// The no-load offset in use, kPa (NaN until a no-load sample was seen).
     pub p0_kpa: f64,
     /// The frame lies in the leading no-load period (a reference, not evaluated).

@@ -11,6 +11,15 @@
 //! no-load frame (an EIT reference candidate) only when its whole window lies in that period; a `tare`
 //! control command re-tares from the last `tare_window_s` seconds of pressure.
 //!
+//! Settled frames: a frame acquired while the load changed mixes two states in one image (the
+//! board scans its channels in sequence) and has no single force. Without truth, the pressure
+//! tells: the frame is `settled` when the standard deviation of its window's samples is at most
+//! `settle_factor` times the sensor's noise, the standard deviation of the no-load samples
+//! (of the tare window after a `tare` command), and never below `settle_floor_kpa`. Until that
+//! noise is known (no no-load sample yet) and with fewer than 2 samples, `settled` is false.
+//! With 15 samples per window, pure noise exceeds 1.6 sigma about once in a thousand frames
+//! (chi-square, 14 degrees of freedom).
+//!
 //! ```toml
 //! params = { tare_s = 2.0, tare_window_s = 1.0 }   # frame_period_s = 0.77 to fix T
 //! ```
@@ -50,6 +59,12 @@ pub struct SyncParams {
     /// Pressure history a `tare` command averages, s.
     #[serde(default = "default_tare_window_s")]
     pub tare_window_s: f64,
+    /// A frame is settled when its window's pressure SD is at most this times the no-load SD.
+    #[serde(default = "default_settle_factor")]
+    pub settle_factor: f64,
+    /// Smallest settle threshold, kPa (a noiseless sensor would otherwise demand SD = 0).
+    #[serde(default = "default_settle_floor_kpa")]
+    pub settle_floor_kpa: f64,
 }
 
 fn default_tare_s() -> f64 {
@@ -58,11 +73,19 @@ fn default_tare_s() -> f64 {
 fn default_tare_window_s() -> f64 {
     1.0
 }
+fn default_settle_factor() -> f64 {
+    1.6
+}
+fn default_settle_floor_kpa() -> f64 {
+    0.002
+}
 
 impl NodeParams for SyncParams {
     fn validate(&self) -> Result<(), ParamError> {
         positive("tare_s", self.tare_s)?;
         positive("tare_window_s", self.tare_window_s)?;
+        positive("settle_factor", self.settle_factor)?;
+        positive("settle_floor_kpa", self.settle_floor_kpa)?;
         self.frame_period_s.map_or(Ok(()), |t| positive("frame_period_s", t))
     }
 }
@@ -87,13 +110,18 @@ pub struct Sync {
     first_contact_s: Option<f64>,
     /// Newest time seen on the pressure or truth input.
     latest_input_s: Option<f64>,
-    /// No-load pressure accumulation for P0.
+    /// No-load pressure accumulation for P0 and the noise SD: sums of (kPa - p0_shift) and
+    /// of its square (shifted by the first sample, so the variance does not cancel).
     p0_sum: f64,
+    p0_sq: f64,
     p0_n: u64,
+    p0_shift: Option<f64>,
     /// The latest samples in the P0 sum, so samples that turn out to follow the first contact
     /// (its truth row may arrive after them) can be taken out again.
     p0_recent: VecDeque<(f64, f64)>,
     p0_fixed: Option<f64>,
+    /// Noise SD measured over the tare window of a `tare` command, kPa.
+    noise_fixed: Option<f64>,
     pending: VecDeque<(Header, Arc<EitFrame>)>,
     last_frame_s: Option<f64>,
     intervals: VecDeque<f64>,
@@ -113,9 +141,12 @@ impl Sync {
             first_contact_s: None,
             latest_input_s: None,
             p0_sum: 0.0,
+            p0_sq: 0.0,
             p0_n: 0,
+            p0_shift: None,
             p0_recent: VecDeque::with_capacity(P0_RECENT + 1),
             p0_fixed: None,
+            noise_fixed: None,
             pending: VecDeque::with_capacity(MAX_PENDING + 2),
             last_frame_s: None,
             intervals: VecDeque::with_capacity(PERIOD_HISTORY + 1),
@@ -151,7 +182,20 @@ impl Sync {
     /// The no-load offset, kPa; NaN while no no-load sample has been seen (P0 is never
     /// assumed zero: such frames carry a NaN dP, which correctors turn into 0 N, flagged).
     fn p0(&self) -> f64 {
-        self.p0_fixed.unwrap_or(if self.p0_n > 0 { self.p0_sum / self.p0_n as f64 } else { f64::NAN })
+        let shift = self.p0_shift.unwrap_or(0.0);
+        self.p0_fixed.unwrap_or(if self.p0_n > 0 { shift + self.p0_sum / self.p0_n as f64 } else { f64::NAN })
+    }
+
+    /// The sensor's noise SD, kPa: of the no-load samples, or of a `tare` command's window;
+    /// `None` with fewer than 2 such samples.
+    fn noise_kpa(&self) -> Option<f64> {
+        if self.noise_fixed.is_some() {
+            return self.noise_fixed;
+        }
+        (self.p0_n >= 2).then(|| {
+            let n = self.p0_n as f64;
+            ((self.p0_sq - self.p0_sum * self.p0_sum / n) / (n - 1.0)).max(0.0).sqrt()
+        })
     }
 
     /// Newest time seen on the pressure or truth input.
@@ -171,7 +215,9 @@ impl Sync {
             }
         }
         if self.p0_fixed.is_none() && self.in_no_load(t_s) && kpa.is_finite() {
-            self.p0_sum += kpa;
+            let d = kpa - *self.p0_shift.get_or_insert(kpa);
+            self.p0_sum += d;
+            self.p0_sq += d * d;
             self.p0_n += 1;
             self.p0_recent.push_back((t_s, kpa));
             if self.p0_recent.len() > P0_RECENT {
@@ -190,7 +236,9 @@ impl Sync {
                 && tp >= t_s
             {
                 self.p0_recent.pop_back();
-                self.p0_sum -= kpa;
+                let d = kpa - self.p0_shift.unwrap_or(0.0);
+                self.p0_sum -= d;
+                self.p0_sq -= d * d;
                 self.p0_n -= 1;
             }
         }
@@ -243,13 +291,19 @@ impl Sync {
         let t = h.t_s();
         let half = 0.5 * self.frame_period_s();
         let (lo, hi) = (t - half, t + half);
-        let (mut sum, mut n) = (0.0, 0u32);
-        for &(tp, kpa) in &self.pressure {
-            if tp >= lo && tp < hi && kpa.is_finite() {
-                sum += kpa;
-                n += 1;
-            }
-        }
+        let in_window = |&&(tp, kpa): &&(f64, f64)| tp >= lo && tp < hi && kpa.is_finite();
+        let (sum, n) = self.pressure.iter().filter(in_window).fold((0.0, 0u32), |(s, n), &(_, k)| (s + k, n + 1));
+        let mean = sum / f64::from(n.max(1));
+        let sd = if n >= 2 {
+            let ss: f64 = self.pressure.iter().filter(in_window).map(|&(_, k)| (k - mean) * (k - mean)).sum();
+            (ss / f64::from(n - 1)).sqrt()
+        } else {
+            f64::NAN
+        };
+        let settled = self.noise_kpa().is_some_and(|noise| {
+            let threshold = (self.p.settle_factor * noise).max(self.p.settle_floor_kpa);
+            sd <= threshold
+        });
         // Samples before this window can serve no later frame.
         while self.pressure.front().is_some_and(|&(tp, _)| tp < lo) && self.pressure.len() > 1 {
             self.pressure.pop_front();
@@ -262,16 +316,37 @@ impl Sync {
         // first press begin would put part of that contact into the EIT reference.
         let no_load = self.window_in_no_load(hi);
         let p0 = self.p0();
-        let dp_kpa = if n > 0 { sum / n as f64 - p0 } else { f64::NAN };
+        let dp_kpa = if n > 0 { mean - p0 } else { f64::NAN };
         let payload = self.ring.fill(|s| {
             s.frame = frame;
             s.dp_kpa = dp_kpa;
             s.pressure_samples = n;
+            s.pressure_sd_kpa = sd;
+            s.settled = settled;
             s.p0_kpa = p0;
             s.no_load = no_load;
             s.truth = truth;
         });
         out.send(0, Message::from_arc(Header { origin: ctx.index(), ..h }, payload))
+    }
+}
+
+impl Sync {
+    /// Re-tares P0 and the noise from the last `tare_window_s` seconds of pressure.
+    fn tare(&mut self) -> Result<(), NodeError> {
+        let Some(&(last, _)) = self.pressure.back() else {
+            return Err(NodeError::msg("tare: no pressure sample received yet"));
+        };
+        let from = last - self.p.tare_window_s;
+        let window = || self.pressure.iter().filter(|(t, k)| *t >= from && k.is_finite()).map(|&(_, k)| k);
+        let (s, n) = window().fold((0.0, 0u32), |(s, n), k| (s + k, n + 1));
+        let p0 = s / f64::from(n.max(1));
+        let ss: f64 = window().map(|k| (k - p0) * (k - p0)).sum();
+        let noise = (n >= 2).then(|| (ss / f64::from(n - 1)).sqrt());
+        tracing::info!(p0_kpa = p0, samples = n, noise_kpa = noise, "sync: re-tared P0");
+        self.p0_fixed = Some(p0);
+        self.noise_fixed = noise.or(self.noise_fixed);
+        Ok(())
     }
 }
 
@@ -307,21 +382,7 @@ impl Processor for Sync {
 
     fn control(&mut self, _ctx: &mut Context, cmd: &str) -> Result<(), NodeError> {
         match cmd {
-            "tare" => {
-                let Some(&(last, _)) = self.pressure.back() else {
-                    return Err(NodeError::msg("tare: no pressure sample received yet"));
-                };
-                let from = last - self.p.tare_window_s;
-                let (s, n) = self
-                    .pressure
-                    .iter()
-                    .filter(|(t, k)| *t >= from && k.is_finite())
-                    .fold((0.0, 0u32), |(s, n), (_, k)| (s + k, n + 1));
-                let p0 = s / f64::from(n.max(1));
-                tracing::info!(p0_kpa = p0, samples = n, "sync: re-tared P0");
-                self.p0_fixed = Some(p0);
-                Ok(())
-            }
+            "tare" => self.tare(),
             _ => Err(NodeError::msg(format!("unknown control command \"{cmd}\" (known: tare)"))),
         }
     }
@@ -356,7 +417,71 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
             "none",
             "acquisition window T, s (absent: median of frame intervals)",
         ))
-        .param(ParamDoc::new("tare_window_s", "f64", "1.0", "pressure history a tare command averages, s")),
+        .param(ParamDoc::new("tare_window_s", "f64", "1.0", "pressure history a tare command averages, s"))
+        .param(ParamDoc::new(
+            "settle_factor",
+            "f64",
+            "1.6",
+            "a frame is settled when its window's pressure SD <= this x the no-load SD",
+        ))
+        .param(ParamDoc::new("settle_floor_kpa", "f64", "0.002", "smallest settle threshold, kPa")),
         |p: SyncParams, _| Ok(NodeImpl::Processor(Box::new(Sync::new(p)))),
     ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::payload::TruthContact;
+
+    fn sync() -> Sync {
+        Sync::new(SyncParams {
+            tare_s: 2.0,
+            frame_period_s: None,
+            tare_window_s: 1.0,
+            settle_factor: 1.6,
+            settle_floor_kpa: 0.002,
+        })
+    }
+
+    fn sd(v: &[f64]) -> f64 {
+        let m = v.iter().sum::<f64>() / v.len() as f64;
+        (v.iter().map(|x| (x - m) * (x - m)).sum::<f64>() / (v.len() - 1) as f64).sqrt()
+    }
+
+    #[test]
+    fn noise_is_the_sample_sd_of_the_no_load_samples_and_retracts_with_them() {
+        let mut s = sync();
+        assert_eq!(s.noise_kpa(), None, "unknown before two samples");
+        // A large offset with a small spread: the shifted sums must not cancel.
+        let rest = [1000.01, 999.98, 1000.02, 999.99, 1000.0];
+        for (i, &k) in rest.iter().enumerate() {
+            s.on_pressure(0.05 * i as f64, k);
+        }
+        assert!((s.noise_kpa().unwrap() - sd(&rest)).abs() < 1e-9, "{:?} vs {}", s.noise_kpa(), sd(&rest));
+        assert!((s.p0() - 1000.0).abs() < 1e-9);
+        // Two loaded samples arrive before the first contact's truth row, which then takes
+        // them back out of P0 and the noise.
+        s.on_pressure(0.25, 1001.0);
+        s.on_pressure(0.30, 1002.0);
+        s.on_truth(
+            0.25,
+            Arc::new(Truth { contacts: vec![TruthContact { x_mm: 0.0, y_mm: 0.0, force_n: 1.0, diameter_mm: 15.0 }] }),
+        );
+        assert!((s.noise_kpa().unwrap() - sd(&rest)).abs() < 1e-9);
+        assert!((s.p0() - 1000.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn a_tare_command_measures_p0_and_noise_on_its_window() {
+        let mut s = sync();
+        assert!(s.tare().is_err(), "no pressure yet");
+        let samples = [0.50, 0.52, 0.49, 0.51];
+        for (i, &k) in samples.iter().enumerate() {
+            s.on_pressure(10.0 + 0.1 * i as f64, k);
+        }
+        s.tare().unwrap();
+        assert!((s.p0() - 0.505).abs() < 1e-12);
+        assert!((s.noise_kpa().unwrap() - sd(&samples)).abs() < 1e-12);
+    }
 }

@@ -10,7 +10,12 @@ use skinflow_nodes::payload::SyncedFrame;
 use skinflow_nodes::pipeline::{Captured, registry_with_capture};
 
 fn run_press() -> Vec<SyncedFrame> {
-    let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/press.toml");
+    run_scene("press.toml").into_iter().map(|(_, f)| f).collect()
+}
+
+/// Every sync output of a fixture scene with its time stamp, s.
+fn run_scene(fixture: &str) -> Vec<(f64, SyncedFrame)> {
+    let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures").join(fixture);
     let graph = format!(
         "[graph]\nmode = \"lockstep\"\n\
          [[node]]\nid = \"skin\"\nkind = \"sim\"\nparams = {{ scene = {scene:?}, pacing = \"fast\" }}\n\
@@ -28,7 +33,7 @@ fn run_press() -> Vec<SyncedFrame> {
     assert!(report.failures.is_empty(), "{:?}", report.failures);
     assert_eq!(report.stats.total_drops(), 0);
     let rows = captured.lock().unwrap();
-    rows.iter().map(|r| r[0].get::<SyncedFrame>().unwrap().clone()).collect()
+    rows.iter().map(|r| (r[0].header.t_s(), r[0].get::<SyncedFrame>().unwrap().clone())).collect()
 }
 
 #[test]
@@ -75,4 +80,32 @@ fn every_frame_is_emitted_once_and_in_order() {
     // The simulator's frame count for the scene: every one reaches the output.
     let t_total: f64 = 3.0 + 0.2 + 4.0 / 1.3 + 0.2 + 1.0;
     assert!(frames.len() as f64 >= (t_total * 1.3).floor() - 1.0, "{} frames for {t_total} s", frames.len());
+}
+
+/// The settled flag on both skins: it is set exactly on the frames whose window holds no part
+/// of a ramp, whatever the noise. The threshold follows the measured no-load noise (0.01 kPa on
+/// the paper skin); the ideal skin's zero noise falls back to `settle_floor_kpa`.
+#[test]
+fn the_settled_flag_follows_the_load_not_the_noise() {
+    for fixture in ["press.toml", "press-paper.toml"] {
+        let frames = run_scene(fixture);
+        let half = 0.5 / 1.3;
+        // The scene: a 0.2 s ramp from 3.0 s; the hold ends with the acquisition of its last
+        // frame, then a 0.2 s release.
+        let last_held = frames
+            .iter()
+            .filter(|(_, f)| f.truth.as_ref().is_some_and(|t| !t.contacts.is_empty()))
+            .map(|(t, _)| *t)
+            .fold(f64::NEG_INFINITY, f64::max);
+        let release = last_held + half;
+        let ramps = [(3.0, 3.2), (release, release + 0.2)];
+        let mut counts = (0, 0);
+        for (t, f) in &frames {
+            let (lo, hi) = (t - half, t + half);
+            let still = ramps.iter().all(|&(a, b)| hi <= a || lo >= b);
+            assert_eq!(f.settled, still, "{fixture}: frame at {t:.3} s, window SD {:.4} kPa", f.pressure_sd_kpa);
+            if still { counts.0 += 1 } else { counts.1 += 1 }
+        }
+        assert!(counts.0 >= 6 && counts.1 >= 3, "{fixture}: settled / not: {counts:?}");
+    }
 }

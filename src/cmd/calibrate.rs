@@ -40,10 +40,10 @@ pub fn samples(rows: &[Vec<skinflow_core::Message>], settled: &Settled) -> Vec<C
     for row in rows {
         let Some(m) = row.first() else { continue };
         let Some(c) = m.get::<Contacts>() else { continue };
-        if !settled.is_settled(m.header.t_s()) {
+        let synced = &c.image.src;
+        if !settled.is_settled(m.header.t_s(), synced) {
             continue;
         }
-        let synced = &c.image.src;
         let Some(truth) = synced.truth.as_ref() else { continue };
         if synced.no_load || truth.contacts.len() != 1 || !synced.dp_kpa.is_finite() {
             continue;
@@ -76,7 +76,7 @@ pub fn fit_params(text: &str) -> Result<CalibParams> {
 /// Runs the pipeline over a calibration recording and fits the calibration.
 pub fn fit(recording: &Path, params: &CalibParams, args: &PipelineArgs) -> Result<Calibrated> {
     let rec = require_truth(recording)?;
-    let settled = Settled::of(&rec, args.all_frames);
+    let settled = Settled::of(&rec, args);
     drop(rec);
     let spec = args.spec(recording.to_path_buf());
     if args.print_graph {

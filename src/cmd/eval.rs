@@ -12,7 +12,7 @@ use skinflow_contact::{Calibration, ImageGrid, Segmenter};
 use skinflow_nodes::payload::{Forces, Image};
 
 use super::calibrate::require_truth;
-use super::pipeline::{PipelineArgs, Settled};
+use super::pipeline::{PipelineArgs, Settled, SettledBy};
 
 /// (lane name, splitter, corrector strategy, label), in report order: the paper's four, then ours.
 pub const LANES: [(&str, &str, &str, &str); 9] = [
@@ -46,7 +46,7 @@ pub struct EvalOutcome {
 /// Runs every lane over the recording and feeds the evaluator.
 pub fn evaluate(recording: &Path, calib: &Path, args: &PipelineArgs) -> Result<EvalOutcome> {
     let rec = require_truth(recording)?;
-    let settled = Settled::of(&rec, args.all_frames);
+    let settled = Settled::of(&rec, args);
     drop(rec);
     let mut spec = args.spec(recording.to_path_buf());
     spec.calibration = Some(calib.to_path_buf());
@@ -61,6 +61,8 @@ pub fn evaluate(recording: &Path, calib: &Path, args: &PipelineArgs) -> Result<E
     let mut truth = Vec::new();
     let mut detected = Vec::new();
     let mut transitions = 0usize;
+    // Frames (loaded, not no-load) settled by each criterion: [truth only, pressure only, both, neither].
+    let mut agreement = [0usize; 4];
     let mut contact_rows = Vec::new();
     for row in &rows {
         let forces: Vec<&Forces> = row.iter().filter_map(|m| m.get::<Forces>()).collect();
@@ -70,7 +72,14 @@ pub fn evaluate(recording: &Path, calib: &Path, args: &PipelineArgs) -> Result<E
         if synced.no_load {
             continue;
         }
-        if !settled.is_settled(row[0].header.t_s()) {
+        let by_truth = settled.by_truth(row[0].header.t_s());
+        agreement[match (by_truth, synced.settled) {
+            (true, false) => 0,
+            (false, true) => 1,
+            (true, true) => 2,
+            (false, false) => 3,
+        }] += 1;
+        if !settled.is_settled(row[0].header.t_s(), synced) {
             transitions += 1;
             continue;
         }
@@ -122,11 +131,24 @@ pub fn evaluate(recording: &Path, calib: &Path, args: &PipelineArgs) -> Result<E
         }
     }
     if transitions > 0 {
+        let by = match settled.by {
+            SettledBy::Truth => "truth",
+            SettledBy::Pressure => "pressure",
+        };
         eprintln!(
-            "{}: {transitions} frames acquired while the load changed were not evaluated (--all-frames includes them)",
+            "{}: {transitions} frames acquired while the load changed (judged by {by}) were not evaluated (--all-frames includes them)",
             recording.display()
         );
     }
+    let [truth_only, pressure_only, both, neither] = agreement;
+    eprintln!(
+        "{}: settled frames by truth / by pressure: {} / {} of {} loaded frames ({both} both, {neither} neither, \
+         {truth_only} by truth only, {pressure_only} by pressure only)",
+        recording.display(),
+        truth_only + both,
+        pressure_only + both,
+        truth_only + pressure_only + both + neither,
+    );
     Ok(EvalOutcome { evaluator: ev, contact_rows, example })
 }
 

@@ -3,6 +3,7 @@
 use std::path::PathBuf;
 
 use clap::Args;
+use skinflow_nodes::payload::SyncedFrame;
 use skinflow_nodes::pipeline::PipelineSpec;
 
 /// Pipeline knobs; each is the TOML of the node's `params` table body.
@@ -23,6 +24,19 @@ pub struct PipelineArgs {
     /// Also use frames acquired while the load changed (see `Settled`).
     #[arg(long)]
     pub all_frames: bool,
+    /// How a frame acquired while the load changed is recognized: by the truth rows, or by
+    /// the `sync` node's pressure-only `settled` flag (what a live pipeline has).
+    #[arg(long, value_enum, default_value_t = SettledBy::Truth)]
+    pub settled_by: SettledBy,
+}
+
+/// Criterion for frames with a single load.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum SettledBy {
+    /// No truth row starts inside the frame's acquisition window.
+    Truth,
+    /// The sync node's flag: the window's pressure varied no more than its noise.
+    Pressure,
 }
 
 impl PipelineArgs {
@@ -46,10 +60,11 @@ pub struct Settled {
     truth_t: Vec<f64>,
     half_period_s: f64,
     pub all_frames: bool,
+    pub by: SettledBy,
 }
 
 impl Settled {
-    pub fn of(rec: &skinflow_record::read::Recording, all_frames: bool) -> Settled {
+    pub fn of(rec: &skinflow_record::read::Recording, args: &PipelineArgs) -> Settled {
         let eit_t = rec.eit.as_ref().map_or(&[][..], |e| &e.t_s[..]);
         let mut d: Vec<f64> = eit_t.windows(2).map(|w| w[1] - w[0]).filter(|d| *d > 0.0).collect();
         d.sort_by(f64::total_cmp);
@@ -57,15 +72,22 @@ impl Settled {
         Settled {
             truth_t: rec.truth.as_ref().map_or_else(Vec::new, |t| t.t_s.clone()),
             half_period_s: 0.5 * period,
-            all_frames,
+            all_frames: args.all_frames,
+            by: args.settled_by,
         }
     }
 
+    /// Whether a frame stamped `t_s` with this sync output is used (`--all-frames`: all are).
+    pub fn is_settled(&self, t_s: f64, synced: &SyncedFrame) -> bool {
+        self.all_frames
+            || match self.by {
+                SettledBy::Truth => self.by_truth(t_s),
+                SettledBy::Pressure => synced.settled,
+            }
+    }
+
     /// Whether no truth row starts within the acquisition window of a frame stamped `t_s`.
-    pub fn is_settled(&self, t_s: f64) -> bool {
-        if self.all_frames {
-            return true;
-        }
+    pub fn by_truth(&self, t_s: f64) -> bool {
         let (lo, hi) = (t_s - self.half_period_s, t_s + self.half_period_s);
         let i = self.truth_t.partition_point(|&t| t <= lo);
         self.truth_t.get(i).is_none_or(|&t| t > hi)

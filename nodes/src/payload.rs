@@ -63,6 +63,8 @@ pub struct SyncedFrame {
     /// The load did not change during the window, judged from the pressure alone (see the
     /// `sync` node): false while the sensor noise is unknown or with fewer than 2 samples.
     pub settled: bool,
+    /// The pressure noise SD the `settled` judgement used, kPa (NaN while unknown).
+    pub noise_kpa: f64,
     /// The no-load offset in use, kPa (NaN until a no-load sample was seen).
     pub p0_kpa: f64,
     /// The frame lies in the leading no-load period (a reference, not evaluated).

@@ -10,7 +10,7 @@ use skinflow_contact::correct::{CalibParams, Calibrated, FFit, Provenance, calib
 use skinflow_nodes::payload::Contacts;
 use skinflow_record::read::Recording;
 
-use super::pipeline::{PipelineArgs, Settled};
+use super::pipeline::{PipelineArgs, Settled, SettledBy};
 
 /// `sha256:<hex>` of a file's bytes.
 pub fn content_hash(path: &Path) -> Result<String> {
@@ -68,13 +68,19 @@ pub fn samples(rows: &[Vec<skinflow_core::Message>], settled: &Settled) -> Vec<C
 
 /// Parses the `--fit` TOML (fields of `CalibParams`; empty: the defaults).
 pub fn fit_params(text: &str) -> Result<CalibParams> {
-    let params: CalibParams = toml::from_str(text).map_err(|e| anyhow::anyhow!("--fit: {}", e.message()))?;
+    let params: CalibParams = toml::from_str(text).map_err(|e| anyhow::anyhow!("--fit: {e}"))?;
     params.validate().map_err(|e| anyhow::anyhow!("--fit: {e}"))?;
     Ok(params)
 }
 
 /// Runs the pipeline over a calibration recording and fits the calibration.
 pub fn fit(recording: &Path, params: &CalibParams, args: &PipelineArgs) -> Result<Calibrated> {
+    let (samples, provenance) = collect(recording, args)?;
+    calibrate(&samples, params, provenance).map_err(anyhow::Error::msg)
+}
+
+/// Runs the pipeline over a calibration recording: its calibration samples and provenance.
+pub fn collect(recording: &Path, args: &PipelineArgs) -> Result<(Vec<CalibSample>, Provenance)> {
     let rec = require_truth(recording)?;
     let settled = Settled::of(&rec, args);
     drop(rec);
@@ -84,6 +90,18 @@ pub fn fit(recording: &Path, params: &CalibParams, args: &PipelineArgs) -> Resul
     }
     let rows = spec.run().map_err(|e| anyhow::anyhow!("{}: pipeline: {e}", recording.display()))?;
     let samples = samples(&rows, &settled);
+    let unknown_noise = rows
+        .iter()
+        .filter_map(|r| r.first().and_then(|m| m.get::<Contacts>()))
+        .filter(|c| !c.image.src.no_load && c.image.src.noise_kpa.is_nan())
+        .count();
+    if args.settled_by == SettledBy::Pressure && unknown_noise > 0 {
+        eprintln!(
+            "{}: warning: {unknown_noise} frames came before the sync node knew the pressure noise (no no-load \
+             period or tare yet); by pressure they count as not settled",
+            recording.display()
+        );
+    }
     if samples.is_empty() {
         bail!("{}: no loaded single-contact frame with a detected contact to calibrate from", recording.display());
     }
@@ -92,7 +110,7 @@ pub fn fit(recording: &Path, params: &CalibParams, args: &PipelineArgs) -> Resul
         recording_hash: content_hash(recording)?,
         software_version: concat!("skinflow ", env!("CARGO_PKG_VERSION")).to_owned(),
     };
-    calibrate(&samples, params, provenance).map_err(anyhow::Error::msg)
+    Ok((samples, provenance))
 }
 
 pub fn run(recording: &Path, out: &Path, fit_toml: &str, args: &PipelineArgs) -> Result<()> {

@@ -63,6 +63,7 @@ pub fn evaluate(recording: &Path, calib: &Path, args: &PipelineArgs) -> Result<E
     let mut transitions = 0usize;
     // Frames (loaded, not no-load) settled by each criterion: [truth only, pressure only, both, neither].
     let mut agreement = [0usize; 4];
+    let mut unknown_noise = 0usize;
     let mut contact_rows = Vec::new();
     for row in &rows {
         let forces: Vec<&Forces> = row.iter().filter_map(|m| m.get::<Forces>()).collect();
@@ -73,6 +74,7 @@ pub fn evaluate(recording: &Path, calib: &Path, args: &PipelineArgs) -> Result<E
             continue;
         }
         let by_truth = settled.by_truth(row[0].header.t_s());
+        unknown_noise += usize::from(synced.noise_kpa.is_nan());
         agreement[match (by_truth, synced.settled) {
             (true, false) => 0,
             (false, true) => 1,
@@ -142,13 +144,20 @@ pub fn evaluate(recording: &Path, calib: &Path, args: &PipelineArgs) -> Result<E
     }
     let [truth_only, pressure_only, both, neither] = agreement;
     eprintln!(
-        "{}: settled frames by truth / by pressure: {} / {} of {} loaded frames ({both} both, {neither} neither, \
-         {truth_only} by truth only, {pressure_only} by pressure only)",
+        "{}: settled frames by truth / by pressure: {} / {} of {} frames after the no-load period ({both} both, \
+         {neither} neither, {truth_only} by truth only, {pressure_only} by pressure only)",
         recording.display(),
         truth_only + both,
         pressure_only + both,
         truth_only + pressure_only + both + neither,
     );
+    if unknown_noise > 0 {
+        eprintln!(
+            "{}: warning: {unknown_noise} frames came before the sync node knew the pressure noise (no no-load \
+             period or tare yet); by pressure they count as not settled",
+            recording.display()
+        );
+    }
     Ok(EvalOutcome { evaluator: ev, contact_rows, example })
 }
 

@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{Context as _, Result};
-use skinflow_contact::correct::{CalibParams, FFit};
+use skinflow_contact::correct::{CalibParams, FFit, calibrate};
 use skinflow_contact::eval::EvalReport;
 
 use super::pipeline::PipelineArgs;
@@ -55,7 +55,8 @@ pub fn run(scenes_dir: &Path, out: &Path, seed: u64, fit_toml: &str, args: &Pipe
         super::simulate::run(&scenes_dir.join(format!("{s}.toml")), &rec(s), seed, true)?;
     }
     let calib_path = out.join("calib.toml");
-    let fitted = super::calibrate::fit(&rec("calibration"), &params, args)?;
+    let (samples, provenance) = super::calibrate::collect(&rec("calibration"), args)?;
+    let fitted = calibrate(&samples, &params, provenance.clone()).map_err(anyhow::Error::msg)?;
     fitted.calibration.write(&calib_path).map_err(anyhow::Error::msg)?;
     let cal = &fitted.calibration;
     let mut reports: Vec<(&str, EvalReport)> = Vec::new();
@@ -169,7 +170,8 @@ pub fn run(scenes_dir: &Path, out: &Path, seed: u64, fit_toml: &str, args: &Pipe
         // The same run with the paper's fitting order, so the joint fit's effect is on record.
         let seq_params = CalibParams { f_fit: FFit::Sequential, ..params.clone() };
         let seq_path = out.join("calib-sequential.toml");
-        super::calibrate::fit(&rec("calibration"), &seq_params, args)?
+        calibrate(&samples, &seq_params, provenance)
+            .map_err(anyhow::Error::msg)?
             .calibration
             .write(&seq_path)
             .map_err(anyhow::Error::msg)?;

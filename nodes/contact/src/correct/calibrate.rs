@@ -144,6 +144,9 @@ pub enum CalibWarning {
     /// The sensitivity field could not be fitted; the compensated split is proportional.
     #[error("eit sensitivity field not fitted: sensitivity-compensated split equals proportional")]
     UniformSensitivity,
+    /// The joint f fit stopped early; the last consistent (f, g, b) is kept.
+    #[error("{what}: {problem}; the last consistent f and fields are kept")]
+    JointFit { what: &'static str, problem: &'static str },
     /// No centre location: the R^2 table's centre column is empty.
     #[error("no location with >= 3 distinct forces near the centre: centre R^2 not computed")]
     NoCenter,
@@ -318,6 +321,7 @@ pub fn calibrate(
         if params.f_fit == FFit::Joint {
             // Alternate at the chosen weights, then choose them again on the new f; the
             // weights settle in one or two passes.
+            let mut settled = false;
             for _ in 0..JOINT_PASSES {
                 let problem = JointProblem {
                     phi: &phis,
@@ -326,13 +330,32 @@ pub fn calibrate(
                     lambda_g: cv.lambdas[0],
                     lambda_b: cv.lambdas[1],
                 };
-                let Some(joint) = fit_joint(&problem, f_map) else { break };
-                let Some(next) = cv_fields(&joint.map, signal) else { break };
-                let settled = next.lambdas == cv.lambdas;
+                let Some(joint) = fit_joint(&problem, f_map) else {
+                    warnings.push(CalibWarning::JointFit { what, problem: "field step not solvable" });
+                    settled = true;
+                    break;
+                };
+                if !joint.converged {
+                    warnings.push(CalibWarning::JointFit { what, problem: "alternation did not converge" });
+                }
+                if joint.rounds == 0 {
+                    settled = true;
+                    break;
+                }
+                let Some(next) = cv_fields(&joint.map, signal) else {
+                    warnings.push(CalibWarning::JointFit { what, problem: "cross-validation on the joint f failed" });
+                    settled = true;
+                    break;
+                };
+                settled = next.lambdas == cv.lambdas;
                 (f_map, cv, f_fit) = (joint.map, next, FFit::Joint);
                 if settled {
                     break;
                 }
+            }
+            if !settled {
+                warnings
+                    .push(CalibWarning::JointFit { what, problem: "ridge weights still changing after the last pass" });
             }
         }
         let (gain, offset) = split_fields(&cv.coeffs);

@@ -47,8 +47,9 @@ pub enum FFit {
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct LocAware {
-    /// The f these fields multiply: the pooled map (`sequential`) or re-estimated with them
-    /// (`joint`); same signal range as the pooled map.
+    /// The f these fields multiply: the pooled map (`sequential`) or re-estimated with the
+    /// pneumatic (or EIT) location-aware fields (`joint`); same signal range as the pooled
+    /// map. The area-aware fields reuse the pneumatic one.
     pub map: SignalMap,
     /// How `map` was fitted.
     pub f_fit: FFit,
@@ -60,7 +61,8 @@ pub struct LocAware {
     pub lambda_g: Option<f64>,
     /// Ridge weight on ||beta||^2 (absent when the prior was used).
     pub lambda_b: Option<f64>,
-    /// Cross-validated RMSE of the fit, N (absent when the prior was used).
+    /// Cross-validated RMSE of the fit, N (absent when the prior was used). Only g and b are
+    /// held out: with the joint fit, f was fitted on every sample, so this is optimistic.
     pub cv_rmse_n: Option<f64>,
     /// True when the data were degenerate and the prior g = 1, b = 0 was kept.
     pub prior_fallback: bool,

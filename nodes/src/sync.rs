@@ -16,7 +16,7 @@
 //! tells: the frame is `settled` when the standard deviation of its window's samples is at most
 //! `settle_factor` times the sensor's noise, the standard deviation of the no-load samples
 //! (of the tare window after a `tare` command), and never below `settle_floor_kpa`. Until that
-//! noise is known (fewer than 2 no-load samples; `noise_kpa` is NaN) and with fewer than 2
+//! noise is known (fewer than 10 no-load samples; `noise_kpa` is NaN) and with fewer than 2
 //! window samples, `settled` is false. With 15 samples per window and the noise known exactly,
 //! pure noise exceeds 1.6 sigma about once in a thousand frames (chi-square, 14 degrees of
 //! freedom); the noise is estimated, so the real rate is higher (about 0.6 % of frames with
@@ -47,6 +47,9 @@ const PERIOD_HISTORY: usize = 15;
 /// No-load samples remembered for retraction: more than arrive between a contact's start and
 /// its truth row on any realistic link (20 Hz pressure: over 3 s).
 const P0_RECENT: usize = 64;
+/// Fewest samples a noise estimate needs before `settled` trusts it (an SD from fewer samples
+/// is too uncertain: with 5, pure noise would be flagged in about a fifth of the frames).
+const MIN_NOISE_SAMPLES: u64 = 10;
 /// Frames waiting for their window to close before the oldest is emitted regardless.
 const MAX_PENDING: usize = 2;
 
@@ -189,12 +192,12 @@ impl Sync {
     }
 
     /// The sensor's noise SD, kPa: of the no-load samples, or of a `tare` command's window;
-    /// `None` with fewer than 2 such samples.
+    /// `None` with fewer than [`MIN_NOISE_SAMPLES`] such samples.
     fn noise_kpa(&self) -> Option<f64> {
         if self.noise_fixed.is_some() {
             return self.noise_fixed;
         }
-        (self.p0_n >= 2).then(|| {
+        (self.p0_n >= MIN_NOISE_SAMPLES).then(|| {
             let n = self.p0_n as f64;
             ((self.p0_sq - self.p0_sum * self.p0_sum / n) / (n - 1.0)).max(0.0).sqrt()
         })
@@ -355,11 +358,12 @@ impl Sync {
         }
         let p0 = s / f64::from(n);
         let ss: f64 = window().map(|k| (k - p0) * (k - p0)).sum();
-        let noise = (n >= 2).then(|| (ss / f64::from(n - 1)).sqrt());
+        let noise = (u64::from(n) >= MIN_NOISE_SAMPLES).then(|| (ss / f64::from(n - 1)).sqrt());
         if noise.is_none() {
             tracing::warn!(
                 samples = n,
-                "sync: tare window has one sample: P0 re-tared, noise (for `settled`) not measured"
+                min = MIN_NOISE_SAMPLES,
+                "sync: tare window too short to measure the noise for `settled`: P0 re-tared, noise kept"
             );
         }
         tracing::info!(p0_kpa = p0, samples = n, noise_kpa = noise, "sync: re-tared P0");
@@ -471,9 +475,14 @@ mod tests {
     #[test]
     fn noise_is_the_sample_sd_of_the_no_load_samples_and_retracts_with_them() {
         let mut s = sync();
-        assert_eq!(s.noise_kpa(), None, "unknown before two samples");
+        assert_eq!(s.noise_kpa(), None, "unknown before any sample");
         // A large offset with a small spread: the shifted sums must not cancel.
-        let rest = [1000.01, 999.98, 1000.02, 999.99, 1000.0];
+        let rest = [1000.01, 999.98, 1000.02, 999.99, 1000.0, 1000.01, 999.98, 1000.02, 999.99, 1000.0];
+        for (i, &k) in rest.iter().enumerate().take(9) {
+            s.on_pressure(0.05 * i as f64, k);
+        }
+        assert_eq!(s.noise_kpa(), None, "too few samples to trust");
+        let mut s = sync();
         for (i, &k) in rest.iter().enumerate() {
             s.on_pressure(0.05 * i as f64, k);
         }
@@ -481,10 +490,10 @@ mod tests {
         assert!((s.p0() - 1000.0).abs() < 1e-9);
         // Two loaded samples arrive before the first contact's truth row, which then takes
         // them back out of P0 and the noise.
-        s.on_pressure(0.25, 1001.0);
-        s.on_pressure(0.30, 1002.0);
+        s.on_pressure(0.50, 1001.0);
+        s.on_pressure(0.55, 1002.0);
         s.on_truth(
-            0.25,
+            0.50,
             Arc::new(Truth { contacts: vec![TruthContact { x_mm: 0.0, y_mm: 0.0, force_n: 1.0, diameter_mm: 15.0 }] }),
         );
         assert!((s.noise_kpa().unwrap() - sd(&rest)).abs() < 1e-9);
@@ -513,9 +522,9 @@ mod tests {
         s.on_pressure(9.0, f64::NAN);
         assert!(s.tare().unwrap_err().to_string().contains("tare_window_s"));
         assert!(s.p0().is_nan());
-        let samples = [0.50, 0.52, 0.49, 0.51];
+        let samples = [0.50, 0.52, 0.49, 0.51, 0.50, 0.52, 0.49, 0.51, 0.50, 0.52, 0.49, 0.51];
         for (i, &k) in samples.iter().enumerate() {
-            s.on_pressure(10.0 + 0.1 * i as f64, k);
+            s.on_pressure(10.0 + 0.05 * i as f64, k);
         }
         s.tare().unwrap();
         assert!((s.p0() - 0.505).abs() < 1e-12);

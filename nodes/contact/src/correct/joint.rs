@@ -18,11 +18,14 @@
 //!   penalty, so only the priors pin the scale and the intercept of f (g stays near 1).
 //!
 //! The objective is ||A theta - F||^2 + lambda_g ||alpha - alpha0||^2 + lambda_b ||beta||^2 with
-//! A built from the monotone envelope of f ([`SignalMap`]). Where that envelope differs from the
-//! raw quadratic (a fit that bends over inside the signal range) the f step solves a slightly
-//! different problem, so a round can raise the objective: such a round is rejected and the loop
-//! stops. Every accepted round lowers the objective, and the result is never worse than the
-//! start; it is a stationary point only where the envelope is inactive.
+//! A built from the monotone envelope of f ([`SignalMap`]). Each round tries two f steps: one
+//! that keeps f non-decreasing on the signal range (where every sample lies), so that there the
+//! envelope is f itself and the step minimizes the objective exactly, and the unconstrained
+//! one, which can do better when the data bend over (the envelope then flattens f's top, and
+//! the step minimizes a neighbouring problem). The candidate with the lower objective is taken
+//! if it lowers the objective; otherwise the loop ends. Every accepted round lowers the
+//! objective and the result is never worse than the start, but where the envelope is active
+//! it need not be a stationary point.
 
 use super::field::NPHI;
 use super::fit::{Quadratic, ridge};
@@ -112,25 +115,66 @@ impl JointProblem<'_> {
         data + pen
     }
 
-    /// The f step: least squares of F_t - b_t = g_t q(s_t) over q's coefficients.
-    fn curve(&self, coeffs: &[f64]) -> Option<Quadratic> {
+    /// The f step: least squares of F_t - b_t = g_t q(s_t) over q's coefficients, with q
+    /// non-decreasing on the signal range (slope >= 0 at both ends; the slope is linear, so then
+    /// everywhere between). On the range the monotone envelope is then q itself, so this step
+    /// minimizes the objective exactly. Solved by active sets: the unconstrained fit, each end
+    /// constraint held with equality, or a constant; the feasible one with the least error.
+    fn curve(&self, coeffs: &[f64], range: (f64, f64), monotone: bool) -> Option<Quadratic> {
         let (alpha, beta) = coeffs.split_at(NPHI);
         let scale = self.signal.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
         if !(scale > 0.0 && scale.is_finite()) {
             return None;
         }
-        let mut design = Vec::with_capacity(3 * self.phi.len());
+        // Rows [g, g r, g r^2] with r = s / scale, and targets F - b.
+        let mut rows = Vec::with_capacity(self.phi.len());
         let mut y = Vec::with_capacity(self.phi.len());
         for ((p, &s), &f) in self.phi.iter().zip(self.signal).zip(self.force) {
             let g: f64 = p.iter().zip(alpha).map(|(a, b)| a * b).sum();
             let b: f64 = p.iter().zip(beta).map(|(a, b)| a * b).sum();
             let r = s / scale;
-            design.extend_from_slice(&[g, g * r, g * r * r]);
+            rows.push([g, g * r, g * r * r]);
             y.push(f - b);
         }
-        let c = ridge(&design, &y, 3, &[0.0; 3], &[0.0; 3])?;
-        let q = Quadratic { a0: c[0], a1: c[1] / scale, a2: c[2] / scale / scale };
-        [q.a0, q.a1, q.a2].iter().all(|v| v.is_finite()).then_some(q)
+        let (lo, hi) = (range.0 / scale, range.1 / scale);
+        // Slope of c0 + c1 r + c2 r^2 at both ends, with a little slack for rounding.
+        let feasible = |c: &[f64; 3]| {
+            let tol = 1e-12 * (c[1].abs() + c[2].abs());
+            c[1] + 2.0 * c[2] * lo >= -tol && c[1] + 2.0 * c[2] * hi >= -tol
+        };
+        // c = sum_k z_k basis_k: each face of the constraint set is such a subspace.
+        let faces: [&[[f64; 3]]; 4] = [
+            &[[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+            &[[1.0, 0.0, 0.0], [0.0, -2.0 * lo, 1.0]],
+            &[[1.0, 0.0, 0.0], [0.0, -2.0 * hi, 1.0]],
+            &[[1.0, 0.0, 0.0]],
+        ];
+        let mut best: Option<(f64, [f64; 3])> = None;
+        for basis in faces {
+            let k = basis.len();
+            let design: Vec<f64> = rows
+                .iter()
+                .flat_map(|row| basis.iter().map(|b| row.iter().zip(b).map(|(x, y)| x * y).sum::<f64>()))
+                .collect();
+            let Some(z) = ridge(&design, &y, k, &vec![0.0; k], &vec![0.0; k]) else { continue };
+            let mut c = [0.0; 3];
+            for (zk, b) in z.iter().zip(basis) {
+                c.iter_mut().zip(b).for_each(|(ci, bi)| *ci += zk * bi);
+            }
+            if !c.iter().all(|v| v.is_finite()) || (monotone && !feasible(&c)) {
+                continue;
+            }
+            let sse: f64 = rows
+                .iter()
+                .zip(&y)
+                .map(|(row, t)| (row.iter().zip(&c).map(|(a, b)| a * b).sum::<f64>() - t).powi(2))
+                .sum();
+            if best.is_none_or(|(e, _)| sse < e) {
+                best = Some((sse, c));
+            }
+        }
+        let (_, c) = best?;
+        Some(Quadratic { a0: c[0], a1: c[1] / scale, a2: c[2] / scale / scale })
     }
 }
 
@@ -165,17 +209,21 @@ pub fn fit_joint(problem: &JointProblem, start: SignalMap) -> Option<JointFit> {
     let mut rounds = 0;
     let mut converged = false;
     while rounds < MAX_ROUNDS {
-        let Some(quadratic) = problem.curve(&coeffs) else {
+        // Both f steps, each followed by the field and gauge steps; the lower objective wins.
+        let range = (map.signal_min, map.signal_max);
+        let candidate = |monotone: bool| {
+            let quadratic = problem.curve(&coeffs, range, monotone)?;
+            let mut next_map = SignalMap { quadratic, ..map };
+            let mut next = problem.fields(&next_map)?;
+            gauge(&mut next_map, &mut next);
+            let objective = problem.objective(&next_map, &next);
+            objective.is_finite().then_some((objective, next_map, next))
+        };
+        let best = [candidate(true), candidate(false)].into_iter().flatten().min_by(|a, b| a.0.total_cmp(&b.0));
+        let Some((next_objective, next_map, next)) = best else {
             converged = true;
             break;
         };
-        let mut next_map = SignalMap { quadratic, ..map };
-        let Some(mut next) = problem.fields(&next_map) else {
-            converged = true;
-            break;
-        };
-        gauge(&mut next_map, &mut next);
-        let next_objective = problem.objective(&next_map, &next);
         // A NaN objective compares false too, and ends the loop.
         if next_objective.partial_cmp(&objective) != Some(std::cmp::Ordering::Less) {
             converged = true;
@@ -258,6 +306,43 @@ mod tests {
         let (q, q0) = (fit.map.quadratic, start.quadratic);
         for (a, b) in [(q.a0, q0.a0), (q.a1, q0.a1), (q.a2, q0.a2)] {
             assert!((a - b).abs() < 1e-6 * (1.0 + b.abs()), "{q:?} vs {q0:?}");
+        }
+    }
+
+    #[test]
+    fn data_that_bend_over_get_a_monotone_step_and_never_a_worse_fit() {
+        // Forces that turn down inside the signal range (vertex at s = 2.8 of [0.1, 4.0]).
+        let (mut rows, mut s, mut f) = (Vec::new(), Vec::new(), Vec::new());
+        for iu in 0..5 {
+            for k in 1..=40 {
+                let sig = 0.1 * k as f64;
+                rows.push(phi(-1.0 + 0.5 * iu as f64, 0.0));
+                s.push(sig);
+                f.push(5.0 * sig - 0.9 * sig * sig);
+            }
+        }
+        let problem = JointProblem { phi: &rows, signal: &s, force: &f, lambda_g: 1e3, lambda_b: 1e3 };
+        let start = pooled(&s, &f);
+        assert!(start.quadratic.slope(start.signal_max) < 0.0, "the start bends over: {start:?}");
+        let (lo, hi) = (start.signal_min, start.signal_max);
+        // The monotone f step, from g = 1, b = 0: the least-squares quadratic would turn down,
+        // so the constraint at the top end is active and holds the slope there at 0.
+        let mut coeffs = vec![0.0; 2 * NPHI];
+        coeffs[0] = 1.0;
+        let c = problem.curve(&coeffs, (lo, hi), true).unwrap();
+        assert!(c.slope(hi).abs() <= 1e-9 * c.a1.abs() && c.slope(lo) > 0.0, "{c:?}");
+        let free = problem.curve(&coeffs, (lo, hi), false).unwrap();
+        assert!(free.slope(hi) < 0.0, "{free:?}");
+        // The fit takes whichever step lowers the envelope objective, never a worse one, and
+        // its map (an envelope) never turns down.
+        let fit = fit_joint(&problem, start).unwrap();
+        assert!(fit.objective <= fit.objective_start, "{fit:?}");
+        let mut prev = f64::NEG_INFINITY;
+        for k in 0..=500 {
+            let v = 0.01 * k as f64;
+            let y = fit.map.eval(v).0;
+            assert!(y >= prev - 1e-12, "map turns down at {v}: {y} after {prev}");
+            prev = y;
         }
     }
 

@@ -339,9 +339,7 @@ impl Sync {
         });
         out.send(0, Message::from_arc(Header { origin: ctx.index(), ..h }, payload))
     }
-}
 
-impl Sync {
     /// Re-tares P0 and the noise from the last `tare_window_s` seconds of pressure.
     fn tare(&mut self) -> Result<(), NodeError> {
         let Some(&(last, _)) = self.pressure.back() else {

@@ -10,7 +10,7 @@ use skinflow_contact::correct::{CalibParams, Calibrated, FFit, Provenance, calib
 use skinflow_nodes::payload::Contacts;
 use skinflow_record::read::Recording;
 
-use super::pipeline::{PipelineArgs, Settled, SettledBy};
+use super::pipeline::{PipelineArgs, Settled};
 
 /// `sha256:<hex>` of a file's bytes.
 pub fn content_hash(path: &Path) -> Result<String> {
@@ -95,13 +95,7 @@ pub fn collect(recording: &Path, args: &PipelineArgs) -> Result<(Vec<CalibSample
         .filter_map(|r| r.first().and_then(|m| m.get::<Contacts>()))
         .filter(|c| !c.image.src.no_load && c.image.src.noise_kpa.is_nan())
         .count();
-    if args.settled_by == SettledBy::Pressure && unknown_noise > 0 {
-        eprintln!(
-            "{}: warning: {unknown_noise} frames came before the sync node knew the pressure noise (no no-load \
-             period or tare yet); by pressure they count as not settled",
-            recording.display()
-        );
-    }
+    settled.warn_unknown_noise(recording, unknown_noise);
     if samples.is_empty() {
         bail!("{}: no loaded single-contact frame with a detected contact to calibrate from", recording.display());
     }

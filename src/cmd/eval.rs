@@ -151,13 +151,7 @@ pub fn evaluate(recording: &Path, calib: &Path, args: &PipelineArgs) -> Result<E
         pressure_only + both,
         truth_only + pressure_only + both + neither,
     );
-    if unknown_noise > 0 {
-        eprintln!(
-            "{}: warning: {unknown_noise} frames came before the sync node knew the pressure noise (no no-load \
-             period or tare yet); by pressure they count as not settled",
-            recording.display()
-        );
-    }
+    settled.warn_unknown_noise(recording, unknown_noise);
     Ok(EvalOutcome { evaluator: ev, contact_rows, example })
 }
 

@@ -86,6 +86,17 @@ impl Settled {
             }
     }
 
+    /// Warns when the pressure criterion met frames the sync node could not judge yet.
+    pub fn warn_unknown_noise(&self, recording: &std::path::Path, frames: usize) {
+        if self.by == SettledBy::Pressure && !self.all_frames && frames > 0 {
+            eprintln!(
+                "{}: warning: {frames} frames came before the sync node knew the pressure noise (no no-load \
+                 period or tare yet); by pressure they count as not settled",
+                recording.display()
+            );
+        }
+    }
+
     /// Whether no truth row starts within the acquisition window of a frame stamped `t_s`.
     pub fn by_truth(&self, t_s: f64) -> bool {
         let (lo, hi) = (t_s - self.half_period_s, t_s + self.half_period_s);

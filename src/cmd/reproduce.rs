@@ -59,10 +59,12 @@ pub fn run(scenes_dir: &Path, out: &Path, seed: u64, fit_toml: &str, args: &Pipe
     let fitted = calibrate(&samples, &params, provenance.clone()).map_err(anyhow::Error::msg)?;
     fitted.calibration.write(&calib_path).map_err(anyhow::Error::msg)?;
     let cal = &fitted.calibration;
+    let report_of = |scene: &str, calib: &Path| -> Result<EvalReport> {
+        Ok(super::eval::evaluate(&rec(scene), calib, args)?.evaluator.report(&rec(scene).display().to_string()))
+    };
     let mut reports: Vec<(&str, EvalReport)> = Vec::new();
     for s in &SCENES[1..] {
-        let o = super::eval::evaluate(&rec(s), &calib_path, args)?;
-        let r = o.evaluator.report(&rec(s).display().to_string());
+        let r = report_of(s, &calib_path)?;
         std::fs::write(out.join(format!("{s}.json")), r.to_json())?;
         println!("== {s}\n{r}");
         reports.push((s, r));
@@ -153,7 +155,7 @@ pub fn run(scenes_dir: &Path, out: &Path, seed: u64, fit_toml: &str, args: &Pipe
     for (name, s) in &multi.strategies {
         let pm = paper::MULTI.iter().find(|(n, _)| n == name).map_or("-".into(), |(_, v)| format!("{v:.2}"));
         let pr = paper::MULTI_REL.iter().find(|(n, _)| n == name).map_or("-".into(), |(_, v)| format!("{v:.2}"));
-        let ours = multi.multi_contact.as_ref().and_then(|m| m.per_contact_rmse_n.get(name).copied().flatten());
+        let ours = per_contact(multi, name);
         let _ = writeln!(md, "| {name} | {pm} | {} | {pr} | {} |", f(ours, 2), f(s.relative_error_pct, 1));
     }
     let l = &multi.localization;
@@ -175,16 +177,8 @@ pub fn run(scenes_dir: &Path, out: &Path, seed: u64, fit_toml: &str, args: &Pipe
             .calibration
             .write(&seq_path)
             .map_err(anyhow::Error::msg)?;
-        let seq_cross = super::eval::evaluate(&rec("cross-diameter"), &seq_path, args)?
-            .evaluator
-            .report(&rec("cross-diameter").display().to_string());
-        let seq_multi = super::eval::evaluate(&rec("multi-contact"), &seq_path, args)?
-            .evaluator
-            .report(&rec("multi-contact").display().to_string());
+        let (seq_cross, seq_multi) = (report_of("cross-diameter", &seq_path)?, report_of("multi-contact", &seq_path)?);
         let la = "pneumatic-locaware";
-        let cross_of = |r: &EvalReport| r.strategies.get(la).and_then(|s| s.rmse_n);
-        let multi_of =
-            |r: &EvalReport| r.multi_contact.as_ref().and_then(|m| m.per_contact_rmse_n.get(la).copied().flatten());
         let per_d = |r: &EvalReport| {
             r.strategies.get(la).map_or("-".into(), |s| {
                 s.per_diameter_rmse_n.values().map(|v| f(Some(*v), 2)).collect::<Vec<_>>().join(" / ")
@@ -201,7 +195,7 @@ pub fn run(scenes_dir: &Path, out: &Path, seed: u64, fit_toml: &str, args: &Pipe
             writeln!(md, "| f fit | cross-diameter RMSE, N | 10 / 20 / 25 mm | multi-contact per-contact RMSE, N |");
         let _ = writeln!(md, "|---|---|---|---|");
         for (name, c, m) in [("joint", cross, multi), ("sequential (paper's order)", &seq_cross, &seq_multi)] {
-            let _ = writeln!(md, "| {name} | {} | {} | {} |", f(cross_of(c), 3), per_d(c), f(multi_of(m), 3));
+            let _ = writeln!(md, "| {name} | {} | {} | {} |", f(rmse(c, la), 3), per_d(c), f(per_contact(m, la), 3));
         }
     }
     goals(&mut md, cross, single, multi);
@@ -217,11 +211,19 @@ pub fn run(scenes_dir: &Path, out: &Path, seed: u64, fit_toml: &str, args: &Pipe
     Ok(())
 }
 
+/// A strategy's RMSE on a report, N.
+fn rmse(r: &EvalReport, name: &str) -> Option<f64> {
+    r.strategies.get(name).and_then(|s| s.rmse_n)
+}
+
+/// A strategy's multi-contact per-contact RMSE on a report, N.
+fn per_contact(r: &EvalReport, name: &str) -> Option<f64> {
+    r.multi_contact.as_ref().and_then(|m| m.per_contact_rmse_n.get(name).copied().flatten())
+}
+
 /// The goals for this report, each checked against the figures above.
 fn goals(md: &mut String, cross: &EvalReport, single: &EvalReport, multi: &EvalReport) {
-    let rmse = |r: &EvalReport, name: &str| r.strategies.get(name).and_then(|s| s.rmse_n);
-    let per_contact =
-        |name: &str| multi.multi_contact.as_ref().and_then(|m| m.per_contact_rmse_n.get(name).copied().flatten());
+    let per_contact = |name: &str| per_contact(multi, name);
     // Best of skinflow's strategies (those the paper does not have) on a figure.
     let best = |fig: &dyn Fn(&str) -> Option<f64>| {
         cross

@@ -16,7 +16,7 @@ use super::calibration::{
     AreaAware, Calibration, FFit, FORMAT, FORMAT_VERSION, LocAware, Provenance, R2Table, SignalCalibration,
     TrainingSummary,
 };
-use super::field::{NPHI, QuadField, Region, phi};
+use super::field::{NPHI, QuadField, Region, locaware_design, phi};
 use super::fit::{CvSearch, RidgeProblem, cross_validate, fit_quadratic, r_squared};
 use super::forward::{ForwardModel, ForwardSample};
 use super::joint::{JointProblem, fit_joint};
@@ -194,21 +194,6 @@ fn split_fields(coeffs: &[f64]) -> (QuadField, QuadField) {
     (QuadField { coeffs: a }, QuadField { coeffs: b })
 }
 
-/// Rows [f(s) Phi, Phi] (plus [f(s) a, a] when `rel_area` is given).
-fn design(samples: &[CalibSample], region: &Region, fs: &[f64], rel_area: Option<&[f64]>) -> Vec<f64> {
-    let mut d = Vec::new();
-    for (t, s) in samples.iter().enumerate() {
-        let n = region.normalize(s.x_mm, s.y_mm);
-        let p = phi(n.u, n.v);
-        d.extend(p.iter().map(|v| v * fs[t]));
-        d.extend_from_slice(&p);
-        if let Some(a) = rel_area {
-            d.extend_from_slice(&[fs[t] * a[t], a[t]]);
-        }
-    }
-    d
-}
-
 /// Most (joint fit, CV) passes of the joint f fit.
 const JOINT_PASSES: usize = 4;
 
@@ -302,7 +287,7 @@ pub fn calibrate(
     // g, b by CV-chosen ridge on a fixed f.
     let cv_fields = |map: &SignalMap, signal: &[f64]| {
         let fs: Vec<f64> = signal.iter().map(|&s| map.eval(s).0).collect();
-        let d = design(&samples, &region, &fs, None);
+        let d = locaware_design(&phis, &fs, None);
         let prior = prior_vec(2 * NPHI);
         let problem =
             RidgeProblem { design: &d, y: &force, p: 2 * NPHI, prior: &prior, base_penalty: &[0.0; 2 * NPHI] };
@@ -391,7 +376,7 @@ pub fn calibrate(
     if let (false, Some(lg), Some(lb)) = (degenerate, pneumatic.locaware.lambda_g, pneumatic.locaware.lambda_b) {
         let f_map = pneumatic.locaware.map;
         let fs: Vec<f64> = dp.iter().map(|&s| f_map.eval(s).0).collect();
-        let d = design(&samples, &region, &fs, Some(&rel));
+        let d = locaware_design(&phis, &fs, Some(&rel));
         let p = 2 * NPHI + 2;
         let prior = prior_vec(p);
         let mut base = vec![lg; p];

@@ -15,6 +15,26 @@ pub fn phi(u: f64, v: f64) -> [f64; NPHI] {
     [1.0, u, v, u * u, u * v, v * v]
 }
 
+/// Design rows of the location-aware model F = g f + b: `[f_t Phi_t, Phi_t]` per sample, plus
+/// `[f_t a_t, a_t]` when contact-area terms `rel_area` are given; row-major.
+pub fn locaware_design(phis: &[[f64; NPHI]], fs: &[f64], rel_area: Option<&[f64]>) -> Vec<f64> {
+    let width = 2 * NPHI + if rel_area.is_some() { 2 } else { 0 };
+    let mut d = Vec::with_capacity(phis.len() * width);
+    for (t, (p, &f)) in phis.iter().zip(fs).enumerate() {
+        d.extend(p.iter().map(|v| v * f));
+        d.extend_from_slice(p);
+        if let Some(a) = rel_area {
+            d.extend_from_slice(&[f * a[t], a[t]]);
+        }
+    }
+    d
+}
+
+/// `Phi . c` for the first `NPHI` coefficients `c`: a quadratic field's value from its basis row.
+pub fn field_value(phi_row: &[f64; NPHI], coeffs: &[f64]) -> f64 {
+    phi_row.iter().zip(coeffs).map(|(p, c)| p * c).sum()
+}
+
 /// The calibrated region: an axis-aligned box in mm.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -123,7 +143,7 @@ impl QuadField {
 
     /// Value at normalized coordinates.
     pub fn at(&self, u: f64, v: f64) -> f64 {
-        phi(u, v).iter().zip(&self.coeffs).map(|(p, c)| p * c).sum()
+        field_value(&phi(u, v), &self.coeffs)
     }
 }
 

@@ -27,7 +27,7 @@
 //! objective and the result is never worse than the start, but where the envelope is active
 //! it need not be a stationary point.
 
-use super::field::NPHI;
+use super::field::{NPHI, field_value, locaware_design};
 use super::fit::{Quadratic, ridge};
 use super::map::SignalMap;
 
@@ -81,20 +81,10 @@ impl JointProblem<'_> {
         p
     }
 
-    /// Rows [f(s_t) Phi_t, Phi_t].
-    fn design(&self, map: &SignalMap) -> Vec<f64> {
-        let mut d = Vec::with_capacity(self.phi.len() * 2 * NPHI);
-        for (p, &s) in self.phi.iter().zip(self.signal) {
-            let f = map.eval(s).0;
-            d.extend(p.iter().map(|v| v * f));
-            d.extend_from_slice(p);
-        }
-        d
-    }
-
     /// The field step: the paper's ridge with f fixed.
     fn fields(&self, map: &SignalMap) -> Option<Vec<f64>> {
-        ridge(&self.design(map), self.force, 2 * NPHI, &self.penalty(), &Self::prior())
+        let fs: Vec<f64> = self.signal.iter().map(|&s| map.eval(s).0).collect();
+        ridge(&locaware_design(self.phi, &fs, None), self.force, 2 * NPHI, &self.penalty(), &Self::prior())
     }
 
     fn objective(&self, map: &SignalMap, coeffs: &[f64]) -> f64 {
@@ -104,11 +94,7 @@ impl JointProblem<'_> {
             .iter()
             .zip(self.signal)
             .zip(self.force)
-            .map(|((p, &s), &f)| {
-                let g: f64 = p.iter().zip(alpha).map(|(a, b)| a * b).sum();
-                let b: f64 = p.iter().zip(beta).map(|(a, b)| a * b).sum();
-                (g * map.eval(s).0 + b - f).powi(2)
-            })
+            .map(|((p, &s), &f)| (field_value(p, alpha) * map.eval(s).0 + field_value(p, beta) - f).powi(2))
             .sum();
         let prior = Self::prior();
         let pen: f64 = self.penalty().iter().zip(coeffs).zip(prior).map(|((l, c), c0)| l * (c - c0).powi(2)).sum();
@@ -130,11 +116,9 @@ impl JointProblem<'_> {
         let mut rows = Vec::with_capacity(self.phi.len());
         let mut y = Vec::with_capacity(self.phi.len());
         for ((p, &s), &f) in self.phi.iter().zip(self.signal).zip(self.force) {
-            let g: f64 = p.iter().zip(alpha).map(|(a, b)| a * b).sum();
-            let b: f64 = p.iter().zip(beta).map(|(a, b)| a * b).sum();
-            let r = s / scale;
+            let (g, r) = (field_value(p, alpha), s / scale);
             rows.push([g, g * r, g * r * r]);
-            y.push(f - b);
+            y.push(f - field_value(p, beta));
         }
         let (lo, hi) = (range.0 / scale, range.1 / scale);
         // Slope of c0 + c1 r + c2 r^2 at both ends, with a little slack for rounding.
@@ -358,11 +342,7 @@ mod tests {
         let predict = |m: &SignalMap, c: &[f64]| -> Vec<f64> {
             rows.iter()
                 .zip(&s)
-                .map(|(p, &v)| {
-                    let g: f64 = p.iter().zip(&c[..NPHI]).map(|(a, b)| a * b).sum();
-                    let b: f64 = p.iter().zip(&c[NPHI..]).map(|(a, b)| a * b).sum();
-                    g * m.eval(v).0 + b
-                })
+                .map(|(p, &v)| field_value(p, &c[..NPHI]) * m.eval(v).0 + field_value(p, &c[NPHI..]))
                 .collect()
         };
         let before = predict(&map, &coeffs);

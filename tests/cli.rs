@@ -2,44 +2,13 @@
 //! small fixture scenes (tests/fixtures). Each test works in its own temporary directory and
 //! points the reconstruction-matrix cache there.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::path::Path;
 
-fn bin() -> &'static str {
-    env!("CARGO_BIN_EXE_skinflow")
-}
+use super::support::{fixture, ok, root, skinflow};
 
-fn fixture(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures").join(name)
-}
-
-/// A fresh directory under the system temp dir, unique per test.
-fn workdir(test: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("skinflow-cli-{}-{test}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
-
-fn skinflow(dir: &Path, args: &[&str]) -> Output {
-    Command::new(bin())
-        .args(args)
-        .current_dir(dir)
-        .env("XDG_CACHE_HOME", dir.join("cache"))
-        .env("RUST_LOG", "warn")
-        .output()
-        .unwrap()
-}
-
-fn ok(out: &Output) -> String {
-    let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
-    assert!(
-        out.status.success(),
-        "exit {:?}\nstdout:\n{stdout}\nstderr:\n{}",
-        out.status,
-        String::from_utf8_lossy(&out.stderr)
-    );
-    stdout
+/// A fresh work directory for one test of this module.
+fn workdir(test: &str) -> std::path::PathBuf {
+    super::support::workdir("cli", test)
 }
 
 fn simulate(dir: &Path, scene: &str, out: &str) {
@@ -207,7 +176,7 @@ fn a_missing_recording_stops_run_before_data_flows() {
 #[test]
 fn reproduce_pins_the_paper_baselines() {
     let d = workdir("reproduce");
-    let scenes = Path::new(env!("CARGO_MANIFEST_DIR")).join("graphs/scenes");
+    let scenes = root().join("graphs/scenes");
     let out = skinflow(&d, &["reproduce", "--out", "r", "--scenes", scenes.to_str().unwrap()]);
     ok(&out);
     let calib: toml::Table = std::fs::read_to_string(d.join("r/calib.toml")).unwrap().parse().unwrap();

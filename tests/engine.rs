@@ -9,17 +9,17 @@ use std::time::{Duration, Instant};
 
 const LIMIT: Duration = Duration::from_secs(60);
 
+use super::support::{bin, text};
+
 fn skinflow() -> Command {
-    let mut c = Command::new(env!("CARGO_BIN_EXE_skinflow"));
+    let mut c = Command::new(bin());
     c.env("RUST_LOG", "info");
     c
 }
 
+/// A fresh work directory for one test of this module.
 fn temp_dir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("skinflow-engine-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+    super::support::workdir("engine", name)
 }
 
 fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
@@ -40,10 +40,6 @@ fn run_to_end(cmd: &mut Command) -> Output {
         std::thread::sleep(Duration::from_millis(10));
     }
     child.wait_with_output().unwrap()
-}
-
-fn text(b: &[u8]) -> String {
-    String::from_utf8_lossy(b).into_owned()
 }
 
 fn rows(path: &Path) -> Vec<(u64, u64)> {

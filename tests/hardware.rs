@@ -7,25 +7,25 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
+use super::support::{bin, root, text};
+
+/// A fresh work directory for one test of this module.
 fn workdir(test: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("skinflow-hw-{}-{test}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+    super::support::workdir("hw", test)
 }
 
 fn fixture(name: &str) -> String {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures").join(name).to_string_lossy().into_owned()
+    super::support::fixture(name).to_string_lossy().into_owned()
 }
 
 fn calib() -> String {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("graphs/calib/paper.toml").to_string_lossy().into_owned()
+    root().join("graphs/calib/paper.toml").to_string_lossy().into_owned()
 }
 
 fn inspect(dir: &Path, file: &str) -> String {
-    let out = Command::new(env!("CARGO_BIN_EXE_skinflow")).args(["inspect", file]).current_dir(dir).output().unwrap();
-    assert!(out.status.success(), "inspect failed: {}", String::from_utf8_lossy(&out.stderr));
-    String::from_utf8_lossy(&out.stdout).into_owned()
+    let out = Command::new(bin()).args(["inspect", file]).current_dir(dir).output().unwrap();
+    assert!(out.status.success(), "inspect failed: {}", text(&out.stderr));
+    text(&out.stdout)
 }
 
 /// The row count of a stream in `skinflow inspect` output.
@@ -39,7 +39,7 @@ fn rows(summary: &str, stream: &str) -> u64 {
 fn serial_sources_drive_the_pipeline_through_emulated_boards() {
     let d = workdir("emulate");
     let emu_dir = d.join("emu");
-    let mut emu = Command::new(env!("CARGO_BIN_EXE_skinflow"))
+    let mut emu = Command::new(bin())
         .args(["emulate", &fixture("tiny-eval.toml"), "--dir", emu_dir.to_str().unwrap()])
         .env("RUST_LOG", "warn")
         .stdout(Stdio::piped())
@@ -77,7 +77,7 @@ fn serial_sources_drive_the_pipeline_through_emulated_boards() {
         calib()
     );
     std::fs::write(d.join("g.toml"), graph).unwrap();
-    let run = Command::new(env!("CARGO_BIN_EXE_skinflow"))
+    let run = Command::new(bin())
         .args(["run", "g.toml", "--for", "1000", "--stats-json", "stats.json"])
         .current_dir(&d)
         .env("RUST_LOG", "warn")
@@ -136,7 +136,7 @@ fn a_logging_run_killed_with_sigkill_leaves_a_readable_file() {
     // The simulator alone is fast; loop it through a replay would be faster still, but the
     // point is a logger in the middle of writing: kill it while the scene is being logged.
     std::fs::write(d.join("g.toml"), graph).unwrap();
-    let child = Command::new(env!("CARGO_BIN_EXE_skinflow"))
+    let child = Command::new(bin())
         .args(["run", "g.toml"])
         .current_dir(&d)
         .env("RUST_LOG", "info")

@@ -7,6 +7,8 @@ use std::os::unix::net::UnixStream;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
+use super::support::{bin, workdir};
+
 fn graph(scale_params: &str, out: &str) -> String {
     format!(
         "[[node]]\nid = \"src\"\nkind = \"counter\"\nparams = {{ count = 1500, rate_hz = 500.0 }}\n\
@@ -27,13 +29,11 @@ fn ask(sock: &std::path::Path, req: &str) -> serde_json::Value {
 
 #[test]
 fn watch_swaps_edited_nodes_and_the_control_socket_answers() {
-    let d = std::env::temp_dir().join(format!("skinflow-live-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
+    let d = workdir("live", "watch");
     let g = d.join("g.toml");
     let sock = d.join("ctl.sock");
     std::fs::write(&g, graph("factor = 2", "out.csv")).unwrap();
-    let child = Command::new(env!("CARGO_BIN_EXE_skinflow"))
+    let child = Command::new(bin())
         .args(["run", g.to_str().unwrap(), "--watch", "--control", sock.to_str().unwrap()])
         .env("RUST_LOG", "warn")
         .stdout(Stdio::piped())

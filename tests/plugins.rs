@@ -9,13 +9,7 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-fn bin() -> &'static str {
-    env!("CARGO_BIN_EXE_skinflow")
-}
-
-fn root() -> &'static Path {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-}
+use super::support::{bin, ok, root, skinflow, text};
 
 /// target/<profile>/, where cargo puts the binary and the cdylibs.
 fn profile_dir() -> PathBuf {
@@ -49,34 +43,13 @@ fn plugin(package: &str) -> PathBuf {
     lib
 }
 
+/// A fresh work directory for one test of this module.
 fn workdir(test: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("skinflow-plugins-{}-{test}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
-
-fn skinflow(dir: &Path, args: &[&str]) -> Output {
-    Command::new(bin())
-        .args(args)
-        .current_dir(dir)
-        .env("XDG_CACHE_HOME", dir.join("cache"))
-        .env("RUST_LOG", "warn")
-        .output()
-        .unwrap()
-}
-
-fn stdout(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stdout).into_owned()
+    super::support::workdir("plugins", test)
 }
 
 fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
-
-fn ok(o: &Output) -> String {
-    assert!(o.status.success(), "exit {:?}\nstdout:\n{}\nstderr:\n{}", o.status, stdout(o), stderr(o));
-    stdout(o)
+    text(&o.stderr)
 }
 
 fn quoted(p: &Path) -> String {

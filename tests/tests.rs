@@ -5,3 +5,4 @@ mod engine;
 mod hardware;
 mod live;
 mod plugins;
+mod support;

@@ -6,6 +6,7 @@
 //! wires each edge as a bounded lock-free queue ([`edge`]) and runs them on a worker pool with
 //! real-time options, or in deterministic lockstep. [`stats`] reports what happened.
 
+pub mod alloc_count;
 pub mod edge;
 pub mod error;
 pub mod graph;

@@ -6,57 +6,12 @@
 //! which must be zero. The toy nodes fill payloads from a `Recycler`, so every allocation left
 //! would be the engine's.
 
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::cell::Cell;
-use std::sync::atomic::{AtomicU64, Ordering::Relaxed};
-
+use skinflow_core::alloc_count::CountingAlloc;
 use skinflow_core::graph::SourceFile;
 use skinflow_core::{GraphSpec, Mode, Registry, RunOptions, run};
 
-struct Counting;
-
-/// Allocations by every thread.
-static ALLOCS: AtomicU64 = AtomicU64::new(0);
-
-thread_local! {
-    /// Allocations by this thread (const-initialised: reading it never allocates).
-    static MINE: Cell<u64> = const { Cell::new(0) };
-}
-
-fn count() {
-    ALLOCS.fetch_add(1, Relaxed);
-    MINE.with(|m| m.set(m.get() + 1));
-}
-
-// SAFETY: every call forwards to the system allocator with the caller's arguments unchanged;
-// the only addition is counter increments, which neither allocate nor panic.
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        count();
-        // SAFETY: forwarded unchanged (see above).
-        unsafe { System.alloc(layout) }
-    }
-
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        // SAFETY: `ptr` came from `System.alloc` with this layout.
-        unsafe { System.dealloc(ptr, layout) }
-    }
-
-    unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
-        count();
-        // SAFETY: forwarded unchanged.
-        unsafe { System.alloc_zeroed(layout) }
-    }
-
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        count();
-        // SAFETY: forwarded unchanged.
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-}
-
 #[global_allocator]
-static GLOBAL: Counting = Counting;
+static GLOBAL: CountingAlloc = CountingAlloc;
 
 /// Counter -> scale x4 -> null, lossless edges of capacity 16 (the toy recyclers hold 256
 /// buffers, more than can be in flight).
@@ -125,9 +80,9 @@ fn chain(count: u64, mode: Mode) -> GraphSpec {
 /// whatever the test harness's own threads happen to do meanwhile).
 fn allocations(count: u64, mode: Mode) -> (u64, u64) {
     let spec = chain(count, mode);
-    let (all, mine) = (ALLOCS.load(Relaxed), MINE.with(Cell::get));
+    let (all, mine) = (CountingAlloc::total(), CountingAlloc::this_thread());
     let report = run(&spec, &RunOptions::default()).unwrap();
-    let (all, mine) = (ALLOCS.load(Relaxed) - all, MINE.with(Cell::get) - mine);
+    let (all, mine) = (CountingAlloc::total() - all, CountingAlloc::this_thread() - mine);
     assert!(report.failures.is_empty(), "{:?}", report.failures);
     let sink = report.stats.node("sink").unwrap();
     assert_eq!(sink.msgs_in + report.stats.total_drops(), count);

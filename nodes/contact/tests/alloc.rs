@@ -6,35 +6,11 @@ mod synth;
 use skinflow_contact::correct::calibrate::{CalibParams, calibrate};
 use skinflow_contact::correct::calibration::Provenance;
 use skinflow_contact::{ForceEstimate, ImageGrid, SegmentParams, Segmenter, Splitter, Strategy};
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::sync::atomic::{AtomicUsize, Ordering};
 
-struct Counting;
-
-static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
-
-// SAFETY: forwards every call unchanged to the system allocator; it only counts calls.
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
-        // SAFETY: same contract as the caller's.
-        unsafe { System.alloc(layout) }
-    }
-
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        // SAFETY: `ptr` came from `System.alloc` above with this layout.
-        unsafe { System.dealloc(ptr, layout) }
-    }
-
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
-        // SAFETY: `ptr` came from this allocator with `layout`.
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-}
+use skinflow_core::alloc_count::CountingAlloc;
 
 #[global_allocator]
-static GLOBAL: Counting = Counting;
+static GLOBAL: CountingAlloc = CountingAlloc;
 
 #[test]
 fn segment_split_and_correct_do_not_allocate_per_frame() {
@@ -52,7 +28,7 @@ fn segment_split_and_correct_do_not_allocate_per_frame() {
     let mut forces = [ForceEstimate::default(); 8];
     // Warm-up pass (nothing lazily allocated should remain after it).
     seg.segment_into(&images[0], &mut contacts).unwrap();
-    let before = ALLOCATIONS.load(Ordering::SeqCst);
+    let before = CountingAlloc::total();
     for _ in 0..3 {
         for img in &images {
             seg.segment_into(img, &mut contacts).unwrap();
@@ -63,7 +39,7 @@ fn segment_split_and_correct_do_not_allocate_per_frame() {
             }
         }
     }
-    let after = ALLOCATIONS.load(Ordering::SeqCst);
+    let after = CountingAlloc::total();
     assert_eq!(after - before, 0, "per-frame path allocated {} times", after - before);
     assert_eq!(contacts.len(), 0, "last image is empty");
 }

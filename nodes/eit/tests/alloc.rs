@@ -3,34 +3,11 @@
 
 use skinflow_eit::mask::ChannelMask;
 use skinflow_eit::{MeshParams, Precision, ReconParams, Reconstructor, Sensor};
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::sync::atomic::{AtomicUsize, Ordering};
 
-struct Counting;
-
-static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
-
-// SAFETY: forwards every call unchanged to the system allocator and only counts; the layout
-// contracts of `GlobalAlloc` pass through untouched.
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
-        // SAFETY: same layout contract as our caller's.
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        // SAFETY: `ptr` came from `System.alloc` with this layout.
-        unsafe { System.dealloc(ptr, layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
-        // SAFETY: `ptr` came from `System.alloc` with `layout`.
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-}
+use skinflow_core::alloc_count::CountingAlloc;
 
 #[global_allocator]
-static GLOBAL: Counting = Counting;
+static GLOBAL: CountingAlloc = CountingAlloc;
 
 #[test]
 fn frames_allocate_nothing() {
@@ -50,7 +27,7 @@ fn frames_allocate_nothing() {
         masked.excluded[3] = true;
         r.set_mask(&masked).unwrap();
         r.set_mask(&mask).unwrap();
-        let before = ALLOCATIONS.load(Ordering::SeqCst);
+        let before = CountingAlloc::total();
         for f in 0..50 {
             v[f % m] += 1e-4;
             r.detect_mask_into(&v, &mut mask);
@@ -60,7 +37,7 @@ fn frames_allocate_nothing() {
         }
         r.set_mask(&masked).unwrap();
         r.reconstruct_image_into(&v, &v_ref, &mut image).unwrap();
-        let after = ALLOCATIONS.load(Ordering::SeqCst);
+        let after = CountingAlloc::total();
         assert_eq!(after - before, 0, "{precision:?}: {} allocations in the frame loop", after - before);
         assert!(image.iter().any(|x| *x != 0.0));
     }

@@ -1,38 +1,13 @@
 //! Appending rows between chunk writes allocates nothing: rows go into buffers sized at
 //! construction. Counted with a global allocator, in a test binary of its own.
 
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::sync::atomic::{AtomicUsize, Ordering};
-
 use skinflow_eit::sensor::PAPER_100MM_TOML;
 use skinflow_record::{ContactRow, RecordingWriter, Streams, TruthContact, WriterOptions};
 
-struct Counting;
-
-static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
-
-// SAFETY: forwards every call to the system allocator unchanged; only counts allocations.
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
-        // SAFETY: same contract as the caller's.
-        unsafe { System.alloc(layout) }
-    }
-
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        // SAFETY: `ptr` came from `System.alloc` with this layout.
-        unsafe { System.dealloc(ptr, layout) }
-    }
-
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
-        // SAFETY: same contract as the caller's.
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-}
+use skinflow_core::alloc_count::CountingAlloc;
 
 #[global_allocator]
-static GLOBAL: Counting = Counting;
+static GLOBAL: CountingAlloc = CountingAlloc;
 
 #[test]
 fn appends_between_chunk_writes_do_not_allocate() {
@@ -53,7 +28,7 @@ fn appends_between_chunk_writes_do_not_allocate() {
     let image = [1.0; 64];
     let truth = [TruthContact { x_mm: 1.0, y_mm: 2.0, force_n: 3.0, diameter_mm: 10.0 }; 2];
     let strategy = w.strategy_index("pneumatic-locaware").unwrap();
-    let before = ALLOCATIONS.load(Ordering::Relaxed);
+    let before = CountingAlloc::total();
     for i in 0..500u64 {
         let t = i as f64 * 0.01;
         w.append_eit(t, i, &frame).unwrap();
@@ -64,7 +39,7 @@ fn appends_between_chunk_writes_do_not_allocate() {
         w.append_contacts(t, contacts).unwrap();
         w.append_forces(strategy, t, &[1.0, 2.0, 3.0]).unwrap();
     }
-    let allocations = ALLOCATIONS.load(Ordering::Relaxed) - before;
+    let allocations = CountingAlloc::total() - before;
     assert_eq!(allocations, 0, "{allocations} allocations in 3000 appends");
     assert_eq!(w.close().unwrap().rows_written, 3000);
 }

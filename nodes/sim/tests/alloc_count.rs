@@ -3,33 +3,11 @@
 //! in a test binary of its own so no other test's allocations are counted).
 
 use skinflow_sim::{Scene, Simulator};
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::sync::atomic::{AtomicUsize, Ordering};
 
-struct Counting;
-
-static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
-
-// SAFETY: forwards to the system allocator unchanged; only counts calls.
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
-        // SAFETY: same contract as the caller's.
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        // SAFETY: same contract as the caller's.
-        unsafe { System.dealloc(ptr, layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
-        // SAFETY: same contract as the caller's.
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-}
+use skinflow_core::alloc_count::CountingAlloc;
 
 #[global_allocator]
-static GLOBAL: Counting = Counting;
+static GLOBAL: CountingAlloc = CountingAlloc;
 
 #[test]
 fn static_hold_frames_do_not_allocate() {
@@ -47,7 +25,7 @@ fn static_hold_frames_do_not_allocate() {
             skinflow_sim::EventKind::Truth { t_s } => t = t_s,
         }
     }
-    let before = ALLOCATIONS.load(Ordering::Relaxed);
+    let before = CountingAlloc::total();
     // the hold ends at 33.5 s (3 s rest + 0.5 s ramp + 30 s); stop before the release
     let mut events = 0;
     loop {
@@ -60,7 +38,7 @@ fn static_hold_frames_do_not_allocate() {
         }
         events += 1;
     }
-    let after = ALLOCATIONS.load(Ordering::Relaxed);
+    let after = CountingAlloc::total();
     assert!(events > 400, "{events} events");
     assert_eq!(after - before, 0, "{} allocations in {events} events of a static hold", after - before);
 }

@@ -1,0 +1,51 @@
+//! Helpers shared by the whole-binary tests: the binary, the repository, fixtures, a fresh
+//! work directory per test, and one run of the binary.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+/// The `skinflow` binary under test.
+pub fn bin() -> &'static str {
+    env!("CARGO_BIN_EXE_skinflow")
+}
+
+/// The repository root.
+pub fn root() -> &'static Path {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// A file of `tests/fixtures`.
+pub fn fixture(name: &str) -> PathBuf {
+    root().join("tests/fixtures").join(name)
+}
+
+/// A fresh, empty directory under the system temp dir, unique per module, process and test.
+pub fn workdir(module: &str, test: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("skinflow-{module}-{}-{test}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+/// Runs the binary in `dir` to the end, with its reconstruction-matrix cache in `dir/cache`.
+pub fn skinflow(dir: &Path, args: &[&str]) -> Output {
+    Command::new(bin())
+        .args(args)
+        .current_dir(dir)
+        .env("XDG_CACHE_HOME", dir.join("cache"))
+        .env("RUST_LOG", "warn")
+        .output()
+        .unwrap()
+}
+
+/// Bytes of an output stream as text.
+pub fn text(b: &[u8]) -> String {
+    String::from_utf8_lossy(b).into_owned()
+}
+
+/// The stdout of a successful run; fails the test with both streams otherwise.
+pub fn ok(out: &Output) -> String {
+    let stdout = text(&out.stdout);
+    assert!(out.status.success(), "exit {:?}\nstdout:\n{stdout}\nstderr:\n{}", out.status, text(&out.stderr));
+    stdout
+}

@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Installs what skinflow needs on a fresh Debian/Ubuntu machine, only when missing:
-# pkg-config and the system HDF5 (libhdf5-dev) via apt-get. Rust (cargo) must be present.
+# pkg-config, the system HDF5 (libhdf5-dev), fontconfig and freetype via apt-get.
+# Rust (cargo) must be present.
 set -euo pipefail
 
 need=()
@@ -8,6 +9,9 @@ command -v pkg-config >/dev/null 2>&1 || need+=(pkg-config)
 if ! pkg-config --exists hdf5 2>/dev/null && ! pkg-config --exists hdf5-serial 2>/dev/null; then
   need+=(libhdf5-dev)
 fi
+# Plot rendering (plotters) links the system fontconfig and freetype.
+pkg-config --exists fontconfig 2>/dev/null || need+=(libfontconfig1-dev)
+pkg-config --exists freetype2 2>/dev/null || need+=(libfreetype-dev)
 command -v cc >/dev/null 2>&1 || need+=(gcc libc6-dev)
 
 if [ ${#need[@]} -gt 0 ]; then

@@ -140,7 +140,8 @@ fn replayed_pipeline_logs_derived_streams_without_drops() {
         [[edge]]\nfrom = \"replay.eit\"\nto = \"log.eit\"\ncapacity = 1024\n\
         [[edge]]\nfrom = \"replay.truth\"\nto = \"log.truth\"\ncapacity = 1024\n\
         [[edge]]\nfrom = \"seg.contacts\"\nto = \"log.contacts\"\n\
-        [[edge]]\nfrom = \"force.forces\"\nto = \"log.forces\"\n"
+        [[edge]]\nfrom = \"force.forces\"\nto = \"log.forces\"\n\
+        [[edge]]\nfrom = \"sync.frame\"\nto = \"log.sync\"\n"
     );
     std::fs::write(d.join("g.toml"), graph).unwrap();
     let out = skinflow(&d, &["run", "g.toml", "--stats-json", "stats.json"]);
@@ -155,7 +156,55 @@ fn replayed_pipeline_logs_derived_streams_without_drops() {
     assert!(frames > 10);
     assert_eq!(node("force")["msgs_out"].as_u64().unwrap(), frames);
     let text = ok(&skinflow(&d, &["inspect", "out.h5"]));
-    assert!(text.contains("/eit") && text.contains("/truth"), "{text}");
+    assert!(text.contains("/eit") && text.contains("/truth") && text.contains("/derived/sync"), "{text}");
+    derived_streams_agree(&d.join("out.h5"), frames as usize);
+}
+
+/// What the logger recorded of the sync node and the corrector tells one story: a row per
+/// frame in both, the proportional shares add up to the frame's pressure change, and the
+/// guard bits say which forces were zeroed for want of load.
+fn derived_streams_agree(path: &Path, frames: usize) {
+    use skinflow_record::layout::force_flags;
+    let rec = skinflow_record::Recording::open(path).unwrap();
+    let sync = rec.derived.sync.as_ref().expect("/derived/sync");
+    assert_eq!(sync.t_s.len(), frames);
+    assert!(sync.no_load[0] && !sync.no_load[frames - 1], "the scene starts with a rest and ends loaded or resting");
+    assert!(sync.settled.iter().any(|&s| s) && sync.settled.iter().any(|&s| !s), "{:?}", sync.settled);
+    assert!(sync.p0_kpa[frames - 1].is_finite() && sync.noise_kpa[frames - 1] > 0.0);
+    let forces = &rec.derived.forces[0];
+    assert_eq!(forces.name, "pneumatic-locaware");
+    let (dp, flags) = (forces.dp_kpa.as_ref().expect("dp_kpa"), forces.flags.as_ref().expect("flags"));
+    // Forces of a frame arrive after its sync row: both streams are in frame order.
+    assert_eq!(forces.t_s, sync.t_s);
+    let c = forces.max_contacts;
+    let (mut loaded, mut zeroed) = (0, 0);
+    for k in 0..frames {
+        let row = k * c..(k + 1) * c;
+        let n = forces.force_n[row.clone()].iter().take_while(|f| !f.is_nan()).count();
+        if n == 0 {
+            continue;
+        }
+        let shares: f64 = dp[row.clone()][..n].iter().sum();
+        if sync.dp_kpa[k] > 0.0 {
+            loaded += 1;
+            assert!(
+                (shares - sync.dp_kpa[k]).abs() <= 1e-9 * sync.dp_kpa[k].max(1.0),
+                "frame {k}: {shares} vs {}",
+                sync.dp_kpa[k]
+            );
+        }
+        for j in row.start..row.start + n {
+            let no_load = flags[j] as u32 & force_flags::NO_LOAD != 0;
+            let no_signal = dp[j].is_nan() || dp[j] <= 0.0;
+            assert_eq!(no_load, no_signal, "frame {k}: share {} flags {}", dp[j], flags[j]);
+            if no_load {
+                zeroed += 1;
+                assert_eq!(forces.force_n[j], 0.0);
+            }
+        }
+    }
+    eprintln!("{loaded} loaded frames with contacts, {zeroed} forces zeroed for want of load");
+    assert!(loaded > 0, "no loaded frame with contacts");
 }
 
 #[test]

@@ -1,6 +1,7 @@
 //! Node `hdf5_logger`: writes a recording (CONTRACTS.md section 2, format v1) from whatever
-//! streams are connected, plus the derived streams (images, contacts, per-strategy forces)
-//! under `/derived` (see `skinflow_record`'s docs). Rows are written a chunk at a time and
+//! streams are connected, plus the derived streams (images, contacts, the sync node's
+//! per-frame pressure judgement, per-strategy forces with their pressure shares and guard
+//! flags) under `/derived` (see `skinflow_record`'s docs). Rows are written a chunk at a time and
 //! flushed at least every `flush_interval_s`, so a crash loses at most that much; rotation by
 //! `rotate_mb` / `rotate_s` gives `name-0001.h5`, `name-0002.h5`, ...
 //!
@@ -11,19 +12,24 @@
 //! ```toml
 //! params = { path = "../out/run.h5", flush_interval_s = 1.0, strategies = ["pneumatic-locaware"] }
 //! ```
-//! Inputs (all optional): `eit`, `pressure`, `truth`, `image`, `contacts`, `forces` (multi).
+//! Inputs (all optional): `eit`, `pressure`, `truth`, `image`, `contacts`, `forces` (multi),
+//! `sync` (the `sync` node's frames).
 
 use std::path::{Path, PathBuf};
 
 use serde::Deserialize;
+use skinflow_contact::correct::ForceFlags;
 use skinflow_core::params::positive;
 use skinflow_core::{
     BuildContext, Context, Inputs, KindInfo, NodeError, NodeImpl, NodeParams, ParamDoc, ParamError, PortSpec, Registry,
     Role, Sink, typed,
 };
-use skinflow_record::write::{ContactRow, RecordingWriter, Streams, TruthContact as RecTruth, WriterOptions};
+use skinflow_record::layout::force_flags;
+use skinflow_record::write::{
+    ContactRow, ForceRow, RecordingWriter, Streams, SyncRow, TruthContact as RecTruth, WriterOptions,
+};
 
-use crate::payload::{Contacts, EitFrame, Forces, Image, PressureSample, Truth};
+use crate::payload::{Contacts, EitFrame, Forces, Image, PressureSample, SyncedFrame, Truth};
 use crate::reconstruct::load_sensor;
 
 #[derive(Debug, Deserialize)]
@@ -85,13 +91,14 @@ const TRUTH: usize = 2;
 const IMAGE: usize = 3;
 const CONTACTS: usize = 4;
 const FORCES: usize = 5;
+const SYNC: usize = 6;
 
 pub struct Logger {
     path: PathBuf,
     opts: Option<WriterOptions>,
     writer: Option<RecordingWriter>,
     truth_buf: Vec<RecTruth>,
-    forces_buf: Vec<f64>,
+    forces_buf: Vec<ForceRow>,
 }
 
 fn io(path: &Path, e: impl std::fmt::Display) -> NodeError {
@@ -116,6 +123,7 @@ impl Logger {
             truth: false,
             image_hw: Some([p.image_ny, p.image_nx]),
             contacts: false,
+            sync: false,
             force_strategies: p.strategies,
         };
         Ok(Logger {
@@ -138,6 +146,7 @@ impl Logger {
                 o.streams.image_hw = None;
             }
             o.streams.contacts = inputs.lanes(CONTACTS) > 0;
+            o.streams.sync = inputs.lanes(SYNC) > 0;
             if inputs.lanes(FORCES) == 0 {
                 o.streams.force_strategies.clear();
             } else if o.streams.force_strategies.is_empty() {
@@ -218,8 +227,26 @@ impl Sink for Logger {
                 });
             };
             forces_buf.clear();
-            forces_buf.extend(f.forces.iter().map(|e| e.force_n));
+            forces_buf.extend(f.forces.iter().map(|e| ForceRow {
+                force_n: e.force_n,
+                dp_kpa: e.dp_kpa,
+                flags: flag_bits(&e.flags),
+            }));
             w.append_forces(k, m.header.t_s(), forces_buf).map_err(fatal)?;
+        }
+        if let Some(m) = inputs.get(SYNC)
+            && let Some(s) = m.get::<SyncedFrame>()
+        {
+            let row = SyncRow {
+                dp_kpa: s.dp_kpa,
+                pressure_samples: s.pressure_samples,
+                pressure_sd_kpa: s.pressure_sd_kpa,
+                settled: s.settled,
+                no_load: s.no_load,
+                p0_kpa: s.p0_kpa,
+                noise_kpa: s.noise_kpa,
+            };
+            w.append_sync(m.header.t_s(), &row).map_err(fatal)?;
         }
         w.flush_if_due().map_err(fatal)
     }
@@ -236,6 +263,22 @@ impl Sink for Logger {
     }
 }
 
+/// The recording's bit code of a force's guard flags (`skinflow_record::layout::force_flags`).
+fn flag_bits(f: &ForceFlags) -> u32 {
+    [
+        (f.no_load, force_flags::NO_LOAD),
+        (f.above_range, force_flags::ABOVE_RANGE),
+        (f.below_range, force_flags::BELOW_RANGE),
+        (f.location_clamped, force_flags::LOCATION_CLAMPED),
+        (f.area_clamped, force_flags::AREA_CLAMPED),
+        (f.negative_clamped, force_flags::NEGATIVE_CLAMPED),
+    ]
+    .into_iter()
+    .filter(|(set, _)| *set)
+    .map(|(_, bit)| bit)
+    .sum()
+}
+
 pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::DuplicateKind> {
     r.register(typed(
         KindInfo::new("hdf5_logger", Role::Sink, "writes a recording (HDF5 format v1) with optional derived streams")
@@ -245,6 +288,7 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
             .input(PortSpec::input::<Image>("image", "reconstructed images").optional())
             .input(PortSpec::input::<Contacts>("contacts", "segmented contacts").optional())
             .input(PortSpec::input::<Forces>("forces", "per-strategy forces").optional().multi())
+            .input(PortSpec::input::<SyncedFrame>("sync", "the sync node's frames (pressure judgement)").optional())
             .param(ParamDoc::new("path", "path", "", "output file"))
             .param(ParamDoc::new(
                 "sensor",

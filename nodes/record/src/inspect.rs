@@ -6,6 +6,7 @@ use std::fmt;
 use std::path::{Path, PathBuf};
 
 use crate::RecordError;
+use crate::layout;
 use crate::read::Recording;
 
 /// One stream's rows and timing.
@@ -132,6 +133,9 @@ impl Summary {
         if let Some(s) = &rec.derived.contacts {
             streams.push(StreamSummary::of("/derived/contacts", &s.t_s));
         }
+        if let Some(s) = &rec.derived.sync {
+            streams.push(StreamSummary::of(layout::SYNC_GROUP, &s.t_s));
+        }
         for f in &rec.derived.forces {
             streams.push(StreamSummary::of(&format!("/derived/forces/{}", f.name), &f.t_s));
         }
@@ -180,11 +184,13 @@ impl fmt::Display for Summary {
             writeln!(f, "part:     {part}")?;
         }
         writeln!(f, "duration: {:.3} s", self.duration_s)?;
-        writeln!(f, "{:<36} {:>9} {:>11} {:>11} {:>11} {:>12}", "stream", "rows", "first", "last", "rate", "period")?;
+        // Strategy names make `/derived/forces/<name>` as long as the user likes.
+        let w = self.streams.iter().map(|s| s.path.len()).max().unwrap_or(0).max(20);
+        writeln!(f, "{:<w$} {:>9} {:>11} {:>11} {:>11} {:>12}", "stream", "rows", "first", "last", "rate", "period")?;
         for s in &self.streams {
             write!(
                 f,
-                "{:<36} {:>9} {:>11} {:>11} {:>11} {:>12}",
+                "{:<w$} {:>9} {:>11} {:>11} {:>11} {:>12}",
                 s.path,
                 s.rows,
                 opt(s.first_t_s, " s"),

@@ -37,6 +37,32 @@ pub const CONTACTS_Y_MM: &str = "/derived/contacts/y_mm";
 pub const CONTACTS_SUM: &str = "/derived/contacts/sum";
 pub const CONTACTS_AREA_MM2: &str = "/derived/contacts/area_mm2";
 pub const FORCES_GROUP: &str = "/derived/forces";
+pub const SYNC_GROUP: &str = "/derived/sync";
+pub const SYNC_T: &str = "/derived/sync/t";
+pub const SYNC_DP_KPA: &str = "/derived/sync/dp_kpa";
+pub const SYNC_PRESSURE_SAMPLES: &str = "/derived/sync/pressure_samples";
+pub const SYNC_PRESSURE_SD_KPA: &str = "/derived/sync/pressure_sd_kpa";
+pub const SYNC_SETTLED: &str = "/derived/sync/settled";
+pub const SYNC_NO_LOAD: &str = "/derived/sync/no_load";
+pub const SYNC_P0_KPA: &str = "/derived/sync/p0_kpa";
+pub const SYNC_NOISE_KPA: &str = "/derived/sync/noise_kpa";
+
+/// Bits of `/derived/forces/<strategy>/flags`: what the corrector's guards did to a contact's
+/// force (stored as an f64 holding the integer sum of the bits that are set).
+pub mod force_flags {
+    /// Signal <= 0 or not finite: force set to 0 N.
+    pub const NO_LOAD: u32 = 1;
+    /// Signal above the calibrated range (monotone extrapolation).
+    pub const ABOVE_RANGE: u32 = 2;
+    /// Signal below the calibrated range (monotone extrapolation).
+    pub const BELOW_RANGE: u32 = 4;
+    /// Centroid outside the calibrated region, clamped onto it.
+    pub const LOCATION_CLAMPED: u32 = 8;
+    /// Contact area outside the calibrated range, clamped (area-aware strategy).
+    pub const AREA_CLAMPED: u32 = 16;
+    /// The model gave a negative force, clamped to 0 N.
+    pub const NEGATIVE_CLAMPED: u32 = 32;
+}
 
 /// `/derived/forces/<strategy>/t`.
 pub fn forces_t(strategy: &str) -> String {
@@ -46,4 +72,14 @@ pub fn forces_t(strategy: &str) -> String {
 /// `/derived/forces/<strategy>/force_n`.
 pub fn forces_force_n(strategy: &str) -> String {
     format!("{FORCES_GROUP}/{strategy}/force_n")
+}
+
+/// `/derived/forces/<strategy>/dp_kpa`.
+pub fn forces_dp_kpa(strategy: &str) -> String {
+    format!("{FORCES_GROUP}/{strategy}/dp_kpa")
+}
+
+/// `/derived/forces/<strategy>/flags`.
+pub fn forces_flags(strategy: &str) -> String {
+    format!("{FORCES_GROUP}/{strategy}/flags")
 }

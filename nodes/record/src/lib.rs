@@ -24,6 +24,14 @@
 //! | `/derived/contacts/area_mm2` | f64 `[n, Cmax]` | contact area, mm² |
 //! | `/derived/forces/<strategy>/t` | f64 `[n]` | seconds |
 //! | `/derived/forces/<strategy>/force_n` | f64 `[n, Cmax]` | per-contact force of that strategy, N, in the order of the frame's contacts, NaN-padded |
+//! | `/derived/forces/<strategy>/dp_kpa` | f64 `[n, Cmax]` | the pressure share (or signal) each contact's force came from, kPa, NaN-padded |
+//! | `/derived/forces/<strategy>/flags` | f64 `[n, Cmax]` | guard bits of each force (integer values, NaN-padded): 1 no load (force 0), 2 above and 4 below the calibrated range (extrapolated), 8 centroid clamped onto the calibrated region, 16 area clamped, 32 negative force clamped to 0 (`layout::force_flags`) |
+//! | `/derived/sync/t` | f64 `[n]` | seconds, time of the EIT frame |
+//! | `/derived/sync/dp_kpa` | f64 `[n]` | the frame's pressure change: window mean minus P0, kPa (NaN without samples) |
+//! | `/derived/sync/pressure_samples`, `pressure_sd_kpa` | f64 `[n]` | samples in the window and their SD, kPa |
+//! | `/derived/sync/settled` | f64 `[n]` | 1 where the pressure alone says the load did not change during the window, else 0 |
+//! | `/derived/sync/no_load` | f64 `[n]` | 1 for frames of the leading no-load period, else 0 |
+//! | `/derived/sync/p0_kpa`, `noise_kpa` | f64 `[n]` | the no-load offset removed and the noise SD behind `settled`, kPa (NaN until known) |
 //!
 //! - Widths are fixed when a file is created, so rows never change once written and all parts
 //!   have the same shapes:
@@ -75,9 +83,10 @@ pub mod write;
 pub use error::{RecordError, SchemaProblem};
 pub use inspect::{FrameGaps, StreamSummary, Summary, TruthCoverage, inspect};
 pub use read::{
-    ContactsStream, Derived, EitStream, ForceStream, ImageStream, PressureStream, Recording, TruthRow, TruthStream,
+    ContactsStream, Derived, EitStream, ForceStream, ImageStream, PressureStream, Recording, SyncStream, TruthRow,
+    TruthStream,
 };
 pub use replay::{Event, Events};
 pub use tare::{DEFAULT_TARE_S, NoLoad, NoLoadSource};
 pub use timestamp::iso8601_utc;
-pub use write::{ContactRow, RecordingWriter, Streams, TruthContact, WriterOptions, WriterStats};
+pub use write::{ContactRow, ForceRow, RecordingWriter, Streams, SyncRow, TruthContact, WriterOptions, WriterStats};

@@ -15,7 +15,7 @@ use skinflow_eit::Sensor;
 use crate::error::{RecordError, SchemaProblem};
 use crate::layout::{self, FORMAT, FORMAT_VERSION};
 use crate::write::TruthContact;
-pub use derived::{ContactsStream, Derived, ForceStream, ImageStream};
+pub use derived::{ContactsStream, Derived, ForceStream, ImageStream, SyncStream};
 
 /// `/eit/*`: n frames of M values.
 #[derive(Debug, Clone, PartialEq)]

@@ -21,7 +21,7 @@ use crate::rotate::part_path;
 use crate::timestamp::iso8601_utc;
 use column::{ColumnSpec, Storage, Table};
 use create::{RootAttrs, create_file, ensure_parent_groups, write_reference, write_root_attrs};
-pub use options::{ContactRow, Streams, TruthContact, WriterOptions, WriterStats};
+pub use options::{ContactRow, ForceRow, Streams, SyncRow, TruthContact, WriterOptions, WriterStats};
 
 #[derive(Debug, Clone, Copy)]
 enum Slot {
@@ -30,7 +30,13 @@ enum Slot {
     Truth,
     Image,
     Contacts,
+    Sync,
     Force(usize),
+}
+
+impl Slot {
+    /// Every stream but the per-strategy forces.
+    const FIXED: [Slot; 6] = [Slot::Eit, Slot::Pressure, Slot::Truth, Slot::Image, Slot::Contacts, Slot::Sync];
 }
 
 /// Synchronous writer of format v1; see the module doc. Dropping it flushes (errors ignored);
@@ -50,6 +56,7 @@ pub struct RecordingWriter {
     truth: Option<Table>,
     image: Option<Table>,
     contacts: Option<Table>,
+    sync: Option<Table>,
     forces: Vec<Table>,
     reference: Option<Vec<f64>>,
     swmr_started: bool,
@@ -90,11 +97,24 @@ impl RecordingWriter {
                     [layout::CONTACTS_X_MM, layout::CONTACTS_Y_MM, layout::CONTACTS_SUM, layout::CONTACTS_AREA_MM2];
                 Table::new(layout::CONTACTS_T, None, cols.iter().map(|p| ColumnSpec::new(*p, &[dc])).collect(), rows)
             }),
+            sync: s.sync.then(|| {
+                let cols = [
+                    layout::SYNC_DP_KPA,
+                    layout::SYNC_PRESSURE_SAMPLES,
+                    layout::SYNC_PRESSURE_SD_KPA,
+                    layout::SYNC_SETTLED,
+                    layout::SYNC_NO_LOAD,
+                    layout::SYNC_P0_KPA,
+                    layout::SYNC_NOISE_KPA,
+                ];
+                Table::new(layout::SYNC_T, None, cols.iter().map(|p| ColumnSpec::new(*p, &[])).collect(), rows)
+            }),
             forces: s
                 .force_strategies
                 .iter()
                 .map(|name| {
-                    let v = vec![ColumnSpec::new(layout::forces_force_n(name), &[dc])];
+                    let cols = [layout::forces_force_n(name), layout::forces_dp_kpa(name), layout::forces_flags(name)];
+                    let v = cols.into_iter().map(|p| ColumnSpec::new(p, &[dc])).collect();
                     Table::new(&layout::forces_t(name), None, v, rows)
                 })
                 .collect(),
@@ -140,6 +160,7 @@ impl RecordingWriter {
             truth_rows: rows(&self.truth),
             image_rows: rows(&self.image),
             contacts_rows: rows(&self.contacts),
+            sync_rows: rows(&self.sync),
             force_rows: self.forces.iter().map(|t| t.rows_appended).sum(),
             ..self.stats
         }
@@ -227,19 +248,44 @@ impl RecordingWriter {
         self.after_append(Slot::Contacts)
     }
 
-    /// Per-contact forces (N) of strategy `strategy` (see `strategy_index`), in the order of
-    /// the frame's contacts.
-    pub fn append_forces(&mut self, strategy: usize, t_s: f64, forces_n: &[f64]) -> Result<(), RecordError> {
+    /// Per-contact forces of strategy `strategy` (see `strategy_index`), in the order of the
+    /// frame's contacts: force (N), the pressure share used (kPa) and the guard bits.
+    pub fn append_forces(&mut self, strategy: usize, t_s: f64, forces: &[ForceRow]) -> Result<(), RecordError> {
         self.before_append(Slot::Force(strategy), t_s)?;
         let max = self.opts.derived_max_contacts;
-        let kept = forces_n.len().min(max);
+        let kept = forces.len().min(max);
         if let Some(table) = self.forces.get_mut(strategy) {
             table.t.buf.push(t_s);
-            table.values[0].buf.extend_from_slice(&forces_n[..kept]);
-            table.values[0].buf.extend(std::iter::repeat_n(f64::NAN, max - kept));
+            let fields: [fn(&ForceRow) -> f64; 3] = [|f| f.force_n, |f| f.dp_kpa, |f| f64::from(f.flags)];
+            for (col, field) in table.values.iter_mut().zip(fields) {
+                col.buf.extend(forces[..kept].iter().map(field));
+                col.buf.extend(std::iter::repeat_n(f64::NAN, max - kept));
+            }
         }
-        self.stats.contacts_dropped += (forces_n.len() - kept) as u64;
+        self.stats.contacts_dropped += (forces.len() - kept) as u64;
         self.after_append(Slot::Force(strategy))
+    }
+
+    /// The sync node's judgement of one frame (`/derived/sync/*`; booleans stored as 0 or 1).
+    pub fn append_sync(&mut self, t_s: f64, row: &SyncRow) -> Result<(), RecordError> {
+        self.before_append(Slot::Sync, t_s)?;
+        if let Some(table) = self.sync.as_mut() {
+            table.t.buf.push(t_s);
+            let flag = |b: bool| if b { 1.0 } else { 0.0 };
+            let values = [
+                row.dp_kpa,
+                f64::from(row.pressure_samples),
+                row.pressure_sd_kpa,
+                flag(row.settled),
+                flag(row.no_load),
+                row.p0_kpa,
+                row.noise_kpa,
+            ];
+            for (col, v) in table.values.iter_mut().zip(values) {
+                col.buf.push(v);
+            }
+        }
+        self.after_append(Slot::Sync)
     }
 
     /// Stores the no-load frame `/eit/reference` `[M]` (also in every later part). With SWMR it
@@ -258,7 +304,7 @@ impl RecordingWriter {
 
     /// Writes every buffered row and flushes the file.
     pub fn flush(&mut self) -> Result<(), RecordError> {
-        for slot in [Slot::Eit, Slot::Pressure, Slot::Truth, Slot::Image, Slot::Contacts] {
+        for slot in Slot::FIXED {
             self.write_table(slot)?;
         }
         for i in 0..self.forces.len() {
@@ -287,12 +333,13 @@ impl RecordingWriter {
             Slot::Truth => self.truth.as_mut(),
             Slot::Image => self.image.as_mut(),
             Slot::Contacts => self.contacts.as_mut(),
+            Slot::Sync => self.sync.as_mut(),
             Slot::Force(i) => self.forces.get_mut(i),
         }
     }
 
     fn all_tables_mut(&mut self) -> impl Iterator<Item = &mut Table> {
-        [&mut self.eit, &mut self.pressure, &mut self.truth, &mut self.image, &mut self.contacts]
+        [&mut self.eit, &mut self.pressure, &mut self.truth, &mut self.image, &mut self.contacts, &mut self.sync]
             .into_iter()
             .filter_map(Option::as_mut)
             .chain(self.forces.iter_mut())
@@ -305,6 +352,7 @@ impl RecordingWriter {
             Slot::Truth => "/truth".to_owned(),
             Slot::Image => layout::DERIVED_IMAGE.to_owned(),
             Slot::Contacts => "/derived/contacts".to_owned(),
+            Slot::Sync => layout::SYNC_GROUP.to_owned(),
             Slot::Force(i) => format!("{}/#{i}", layout::FORCES_GROUP),
         };
         RecordError::NotDeclared { file: self.path.clone(), path }

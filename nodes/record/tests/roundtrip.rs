@@ -1,7 +1,9 @@
 //! Write then read gives back identical data, bit for bit, for every stream.
 
 use skinflow_eit::sensor::PAPER_100MM_TOML;
-use skinflow_record::{ContactRow, Recording, RecordingWriter, Streams, TruthContact, WriterOptions};
+use skinflow_record::{
+    ContactRow, ForceRow, Recording, RecordingWriter, Streams, SyncRow, TruthContact, WriterOptions,
+};
 
 /// Deterministic "random" f64 bit patterns (xorshift), including awkward values.
 struct Bits(u64);
@@ -40,6 +42,7 @@ fn every_stream_reads_back_bit_exact() {
         truth: true,
         image_hw: Some([3, 4]),
         contacts: true,
+        sync: true,
         force_strategies: vec!["pneumatic-locaware".into(), "eit-nocal".into()],
     };
     let mut w = RecordingWriter::create(&path, &opts).unwrap();
@@ -52,6 +55,7 @@ fn every_stream_reads_back_bit_exact() {
     let (mut p_t, mut p_kpa) = (vec![], vec![]);
     let mut truth_rows = vec![];
     let mut images = vec![];
+    let (mut force_rows, mut sync_rows) = (vec![], vec![]);
     for i in 0..40u64 {
         let t = i as f64 * 0.02 + 1e-9 * rng.next();
         let frame: Vec<f64> = (0..m).map(|_| rng.next()).collect();
@@ -83,11 +87,24 @@ fn every_stream_reads_back_bit_exact() {
         images.extend_from_slice(&img);
         let contacts = (0..(i % 4)).map(|j| ContactRow { x_mm: j as f64, y_mm: -(j as f64), sum: 2.0, area_mm2: 30.0 });
         w.append_contacts(t, contacts).unwrap();
-        w.append_forces(1, t, &[0.25, 0.5, 0.75][..(i % 4) as usize]).unwrap();
+        let forces = [0.25, 0.5, 0.75].map(|force_n| ForceRow { force_n, dp_kpa: rng.next(), flags: i as u32 % 64 });
+        w.append_forces(1, t, &forces[..(i % 4) as usize]).unwrap();
+        force_rows.push(forces);
+        let row = SyncRow {
+            dp_kpa: rng.next(),
+            pressure_samples: i as u32,
+            pressure_sd_kpa: rng.next(),
+            settled: i % 3 == 0,
+            no_load: i < 5,
+            p0_kpa: rng.next(),
+            noise_kpa: rng.next(),
+        };
+        w.append_sync(t, &row).unwrap();
+        sync_rows.push(row);
     }
     let stats = w.close().unwrap();
     assert_eq!((stats.eit_rows, stats.pressure_rows, stats.truth_rows), (40, 120, 10));
-    assert_eq!(stats.rows_written, 40 + 120 + 10 + 40 + 40 + 40);
+    assert_eq!(stats.rows_written, 40 + 120 + 10 + 40 + 40 + 40 + 40);
     // Rows with 3 contacts (i % 4 == 3) lose one contact and one force each: 10 rows x 2.
     assert_eq!(stats.contacts_dropped, 20);
 
@@ -131,7 +148,29 @@ fn every_stream_reads_back_bit_exact() {
     assert_eq!(forces.t_s.len(), 40);
     let nan = f64::NAN;
     assert_eq!(bits(&forces.force_n[..8]), bits(&[nan, nan, 0.25, nan, 0.25, 0.5, 0.25, 0.5]));
+    let (dp, flags) = (forces.dp_kpa.as_ref().unwrap(), forces.flags.as_ref().unwrap());
+    for (i, row) in force_rows.iter().enumerate() {
+        let n = (i % 4).min(2);
+        for j in 0..2 {
+            let (d, f) = (dp[i * 2 + j], flags[i * 2 + j]);
+            if j < n {
+                assert_eq!((d.to_bits(), f), (row[j].dp_kpa.to_bits(), f64::from(row[j].flags)));
+            } else {
+                assert!(d.is_nan() && f.is_nan(), "row {i}, column {j}: padding is NaN");
+            }
+        }
+    }
     assert!(rec.derived.forces[1].t_s.is_empty());
+    let sync = rec.derived.sync.as_ref().unwrap();
+    assert_eq!(bits(&sync.t_s), bits(&eit_t));
+    let col = |f: fn(&SyncRow) -> f64| bits(&sync_rows.iter().map(f).collect::<Vec<_>>());
+    assert_eq!(bits(&sync.dp_kpa), col(|r| r.dp_kpa));
+    assert_eq!(bits(&sync.pressure_samples), col(|r| f64::from(r.pressure_samples)));
+    assert_eq!(bits(&sync.pressure_sd_kpa), col(|r| r.pressure_sd_kpa));
+    assert_eq!(bits(&sync.p0_kpa), col(|r| r.p0_kpa));
+    assert_eq!(bits(&sync.noise_kpa), col(|r| r.noise_kpa));
+    assert_eq!(sync.settled, sync_rows.iter().map(|r| r.settled).collect::<Vec<_>>());
+    assert_eq!(sync.no_load, sync_rows.iter().map(|r| r.no_load).collect::<Vec<_>>());
 }
 
 fn tempdir(name: &str) -> std::path::PathBuf {

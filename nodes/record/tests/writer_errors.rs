@@ -1,7 +1,7 @@
 //! The writer refuses bad options and bad rows with errors that name the file and the path.
 
 use skinflow_eit::sensor::PAPER_100MM_TOML;
-use skinflow_record::{RecordError, Recording, RecordingWriter, Streams, TruthContact, WriterOptions};
+use skinflow_record::{RecordError, Recording, RecordingWriter, Streams, SyncRow, TruthContact, WriterOptions};
 
 fn tempdir(name: &str) -> std::path::PathBuf {
     let dir = std::env::temp_dir().join(format!("skinflow-record-{name}-{}", std::process::id()));
@@ -61,6 +61,17 @@ fn bad_rows_are_refused_and_the_file_stays_valid() {
     assert!(matches!(w.append_truth(0.0, &[c; 3]), Err(RecordError::TooManyTruthContacts { found: 3, max: 2, .. })));
     assert!(w.append_eit(f64::NAN, 0, &[0.0; 120]).unwrap_err().to_string().contains("/eit/t: time NaN is not finite"));
     assert!(w.append_image(0.0, &[]).is_err() && w.append_forces(0, 0.0, &[]).is_err());
+    let sync = SyncRow {
+        dp_kpa: 0.0,
+        pressure_samples: 0,
+        pressure_sd_kpa: f64::NAN,
+        settled: false,
+        no_load: true,
+        p0_kpa: f64::NAN,
+        noise_kpa: f64::NAN,
+    };
+    let e = w.append_sync(0.0, &sync).unwrap_err().to_string();
+    assert_eq!(e, format!("{shown}: /derived/sync: stream was not declared in the writer options"));
     w.append_eit(0.0, 0, &[0.0; 120]).unwrap();
     w.append_truth(0.0, &[c; 2]).unwrap();
     let stats = w.close().unwrap();

@@ -1,6 +1,9 @@
 //! Per-frame hot path without heap allocation: once a hold's state is solved, further EIT
 //! frames, pressure samples and truth rows of the hold allocate nothing (counting allocator,
-//! in a test binary of its own so no other test's allocations are counted).
+//! in a test binary of its own so no other test's allocations are counted). Counted on the
+//! calling thread: faer may start its rayon worker pool while the hold is solved, and those
+//! threads allocate on their own schedule (a CI run once saw two such allocations land inside
+//! the counted window).
 
 use skinflow_sim::{Scene, Simulator};
 
@@ -25,7 +28,7 @@ fn static_hold_frames_do_not_allocate() {
             skinflow_sim::EventKind::Truth { t_s } => t = t_s,
         }
     }
-    let before = CountingAlloc::total();
+    let before = CountingAlloc::this_thread();
     // the hold ends at 33.5 s (3 s rest + 0.5 s ramp + 30 s); stop before the release
     let mut events = 0;
     loop {
@@ -38,7 +41,7 @@ fn static_hold_frames_do_not_allocate() {
         }
         events += 1;
     }
-    let after = CountingAlloc::total();
+    let after = CountingAlloc::this_thread();
     assert!(events > 400, "{events} events");
     assert_eq!(after - before, 0, "{} allocations in {events} events of a static hold", after - before);
 }

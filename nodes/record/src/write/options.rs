@@ -25,6 +25,38 @@ pub struct ContactRow {
     pub area_mm2: f64,
 }
 
+/// One frame of the `sync` node (`/derived/sync/*`): what the pipeline knew about the
+/// frame's pressure, so a recording shows which frames it judged settled and which offset it
+/// removed.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SyncRow {
+    /// Mean pressure over the frame's window minus P0, kPa (NaN without samples).
+    pub dp_kpa: f64,
+    /// Pressure samples in the window.
+    pub pressure_samples: u32,
+    /// Their standard deviation, kPa (NaN with fewer than 2).
+    pub pressure_sd_kpa: f64,
+    /// The pressure-only "load did not change" judgement.
+    pub settled: bool,
+    /// The frame lies in the leading no-load period.
+    pub no_load: bool,
+    /// The no-load offset P0 in use, kPa (NaN until known).
+    pub p0_kpa: f64,
+    /// The pressure noise SD behind `settled`, kPa (NaN until known).
+    pub noise_kpa: f64,
+}
+
+/// One contact's force estimate (`/derived/forces/<strategy>/*`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ForceRow {
+    /// Estimated normal force, N.
+    pub force_n: f64,
+    /// The contact's pressure share (or signal) the strategy used, kPa.
+    pub dp_kpa: f64,
+    /// Guard bits, `layout::force_flags`.
+    pub flags: u32,
+}
+
 /// Which streams a recording holds. All datasets are created empty when a file (or part) is
 /// created, so SWMR readers see the full layout and appends never create objects.
 #[derive(Debug, Clone, PartialEq)]
@@ -35,6 +67,8 @@ pub struct Streams {
     /// Reconstructed image size `[H, W]` in pixels, when images are logged.
     pub image_hw: Option<[usize; 2]>,
     pub contacts: bool,
+    /// The sync node's per-frame pressure judgement, `/derived/sync/*`.
+    pub sync: bool,
     /// Names of the force strategies logged under `/derived/forces/<name>`.
     pub force_strategies: Vec<String>,
 }
@@ -48,6 +82,7 @@ impl Default for Streams {
             truth: false,
             image_hw: None,
             contacts: false,
+            sync: false,
             force_strategies: Vec::new(),
         }
     }
@@ -160,6 +195,7 @@ pub struct WriterStats {
     pub truth_rows: u64,
     pub image_rows: u64,
     pub contacts_rows: u64,
+    pub sync_rows: u64,
     /// Summed over strategies.
     pub force_rows: u64,
     /// Rows (all streams) written to a file and flushed: these survive a crash.

@@ -242,6 +242,18 @@ fn example_plugins_run_as_ab_lanes_and_compare_reports_each() {
 }
 
 #[test]
+fn bench_names_file_line_and_column_of_a_broken_graph() {
+    let d = workdir("bench-broken");
+    std::fs::write(d.join("rec.h5"), b"").unwrap();
+    std::fs::write(d.join("g.toml"), "[graph]\nname = \"x\"\n[[node]]\nid = \"a\"\nkind = \n").unwrap();
+    let o = skinflow(&d, &["bench", "g.toml", "--replay", "rec.h5", "--vary", "recon.lambda=0.1", "--out", "b"]);
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("g.toml:5:"), "no file:line:column in {err}");
+    assert!(!d.join("b").exists(), "nothing written for a broken graph");
+}
+
+#[test]
 fn bench_varies_a_param_over_a_recording_and_writes_table_and_plot() {
     let d = workdir("bench");
     let fixture = root().join("tests/fixtures/tiny-eval.toml");

@@ -261,6 +261,9 @@ fn plot(path: &Path, points: &[Point]) -> Result<()> {
 pub fn run(graph: &Path, replay: &Path, vary: &[String], out_dir: &Path) -> Result<()> {
     let vary: Vec<Vary> = vary.iter().map(|s| s.parse()).collect::<Result<_>>()?;
     let text = std::fs::read_to_string(graph).with_context(|| format!("{}: cannot read", graph.display()))?;
+    let reg = registry_for(&SourceFile::new(graph, text.clone()))?;
+    // The graph as written must be valid first, so its errors name file, line and column.
+    GraphSpec::parse(SourceFile::new(graph, text.clone()), &reg).map_err(|e| anyhow!("{e}"))?;
     let base: toml::Table = toml::from_str(&text).map_err(|e| anyhow!("{}: {}", graph.display(), e.message()))?;
     let replay = std::path::absolute(replay).with_context(|| format!("{}: bad path", replay.display()))?;
     if !replay.is_file() {
@@ -268,7 +271,6 @@ pub fn run(graph: &Path, replay: &Path, vary: &[String], out_dir: &Path) -> Resu
     }
     std::fs::create_dir_all(out_dir).with_context(|| format!("{}: cannot create", out_dir.display()))?;
     let out_abs = std::path::absolute(out_dir)?;
-    let reg = registry_for(&SourceFile::new(graph, text.clone()))?;
     let mut points = Vec::new();
     for (k, (label, set)) in combinations(&vary).into_iter().enumerate() {
         let json = out_abs.join(format!("variant-{k}.json"));

@@ -162,7 +162,8 @@ fn replayed_pipeline_logs_derived_streams_without_drops() {
 
 /// What the logger recorded of the sync node and the corrector tells one story: a row per
 /// frame in both, the proportional shares add up to the frame's pressure change, and the
-/// guard bits say which forces were zeroed for want of load.
+/// no-load bit is set exactly on the shares <= 0 (the bit mapping itself is unit-tested in
+/// the logger).
 fn derived_streams_agree(path: &Path, frames: usize) {
     use skinflow_record::layout::force_flags;
     let rec = skinflow_record::Recording::open(path).unwrap();
@@ -177,7 +178,7 @@ fn derived_streams_agree(path: &Path, frames: usize) {
     // Forces of a frame arrive after its sync row: both streams are in frame order.
     assert_eq!(forces.t_s, sync.t_s);
     let c = forces.max_contacts;
-    let (mut loaded, mut zeroed) = (0, 0);
+    let mut loaded = 0;
     for k in 0..frames {
         let row = k * c..(k + 1) * c;
         let n = forces.force_n[row.clone()].iter().take_while(|f| !f.is_nan()).count();
@@ -198,12 +199,10 @@ fn derived_streams_agree(path: &Path, frames: usize) {
             let no_signal = dp[j].is_nan() || dp[j] <= 0.0;
             assert_eq!(no_load, no_signal, "frame {k}: share {} flags {}", dp[j], flags[j]);
             if no_load {
-                zeroed += 1;
                 assert_eq!(forces.force_n[j], 0.0);
             }
         }
     }
-    eprintln!("{loaded} loaded frames with contacts, {zeroed} forces zeroed for want of load");
     assert!(loaded > 0, "no loaded frame with contacts");
 }
 

@@ -245,12 +245,27 @@ fn example_plugins_run_as_ab_lanes_and_compare_reports_each() {
 fn bench_names_file_line_and_column_of_a_broken_graph() {
     let d = workdir("bench-broken");
     std::fs::write(d.join("rec.h5"), b"").unwrap();
-    std::fs::write(d.join("g.toml"), "[graph]\nname = \"x\"\n[[node]]\nid = \"a\"\nkind = \n").unwrap();
+    // Valid TOML, so only graph validation catches it: an unknown kind on line 11. The replay
+    // node has no `path`: bench fills it in from --replay, so that alone is not an error.
+    let graph = "[graph]\nname = \"x\"\n\
+        [[node]]\nid = \"replay\"\nkind = \"replay\"\n\
+        [[node]]\nid = \"cmp\"\nkind = \"compare\"\n\
+        [[node]]\nid = \"recon\"\nkind = \"nope\"\n";
+    std::fs::write(d.join("g.toml"), graph).unwrap();
     let o = skinflow(&d, &["bench", "g.toml", "--replay", "rec.h5", "--vary", "recon.lambda=0.1", "--out", "b"]);
     assert!(!o.status.success());
     let err = String::from_utf8_lossy(&o.stderr);
-    assert!(err.contains("g.toml:5:"), "no file:line:column in {err}");
+    assert!(err.contains("g.toml:11:") && err.contains("nope"), "no file:line:column in {err}");
     assert!(!d.join("b").exists(), "nothing written for a broken graph");
+    // An error only an override causes names the variant (its regenerated text has no lines
+    // the user could look up).
+    let ab = root().join("graphs/ab-replay.toml");
+    let o =
+        skinflow(&d, &["bench", ab.to_str().unwrap(), "--replay", "rec.h5", "--vary", "recon.lambda=-1", "--out", "b"]);
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("variant \"recon.lambda=-1\"") && err.contains("lambda"), "{err}");
+    assert!(!d.join("b").exists(), "nothing written for an invalid variant");
 }
 
 #[test]

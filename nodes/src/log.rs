@@ -256,7 +256,8 @@ impl Sink for Logger {
             let s = w.close().map_err(|e| io(&self.path, e))?;
             tracing::info!(
                 node = ctx.id(), path = %self.path.display(), eit = s.eit_rows, pressure = s.pressure_rows, truth = s.truth_rows,
-                images = s.image_rows, parts = s.parts, contacts_dropped = s.contacts_dropped, "recording closed"
+                images = s.image_rows, contacts = s.contacts_rows, sync = s.sync_rows, forces = s.force_rows,
+                parts = s.parts, contacts_dropped = s.contacts_dropped, "recording closed"
             );
         }
         Ok(())
@@ -265,13 +266,15 @@ impl Sink for Logger {
 
 /// The recording's bit code of a force's guard flags (`skinflow_record::layout::force_flags`).
 fn flag_bits(f: &ForceFlags) -> u32 {
+    // Destructured in full, so a new flag cannot be left out of the file unnoticed.
+    let ForceFlags { no_load, above_range, below_range, location_clamped, area_clamped, negative_clamped } = *f;
     [
-        (f.no_load, force_flags::NO_LOAD),
-        (f.above_range, force_flags::ABOVE_RANGE),
-        (f.below_range, force_flags::BELOW_RANGE),
-        (f.location_clamped, force_flags::LOCATION_CLAMPED),
-        (f.area_clamped, force_flags::AREA_CLAMPED),
-        (f.negative_clamped, force_flags::NEGATIVE_CLAMPED),
+        (no_load, force_flags::NO_LOAD),
+        (above_range, force_flags::ABOVE_RANGE),
+        (below_range, force_flags::BELOW_RANGE),
+        (location_clamped, force_flags::LOCATION_CLAMPED),
+        (area_clamped, force_flags::AREA_CLAMPED),
+        (negative_clamped, force_flags::NEGATIVE_CLAMPED),
     ]
     .into_iter()
     .filter(|(set, _)| *set)
@@ -307,4 +310,37 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
             .param(ParamDoc::new("deflate_level", "u8", "1", "0-9")),
         |p: LoggerParams, ctx| Ok(NodeImpl::Sink(Box::new(Logger::new(p, ctx)?))),
     ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn each_flag_has_its_own_bit() {
+        let one = |set: fn(&mut ForceFlags)| {
+            let mut f = ForceFlags::default();
+            set(&mut f);
+            flag_bits(&f)
+        };
+        let bits = [
+            one(|f| f.no_load = true),
+            one(|f| f.above_range = true),
+            one(|f| f.below_range = true),
+            one(|f| f.location_clamped = true),
+            one(|f| f.area_clamped = true),
+            one(|f| f.negative_clamped = true),
+        ];
+        assert_eq!(bits, [1, 2, 4, 8, 16, 32]);
+        assert_eq!(flag_bits(&ForceFlags::default()), 0);
+        let all = ForceFlags {
+            no_load: true,
+            above_range: true,
+            below_range: true,
+            location_clamped: true,
+            area_clamped: true,
+            negative_clamped: true,
+        };
+        assert_eq!(flag_bits(&all), 63);
+    }
 }

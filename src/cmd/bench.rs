@@ -12,7 +12,7 @@ use std::path::Path;
 
 use anyhow::{Context as _, Result, anyhow, bail};
 use plotters::prelude::*;
-use skinflow_core::graph::{SourceFile, plugin_paths};
+use skinflow_core::graph::{GraphErrors, SourceFile, plugin_paths};
 use skinflow_core::{GraphSpec, Registry, RunOptions};
 
 /// One `--vary node.param=v1,v2,...`.
@@ -257,25 +257,49 @@ fn plot(path: &Path, points: &[Point]) -> Result<()> {
     Ok(())
 }
 
+/// The error for a variant that does not validate. A variant is regenerated TOML, so its line
+/// and column mean nothing to the user: each error the graph as written shares is reported at
+/// its place in the user's file; the others (caused by an override) name the variant. The
+/// graph as written need not validate on its own: the overrides may complete it (a replay
+/// `path` left for `--replay` to fill in, say).
+fn invalid_variant(graph: &Path, text: &str, reg: &Registry, label: &str, errs: GraphErrors) -> anyhow::Error {
+    let written = GraphSpec::parse(SourceFile::new(graph, text.to_owned()), reg).err().map_or_else(Vec::new, |w| w.0);
+    let lines: Vec<String> = errs
+        .0
+        .iter()
+        .map(|e| match written.iter().find(|w| w.node == e.node && w.kind == e.kind) {
+            Some(w) => w.to_string(),
+            None => {
+                let node = e.node.as_ref().map(|n| format!("node \"{n}\": ")).unwrap_or_default();
+                format!("{}: variant \"{label}\" (--replay and --vary applied): {node}{}", graph.display(), e.kind)
+            }
+        })
+        .collect();
+    anyhow!(lines.join("\n"))
+}
+
 /// Runs the variants and writes `bench.md`, `bench.json` and `pareto.png` into `out_dir`.
 pub fn run(graph: &Path, replay: &Path, vary: &[String], out_dir: &Path) -> Result<()> {
     let vary: Vec<Vary> = vary.iter().map(|s| s.parse()).collect::<Result<_>>()?;
     let text = std::fs::read_to_string(graph).with_context(|| format!("{}: cannot read", graph.display()))?;
     let reg = registry_for(&SourceFile::new(graph, text.clone()))?;
-    // The graph as written must be valid first, so its errors name file, line and column.
-    GraphSpec::parse(SourceFile::new(graph, text.clone()), &reg).map_err(|e| anyhow!("{e}"))?;
     let base: toml::Table = toml::from_str(&text).map_err(|e| anyhow!("{}: {}", graph.display(), e.message()))?;
     let replay = std::path::absolute(replay).with_context(|| format!("{}: bad path", replay.display()))?;
     if !replay.is_file() {
         bail!("{}: recording not found", replay.display());
     }
-    std::fs::create_dir_all(out_dir).with_context(|| format!("{}: cannot create", out_dir.display()))?;
     let out_abs = std::path::absolute(out_dir)?;
-    let mut points = Vec::new();
+    // Every variant validates before any runs or anything is written.
+    let mut variants = Vec::new();
     for (k, (label, set)) in combinations(&vary).into_iter().enumerate() {
         let json = out_abs.join(format!("variant-{k}.json"));
         let src = SourceFile::new(graph, variant_text(&base, &replay, &set, &json)?);
-        let spec = GraphSpec::parse(src, &reg).map_err(|e| anyhow!("variant \"{label}\": {e}"))?;
+        let spec = GraphSpec::parse(src, &reg).map_err(|e| invalid_variant(graph, &text, &reg, &label, e))?;
+        variants.push((label, spec, json));
+    }
+    std::fs::create_dir_all(out_dir).with_context(|| format!("{}: cannot create", out_dir.display()))?;
+    let mut points = Vec::new();
+    for (k, (label, spec, json)) in variants.into_iter().enumerate() {
         eprintln!("bench: variant {k}: {label}");
         let report =
             skinflow_core::run(&spec, &RunOptions::default()).map_err(|e| anyhow!("variant \"{label}\": {e}"))?;

@@ -24,15 +24,18 @@
 //! | `/derived/contacts/area_mm2` | f64 `[n, Cmax]` | contact area, mm² |
 //! | `/derived/forces/<strategy>/t` | f64 `[n]` | seconds |
 //! | `/derived/forces/<strategy>/force_n` | f64 `[n, Cmax]` | per-contact force of that strategy, N, in the order of the frame's contacts, NaN-padded |
-//! | `/derived/forces/<strategy>/dp_kpa` | f64 `[n, Cmax]` | the pressure share (or signal) each contact's force came from, kPa, NaN-padded |
-//! | `/derived/forces/<strategy>/flags` | f64 `[n, Cmax]` | guard bits of each force (integer values, NaN-padded): 1 no load (force 0), 2 above and 4 below the calibrated range (extrapolated), 8 centroid clamped onto the calibrated region, 16 area clamped, 32 negative force clamped to 0 (`layout::force_flags`) |
+//! | `/derived/forces/<strategy>/dp_kpa` | f64 `[n, Cmax]` | each contact's pressure share from the splitter, kPa, NaN-padded (the pneumatic strategies' input; the EIT strategies use the contact's conductivity sum instead) |
+//! | `/derived/forces/<strategy>/flags` | f64 `[n, Cmax]` | guard bits of each force (integer values, NaN-padded): 1 no load (signal <= 0, force 0), 2 above and 4 below the calibrated range (extrapolated), 8 centroid clamped onto the calibrated region, 16 area clamped, 32 negative force clamped to 0 (`layout::force_flags`). Plugin lanes carry only bit 1, set where their share is <= 0 |
 //! | `/derived/sync/t` | f64 `[n]` | seconds, time of the EIT frame |
-//! | `/derived/sync/dp_kpa` | f64 `[n]` | the frame's pressure change: window mean minus P0, kPa (NaN without samples) |
-//! | `/derived/sync/pressure_samples`, `pressure_sd_kpa` | f64 `[n]` | samples in the window and their SD, kPa |
+//! | `/derived/sync/dp_kpa` | f64 `[n]` | the frame's pressure change: window mean minus P0, kPa (NaN without samples or while P0 is unknown) |
+//! | `/derived/sync/pressure_samples`, `pressure_sd_kpa` | f64 `[n]` | samples in the window and their SD, kPa (NaN with fewer than 2) |
 //! | `/derived/sync/settled` | f64 `[n]` | 1 where the pressure alone says the load did not change during the window, else 0 |
 //! | `/derived/sync/no_load` | f64 `[n]` | 1 for frames of the leading no-load period, else 0 |
 //! | `/derived/sync/p0_kpa`, `noise_kpa` | f64 `[n]` | the no-load offset removed and the noise SD behind `settled`, kPa (NaN until known) |
 //!
+//! - Derived streams are joined to each other and to `/eit` by time `t`, not by row index: with
+//!   `drop_oldest` edges each stream may lose different frames (counted by the engine), and
+//!   with rotation a frame's rows may fall into consecutive parts.
 //! - Widths are fixed when a file is created, so rows never change once written and all parts
 //!   have the same shapes:
 //!   truth C = `truth_max_contacts` (default 8) and derived Cmax = `derived_max_contacts`

@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 
 use skinflow_eit::sensor::PAPER_100MM_TOML;
 use skinflow_record::rotate::{find_parts, part_path, recording_files};
-use skinflow_record::{Recording, RecordingWriter, Streams, TruthContact, WriterOptions};
+use skinflow_record::{ForceRow, Recording, RecordingWriter, Streams, SyncRow, TruthContact, WriterOptions};
 
 fn tempdir(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("skinflow-record-{name}-{}", std::process::id()));
@@ -19,7 +19,8 @@ fn frame(i: u64, m: usize) -> Vec<f64> {
 }
 
 /// Writes `n` EIT frames (t = 10 ms steps), a pressure sample per frame and a truth row
-/// every 50 frames; returns the parts.
+/// every 50 frames, plus a sync row and one force of the first strategy per frame when those
+/// streams are declared; returns the parts.
 fn write(base: &Path, opts: &WriterOptions, n: u64) -> Vec<PathBuf> {
     let mut w = RecordingWriter::create(base, opts).unwrap();
     w.set_reference(&frame(7, 120)).unwrap();
@@ -30,6 +31,22 @@ fn write(base: &Path, opts: &WriterOptions, n: u64) -> Vec<PathBuf> {
         if i % 50 == 0 {
             let c = TruthContact { x_mm: i as f64, y_mm: 0.0, force_n: 1.0, diameter_mm: 10.0 };
             w.append_truth(t, &[c]).unwrap();
+        }
+        if opts.streams.sync {
+            let row = SyncRow {
+                dp_kpa: i as f64,
+                pressure_samples: 1,
+                pressure_sd_kpa: f64::NAN,
+                settled: i % 2 == 0,
+                no_load: false,
+                p0_kpa: 0.0,
+                noise_kpa: 0.01,
+            };
+            w.append_sync(t, &row).unwrap();
+        }
+        if !opts.streams.force_strategies.is_empty() {
+            w.append_forces(0, t, &[ForceRow { force_n: i as f64, dp_kpa: 0.5 * i as f64, flags: (i % 64) as u32 }])
+                .unwrap();
         }
     }
     let stats = w.close().unwrap();
@@ -42,6 +59,7 @@ fn write(base: &Path, opts: &WriterOptions, n: u64) -> Vec<PathBuf> {
 /// Concatenates the parts and checks them against what `write` wrote.
 fn check_concatenation(parts: &[PathBuf], n: u64) {
     let (mut seq, mut p_kpa, mut truth_t) = (vec![], vec![], vec![]);
+    let (mut sync_dp, mut settled, mut force_n, mut force_dp, mut flags) = (vec![], vec![], vec![], vec![], vec![]);
     for (k, path) in parts.iter().enumerate() {
         let rec = Recording::open(path).unwrap();
         assert_eq!(rec.part, Some(k as i64 + 1));
@@ -56,6 +74,28 @@ fn check_concatenation(parts: &[PathBuf], n: u64) {
         seq.extend_from_slice(&eit.seq);
         p_kpa.extend_from_slice(&rec.pressure.as_ref().unwrap().kpa);
         truth_t.extend_from_slice(&rec.truth.as_ref().unwrap().t_s);
+        if let Some(s) = &rec.derived.sync {
+            assert_eq!(s.t_s, eit.t_s, "part {k}: a sync row per frame, in the same part");
+            sync_dp.extend_from_slice(&s.dp_kpa);
+            settled.extend_from_slice(&s.settled);
+        }
+        if let Some(f) = rec.derived.forces.first() {
+            assert_eq!(f.t_s, eit.t_s, "part {k}: a force row per frame, in the same part");
+            // One contact per row: column 0 of each row.
+            let col0 = |v: &[f64]| v.iter().step_by(f.max_contacts).copied().collect::<Vec<_>>();
+            force_n.extend(col0(&f.force_n));
+            force_dp.extend(col0(f.dp_kpa.as_ref().unwrap()));
+            flags.extend(col0(f.flags.as_ref().unwrap()));
+        }
+    }
+    if !sync_dp.is_empty() {
+        assert_eq!(sync_dp, (0..n).map(|i| i as f64).collect::<Vec<_>>());
+        assert_eq!(settled, (0..n).map(|i| i % 2 == 0).collect::<Vec<_>>());
+    }
+    if !force_n.is_empty() {
+        assert_eq!(force_n, (0..n).map(|i| i as f64).collect::<Vec<_>>());
+        assert_eq!(force_dp, (0..n).map(|i| 0.5 * i as f64).collect::<Vec<_>>());
+        assert_eq!(flags, (0..n).map(|i| (i % 64) as f64).collect::<Vec<_>>());
     }
     assert_eq!(seq, (0..n).collect::<Vec<_>>());
     assert_eq!(p_kpa, (0..n).map(|i| i as f64).collect::<Vec<_>>());
@@ -67,7 +107,8 @@ fn rotation_by_duration_splits_at_rotate_s() {
     let dir = tempdir("rotate-time");
     let base = dir.join("rec.h5");
     let mut opts = WriterOptions::new(PAPER_100MM_TOML);
-    opts.streams = Streams { truth: true, ..Streams::default() };
+    opts.streams =
+        Streams { truth: true, sync: true, force_strategies: vec!["pneumatic-locaware".into()], ..Streams::default() };
     opts.rotate_s = Some(1.0);
     opts.chunk_rows = 64;
     let parts = write(&base, &opts, 350);

@@ -5,7 +5,9 @@ use std::path::{Path, PathBuf};
 
 use hdf5::types::VarLenUnicode;
 use skinflow_eit::sensor::PAPER_100MM_TOML;
-use skinflow_record::{RecordError, Recording, RecordingWriter, SchemaProblem, Streams, TruthContact, WriterOptions};
+use skinflow_record::{
+    ForceRow, RecordError, Recording, RecordingWriter, SchemaProblem, Streams, SyncRow, TruthContact, WriterOptions,
+};
 
 fn valid_file(dir: &Path, name: &str) -> PathBuf {
     let path = dir.join(name);
@@ -178,4 +180,49 @@ fn extra_groups_and_attributes_are_ignored() {
     let after = Recording::open(&file).unwrap();
     // Debug text compares NaN padding too (NaN != NaN under PartialEq).
     assert!(format!("{before:?}") == format!("{after:?}"), "extra content changed what was read");
+}
+
+/// Files written before the logger recorded `/derived/sync` and each force's `dp_kpa` and
+/// `flags` still open: those read as absent, everything else as before.
+#[test]
+fn files_without_sync_or_force_flags_still_open() {
+    let dir = std::env::temp_dir().join(format!("skinflow-record-older-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("older.h5");
+    let mut opts = WriterOptions::new(PAPER_100MM_TOML);
+    opts.streams = Streams { sync: true, force_strategies: vec!["s".into()], ..Streams::default() };
+    let mut w = RecordingWriter::create(&path, &opts).unwrap();
+    let sync = SyncRow {
+        dp_kpa: 1.0,
+        pressure_samples: 3,
+        pressure_sd_kpa: 0.01,
+        settled: true,
+        no_load: false,
+        p0_kpa: 0.0,
+        noise_kpa: 0.01,
+    };
+    for i in 0..5u64 {
+        let t = i as f64 * 0.1;
+        w.append_eit(t, i, &[1.0; 120]).unwrap();
+        w.append_sync(t, &sync).unwrap();
+        w.append_forces(0, t, &[ForceRow { force_n: 2.0, dp_kpa: 1.0, flags: 8 }]).unwrap();
+    }
+    w.close().unwrap();
+    let full = Recording::open(&path).unwrap();
+    assert_eq!(full.derived.sync.as_ref().unwrap().t_s.len(), 5);
+    assert_eq!(full.derived.forces[0].flags.as_ref().unwrap()[0], 8.0);
+
+    let f = hdf5::File::open_rw(&path).unwrap();
+    for p in ["/derived/forces/s/dp_kpa", "/derived/forces/s/flags", "/derived/sync"] {
+        f.unlink(p).unwrap();
+    }
+    drop(f);
+    let older = Recording::open(&path).unwrap();
+    assert!(older.derived.sync.is_none());
+    let forces = &older.derived.forces[0];
+    assert!(forces.dp_kpa.is_none() && forces.flags.is_none());
+    let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+    assert_eq!(bits(&forces.force_n), bits(&full.derived.forces[0].force_n), "NaN padding included");
+    assert_eq!(older.eit, full.eit);
 }

@@ -51,7 +51,7 @@ pub struct SyncRow {
 pub struct ForceRow {
     /// Estimated normal force, N.
     pub force_n: f64,
-    /// The contact's pressure share (or signal) the strategy used, kPa.
+    /// The contact's pressure share from the splitter, kPa.
     pub dp_kpa: f64,
     /// Guard bits, `layout::force_flags`.
     pub flags: u32,

@@ -157,6 +157,8 @@ fn replayed_pipeline_logs_derived_streams_without_drops() {
     assert_eq!(node("force")["msgs_out"].as_u64().unwrap(), frames);
     let text = ok(&skinflow(&d, &["inspect", "out.h5"]));
     assert!(text.contains("/eit") && text.contains("/truth") && text.contains("/derived/sync"), "{text}");
+    assert!(text.contains(&format!("sync:     {frames} frames: ")), "{text}");
+    assert!(text.contains("guards:   pneumatic-locaware: "), "{text}");
     derived_streams_agree(&d.join("out.h5"), frames as usize);
 }
 

@@ -1,5 +1,7 @@
 //! `skinflow inspect REC.h5`: a `Summary` of a recording (streams, row counts, time span,
-//! rates, EIT frame gaps from `/eit/seq`, truth coverage) and its plain-text `Display`.
+//! rates, EIT frame gaps from `/eit/seq`, truth coverage, and from the logger's derived
+//! streams the frames judged settled and the forces each guard touched) and its plain-text
+//! `Display`.
 //! Rates are rows per second over the stream's span; periods are medians of time steps.
 
 use std::fmt;
@@ -89,6 +91,34 @@ pub struct TruthCoverage {
     pub eit_frames: usize,
 }
 
+/// The sync node's judgements over `/derived/sync`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct SyncCounts {
+    pub frames: usize,
+    pub settled: usize,
+    pub no_load: usize,
+}
+
+/// How many forces of one strategy each guard touched (`/derived/forces/<name>/flags`).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct GuardCounts {
+    pub strategy: String,
+    /// Forces stored (padding excluded).
+    pub forces: usize,
+    /// Per bit of `layout::force_flags`, in `GUARDS` order.
+    pub flagged: [usize; GUARDS.len()],
+}
+
+/// Names and bits of the guard flags, in bit order.
+pub const GUARDS: [(&str, u32); 6] = [
+    ("no load", layout::force_flags::NO_LOAD),
+    ("above range", layout::force_flags::ABOVE_RANGE),
+    ("below range", layout::force_flags::BELOW_RANGE),
+    ("location clamped", layout::force_flags::LOCATION_CLAMPED),
+    ("area clamped", layout::force_flags::AREA_CLAMPED),
+    ("negative clamped", layout::force_flags::NEGATIVE_CLAMPED),
+];
+
 /// Summary of one recording file.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Summary {
@@ -108,6 +138,9 @@ pub struct Summary {
     pub eit_gaps: Option<FrameGaps>,
     pub truth: Option<TruthCoverage>,
     pub has_reference: bool,
+    pub sync: Option<SyncCounts>,
+    /// Strategies whose forces carry guard flags.
+    pub guards: Vec<GuardCounts>,
 }
 
 /// Opens `path` and summarises it.
@@ -165,6 +198,25 @@ impl Summary {
             eit_gaps: rec.eit.as_ref().map(|e| FrameGaps::of(&e.seq)),
             truth,
             has_reference: rec.reference.is_some(),
+            sync: rec.derived.sync.as_ref().map(|s| SyncCounts {
+                frames: s.t_s.len(),
+                settled: s.settled.iter().filter(|&&b| b).count(),
+                no_load: s.no_load.iter().filter(|&&b| b).count(),
+            }),
+            guards: rec
+                .derived
+                .forces
+                .iter()
+                .filter_map(|f| {
+                    let flags = f.flags.as_ref()?;
+                    let stored = || flags.iter().filter(|x| !x.is_nan());
+                    Some(GuardCounts {
+                        strategy: f.name.clone(),
+                        forces: stored().count(),
+                        flagged: GUARDS.map(|(_, bit)| stored().filter(|&&x| x as u32 & bit != 0).count()),
+                    })
+                })
+                .collect(),
         }
     }
 }
@@ -226,9 +278,23 @@ impl fmt::Display for Summary {
                     f,
                     "truth:    {} rows (C = {}), {} with contact; covers {}/{} EIT frames ({pct:.1} %)",
                     t.rows, t.max_contacts, t.rows_with_contact, t.eit_frames_covered, t.eit_frames
-                )
+                )?;
             }
-            None => writeln!(f, "truth:    none"),
+            None => writeln!(f, "truth:    none")?,
         }
+        if let Some(s) = &self.sync {
+            writeln!(f, "sync:     {} frames: {} settled, {} in the no-load period", s.frames, s.settled, s.no_load)?;
+        }
+        for g in &self.guards {
+            let touched: Vec<String> = GUARDS
+                .iter()
+                .zip(g.flagged)
+                .filter(|(_, n)| *n > 0)
+                .map(|((name, _), n)| format!("{n} {name}"))
+                .collect();
+            let touched = if touched.is_empty() { "none flagged".to_owned() } else { touched.join(", ") };
+            writeln!(f, "guards:   {}: {} forces; {touched}", g.strategy, g.forces)?;
+        }
+        Ok(())
     }
 }

@@ -84,7 +84,7 @@ mod timestamp;
 pub mod write;
 
 pub use error::{RecordError, SchemaProblem};
-pub use inspect::{FrameGaps, StreamSummary, Summary, TruthCoverage, inspect};
+pub use inspect::{FrameGaps, GUARDS, GuardCounts, StreamSummary, Summary, SyncCounts, TruthCoverage, inspect};
 pub use read::{
     ContactsStream, Derived, EitStream, ForceStream, ImageStream, PressureStream, Recording, SyncStream, TruthRow,
     TruthStream,

@@ -226,3 +226,43 @@ fn files_without_sync_or_force_flags_still_open() {
     assert_eq!(bits(&forces.force_n), bits(&full.derived.forces[0].force_n), "NaN padding included");
     assert_eq!(older.eit, full.eit);
 }
+
+/// `inspect` counts the settled frames and the forces each guard touched, padding excluded.
+#[test]
+fn inspect_counts_settled_frames_and_guarded_forces() {
+    let dir = std::env::temp_dir().join(format!("skinflow-record-guards-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("guards.h5");
+    let mut opts = WriterOptions::new(PAPER_100MM_TOML);
+    opts.streams = Streams { sync: true, force_strategies: vec!["s".into()], ..Streams::default() };
+    let mut w = RecordingWriter::create(&path, &opts).unwrap();
+    for i in 0..6u32 {
+        let t = f64::from(i) * 0.1;
+        w.append_eit(t, u64::from(i), &[1.0; 120]).unwrap();
+        let row = SyncRow {
+            dp_kpa: 1.0,
+            pressure_samples: 3,
+            pressure_sd_kpa: 0.01,
+            settled: i >= 2,
+            no_load: i == 0,
+            p0_kpa: 0.0,
+            noise_kpa: 0.01,
+        };
+        w.append_sync(t, &row).unwrap();
+        // Frame i has i % 3 contacts; flags: 1 (no load) on the first, 2 | 8 on the second.
+        let forces =
+            [ForceRow { force_n: 0.0, dp_kpa: -0.1, flags: 1 }, ForceRow { force_n: 3.0, dp_kpa: 9.0, flags: 10 }];
+        w.append_forces(0, t, &forces[..(i % 3) as usize]).unwrap();
+    }
+    w.close().unwrap();
+    let s = skinflow_record::inspect(&path).unwrap();
+    assert_eq!(s.sync, Some(skinflow_record::SyncCounts { frames: 6, settled: 4, no_load: 1 }));
+    let g = &s.guards[0];
+    // Contacts per frame 0,1,2,0,1,2: 6 forces, 4 with bit 1, 2 with bits 2 and 8.
+    assert_eq!((g.strategy.as_str(), g.forces), ("s", 6));
+    assert_eq!(g.flagged, [4, 2, 0, 2, 0, 0]);
+    let text = s.to_string();
+    assert!(text.contains("sync:     6 frames: 4 settled, 1 in the no-load period"), "{text}");
+    assert!(text.contains("guards:   s: 6 forces; 4 no load, 2 above range, 2 location clamped"), "{text}");
+}

@@ -5,8 +5,10 @@
 //! pressure samples in `[t - T/2, t + T/2)` (CONTRACTS.md section 2). `T` is `frame_period_s`
 //! or the median of the observed frame intervals. A frame is emitted as soon as no later
 //! pressure sample can fall into its window (the newest sample is within one pressure period
-//! of the window's end), when a newer frame proves the window is past, or at once when no
-//! pressure is connected. P0 is the mean pressure of the leading no-load period: before the
+//! of the window's end), without waiting when no pressure is connected, and in any case once
+//! more than three frames are pending. Before the first truth row with a contact, a frame
+//! also waits until some input (or a newer frame) shows time past its window's end, so a first
+//! contact stamped inside the window cannot be missed. P0 is the mean pressure of the leading no-load period: before the
 //! first truth row with a contact, or the first `tare_s` seconds without truth. A frame is a
 //! no-load frame (an EIT reference candidate) only when its whole window lies in that period; a `tare`
 //! control command re-tares from the last `tare_window_s` seconds of pressure.
@@ -113,8 +115,6 @@ pub struct Sync {
     truth: VecDeque<(f64, Arc<Truth>)>,
     /// Time of the first truth row with a contact: the no-load period ends there.
     first_contact_s: Option<f64>,
-    /// Newest time seen on the pressure or truth input.
-    latest_input_s: Option<f64>,
     /// No-load pressure accumulation for P0 and the noise SD: sums of (kPa - p0_shift) and
     /// of its square (shifted by the first sample, so the variance does not cancel).
     p0_sum: f64,
@@ -131,11 +131,15 @@ pub struct Sync {
     last_frame_s: Option<f64>,
     intervals: VecDeque<f64>,
     scratch: Vec<f64>,
+    /// The acquisition window T in use, s: `frame_period_s`, else the median of `intervals`
+    /// (updated per frame, read per pressure sample).
+    period_s: f64,
     ring: Recycler<SyncedFrame>,
 }
 
 impl Sync {
     pub fn new(p: SyncParams) -> Sync {
+        let period_s = p.frame_period_s.unwrap_or(DEFAULT_FRAME_PERIOD_S);
         Sync {
             p,
             pressure_connected: true,
@@ -144,7 +148,6 @@ impl Sync {
             pressure_period_s: None,
             truth: VecDeque::with_capacity(64),
             first_contact_s: None,
-            latest_input_s: None,
             p0_sum: 0.0,
             p0_sq: 0.0,
             p0_n: 0,
@@ -156,21 +159,16 @@ impl Sync {
             last_frame_s: None,
             intervals: VecDeque::with_capacity(PERIOD_HISTORY + 1),
             scratch: Vec::with_capacity(PERIOD_HISTORY),
+            period_s,
             ring: Recycler::new(128, SyncedFrame::default),
         }
     }
 
-    fn frame_period_s(&mut self) -> f64 {
-        if let Some(t) = self.p.frame_period_s {
-            return t;
-        }
-        if self.intervals.is_empty() {
-            return DEFAULT_FRAME_PERIOD_S;
-        }
-        self.scratch.clear();
-        self.scratch.extend(self.intervals.iter().copied());
-        self.scratch.sort_by(f64::total_cmp);
-        self.scratch[self.scratch.len() / 2]
+    /// Newest time seen on the pressure or truth input: both histories keep their newest entry.
+    fn latest_input_s(&self) -> Option<f64> {
+        let p = self.pressure.back().map(|&(t, _)| t);
+        let t = self.truth.back().map(|&(t, _)| t);
+        p.into_iter().chain(t).reduce(f64::max)
     }
 
     /// Whether a frame window ending (exclusive) at `end_s` lies wholly in the leading
@@ -203,15 +201,7 @@ impl Sync {
         })
     }
 
-    /// Newest time seen on the pressure or truth input.
-    fn saw_input(&mut self, t_s: f64) {
-        if self.latest_input_s.is_none_or(|t| t_s > t) {
-            self.latest_input_s = Some(t_s);
-        }
-    }
-
     fn on_pressure(&mut self, t_s: f64, kpa: f64) {
-        self.saw_input(t_s);
         if let Some(&(last, _)) = self.pressure.back() {
             let dt = t_s - last;
             if dt > 0.0 {
@@ -233,7 +223,6 @@ impl Sync {
     }
 
     fn on_truth(&mut self, t_s: f64, row: Arc<Truth>) {
-        self.saw_input(t_s);
         if self.first_contact_s.is_none() && !row.contacts.is_empty() {
             self.first_contact_s = Some(t_s);
             // Samples at or after the first contact are loaded: out of P0.
@@ -259,25 +248,31 @@ impl Sync {
             if self.intervals.len() > PERIOD_HISTORY {
                 self.intervals.pop_front();
             }
+            if self.p.frame_period_s.is_none() {
+                self.scratch.clear();
+                self.scratch.extend(self.intervals.iter().copied());
+                self.scratch.sort_by(f64::total_cmp);
+                self.period_s = self.scratch[self.scratch.len() / 2];
+            }
         }
         self.last_frame_s = Some(t);
         self.pending.push_back((h, f));
     }
 
     /// Whether the oldest pending frame's window can receive no more samples.
-    fn oldest_complete(&mut self) -> bool {
+    fn oldest_complete(&self) -> bool {
         let Some((h, _)) = self.pending.front() else { return false };
-        let end = h.t_s() + 0.5 * self.frame_period_s();
         if self.pending.len() > MAX_PENDING {
             return true;
         }
+        let end = h.t_s() + 0.5 * self.period_s;
         // Before the first contact, a frame is a no-load (reference) candidate: it waits until
         // some input (or a newer frame) shows time past its window's end, so a first contact
         // row stamped inside the window cannot arrive after the frame was judged.
         if self.truth_connected
             && self.first_contact_s.is_none()
             && self.pending.len() < 2
-            && self.latest_input_s.is_none_or(|t| t < end)
+            && self.latest_input_s().is_none_or(|t| t < end)
         {
             return false;
         }
@@ -294,18 +289,11 @@ impl Sync {
     fn emit_oldest(&mut self, ctx: &Context, out: &mut Outputs) -> Result<(), NodeError> {
         let (h, frame) = self.pending.pop_front().expect("called with a pending frame");
         let t = h.t_s();
-        let half = 0.5 * self.frame_period_s();
+        let half = 0.5 * self.period_s;
         let (lo, hi) = (t - half, t + half);
-        let in_window = |&&(tp, kpa): &&(f64, f64)| tp >= lo && tp < hi && kpa.is_finite();
-        let (sum, n) = self.pressure.iter().filter(in_window).fold((0.0, 0u32), |(s, n), &(_, k)| (s + k, n + 1));
+        let (n, mean, sd) =
+            mean_sd(self.pressure.iter().filter(|&&(tp, kpa)| tp >= lo && tp < hi && kpa.is_finite()).map(|&(_, k)| k));
         let noise = self.noise_kpa();
-        let mean = sum / f64::from(n.max(1));
-        let sd = if n >= 2 {
-            let ss: f64 = self.pressure.iter().filter(in_window).map(|&(_, k)| (k - mean) * (k - mean)).sum();
-            (ss / f64::from(n - 1)).sqrt()
-        } else {
-            f64::NAN
-        };
         let settled = noise.is_some_and(|noise| {
             let threshold = (self.p.settle_factor * noise).max(self.p.settle_floor_kpa);
             sd <= threshold
@@ -325,7 +313,7 @@ impl Sync {
         // first press begin would put part of that contact into the EIT reference.
         let no_load = self.window_in_no_load(hi);
         let p0 = self.p0();
-        let dp_kpa = if n > 0 { mean - p0 } else { f64::NAN };
+        let dp_kpa = mean - p0;
         let payload = self.ring.fill(|s| {
             s.frame = frame;
             s.dp_kpa = dp_kpa;
@@ -346,17 +334,14 @@ impl Sync {
             return Err(NodeError::msg("tare: no pressure sample received yet"));
         };
         let from = last - self.p.tare_window_s;
-        let window = || self.pressure.iter().filter(|(t, k)| *t >= from && k.is_finite()).map(|&(_, k)| k);
-        let (s, n) = window().fold((0.0, 0u32), |(s, n), k| (s + k, n + 1));
+        let (n, p0, sd) = mean_sd(self.pressure.iter().filter(|(t, k)| *t >= from && k.is_finite()).map(|&(_, k)| k));
         if n == 0 {
             return Err(NodeError::msg(format!(
                 "tare: no finite pressure sample in the last {} s (tare_window_s); P0 unchanged",
                 self.p.tare_window_s
             )));
         }
-        let p0 = s / f64::from(n);
-        let ss: f64 = window().map(|k| (k - p0) * (k - p0)).sum();
-        let noise = (u64::from(n) >= MIN_NOISE_SAMPLES).then(|| (ss / f64::from(n - 1)).sqrt());
+        let noise = (u64::from(n) >= MIN_NOISE_SAMPLES).then_some(sd);
         if noise.is_none() {
             tracing::warn!(
                 samples = n,
@@ -420,6 +405,19 @@ impl Processor for Sync {
     }
 }
 
+/// Count, mean and sample SD (two passes) of `samples`; the mean is NaN without samples and
+/// the SD NaN with fewer than 2.
+fn mean_sd(samples: impl Iterator<Item = f64> + Clone) -> (u32, f64, f64) {
+    let (sum, n) = samples.clone().fold((0.0, 0u32), |(s, n), k| (s + k, n + 1));
+    let mean = if n > 0 { sum / f64::from(n) } else { f64::NAN };
+    let sd = if n >= 2 {
+        (samples.map(|k| (k - mean) * (k - mean)).sum::<f64>() / f64::from(n - 1)).sqrt()
+    } else {
+        f64::NAN
+    };
+    (n, mean, sd)
+}
+
 pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::DuplicateKind> {
     r.register(typed(
         KindInfo::new(
@@ -466,8 +464,7 @@ mod tests {
     }
 
     fn sd(v: &[f64]) -> f64 {
-        let m = v.iter().sum::<f64>() / v.len() as f64;
-        (v.iter().map(|x| (x - m) * (x - m)).sum::<f64>() / (v.len() - 1) as f64).sqrt()
+        skinflow_contact::eval::metrics::sd(v).unwrap()
     }
 
     #[test]

@@ -60,7 +60,7 @@ pub struct SegmenterParams {
     #[serde(default = "default_separation")]
     pub separation: f64,
     /// Keep regions whose peak reaches this fraction of the largest, each cut at Otsu's
-    /// fraction of its own peak (0: the paper's single global cut).
+    /// fraction of its own peak (0: the paper's single global cut; > 0 needs `separation` > 0).
     #[serde(default = "default_weak_peak")]
     pub weak_peak: f64,
 }
@@ -149,13 +149,14 @@ impl Processor for Segmenter {
             self.scratch.extend_from_slice(&self.noise_peaks);
             self.scratch.sort_by(f64::total_cmp);
             let median = self.scratch[self.scratch.len() / 2];
-            {
-                let floor = self.floor_min.max(self.floor_over_noise * median);
-                if floor != self.params.floor {
-                    self.params.floor = floor;
-                    self.math = None; // rebuilt below with the new floor (no-load period only)
-                    tracing::debug!(node = ctx.id(), floor, "segmentation floor follows the no-load noise");
+            let floor = self.floor_min.max(self.floor_over_noise * median);
+            if floor != self.params.floor {
+                self.params.floor = floor;
+                if let Some((_, seg, _)) = self.math.as_mut() {
+                    seg.set_floor(floor)
+                        .map_err(|e| NodeError::Input { port: "image".into(), problem: e.to_string() })?;
                 }
+                tracing::debug!(node = ctx.id(), floor, "segmentation floor follows the no-load noise");
             }
         }
         let grid = ImageGrid::centred(image.width, image.height, image.width_mm, image.height_mm);
@@ -198,7 +199,7 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
         KindInfo::new(
             "segmenter",
             Role::Processor,
-            "image -> contacts: Otsu + floor, disk opening/closing, components, centroids",
+            "image -> contacts: Otsu + floor, disk opening/closing, components split at saddles, weak-contact regions, centroids",
         )
         .input(PortSpec::input::<Image>("image", "conductivity-change image"))
         .output(PortSpec::output::<Contacts>("contacts", "centroid (mm), conductivity sum, area (mm^2) per contact"))
@@ -211,6 +212,12 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
             "f64",
             "0.2",
             "split touching contacts at saddles this deep (fraction of the lower peak); 0 = paper",
+        ))
+        .param(ParamDoc::new(
+            "weak_peak",
+            "f64",
+            "0.15",
+            "keep regions whose peak reaches this fraction of the largest, each cut at its own Otsu level; 0 = paper (needs separation > 0)",
         )),
         |p: SegmenterParams, _| Ok(NodeImpl::Processor(Box::new(Segmenter::new(&p)))),
     ))

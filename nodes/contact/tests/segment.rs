@@ -31,11 +31,15 @@ fn image(blobs: &[(f64, f64, f64, f64)], noise_sd: f64, seed: u64) -> Vec<f64> {
     img
 }
 
-fn segment(img: &[f64], floor: f64) -> Vec<skinflow_contact::Contact> {
-    let mut seg = Segmenter::new(grid(), &SegmentParams::with_floor(floor)).unwrap();
+fn segment_params(img: &[f64], params: &SegmentParams) -> Vec<skinflow_contact::Contact> {
+    let mut seg = Segmenter::new(grid(), params).unwrap();
     let mut out = seg.new_contacts();
     seg.segment_into(img, &mut out).unwrap();
     out.as_slice().to_vec()
+}
+
+fn segment(img: &[f64], floor: f64) -> Vec<skinflow_contact::Contact> {
+    segment_params(img, &SegmentParams::with_floor(floor))
 }
 
 #[test]
@@ -161,11 +165,32 @@ fn pixels_outside_the_domain_and_invalid_values_are_ignored() {
 }
 
 fn segment_with(img: &[f64], floor: f64, separation: f64, weak_peak: f64) -> Vec<skinflow_contact::Contact> {
-    let params = SegmentParams { separation, weak_peak, ..SegmentParams::with_floor(floor) };
-    let mut seg = Segmenter::new(grid(), &params).unwrap();
+    segment_params(img, &SegmentParams { separation, weak_peak, ..SegmentParams::with_floor(floor) })
+}
+
+/// A floor changed in place (as the node does while it learns the no-load noise) segments
+/// exactly like a segmenter built with that floor, and a bad floor is refused.
+#[test]
+fn set_floor_matches_a_segmenter_built_with_that_floor() {
+    let img = image(&[(-30.0, 0.0, 0.25, 7.0), (30.0, 20.0, 1.0, 7.0)], 0.005, 3);
+    let mut seg = Segmenter::new(grid(), &SegmentParams::with_floor(0.01)).unwrap();
     let mut out = seg.new_contacts();
-    seg.segment_into(img, &mut out).unwrap();
-    out.as_slice().to_vec()
+    for floor in [0.3, 0.05] {
+        seg.set_floor(floor).unwrap();
+        seg.segment_into(&img, &mut out).unwrap();
+        assert_eq!(out.as_slice(), &segment(&img, floor)[..], "floor {floor}");
+    }
+    assert_eq!(segment(&img, 0.3).len(), 1, "the high floor drops the weak contact");
+    assert!(seg.set_floor(0.0).is_err() && seg.set_floor(f64::NAN).is_err());
+}
+
+#[test]
+fn weak_regions_without_separation_are_refused_not_ignored() {
+    let params = SegmentParams { separation: 0.0, ..SegmentParams::with_floor(0.05) };
+    let e = Segmenter::new(grid(), &params).err().expect("weak_peak > 0 with separation = 0");
+    assert!(e.to_string().contains("weak_peak"), "{e}");
+    let paper = SegmentParams { separation: 0.0, weak_peak: 0.0, ..SegmentParams::with_floor(0.05) };
+    assert!(Segmenter::new(grid(), &paper).is_ok());
 }
 
 #[test]

@@ -41,7 +41,7 @@ pub struct SegmentParams {
     /// 0 keeps the paper's plain connected components.
     #[serde(default = "default_separation")]
     pub separation: f64,
-    /// Weak contacts: when > 0 and `separation` > 0, regions are taken at half this fraction of
+    /// Weak contacts: when > 0 (needs `separation` > 0), regions are taken at half this fraction of
     /// the image's largest decrease (or the floor, if higher), split at their saddles, and each
     /// region whose peak reaches this fraction becomes a contact whose ROI is cut at Otsu's
     /// fraction of its own peak (never below the region level); 0 keeps the one global Otsu
@@ -101,6 +101,15 @@ impl SegmentParams {
             return Err(SegmentError::Param {
                 name: "weak_peak",
                 expected: "finite and in [0, 1]",
+                got: self.weak_peak,
+            });
+        }
+        if self.weak_peak > 0.0 && self.separation == 0.0 {
+            // Weak-contact regions are split at their saddles: without separation they would
+            // be silently off.
+            return Err(SegmentError::Param {
+                name: "weak_peak",
+                expected: "0 when separation = 0 (the paper's segmentation sets both to 0)",
                 got: self.weak_peak,
             });
         }
@@ -266,6 +275,14 @@ impl Segmenter {
         })
     }
 
+    /// Changes the absolute floor without reallocating (no buffer depends on it); `floor`
+    /// must be finite and > 0, as in [`SegmentParams`].
+    pub fn set_floor(&mut self, floor: f64) -> Result<(), SegmentError> {
+        SegmentParams { floor, ..self.params.clone() }.validate()?;
+        self.params.floor = floor;
+        Ok(())
+    }
+
     /// An output buffer sized for this segmenter's `max_contacts`.
     pub fn new_contacts(&self) -> Contacts {
         Contacts::with_capacity(self.params.max_contacts)
@@ -354,7 +371,7 @@ impl Segmenter {
         let cut = (d_min + t_norm * range).max(self.params.floor);
         // With `weak_peak` the regions come from a lower level instead (each later thresholded
         // at Otsu's fraction of its own peak), so a weak contact beside a strong one survives.
-        let weak = self.params.weak_peak > 0.0 && self.params.separation > 0.0;
+        let weak = self.params.weak_peak > 0.0; // validated: then separation > 0 as well
         // Regions are found at half the weakest kept peak (`weak_peak` of the largest): low
         // enough to hold a weak contact's ROI, high enough to leave out the image's ripples
         // (which would cost time and merge nothing useful).

@@ -97,7 +97,7 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
         KindInfo::new(
             "corrector",
             Role::Processor,
-            "per-contact force by a calibrated strategy (paper's four + area-aware)",
+            "per-contact force by a calibrated strategy (the paper's four and skinflow's)",
         )
         .input(PortSpec::input::<Split>("split", "dP_i per contact"))
         .output(PortSpec::output::<Forces>("forces", "per-contact force estimates, N, with guard flags"))
@@ -105,7 +105,7 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
             "strategy",
             "string",
             "\"pneumatic-locaware\"",
-            "eit-nocal | pneumatic-nocal | eit-locaware | pneumatic-locaware | pneumatic-area-aware | pneumatic-forward",
+            "eit-nocal | pneumatic-nocal | eit-locaware | pneumatic-locaware | pneumatic-area-aware | pneumatic-forward (the eval names pneumatic-locaware-sensitivity and pneumatic-forward-balance act as their base here: the splitter node chooses the split)",
         ))
         .param(ParamDoc::new("calibration", "path", "", "calibration TOML from `skinflow calibrate`"))
         .param(ParamDoc::new("name", "string", "none", "name on the output (default: strategy[-splitter])")),

@@ -1,8 +1,8 @@
 //! Node `splitter`: shares a frame's pressure change dP among its contacts (paper eq. for
 //! dP_i). `proportional` weights each contact by its conductivity sum C_i (the paper);
-//! `sensitivity-compensated` divides C_i by the EIT sensitivity field s(x, y) learned by
-//! `skinflow calibrate`, so a contact near the electrodes, where EIT over-responds, does not
-//! take more than its share. `eit-force` weights each contact by its EIT-LocAware force
+//! `sensitivity-compensated` turns each C_i into a force equivalent (C_i / k(x, y))^(1/gamma)
+//! with the single-contact EIT response C = k(x, y) F^gamma learned by `skinflow calibrate`, so
+//! a contact where EIT over-responds does not take more than its share. `eit-force` weights each contact by its EIT-LocAware force
 //! estimate g_C(x, y) f_C(C_i) + b_C(x, y): the EIT calibration's own location-aware map from
 //! conductivity sum to force, so both the sensitivity field and the sub-linear C(F) response
 //! are undone before the pneumatic total is shared. `force-balance` takes the sensitivity-

@@ -162,6 +162,15 @@ fn calibration_file_round_trips_and_rejects_unknown_keys() {
     let bad = text.replacen("exponent = ", "exponent = -", 1);
     let err = Calibration::from_toml_str(&bad, "calib.toml").unwrap_err().to_string();
     assert!(err.starts_with("calib.toml:") && err.contains("sensitivity.exponent"), "{err}");
+    // A region the fields divide by (zero width), or a field fitted on another region.
+    let mut flat = cal.clone();
+    flat.region.x_max_mm = flat.region.x_min_mm;
+    let err = Calibration::from_toml_str(&flat.to_toml_string().unwrap(), "calib.toml").unwrap_err().to_string();
+    assert!(err.contains("region must be finite with positive width"), "{err}");
+    let mut moved = cal.clone();
+    moved.forward.sensitivity.region.x_max_mm += 5.0;
+    let err = Calibration::from_toml_str(&moved.to_toml_string().unwrap(), "calib.toml").unwrap_err().to_string();
+    assert!(err.contains("forward.sensitivity.region must equal [region]"), "{err}");
     // Another format version is named as such (with what to do), not reported as a parse error.
     for v in ["2", "99"] {
         let wrong = text.replacen(&format!("format_version = {FORMAT_VERSION}"), &format!("format_version = {v}"), 1);

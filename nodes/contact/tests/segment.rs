@@ -187,7 +187,7 @@ fn set_floor_matches_a_segmenter_built_with_that_floor() {
 #[test]
 fn weak_regions_without_separation_are_refused_not_ignored() {
     let params = SegmentParams { separation: 0.0, ..SegmentParams::with_floor(0.05) };
-    let e = Segmenter::new(grid(), &params).err().expect("weak_peak > 0 with separation = 0");
+    let Err(e) = Segmenter::new(grid(), &params) else { panic!("weak_peak > 0 with separation = 0 accepted") };
     assert!(e.to_string().contains("weak_peak"), "{e}");
     let paper = SegmentParams { separation: 0.0, weak_peak: 0.0, ..SegmentParams::with_floor(0.05) };
     assert!(Segmenter::new(grid(), &paper).is_ok());

@@ -244,9 +244,7 @@ impl Calibration {
             format: String,
             format_version: u32,
         }
-        let h: Header = toml::from_str::<toml::Table>(text)
-            .map_err(parse)
-            .and_then(|t| toml::Value::Table(t).try_into().map_err(parse))?;
+        let h: Header = toml::from_str(text).map_err(parse)?;
         if h.format != FORMAT || h.format_version != FORMAT_VERSION {
             return Err(CalibrationFileError::Format {
                 path: origin.to_string(),
@@ -262,7 +260,15 @@ impl Calibration {
     /// Checks the values the per-frame math divides by or exponentiates: a hand-edited file
     /// must fail here, at load, rather than give NaN forces (or no split) later.
     pub fn validate(&self) -> Result<(), String> {
+        let (w, h) = self.region.span_mm();
+        if ![self.region.x_min_mm, self.region.y_min_mm, w, h].iter().all(|v| v.is_finite()) || w <= 0.0 || h <= 0.0 {
+            return Err(format!("region must be finite with positive width and height (got {:?})", self.region));
+        }
         let kernel = |name: &str, k: &KernelField| -> Result<(), String> {
+            // Fitted on the calibrated region; another one would clamp and normalize elsewhere.
+            if k.region != self.region {
+                return Err(format!("{name}.region must equal [region] (got {:?})", k.region));
+            }
             if !(k.length_mm.is_finite() && k.length_mm > 0.0) {
                 return Err(format!("{name}.length_mm must be finite and > 0 (got {})", k.length_mm));
             }

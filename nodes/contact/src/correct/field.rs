@@ -97,6 +97,16 @@ impl Region {
         (self.x_max_mm - self.x_min_mm, self.y_max_mm - self.y_min_mm)
     }
 
+    /// The point clamped onto the region, mm, and whether it was outside. A point with a
+    /// non-finite coordinate has no place: it goes to the centre, flagged.
+    pub fn clamp(&self, x_mm: f64, y_mm: f64) -> ((f64, f64), bool) {
+        if !(x_mm.is_finite() && y_mm.is_finite()) {
+            return ((0.5 * (self.x_min_mm + self.x_max_mm), 0.5 * (self.y_min_mm + self.y_max_mm)), true);
+        }
+        let p = (x_mm.clamp(self.x_min_mm, self.x_max_mm), y_mm.clamp(self.y_min_mm, self.y_max_mm));
+        (p, p != (x_mm, y_mm))
+    }
+
     /// Maps a point to [-1, 1]^2, clamping (and flagging) points outside; a non-finite
     /// coordinate maps to the centre and is flagged.
     pub fn normalize(&self, x_mm: f64, y_mm: f64) -> Normalized {
@@ -162,6 +172,20 @@ mod tests {
         assert_eq!((n.u, n.v, n.clamped), (1.0, 0.5, true));
         assert!(r.normalize(f64::NAN, 0.0).clamped);
         assert_eq!(r.denormalize(0.5, -0.5), (20.0, -10.0));
+    }
+
+    #[test]
+    fn clamp_agrees_with_normalize() {
+        let r = Region { x_min_mm: -40.0, x_max_mm: 40.0, y_min_mm: -20.0, y_max_mm: 20.0 };
+        assert_eq!(r.clamp(f64::NAN, 5.0), ((0.0, 0.0), true));
+        assert_eq!(r.clamp(1.0, f64::INFINITY), ((0.0, 0.0), true));
+        for (x, y) in [(40.0, -20.0), (0.0, 0.0), (55.0, 10.0), (-3.0, -21.0), (-41.0, 25.0)] {
+            let ((cx, cy), clamped) = r.clamp(x, y);
+            let n = r.normalize(x, y);
+            assert_eq!(clamped, n.clamped, "({x}, {y})");
+            let (dx, dy) = r.denormalize(n.u, n.v);
+            assert!((cx - dx).abs() < 1e-12 && (cy - dy).abs() < 1e-12, "({x}, {y}): ({cx}, {cy}) vs ({dx}, {dy})");
+        }
     }
 
     #[test]

@@ -112,8 +112,7 @@ impl ForwardModel {
 
     /// The response at a point (mm), clamped onto the region; the flag says it was clamped.
     pub fn at(&self, x_mm: f64, y_mm: f64) -> (LocalResponse, bool) {
-        let r = &self.sensitivity.region;
-        let clamped = !(x_mm >= r.x_min_mm && x_mm <= r.x_max_mm && y_mm >= r.y_min_mm && y_mm <= r.y_max_mm);
+        let (_, clamped) = self.sensitivity.region.clamp(x_mm, y_mm);
         let floor = A_FLOOR_REL * self.sensitivity.mean.abs();
         let a = self.sensitivity.at(x_mm, y_mm).max(floor).max(f64::MIN_POSITIVE);
         // With c < 0 the parabola's top must lie beyond the calibrated range.

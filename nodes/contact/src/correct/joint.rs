@@ -56,8 +56,6 @@ pub struct JointProblem<'a> {
 pub struct JointFit {
     /// The re-estimated f (same signal range as the start).
     pub map: SignalMap,
-    /// alpha then beta.
-    pub coeffs: Vec<f64>,
     /// Penalized objective with `start` and its ridge fields.
     pub objective_start: f64,
     /// Penalized objective at the end.
@@ -221,7 +219,7 @@ pub fn fit_joint(problem: &JointProblem, start: SignalMap) -> Option<JointFit> {
             break;
         }
     }
-    Some(JointFit { map, coeffs, objective_start, objective, rounds, converged })
+    Some(JointFit { map, objective_start, objective, rounds, converged })
 }
 
 #[cfg(test)]

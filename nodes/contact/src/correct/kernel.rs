@@ -46,17 +46,13 @@ impl KernelField {
         Self { region, mean: value, length_mm: 1.0, sites: Vec::new(), loo_rmse: None }
     }
 
-    /// The value at a point (mm); a non-finite point is taken at the region's centre.
+    /// The value at a point (mm), clamped onto the region; a non-finite point is taken at the
+    /// region's centre.
     pub fn at(&self, x_mm: f64, y_mm: f64) -> f64 {
         if self.sites.is_empty() {
             return self.mean;
         }
-        let r = &self.region;
-        let (x, y) = if x_mm.is_finite() && y_mm.is_finite() {
-            (x_mm.clamp(r.x_min_mm, r.x_max_mm), y_mm.clamp(r.y_min_mm, r.y_max_mm))
-        } else {
-            (0.5 * (r.x_min_mm + r.x_max_mm), 0.5 * (r.y_min_mm + r.y_max_mm))
-        };
+        let ((x, y), _) = self.region.clamp(x_mm, y_mm);
         let inv = -0.5 / (self.length_mm * self.length_mm);
         self.mean
             + self.sites.iter().map(|s| s[2] * (((x - s[0]).powi(2) + (y - s[1]).powi(2)) * inv).exp()).sum::<f64>()

@@ -6,10 +6,15 @@
 //! (absolute floor, image units, so noise alone never makes a contact), opening then closing
 //! with a disk of radius `radius_frac * max(width, height)` pixels, 8-connected components,
 //! components split at deep saddles when `separation > 0` ([`separate`]; the paper keeps
-//! plain components, `separation = 0`),
-//! and per component the intensity-weighted centroid (mm), the decrease sum `C` (image units
+//! plain components, `separation = 0`), and per component the intensity-weighted centroid (mm), the decrease sum `C` (image units
 //! summed over ROI pixels, weights `max(d, 0)`), area (mm^2) and peak decrease. Pixel grid
 //! convention: see [`grid`]. No allocation after [`Segmenter::new`].
+//!
+//! With `weak_peak > 0` (the default) the mask is built differently, so a light press beside
+//! a heavy one is not lost under the global Otsu cut: regions are the pixels at or above
+//! `0.5 * weak_peak * d_max` (and the floor), cleaned by the same opening and closing and split
+//! at saddles; each region whose peak reaches `weak_peak * d_max` is a contact, and its ROI is
+//! the region's pixels at or above Otsu's fraction of its own peak (no further morphology).
 
 pub mod grid;
 pub mod label;

@@ -4,7 +4,7 @@
 
 use std::path::Path;
 
-use super::support::{fixture, ok, root, skinflow};
+use super::support::{fixture, ok, root, skinflow, stderr};
 
 /// A fresh work directory for one test of this module.
 fn workdir(test: &str) -> std::path::PathBuf {
@@ -44,7 +44,7 @@ fn calibrate_then_eval_writes_the_contract_json() {
     let text = std::fs::read_to_string(d.join("seq.toml")).unwrap();
     assert!(text.contains("f_fit = \"sequential\"") && !text.contains("f_fit = \"joint\""), "{text}");
     let bad = skinflow(&d, &["calibrate", "cal.h5", "--out", "bad.toml", "--fit", "f_fit = \"sideways\""]);
-    let err = String::from_utf8_lossy(&bad.stderr);
+    let err = stderr(&bad);
     assert!(!bad.status.success() && err.contains("--fit") && err.contains("sideways"), "{err}");
     assert!(!d.join("bad.toml").exists(), "nothing written on a bad --fit");
 
@@ -92,10 +92,18 @@ fn calibrate_then_eval_writes_the_contract_json() {
     let out =
         skinflow(&d, &["eval", "test.h5", "--calib", "calib.toml", "--settled-by", "pressure", "--json", "p.json"]);
     ok(&out);
-    let err = String::from_utf8_lossy(&out.stderr);
+    let err = stderr(&out);
     assert!(err.contains("settled frames by truth / by pressure"), "{err}");
     let p: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(d.join("p.json")).unwrap()).unwrap();
-    assert!(p["frames"].as_u64().unwrap() > 0, "{p}");
+    // "settled frames by truth / by pressure: A / B of N ...": each run evaluated exactly the
+    // frames its criterion passed.
+    let counts = err.split("settled frames by truth / by pressure: ").nth(1).unwrap();
+    let mut nums = counts.split(|c: char| !c.is_ascii_digit()).filter(|w| !w.is_empty());
+    let (by_truth, by_pressure): (u64, u64) =
+        (nums.next().unwrap().parse().unwrap(), nums.next().unwrap().parse().unwrap());
+    assert_eq!(v["frames"].as_u64().unwrap(), by_truth, "{err}");
+    assert_eq!(p["frames"].as_u64().unwrap(), by_pressure, "{err}");
+    assert!(by_pressure > 0, "{err}");
 }
 
 #[test]
@@ -112,7 +120,7 @@ fn eval_refuses_a_recording_without_truth() {
     ok(&skinflow(&d, &["run", "strip.toml"]));
     let out = skinflow(&d, &["eval", "bare.h5", "--calib", fixture("../../graphs/calib/paper.toml").to_str().unwrap()]);
     assert!(!out.status.success());
-    let err = String::from_utf8_lossy(&out.stderr);
+    let err = stderr(&out);
     assert!(err.contains("bare.h5") && err.contains("no ground truth"), "{err}");
 }
 
@@ -216,7 +224,7 @@ fn a_missing_recording_stops_run_before_data_flows() {
     std::fs::write(d.join("g.toml"), graph).unwrap();
     let out = skinflow(&d, &["run", "g.toml"]);
     assert!(!out.status.success());
-    let err = String::from_utf8_lossy(&out.stderr);
+    let err = stderr(&out);
     assert!(err.contains("\"replay\"") && err.contains("nope.h5"), "{err}");
 }
 

@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use super::support::{bin, root, text};
+use super::support::{bin, ok, root, skinflow, stderr};
 
 /// A fresh work directory for one test of this module.
 fn workdir(test: &str) -> PathBuf {
@@ -23,9 +23,7 @@ fn calib() -> String {
 }
 
 fn inspect(dir: &Path, file: &str) -> String {
-    let out = Command::new(bin()).args(["inspect", file]).current_dir(dir).output().unwrap();
-    assert!(out.status.success(), "inspect failed: {}", text(&out.stderr));
-    text(&out.stdout)
+    ok(&skinflow(dir, &["inspect", file]))
 }
 
 /// The row count of a stream in `skinflow inspect` output.
@@ -89,11 +87,11 @@ fn serial_sources_drive_the_pipeline_through_emulated_boards() {
     // The emulator ends with its scene (real rates: about 14 s); then stop the graph.
     let t0 = Instant::now();
     let emu_out = emu.wait_with_output().unwrap();
-    assert!(emu_out.status.success(), "{}", String::from_utf8_lossy(&emu_out.stderr));
+    assert!(emu_out.status.success(), "{}", stderr(&emu_out));
     std::thread::sleep(Duration::from_millis(300));
     Command::new("kill").args(["-INT", &run.id().to_string()]).status().unwrap();
     let out = run.wait_with_output().unwrap();
-    let stderr = String::from_utf8_lossy(&out.stderr);
+    let stderr = stderr(&out);
     assert!(out.status.success(), "{stderr}");
     assert!(t0.elapsed() < Duration::from_secs(120));
     let summary = inspect(&d, "live.h5");

@@ -7,7 +7,7 @@ use std::os::unix::net::UnixStream;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use super::support::{bin, workdir};
+use super::support::{bin, stderr, workdir};
 
 fn graph(scale_params: &str, out: &str) -> String {
     format!(
@@ -57,7 +57,7 @@ fn watch_swaps_edited_nodes_and_the_control_socket_answers() {
     std::thread::sleep(Duration::from_millis(600));
     std::fs::write(&g, graph("add = 1000000", "out.csv")).unwrap();
     let out = child.wait_with_output().unwrap();
-    let stderr = String::from_utf8_lossy(&out.stderr);
+    let stderr = stderr(&out);
     assert!(out.status.success(), "{stderr}");
     assert!(stderr.contains("edit rejected") && stderr.contains("factr"), "{stderr}");
     assert!(stderr.contains("swapped f"), "{stderr}");

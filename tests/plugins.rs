@@ -7,9 +7,9 @@
 //! (target/<profile>/lib<name>.so); a missing one is built with `cargo build -p`.
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Command;
 
-use super::support::{bin, ok, root, skinflow, text};
+use super::support::{bin, ok, root, skinflow, stderr};
 
 /// target/<profile>/, where cargo puts the binary and the cdylibs.
 fn profile_dir() -> PathBuf {
@@ -46,10 +46,6 @@ fn plugin(package: &str) -> PathBuf {
 /// A fresh work directory for one test of this module.
 fn workdir(test: &str) -> PathBuf {
     super::support::workdir("plugins", test)
-}
-
-fn stderr(o: &Output) -> String {
-    text(&o.stderr)
 }
 
 fn quoted(p: &Path) -> String {
@@ -254,7 +250,7 @@ fn bench_names_file_line_and_column_of_a_broken_graph() {
     std::fs::write(d.join("g.toml"), graph).unwrap();
     let o = skinflow(&d, &["bench", "g.toml", "--replay", "rec.h5", "--vary", "recon.lambda=0.1", "--out", "b"]);
     assert!(!o.status.success());
-    let err = String::from_utf8_lossy(&o.stderr);
+    let err = stderr(&o);
     assert!(err.contains("g.toml:11:") && err.contains("nope"), "no file:line:column in {err}");
     assert!(!d.join("b").exists(), "nothing written for a broken graph");
     // An error only an override causes names the variant (its regenerated text has no lines
@@ -263,7 +259,7 @@ fn bench_names_file_line_and_column_of_a_broken_graph() {
     let o =
         skinflow(&d, &["bench", ab.to_str().unwrap(), "--replay", "rec.h5", "--vary", "recon.lambda=-1", "--out", "b"]);
     assert!(!o.status.success());
-    let err = String::from_utf8_lossy(&o.stderr);
+    let err = stderr(&o);
     assert!(err.contains("variant \"recon.lambda=-1\"") && err.contains("lambda"), "{err}");
     assert!(!d.join("b").exists(), "nothing written for an invalid variant");
 }

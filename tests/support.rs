@@ -43,6 +43,11 @@ pub fn text(b: &[u8]) -> String {
     String::from_utf8_lossy(b).into_owned()
 }
 
+/// The stderr of a run, as text.
+pub fn stderr(out: &Output) -> String {
+    text(&out.stderr)
+}
+
 /// The stdout of a successful run; fails the test with both streams otherwise.
 pub fn ok(out: &Output) -> String {
     let stdout = text(&out.stdout);

@@ -32,7 +32,8 @@ pub enum Role {
 pub struct ParamDoc {
     pub name: Cow<'static, str>,
     pub ty: Cow<'static, str>,
-    /// Default as TOML text, or empty when required.
+    /// Default as TOML text; `none` for an optional parameter that is absent unless given;
+    /// empty when required.
     pub default: Cow<'static, str>,
     pub doc: Cow<'static, str>,
 }

@@ -338,7 +338,7 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
                 "lane names in edge order (default: strategy names)",
             ))
             .param(ParamDoc::new("report_s", "float", "2.0", "wall seconds between live report lines; 0 = none"))
-            .param(ParamDoc::new("json", "path", "", "write the final report as JSON here"))
+            .param(ParamDoc::new("json", "path", "none", "write the final report as JSON here"))
             .param(ParamDoc::new("reference", "integer", "0", "lane compared against when a frame has no truth")),
         build,
     ))

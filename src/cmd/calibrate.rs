@@ -8,7 +8,6 @@ use sha2::{Digest, Sha256};
 use skinflow_contact::CalibSample;
 use skinflow_contact::correct::{CalibParams, Calibrated, FFit, Provenance, calibrate};
 use skinflow_nodes::payload::Contacts;
-use skinflow_record::read::Recording;
 
 use super::pipeline::{PipelineArgs, Settled};
 
@@ -17,21 +16,6 @@ pub fn content_hash(path: &Path) -> Result<String> {
     let bytes = std::fs::read(path).with_context(|| format!("{}: cannot read", path.display()))?;
     let digest = Sha256::digest(&bytes);
     Ok(format!("sha256:{}", digest.iter().map(|b| format!("{b:02x}")).collect::<String>()))
-}
-
-/// Refuses recordings the pipeline cannot evaluate against truth; returns the recording.
-pub fn require_truth(path: &Path) -> Result<Recording> {
-    let rec = Recording::open(path).map_err(anyhow::Error::msg)?;
-    if rec.eit.as_ref().is_none_or(|e| e.is_empty()) {
-        bail!("{}: the recording has no EIT frames (/eit/v is missing or empty)", path.display());
-    }
-    if rec.truth.as_ref().is_none_or(|t| t.is_empty()) {
-        bail!(
-            "{}: the recording has no ground truth (/truth/*); calibrate and eval need the true contacts",
-            path.display()
-        );
-    }
-    Ok(rec)
 }
 
 /// One calibration sample per settled, loaded single-contact frame with a detection.
@@ -81,21 +65,10 @@ pub fn fit(recording: &Path, params: &CalibParams, args: &PipelineArgs) -> Resul
 
 /// Runs the pipeline over a calibration recording: its calibration samples and provenance.
 pub fn collect(recording: &Path, args: &PipelineArgs) -> Result<(Vec<CalibSample>, Provenance)> {
-    let rec = require_truth(recording)?;
-    let settled = Settled::of(&rec, args);
-    drop(rec);
-    let spec = args.spec(recording.to_path_buf());
-    if args.print_graph {
-        println!("{}", spec.graph_toml());
-    }
-    let rows = spec.run().map_err(|e| anyhow::anyhow!("{}: pipeline: {e}", recording.display()))?;
+    let (rows, settled) = args.run(recording, |_| ())?;
     let samples = samples(&rows, &settled);
-    let unknown_noise = rows
-        .iter()
-        .filter_map(|r| r.first().and_then(|m| m.get::<Contacts>()))
-        .filter(|c| !c.image.src.no_load && c.image.src.noise_kpa.is_nan())
-        .count();
-    settled.warn_unknown_noise(recording, unknown_noise);
+    settled
+        .warn_unknown_noise(recording, rows.iter().filter_map(|r| r.first()?.get::<Contacts>()).map(|c| &*c.image.src));
     if samples.is_empty() {
         bail!("{}: no loaded single-contact frame with a detected contact to calibrate from", recording.display());
     }

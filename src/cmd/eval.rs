@@ -11,8 +11,7 @@ use skinflow_contact::eval::{Evaluator, plots};
 use skinflow_contact::{Calibration, ImageGrid, Segmenter};
 use skinflow_nodes::payload::{Forces, Image};
 
-use super::calibrate::require_truth;
-use super::pipeline::{PipelineArgs, Settled, SettledBy};
+use super::pipeline::{PipelineArgs, SettledBy};
 
 /// (lane name, splitter, corrector strategy, label), in report order: the paper's four, then ours.
 pub const LANES: [(&str, &str, &str, &str); 9] = [
@@ -37,24 +36,20 @@ pub type Example = (Arc<Image>, Vec<(f64, f64)>);
 
 pub struct EvalOutcome {
     pub evaluator: Evaluator,
-    /// One CSV line per matched, missed or spurious contact of every evaluated frame.
+    /// One CSV line per matched, missed or spurious contact of every evaluated frame (empty
+    /// unless asked for).
     pub contact_rows: Vec<String>,
     /// A loaded frame's image with its contacts and truth, for the conductivity plot.
     pub example: Option<Example>,
 }
 
-/// Runs every lane over the recording and feeds the evaluator.
-pub fn evaluate(recording: &Path, calib: &Path, args: &PipelineArgs) -> Result<EvalOutcome> {
-    let rec = require_truth(recording)?;
-    let settled = Settled::of(&rec, args);
-    drop(rec);
-    let mut spec = args.spec(recording.to_path_buf());
-    spec.calibration = Some(calib.to_path_buf());
-    spec.lanes = LANES.iter().map(|(n, s, c, _)| ((*n).to_owned(), (*s).to_owned(), (*c).to_owned())).collect();
-    if args.print_graph {
-        println!("{}", spec.graph_toml());
-    }
-    let rows = spec.run().map_err(|e| anyhow::anyhow!("{}: pipeline: {e}", recording.display()))?;
+/// Runs every lane over the recording and feeds the evaluator; `want_rows` says whether to
+/// build the per-contact CSV lines.
+pub fn evaluate(recording: &Path, calib: &Path, args: &PipelineArgs, want_rows: bool) -> Result<EvalOutcome> {
+    let (rows, settled) = args.run(recording, |spec| {
+        spec.calibration = Some(calib.to_path_buf());
+        spec.lanes = LANES.iter().map(|(n, s, c, _)| ((*n).to_owned(), (*s).to_owned(), (*c).to_owned())).collect();
+    })?;
     let labels: Vec<(&str, &str)> = LANES.iter().map(|(n, _, _, l)| (*n, *l)).collect();
     let mut ev = Evaluator::new(&labels);
     let mut example: Option<Example> = None;
@@ -63,7 +58,6 @@ pub fn evaluate(recording: &Path, calib: &Path, args: &PipelineArgs) -> Result<E
     let mut transitions = 0usize;
     // Frames (loaded, not no-load) settled by each criterion: [truth only, pressure only, both, neither].
     let mut agreement = [0usize; 4];
-    let mut unknown_noise = 0usize;
     let mut contact_rows = Vec::new();
     for row in &rows {
         let forces: Vec<&Forces> = row.iter().filter_map(|m| m.get::<Forces>()).collect();
@@ -74,7 +68,6 @@ pub fn evaluate(recording: &Path, calib: &Path, args: &PipelineArgs) -> Result<E
             continue;
         }
         let by_truth = settled.by_truth(row[0].header.t_s());
-        unknown_noise += usize::from(synced.noise_kpa.is_nan());
         agreement[match (by_truth, synced.settled) {
             (true, false) => 0,
             (false, true) => 1,
@@ -114,17 +107,18 @@ pub fn evaluate(recording: &Path, calib: &Path, args: &PipelineArgs) -> Result<E
                 resolution: res,
             })
             .map_err(anyhow::Error::msg)?;
-        let ctx = CsvFrame { frame, t_s: row[0].header.t_s(), dp_kpa: synced.dp_kpa, n_truth: truth.len() };
-        let matched_pred: Vec<Option<usize>> =
-            (0..truth.len()).map(|t| pairs.iter().find(|p| p.truth == t).map(|p| p.pred)).collect();
-        for (t, pred) in matched_pred.iter().enumerate() {
-            let lane_forces: Vec<f64> = pred.map_or_else(Vec::new, |p| per_lane.iter().map(|l| l[p]).collect());
-            contact_rows.push(ctx.line(Some(&truth[t]), pred.map(|p| &contacts.contacts[p]), &lane_forces));
-        }
-        for (p, c) in contacts.contacts.iter().enumerate() {
-            if !pairs.iter().any(|m| m.pred == p) {
-                let lane_forces: Vec<f64> = per_lane.iter().map(|l| l[p]).collect();
-                contact_rows.push(ctx.line(None, Some(c), &lane_forces));
+        if want_rows {
+            let ctx = CsvFrame { frame, t_s: row[0].header.t_s(), dp_kpa: synced.dp_kpa, n_truth: truth.len() };
+            for (t, truth_c) in truth.iter().enumerate() {
+                let pred = pairs.iter().find(|p| p.truth == t).map(|p| p.pred);
+                let lane_forces: Vec<f64> = pred.map_or_else(Vec::new, |p| per_lane.iter().map(|l| l[p]).collect());
+                contact_rows.push(ctx.line(Some(truth_c), pred.map(|p| &contacts.contacts[p]), &lane_forces));
+            }
+            for (p, c) in contacts.contacts.iter().enumerate() {
+                if !pairs.iter().any(|m| m.pred == p) {
+                    let lane_forces: Vec<f64> = per_lane.iter().map(|l| l[p]).collect();
+                    contact_rows.push(ctx.line(None, Some(c), &lane_forces));
+                }
             }
         }
         let better = example.as_ref().is_none_or(|(_, t)| truth.len() > t.len());
@@ -151,7 +145,9 @@ pub fn evaluate(recording: &Path, calib: &Path, args: &PipelineArgs) -> Result<E
         pressure_only + both,
         truth_only + pressure_only + both + neither,
     );
-    settled.warn_unknown_noise(recording, unknown_noise);
+    let synced =
+        rows.iter().filter_map(|r| r.iter().find_map(|m| m.get::<Forces>())).map(|f| &*f.split.contacts.image.src);
+    settled.warn_unknown_noise(recording, synced);
     Ok(EvalOutcome { evaluator: ev, contact_rows, example })
 }
 
@@ -214,7 +210,7 @@ pub fn run(
     contacts_csv: Option<&Path>,
     args: &PipelineArgs,
 ) -> Result<()> {
-    let outcome = evaluate(recording, calib, args)?;
+    let outcome = evaluate(recording, calib, args, contacts_csv.is_some())?;
     if let Some(p) = contacts_csv {
         let mut text = contacts_csv_header();
         text.push('\n');

@@ -1,10 +1,13 @@
 //! Options shared by `calibrate` and `eval`: how the recording is reconstructed and segmented.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
+use anyhow::{Result, bail};
 use clap::Args;
+use skinflow_core::Message;
 use skinflow_nodes::payload::SyncedFrame;
 use skinflow_nodes::pipeline::PipelineSpec;
+use skinflow_record::read::Recording;
 
 /// Pipeline knobs; each is the TOML of the node's `params` table body.
 #[derive(Debug, Clone, Args)]
@@ -50,6 +53,41 @@ impl PipelineArgs {
             calibration: None,
         }
     }
+
+    /// Runs the pipeline over a recording with ground truth (refused without), its spec
+    /// completed by `configure` (lanes, calibration): the captured rows, and which frames are
+    /// settled.
+    pub fn run(
+        &self,
+        recording: &Path,
+        configure: impl FnOnce(&mut PipelineSpec),
+    ) -> Result<(Vec<Vec<Message>>, Settled)> {
+        let rec = require_truth(recording)?;
+        let settled = Settled::of(&rec, self);
+        drop(rec);
+        let mut spec = self.spec(recording.to_path_buf());
+        configure(&mut spec);
+        if self.print_graph {
+            println!("{}", spec.graph_toml());
+        }
+        let rows = spec.run().map_err(|e| anyhow::anyhow!("{}: pipeline: {e}", recording.display()))?;
+        Ok((rows, settled))
+    }
+}
+
+/// Refuses recordings the pipeline cannot evaluate against truth; returns the recording.
+pub fn require_truth(path: &Path) -> Result<Recording> {
+    let rec = Recording::open(path).map_err(anyhow::Error::msg)?;
+    if rec.eit.as_ref().is_none_or(|e| e.is_empty()) {
+        bail!("{}: the recording has no EIT frames (/eit/v is missing or empty)", path.display());
+    }
+    if rec.truth.as_ref().is_none_or(|t| t.is_empty()) {
+        bail!(
+            "{}: the recording has no ground truth (/truth/*); calibrate and eval need the true contacts",
+            path.display()
+        );
+    }
+    Ok(rec)
 }
 
 /// Which frames have a single true load: the truth rows' times and the EIT frame period of a
@@ -86,8 +124,10 @@ impl Settled {
             }
     }
 
-    /// Warns when the pressure criterion met frames the sync node could not judge yet.
-    pub fn warn_unknown_noise(&self, recording: &std::path::Path, frames: usize) {
+    /// Warns when the pressure criterion met frames (past the no-load period) that the sync
+    /// node could not judge yet.
+    pub fn warn_unknown_noise<'a>(&self, recording: &Path, synced: impl IntoIterator<Item = &'a SyncedFrame>) {
+        let frames = synced.into_iter().filter(|s| !s.no_load && s.noise_kpa.is_nan()).count();
         if self.by == SettledBy::Pressure && !self.all_frames && frames > 0 {
             eprintln!(
                 "{}: warning: {frames} frames came before the sync node knew the pressure noise (no no-load \

@@ -7,7 +7,7 @@
 
 use skinflow_sim::{Scene, Simulator};
 
-use skinflow_core::alloc_count::CountingAlloc;
+use skinflow_core::alloc_count::{CountingAlloc, allocations_in};
 
 #[global_allocator]
 static GLOBAL: CountingAlloc = CountingAlloc;
@@ -28,20 +28,20 @@ fn static_hold_frames_do_not_allocate() {
             skinflow_sim::EventKind::Truth { t_s } => t = t_s,
         }
     }
-    let before = CountingAlloc::this_thread();
     // the hold ends at 33.5 s (3 s rest + 0.5 s ramp + 30 s); stop before the release
     let mut events = 0;
-    loop {
-        let t_s = match sim.next_into(&mut v, &mut truth).unwrap().unwrap() {
-            skinflow_sim::EventKind::Eit { t_s, .. } | skinflow_sim::EventKind::Pressure { t_s, .. } => t_s,
-            skinflow_sim::EventKind::Truth { t_s } => t_s,
-        };
-        if t_s > 32.5 {
-            break;
+    let allocations = allocations_in(|| {
+        loop {
+            let t_s = match sim.next_into(&mut v, &mut truth).unwrap().unwrap() {
+                skinflow_sim::EventKind::Eit { t_s, .. } | skinflow_sim::EventKind::Pressure { t_s, .. } => t_s,
+                skinflow_sim::EventKind::Truth { t_s } => t_s,
+            };
+            if t_s > 32.5 {
+                break;
+            }
+            events += 1;
         }
-        events += 1;
-    }
-    let after = CountingAlloc::this_thread();
+    });
     assert!(events > 400, "{events} events");
-    assert_eq!(after - before, 0, "{} allocations in {events} events of a static hold", after - before);
+    assert_eq!(allocations, 0, "{allocations} allocations in {events} events of a static hold");
 }

@@ -272,4 +272,15 @@ fn reproduce_pins_the_paper_baselines() {
     };
     let (joint, seq) = (row("joint"), row("sequential"));
     assert!(joint[0] < seq[0] && joint[1] < seq[1], "joint {joint:?} vs sequential {seq:?}");
+    // The size ablation: the scene written beside the report switches the effect off, and
+    // without it Pneumatic-LocAware's error on the 25 mm indenter falls (seed 1).
+    let ablated: toml::Table =
+        std::fs::read_to_string(d.join("r/cross-diameter-same-response.toml")).unwrap().parse().unwrap();
+    assert_eq!(ablated["model"]["area_exponent"].as_float(), Some(0.0));
+    let section = report.split("## Where the cross-diameter error comes from").nth(1).expect("size ablation section");
+    let line = section.lines().find(|l| l.starts_with("| pneumatic-locaware |")).expect("locaware row");
+    let cells: Vec<&str> = line.split('|').map(str::trim).collect();
+    let mm25 = |cell: &str| -> f64 { cell.rsplit(" / ").next().unwrap().parse().unwrap() };
+    let (shipped, off): (f64, f64) = (cells[2].parse().unwrap(), cells[4].parse().unwrap());
+    assert!(off < shipped && mm25(cells[5]) < mm25(cells[3]), "{line}");
 }

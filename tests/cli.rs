@@ -2,7 +2,7 @@
 //! small fixture scenes (tests/fixtures). Each test works in its own temporary directory and
 //! points the reconstruction-matrix cache there.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use super::support::{fixture, ok, root, skinflow, stderr};
 
@@ -128,10 +128,36 @@ fn eval_refuses_a_recording_without_truth() {
 fn replayed_pipeline_logs_derived_streams_without_drops() {
     let d = workdir("pipeline");
     simulate(&d, "tiny-eval.toml", "rec.h5");
+    let (frames, out) = replay_pipeline(&d, "rec.h5");
+    let text = ok(&skinflow(&d, &["inspect", out.to_str().unwrap()]));
+    assert!(text.contains("/eit") && text.contains("/truth") && text.contains("/derived/sync"), "{text}");
+    assert!(text.contains(&format!("sync:     {frames} frames: ")), "{text}");
+    assert!(text.contains("guards:   pneumatic-locaware: "), "{text}");
+    let shares = derived_streams_agree(&out, frames);
+    assert!(shares.loaded > 0, "no loaded frame with contacts");
+}
+
+/// Drift the tare cannot follow pushes dP to or below zero while the EIT layer still sees the
+/// press: those shares carry the no-load bit and zero force, and every other share does not.
+#[test]
+fn a_stale_tare_gives_no_load_shares_end_to_end() {
+    let d = workdir("drift-negative");
+    simulate(&d, "drift-negative.toml", "rec.h5");
+    let (frames, out) = replay_pipeline(&d, "rec.h5");
+    let shares = derived_streams_agree(&out, frames);
+    assert!(shares.no_load > 0 && shares.loaded > 0, "{shares:?}");
+    let text = ok(&skinflow(&d, &["inspect", out.to_str().unwrap()]));
+    assert!(text.contains(&format!("{} no load", shares.no_load)), "{text}");
+}
+
+/// Replays `rec` through sync, reconstructor, segmenter, splitter and corrector in lockstep,
+/// logging the derived streams to `out.h5`; checks that nothing was dropped and every frame
+/// went through every stage. Returns the frame count and the log's path.
+fn replay_pipeline(d: &Path, rec: &str) -> (usize, PathBuf) {
     let calib = fixture("../../graphs/calib/paper.toml");
     let graph = format!(
         "[graph]\nmode = \"lockstep\"\n\
-        [[node]]\nid = \"replay\"\nkind = \"replay\"\nparams = {{ path = \"rec.h5\", speed = 0.0 }}\n\
+        [[node]]\nid = \"replay\"\nkind = \"replay\"\nparams = {{ path = {rec:?}, speed = 0.0 }}\n\
         [[node]]\nid = \"sync\"\nkind = \"sync\"\n\
         [[node]]\nid = \"recon\"\nkind = \"reconstructor\"\n\
         [[node]]\nid = \"seg\"\nkind = \"segmenter\"\n\
@@ -152,7 +178,7 @@ fn replayed_pipeline_logs_derived_streams_without_drops() {
         [[edge]]\nfrom = \"sync.frame\"\nto = \"log.sync\"\n"
     );
     std::fs::write(d.join("g.toml"), graph).unwrap();
-    let out = skinflow(&d, &["run", "g.toml", "--stats-json", "stats.json"]);
+    let out = skinflow(d, &["run", "g.toml", "--stats-json", "stats.json"]);
     ok(&out);
     let stats: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(d.join("stats.json")).unwrap()).unwrap();
@@ -163,18 +189,23 @@ fn replayed_pipeline_logs_derived_streams_without_drops() {
     let frames = node("recon")["msgs_in"].as_u64().unwrap();
     assert!(frames > 10);
     assert_eq!(node("force")["msgs_out"].as_u64().unwrap(), frames);
-    let text = ok(&skinflow(&d, &["inspect", "out.h5"]));
-    assert!(text.contains("/eit") && text.contains("/truth") && text.contains("/derived/sync"), "{text}");
-    assert!(text.contains(&format!("sync:     {frames} frames: ")), "{text}");
-    assert!(text.contains("guards:   pneumatic-locaware: "), "{text}");
-    derived_streams_agree(&d.join("out.h5"), frames as usize);
+    (frames as usize, d.join("out.h5"))
+}
+
+/// Shares counted by [`derived_streams_agree`].
+#[derive(Debug)]
+struct Shares {
+    /// Frames with contacts and dP > 0.
+    loaded: usize,
+    /// Shares with the no-load bit (dP share <= 0 or NaN).
+    no_load: usize,
 }
 
 /// What the logger recorded of the sync node and the corrector tells one story: a row per
 /// frame in both, the proportional shares add up to the frame's pressure change, and the
 /// no-load bit is set exactly on the shares <= 0 (the bit mapping itself is unit-tested in
 /// the logger).
-fn derived_streams_agree(path: &Path, frames: usize) {
+fn derived_streams_agree(path: &Path, frames: usize) -> Shares {
     use skinflow_record::layout::force_flags;
     let rec = skinflow_record::Recording::open(path).unwrap();
     let sync = rec.derived.sync.as_ref().expect("/derived/sync");
@@ -188,19 +219,19 @@ fn derived_streams_agree(path: &Path, frames: usize) {
     // Forces of a frame arrive after its sync row: both streams are in frame order.
     assert_eq!(forces.t_s, sync.t_s);
     let c = forces.max_contacts;
-    let mut loaded = 0;
+    let mut shares = Shares { loaded: 0, no_load: 0 };
     for k in 0..frames {
         let row = k * c..(k + 1) * c;
         let n = forces.force_n[row.clone()].iter().take_while(|f| !f.is_nan()).count();
         if n == 0 {
             continue;
         }
-        let shares: f64 = dp[row.clone()][..n].iter().sum();
+        let sum: f64 = dp[row.clone()][..n].iter().sum();
         if sync.dp_kpa[k] > 0.0 {
-            loaded += 1;
+            shares.loaded += 1;
             assert!(
-                (shares - sync.dp_kpa[k]).abs() <= 1e-9 * sync.dp_kpa[k].max(1.0),
-                "frame {k}: {shares} vs {}",
+                (sum - sync.dp_kpa[k]).abs() <= 1e-9 * sync.dp_kpa[k].max(1.0),
+                "frame {k}: {sum} vs {}",
                 sync.dp_kpa[k]
             );
         }
@@ -209,11 +240,12 @@ fn derived_streams_agree(path: &Path, frames: usize) {
             let no_signal = dp[j].is_nan() || dp[j] <= 0.0;
             assert_eq!(no_load, no_signal, "frame {k}: share {} flags {}", dp[j], flags[j]);
             if no_load {
+                shares.no_load += 1;
                 assert_eq!(forces.force_n[j], 0.0);
             }
         }
     }
-    assert!(loaded > 0, "no loaded frame with contacts");
+    shares
 }
 
 #[test]

@@ -5,7 +5,8 @@
 //! sensor where the frame takes the load) averaged over the indenter footprint, g_level the
 //! seating variability of the load level, and F_nl(d) = F_nl min(1, (d_ref/d)^q) the mild
 //! saturation that larger indenters reach sooner. The sum passes a play operator (hysteresis)
-//! that relaxes towards the load (creep), then P0, slow drift and sensor noise are added.
+//! that relaxes towards the load (creep), then P0, slow drift, an optional steady ramp (a leak)
+//! and sensor noise are added.
 //!
 //! Units: kPa (gauge), N, mm, s. Samples must be requested in non-decreasing time.
 
@@ -34,6 +35,7 @@ pub struct Pneumatic {
     hysteresis_tau_s: f64,
     seating_jitter: f64,
     noise_kpa: f64,
+    ramp_kpa_per_s: f64,
     half_extents_mm: (f64, f64),
     heterogeneity: SmoothField,
     seed: u64,
@@ -64,6 +66,7 @@ impl Pneumatic {
             hysteresis_tau_s: profile.hysteresis_tau_s,
             seating_jitter: profile.seating_jitter,
             noise_kpa: profile.pressure_noise_kpa,
+            ramp_kpa_per_s: profile.pressure_ramp_kpa_per_s,
             half_extents_mm: sensor.half_extents_mm(),
             heterogeneity,
             seed,
@@ -144,7 +147,7 @@ impl Pneumatic {
         // and creeps towards the input (viscoelastic relaxation of the shell)
         self.play_kpa += (x - self.play_kpa) * (1.0 - (-dt / self.hysteresis_tau_s).exp());
         let noise = if self.noise_kpa > 0.0 { self.noise_kpa * normal(&mut self.noise) } else { 0.0 };
-        self.p0_kpa + self.play_kpa + self.drift.at(t_s) + noise
+        self.p0_kpa + self.play_kpa + self.drift.at(t_s) + self.ramp_kpa_per_s * t_s + noise
     }
 }
 
@@ -200,5 +203,17 @@ mod tests {
         // unloading leaves a residual that then relaxes
         let after = pn.sample(20.05, &[]) - p.p0_kpa;
         assert!(after > 0.0 && after < 0.05 + 1e-12);
+    }
+
+    #[test]
+    fn a_ramp_adds_rate_times_time_to_the_loaded_reading() {
+        let p = Profile { pressure_ramp_kpa_per_s: -0.03, ..Profile::ideal() };
+        let mut pn = Pneumatic::new(&p, &Sensor::paper_100mm(), 1);
+        let l = [load(10.0, 5.0, 15.0, 2.0)];
+        let dp = pn.static_dp_kpa(&l);
+        for t in [0.0, 1.0, 10.0, 40.0] {
+            let got = pn.sample(t, &l) - p.p0_kpa - dp;
+            assert!((got - (-0.03 * t)).abs() < 1e-12, "t = {t}: {got}");
+        }
     }
 }

@@ -100,6 +100,9 @@ pub struct Profile {
     pub pressure_drift_kpa: f64,
     /// Time constant of the pressure drift, s.
     pub pressure_drift_tau_s: f64,
+    /// Steady pressure ramp from t = 0, kPa/s (a slow leak or a steady temperature change;
+    /// negative: the chamber loses pressure). 0 in both presets.
+    pub pressure_ramp_kpa_per_s: f64,
 }
 
 impl Profile {
@@ -156,6 +159,7 @@ impl Profile {
             pressure_noise_kpa: 0.01,
             pressure_drift_kpa: 0.02,
             pressure_drift_tau_s: 300.0,
+            pressure_ramp_kpa_per_s: 0.0,
         }
     }
 
@@ -241,6 +245,9 @@ impl Profile {
         nonneg("pressure_noise_kpa", self.pressure_noise_kpa)?;
         nonneg("pressure_drift_kpa", self.pressure_drift_kpa)?;
         pos("pressure_drift_tau_s", self.pressure_drift_tau_s)?;
+        if !self.pressure_ramp_kpa_per_s.is_finite() {
+            return Err(("pressure_ramp_kpa_per_s", format!("must be finite (got {})", self.pressure_ramp_kpa_per_s)));
+        }
         Ok(())
     }
 }

@@ -113,6 +113,18 @@ pub fn run(recording: &Path, out: &Path, fit_toml: &str, args: &PipelineArgs) ->
             la.cv_rmse_n.map_or_else(|| "-".into(), |v| format!("{v:.3}")),
         );
     }
+    let t = &cal.training;
+    if t.holdout_folds > 0 {
+        println!(
+            "RMSE per strategy, N: on the training samples, and at held-out locations ({} folds of the {} locations, the whole fit repeated without each)",
+            t.holdout_folds, t.locations
+        );
+        println!("{:<34} {:>9} {:>9}", "strategy", "training", "held out");
+        for (name, train) in &t.train_rmse_n {
+            let held = t.holdout_rmse_n.get(name).map_or_else(|| "-".into(), |v| format!("{v:.3}"));
+            println!("{name:<34} {train:>9.3} {held:>9}");
+        }
+    }
     cal.write(out).map_err(anyhow::Error::msg)?;
     eprintln!("calibration written to {}", out.display());
     Ok(())

@@ -92,6 +92,21 @@ pub fn run(scenes_dir: &Path, out: &Path, seed: u64, fit_toml: &str, args: &Pipe
         paper::R2_PNEUMATIC.1,
         f(cal.r2.pneumatic_all, 3)
     );
+    let t = &cal.training;
+    if t.holdout_folds > 0 {
+        let _ = writeln!(md, "## Calibration fit: training and held-out locations (calibration scene)\n");
+        let _ = writeln!(
+            md,
+            "RMSE on the {} calibration samples, and on the same samples predicted by fits made without \
+             their location ({} folds of the {} locations; the whole fit repeated per fold).\n",
+            t.samples, t.holdout_folds, t.locations
+        );
+        let _ = writeln!(md, "| strategy | training, N | held-out locations, N |\n|---|---|---|");
+        for (name, train) in &t.train_rmse_n {
+            let _ = writeln!(md, "| {name} | {train:.3} | {} |", f(t.holdout_rmse_n.get(name).copied(), 3));
+        }
+        let _ = writeln!(md);
+    }
     let _ = writeln!(md, "## Cross-diameter force RMSE, N (paper Table III; 10/20/25 mm indenters)\n");
     let _ = writeln!(
         md,

@@ -3,7 +3,7 @@
 mod synth;
 
 use skinflow_contact::correct::average_holds;
-use skinflow_contact::correct::calibrate::{CalibParams, CalibWarning, calibrate};
+use skinflow_contact::correct::calibrate::{CalibParams, CalibSample, CalibWarning, calibrate};
 use skinflow_contact::correct::calibration::{Calibration, FFit, FORMAT_VERSION, Provenance};
 use skinflow_contact::correct::field::{NPHI, Region, phi};
 use skinflow_contact::correct::fit::{CvSearch, RidgeProblem, cross_validate};
@@ -136,6 +136,57 @@ fn joint_f_fit_removes_the_pooled_curve_bias_and_sequential_keeps_the_papers_ord
     assert_eq!(joint.area_aware.fields.map, joint.pneumatic.locaware.map);
 }
 
+/// Leave-one-location-out by hand (folds = locations): every strategy's held-out figure is the
+/// RMSE of fits made without each location, predicting that location's hold means.
+#[test]
+fn location_holdout_refits_without_each_location() {
+    let frames = synth::frames(11, 3, &[1.0, 3.0, 5.0, 7.0, 9.0], 6, 0.01);
+    let params = CalibParams { folds: 9, ..CalibParams::default() };
+    let cal = calibrate(&frames, &params, provenance()).unwrap().calibration;
+    assert_eq!(cal.training.holdout_folds, 9);
+    let mut sites: Vec<(f64, f64)> = frames.iter().map(|f| (f.true_x_mm, f.true_y_mm)).collect();
+    sites.dedup();
+    assert_eq!(sites.len(), 9);
+    let at = |f: &CalibSample, site: (f64, f64)| (f.true_x_mm, f.true_y_mm) == site;
+    let mut sse = vec![0.0; StrategyKind::ALL.len()];
+    let mut n = 0;
+    for &site in &sites {
+        let train: Vec<CalibSample> = frames.iter().copied().filter(|f| !at(f, site)).collect();
+        let held: Vec<CalibSample> = frames.iter().copied().filter(|f| at(f, site)).collect();
+        let without = calibrate(&train, &params, provenance()).unwrap().calibration;
+        for s in average_holds(&held).samples {
+            for (e, kind) in sse.iter_mut().zip(StrategyKind::ALL) {
+                let c = Contact { area_mm2: s.area_mm2, ..contact(s.x_mm, s.y_mm, s.cond_sum) };
+                *e += (Strategy::new(&without, kind).estimate(&c, s.dp_kpa).force_n - s.force_n).powi(2);
+            }
+            n += 1;
+        }
+    }
+    assert_eq!(n, cal.training.samples);
+    for (e, kind) in sse.iter().zip(StrategyKind::ALL) {
+        let by_hand = (e / n as f64).sqrt();
+        let got = cal.training.holdout_rmse_n[kind.name()];
+        assert!((got - by_hand).abs() <= 1e-9 * by_hand.max(1.0), "{}: {got} vs {by_hand}", kind.name());
+    }
+    // Unseen places cost something, and the fields still generalize on this smooth skin.
+    let (train, held) = (&cal.training.train_rmse_n, &cal.training.holdout_rmse_n);
+    let la = StrategyKind::PneumaticLocAware.name();
+    assert!(held[la] > train[la], "{held:?} {train:?}");
+    assert!(held[la] < 0.5 * held[StrategyKind::PneumaticNoCal.name()], "{held:?}");
+}
+
+#[test]
+fn location_holdout_is_skipped_with_a_warning_when_folds_are_too_small() {
+    // 9 locations, fields need 8: any fold of 5 leaves too few behind.
+    let frames = synth::frames(3, 3, &[1.0, 3.0, 5.0, 7.0, 9.0], 6, 0.01);
+    let params = CalibParams { min_locations: 8, ..CalibParams::default() };
+    let out = calibrate(&frames, &params, provenance()).unwrap();
+    assert!(!out.calibration.pneumatic.locaware.prior_fallback);
+    assert!(out.warnings.contains(&CalibWarning::HoldoutSkipped), "{:?}", out.warnings);
+    assert!(out.calibration.training.holdout_rmse_n.is_empty());
+    assert_eq!(out.calibration.training.holdout_folds, 0);
+}
+
 #[test]
 fn table_two_layout() {
     let text = fitted().r2.to_string();
@@ -171,6 +222,16 @@ fn calibration_file_round_trips_and_rejects_unknown_keys() {
     moved.forward.sensitivity.region.x_max_mm += 5.0;
     let err = Calibration::from_toml_str(&moved.to_toml_string().unwrap(), "calib.toml").unwrap_err().to_string();
     assert!(err.contains("forward.sensitivity.region must equal [region]"), "{err}");
+    // Version 3 files (before the location-held-out figures) still load, without them.
+    let v3: String = text.lines().filter(|l| !l.starts_with("holdout_folds")).collect::<Vec<_>>().join("\n").replacen(
+        &format!("format_version = {FORMAT_VERSION}"),
+        "format_version = 3",
+        1,
+    );
+    let v3 = v3.split("[training.holdout_rmse_n]").next().unwrap().to_string();
+    let old = Calibration::from_toml_str(&v3, "v3.toml").unwrap();
+    assert!(old.training.holdout_rmse_n.is_empty() && old.training.holdout_folds == 0);
+    assert_eq!(old.training.train_rmse_n, cal.training.train_rmse_n);
     // Another format version is named as such (with what to do), not reported as a parse error.
     for v in ["2", "99"] {
         let wrong = text.replacen(&format!("format_version = {FORMAT_VERSION}"), &format!("format_version = {v}"), 1);

@@ -17,7 +17,7 @@ use super::calibration::{
     TrainingSummary,
 };
 use super::field::{NPHI, QuadField, Region, locaware_design, phi};
-use super::fit::{CvSearch, RidgeProblem, cross_validate, fit_quadratic, r_squared};
+use super::fit::{CvSearch, RidgeProblem, cross_validate, fit_quadratic, fold_of, r_squared};
 use super::forward::{ForwardModel, ForwardSample};
 use super::joint::{JointProblem, fit_joint};
 use super::map::SignalMap;
@@ -147,6 +147,9 @@ pub enum CalibWarning {
     /// The joint f fit stopped early; the last consistent (f, g, b) is kept.
     #[error("{what}: {problem}; the last consistent f and fields are kept")]
     JointFit { what: &'static str, problem: &'static str },
+    /// The location-held-out check could not fit every fold.
+    #[error("location-held-out check skipped: a fold without its locations was too small to fit fields")]
+    HoldoutSkipped,
     /// No centre location: the R^2 table's centre column is empty.
     #[error("no location with >= 3 distinct forces near the centre: centre R^2 not computed")]
     NoCenter,
@@ -203,13 +206,88 @@ fn prior_vec(p: usize) -> Vec<f64> {
     v
 }
 
-/// Fits the calibration. See the module doc for the procedure.
+/// Fits the calibration (see the module doc for the procedure), then estimates how it does at
+/// places it was not fitted on ([`TrainingSummary::holdout_rmse_n`]).
 pub fn calibrate(
     frames: &[CalibSample],
     params: &CalibParams,
     provenance: Provenance,
 ) -> Result<Calibrated, CalibrateError> {
     params.validate()?;
+    let fit = fit_once(frames, params, provenance.clone())?;
+    let mut out = fit.calibrated;
+    if !fit.degenerate {
+        match location_holdout(&fit.samples, &fit.loc_of, fit.locations, params, &provenance) {
+            Some((rmse, folds)) => {
+                out.calibration.training.holdout_rmse_n = rmse;
+                out.calibration.training.holdout_folds = folds;
+            }
+            None => {
+                let w = CalibWarning::HoldoutSkipped;
+                out.calibration.warnings.push(w.to_string());
+                out.warnings.push(w);
+            }
+        }
+    }
+    for w in &out.warnings {
+        tracing::warn!(target: "skinflow::calibrate", "{w}");
+    }
+    Ok(out)
+}
+
+/// The location-held-out check: the calibration locations are dealt into `params.folds` folds
+/// (fixed seed); for each fold the whole fit is repeated without that fold's locations and
+/// every strategy predicts the held-out samples. Returns the RMSE per strategy (N) over all
+/// samples and the number of folds, or `None` when a fold's fit is degenerate or fails (too
+/// few locations to hold any out).
+fn location_holdout(
+    samples: &[CalibSample],
+    loc_of: &[usize],
+    locations: usize,
+    params: &CalibParams,
+    provenance: &Provenance,
+) -> Option<(BTreeMap<String, f64>, usize)> {
+    let k = params.folds.min(locations);
+    if k < 2 {
+        return None;
+    }
+    let fold = fold_of(locations, k);
+    let fold_params = CalibParams { average_holds: false, ..params.clone() };
+    let mut sse = [0.0; StrategyKind::ALL.len()];
+    for f in 0..k {
+        let train: Vec<CalibSample> =
+            samples.iter().zip(loc_of).filter(|&(_, &l)| fold[l] != f).map(|(s, _)| *s).collect();
+        let fitted = fit_once(&train, &fold_params, provenance.clone()).ok()?;
+        if fitted.degenerate {
+            return None;
+        }
+        let strategies = StrategyKind::ALL.map(|kind| Strategy::new(&fitted.calibrated.calibration, kind));
+        for (s, _) in samples.iter().zip(loc_of).filter(|&(_, &l)| fold[l] == f) {
+            for (e, strategy) in sse.iter_mut().zip(&strategies) {
+                *e += (strategy.estimate(&s.contact(), s.dp_kpa).force_n - s.force_n).powi(2);
+            }
+        }
+    }
+    let n = samples.len() as f64;
+    let rmse = StrategyKind::ALL.iter().zip(sse).map(|(kind, e)| (kind.name().to_string(), (e / n).sqrt())).collect();
+    Some((rmse, k))
+}
+
+/// One fit and what the held-out check needs of it.
+struct FitOnce {
+    calibrated: Calibrated,
+    /// The samples fitted on (after averaging and rejection).
+    samples: Vec<CalibSample>,
+    /// Location index of every sample.
+    loc_of: Vec<usize>,
+    /// Distinct locations.
+    locations: usize,
+    /// The fields kept the prior (too few samples or locations, or a narrow region).
+    degenerate: bool,
+}
+
+/// The fit itself, without the held-out check or logging.
+fn fit_once(frames: &[CalibSample], params: &CalibParams, provenance: Provenance) -> Result<FitOnce, CalibrateError> {
     let mut warnings = Vec::new();
     let holds = if params.average_holds {
         average_holds(frames)
@@ -456,6 +534,8 @@ pub fn calibrate(
         lambda_grid_rel: params.lambda_grid_rel.clone(),
         folds: params.folds,
         train_rmse_n: BTreeMap::new(),
+        holdout_rmse_n: BTreeMap::new(),
+        holdout_folds: 0,
     };
     let mut calibration = Calibration {
         format: FORMAT.to_string(),
@@ -477,8 +557,6 @@ pub fn calibrate(
             samples.iter().map(|s| (strategy.estimate(&s.contact(), s.dp_kpa).force_n - s.force_n).powi(2)).sum();
         calibration.training.train_rmse_n.insert(kind.name().to_string(), (sse / t as f64).sqrt());
     }
-    for w in &warnings {
-        tracing::warn!(target: "skinflow::calibrate", "{w}");
-    }
-    Ok(Calibrated { calibration, warnings })
+    let locations = locs.len();
+    Ok(FitOnce { calibrated: Calibrated { calibration, warnings }, samples, loc_of, locations, degenerate })
 }

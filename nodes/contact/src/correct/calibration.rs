@@ -18,7 +18,9 @@ use std::path::Path;
 /// Value of the `format` key.
 pub const FORMAT: &str = "skinflow-calibration";
 /// Current `format_version`.
-pub const FORMAT_VERSION: u32 = 3;
+pub const FORMAT_VERSION: u32 = 4;
+/// Oldest `format_version` still read (version 3 lacks the location-held-out figures).
+pub const OLDEST_FORMAT_VERSION: u32 = 3;
 
 /// Where a calibration came from (all given by the caller).
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
@@ -171,6 +173,15 @@ pub struct TrainingSummary {
     pub folds: usize,
     /// RMSE on the training samples per strategy, N.
     pub train_rmse_n: BTreeMap<String, f64>,
+    /// RMSE per strategy at locations the fit did not see, N: the locations are dealt into
+    /// `holdout_folds` folds and the whole fit (f, weights, fields, kernels) is repeated
+    /// without each fold's locations, which it then predicts. Empty when not computed
+    /// (degenerate data, or a file of format version 3).
+    #[serde(default)]
+    pub holdout_rmse_n: BTreeMap<String, f64>,
+    /// Folds of the location-held-out check (0 when not computed).
+    #[serde(default)]
+    pub holdout_folds: usize,
 }
 
 /// A complete force calibration.
@@ -215,7 +226,7 @@ pub enum CalibrationFileError {
     Parse { path: String, message: String },
     /// Wrong `format` or another `format_version`.
     #[error(
-        "{path}: not a skinflow calibration this version reads (format \"{format}\", version {version}; expected \"{FORMAT}\" version {FORMAT_VERSION}): re-run `skinflow calibrate` on the recording"
+        "{path}: not a skinflow calibration this version reads (format \"{format}\", version {version}; expected \"{FORMAT}\" version {OLDEST_FORMAT_VERSION} to {FORMAT_VERSION}): re-run `skinflow calibrate` on the recording"
     )]
     Format { path: String, format: String, version: u32 },
     /// Parsed, but a value is out of range (e.g. a hand-edited file).
@@ -245,7 +256,7 @@ impl Calibration {
             format_version: u32,
         }
         let h: Header = toml::from_str(text).map_err(parse)?;
-        if h.format != FORMAT || h.format_version != FORMAT_VERSION {
+        if h.format != FORMAT || !(OLDEST_FORMAT_VERSION..=FORMAT_VERSION).contains(&h.format_version) {
             return Err(CalibrationFileError::Format {
                 path: origin.to_string(),
                 format: h.format,

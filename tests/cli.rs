@@ -315,4 +315,14 @@ fn reproduce_pins_the_paper_baselines() {
     let mm25 = |cell: &str| -> f64 { cell.rsplit(" / ").next().unwrap().parse().unwrap() };
     let (shipped, off): (f64, f64) = (cells[2].parse().unwrap(), cells[4].parse().unwrap());
     assert!(off < shipped && mm25(cells[5]) < mm25(cells[3]), "{line}");
+    // The two-size calibration learned from both indenters and was evaluated beside the paper's.
+    let two: toml::Table = std::fs::read_to_string(d.join("r/calib-two-sizes.toml")).unwrap().parse().unwrap();
+    let sizes: Vec<f64> =
+        two["training"]["diameters_mm"].as_array().unwrap().iter().map(|v| v.as_float().unwrap()).collect();
+    assert_eq!(sizes, [15.0, 22.0]);
+    let section = report.split("## Beyond the paper's protocol").nth(1).expect("two-size section");
+    let line = section.lines().find(|l| l.starts_with("| pneumatic-locaware |")).expect("locaware row");
+    let cells: Vec<&str> = line.split('|').map(str::trim).collect();
+    assert_eq!(cells[2].parse::<f64>().unwrap(), shipped, "{line}");
+    assert!(cells[4].parse::<f64>().unwrap().is_finite(), "{line}");
 }

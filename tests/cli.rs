@@ -147,7 +147,7 @@ fn a_stale_tare_gives_no_load_shares_end_to_end() {
     let shares = derived_streams_agree(&out, frames);
     assert!(shares.no_load > 0 && shares.loaded > 0, "{shares:?}");
     let text = ok(&skinflow(&d, &["inspect", out.to_str().unwrap()]));
-    assert!(text.contains(&format!("{} no load", shares.no_load)), "{text}");
+    assert!(text.contains(&format!("; {} no load", shares.no_load)), "{text}");
 }
 
 /// Replays `rec` through sync, reconstructor, segmenter, splitter and corrector in lockstep,
@@ -309,6 +309,12 @@ fn reproduce_pins_the_paper_baselines() {
     let ablated: toml::Table =
         std::fs::read_to_string(d.join("r/cross-diameter-same-response.toml")).unwrap().parse().unwrap();
     assert_eq!(ablated["model"]["area_exponent"].as_float(), Some(0.0));
+    assert_eq!(ablated["scene"]["name"].as_str(), Some("cross-diameter-same-response"));
+    for json in ["cross-diameter-same-response", "cross-diameter-two-sizes", "multi-contact-two-sizes"] {
+        let v: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(d.join(format!("r/{json}.json"))).unwrap()).unwrap();
+        assert!(v["strategies"]["pneumatic-locaware"]["rmse_n"].as_f64().is_some(), "{json}");
+    }
     let section = report.split("## Where the cross-diameter error comes from").nth(1).expect("size ablation section");
     let line = section.lines().find(|l| l.starts_with("| pneumatic-locaware |")).expect("locaware row");
     let cells: Vec<&str> = line.split('|').map(str::trim).collect();

@@ -4,9 +4,9 @@ mod synth;
 
 use skinflow_contact::correct::average_holds;
 use skinflow_contact::correct::calibrate::{CalibParams, CalibSample, CalibWarning, calibrate};
-use skinflow_contact::correct::calibration::{Calibration, FFit, FORMAT_VERSION, Provenance};
+use skinflow_contact::correct::calibration::{Calibration, FFit, FORMAT_VERSION, OLDEST_FORMAT_VERSION, Provenance};
 use skinflow_contact::correct::field::{NPHI, Region, phi};
-use skinflow_contact::correct::fit::{CvSearch, RidgeProblem, cross_validate};
+use skinflow_contact::correct::fit::{CvSearch, RidgeProblem, cross_validate, fold_of};
 use skinflow_contact::{Contact, Strategy, StrategyKind};
 
 fn provenance() -> Provenance {
@@ -136,24 +136,19 @@ fn joint_f_fit_removes_the_pooled_curve_bias_and_sequential_keeps_the_papers_ord
     assert_eq!(joint.area_aware.fields.map, joint.pneumatic.locaware.map);
 }
 
-/// Leave-one-location-out by hand (folds = locations): every strategy's held-out figure is the
-/// RMSE of fits made without each location, predicting that location's hold means.
-#[test]
-fn location_holdout_refits_without_each_location() {
-    let frames = synth::frames(11, 3, &[1.0, 3.0, 5.0, 7.0, 9.0], 6, 0.01);
-    let params = CalibParams { folds: 9, ..CalibParams::default() };
-    let cal = calibrate(&frames, &params, provenance()).unwrap().calibration;
-    assert_eq!(cal.training.holdout_folds, 9);
+/// The held-out check by hand: locations (in order of first appearance) dealt into folds with
+/// the same fixed-seed deal, a fit without each fold, predicting that fold's hold means.
+fn holdout_by_hand(frames: &[CalibSample], params: &CalibParams) -> (Vec<f64>, usize) {
     let mut sites: Vec<(f64, f64)> = frames.iter().map(|f| (f.true_x_mm, f.true_y_mm)).collect();
     sites.dedup();
-    assert_eq!(sites.len(), 9);
-    let at = |f: &CalibSample, site: (f64, f64)| (f.true_x_mm, f.true_y_mm) == site;
+    let fold = fold_of(sites.len(), params.folds);
+    let fold_of_frame = |f: &CalibSample| fold[sites.iter().position(|&s| s == (f.true_x_mm, f.true_y_mm)).unwrap()];
     let mut sse = vec![0.0; StrategyKind::ALL.len()];
     let mut n = 0;
-    for &site in &sites {
-        let train: Vec<CalibSample> = frames.iter().copied().filter(|f| !at(f, site)).collect();
-        let held: Vec<CalibSample> = frames.iter().copied().filter(|f| at(f, site)).collect();
-        let without = calibrate(&train, &params, provenance()).unwrap().calibration;
+    for k in 0..params.folds {
+        let train: Vec<CalibSample> = frames.iter().copied().filter(|f| fold_of_frame(f) != k).collect();
+        let held: Vec<CalibSample> = frames.iter().copied().filter(|f| fold_of_frame(f) == k).collect();
+        let without = calibrate(&train, params, provenance()).unwrap().calibration;
         for s in average_holds(&held).samples {
             for (e, kind) in sse.iter_mut().zip(StrategyKind::ALL) {
                 let c = Contact { area_mm2: s.area_mm2, ..contact(s.x_mm, s.y_mm, s.cond_sum) };
@@ -162,29 +157,48 @@ fn location_holdout_refits_without_each_location() {
             n += 1;
         }
     }
-    assert_eq!(n, cal.training.samples);
-    for (e, kind) in sse.iter().zip(StrategyKind::ALL) {
-        let by_hand = (e / n as f64).sqrt();
-        let got = cal.training.holdout_rmse_n[kind.name()];
-        assert!((got - by_hand).abs() <= 1e-9 * by_hand.max(1.0), "{}: {got} vs {by_hand}", kind.name());
+    (sse.iter().map(|e| (e / n as f64).sqrt()).collect(), n)
+}
+
+/// Leave-one-location-out (folds = locations) and whole multi-location folds (folds = 3) give
+/// the figures a fit repeated by hand without each fold gives.
+#[test]
+fn location_holdout_refits_without_each_fold_of_locations() {
+    let frames = synth::frames(11, 3, &[1.0, 3.0, 5.0, 7.0, 9.0], 6, 0.01);
+    for folds in [9, 3] {
+        let params = CalibParams { folds, ..CalibParams::default() };
+        let cal = calibrate(&frames, &params, provenance()).unwrap().calibration;
+        assert_eq!(cal.training.holdout_folds, folds);
+        let (by_hand, n) = holdout_by_hand(&frames, &params);
+        assert_eq!(n, cal.training.samples);
+        for (want, kind) in by_hand.iter().zip(StrategyKind::ALL) {
+            let got = cal.training.holdout_rmse_n[kind.name()];
+            assert!((got - want).abs() <= 1e-9 * want.max(1.0), "folds {folds}, {}: {got} vs {want}", kind.name());
+        }
+        // Unseen places cost something, and the fields still generalize on this smooth skin.
+        let (train, held) = (&cal.training.train_rmse_n, &cal.training.holdout_rmse_n);
+        let la = StrategyKind::PneumaticLocAware.name();
+        assert!(held[la] > train[la], "folds {folds}: {held:?} {train:?}");
+        assert!(held[la] < 0.5 * held[StrategyKind::PneumaticNoCal.name()], "folds {folds}: {held:?}");
     }
-    // Unseen places cost something, and the fields still generalize on this smooth skin.
-    let (train, held) = (&cal.training.train_rmse_n, &cal.training.holdout_rmse_n);
-    let la = StrategyKind::PneumaticLocAware.name();
-    assert!(held[la] > train[la], "{held:?} {train:?}");
-    assert!(held[la] < 0.5 * held[StrategyKind::PneumaticNoCal.name()], "{held:?}");
 }
 
 #[test]
 fn location_holdout_is_skipped_with_a_warning_when_folds_are_too_small() {
-    // 9 locations, fields need 8: any fold of 5 leaves too few behind.
+    // 9 locations in 5 folds of 1 or 2; fields need 8 locations, so a fold of 2 leaves too few.
     let frames = synth::frames(3, 3, &[1.0, 3.0, 5.0, 7.0, 9.0], 6, 0.01);
     let params = CalibParams { min_locations: 8, ..CalibParams::default() };
     let out = calibrate(&frames, &params, provenance()).unwrap();
     assert!(!out.calibration.pneumatic.locaware.prior_fallback);
-    assert!(out.warnings.contains(&CalibWarning::HoldoutSkipped), "{:?}", out.warnings);
+    let skipped = out.warnings.iter().find_map(|w| match w {
+        CalibWarning::HoldoutSkipped { reason } => Some(reason.clone()),
+        _ => None,
+    });
+    let reason = skipped.unwrap_or_else(|| panic!("{:?}", out.warnings));
+    assert!(reason.contains("leaves") && reason.contains("7 locations, too few for the fields"), "{reason}");
     assert!(out.calibration.training.holdout_rmse_n.is_empty());
     assert_eq!(out.calibration.training.holdout_folds, 0);
+    assert!(out.calibration.warnings.iter().any(|w| w.starts_with("location-held-out check skipped: fold")));
 }
 
 #[test]
@@ -225,13 +239,16 @@ fn calibration_file_round_trips_and_rejects_unknown_keys() {
     // Version 3 files (before the location-held-out figures) still load, without them.
     let v3: String = text.lines().filter(|l| !l.starts_with("holdout_folds")).collect::<Vec<_>>().join("\n").replacen(
         &format!("format_version = {FORMAT_VERSION}"),
-        "format_version = 3",
+        &format!("format_version = {OLDEST_FORMAT_VERSION}"),
         1,
     );
     let v3 = v3.split("[training.holdout_rmse_n]").next().unwrap().to_string();
     let old = Calibration::from_toml_str(&v3, "v3.toml").unwrap();
     assert!(old.training.holdout_rmse_n.is_empty() && old.training.holdout_folds == 0);
     assert_eq!(old.training.train_rmse_n, cal.training.train_rmse_n);
+    // Read as the current version, so writing it back gives a consistent file.
+    assert_eq!(old.format_version, FORMAT_VERSION);
+    assert_eq!(Calibration::from_toml_str(&old.to_toml_string().unwrap(), "<test>").unwrap(), old);
     // Another format version is named as such (with what to do), not reported as a parse error.
     for v in ["2", "99"] {
         let wrong = text.replacen(&format!("format_version = {FORMAT_VERSION}"), &format!("format_version = {v}"), 1);

@@ -62,7 +62,8 @@ impl CalibSample {
 pub struct CalibParams {
     /// Average consecutive frames with identical truth before fitting.
     pub average_holds: bool,
-    /// Folds of the inner cross-validation.
+    /// Folds of the inner cross-validation of the ridge weights, and of the location-held-out
+    /// check (whole locations per fold).
     pub folds: usize,
     /// Ridge weights searched, relative to the number of samples T (weight = rel x T).
     pub lambda_grid_rel: Vec<f64>,
@@ -147,9 +148,9 @@ pub enum CalibWarning {
     /// The joint f fit stopped early; the last consistent (f, g, b) is kept.
     #[error("{what}: {problem}; the last consistent f and fields are kept")]
     JointFit { what: &'static str, problem: &'static str },
-    /// The location-held-out check could not fit every fold.
-    #[error("location-held-out check skipped: a fold without its locations was too small to fit fields")]
-    HoldoutSkipped,
+    /// The location-held-out check could not fit every fold; no held-out figures.
+    #[error("location-held-out check skipped: {reason}")]
+    HoldoutSkipped { reason: String },
     /// No centre location: the R^2 table's centre column is empty.
     #[error("no location with >= 3 distinct forces near the centre: centre R^2 not computed")]
     NoCenter,
@@ -218,12 +219,12 @@ pub fn calibrate(
     let mut out = fit.calibrated;
     if !fit.degenerate {
         match location_holdout(&fit.samples, &fit.loc_of, fit.locations, params, &provenance) {
-            Some((rmse, folds)) => {
+            Ok((rmse, folds)) => {
                 out.calibration.training.holdout_rmse_n = rmse;
                 out.calibration.training.holdout_folds = folds;
             }
-            None => {
-                let w = CalibWarning::HoldoutSkipped;
+            Err(reason) => {
+                let w = CalibWarning::HoldoutSkipped { reason };
                 out.calibration.warnings.push(w.to_string());
                 out.warnings.push(w);
             }
@@ -238,18 +239,18 @@ pub fn calibrate(
 /// The location-held-out check: the calibration locations are dealt into `params.folds` folds
 /// (fixed seed); for each fold the whole fit is repeated without that fold's locations and
 /// every strategy predicts the held-out samples. Returns the RMSE per strategy (N) over all
-/// samples and the number of folds, or `None` when a fold's fit is degenerate or fails (too
-/// few locations to hold any out).
+/// samples and the number of folds, or why no figure is honest: fewer than two locations, or
+/// a fold whose fit is degenerate (too few locations or samples left) or failed.
 fn location_holdout(
     samples: &[CalibSample],
     loc_of: &[usize],
     locations: usize,
     params: &CalibParams,
     provenance: &Provenance,
-) -> Option<(BTreeMap<String, f64>, usize)> {
+) -> Result<(BTreeMap<String, f64>, usize), String> {
     let k = params.folds.min(locations);
     if k < 2 {
-        return None;
+        return Err(format!("{locations} location(s), none to hold out"));
     }
     let fold = fold_of(locations, k);
     let fold_params = CalibParams { average_holds: false, ..params.clone() };
@@ -257,9 +258,17 @@ fn location_holdout(
     for f in 0..k {
         let train: Vec<CalibSample> =
             samples.iter().zip(loc_of).filter(|&(_, &l)| fold[l] != f).map(|(s, _)| *s).collect();
-        let fitted = fit_once(&train, &fold_params, provenance.clone()).ok()?;
+        let fold_name = format!("fold {} of {k}", f + 1);
+        let fitted = fit_once(&train, &fold_params, provenance.clone()).map_err(|e| format!("{fold_name}: {e}"))?;
         if fitted.degenerate {
-            return None;
+            return Err(format!(
+                "{fold_name} leaves {} samples at {} locations, too few for the fields",
+                fitted.samples.len(),
+                fitted.locations
+            ));
+        }
+        if let Some(w) = fitted.calibrated.warnings.iter().find(|w| matches!(w, CalibWarning::FitFailed { .. })) {
+            return Err(format!("{fold_name}: {w}"));
         }
         let strategies = StrategyKind::ALL.map(|kind| Strategy::new(&fitted.calibrated.calibration, kind));
         for (s, _) in samples.iter().zip(loc_of).filter(|&(_, &l)| fold[l] == f) {
@@ -270,7 +279,7 @@ fn location_holdout(
     }
     let n = samples.len() as f64;
     let rmse = StrategyKind::ALL.iter().zip(sse).map(|(kind, e)| (kind.name().to_string(), (e / n).sqrt())).collect();
-    Some((rmse, k))
+    Ok((rmse, k))
 }
 
 /// One fit and what the held-out check needs of it.

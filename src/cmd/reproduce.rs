@@ -211,13 +211,7 @@ pub fn run(scenes_dir: &Path, out: &Path, seed: u64, fit_toml: &str, args: &Pipe
             writeln!(md, "| f fit | cross-diameter RMSE, N | 10 / 20 / 25 mm | multi-contact per-contact RMSE, N |");
         let _ = writeln!(md, "|---|---|---|---|");
         for (name, c, m) in [("joint", cross, multi), ("sequential (paper's order)", &seq_cross, &seq_multi)] {
-            let _ = writeln!(
-                md,
-                "| {name} | {} | {} | {} |",
-                f(rmse(c, la), 3),
-                per_diameter(c, la),
-                f(per_contact(m, la), 3)
-            );
+            let _ = writeln!(md, "| {name} | {} | {} |", cross_cells(c, la), f(per_contact(m, la), 3));
         }
     }
     size_ablation(&ctx, &mut md, cross)?;
@@ -339,14 +333,7 @@ fn size_ablation(ctx: &Run, md: &mut String, cross: &EvalReport) -> Result<()> {
     let _ = writeln!(md, "| strategy | as shipped, N | 10 / 20 / 25 mm | q = 0, N | 10 / 20 / 25 mm |");
     let _ = writeln!(md, "|---|---|---|---|---|");
     for name in PNEUMATIC_ROWS {
-        let _ = writeln!(
-            md,
-            "| {name} | {} | {} | {} | {} |",
-            f(rmse(cross, name), 3),
-            per_diameter(cross, name),
-            f(rmse(&ablated, name), 3),
-            per_diameter(&ablated, name)
-        );
+        let _ = writeln!(md, "| {name} | {} | {} |", cross_cells(cross, name), cross_cells(&ablated, name));
     }
     Ok(())
 }
@@ -357,16 +344,15 @@ fn size_ablation(ctx: &Run, md: &mut String, cross: &EvalReport) -> Result<()> {
 fn two_size_calibration(ctx: &Run, md: &mut String, cross: &EvalReport, multi: &EvalReport) -> Result<()> {
     let name = "calibration-two-sizes";
     let rec = ctx.simulate(&ctx.scenes_dir.join(format!("{name}.toml")), name)?;
-    let (samples, provenance) = super::calibrate::collect(&rec, ctx.args)?;
-    let fitted = calibrate(&samples, ctx.params, provenance)
-        .map_err(anyhow::Error::msg)
+    let fitted = super::calibrate::fit(&rec, ctx.params, ctx.args)
         .with_context(|| format!("{}: calibration failed", rec.display()))?;
     let calib = ctx.out.join("calib-two-sizes.toml");
     fitted.calibration.write(&calib).map_err(anyhow::Error::msg)?;
     let sizes = &fitted.calibration.training.diameters_mm;
     let sizes_text: Vec<String> = sizes.iter().map(|d| format!("{d:.0}")).collect();
-    let tested: Vec<&String> = cross.strategies.values().flat_map(|s| s.per_diameter_rmse_n.keys()).collect();
-    let unseen = sizes.iter().all(|d| !tested.iter().any(|t| t.parse::<f64>().is_ok_and(|t| (t - d).abs() < 0.5)));
+    let tested: Vec<f64> =
+        cross.strategies.values().flat_map(|s| s.per_diameter_rmse_n.keys()).filter_map(|k| k.parse().ok()).collect();
+    let unseen = sizes.iter().all(|d| tested.iter().all(|t| (t - d).abs() >= 0.5));
     let cross2 = ctx.report_to_json("cross-diameter", &calib, "cross-diameter-two-sizes")?;
     let multi2 = ctx.report_to_json("multi-contact", &calib, "multi-contact-two-sizes")?;
     let _ = writeln!(md, "\n## Beyond the paper's protocol: calibrating with two indenter sizes\n");
@@ -386,11 +372,9 @@ fn two_size_calibration(ctx: &Run, md: &mut String, cross: &EvalReport, multi: &
     for s in PNEUMATIC_ROWS {
         let _ = writeln!(
             md,
-            "| {s} | {} | {} | {} | {} | {} / {} |",
-            f(rmse(cross, s), 3),
-            per_diameter(cross, s),
-            f(rmse(&cross2, s), 3),
-            per_diameter(&cross2, s),
+            "| {s} | {} | {} | {} / {} |",
+            cross_cells(cross, s),
+            cross_cells(&cross2, s),
             f(per_contact(multi, s), 3),
             f(per_contact(&multi2, s), 3)
         );
@@ -404,11 +388,13 @@ fn two_size_calibration(ctx: &Run, md: &mut String, cross: &EvalReport, multi: &
     Ok(())
 }
 
-/// A strategy's per-diameter RMSE on a report, "10 / 20 / 25 mm" order, N.
-fn per_diameter(r: &EvalReport, name: &str) -> String {
-    r.strategies.get(name).map_or("-".into(), |s| {
+/// Two table cells of a strategy on a cross-diameter report: its RMSE and its per-diameter
+/// RMSE in "10 / 20 / 25 mm" order, N.
+fn cross_cells(r: &EvalReport, name: &str) -> String {
+    let per_diameter = r.strategies.get(name).map_or("-".into(), |s| {
         paper::PER_DIAMETER.map(|(k, _)| f(s.per_diameter_rmse_n.get(k).copied(), 2)).join(" / ")
-    })
+    });
+    format!("{} | {per_diameter}", f(rmse(r, name), 3))
 }
 
 /// A strategy's RMSE on a report, N.

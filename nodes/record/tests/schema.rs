@@ -9,6 +9,23 @@ use skinflow_record::{
     ForceRow, RecordError, Recording, RecordingWriter, SchemaProblem, Streams, SyncRow, TruthContact, WriterOptions,
 };
 
+/// An empty directory of its own for one test.
+fn fresh_dir(test: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("skinflow-record-{test}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// A writer of `/eit`, `/derived/sync` and one force strategy `s` at `dir/name`.
+fn sync_and_forces_writer(dir: &Path, name: &str) -> (PathBuf, RecordingWriter) {
+    let path = dir.join(name);
+    let mut opts = WriterOptions::new(PAPER_100MM_TOML);
+    opts.streams = Streams { sync: true, force_strategies: vec!["s".into()], ..Streams::default() };
+    let w = RecordingWriter::create(&path, &opts).unwrap();
+    (path, w)
+}
+
 fn valid_file(dir: &Path, name: &str) -> PathBuf {
     let path = dir.join(name);
     let mut opts = WriterOptions::new(PAPER_100MM_TOML);
@@ -43,9 +60,7 @@ type Break = fn(&hdf5::File);
 
 #[test]
 fn every_violation_is_refused_with_file_path_and_problem() {
-    let dir = std::env::temp_dir().join(format!("skinflow-record-schema-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = fresh_dir("schema");
     let sensor_12 = PAPER_100MM_TOML.replace("electrodes_per_side = 4", "electrodes_per_side = 3");
     let cases: Vec<(&str, Break, &str, SchemaProblem)> = vec![
         (
@@ -168,9 +183,7 @@ fn every_violation_is_refused_with_file_path_and_problem() {
 
 #[test]
 fn extra_groups_and_attributes_are_ignored() {
-    let dir = std::env::temp_dir().join(format!("skinflow-record-extra-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = fresh_dir("extra");
     let file = valid_file(&dir, "extra.h5");
     let before = Recording::open(&file).unwrap();
     let f = hdf5::File::open_rw(&file).unwrap();
@@ -186,13 +199,8 @@ fn extra_groups_and_attributes_are_ignored() {
 /// `flags` still open: those read as absent, everything else as before.
 #[test]
 fn files_without_sync_or_force_flags_still_open() {
-    let dir = std::env::temp_dir().join(format!("skinflow-record-older-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    let path = dir.join("older.h5");
-    let mut opts = WriterOptions::new(PAPER_100MM_TOML);
-    opts.streams = Streams { sync: true, force_strategies: vec!["s".into()], ..Streams::default() };
-    let mut w = RecordingWriter::create(&path, &opts).unwrap();
+    let dir = fresh_dir("older");
+    let (path, mut w) = sync_and_forces_writer(&dir, "older.h5");
     let sync = SyncRow {
         dp_kpa: 1.0,
         pressure_samples: 3,
@@ -230,13 +238,8 @@ fn files_without_sync_or_force_flags_still_open() {
 /// `inspect` counts the settled frames and the forces each guard touched, padding excluded.
 #[test]
 fn inspect_counts_settled_frames_and_guarded_forces() {
-    let dir = std::env::temp_dir().join(format!("skinflow-record-guards-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    let path = dir.join("guards.h5");
-    let mut opts = WriterOptions::new(PAPER_100MM_TOML);
-    opts.streams = Streams { sync: true, force_strategies: vec!["s".into()], ..Streams::default() };
-    let mut w = RecordingWriter::create(&path, &opts).unwrap();
+    let dir = fresh_dir("guards");
+    let (path, mut w) = sync_and_forces_writer(&dir, "guards.h5");
     for i in 0..6u32 {
         let t = f64::from(i) * 0.1;
         w.append_eit(t, u64::from(i), &[1.0; 120]).unwrap();

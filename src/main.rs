@@ -101,9 +101,8 @@ enum Cmd {
         scenes: PathBuf,
         #[arg(long, default_value_t = 1)]
         seed: u64,
-        /// Calibration fit params, e.g. 'f_fit = "sequential"' (the paper's fitting order).
-        #[arg(long, value_name = "TOML", default_value = "")]
-        fit: String,
+        #[command(flatten)]
+        fit: cmd::calibrate::FitArgs,
         #[command(flatten)]
         pipeline: cmd::pipeline::PipelineArgs,
     },
@@ -114,9 +113,8 @@ enum Cmd {
         recording: PathBuf,
         #[arg(long)]
         out: PathBuf,
-        /// Calibration fit params, e.g. 'f_fit = "sequential"' (the paper's fitting order).
-        #[arg(long, value_name = "TOML", default_value = "")]
-        fit: String,
+        #[command(flatten)]
+        fit: cmd::calibrate::FitArgs,
         #[command(flatten)]
         pipeline: cmd::pipeline::PipelineArgs,
     },
@@ -188,11 +186,11 @@ fn dispatch(cmd: Cmd) -> Result<ExitCode> {
             cmd::emulate::run(&scene, seed, fast, dir, &faults, interrupt_flag()?).map(|()| ExitCode::SUCCESS)
         }
         Cmd::Reproduce { out, scenes, seed, fit, pipeline } => {
-            cmd::reproduce::run(&scenes, &out, seed, &fit, &pipeline).map(|()| ExitCode::SUCCESS)
+            cmd::reproduce::run(&scenes, &out, seed, &fit.fit, &pipeline).map(|()| ExitCode::SUCCESS)
         }
         Cmd::Inspect { recording } => cmd::inspect::run(&recording).map(|()| ExitCode::SUCCESS),
         Cmd::Calibrate { recording, out, fit, pipeline } => {
-            cmd::calibrate::run(&recording, &out, &fit, &pipeline).map(|()| ExitCode::SUCCESS)
+            cmd::calibrate::run(&recording, &out, &fit.fit, &pipeline).map(|()| ExitCode::SUCCESS)
         }
         Cmd::Eval { recording, calib, json, plots, contacts_csv, pipeline } => {
             cmd::eval::run(&recording, &calib, json.as_deref(), plots.as_deref(), contacts_csv.as_deref(), &pipeline)

@@ -50,6 +50,15 @@ pub fn samples(rows: &[Vec<skinflow_core::Message>], settled: &Settled) -> Vec<C
     out
 }
 
+/// The `--fit` option of `calibrate` and `reproduce`.
+#[derive(Debug, Clone, clap::Args)]
+pub struct FitArgs {
+    /// Calibration fit params, e.g. 'f_fit = "sequential"' (the paper's fitting order) or
+    /// 'holdout_folds = 0' (no location-held-out check).
+    #[arg(long, value_name = "TOML", default_value = "")]
+    pub fit: String,
+}
+
 /// Parses the `--fit` TOML (fields of `CalibParams`; empty: the defaults).
 pub fn fit_params(text: &str) -> Result<CalibParams> {
     let params: CalibParams = toml::from_str(text).map_err(|e| anyhow::anyhow!("--fit: {e}"))?;
@@ -81,7 +90,8 @@ pub fn collect(recording: &Path, args: &PipelineArgs) -> Result<(Vec<CalibSample
 }
 
 pub fn run(recording: &Path, out: &Path, fit_toml: &str, args: &PipelineArgs) -> Result<()> {
-    let fitted = fit(recording, &fit_params(fit_toml)?, args)?;
+    let params = fit_params(fit_toml)?;
+    let fitted = fit(recording, &params, args)?;
     for w in &fitted.warnings {
         eprintln!("warning: {w}");
     }
@@ -119,11 +129,16 @@ pub fn run(recording: &Path, out: &Path, fit_toml: &str, args: &PipelineArgs) ->
             "RMSE per strategy, N: on the training samples, and at held-out locations ({} folds of the {} locations, the whole fit repeated without each)",
             t.holdout_folds, t.locations
         );
-        println!("{:<34} {:>9} {:>9}", "strategy", "training", "held out");
-        for (name, train) in &t.train_rmse_n {
-            let held = t.holdout_rmse_n.get(name).map_or_else(|| "-".into(), |v| format!("{v:.3}"));
-            println!("{name:<34} {train:>9.3} {held:>9}");
-        }
+    } else {
+        println!(
+            "RMSE per strategy, N, on the training samples (no held-out figures: {})",
+            if params.holdout_folds == 0 { "turned off with holdout_folds = 0" } else { "see the warnings above" }
+        );
+    }
+    println!("{:<34} {:>9} {:>9}", "strategy", "training", "held out");
+    for (name, train) in &t.train_rmse_n {
+        let held = t.holdout_rmse_n.get(name).map_or_else(|| "-".into(), |v| format!("{v:.3}"));
+        println!("{name:<34} {train:>9.3} {held:>9}");
     }
     cal.write(out).map_err(anyhow::Error::msg)?;
     eprintln!("calibration written to {}", out.display());

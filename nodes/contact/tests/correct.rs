@@ -141,11 +141,11 @@ fn joint_f_fit_removes_the_pooled_curve_bias_and_sequential_keeps_the_papers_ord
 fn holdout_by_hand(frames: &[CalibSample], params: &CalibParams) -> (Vec<f64>, usize) {
     let mut sites: Vec<(f64, f64)> = frames.iter().map(|f| (f.true_x_mm, f.true_y_mm)).collect();
     sites.dedup();
-    let fold = fold_of(sites.len(), params.folds);
+    let fold = fold_of(sites.len(), params.holdout_folds);
     let fold_of_frame = |f: &CalibSample| fold[sites.iter().position(|&s| s == (f.true_x_mm, f.true_y_mm)).unwrap()];
     let mut sse = vec![0.0; StrategyKind::ALL.len()];
     let mut n = 0;
-    for k in 0..params.folds {
+    for k in 0..params.holdout_folds {
         let train: Vec<CalibSample> = frames.iter().copied().filter(|f| fold_of_frame(f) != k).collect();
         let held: Vec<CalibSample> = frames.iter().copied().filter(|f| fold_of_frame(f) == k).collect();
         let without = calibrate(&train, params, provenance()).unwrap().calibration;
@@ -160,15 +160,17 @@ fn holdout_by_hand(frames: &[CalibSample], params: &CalibParams) -> (Vec<f64>, u
     (sse.iter().map(|e| (e / n as f64).sqrt()).collect(), n)
 }
 
-/// Leave-one-location-out (folds = locations) and whole multi-location folds (folds = 3) give
-/// the figures a fit repeated by hand without each fold gives.
+/// Leave-one-location-out (holdout_folds = locations) and whole multi-location folds
+/// (holdout_folds = 3) give the figures a fit repeated by hand without each fold gives; the
+/// inner cross-validation keeps its own fold count.
 #[test]
 fn location_holdout_refits_without_each_fold_of_locations() {
     let frames = synth::frames(11, 3, &[1.0, 3.0, 5.0, 7.0, 9.0], 6, 0.01);
     for folds in [9, 3] {
-        let params = CalibParams { folds, ..CalibParams::default() };
+        let params = CalibParams { holdout_folds: folds, ..CalibParams::default() };
         let cal = calibrate(&frames, &params, provenance()).unwrap().calibration;
         assert_eq!(cal.training.holdout_folds, folds);
+        assert_eq!(cal.training.folds, CalibParams::default().folds);
         let (by_hand, n) = holdout_by_hand(&frames, &params);
         assert_eq!(n, cal.training.samples);
         for (want, kind) in by_hand.iter().zip(StrategyKind::ALL) {
@@ -199,6 +201,19 @@ fn location_holdout_is_skipped_with_a_warning_when_folds_are_too_small() {
     assert!(out.calibration.training.holdout_rmse_n.is_empty());
     assert_eq!(out.calibration.training.holdout_folds, 0);
     assert!(out.calibration.warnings.iter().any(|w| w.starts_with("location-held-out check skipped: fold")));
+}
+
+/// `holdout_folds = 0` turns the check off: no figures, no warning, and the same calibration.
+#[test]
+fn location_holdout_can_be_turned_off() {
+    let frames = synth::frames(11, 3, &[1.0, 3.0, 5.0, 7.0, 9.0], 6, 0.01);
+    let on = calibrate(&frames, &CalibParams::default(), provenance()).unwrap();
+    let off = calibrate(&frames, &CalibParams { holdout_folds: 0, ..CalibParams::default() }, provenance()).unwrap();
+    assert!(!on.calibration.training.holdout_rmse_n.is_empty());
+    assert!(off.calibration.training.holdout_rmse_n.is_empty() && off.calibration.training.holdout_folds == 0);
+    assert!(off.warnings.iter().all(|w| !matches!(w, CalibWarning::HoldoutSkipped { .. })), "{:?}", off.warnings);
+    assert_eq!(off.calibration.pneumatic, on.calibration.pneumatic);
+    assert_eq!(off.calibration.training.train_rmse_n, on.calibration.training.train_rmse_n);
 }
 
 #[test]
@@ -373,6 +388,8 @@ fn bad_calibration_params_are_rejected_by_name() {
     let params = CalibParams { folds: 1, ..CalibParams::default() };
     let err = calibrate(&synth::paper_like(1), &params, provenance()).unwrap_err().to_string();
     assert!(err.contains("\"folds\""), "{err}");
+    let params = CalibParams { holdout_folds: 1, ..CalibParams::default() };
+    assert!(params.validate().unwrap_err().to_string().contains("\"holdout_folds\""));
     let params = CalibParams { lambda_grid_rel: vec![1.0, -1.0], ..CalibParams::default() };
     assert!(params.validate().unwrap_err().to_string().contains("lambda_grid_rel"));
     let params = CalibParams { max_location_error_mm: f64::NAN, ..CalibParams::default() };

@@ -62,9 +62,11 @@ impl CalibSample {
 pub struct CalibParams {
     /// Average consecutive frames with identical truth before fitting.
     pub average_holds: bool,
-    /// Folds of the inner cross-validation of the ridge weights, and of the location-held-out
-    /// check (whole locations per fold).
+    /// Folds of the inner cross-validation of the ridge weights.
     pub folds: usize,
+    /// Folds of whole locations in the location-held-out check (capped at the number of
+    /// locations); 0 turns the check off (it repeats the whole fit once per fold).
+    pub holdout_folds: usize,
     /// Ridge weights searched, relative to the number of samples T (weight = rel x T).
     pub lambda_grid_rel: Vec<f64>,
     /// Fewer samples than this keep the prior fields.
@@ -86,6 +88,7 @@ impl Default for CalibParams {
         Self {
             average_holds: true,
             folds: 5,
+            holdout_folds: 5,
             lambda_grid_rel: (0..=16).map(|i| 10f64.powf(-4.0 + 0.5 * i as f64)).collect(),
             min_samples: 4 * NPHI,
             min_locations: NPHI,
@@ -103,6 +106,9 @@ impl CalibParams {
         let bad = |name, problem| Err(CalibrateError::Param { name, problem });
         if self.folds < 2 {
             return bad("folds", "must be >= 2");
+        }
+        if self.holdout_folds == 1 {
+            return bad("holdout_folds", "must be 0 (no held-out check) or >= 2");
         }
         if self.lambda_grid_rel.is_empty() || self.lambda_grid_rel.iter().any(|l| !(l.is_finite() && *l > 0.0)) {
             return bad("lambda_grid_rel", "must be non-empty, finite and > 0");
@@ -217,7 +223,7 @@ pub fn calibrate(
     params.validate()?;
     let fit = fit_once(frames, params, provenance.clone())?;
     let mut out = fit.calibrated;
-    if !fit.degenerate {
+    if !fit.degenerate && params.holdout_folds > 0 {
         match location_holdout(&fit.samples, &fit.loc_of, fit.locations, params, &provenance) {
             Ok((rmse, folds)) => {
                 out.calibration.training.holdout_rmse_n = rmse;
@@ -236,7 +242,7 @@ pub fn calibrate(
     Ok(out)
 }
 
-/// The location-held-out check: the calibration locations are dealt into `params.folds` folds
+/// The location-held-out check: the calibration locations are dealt into `params.holdout_folds` folds
 /// (fixed seed); for each fold the whole fit is repeated without that fold's locations and
 /// every strategy predicts the held-out samples. Returns the RMSE per strategy (N) over all
 /// samples and the number of folds, or why no figure is honest: fewer than two locations, or
@@ -248,7 +254,7 @@ fn location_holdout(
     params: &CalibParams,
     provenance: &Provenance,
 ) -> Result<(BTreeMap<String, f64>, usize), String> {
-    let k = params.folds.min(locations);
+    let k = params.holdout_folds.min(locations);
     if k < 2 {
         return Err(format!("{locations} location(s), none to hold out"));
     }

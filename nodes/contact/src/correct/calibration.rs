@@ -169,15 +169,15 @@ pub struct TrainingSummary {
     pub hold_sd_cond_sum: f64,
     /// Relative ridge grid (weights searched = grid x samples).
     pub lambda_grid_rel: Vec<f64>,
-    /// Folds of the inner cross-validation (and of the location-held-out check).
+    /// Folds of the inner cross-validation.
     pub folds: usize,
     /// RMSE on the training samples per strategy, N.
     pub train_rmse_n: BTreeMap<String, f64>,
     /// RMSE per strategy at locations the fit did not see, N: the locations are dealt into
     /// `holdout_folds` folds and the whole fit (f, weights, fields, kernels) is repeated
     /// without each fold's locations, which it then predicts. Empty when not computed
-    /// (degenerate data, a fold too small to fit or whose fit failed, or a file of format
-    /// version 3).
+    /// (degenerate data, a fold too small to fit or whose fit failed, the check turned off
+    /// with `holdout_folds = 0`, or a file of format version 3).
     #[serde(default)]
     pub holdout_rmse_n: BTreeMap<String, f64>,
     /// Folds of the location-held-out check (0 when not computed).

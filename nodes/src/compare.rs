@@ -15,7 +15,7 @@
 use std::fmt::Write as _;
 use std::path::PathBuf;
 
-use serde::Deserialize;
+use serde::{Deserialize, Serialize};
 use skinflow_contact::eval::match_contacts;
 use skinflow_contact::eval::metrics::{MATCH_RADIUS_MM, percentile};
 use skinflow_core::params::non_negative;
@@ -78,7 +78,7 @@ struct Lane {
 }
 
 /// One lane's figures (what the table and the JSON show).
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct LaneReport {
     pub name: String,
     pub frames: u64,
@@ -267,50 +267,19 @@ pub fn table(reports: &[LaneReport]) -> String {
     s
 }
 
-fn json_num(x: f64) -> String {
-    if x.is_finite() { format!("{x}") } else { "null".into() }
-}
-
-fn json_str(s: &str) -> String {
-    let mut o = String::with_capacity(s.len() + 2);
-    o.push('"');
-    for ch in s.chars() {
-        match ch {
-            '"' => o.push_str("\\\""),
-            '\\' => o.push_str("\\\\"),
-            c if (c as u32) < 0x20 => {
-                let _ = write!(o, "\\u{:04x}", c as u32);
-            }
-            c => o.push(c),
-        }
-    }
-    o.push('"');
-    o
+/// The stop-time JSON document.
+#[derive(Serialize)]
+struct JsonReport<'a> {
+    lanes: &'a [LaneReport],
 }
 
 /// The report as JSON: `{"lanes": [{"name": ..., "frames": ..., "latency_us_p50": ..., ...}]}`;
-/// values that cannot be computed are `null`.
+/// values that cannot be computed (NaN) are `null`.
 pub fn to_json(reports: &[LaneReport]) -> String {
-    let lanes: Vec<String> = reports
-        .iter()
-        .map(|r| {
-            format!(
-                "    {{\"name\": {}, \"frames\": {}, \"latency_us_p50\": {}, \"latency_us_p99\": {}, \"rmse_n\": {}, \"relative_error_pct\": {}, \"localization_mean_mm\": {}, \"matched\": {}, \"missed\": {}, \"spurious\": {}, \"disagreement_rmse_n\": {}}}",
-                json_str(&r.name),
-                r.frames,
-                json_num(r.latency_us_p50),
-                json_num(r.latency_us_p99),
-                json_num(r.rmse_n),
-                json_num(r.relative_error_pct),
-                json_num(r.localization_mean_mm),
-                r.matched,
-                r.missed,
-                r.spurious,
-                json_num(r.disagreement_rmse_n)
-            )
-        })
-        .collect();
-    format!("{{\n  \"lanes\": [\n{}\n  ]\n}}\n", lanes.join(",\n"))
+    // Plain structs of strings and numbers always serialize; serde_json writes NaN as null.
+    let mut s = serde_json::to_string_pretty(&JsonReport { lanes: reports }).unwrap_or_default();
+    s.push('\n');
+    s
 }
 
 fn build(p: CompareParams, ctx: &BuildContext) -> Result<NodeImpl, NodeError> {
@@ -461,9 +430,12 @@ mod tests {
         };
         let t = table(std::slice::from_ref(&r));
         assert!(t.contains("| a \"quoted\" lane | 3 | 12.2 | 20.0 | - |"), "{t}");
-        let j = to_json(&[r]);
-        assert!(j.contains("\"name\": \"a \\\"quoted\\\" lane\""), "{j}");
-        assert!(j.contains("\"rmse_n\": null"), "{j}");
-        assert!(j.contains("\"disagreement_rmse_n\": 0.5"), "{j}");
+        let j: serde_json::Value = serde_json::from_str(&to_json(&[r])).unwrap();
+        let lane = &j["lanes"][0];
+        assert_eq!(lane["name"], "a \"quoted\" lane");
+        assert_eq!(lane["frames"], 3);
+        assert!(lane["rmse_n"].is_null() && lane["localization_mean_mm"].is_null(), "{j}");
+        assert_eq!(lane["disagreement_rmse_n"], 0.5);
+        assert_eq!(lane.as_object().unwrap().len(), 11, "{j}");
     }
 }

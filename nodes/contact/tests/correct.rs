@@ -4,7 +4,9 @@ mod synth;
 
 use skinflow_contact::correct::average_holds;
 use skinflow_contact::correct::calibrate::{CalibParams, CalibSample, CalibWarning, calibrate};
-use skinflow_contact::correct::calibration::{Calibration, FFit, FORMAT_VERSION, OLDEST_FORMAT_VERSION, Provenance};
+use skinflow_contact::correct::calibration::{
+    Calibration, CvGroups, FFit, FORMAT_VERSION, OLDEST_FORMAT_VERSION, Provenance,
+};
 use skinflow_contact::correct::field::{NPHI, Region, phi};
 use skinflow_contact::correct::fit::{CvSearch, RidgeProblem, cross_validate, fold_of};
 use skinflow_contact::{Contact, Strategy, StrategyKind};
@@ -55,7 +57,8 @@ fn cv_fit(d: &[f64], y: &[f64]) -> skinflow_contact::correct::fit::CvFit {
     prior[0] = 1.0;
     let grid: Vec<f64> = (0..=16).map(|i| 10f64.powf(-4.0 + 0.5 * i as f64) * y.len() as f64).collect();
     let problem = RidgeProblem { design: d, y, p: 2 * NPHI, prior: &prior, base_penalty: &[0.0; 2 * NPHI] };
-    cross_validate(&problem, &CvSearch { blocks: &[0..NPHI, NPHI..2 * NPHI], grid: &grid, folds: 5 }).unwrap()
+    cross_validate(&problem, &CvSearch { blocks: &[0..NPHI, NPHI..2 * NPHI], grid: &grid, folds: 5, groups: None })
+        .unwrap()
 }
 
 #[test]
@@ -161,16 +164,16 @@ fn holdout_by_hand(frames: &[CalibSample], params: &CalibParams) -> (Vec<f64>, u
 }
 
 /// Leave-one-location-out (holdout_folds = locations) and whole multi-location folds
-/// (holdout_folds = 3) give the figures a fit repeated by hand without each fold gives; the
-/// inner cross-validation keeps its own fold count.
+/// (holdout_folds = 3) give the figures a fit repeated by hand without each fold gives, with the
+/// inner cross-validation over samples or over whole locations (its own fold count).
 #[test]
 fn location_holdout_refits_without_each_fold_of_locations() {
     let frames = synth::frames(11, 3, &[1.0, 3.0, 5.0, 7.0, 9.0], 6, 0.01);
-    for folds in [9, 3] {
-        let params = CalibParams { holdout_folds: folds, ..CalibParams::default() };
+    for (folds, cv_groups) in [(9, CvGroups::Sample), (3, CvGroups::Sample), (3, CvGroups::Location)] {
+        let params = CalibParams { holdout_folds: folds, cv_groups, ..CalibParams::default() };
         let cal = calibrate(&frames, &params, provenance()).unwrap().calibration;
         assert_eq!(cal.training.holdout_folds, folds);
-        assert_eq!(cal.training.folds, CalibParams::default().folds);
+        assert_eq!((cal.training.folds, cal.training.cv_groups), (CalibParams::default().folds, cv_groups));
         let (by_hand, n) = holdout_by_hand(&frames, &params);
         assert_eq!(n, cal.training.samples);
         for (want, kind) in by_hand.iter().zip(StrategyKind::ALL) {
@@ -181,7 +184,13 @@ fn location_holdout_refits_without_each_fold_of_locations() {
         let (train, held) = (&cal.training.train_rmse_n, &cal.training.holdout_rmse_n);
         let la = StrategyKind::PneumaticLocAware.name();
         assert!(held[la] > train[la], "folds {folds}: {held:?} {train:?}");
-        assert!(held[la] < 0.5 * held[StrategyKind::PneumaticNoCal.name()], "folds {folds}: {held:?}");
+        let nocal = held[StrategyKind::PneumaticNoCal.name()];
+        match cv_groups {
+            CvGroups::Sample => assert!(held[la] < 0.5 * nocal, "folds {folds}: {held:?}"),
+            // Each fit sees 6 locations, so a location-grouped inner fold trains the 12 field
+            // coefficients on 4 or 5: the weights it picks keep the fields near the prior.
+            CvGroups::Location => assert!(held[la] < nocal, "folds {folds}: {held:?}"),
+        }
     }
 }
 
@@ -252,14 +261,20 @@ fn calibration_file_round_trips_and_rejects_unknown_keys() {
     let err = Calibration::from_toml_str(&moved.to_toml_string().unwrap(), "calib.toml").unwrap_err().to_string();
     assert!(err.contains("forward.sensitivity.region must equal [region]"), "{err}");
     // Version 3 files (before the location-held-out figures) still load, without them.
-    let v3: String = text.lines().filter(|l| !l.starts_with("holdout_folds")).collect::<Vec<_>>().join("\n").replacen(
-        &format!("format_version = {FORMAT_VERSION}"),
-        &format!("format_version = {OLDEST_FORMAT_VERSION}"),
-        1,
-    );
+    let v3: String = text
+        .lines()
+        .filter(|l| !l.starts_with("holdout_folds") && !l.starts_with("cv_groups"))
+        .collect::<Vec<_>>()
+        .join("\n")
+        .replacen(
+            &format!("format_version = {FORMAT_VERSION}"),
+            &format!("format_version = {OLDEST_FORMAT_VERSION}"),
+            1,
+        );
     let v3 = v3.split("[training.holdout_rmse_n]").next().unwrap().to_string();
     let old = Calibration::from_toml_str(&v3, "v3.toml").unwrap();
     assert!(old.training.holdout_rmse_n.is_empty() && old.training.holdout_folds == 0);
+    assert_eq!(old.training.cv_groups, CvGroups::Sample, "what older files did");
     assert_eq!(old.training.train_rmse_n, cal.training.train_rmse_n);
     // Read as the current version, so writing it back gives a consistent file.
     assert_eq!(old.format_version, FORMAT_VERSION);

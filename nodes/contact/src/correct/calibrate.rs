@@ -13,7 +13,7 @@
 
 use super::average::{Holds, average_holds, locations};
 use super::calibration::{
-    AreaAware, Calibration, FFit, FORMAT, FORMAT_VERSION, LocAware, Provenance, R2Table, SignalCalibration,
+    AreaAware, Calibration, CvGroups, FFit, FORMAT, FORMAT_VERSION, LocAware, Provenance, R2Table, SignalCalibration,
     TrainingSummary,
 };
 use super::field::{NPHI, QuadField, Region, locaware_design, phi};
@@ -64,6 +64,9 @@ pub struct CalibParams {
     pub average_holds: bool,
     /// Folds of the inner cross-validation of the ridge weights.
     pub folds: usize,
+    /// What one inner cross-validation fold holds out: `"location"` (whole locations) or
+    /// `"sample"`.
+    pub cv_groups: CvGroups,
     /// Folds of whole locations in the location-held-out check (capped at the number of
     /// locations); 0 turns the check off (it repeats the whole fit once per fold).
     pub holdout_folds: usize,
@@ -88,6 +91,7 @@ impl Default for CalibParams {
         Self {
             average_holds: true,
             folds: 5,
+            cv_groups: CvGroups::Sample,
             holdout_folds: 5,
             lambda_grid_rel: (0..=16).map(|i| 10f64.powf(-4.0 + 0.5 * i as f64)).collect(),
             min_samples: 4 * NPHI,
@@ -369,7 +373,11 @@ fn fit_once(frames: &[CalibSample], params: &CalibParams, provenance: Provenance
     }
 
     let grid: Vec<f64> = params.lambda_grid_rel.iter().map(|l| l * t as f64).collect();
-    let search = |blocks| CvSearch { blocks, grid: &grid, folds: params.folds };
+    let groups = match params.cv_groups {
+        CvGroups::Sample => None,
+        CvGroups::Location => Some(&loc_of[..]),
+    };
+    let search = |blocks| CvSearch { blocks, grid: &grid, folds: params.folds, groups };
     let phis: Vec<[f64; NPHI]> = samples
         .iter()
         .map(|s| {
@@ -548,6 +556,7 @@ fn fit_once(frames: &[CalibSample], params: &CalibParams, provenance: Provenance
         hold_sd_cond_sum: holds.sd_cond_sum,
         lambda_grid_rel: params.lambda_grid_rel.clone(),
         folds: params.folds,
+        cv_groups: params.cv_groups,
         train_rmse_n: BTreeMap::new(),
         holdout_rmse_n: BTreeMap::new(),
         holdout_folds: 0,

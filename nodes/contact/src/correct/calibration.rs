@@ -45,6 +45,19 @@ pub enum FFit {
     Sequential,
 }
 
+/// What the inner cross-validation of the ridge weights holds out together.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum CvGroups {
+    /// Samples dealt into folds one by one: a held-out sample usually has samples of its own
+    /// location in training (what format-4 files without the field used).
+    #[default]
+    Sample,
+    /// Whole locations dealt into folds: the weights are chosen for places the fit has not
+    /// seen, which is what the fields are used for.
+    Location,
+}
+
 /// Location-aware gain and offset fields F = g(u, v) f(s) + b(u, v) (paper eq. 12-14).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -171,6 +184,9 @@ pub struct TrainingSummary {
     pub lambda_grid_rel: Vec<f64>,
     /// Folds of the inner cross-validation.
     pub folds: usize,
+    /// What the inner cross-validation held out together (absent in older files: samples).
+    #[serde(default)]
+    pub cv_groups: CvGroups,
     /// RMSE on the training samples per strategy, N.
     pub train_rmse_n: BTreeMap<String, f64>,
     /// RMSE per strategy at locations the fit did not see, N: the locations are dealt into

@@ -192,8 +192,12 @@ pub struct CvSearch<'a> {
     pub blocks: &'a [Range<usize>],
     /// Candidate weights (the full grid is searched for every block).
     pub grid: &'a [f64],
-    /// Number of folds (clamped to [2, T]).
+    /// Number of folds (clamped to [2, T], or to [2, groups] with `groups`).
     pub folds: usize,
+    /// Group of every sample (e.g. its location; one entry per sample, numbered from 0), or
+    /// `None` (samples dealt one by one): whole groups are dealt into the folds, so a held-out
+    /// sample never has a sibling of its group in training.
+    pub groups: Option<&'a [usize]>,
 }
 
 /// Chooses one ridge weight per column block by k-fold CV (held-out MSE; on a tie the larger
@@ -201,10 +205,21 @@ pub struct CvSearch<'a> {
 /// solvable system.
 pub fn cross_validate(problem: &RidgeProblem, search: &CvSearch) -> Option<CvFit> {
     let RidgeProblem { design, y, p, prior, base_penalty } = *problem;
-    let CvSearch { blocks, grid, folds } = *search;
+    let CvSearch { blocks, grid, folds, groups } = *search;
     let n = y.len();
-    let k = folds.clamp(2, n.max(2));
-    let fold = fold_of(n, k);
+    let (k, fold) = match groups {
+        Some(g) => {
+            assert_eq!(g.len(), n, "cross_validate: one group per sample");
+            let count = g.iter().max().map_or(0, |m| m + 1);
+            let k = folds.clamp(2, count.max(2));
+            let of_group = fold_of(count, k);
+            (k, g.iter().map(|&i| of_group[i]).collect())
+        }
+        None => {
+            let k = folds.clamp(2, n.max(2));
+            (k, fold_of(n, k))
+        }
+    };
     let (g_all, r_all) = gram(design, y, p, 0..n);
     // Training normal equations of fold f = all minus the held-out rows.
     let train: Vec<(Vec<f64>, Vec<f64>)> = (0..k)
@@ -321,5 +336,38 @@ mod tests {
             let n = f.iter().filter(|&&x| x == k).count();
             assert!(n == 4 || n == 5);
         }
+    }
+
+    /// One indicator column per group and y = the group's value: a held-out sample whose group
+    /// is in training is predicted best with the least penalty, while a held-out group's
+    /// coefficient is pinned to the prior by every penalty (a tie, which the larger weight
+    /// wins). So sample folds choose the smallest weight and group folds the largest.
+    #[test]
+    fn grouped_folds_hold_out_whole_groups() {
+        let (groups, per) = (6, 4);
+        let n = groups * per;
+        let mut design = vec![0.0; n * groups];
+        let mut y = vec![0.0; n];
+        let mut group = vec![0; n];
+        for t in 0..n {
+            group[t] = t % groups;
+            design[t * groups + group[t]] = 1.0;
+            y[t] = 1.0 + group[t] as f64;
+        }
+        let prior = vec![0.0; groups];
+        let base = vec![0.0; groups];
+        let problem = RidgeProblem { design: &design, y: &y, p: groups, prior: &prior, base_penalty: &base };
+        let grid = [1e-3, 1.0, 1e3];
+        let blocks = [0..groups];
+        let by =
+            |groups| cross_validate(&problem, &CvSearch { blocks: &blocks, grid: &grid, folds: 3, groups }).unwrap();
+        let samples = by(None);
+        let whole = by(Some(&group));
+        assert_eq!(samples.lambdas, vec![1e-3]);
+        assert_eq!(whole.lambdas, vec![1e3]);
+        // Held-out groups are predicted by the prior 0: the CV error is the mean of y^2.
+        let want = y.iter().map(|v| v * v).sum::<f64>() / n as f64;
+        assert!((whole.cv_mse - want).abs() < 1e-9 * want, "{} vs {want}", whole.cv_mse);
+        assert!(samples.cv_mse < 1e-3, "{}", samples.cv_mse);
     }
 }

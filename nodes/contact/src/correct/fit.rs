@@ -358,9 +358,9 @@ mod tests {
         let base = vec![0.0; groups];
         let problem = RidgeProblem { design: &design, y: &y, p: groups, prior: &prior, base_penalty: &base };
         let grid = [1e-3, 1.0, 1e3];
-        let blocks = [0..groups];
-        let by =
-            |groups| cross_validate(&problem, &CvSearch { blocks: &blocks, grid: &grid, folds: 3, groups }).unwrap();
+        let all = 0..groups;
+        let blocks = std::slice::from_ref(&all);
+        let by = |groups| cross_validate(&problem, &CvSearch { blocks, grid: &grid, folds: 3, groups }).unwrap();
         let samples = by(None);
         let whole = by(Some(&group));
         assert_eq!(samples.lambdas, vec![1e-3]);

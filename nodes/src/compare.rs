@@ -276,8 +276,8 @@ struct JsonReport<'a> {
 /// The report as JSON: `{"lanes": [{"name": ..., "frames": ..., "latency_us_p50": ..., ...}]}`;
 /// values that cannot be computed (NaN) are `null`.
 pub fn to_json(reports: &[LaneReport]) -> String {
-    // Plain structs of strings and numbers always serialize; serde_json writes NaN as null.
-    let mut s = serde_json::to_string_pretty(&JsonReport { lanes: reports }).unwrap_or_default();
+    // serde_json writes NaN as null; strings and numbers cannot fail to serialize.
+    let mut s = serde_json::to_string_pretty(&JsonReport { lanes: reports }).expect("lane reports serialize");
     s.push('\n');
     s
 }

@@ -151,7 +151,9 @@ fn holdout_by_hand(frames: &[CalibSample], params: &CalibParams) -> (Vec<f64>, u
     for k in 0..params.holdout_folds {
         let train: Vec<CalibSample> = frames.iter().copied().filter(|f| fold_of_frame(f) != k).collect();
         let held: Vec<CalibSample> = frames.iter().copied().filter(|f| fold_of_frame(f) == k).collect();
-        let without = calibrate(&train, params, provenance()).unwrap().calibration;
+        // The fit alone: its own held-out check does not change the fitted calibration.
+        let fit_only = CalibParams { holdout_folds: 0, ..params.clone() };
+        let without = calibrate(&train, &fit_only, provenance()).unwrap().calibration;
         for s in average_holds(&held).samples {
             for (e, kind) in sse.iter_mut().zip(StrategyKind::ALL) {
                 let c = Contact { area_mm2: s.area_mm2, ..contact(s.x_mm, s.y_mm, s.cond_sum) };
@@ -174,6 +176,13 @@ fn location_holdout_refits_without_each_fold_of_locations() {
         let cal = calibrate(&frames, &params, provenance()).unwrap().calibration;
         assert_eq!(cal.training.holdout_folds, folds);
         assert_eq!((cal.training.folds, cal.training.cv_groups), (CalibParams::default().folds, cv_groups));
+        if cv_groups == CvGroups::Location {
+            // The grouping reaches the fit: whole held-out locations give another CV error.
+            let by_sample = CalibParams { cv_groups: CvGroups::Sample, ..params.clone() };
+            let sample_cal = calibrate(&frames, &by_sample, provenance()).unwrap().calibration;
+            let (a, b) = (cal.pneumatic.locaware.cv_rmse_n.unwrap(), sample_cal.pneumatic.locaware.cv_rmse_n.unwrap());
+            assert!((a - b).abs() > 1e-6, "location {a} vs sample {b}");
+        }
         let (by_hand, n) = holdout_by_hand(&frames, &params);
         assert_eq!(n, cal.training.samples);
         for (want, kind) in by_hand.iter().zip(StrategyKind::ALL) {
@@ -279,6 +288,16 @@ fn calibration_file_round_trips_and_rejects_unknown_keys() {
     // Read as the current version, so writing it back gives a consistent file.
     assert_eq!(old.format_version, FORMAT_VERSION);
     assert_eq!(Calibration::from_toml_str(&old.to_toml_string().unwrap(), "<test>").unwrap(), old);
+    // Version 4 files (before cv_groups) load as sample folds, keeping their held-out figures.
+    let v4: String = text.lines().filter(|l| !l.starts_with("cv_groups")).collect::<Vec<_>>().join("\n").replacen(
+        &format!("format_version = {FORMAT_VERSION}"),
+        "format_version = 4",
+        1,
+    );
+    let old = Calibration::from_toml_str(&v4, "v4.toml").unwrap();
+    assert_eq!(old.training.cv_groups, CvGroups::Sample);
+    assert_eq!(old.training.holdout_rmse_n, cal.training.holdout_rmse_n);
+    assert_eq!(old.format_version, FORMAT_VERSION);
     // Another format version is named as such (with what to do), not reported as a parse error.
     for v in ["2", "99"] {
         let wrong = text.replacen(&format!("format_version = {FORMAT_VERSION}"), &format!("format_version = {v}"), 1);

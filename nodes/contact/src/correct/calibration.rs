@@ -18,8 +18,9 @@ use std::path::Path;
 /// Value of the `format` key.
 pub const FORMAT: &str = "skinflow-calibration";
 /// Current `format_version`.
-pub const FORMAT_VERSION: u32 = 4;
-/// Oldest `format_version` still read (version 3 lacks the location-held-out figures).
+pub const FORMAT_VERSION: u32 = 5;
+/// Oldest `format_version` still read (version 3 lacks the location-held-out figures, versions
+/// 3 and 4 the `cv_groups` choice).
 pub const OLDEST_FORMAT_VERSION: u32 = 3;
 
 /// Where a calibration came from (all given by the caller).
@@ -50,7 +51,7 @@ pub enum FFit {
 #[serde(rename_all = "kebab-case")]
 pub enum CvGroups {
     /// Samples dealt into folds one by one: a held-out sample usually has samples of its own
-    /// location in training (what format-4 files without the field used).
+    /// location in training (what files of format version 4 and older, without the field, used).
     #[default]
     Sample,
     /// Whole locations dealt into folds: the weights are chosen for places the fit has not
@@ -182,7 +183,8 @@ pub struct TrainingSummary {
     pub hold_sd_cond_sum: f64,
     /// Relative ridge grid (weights searched = grid x samples).
     pub lambda_grid_rel: Vec<f64>,
-    /// Folds of the inner cross-validation.
+    /// Folds of the inner cross-validation as requested (each fit clamps it to the samples, or
+    /// with `cv_groups = "location"` to the locations, it has).
     pub folds: usize,
     /// What the inner cross-validation held out together (absent in older files: samples).
     #[serde(default)]

@@ -194,15 +194,15 @@ pub struct CvSearch<'a> {
     pub grid: &'a [f64],
     /// Number of folds (clamped to [2, T], or to [2, groups] with `groups`).
     pub folds: usize,
-    /// Group of every sample (e.g. its location; one entry per sample, numbered from 0), or
-    /// `None` (samples dealt one by one): whole groups are dealt into the folds, so a held-out
-    /// sample never has a sibling of its group in training.
+    /// Group id of every sample (e.g. its location; one entry per sample, any ids), or `None`
+    /// (samples dealt one by one): whole groups are dealt into the folds, so a held-out sample
+    /// never has a sibling of its group in training.
     pub groups: Option<&'a [usize]>,
 }
 
 /// Chooses one ridge weight per column block by k-fold CV (held-out MSE; on a tie the larger
 /// weights win), then refits on all samples. `None` when no weight combination gives a
-/// solvable system.
+/// solvable system, or with `groups` of fewer than two distinct ids (nothing to hold out).
 pub fn cross_validate(problem: &RidgeProblem, search: &CvSearch) -> Option<CvFit> {
     let RidgeProblem { design, y, p, prior, base_penalty } = *problem;
     let CvSearch { blocks, grid, folds, groups } = *search;
@@ -210,10 +210,17 @@ pub fn cross_validate(problem: &RidgeProblem, search: &CvSearch) -> Option<CvFit
     let (k, fold) = match groups {
         Some(g) => {
             assert_eq!(g.len(), n, "cross_validate: one group per sample");
-            let count = g.iter().max().map_or(0, |m| m + 1);
-            let k = folds.clamp(2, count.max(2));
-            let of_group = fold_of(count, k);
-            (k, g.iter().map(|&i| of_group[i]).collect())
+            let mut ids = g.to_vec();
+            ids.sort_unstable();
+            ids.dedup();
+            if ids.len() < 2 {
+                return None;
+            }
+            let k = folds.clamp(2, ids.len());
+            let of_group = fold_of(ids.len(), k);
+            // Dense index of each id (ids sorted), so any ids deal evenly.
+            let fold = g.iter().filter_map(|i| ids.binary_search(i).ok()).map(|d| of_group[d]).collect();
+            (k, fold)
         }
         None => {
             let k = folds.clamp(2, n.max(2));
@@ -360,14 +367,19 @@ mod tests {
         let grid = [1e-3, 1.0, 1e3];
         let all = 0..groups;
         let blocks = std::slice::from_ref(&all);
-        let by = |groups| cross_validate(&problem, &CvSearch { blocks, grid: &grid, folds: 3, groups }).unwrap();
-        let samples = by(None);
-        let whole = by(Some(&group));
+        let by = |groups| cross_validate(&problem, &CvSearch { blocks, grid: &grid, folds: 3, groups });
+        let samples = by(None).unwrap();
+        let whole = by(Some(&group)).unwrap();
         assert_eq!(samples.lambdas, vec![1e-3]);
         assert_eq!(whole.lambdas, vec![1e3]);
         // Held-out groups are predicted by the prior 0: the CV error is the mean of y^2.
         let want = y.iter().map(|v| v * v).sum::<f64>() / n as f64;
         assert!((whole.cv_mse - want).abs() < 1e-9 * want, "{} vs {want}", whole.cv_mse);
         assert!(samples.cv_mse < 1e-3, "{}", samples.cv_mse);
+        // Any ids: the same groups under sparse ids deal the same way.
+        let sparse: Vec<usize> = group.iter().map(|&g| 1000 + 37 * g).collect();
+        assert_eq!(by(Some(&sparse)), Some(whole));
+        // One group leaves nothing to hold out.
+        assert!(by(Some(&vec![7; n])).is_none());
     }
 }

@@ -7,11 +7,13 @@
 //! contact state equals a recently solved one reuses it, so a static hold costs one solve and
 //! afterwards only fresh noise. Drift scales all values by 1 / (1 + d(t)) (liquid conductivity
 //! and electrode impedance drift together with temperature); noise is Gaussian with standard
-//! deviation rel * |v| + abs. Volts, protocol order (CONTRACTS.md section 1).
+//! deviation rel * |v| + abs. Volts, protocol order (CONTRACTS.md section 1). A dead electrode
+//! (scene `[[fault]]`) pins every channel that uses it to the rail voltage while it lasts.
 
 use crate::compress::Compressor;
 use crate::profile::Profile;
 use crate::randomness::{Drift, Stream, normal, stream};
+use crate::scene::Fault;
 use crate::stage::Stage;
 use crate::timeline::{Load, Timeline};
 use rand_chacha::ChaCha8Rng;
@@ -99,6 +101,8 @@ pub struct EitChannel {
     compressor: Compressor,
     noise_rel: f64,
     noise_abs_v: f64,
+    /// Dead-electrode faults: (channels that use the electrode, from_s, until_s, rail_v).
+    dead: Vec<(Vec<usize>, f64, f64, f64)>,
     // Internal state
     drift: Drift,
     noise: ChaCha8Rng,
@@ -111,8 +115,15 @@ pub struct EitChannel {
 }
 
 impl EitChannel {
-    /// Meshes the sensor for the timeline's smallest indenter and prepares the forward model.
-    pub fn new(profile: &Profile, sensor: &Sensor, timeline: &Timeline, seed: u64) -> Result<EitChannel, EitError> {
+    /// Meshes the sensor for the timeline's smallest indenter and prepares the forward model;
+    /// `faults` are applied to the frames they cover.
+    pub fn new(
+        profile: &Profile,
+        sensor: &Sensor,
+        timeline: &Timeline,
+        faults: &[Fault],
+        seed: u64,
+    ) -> Result<EitChannel, EitError> {
         let elements = sim_mesh_elements(profile, sensor, timeline.smallest_diameter_mm());
         let sensor = &misplace_electrodes(sensor, profile.electrode_misplacement_mm, seed);
         let mesh = Mesh::generate(
@@ -151,8 +162,18 @@ impl EitChannel {
         let compressor = Compressor::new(profile, mesh.element_centroids_mm(), &diameters, &foam, seed);
         let n = compressor.element_count();
         let max_contacts = timeline.max_contacts();
+        let measurements = sensor.measurements();
+        let dead = faults
+            .iter()
+            .map(|&Fault::DeadElectrode { electrode: e, from_s, until_s, rail_v }| {
+                let uses = |m: &Measurement| [m.drive.0, m.drive.1, m.sense.0, m.sense.1].contains(&e);
+                let channels = measurements.iter().enumerate().filter(|(_, m)| uses(m)).map(|(k, _)| k).collect();
+                (channels, from_s, until_s, rail_v)
+            })
+            .collect();
         Ok(EitChannel {
-            measurements: sensor.measurements(),
+            measurements,
+            dead,
             forward,
             compressor,
             noise_rel: profile.eit_noise_rel,
@@ -211,6 +232,11 @@ impl EitChannel {
             let clean = *v * scale;
             let sd = self.noise_rel * clean.abs() + self.noise_abs_v;
             *v = if sd > 0.0 { clean + sd * normal(&mut self.noise) } else { clean };
+        }
+        for (channels, from_s, until_s, rail_v) in &self.dead {
+            if (*from_s..*until_s).contains(&t_s) {
+                channels.iter().for_each(|&k| out[k] = *rail_v);
+            }
         }
         Ok(())
     }

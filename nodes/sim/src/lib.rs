@@ -19,7 +19,7 @@ pub mod timeline;
 pub mod truth;
 
 pub use profile::Profile;
-pub use scene::{Channels, Pacing, Rates, Scene, SceneError};
+pub use scene::{Channels, Fault, Pacing, Rates, Scene, SceneError};
 pub use simulate::{EventKind, SimError, SimEvent, Simulator};
 pub use timeline::{Load, Segment, SegmentContact, Timeline};
 pub use truth::{TruthContact, TruthRow};

@@ -71,7 +71,7 @@ impl Simulator {
     pub fn new(scene: &Scene, seed: u64) -> Result<Simulator, SimError> {
         let eit = if scene.channels.eit {
             Some(
-                EitChannel::new(&scene.profile, &scene.sensor, &scene.timeline, seed)
+                EitChannel::new(&scene.profile, &scene.sensor, &scene.timeline, &scene.faults, seed)
                     .map_err(|source| SimError::Eit { scene: scene.name.clone(), source })?,
             )
         } else {

@@ -191,3 +191,47 @@ fn hard_cases_light_touch_heavy_press_corners() {
     let pair = h.iter().find(|(c, _)| c.len() == 2 && c[0].force_n == 3.0).unwrap().1;
     assert!(pair > 1.5 * single(20.0, -15.0, 0.3) * 10.0, "{pair}");
 }
+
+/// A dead electrode pins exactly the 15 pairs that use it to the rail, only in the frames
+/// whose mid-time falls in the fault's window; every other value is the fault-free one.
+#[test]
+fn a_dead_electrode_pins_its_pairs_to_the_rail_while_it_lasts() {
+    let steps = "[[step]]\nat_mm = [[10.0, 0.0]]\ndiameter_mm = 15.0\nforces_n = [5.0]\nhold_s = 6.0\nramp_s = 0.5\nrest_s = 2.0\n";
+    let healthy = scene(steps, "paper");
+    let faulty = Scene::from_str(
+        &format!(
+            "{}\n[[fault]]\nkind = \"dead_electrode\"\nelectrode = 6\nfrom_s = 6.0\nuntil_s = 9.0\nrail_v = 4.5\n",
+            healthy.toml
+        ),
+        "t.toml",
+    )
+    .unwrap();
+    let frames = |s: &Scene| -> Vec<(f64, Vec<f64>)> {
+        run(s, 3)
+            .into_iter()
+            .filter_map(|e| if let SimEvent::Eit { t_s, v, .. } = e { Some((t_s, v)) } else { None })
+            .collect()
+    };
+    let (a, b) = (frames(&healthy), frames(&faulty));
+    assert_eq!(a.len(), b.len());
+    let uses_6: Vec<bool> = healthy
+        .sensor
+        .measurements()
+        .iter()
+        .map(|m| [m.drive.0, m.drive.1, m.sense.0, m.sense.1].contains(&6))
+        .collect();
+    assert_eq!(uses_6.iter().filter(|&&u| u).count(), 15);
+    let mut dead_frames = 0;
+    for ((t, va), (_, vb)) in a.iter().zip(&b) {
+        let dead = (6.0..9.0).contains(t);
+        dead_frames += usize::from(dead);
+        for (k, (x, y)) in va.iter().zip(vb).enumerate() {
+            if dead && uses_6[k] {
+                assert_eq!(*y, 4.5, "t = {t}, channel {k}");
+            } else {
+                assert_eq!(x, y, "t = {t}, channel {k}");
+            }
+        }
+    }
+    assert_eq!(dead_frames, 4, "frames at 6.0 to 9.0 s at 1.3 frames/s");
+}

@@ -54,6 +54,21 @@ pub struct Channels {
     pub pressure: bool,
 }
 
+/// A hardware fault of the EIT channel.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Fault {
+    /// Electrode `electrode` (0-based, CONTRACTS.md section 1) loses contact for frames whose
+    /// mid-time falls in `[from_s, until_s)`: every pair that uses it cannot drive its current
+    /// (two-terminal protocol), so the board reads its compliance voltage, `rail_v` volts.
+    DeadElectrode { electrode: usize, from_s: f64, until_s: f64, rail_v: f64 },
+}
+
+impl Fault {
+    /// Default compliance voltage of a dead electrode's channels, V (the reconstructor's
+    /// default saturation threshold is 2 V).
+    pub const DEFAULT_RAIL_V: f64 = 5.0;
+}
+
 /// A validated scene.
 #[derive(Debug, Clone)]
 pub struct Scene {
@@ -68,6 +83,8 @@ pub struct Scene {
     pub rates: Rates,
     pub channels: Channels,
     pub timeline: Timeline,
+    /// Injected hardware faults (`[[fault]]`).
+    pub faults: Vec<Fault>,
     /// The scene's TOML text, verbatim (recordings may store it).
     pub toml: String,
 }

@@ -16,6 +16,19 @@ pub(crate) struct RawScene {
     pub model: Option<Spanned<toml::Table>>,
     #[serde(default)]
     pub step: Vec<Spanned<RawStep>>,
+    /// Hardware faults injected into the EIT channel.
+    #[serde(default)]
+    pub fault: Vec<Spanned<RawFault>>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawFault {
+    pub kind: Spanned<String>,
+    pub electrode: Spanned<i64>,
+    pub from_s: Option<Spanned<f64>>,
+    pub until_s: Option<Spanned<f64>>,
+    pub rail_v: Option<Spanned<f64>>,
 }
 
 #[derive(Debug, Deserialize)]

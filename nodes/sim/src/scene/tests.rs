@@ -159,3 +159,32 @@ fn inline_sensor_is_used() {
     let s = parse(&text.replace("35.0", "25.0")).unwrap();
     assert_eq!(s.sensor.width_mm, 60.0);
 }
+
+#[test]
+fn faults_parse_with_defaults_and_bad_ones_are_named_where_they_are() {
+    let ok = parse(&format!("{HEAD}[[fault]]\nkind = \"dead_electrode\"\nelectrode = 15\n")).unwrap();
+    assert_eq!(
+        ok.faults,
+        vec![Fault::DeadElectrode {
+            electrode: 15,
+            from_s: 0.0,
+            until_s: f64::INFINITY,
+            rail_v: Fault::DEFAULT_RAIL_V
+        }]
+    );
+    assert!(parse(HEAD).unwrap().faults.is_empty());
+    let (line, _, p) = fails(&format!("{HEAD}[[fault]]\nkind = \"dead_electrode\"\nelectrode = 16\n"));
+    assert_eq!(line, 10);
+    assert!(p.contains("\"electrode\": must be 0 to 15 (got 16)"), "{p}");
+    let (line, _, p) = fails(&format!("{HEAD}[[fault]]\nkind = \"loose_wire\"\nelectrode = 1\n"));
+    assert_eq!(line, 9);
+    assert!(p.contains("unknown fault \"loose_wire\""), "{p}");
+    let (line, _, p) =
+        fails(&format!("{HEAD}[[fault]]\nkind = \"dead_electrode\"\nelectrode = 1\nfrom_s = 5.0\nuntil_s = 5.0\n"));
+    assert_eq!(line, 12);
+    assert!(p.contains("\"until_s\": must be after from_s = 5"), "{p}");
+    let (_, _, p) = fails(&format!("{HEAD}[[fault]]\nkind = \"dead_electrode\"\nelectrode = 1\nrail_v = -1.0\n"));
+    assert!(p.contains("\"rail_v\": must be finite and > 0"), "{p}");
+    let (_, _, p) = fails(&format!("{HEAD}[[fault]]\nkind = \"dead_electrode\"\nelectrode = 1\nvolts = 3.0\n"));
+    assert!(p.contains("volts"), "{p}");
+}

@@ -2,8 +2,8 @@
 //! no-load start; then hands each step to `expand`. Errors carry the span of the culprit.
 
 use super::expand::{Builder, expand_step, has_contacts};
-use super::parse::RawScene;
-use super::{Channels, Locator, Pacing, Rates, Scene, SceneError};
+use super::parse::{RawFault, RawScene};
+use super::{Channels, Fault, Locator, Pacing, Rates, Scene, SceneError};
 use crate::profile::Profile;
 use crate::timeline::Timeline;
 use skinflow_eit::Sensor;
@@ -68,6 +68,7 @@ pub(super) fn validate(raw: RawScene, text: &str, at: &Locator<'_>) -> Result<Sc
     if timeline.duration_s() <= 0.0 {
         return Err(at.error(None, "empty timeline: the steps add up to 0 s".into()));
     }
+    let faults = raw.fault.iter().map(|f| fault(f, &sensor, &err)).collect::<Result<Vec<_>, _>>()?;
 
     Ok(Scene {
         name: raw.scene.name.clone().unwrap_or_default(),
@@ -78,6 +79,7 @@ pub(super) fn validate(raw: RawScene, text: &str, at: &Locator<'_>) -> Result<Sc
         rates,
         channels,
         timeline,
+        faults,
         toml: text.to_owned(),
     })
 }
@@ -98,6 +100,31 @@ fn override_profile(base: &Profile, model: &Spanned<toml::Table>) -> Result<Prof
         table.insert(k.clone(), v);
     }
     toml::Value::Table(table).try_into::<Profile>().map_err(|e| format!("[model]: {}", e.message()))
+}
+
+fn fault(raw: &Spanned<RawFault>, sensor: &Sensor, err: &ErrFn<'_>) -> Result<Fault, SceneError> {
+    let f = raw.get_ref();
+    if f.kind.get_ref() != "dead_electrode" {
+        return Err(err(
+            f.kind.span(),
+            format!("[[fault]] \"kind\": unknown fault \"{}\" (expected \"dead_electrode\")", f.kind.get_ref()),
+        ));
+    }
+    let n = sensor.electrode_count();
+    let electrode = usize::try_from(*f.electrode.get_ref()).ok().filter(|&e| e < n).ok_or_else(|| {
+        err(
+            f.electrode.span(),
+            format!("[[fault]] \"electrode\": must be 0 to {} (got {})", n - 1, f.electrode.get_ref()),
+        )
+    })?;
+    let from_s = f.from_s.as_ref().map(|v| non_negative("from_s", v, err)).transpose()?.unwrap_or(0.0);
+    let until_s = f.until_s.as_ref().map(|v| positive("until_s", v, err)).transpose()?.unwrap_or(f64::INFINITY);
+    if until_s <= from_s {
+        let span = f.until_s.as_ref().map_or(raw.span(), |v| v.span());
+        return Err(err(span, format!("[[fault]] \"until_s\": must be after from_s = {from_s} (got {until_s})")));
+    }
+    let rail_v = f.rail_v.as_ref().map(|v| positive("rail_v", v, err)).transpose()?.unwrap_or(Fault::DEFAULT_RAIL_V);
+    Ok(Fault::DeadElectrode { electrode, from_s, until_s, rail_v })
 }
 
 fn rates(raw: &RawScene, err: &ErrFn<'_>) -> Result<Rates, SceneError> {

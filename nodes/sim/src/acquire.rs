@@ -17,7 +17,7 @@ use crate::scene::Fault;
 use crate::stage::Stage;
 use crate::timeline::{Load, Timeline};
 use rand_chacha::ChaCha8Rng;
-use skinflow_eit::{CemParams, EitError, ForwardModel, Measurement, Mesh, MeshParams, Sensor};
+use skinflow_eit::{CemParams, ChannelMask, EitError, ForwardModel, Measurement, Mesh, MeshParams, Sensor};
 
 /// Blocks per acquisition window: measurements in block b see the contacts at the block's
 /// mid-time (4 resolves a ramp within a frame to a quarter frame).
@@ -85,6 +85,16 @@ pub fn misplace_electrodes(sensor: &Sensor, sd_mm: f64, seed: u64) -> Sensor {
     built
 }
 
+/// A dead-electrode fault as applied: the channels that use the electrode read `rail_v` in
+/// frames whose mid-time is in `[from_s, until_s)`.
+#[derive(Debug, Clone)]
+struct DeadChannels {
+    channels: Vec<usize>,
+    from_s: f64,
+    until_s: f64,
+    rail_v: f64,
+}
+
 #[derive(Debug, Clone)]
 struct CachedState {
     loads: Vec<Load>,
@@ -101,8 +111,7 @@ pub struct EitChannel {
     compressor: Compressor,
     noise_rel: f64,
     noise_abs_v: f64,
-    /// Dead-electrode faults: (channels that use the electrode, from_s, until_s, rail_v).
-    dead: Vec<(Vec<usize>, f64, f64, f64)>,
+    dead: Vec<DeadChannels>,
     // Internal state
     drift: Drift,
     noise: ChaCha8Rng,
@@ -165,10 +174,12 @@ impl EitChannel {
         let measurements = sensor.measurements();
         let dead = faults
             .iter()
-            .map(|&Fault::DeadElectrode { electrode: e, from_s, until_s, rail_v }| {
-                let uses = |m: &Measurement| [m.drive.0, m.drive.1, m.sense.0, m.sense.1].contains(&e);
-                let channels = measurements.iter().enumerate().filter(|(_, m)| uses(m)).map(|(k, _)| k).collect();
-                (channels, from_s, until_s, rail_v)
+            .map(|&Fault::DeadElectrode { electrode, from_s, until_s, rail_v }| DeadChannels {
+                channels: ChannelMask::from_dead_electrodes(&measurements, sensor.electrode_count(), &[electrode])
+                    .excluded_channels(),
+                from_s,
+                until_s,
+                rail_v,
             })
             .collect();
         Ok(EitChannel {
@@ -233,10 +244,8 @@ impl EitChannel {
             let sd = self.noise_rel * clean.abs() + self.noise_abs_v;
             *v = if sd > 0.0 { clean + sd * normal(&mut self.noise) } else { clean };
         }
-        for (channels, from_s, until_s, rail_v) in &self.dead {
-            if (*from_s..*until_s).contains(&t_s) {
-                channels.iter().for_each(|&k| out[k] = *rail_v);
-            }
+        for dead in self.dead.iter().filter(|d| (d.from_s..d.until_s).contains(&t_s)) {
+            dead.channels.iter().for_each(|&k| out[k] = dead.rail_v);
         }
         Ok(())
     }

@@ -92,6 +92,17 @@ pub enum ReferenceSource {
     Tare,
 }
 
+/// The reconstruction's linear point spread, shared by every image made with the same matrix
+/// (the segmenter's crosstalk pass uses it; see `skinflow_contact::segment::crosstalk`).
+#[derive(Clone)]
+pub struct Spread(pub Arc<dyn skinflow_contact::PointSpread>);
+
+impl std::fmt::Debug for Spread {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "Spread(data_len = {})", self.0.data_len())
+    }
+}
+
 /// A reconstructed conductivity-change image (negative = decrease = contact), row-major,
 /// row 0 at the bottom (y = -height/2), on the grid the reconstructor reports.
 #[derive(Debug, Clone, Default)]
@@ -110,6 +121,9 @@ pub struct Image {
     pub masked_channels: u32,
     /// Wall time of the reconstruction, ns (for speed-against-error reports).
     pub compute_ns: u64,
+    /// The point spread of the matrix that made this image (none when the reconstructor's
+    /// `point_spread_mm` is 0, or for images from elsewhere, e.g. a plugin).
+    pub spread: Option<Spread>,
 }
 
 impl Payload for Image {

@@ -29,7 +29,7 @@ use skinflow_eit::reconstruct::{Precision, ReconParams};
 use skinflow_eit::reference::{ReferenceSource as EitRef, ReferenceTracker};
 use skinflow_eit::{CemParams, MaskParams, Sensor};
 
-use crate::payload::{EitFrame, Image, ReferenceSource, SyncedFrame};
+use crate::payload::{EitFrame, Image, ReferenceSource, Spread, SyncedFrame};
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -56,6 +56,32 @@ pub struct ReconstructorParams {
     pub mesh: Option<skinflow_eit::mesh::MeshParams>,
     pub cem: Option<CemParams>,
     pub mask: Option<MaskParams>,
+    /// Radius of the source disc of the point spread attached to each image, mm (for the
+    /// segmenter's crosstalk pass); 0 attaches none (and skips building the model on a cache hit).
+    #[serde(default = "default_point_spread_mm")]
+    pub point_spread_mm: f64,
+}
+
+/// Default source radius of the point spread, mm: the smallest indenter of the paper (10 mm).
+pub const DEFAULT_POINT_SPREAD_MM: f64 = 5.0;
+
+fn default_point_spread_mm() -> f64 {
+    DEFAULT_POINT_SPREAD_MM
+}
+
+/// The EIT point spread as the segmenter sees it.
+struct EitSpread(skinflow_eit::PointSpread);
+
+impl skinflow_contact::PointSpread for EitSpread {
+    fn data_len(&self) -> usize {
+        self.0.measurement_count()
+    }
+    fn source_into(&self, x_mm: f64, y_mm: f64, out: &mut [f64]) {
+        self.0.source_into(x_mm, y_mm, out)
+    }
+    fn add_pixel_row(&self, pixel: usize, out: &mut [f64]) {
+        self.0.add_pixel_row(pixel, out)
+    }
 }
 
 fn default_reference_frames() -> usize {
@@ -97,6 +123,7 @@ impl NodeParams for ReconstructorParams {
         if self.reference_frames == 0 {
             return Err(ParamError::new("reference_frames", "must be >= 1 (got 0)"));
         }
+        skinflow_core::params::non_negative("point_spread_mm", self.point_spread_mm)?;
         // The sensor file is read when the node is built; check against the default here.
         if self.sensor.is_none() {
             self.recon().validate(&Sensor::paper_100mm()).map_err(|e| ParamError {
@@ -137,6 +164,9 @@ pub struct Reconstructor {
     mask_scratch: ChannelMask,
     reported: EitRef,
     ring: Recycler<Image>,
+    /// Source radius of the point spread, mm (0: none).
+    spread_mm: f64,
+    spread: Option<Spread>,
 }
 
 impl Reconstructor {
@@ -157,6 +187,8 @@ impl Reconstructor {
         );
         let m = sensor.measurement_count();
         let mask = math.mask().clone();
+        let mut math = math;
+        let spread = point_spread(&mut math, p.point_spread_mm)?;
         Ok(Reconstructor {
             tracker: ReferenceTracker::new(m, p.reference_frames)
                 .map_err(|e| NodeError::Param { param: "reference_frames".into(), problem: e.to_string() })?,
@@ -171,6 +203,8 @@ impl Reconstructor {
             ring: Recycler::new(64, Image::default),
             math,
             sensor,
+            spread_mm: p.point_spread_mm,
+            spread,
         })
     }
 
@@ -197,6 +231,17 @@ impl Reconstructor {
             self.reported = now;
         }
     }
+}
+
+/// The active matrix's point spread, or none when `radius_mm` is 0.
+fn point_spread(math: &mut skinflow_eit::Reconstructor, radius_mm: f64) -> Result<Option<Spread>, NodeError> {
+    if radius_mm == 0.0 {
+        return Ok(None);
+    }
+    let s = math
+        .point_spread(radius_mm)
+        .map_err(|e| NodeError::Param { param: "point_spread_mm".into(), problem: e.to_string() })?;
+    Ok(Some(Spread(Arc::new(EitSpread(s)))))
 }
 
 fn reference_source(s: EitRef) -> ReferenceSource {
@@ -256,6 +301,7 @@ impl Processor for Reconstructor {
             self.math
                 .set_mask(&self.mask)
                 .map_err(|e| NodeError::Input { port: "frame".into(), problem: e.to_string() })?;
+            self.spread = point_spread(&mut self.math, self.spread_mm)?;
             tracing::warn!(node = ctx.id(), excluded = ?self.mask.excluded_channels(), dead_electrodes = ?self.mask.dead_electrodes(), "channel mask changed");
         }
         let masked = self.mask.excluded_count() as u32;
@@ -267,6 +313,7 @@ impl Processor for Reconstructor {
         let math = &mut self.math;
         let tracker = &self.tracker;
         let partial = (self.noload_n > 1).then_some(&self.noload_mean[..]);
+        let spread = &self.spread;
         let mut result = Ok(());
         let payload = self.ring.fill(|img| {
             img.width = nx;
@@ -287,6 +334,7 @@ impl Processor for Reconstructor {
                 None => img.pixels.fill(0.0),
             }
             img.src = Arc::clone(&synced);
+            img.spread.clone_from(spread);
             img.compute_ns = t0.elapsed().as_nanos() as u64;
         });
         result.map_err(|e| NodeError::Input { port: "frame".into(), problem: e.to_string() })?;
@@ -316,7 +364,7 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
         .input(PortSpec::input::<EitFrame>("reference", "recorded no-load reference frame").optional())
         .output(PortSpec::output::<Image>("image", "conductivity change, S/m, negative = contact"))
         .param(ParamDoc::new("sensor", "path", "none", "sensor TOML (default paper-100mm)"))
-        .param(ParamDoc::new("lambda", "f64", "0.03", "regularisation weight (dimensionless)"))
+        .param(ParamDoc::new("lambda", "f64", "0.1", "regularisation weight (dimensionless)"))
         .param(ParamDoc::new("prior", "table", "{ noser = { p = 0.5 } }", "noser {p} | identity | laplacian {epsilon}"))
         .param(ParamDoc::new("mode", "string", "\"normalized\"", "normalized | plain difference data"))
         .param(ParamDoc::new("reference_frames", "usize", "10", "no-load frames averaged into the reference"))
@@ -327,6 +375,12 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
         .param(ParamDoc::new("cem", "table", "none", "complete electrode model constants"))
         .param(ParamDoc::new("mask", "table", "none", "saturation_v, dead_electrode_fraction"))
         .param(ParamDoc::new("elements", "bool", "false", "also output per-element values"))
+        .param(ParamDoc::new(
+            "point_spread_mm",
+            "f64",
+            "5",
+            "source radius of the point spread attached to images (segmenter crosstalk), mm; 0 = none",
+        ))
         .param(ParamDoc::new("cache_dir", "path", "~/.cache/skinflow", "matrix cache directory"))
         .param(ParamDoc::new("no_cache", "bool", "false", "do not use the disk cache")),
         |p: ReconstructorParams, ctx| Ok(NodeImpl::Processor(Box::new(Reconstructor::new(&p, ctx)?))),

@@ -63,6 +63,21 @@ pub struct SegmenterParams {
     /// fraction of its own peak (0: the paper's single global cut; > 0 needs `separation` > 0).
     #[serde(default = "default_weak_peak")]
     pub weak_peak: f64,
+    /// With the image's point spread: a region whose own share of its conductivity sum is below
+    /// this is another contact's sidelobe and is removed (0: keep every region, the paper).
+    #[serde(default = "default_ghost_share")]
+    pub ghost_share: f64,
+    /// With the image's point spread: each contact's sum without the other contacts' spill.
+    #[serde(default = "default_deblend")]
+    pub deblend: bool,
+}
+
+fn default_ghost_share() -> f64 {
+    SegmentParams::with_floor(1.0).ghost_share
+}
+
+fn default_deblend() -> bool {
+    SegmentParams::with_floor(1.0).deblend
 }
 
 fn default_weak_peak() -> f64 {
@@ -94,6 +109,8 @@ impl SegmenterParams {
             max_contacts: self.max_contacts,
             separation: self.separation,
             weak_peak: self.weak_peak,
+            ghost_share: self.ghost_share,
+            deblend: self.deblend,
         }
     }
 }
@@ -119,6 +136,12 @@ pub struct Segmenter {
     math: Option<(ImageGrid, SegmentMath, ContactBuf)>,
     ring: Recycler<Contacts>,
     dropped_components: u64,
+    /// Regions removed as sidelobes, over the run.
+    ghosts: u64,
+    /// Frames whose crosstalk system could not be solved (contacts left as segmented).
+    unsolved: u64,
+    /// Frames with two or more contacts but no point spread (crosstalk pass skipped).
+    no_spread: u64,
 }
 
 impl Segmenter {
@@ -132,6 +155,9 @@ impl Segmenter {
             math: None,
             ring: Recycler::new(128, Contacts::default),
             dropped_components: 0,
+            ghosts: 0,
+            unsolved: 0,
+            no_spread: 0,
         }
     }
 }
@@ -170,6 +196,25 @@ impl Processor for Segmenter {
         let (_, seg, buf) = self.math.as_mut().expect("set above");
         seg.segment_into(&image.pixels, buf)
             .map_err(|e| NodeError::Input { port: "image".into(), problem: e.to_string() })?;
+        if self.params.ghost_share > 0.0 || self.params.deblend {
+            match &image.spread {
+                Some(spread) => {
+                    let o = seg.correct_crosstalk(&image.pixels, spread.0.as_ref(), buf);
+                    self.ghosts += o.ghosts as u64;
+                    self.unsolved += u64::from(!o.solved);
+                }
+                None if buf.len() > 1 => {
+                    if self.no_spread == 0 {
+                        tracing::warn!(
+                            node = ctx.id(),
+                            "image without a point spread (reconstructor point_spread_mm = 0, or not from a reconstructor): no crosstalk pass"
+                        );
+                    }
+                    self.no_spread += 1;
+                }
+                None => {}
+            }
+        }
         self.dropped_components += buf.dropped as u64;
         let found = buf.as_slice();
         let ns = t0.elapsed().as_nanos() as u64;
@@ -183,6 +228,15 @@ impl Processor for Segmenter {
     }
 
     fn stop(&mut self, ctx: &mut Context) -> Result<(), NodeError> {
+        if self.ghosts > 0 || self.unsolved > 0 || self.no_spread > 0 {
+            tracing::info!(
+                node = ctx.id(),
+                ghosts = self.ghosts,
+                unsolved = self.unsolved,
+                without_point_spread = self.no_spread,
+                "crosstalk pass: sidelobe regions removed, frames left as segmented"
+            );
+        }
         if self.dropped_components > 0 {
             tracing::warn!(
                 node = ctx.id(),
@@ -218,6 +272,18 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
             "f64",
             "0.15",
             "keep regions whose peak reaches this fraction of the largest, each cut at its own Otsu level; 0 = paper (needs separation > 0)",
+        ))
+        .param(ParamDoc::new(
+            "ghost_share",
+            "f64",
+            "0.5",
+            "drop a region whose own share of its sum, by the image's point spread, is below this (a sidelobe); 0 = paper",
+        ))
+        .param(ParamDoc::new(
+            "deblend",
+            "bool",
+            "false",
+            "each contact's sum without the other contacts' spill, by the image's point spread",
         )),
         |p: SegmenterParams, _| Ok(NodeImpl::Processor(Box::new(Segmenter::new(&p)))),
     ))

@@ -10,7 +10,7 @@
 pub mod segment;
 
 pub use segment::grid::ImageGrid;
-pub use segment::{Contact, Contacts, SegmentError, SegmentParams, Segmenter};
+pub use segment::{Contact, Contacts, CrosstalkOutcome, PointSpread, SegmentError, SegmentParams, Segmenter};
 pub mod correct;
 pub mod eval;
 pub mod split;

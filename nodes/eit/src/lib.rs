@@ -28,6 +28,8 @@
 //! `set_mask(&mask)` (a new mask builds its matrix once, then it is cached in memory and on
 //! disk). Pixel geometry: `grid()` (`pixel_centre_mm`, `pixel_area_mm2`, `pixel_at`).
 //! `ReferenceTracker` picks the reference frame; `choose_lambda` + `set_lambda` tune lambda.
+//! `point_spread(radius_mm)` gives the active matrix's linear point spread (`spread`), which a
+//! segmenter uses to tell a press from another press's sidelobe (builds the model once).
 //!
 //! # Stable forward API (used by the simulator)
 //! `Mesh::generate(&Sensor, &MeshParams) -> Result<Mesh, EitError>` (fields `nodes` in mm,
@@ -50,6 +52,7 @@ pub mod precompute;
 pub mod reconstruct;
 pub mod reference;
 pub mod sensor;
+pub mod spread;
 
 pub use error::EitError;
 pub use forward::{CemParams, ForwardModel, ForwardSolution};
@@ -63,3 +66,4 @@ pub use precompute::{DifferenceMode, Model};
 pub use reconstruct::{CacheStatus, Precision, ReconInfo, ReconParams, Reconstructor};
 pub use reference::{ReferenceSource, ReferenceTracker};
 pub use sensor::{Electrode, Measurement, Protocol, Sensor, SensorError};
+pub use spread::{PointSpread, SpreadBasis};

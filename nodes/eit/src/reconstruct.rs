@@ -17,6 +17,7 @@ use crate::mesh::MeshParams;
 use crate::noser::{DualSystem, Prior};
 use crate::precompute::{DifferenceMode, Folded, Model};
 use crate::sensor::{Measurement, Sensor};
+use crate::spread::{PointSpread, SpreadBasis};
 use faer::linalg::matmul::matmul;
 use faer::{Accum, Mat, MatMut, MatRef, Par};
 use serde::Deserialize;
@@ -120,6 +121,7 @@ pub struct Reconstructor {
     measurements: Vec<Measurement>,
     // Internal state
     model: Option<Box<Model>>,
+    spread_basis: Option<SpreadBasis>,
     active: Arc<Folded>,
     mask: ChannelMask,
     by_mask: HashMap<Vec<bool>, Arc<Folded>>,
@@ -143,6 +145,7 @@ impl Reconstructor {
             grid,
             measurements,
             model: None,
+            spread_basis: None,
             active: Arc::new(Folded::from_parts(m, Vec::new(), Vec::new(), 0)),
             mask: mask.clone(),
             by_mask: HashMap::new(),
@@ -230,6 +233,17 @@ impl Reconstructor {
             self.model = Some(Box::new(model));
         }
         Ok(self.model.as_deref().expect("built above"))
+    }
+
+    /// The linear point spread of the active matrix for sources of radius `radius_mm` (see
+    /// [`crate::spread`]). The first call builds the model (mesh, forward solve, Jacobian) if the
+    /// matrix came from the cache; call it again after `set_mask` or `set_lambda`.
+    pub fn point_spread(&mut self, radius_mm: f64) -> Result<PointSpread, EitError> {
+        if self.spread_basis.is_none() {
+            let basis = SpreadBasis::new(self.model()?);
+            self.spread_basis = Some(basis);
+        }
+        self.spread_basis.as_ref().expect("built above").spread(&self.active, radius_mm)
     }
 
     pub fn info(&self) -> &ReconInfo {

@@ -16,12 +16,14 @@
 //! at saddles; each region whose peak reaches `weak_peak * d_max` is a contact, and its ROI is
 //! the region's pixels at or above Otsu's fraction of its own peak (no further morphology).
 
+pub mod crosstalk;
 pub mod grid;
 pub mod label;
 pub mod morphology;
 pub mod otsu;
 pub mod separate;
 
+pub use crosstalk::{CrosstalkOutcome, PointSpread};
 use grid::{GridError, ImageGrid};
 use morphology::Disk;
 use serde::{Deserialize, Serialize};
@@ -53,6 +55,23 @@ pub struct SegmentParams {
     /// cut of the paper, under which a light press beside a heavy one vanishes.
     #[serde(default = "default_weak_peak")]
     pub weak_peak: f64,
+    /// Sidelobes: with the reconstruction's point spread ([`Segmenter::correct_crosstalk`]), a
+    /// region whose own share of its conductivity sum is below this is another contact's
+    /// sidelobe and is removed ([`crosstalk`]); 0 keeps every region (the paper).
+    #[serde(default = "default_ghost_share")]
+    pub ghost_share: f64,
+    /// With the point spread, each contact's sum C becomes its own share, without what the other
+    /// contacts spilled into its ROI; false keeps the segmented sums (the paper).
+    #[serde(default = "default_deblend")]
+    pub deblend: bool,
+}
+
+fn default_ghost_share() -> f64 {
+    0.5
+}
+
+fn default_deblend() -> bool {
+    false
 }
 
 fn default_weak_peak() -> f64 {
@@ -80,6 +99,8 @@ impl SegmentParams {
             max_contacts: default_max_contacts(),
             separation: default_separation(),
             weak_peak: default_weak_peak(),
+            ghost_share: default_ghost_share(),
+            deblend: default_deblend(),
         }
     }
 
@@ -116,6 +137,13 @@ impl SegmentParams {
                 name: "weak_peak",
                 expected: "0 when separation = 0 (the paper's segmentation sets both to 0)",
                 got: self.weak_peak,
+            });
+        }
+        if !(self.ghost_share.is_finite() && (0.0..1.0).contains(&self.ghost_share)) {
+            return Err(SegmentError::Param {
+                name: "ghost_share",
+                expected: "finite and in [0, 1)",
+                got: self.ghost_share,
             });
         }
         if self.max_contacts == 0 {
@@ -168,6 +196,8 @@ pub struct Contacts {
     pub peak_decrease: f64,
     /// Components found beyond `max_contacts` and not reported.
     pub dropped: usize,
+    /// Regions removed as other contacts' sidelobes ([`Segmenter::correct_crosstalk`]).
+    pub ghosts: usize,
 }
 
 impl Contacts {
@@ -179,6 +209,7 @@ impl Contacts {
             threshold: None,
             peak_decrease: 0.0,
             dropped: 0,
+            ghosts: 0,
         }
     }
 
@@ -203,6 +234,7 @@ impl Contacts {
         self.threshold = None;
         self.peak_decrease = 0.0;
         self.dropped = 0;
+        self.ghosts = 0;
     }
 
     /// Adds a contact; when full, keeps the largest sums and counts the rest as dropped.
@@ -255,6 +287,7 @@ pub struct Segmenter {
     separator: separate::Separator,
     region_cut: Vec<f64>,
     accums: Vec<Accum>,
+    crosstalk: crosstalk::Crosstalk,
 }
 
 impl Segmenter {
@@ -277,6 +310,7 @@ impl Segmenter {
             separator: separate::Separator::new(n),
             region_cut: vec![0.0; n + 1],
             accums: vec![Accum::default(); n + 1],
+            crosstalk: crosstalk::Crosstalk::default(),
         })
     }
 
@@ -309,6 +343,28 @@ impl Segmenter {
     /// region-level mask, including regions too weak to report), for plotting.
     pub fn labels(&self) -> &[u32] {
         &self.labels
+    }
+
+    /// Crosstalk pass over the contacts [`Segmenter::segment_into`] just found in `image`
+    /// (same image, same `out`): removes sidelobes and, with `deblend`, the other contacts'
+    /// spill from each sum ([`crosstalk`]). Does nothing with fewer than two contacts or with
+    /// `ghost_share = 0` and `deblend = false`. Allocates only on its first call with a
+    /// given data length.
+    pub fn correct_crosstalk(
+        &mut self,
+        image: &[f64],
+        spread: &dyn PointSpread,
+        out: &mut Contacts,
+    ) -> CrosstalkOutcome {
+        let weak = self.params.weak_peak > 0.0;
+        let (labels, cuts) = (&self.labels, &self.region_cut);
+        // The ROI of a contact, as `segment_into` summed it: its region's pixels, above the
+        // region's own cut when weak contacts are on.
+        let in_roi = |p: usize| {
+            let l = labels[p];
+            (l != 0 && (!weak || -image[p] >= cuts[l as usize])).then_some(l)
+        };
+        self.crosstalk.apply(&self.params, labels.len() + 1, image.len().min(labels.len()), in_roi, spread, out)
     }
 
     /// Segments one image (row-major, row 0 = bottom, negative = conductivity decrease) into

@@ -1,0 +1,133 @@
+//! The reconstruction's point spread: the image a small conductivity decrease at a given place
+//! produces through the active reconstruction matrix, in the linear (Jacobian) model.
+//!
+//! A one-step reconstruction is linear in the data, image = F dv, and to first order the data of
+//! a relative conductivity change x is dv = J x. So a decrease of relative depth `a` on a disc D
+//! images as `a * F u` with `u = J 1_D` (the columns of J summed over the elements whose centroid
+//! lies in D). The image is blurred and carries sidelobes: on the paper's square sensor a press
+//! 5 mm from one side, 20 mm from a corner, puts a second, weaker blob at its mirror image across
+//! the corner's diagonal. This module gives the pieces a segmenter needs to tell such sidelobes
+//! from presses without knowing anything of EIT: `u` for a source ([`PointSpread::source_into`])
+//! and the rows of F ([`PointSpread::add_pixel_row`]).
+//!
+//! Units and signs: `u` in the difference mode's units per unit relative change; a row of F in
+//! S/m per unit of dv. The predicted DECREASE (S/m, positive for a press) at pixel q of a relative
+//! decrease `a` on the disc is `a * (row_q . u)`. Channels the mask excludes have zero rows.
+
+use std::sync::Arc;
+
+use crate::error::{EitError, check_positive};
+use crate::precompute::{Folded, Model};
+
+/// The linear point spread of one reconstruction matrix (see the module doc).
+#[derive(Clone)]
+pub struct PointSpread {
+    measurements: usize,
+    radius_mm: f64,
+    /// The Jacobian transposed: element e's M values at `e * M`.
+    jt: Arc<[f64]>,
+    centroids: Arc<[[f64; 2]]>,
+    /// The folded image matrix, pixel-major: pixel q's M weights at `q * M`.
+    rows: Vec<f64>,
+}
+
+impl std::fmt::Debug for PointSpread {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("PointSpread")
+            .field("measurements", &self.measurements)
+            .field("elements", &self.centroids.len())
+            .field("pixels", &(self.rows.len() / self.measurements.max(1)))
+            .field("radius_mm", &self.radius_mm)
+            .finish()
+    }
+}
+
+/// The Jacobian parts a [`PointSpread`] shares across channel masks.
+#[derive(Debug, Clone)]
+pub struct SpreadBasis {
+    jt: Arc<[f64]>,
+    centroids: Arc<[[f64; 2]]>,
+    measurements: usize,
+}
+
+impl SpreadBasis {
+    /// Transposes the model's Jacobian (M x E) once.
+    pub fn new(model: &Model) -> SpreadBasis {
+        let (m, e) = (model.jacobian.nrows(), model.jacobian.ncols());
+        let mut jt = vec![0.0; m * e];
+        for el in 0..e {
+            for (k, &v) in model.jacobian.col(el).iter().enumerate() {
+                jt[el * m + k] = v;
+            }
+        }
+        SpreadBasis { jt: jt.into(), centroids: model.mesh.element_centroids_mm().into(), measurements: m }
+    }
+
+    /// The point spread through `folded` (one channel mask), for sources of radius `radius_mm`.
+    pub fn spread(&self, folded: &Folded, radius_mm: f64) -> Result<PointSpread, EitError> {
+        check_positive("point_spread_mm", radius_mm)?;
+        let m = self.measurements;
+        if folded.measurements != m {
+            return Err(EitError::Length { what: "folded matrix", expected: m, got: folded.measurements });
+        }
+        let pixels = folded.image.len() / m;
+        let mut rows = vec![0.0; pixels * m];
+        for k in 0..m {
+            for (q, &v) in folded.image[k * pixels..(k + 1) * pixels].iter().enumerate() {
+                rows[q * m + k] = v;
+            }
+        }
+        Ok(PointSpread { measurements: m, radius_mm, jt: self.jt.clone(), centroids: self.centroids.clone(), rows })
+    }
+}
+
+impl PointSpread {
+    /// M, the length of a source vector and of a pixel row.
+    pub fn measurement_count(&self) -> usize {
+        self.measurements
+    }
+
+    /// Pixels of the image the rows belong to.
+    pub fn pixel_count(&self) -> usize {
+        self.rows.len() / self.measurements
+    }
+
+    /// Radius of the modelled source disc, mm.
+    pub fn radius_mm(&self) -> f64 {
+        self.radius_mm
+    }
+
+    /// `out = u = J 1_D`, D the disc of `radius_mm` centred at (x, y) mm: the data of a unit
+    /// relative change there. A disc holding no element centroid takes the nearest element.
+    /// Allocates nothing.
+    pub fn source_into(&self, x_mm: f64, y_mm: f64, out: &mut [f64]) {
+        let m = self.measurements;
+        assert_eq!(out.len(), m, "source vector length");
+        out.fill(0.0);
+        let r2 = self.radius_mm * self.radius_mm;
+        let (mut nearest, mut nearest_d2, mut any) = (0, f64::INFINITY, false);
+        for (e, c) in self.centroids.iter().enumerate() {
+            let d2 = (c[0] - x_mm).powi(2) + (c[1] - y_mm).powi(2);
+            if d2 <= r2 {
+                any = true;
+                for (o, j) in out.iter_mut().zip(&self.jt[e * m..(e + 1) * m]) {
+                    *o += j;
+                }
+            } else if d2 < nearest_d2 {
+                (nearest, nearest_d2) = (e, d2);
+            }
+        }
+        if !any && nearest_d2.is_finite() {
+            out.copy_from_slice(&self.jt[nearest * m..(nearest + 1) * m]);
+        }
+    }
+
+    /// `out += row_q` of the image matrix (S/m per unit of dv). Allocates nothing.
+    pub fn add_pixel_row(&self, pixel: usize, out: &mut [f64]) {
+        let m = self.measurements;
+        assert_eq!(out.len(), m, "row length");
+        for (o, f) in out.iter_mut().zip(&self.rows[pixel * m..(pixel + 1) * m]) {
+            *o += f;
+        }
+    }
+}

@@ -38,6 +38,35 @@ fn bench(c: &mut Criterion) {
         assert_eq!(contacts.len(), 3, "{name}: {:?}", contacts.as_slice());
         c.bench_function(name, |b| b.iter(|| s.segment_into(black_box(&real), &mut contacts).unwrap()));
     }
+    // The crosstalk pass on the same image with the default reconstructor's point spread
+    // (4,000 elements, 120 channels): sidelobe test alone, and with deblended sums.
+    struct Eit(skinflow_eit::PointSpread);
+    impl skinflow_contact::PointSpread for Eit {
+        fn data_len(&self) -> usize {
+            self.0.measurement_count()
+        }
+        fn source_into(&self, x_mm: f64, y_mm: f64, out: &mut [f64]) {
+            self.0.source_into(x_mm, y_mm, out)
+        }
+        fn add_pixel_row(&self, pixel: usize, out: &mut [f64]) {
+            self.0.add_pixel_row(pixel, out)
+        }
+    }
+    let mut recon =
+        skinflow_eit::Reconstructor::new(&skinflow_eit::Sensor::paper_100mm(), &Default::default()).unwrap();
+    let spread = Eit(recon.point_spread(5.0).unwrap());
+    for (name, deblend) in [("crosstalk_real_3contacts", false), ("crosstalk_real_3contacts_deblend", true)] {
+        let mut s = Segmenter::new(grid, &SegmentParams { deblend, ..SegmentParams::with_floor(2e-4) }).unwrap();
+        s.segment_into(&real, &mut contacts).unwrap();
+        let o = s.correct_crosstalk(&real, &spread, &mut contacts);
+        assert!(o.solved && o.ghosts == 0 && contacts.len() == 3, "{name}: {o:?}");
+        c.bench_function(name, |b| {
+            b.iter(|| {
+                s.segment_into(black_box(&real), &mut contacts).unwrap();
+                s.correct_crosstalk(black_box(&real), &spread, &mut contacts)
+            })
+        });
+    }
     // The paper's plain connected components (no saddle separation), for comparison.
     let paper = SegmentParams { separation: 0.0, weak_peak: 0.0, ..SegmentParams::with_floor(synth::FLOOR) };
     let mut seg_paper = Segmenter::new(grid, &paper).unwrap();

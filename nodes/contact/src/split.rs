@@ -221,8 +221,26 @@ impl Splitter {
                 }
             }
         }
+        if usable {
+            for i in 0..n {
+                set(i, weight(i) / total * dp_kpa);
+            }
+            return;
+        }
+        // Weights that overflow (a corrupt or extreme calibration): the infinite ones share dP;
+        // finite ones whose sum overflows are rescaled by the largest; none usable: equal shares.
+        let infinite = (0..n).filter(|&i| weight(i) == f64::INFINITY).count();
+        let largest = (0..n).map(weight).filter(|w| w.is_finite()).fold(0.0f64, f64::max);
+        let scaled_total: f64 = if largest > 0.0 { (0..n).map(|i| weight(i) / largest).sum() } else { 0.0 };
         for i in 0..n {
-            set(i, if usable { weight(i) / total * dp_kpa } else { dp_kpa / n as f64 });
+            let share = if infinite > 0 {
+                if weight(i) == f64::INFINITY { 1.0 / infinite as f64 } else { 0.0 }
+            } else if scaled_total > 0.0 && scaled_total.is_finite() {
+                weight(i) / largest / scaled_total
+            } else {
+                1.0 / n as f64
+            };
+            set(i, share * dp_kpa);
         }
     }
 }
@@ -374,7 +392,13 @@ mod tests {
         extreme.exponent = 0.25;
         let wild = Splitter::ForceBalance { sensitivity: extreme, forward: ForwardModel::linear(region(), 0.3, 10.0) };
         wild.split_into(1.0, &[contact(0.0, 1e200), contact(5.0, 1.0)], &mut out);
-        assert!(out.iter().all(|v| v.is_finite()) && (out[0] + out[1] - 1.0).abs() < 1e-12, "{out:?}");
+        assert_eq!(out, [1.0, 0.0], "the infinite weight takes dP");
+        // Finite weights whose sum overflows: rescaled, still in proportion.
+        let mut big = SensitivityField::uniform(region());
+        big.exponent = 1.0;
+        let proportional = Splitter::SensitivityCompensated(big);
+        proportional.split_into(1.0, &[contact(0.0, 1.5e308), contact(5.0, 0.5e308)], &mut out);
+        assert!((out[0] - 0.75).abs() < 1e-12 && (out[1] - 0.25).abs() < 1e-12, "{out:?}");
         // More contacts than the stack cache holds: the same answer as the proportional split
         // (uniform linear layer), through the uncached path.
         let many: Vec<Contact> = (0..BALANCE_STACK + 4).map(|i| contact(i as f64, 1.0 + i as f64)).collect();

@@ -265,6 +265,31 @@ fn calibration_file_round_trips_and_rejects_unknown_keys() {
     flat.region.x_max_mm = flat.region.x_min_mm;
     let err = Calibration::from_toml_str(&flat.to_toml_string().unwrap(), "calib.toml").unwrap_err().to_string();
     assert!(err.contains("region must be finite with positive width"), "{err}");
+    // Non-finite or inverted values the per-frame math would turn into a silent floor, a
+    // panic in a clamp, or nonsense forces.
+    let mut nan_gain = cal.clone();
+    nan_gain.pneumatic.locaware.gain.coeffs[0] = f64::NAN;
+    let mut nan_area = cal.clone();
+    nan_area.area_aware.rel_area_min = f64::NAN;
+    let mut inverted_area = cal.clone();
+    (inverted_area.area_aware.rel_area_min, inverted_area.area_aware.rel_area_max) = (0.5, -0.5);
+    let mut zero_ref = cal.clone();
+    zero_ref.area_aware.area_ref_mm2 = 0.0;
+    let mut inverted_signal = cal.clone();
+    std::mem::swap(&mut inverted_signal.pneumatic.map.signal_min, &mut inverted_signal.pneumatic.map.signal_max);
+    for (c, want) in [
+        (nan_gain, "pneumatic.locaware: gain and offset coefficients must be finite"),
+        (nan_area, "relative area range must be finite"),
+        (inverted_area, "rel_area_min (0.5) must be <= rel_area_max (-0.5)"),
+        (zero_ref, "area_aware.area_ref_mm2 must be finite and > 0"),
+        (inverted_signal, "pneumatic.map: signal_min"),
+    ] {
+        let err = match c.validate() {
+            Err(e) => e,
+            Ok(()) => panic!("accepted: {want}"),
+        };
+        assert!(err.contains(want), "{err}");
+    }
     let mut moved = cal.clone();
     moved.forward.sensitivity.region.x_max_mm += 5.0;
     let err = Calibration::from_toml_str(&moved.to_toml_string().unwrap(), "calib.toml").unwrap_err().to_string();
@@ -342,14 +367,16 @@ fn outliers_are_rejected_with_a_warning() {
     for f in &mut frames[6..12] {
         f.x_mm += 30.0; // a whole hold 30 mm off: rejected
     }
+    // One NaN frame costs only itself: the other five frames of its hold still make a sample.
     frames[12].cond_sum = f64::NAN;
     let out = calibrate(&frames, &CalibParams::default(), provenance()).unwrap();
     assert!(
-        out.warnings.iter().any(|w| matches!(w, CalibWarning::Rejected { count: 2, total: 125, .. })),
+        out.warnings.iter().any(|w| matches!(w, CalibWarning::Rejected { count: 1, total: 125, .. })),
         "{:?}",
         out.warnings
     );
-    assert_eq!(out.calibration.training.rejected, 2);
+    assert!(out.warnings.contains(&CalibWarning::NonFiniteFrames { count: 1, total: 750 }), "{:?}", out.warnings);
+    assert_eq!(out.calibration.training.rejected, 1);
 }
 
 #[test]
@@ -428,6 +455,8 @@ fn bad_calibration_params_are_rejected_by_name() {
     assert!(params.validate().unwrap_err().to_string().contains("lambda_grid_rel"));
     let params = CalibParams { max_location_error_mm: f64::NAN, ..CalibParams::default() };
     assert!(params.validate().is_err());
+    let params = CalibParams { min_span_mm: 0.0, ..CalibParams::default() };
+    assert!(params.validate().unwrap_err().to_string().contains("\"min_span_mm\""));
 }
 
 #[test]

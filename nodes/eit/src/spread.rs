@@ -27,8 +27,61 @@ pub struct PointSpread {
     /// The Jacobian transposed: element e's M values at `e * M`.
     jt: Arc<[f64]>,
     centroids: Arc<[[f64; 2]]>,
+    /// The element centroids bucketed into square cells of side `radius_mm`, so a source
+    /// visits the 3 x 3 cells around it instead of every element.
+    cells: Cells,
     /// The folded image matrix, pixel-major: pixel q's M weights at `q * M`.
     rows: Vec<f64>,
+}
+
+/// Element indices by cell, compressed rows: cell c holds `items[start[c]..start[c + 1]]`.
+#[derive(Debug, Clone)]
+struct Cells {
+    origin: [f64; 2],
+    side: f64,
+    nx: usize,
+    ny: usize,
+    start: Vec<u32>,
+    items: Vec<u32>,
+}
+
+impl Cells {
+    fn new(centroids: &[[f64; 2]], side: f64) -> Cells {
+        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+        for c in centroids {
+            for a in 0..2 {
+                lo[a] = lo[a].min(c[a]);
+                hi[a] = hi[a].max(c[a]);
+            }
+        }
+        // At most 256 cells a side: a tiny radius needs no finer buckets than that.
+        let side = side.max((hi[0] - lo[0]).max(hi[1] - lo[1]) / 256.0).max(f64::MIN_POSITIVE);
+        let n = |a: usize| (((hi[a] - lo[a]) / side).floor() as usize + 1).max(1);
+        let (nx, ny) = (n(0), n(1));
+        let mut cells =
+            Cells { origin: lo, side, nx, ny, start: vec![0; nx * ny + 1], items: vec![0; centroids.len()] };
+        let of: Vec<usize> = centroids.iter().map(|c| cells.cell_of(c[0], c[1])).collect();
+        for &c in &of {
+            cells.start[c + 1] += 1;
+        }
+        for c in 0..nx * ny {
+            cells.start[c + 1] += cells.start[c];
+        }
+        let mut fill = cells.start.clone();
+        for (e, &c) in of.iter().enumerate() {
+            cells.items[fill[c] as usize] = e as u32;
+            fill[c] += 1;
+        }
+        cells
+    }
+
+    fn index(&self, v: f64, axis: usize, n: usize) -> usize {
+        (((v - self.origin[axis]) / self.side).floor().max(0.0) as usize).min(n - 1)
+    }
+
+    fn cell_of(&self, x: f64, y: f64) -> usize {
+        self.index(y, 1, self.ny) * self.nx + self.index(x, 0, self.nx)
+    }
 }
 
 impl std::fmt::Debug for PointSpread {
@@ -77,7 +130,14 @@ impl SpreadBasis {
                 rows[q * m + k] = v;
             }
         }
-        Ok(PointSpread { measurements: m, radius_mm, jt: self.jt.clone(), centroids: self.centroids.clone(), rows })
+        Ok(PointSpread {
+            measurements: m,
+            radius_mm,
+            jt: self.jt.clone(),
+            cells: Cells::new(&self.centroids, radius_mm),
+            centroids: self.centroids.clone(),
+            rows,
+        })
     }
 }
 
@@ -104,21 +164,33 @@ impl PointSpread {
         let m = self.measurements;
         assert_eq!(out.len(), m, "source vector length");
         out.fill(0.0);
-        let r2 = self.radius_mm * self.radius_mm;
-        let (mut nearest, mut nearest_d2, mut any) = (0, f64::INFINITY, false);
-        for (e, c) in self.centroids.iter().enumerate() {
-            let d2 = (c[0] - x_mm).powi(2) + (c[1] - y_mm).powi(2);
-            if d2 <= r2 {
-                any = true;
-                for (o, j) in out.iter_mut().zip(&self.jt[e * m..(e + 1) * m]) {
-                    *o += j;
+        let r = self.radius_mm;
+        let g = &self.cells;
+        // Cells are at least `r` wide, so the disc lies in the cells from (x - r) to (x + r).
+        let (x0, x1) = (g.index(x_mm - r, 0, g.nx), g.index(x_mm + r, 0, g.nx));
+        let (y0, y1) = (g.index(y_mm - r, 1, g.ny), g.index(y_mm + r, 1, g.ny));
+        let mut any = false;
+        for cy in y0..=y1 {
+            for cell in cy * g.nx + x0..=cy * g.nx + x1 {
+                for &e in &g.items[g.start[cell] as usize..g.start[cell + 1] as usize] {
+                    let (e, c) = (e as usize, self.centroids[e as usize]);
+                    if (c[0] - x_mm).powi(2) + (c[1] - y_mm).powi(2) <= r * r {
+                        any = true;
+                        for (o, j) in out.iter_mut().zip(&self.jt[e * m..(e + 1) * m]) {
+                            *o += j;
+                        }
+                    }
                 }
-            } else if d2 < nearest_d2 {
-                (nearest, nearest_d2) = (e, d2);
             }
         }
-        if !any && nearest_d2.is_finite() {
-            out.copy_from_slice(&self.jt[nearest * m..(nearest + 1) * m]);
+        if !any {
+            // No centroid in the disc (a radius below the element size): the nearest element.
+            let d2 = |c: &[f64; 2]| (c[0] - x_mm).powi(2) + (c[1] - y_mm).powi(2);
+            let nearest =
+                (0..self.centroids.len()).min_by(|&a, &b| d2(&self.centroids[a]).total_cmp(&d2(&self.centroids[b])));
+            if let Some(e) = nearest {
+                out.copy_from_slice(&self.jt[e * m..(e + 1) * m]);
+            }
         }
     }
 

@@ -96,7 +96,7 @@ fn a_press_near_a_corner_has_a_mirror_sidelobe() {
     // across the corner's diagonal, at about (-45, -30) mm.
     let mut r = recon(DifferenceMode::Normalized);
     let img = predicted(&mut r, [-30.0, -45.0], 5.0, 0.2);
-    let grid = r.grid().clone();
+    let grid = *r.grid();
     let peak = img.iter().fold(0.0f64, |m, &v| m.max(v));
     let near = |x: f64, y: f64| {
         (0..img.len())

@@ -1,7 +1,9 @@
 //! Averaging the frames of a hold (the paper's 6-frame means) and grouping true locations.
 //!
 //! A hold is a run of consecutive frames whose truth (x, y, force, diameter) is identical; its
-//! frames are averaged into one [`CalibSample`] and their spread is reported. Locations are
+//! frames are averaged into one [`CalibSample`] and their spread is reported. A frame with a
+//! non-finite measurement (centroid, dP, C, area) is left out of its hold's mean and counted, so
+//! one bad frame does not cost the whole hold. Locations are
 //! true positions clustered greedily within a tolerance (mm).
 
 use super::calibrate::CalibSample;
@@ -15,6 +17,12 @@ pub struct Holds {
     pub sd_dp_kpa: f64,
     /// Mean within-hold standard deviation of C.
     pub sd_cond_sum: f64,
+    /// Frames left out of their hold's mean for a non-finite measurement.
+    pub non_finite_frames: usize,
+}
+
+fn finite(s: &CalibSample) -> bool {
+    [s.x_mm, s.y_mm, s.dp_kpa, s.cond_sum, s.area_mm2].iter().all(|v| v.is_finite())
 }
 
 /// Averages runs of consecutive frames with identical truth (x, y, force, diameter).
@@ -25,14 +33,25 @@ pub fn average_holds(frames: &[CalibSample]) -> Holds {
             && a.force_n == b.force_n
             && a.diameter_mm == b.diameter_mm
     };
-    let (mut samples, mut sd_dp, mut sd_c) = (Vec::new(), 0.0, 0.0);
+    let (mut samples, mut sd_dp, mut sd_c, mut non_finite) = (Vec::new(), 0.0, 0.0, 0);
+    let mut run: Vec<CalibSample> = Vec::new();
     let mut start = 0;
     while start < frames.len() {
         let mut end = start + 1;
         while end < frames.len() && same(&frames[start], &frames[end]) {
             end += 1;
         }
-        let run = &frames[start..end];
+        run.clear();
+        run.extend(frames[start..end].iter().filter(|s| finite(s)));
+        non_finite += (end - start) - run.len();
+        if run.is_empty() {
+            // No usable frame: the hold's sample is the (non-finite) first frame, which the
+            // quality filter rejects and counts.
+            samples.push(frames[start]);
+            start = end;
+            continue;
+        }
+        let run = &run[..];
         let n = run.len() as f64;
         let mean = |f: fn(&CalibSample) -> f64| run.iter().map(f).sum::<f64>() / n;
         let sd = |f: fn(&CalibSample) -> f64, m: f64| {
@@ -52,7 +71,7 @@ pub fn average_holds(frames: &[CalibSample]) -> Holds {
         start = end;
     }
     let holds = samples.len().max(1) as f64;
-    Holds { samples, sd_dp_kpa: sd_dp / holds, sd_cond_sum: sd_c / holds }
+    Holds { samples, sd_dp_kpa: sd_dp / holds, sd_cond_sum: sd_c / holds, non_finite_frames: non_finite }
 }
 
 /// Distinct true locations (greedy clustering within `tol_mm`) and each sample's location.
@@ -95,6 +114,19 @@ mod tests {
         assert_eq!(dp, [2.0, 5.0, 7.0]);
         // SDs: sqrt(2), 0, 0 -> mean sqrt(2) / 3.
         assert!((h.sd_dp_kpa - 2f64.sqrt() / 3.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_non_finite_frame_leaves_the_rest_of_its_hold() {
+        // Hold 1: dP 1, NaN, 3 -> mean of the two finite frames; hold 2: only NaN -> its sample
+        // stays non-finite (the quality filter rejects it), counted both times.
+        let frames = [frame(0.0, 1.0, 1.0), frame(0.0, 1.0, f64::NAN), frame(0.0, 1.0, 3.0), frame(0.0, 2.0, f64::NAN)];
+        let h = average_holds(&frames);
+        assert_eq!(h.samples.len(), 2);
+        assert_eq!(h.samples[0].dp_kpa, 2.0);
+        assert!(h.samples[1].dp_kpa.is_nan());
+        assert_eq!(h.non_finite_frames, 2);
+        assert!(h.sd_dp_kpa.is_finite());
     }
 
     #[test]

@@ -117,8 +117,12 @@ impl CalibParams {
         if self.lambda_grid_rel.is_empty() || self.lambda_grid_rel.iter().any(|l| !(l.is_finite() && *l > 0.0)) {
             return bad("lambda_grid_rel", "must be non-empty, finite and > 0");
         }
+        // A zero span would let a calibration whose centroids lie on a line through: its region
+        // has no height, and the fields' normalization divides by it.
+        if !(self.min_span_mm.is_finite() && self.min_span_mm > 0.0) {
+            return bad("min_span_mm", "must be finite and > 0");
+        }
         for (name, v) in [
-            ("min_span_mm", self.min_span_mm),
             ("location_tolerance_mm", self.location_tolerance_mm),
             ("max_location_error_mm", self.max_location_error_mm),
         ] {
@@ -138,6 +142,9 @@ pub enum CalibWarning {
         "rejected {count} of {total} samples (non-finite, C <= 0, F <= 0 or centroid > {max_error_mm} mm from truth)"
     )]
     Rejected { count: usize, total: usize, max_error_mm: f64 },
+    /// Frames left out of their hold's mean (the rest of the hold is still used).
+    #[error("left {count} of {total} frames out of their holds' means (non-finite centroid, dP, C or area)")]
+    NonFiniteFrames { count: usize, total: usize },
     /// Too few samples for the fields.
     #[error("only {samples} samples (need {min}): location fields fall back to the prior g = 1, b = 0")]
     TooFewSamples { samples: usize, min: usize },
@@ -311,8 +318,11 @@ fn fit_once(frames: &[CalibSample], params: &CalibParams, provenance: Provenance
     let holds = if params.average_holds {
         average_holds(frames)
     } else {
-        Holds { samples: frames.to_vec(), sd_dp_kpa: 0.0, sd_cond_sum: 0.0 }
+        Holds { samples: frames.to_vec(), sd_dp_kpa: 0.0, sd_cond_sum: 0.0, non_finite_frames: 0 }
     };
+    if holds.non_finite_frames > 0 {
+        warnings.push(CalibWarning::NonFiniteFrames { count: holds.non_finite_frames, total: frames.len() });
+    }
     let total = holds.samples.len();
     let ok = |s: &CalibSample| {
         [s.x_mm, s.y_mm, s.true_x_mm, s.true_y_mm, s.force_n, s.dp_kpa, s.cond_sum, s.area_mm2]

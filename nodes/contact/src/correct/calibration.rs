@@ -321,6 +321,32 @@ impl Calibration {
             if ![q.a0, q.a1, q.a2, m.signal_min, m.signal_max].iter().all(|v| v.is_finite()) {
                 return Err(format!("{name}: coefficients and signal range must be finite"));
             }
+            if m.signal_min > m.signal_max {
+                return Err(format!("{name}: signal_min ({}) must be <= signal_max ({})", m.signal_min, m.signal_max));
+            }
+        }
+        // The location fields: a NaN gain would pass the gain floor as the floor itself.
+        for (name, l) in [
+            ("pneumatic.locaware", &self.pneumatic.locaware),
+            ("eit.locaware", &self.eit.locaware),
+            ("area_aware.fields", &self.area_aware.fields),
+        ] {
+            if !l.gain.coeffs.iter().chain(&l.offset.coeffs).all(|v| v.is_finite()) {
+                return Err(format!("{name}: gain and offset coefficients must be finite"));
+            }
+        }
+        let a = &self.area_aware;
+        if ![a.area_gain, a.area_offset, a.rel_area_min, a.rel_area_max].iter().all(|v| v.is_finite()) {
+            return Err("area_aware: area_gain, area_offset and the relative area range must be finite".into());
+        }
+        if !(a.area_ref_mm2.is_finite() && a.area_ref_mm2 > 0.0) {
+            return Err(format!("area_aware.area_ref_mm2 must be finite and > 0 (got {})", a.area_ref_mm2));
+        }
+        if a.rel_area_min > a.rel_area_max {
+            return Err(format!(
+                "area_aware: rel_area_min ({}) must be <= rel_area_max ({})",
+                a.rel_area_min, a.rel_area_max
+            ));
         }
         let e = self.sensitivity.exponent;
         if !(e.is_finite() && e > 0.0) {

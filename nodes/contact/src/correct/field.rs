@@ -114,6 +114,10 @@ impl Region {
             if !p.is_finite() {
                 return (0.0, true);
             }
+            // A degenerate axis (never from `calibrate`, which needs a span) has only a centre.
+            if hi.partial_cmp(&lo) != Some(std::cmp::Ordering::Greater) {
+                return (0.0, true);
+            }
             let t = 2.0 * (p - lo) / (hi - lo) - 1.0;
             if t < -1.0 {
                 (-1.0, true)

@@ -126,9 +126,9 @@ impl Crosstalk {
         loop {
             let n = self.solve(k, out);
             if n == 0 {
-                outcome.solved = false;
+                // Every contact stays, also any marked as a ghost before this solve.
                 self.alive[..k].fill(true);
-                return outcome;
+                return CrosstalkOutcome { ghosts: 0, solved: false };
             }
             // The weakest own share among the live contacts.
             let weakest = (0..n)

@@ -56,7 +56,8 @@ fn assert_same(a: &[f64], b: &[f64], what: &str) {
     let peak = a.iter().fold(0.0f64, |m, v| m.max(v.abs()));
     assert!(peak > 0.0, "{what}: empty image");
     let worst = a.iter().zip(b).fold(0.0f64, |m, (x, y)| m.max((x - y).abs()));
-    assert!(worst <= 1e-9 * peak, "{what}: worst pixel differs by {worst:e} (peak {peak:e})");
+    // The rows are kept in f32: agreement to f32 rounding of the matrix.
+    assert!(worst <= 1e-5 * peak, "{what}: worst pixel differs by {worst:e} (peak {peak:e})");
 }
 
 #[test]

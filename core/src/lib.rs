@@ -25,7 +25,7 @@ pub use error::NodeError;
 pub use graph::{GraphErrors, GraphSpec};
 pub use io::{Inputs, Outputs};
 pub use message::{Header, Message, Payload};
-pub use node::{Context, Mode, NodeImpl, Processor, Sink, Source, SourcePoll};
+pub use node::{Context, Mode, NodeImpl, NodeState, Processor, Sink, Source, SourcePoll, StateRefused};
 pub use params::{ParamError, Params};
 pub use port::PortSpec;
 pub use recycle::Recycler;

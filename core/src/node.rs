@@ -5,7 +5,16 @@
 //! Lifecycle: the kind's factory constructs the node (reads params, allocates every buffer,
 //! fails here) -> `start` -> `poll`/`process`/`consume` (hot: no allocation) -> `stop`
 //! (flush, close; called once, also after errors).
+//!
+//! Hot swap (see [`crate::runtime::GraphHandle::swap`]): the replacement is built and started
+//! off the data path; between two calls the engine asks the old instance for its learned state
+//! ([`Processor::export_state`], e.g. an EIT reference frame, a tare, a noise estimate,
+//! buffered input), offers it to the replacement ([`Processor::import_state`]), and then stops
+//! the old instance. A replacement that does not recognize the state (another kind, another
+//! channel count) returns it; the engine logs why and gives it back to the old instance before
+//! its `stop`, so nothing it buffered is silently dropped. The same hooks exist on every role.
 
+use std::any::Any;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
@@ -35,6 +44,34 @@ pub enum SourcePoll {
     Finished,
 }
 
+/// What a node's instance learned from the stream, handed to its replacement in a hot swap.
+/// Opaque to the engine: each kind exports its own type and downcasts on import.
+pub type NodeState = Box<dyn Any + Send>;
+
+/// A hand-over the replacement refused: the state goes back to the replaced instance.
+pub struct StateRefused {
+    pub state: NodeState,
+    /// Why (e.g. "state of another kind", "the sensor has 208 channels, the state 192").
+    pub reason: String,
+}
+
+impl StateRefused {
+    pub fn new(state: NodeState, reason: impl Into<String>) -> StateRefused {
+        StateRefused { state, reason: reason.into() }
+    }
+}
+
+impl std::fmt::Debug for StateRefused {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("StateRefused").field("reason", &self.reason).finish_non_exhaustive()
+    }
+}
+
+/// The default `import_state`: this kind takes over nothing.
+fn refuse(state: NodeState) -> Result<(), StateRefused> {
+    Err(StateRefused::new(state, "this kind takes over no state"))
+}
+
 /// A producer of messages.
 pub trait Source: Send {
     fn start(&mut self, _ctx: &mut Context) -> Result<(), NodeError> {
@@ -51,6 +88,18 @@ pub trait Source: Send {
     fn control(&mut self, _ctx: &mut Context, cmd: &str) -> Result<(), NodeError> {
         Err(NodeError::msg(format!("control command \"{cmd}\" is not supported by this node")))
     }
+    /// Hot swap: this instance is being replaced. Returns what it learned from the stream
+    /// (references, tares, noise estimates, buffered input) for the replacement; called after
+    /// its last call and before its `stop`. Default: nothing to hand over.
+    fn export_state(&mut self, _ctx: &mut Context) -> Option<NodeState> {
+        None
+    }
+    /// Hot swap: takes over the state exported by the replaced instance, before this
+    /// instance's first call. Returns it (with the reason) when it is not of a type this node
+    /// knows or does not fit; it then goes back to the replaced instance. Default: refuse.
+    fn import_state(&mut self, _ctx: &mut Context, state: NodeState) -> Result<(), StateRefused> {
+        refuse(state)
+    }
 }
 
 /// A transformer of messages.
@@ -66,6 +115,18 @@ pub trait Processor: Send {
     fn control(&mut self, _ctx: &mut Context, cmd: &str) -> Result<(), NodeError> {
         Err(NodeError::msg(format!("control command \"{cmd}\" is not supported by this node")))
     }
+    /// Hot swap: this instance is being replaced. Returns what it learned from the stream
+    /// (references, tares, noise estimates, buffered input) for the replacement; called after
+    /// its last call and before its `stop`. Default: nothing to hand over.
+    fn export_state(&mut self, _ctx: &mut Context) -> Option<NodeState> {
+        None
+    }
+    /// Hot swap: takes over the state exported by the replaced instance, before this
+    /// instance's first call. Returns it (with the reason) when it is not of a type this node
+    /// knows or does not fit; it then goes back to the replaced instance. Default: refuse.
+    fn import_state(&mut self, _ctx: &mut Context, state: NodeState) -> Result<(), StateRefused> {
+        refuse(state)
+    }
 }
 
 /// A consumer of messages.
@@ -80,6 +141,18 @@ pub trait Sink: Send {
     }
     fn control(&mut self, _ctx: &mut Context, cmd: &str) -> Result<(), NodeError> {
         Err(NodeError::msg(format!("control command \"{cmd}\" is not supported by this node")))
+    }
+    /// Hot swap: this instance is being replaced. Returns what it learned from the stream
+    /// (references, tares, noise estimates, buffered input) for the replacement; called after
+    /// its last call and before its `stop`. Default: nothing to hand over.
+    fn export_state(&mut self, _ctx: &mut Context) -> Option<NodeState> {
+        None
+    }
+    /// Hot swap: takes over the state exported by the replaced instance, before this
+    /// instance's first call. Returns it (with the reason) when it is not of a type this node
+    /// knows or does not fit; it then goes back to the replaced instance. Default: refuse.
+    fn import_state(&mut self, _ctx: &mut Context, state: NodeState) -> Result<(), StateRefused> {
+        refuse(state)
     }
 }
 
@@ -112,6 +185,22 @@ impl NodeImpl {
             NodeImpl::Source(n) => n.control(ctx, cmd),
             NodeImpl::Processor(n) => n.control(ctx, cmd),
             NodeImpl::Sink(n) => n.control(ctx, cmd),
+        }
+    }
+
+    pub(crate) fn export_state(&mut self, ctx: &mut Context) -> Option<NodeState> {
+        match self {
+            NodeImpl::Source(n) => n.export_state(ctx),
+            NodeImpl::Processor(n) => n.export_state(ctx),
+            NodeImpl::Sink(n) => n.export_state(ctx),
+        }
+    }
+
+    pub(crate) fn import_state(&mut self, ctx: &mut Context, state: NodeState) -> Result<(), StateRefused> {
+        match self {
+            NodeImpl::Source(n) => n.import_state(ctx, state),
+            NodeImpl::Processor(n) => n.import_state(ctx, state),
+            NodeImpl::Sink(n) => n.import_state(ctx, state),
         }
     }
 

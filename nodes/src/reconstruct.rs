@@ -8,6 +8,11 @@
 //! and dead-electrode channels are masked with a matrix for the reduced set.
 //! Math: `skinflow_eit`.
 //!
+//! Hot swap: the replacement takes over the reference (tracker, the running no-load mean, a
+//! pending tare) when the sensor has the same channel count. The reference is measured volts,
+//! so it stays valid under a new lambda, prior or mesh (those only change the matrix); a
+//! replacement that had to re-learn it would tare on a loaded frame.
+//!
 //! ```toml
 //! params = { lambda = 0.03, prior = { noser = { p = 0.5 } }, reference_frames = 10, mesh = { elements = 4000 } }
 //! ```
@@ -20,8 +25,8 @@ use std::time::Instant;
 
 use serde::Deserialize;
 use skinflow_core::{
-    BuildContext, Context, Inputs, KindInfo, Message, NodeError, NodeImpl, NodeParams, Outputs, ParamDoc, ParamError,
-    PortSpec, Processor, Recycler, Registry, Role, typed,
+    BuildContext, Context, Inputs, KindInfo, Message, NodeError, NodeImpl, NodeParams, NodeState, Outputs, ParamDoc,
+    ParamError, PortSpec, Processor, Recycler, Registry, Role, StateRefused, typed,
 };
 use skinflow_eit::mask::ChannelMask;
 use skinflow_eit::precompute::DifferenceMode;
@@ -233,6 +238,18 @@ impl Reconstructor {
     }
 }
 
+/// What a replaced reconstructor hands to its replacement: everything it learned about the
+/// reference frame (volts, independent of the matrix).
+struct ReferenceState {
+    channels: usize,
+    tracker: ReferenceTracker,
+    tare_pending: bool,
+    noload_sum: Vec<f64>,
+    noload_mean: Vec<f64>,
+    noload_n: u32,
+    reported: EitRef,
+}
+
 /// The active matrix's point spread, or none when `radius_mm` is 0.
 fn point_spread(math: &mut skinflow_eit::Reconstructor, radius_mm: f64) -> Result<Option<Spread>, NodeError> {
     if radius_mm == 0.0 {
@@ -350,6 +367,42 @@ impl Processor for Reconstructor {
             }
             _ => Err(NodeError::msg(format!("unknown control command \"{cmd}\" (known: tare)"))),
         }
+    }
+
+    fn export_state(&mut self, _ctx: &mut Context) -> Option<NodeState> {
+        let m = self.sensor.measurement_count();
+        Some(Box::new(ReferenceState {
+            channels: m,
+            tracker: self.tracker.clone(),
+            tare_pending: self.tare_pending,
+            noload_sum: std::mem::take(&mut self.noload_sum),
+            noload_mean: std::mem::take(&mut self.noload_mean),
+            noload_n: self.noload_n,
+            reported: self.reported,
+        }))
+    }
+
+    fn import_state(&mut self, ctx: &mut Context, state: NodeState) -> Result<(), StateRefused> {
+        let s = state
+            .downcast::<ReferenceState>()
+            .map_err(|s| StateRefused::new(s, "not a reconstructor's reference state"))?;
+        let m = self.sensor.measurement_count();
+        if s.channels != m {
+            let reason = format!(
+                "the reference has {} channels but sensor \"{}\" has {m}: the reference is learned again",
+                s.channels, self.sensor.name
+            );
+            return Err(StateRefused::new(s, reason));
+        }
+        let s = *s;
+        self.tracker = s.tracker;
+        self.tare_pending = s.tare_pending;
+        self.noload_sum = s.noload_sum;
+        self.noload_mean = s.noload_mean;
+        self.noload_n = s.noload_n;
+        self.reported = s.reported;
+        tracing::info!(node = ctx.id(), source = ?self.reported, "EIT reference state taken over (hot swap)");
+        Ok(())
     }
 }
 

@@ -18,14 +18,17 @@
 //! # the paper's segmentation: separation = 0.0, weak_peak = 0.0
 //! ```
 //! Input: `image` (image). Output: `contacts` (contacts).
+//!
+//! Hot swap: the replacement takes over the no-load noise peaks and derives its floor from
+//! them with its own `floor` and `floor_over_noise` (after the no-load period no new peaks come).
 
 use std::time::Instant;
 
 use serde::Deserialize;
 use skinflow_contact::{Contacts as ContactBuf, ImageGrid, SegmentParams, Segmenter as SegmentMath};
 use skinflow_core::{
-    Context, Inputs, KindInfo, Message, NodeError, NodeImpl, NodeParams, Outputs, ParamDoc, ParamError, PortSpec,
-    Processor, Recycler, Registry, Role, typed,
+    Context, Inputs, KindInfo, Message, NodeError, NodeImpl, NodeParams, NodeState, Outputs, ParamDoc, ParamError,
+    PortSpec, Processor, Recycler, Registry, Role, StateRefused, typed,
 };
 
 use crate::payload::{Contacts, Image};
@@ -162,6 +165,34 @@ impl Segmenter {
     }
 }
 
+/// What a replaced segmenter hands to its replacement.
+struct NoiseState {
+    noise_peaks: Vec<f64>,
+}
+
+impl Segmenter {
+    /// Sets the floor from the no-load peaks so far: the larger of `floor` and
+    /// `floor_over_noise` times their median.
+    fn update_floor(&mut self, ctx: &Context) -> Result<(), NodeError> {
+        if self.noise_peaks.is_empty() {
+            return Ok(());
+        }
+        self.scratch.clear();
+        self.scratch.extend_from_slice(&self.noise_peaks);
+        self.scratch.sort_by(f64::total_cmp);
+        let median = self.scratch[self.scratch.len() / 2];
+        let floor = self.floor_min.max(self.floor_over_noise * median);
+        if floor != self.params.floor {
+            self.params.floor = floor;
+            if let Some((_, seg, _)) = self.math.as_mut() {
+                seg.set_floor(floor).map_err(|e| NodeError::Input { port: "image".into(), problem: e.to_string() })?;
+            }
+            tracing::debug!(node = ctx.id(), floor, "segmentation floor follows the no-load noise");
+        }
+        Ok(())
+    }
+}
+
 impl Processor for Segmenter {
     fn process(&mut self, ctx: &mut Context, inputs: &Inputs, out: &mut Outputs) -> Result<(), NodeError> {
         let Some(m) = inputs.get(0) else { return Ok(()) };
@@ -171,19 +202,7 @@ impl Processor for Segmenter {
         let peak = skinflow_contact::segment::peak_decrease(&image.pixels);
         if image.src.no_load && peak > 0.0 && self.noise_peaks.len() < NOISE_FRAMES {
             self.noise_peaks.push(peak);
-            self.scratch.clear();
-            self.scratch.extend_from_slice(&self.noise_peaks);
-            self.scratch.sort_by(f64::total_cmp);
-            let median = self.scratch[self.scratch.len() / 2];
-            let floor = self.floor_min.max(self.floor_over_noise * median);
-            if floor != self.params.floor {
-                self.params.floor = floor;
-                if let Some((_, seg, _)) = self.math.as_mut() {
-                    seg.set_floor(floor)
-                        .map_err(|e| NodeError::Input { port: "image".into(), problem: e.to_string() })?;
-                }
-                tracing::debug!(node = ctx.id(), floor, "segmentation floor follows the no-load noise");
-            }
+            self.update_floor(ctx)?;
         }
         let grid = ImageGrid::centred(image.width, image.height, image.width_mm, image.height_mm);
         // The grid is fixed by the first image; a change rebuilds the scratch (rare, allocates).
@@ -225,6 +244,27 @@ impl Processor for Segmenter {
             c.compute_ns = ns;
         });
         out.send(0, Message::from_arc(m.header, payload))
+    }
+
+    fn export_state(&mut self, _ctx: &mut Context) -> Option<NodeState> {
+        Some(Box::new(NoiseState { noise_peaks: self.noise_peaks.clone() }))
+    }
+
+    fn import_state(&mut self, ctx: &mut Context, state: NodeState) -> Result<(), StateRefused> {
+        let s = state.downcast::<NoiseState>().map_err(|s| StateRefused::new(s, "not a segmenter's noise state"))?;
+        self.noise_peaks.clear();
+        self.noise_peaks.extend(s.noise_peaks.iter().take(NOISE_FRAMES));
+        if let Err(e) = self.update_floor(ctx) {
+            self.noise_peaks.clear();
+            return Err(StateRefused::new(s, format!("the floor from the no-load noise is invalid: {e}")));
+        }
+        tracing::info!(
+            node = ctx.id(),
+            no_load_images = self.noise_peaks.len(),
+            floor = self.params.floor,
+            "no-load noise taken over (hot swap)"
+        );
+        Ok(())
     }
 
     fn stop(&mut self, ctx: &mut Context) -> Result<(), NodeError> {

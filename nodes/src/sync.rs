@@ -24,6 +24,11 @@
 //! freedom); the noise is estimated, so the real rate is higher (about 0.6 % of frames with
 //! 60 no-load samples, 3 % with 20), and drift during the no-load period loosens it.
 //!
+//! Hot swap: the replacement takes over the whole stream state (P0 and its sums, a `tare`'s P0
+//! and noise, the end of the no-load period, the pressure and truth history, the frame period
+//! estimate and the frames still waiting for pressure), so it neither re-tares on loaded
+//! pressure nor drops pending frames; its own parameters apply from then on.
+//!
 //! ```toml
 //! params = { tare_s = 2.0, tare_window_s = 1.0 }   # frame_period_s = 0.77 to fix T
 //! ```
@@ -36,8 +41,8 @@ use std::sync::Arc;
 use serde::Deserialize;
 use skinflow_core::params::positive;
 use skinflow_core::{
-    Context, Header, Inputs, KindInfo, Message, NodeError, NodeImpl, NodeParams, Outputs, ParamDoc, ParamError,
-    PortSpec, Processor, Recycler, Registry, Role, typed,
+    Context, Header, Inputs, KindInfo, Message, NodeError, NodeImpl, NodeParams, NodeState, Outputs, ParamDoc,
+    ParamError, PortSpec, Processor, Recycler, Registry, Role, StateRefused, typed,
 };
 
 use crate::payload::{EitFrame, PressureSample, SyncedFrame, Truth};
@@ -137,6 +142,25 @@ pub struct Sync {
     ring: Recycler<SyncedFrame>,
 }
 
+/// What a replaced `sync` hands to its replacement: its internal state, moved.
+struct SyncState {
+    pressure: VecDeque<(f64, f64)>,
+    pressure_period_s: Option<f64>,
+    truth: VecDeque<(f64, Arc<Truth>)>,
+    first_contact_s: Option<f64>,
+    p0_sum: f64,
+    p0_sq: f64,
+    p0_n: u64,
+    p0_shift: Option<f64>,
+    p0_recent: VecDeque<(f64, f64)>,
+    p0_fixed: Option<f64>,
+    noise_fixed: Option<f64>,
+    pending: VecDeque<(Header, Arc<EitFrame>)>,
+    last_frame_s: Option<f64>,
+    intervals: VecDeque<f64>,
+    period_s: f64,
+}
+
 impl Sync {
     pub fn new(p: SyncParams) -> Sync {
         let period_s = p.frame_period_s.unwrap_or(DEFAULT_FRAME_PERIOD_S);
@@ -162,6 +186,55 @@ impl Sync {
             period_s,
             ring: Recycler::new(128, SyncedFrame::default),
         }
+    }
+
+    /// Moves the internal state out (this instance is being replaced).
+    fn take_state(&mut self) -> SyncState {
+        SyncState {
+            pressure: std::mem::take(&mut self.pressure),
+            pressure_period_s: self.pressure_period_s,
+            truth: std::mem::take(&mut self.truth),
+            first_contact_s: self.first_contact_s,
+            p0_sum: self.p0_sum,
+            p0_sq: self.p0_sq,
+            p0_n: self.p0_n,
+            p0_shift: self.p0_shift,
+            p0_recent: std::mem::take(&mut self.p0_recent),
+            p0_fixed: self.p0_fixed,
+            noise_fixed: self.noise_fixed,
+            pending: std::mem::take(&mut self.pending),
+            last_frame_s: self.last_frame_s,
+            intervals: std::mem::take(&mut self.intervals),
+            period_s: self.period_s,
+        }
+    }
+
+    /// Takes over a replaced instance's state; the window T follows this instance's params.
+    fn put_state(&mut self, s: SyncState) {
+        self.pressure = s.pressure;
+        self.pressure_period_s = s.pressure_period_s;
+        self.truth = s.truth;
+        self.first_contact_s = s.first_contact_s;
+        self.p0_sum = s.p0_sum;
+        self.p0_sq = s.p0_sq;
+        self.p0_n = s.p0_n;
+        self.p0_shift = s.p0_shift;
+        self.p0_recent = s.p0_recent;
+        self.p0_fixed = s.p0_fixed;
+        self.noise_fixed = s.noise_fixed;
+        self.pending = s.pending;
+        self.last_frame_s = s.last_frame_s;
+        self.intervals = s.intervals;
+        self.period_s = match self.p.frame_period_s {
+            Some(t) => t,
+            None if !self.intervals.is_empty() => {
+                self.scratch.clear();
+                self.scratch.extend(self.intervals.iter().copied());
+                self.scratch.sort_by(f64::total_cmp);
+                self.scratch[self.scratch.len() / 2]
+            }
+            None => s.period_s,
+        };
     }
 
     /// Newest time seen on the pressure or truth input: both histories keep their newest entry.
@@ -393,6 +466,23 @@ impl Processor for Sync {
         }
     }
 
+    fn export_state(&mut self, _ctx: &mut Context) -> Option<NodeState> {
+        Some(Box::new(self.take_state()))
+    }
+
+    fn import_state(&mut self, ctx: &mut Context, state: NodeState) -> Result<(), StateRefused> {
+        let s = state.downcast::<SyncState>().map_err(|s| StateRefused::new(s, "not a sync node's state"))?;
+        self.put_state(*s);
+        tracing::info!(
+            node = ctx.id(),
+            p0_kpa = self.p0(),
+            noise_kpa = self.noise_kpa(),
+            pending_frames = self.pending.len(),
+            "P0, noise and pending frames taken over (hot swap)"
+        );
+        Ok(())
+    }
+
     fn stop(&mut self, ctx: &mut Context) -> Result<(), NodeError> {
         if !self.pending.is_empty() {
             tracing::warn!(
@@ -507,6 +597,30 @@ mod tests {
         );
         assert!(s.p0().is_nan());
         assert_eq!(s.noise_kpa(), None);
+    }
+
+    #[test]
+    fn a_replacement_takes_over_p0_noise_and_pending_frames() {
+        let mut a = sync();
+        for i in 0..20 {
+            a.on_pressure(0.05 * f64::from(i), 1.0 + 0.01 * f64::from(i % 3));
+        }
+        a.on_truth(
+            1.0,
+            Arc::new(Truth { contacts: vec![TruthContact { x_mm: 0.0, y_mm: 0.0, force_n: 1.0, diameter_mm: 15.0 }] }),
+        );
+        a.on_pressure(1.0, 5.0); // loaded: not in P0
+        a.on_frame(Header { seq: 0, t_ns: 900_000_000, origin: 0 }, Arc::new(EitFrame { v: vec![1.0] }));
+        let (p0, noise) = (a.p0(), a.noise_kpa());
+        assert!(p0.is_finite() && noise.is_some());
+        let mut b = Sync::new(SyncParams { frame_period_s: Some(0.5), ..sync().p });
+        b.put_state(a.take_state());
+        assert_eq!((b.p0().to_bits(), b.noise_kpa()), (p0.to_bits(), noise));
+        assert_eq!((b.first_contact_s, b.pending.len(), b.period_s), (Some(1.0), 1, 0.5));
+        assert!(a.pending.is_empty(), "moved, not copied: the old instance reports nothing pending");
+        // Loaded pressure after the swap does not move P0.
+        b.on_pressure(1.05, 5.0);
+        assert_eq!(b.p0().to_bits(), p0.to_bits());
     }
 
     #[test]

@@ -263,20 +263,49 @@ impl Cell {
     /// Runs a control command, or installs a hot-swapped instance, between calls.
     pub fn control(&mut self, c: super::pool::Control) {
         match c {
-            super::pool::Control::Command(cmd) => match self.imp.control(&mut self.ctx, &cmd) {
-                Ok(()) => tracing::info!(node = %self.ctx.id, "control \"{cmd}\" applied"),
-                Err(e) => tracing::warn!(node = %self.ctx.id, "control \"{cmd}\": {e}"),
-            },
+            super::pool::Control::Command(cmd, reply) => {
+                let result = self.imp.control(&mut self.ctx, &cmd);
+                match &result {
+                    Ok(()) => tracing::info!(node = %self.ctx.id, "control \"{cmd}\" applied"),
+                    Err(e) => tracing::warn!(node = %self.ctx.id, "control \"{cmd}\": {e}"),
+                }
+                if let Some(tx) = reply {
+                    let _ = tx.try_send(result); // the asker may have given up waiting
+                }
+            }
             super::pool::Control::Swap(s) => {
                 let s = *s;
                 let mut old = std::mem::replace(&mut self.imp, s.imp);
                 self.recipe = s.recipe;
+                // A dead instance (panicked, failed) hands nothing over: its state is not trusted.
+                if !self.dead {
+                    self.hand_over(&mut old);
+                }
                 self.dead = false;
                 if let Err(e) = old.stop(&mut self.ctx) {
                     tracing::warn!(node = %self.ctx.id, "replaced instance failed to stop: {e}");
                 }
                 bump(&self.stats.swaps, 1);
                 tracing::info!(node = %self.ctx.id, kind = %s.kind, "hot swap applied");
+            }
+        }
+    }
+
+    /// Moves the replaced instance's state into the installed one; a refused state goes back
+    /// to the replaced instance (its `stop` then reports what it held).
+    fn hand_over(&mut self, old: &mut NodeImpl) {
+        let Some(state) = old.export_state(&mut self.ctx) else { return };
+        match self.imp.import_state(&mut self.ctx, state) {
+            Ok(()) => tracing::info!(node = %self.ctx.id, "hot swap: the replacement took over the node's state"),
+            Err(refused) => {
+                tracing::warn!(
+                    node = %self.ctx.id,
+                    "hot swap: the replacement starts afresh, it did not take over the node's state: {}",
+                    refused.reason
+                );
+                if let Err(back) = old.import_state(&mut self.ctx, refused.state) {
+                    tracing::warn!(node = %self.ctx.id, "the replaced instance did not take its state back: {}", back.reason);
+                }
             }
         }
     }

@@ -5,11 +5,20 @@
 //! executor as a control message: it takes effect between two calls, the node's queues (and
 //! every message in them) stay where they are, and the old instance is stopped. Only a
 //! replacement with the same ports (names and types, in order) is accepted: edges index ports.
+//!
+//! State hand-over: at the switch the old instance exports what it learned from the stream
+//! ([`crate::Processor::export_state`]) and the replacement imports it
+//! ([`crate::Processor::import_state`]), so a node rebuilt with new parameters keeps e.g. its
+//! EIT reference frame, tare and noise estimates instead of re-learning them from data that is
+//! no longer no-load. Every swap goes through here (`skinflow run --watch` edits and control
+//! socket swaps alike). A replacement that refuses the state (another kind, another channel
+//! count) starts afresh with a warning naming the reason. No hand-over after a panic: a restart
+//! or a swap of a dead instance starts from scratch.
 
 use std::path::PathBuf;
 use std::sync::atomic::Ordering::SeqCst;
 use std::sync::{Arc, Mutex};
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use super::RunError;
 use super::cell::Recipe;
@@ -73,10 +82,26 @@ impl GraphHandle {
     }
 
     /// Sends a control command (e.g. `tare`) to a node; it runs between two of its calls.
+    /// Does not wait: the node's answer is only logged (see [`GraphHandle::control_wait`]).
     pub fn control(&self, node: &str, cmd: &str) -> Result<(), RunError> {
         let i = self.index(node)?;
-        self.push(i, Control::Command(cmd.to_owned()));
+        self.push(i, Control::Command(cmd.to_owned(), None));
         Ok(())
+    }
+
+    /// Sends a control command and waits at most `timeout` for the node's answer: its error
+    /// if it rejects the command. A node that is not called within `timeout` (the graph has
+    /// ended, a source blocked in a read) gives [`RunError::ControlTimeout`]; the command
+    /// stays queued and may still run.
+    pub fn control_wait(&self, node: &str, cmd: &str, timeout: Duration) -> Result<(), RunError> {
+        let i = self.index(node)?;
+        let (tx, rx) = std::sync::mpsc::sync_channel(1);
+        self.push(i, Control::Command(cmd.to_owned(), Some(tx)));
+        match rx.recv_timeout(timeout) {
+            Ok(Ok(())) => Ok(()),
+            Ok(Err(error)) => Err(RunError::Control { node: node.to_owned(), command: cmd.to_owned(), error }),
+            Err(_) => Err(RunError::ControlTimeout { node: node.to_owned(), command: cmd.to_owned(), timeout }),
+        }
     }
 
     /// Replaces a node by one built from `factory` and `params`. The replacement is built and

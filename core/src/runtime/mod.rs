@@ -49,6 +49,12 @@ pub enum RunError {
     UnknownNode(String),
     #[error("node \"{node}\": swap refused: {problem}")]
     Swap { node: String, problem: String },
+    #[error("node \"{node}\": control \"{command}\" rejected: {error}")]
+    Control { node: String, command: String, error: NodeError },
+    #[error(
+        "node \"{node}\": control \"{command}\" got no answer within {timeout:?} (the node was not called: the graph may have ended); it stays queued"
+    )]
+    ControlTimeout { node: String, command: String, timeout: Duration },
 }
 
 /// The result of a run that started.
@@ -310,6 +316,11 @@ impl RunningGraph {
     /// Sends a control command (e.g. `tare`) to a node; it runs between two of its calls.
     pub fn control(&self, node: &str, cmd: &str) -> Result<(), RunError> {
         self.handle.control(node, cmd)
+    }
+
+    /// Sends a control command and waits for the node's answer (see [`GraphHandle::control_wait`]).
+    pub fn control_wait(&self, node: &str, cmd: &str, timeout: Duration) -> Result<(), RunError> {
+        self.handle.control_wait(node, cmd, timeout)
     }
 
     /// A handle for other threads: statistics, control commands, hot swaps.

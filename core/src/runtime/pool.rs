@@ -61,8 +61,8 @@ pub(crate) fn take_flag(f: &AtomicBool) -> bool {
 
 /// Work for a node between two of its calls.
 pub(crate) enum Control {
-    /// A command for the node itself (e.g. `tare`).
-    Command(String),
+    /// A command for the node itself (e.g. `tare`), with where to send its result.
+    Command(String, Option<std::sync::mpsc::SyncSender<Result<(), crate::error::NodeError>>>),
     /// Replace the node's instance (hot swap).
     Swap(Box<Swap>),
 }

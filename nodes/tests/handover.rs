@@ -1,0 +1,200 @@
+//! Hot swap of the stateful skin nodes mid-stream, after the no-load period: the replacements
+//! of `sync`, `reconstructor` and `segmenter` take over what the replaced instances learned
+//! (P0 and noise, the EIT reference, the no-load noise floor), so the outputs go on exactly as
+//! in a run without the swap, and a new lambda does not re-tare the EIT reference on a loaded
+//! frame.
+//!
+//! Deterministic: the graph runs in lockstep behind a gate that holds the simulated skin after
+//! its first `GATE_FRAMES` EIT frames; the swaps are queued while it is held, then it opens.
+
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering::SeqCst};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use serde::Deserialize;
+use skinflow_core::graph::SourceFile;
+use skinflow_core::{
+    BuildContext, Context, GraphSpec, KindInfo, NodeError, NodeImpl, NodeParams, Outputs, Params, PortSpec, Registry,
+    Role, RunOptions, RunningGraph, Source, SourcePoll, typed,
+};
+use skinflow_nodes::payload::{Contacts, EitFrame, PressureSample, ReferenceSource, Truth};
+use skinflow_nodes::pipeline::{Captured, registry_with_capture};
+
+/// EIT frames let through before the swap: the 3 s rest is 4 frames at 1.3 frames/s, so the
+/// swap comes during the first press.
+const GATE_FRAMES: u64 = 7;
+
+#[derive(Default)]
+struct Gate {
+    /// Frames let through before holding (u64::MAX: never hold).
+    limit: AtomicU64,
+    open: AtomicBool,
+    frames: AtomicU64,
+    /// Polls answered while held.
+    held: AtomicU64,
+}
+
+/// The `sim` source behind a gate.
+struct Gated {
+    inner: Box<dyn Source>,
+    gate: Arc<Gate>,
+}
+
+impl Source for Gated {
+    fn start(&mut self, ctx: &mut Context) -> Result<(), NodeError> {
+        self.inner.start(ctx)
+    }
+    fn poll(&mut self, ctx: &mut Context, out: &mut Outputs) -> Result<SourcePoll, NodeError> {
+        let g = &self.gate;
+        if !g.open.load(SeqCst) && g.frames.load(SeqCst) >= g.limit.load(SeqCst) {
+            g.held.fetch_add(1, SeqCst);
+            std::thread::yield_now();
+            return Ok(SourcePoll::Idle);
+        }
+        let r = self.inner.poll(ctx, out)?;
+        if out.is_taken(0) {
+            g.frames.fetch_add(1, SeqCst);
+        }
+        Ok(r)
+    }
+    fn stop(&mut self, ctx: &mut Context) -> Result<(), NodeError> {
+        self.inner.stop(ctx)
+    }
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct GatedParams {
+    scene: PathBuf,
+}
+impl NodeParams for GatedParams {}
+
+fn fixture(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures").join(name)
+}
+
+fn registry(captured: Captured, gate: Arc<Gate>) -> Registry {
+    let mut r = registry_with_capture(captured);
+    let sim = r.get("sim").unwrap().clone();
+    r.register(typed(
+        KindInfo::new("gated_sim", Role::Source, "test: the sim source, held after some EIT frames")
+            .output(PortSpec::output::<EitFrame>("eit", "EIT frames"))
+            .output(PortSpec::output::<PressureSample>("pressure", "pressure"))
+            .output(PortSpec::output::<Truth>("truth", "truth")),
+        move |p: GatedParams, ctx: &BuildContext| {
+            let params = Params::from_toml(&format!("scene = {:?}", p.scene)).unwrap();
+            match sim.build(&params, ctx)? {
+                NodeImpl::Source(inner) => Ok(NodeImpl::Source(Box::new(Gated { inner, gate: gate.clone() }))),
+                _ => unreachable!("sim is a source"),
+            }
+        },
+    ))
+    .unwrap();
+    r
+}
+
+fn cache_dir() -> PathBuf {
+    std::env::temp_dir().join(format!("skinflow-handover-cache-{}", std::process::id()))
+}
+
+fn recon_params(extra: &str) -> String {
+    format!("cache_dir = {:?}, mesh = {{ elements = 1500 }}{extra}", cache_dir())
+}
+
+/// Runs the scene through sync -> reconstructor -> segmenter; with `swaps` (node, params),
+/// holds the source after `GATE_FRAMES` EIT frames, swaps those nodes (same kind) and goes on.
+fn run(swaps: &[(&str, String)]) -> Vec<Arc<Contacts>> {
+    let gate = Arc::new(Gate::default());
+    gate.limit.store(if swaps.is_empty() { u64::MAX } else { GATE_FRAMES }, SeqCst);
+    let captured: Captured = Arc::new(Mutex::new(Vec::new()));
+    let reg = registry(captured.clone(), gate.clone());
+    let graph = format!(
+        "[graph]\nmode = \"lockstep\"\n\
+         [[node]]\nid = \"skin\"\nkind = \"gated_sim\"\nparams = {{ scene = {:?} }}\n\
+         [[node]]\nid = \"sync\"\nkind = \"sync\"\n\
+         [[node]]\nid = \"recon\"\nkind = \"reconstructor\"\nparams = {{ {} }}\n\
+         [[node]]\nid = \"seg\"\nkind = \"segmenter\"\n\
+         [[node]]\nid = \"cap\"\nkind = \"capture\"\n\
+         [[edge]]\nfrom = \"skin.eit\"\nto = \"sync.eit\"\n\
+         [[edge]]\nfrom = \"skin.pressure\"\nto = \"sync.pressure\"\n\
+         [[edge]]\nfrom = \"skin.truth\"\nto = \"sync.truth\"\n\
+         [[edge]]\nfrom = \"sync.frame\"\nto = \"recon.frame\"\n\
+         [[edge]]\nfrom = \"recon.image\"\nto = \"seg.image\"\n\
+         [[edge]]\nfrom = \"seg.contacts\"\nto = \"cap.in\"\n",
+        fixture("two-presses-paper.toml"),
+        recon_params("")
+    );
+    let spec = GraphSpec::parse(SourceFile::new("handover.toml", graph), &reg).unwrap();
+    let running = RunningGraph::start(&spec).unwrap();
+    let handle = running.handle();
+    let runner = std::thread::spawn(move || running.wait(&RunOptions::default()));
+    if !swaps.is_empty() {
+        // Held twice: everything before the gate has run through (a lockstep pass drains).
+        let t0 = Instant::now();
+        while gate.held.load(SeqCst) < 2 {
+            assert!(t0.elapsed() < Duration::from_secs(300), "the source was never held");
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        for (node, params) in swaps {
+            let kind = spec.nodes.iter().find(|n| n.id == *node).unwrap().kind.clone();
+            // An inline-table body, as in the graph file.
+            let table: toml::Table = format!("p = {{ {params} }}").parse().unwrap();
+            let params = Params::from_table(table["p"].as_table().unwrap().clone());
+            handle.swap(node, reg.get(&kind).unwrap().clone(), params).unwrap();
+        }
+        gate.open.store(true, SeqCst);
+    }
+    let report = runner.join().unwrap();
+    assert!(report.failures.is_empty(), "{:?}", report.failures);
+    assert_eq!(report.stats.total_drops(), 0);
+    for (node, _) in swaps {
+        assert_eq!(report.stats.node(node).unwrap().swaps, 1, "{node}");
+    }
+    let rows = captured.lock().unwrap();
+    rows.iter().map(|r| r[0].arc::<Contacts>().unwrap()).collect()
+}
+
+#[test]
+fn swapped_nodes_keep_their_state_and_outputs_equal_an_unswapped_run() {
+    let base = run(&[]);
+    // Same parameters, or a harmless change (per-element values as well as pixels).
+    let swapped = run(&[("sync", String::new()), ("recon", recon_params(", elements = true")), ("seg", String::new())]);
+    let loaded_before_swap = base.iter().take(GATE_FRAMES as usize).filter(|c| !c.image.src.no_load).count();
+    assert!(loaded_before_swap >= 1, "the swap must come after the no-load period");
+    assert_eq!(base.len(), swapped.len(), "no frame lost or added by the swap");
+    assert!(base.len() >= 12, "{} frames", base.len());
+    let mut contacts = 0;
+    for (i, (a, b)) in base.iter().zip(&swapped).enumerate() {
+        let (sa, sb) = (&a.image.src, &b.image.src);
+        assert_eq!(sa.frame.v, sb.frame.v, "frame {i}: input");
+        // sync: P0, the noise and the no-load period go on.
+        assert_eq!(sa.dp_kpa.to_bits(), sb.dp_kpa.to_bits(), "frame {i}: dP");
+        assert_eq!(sa.p0_kpa.to_bits(), sb.p0_kpa.to_bits(), "frame {i}: P0");
+        assert_eq!(sa.noise_kpa.to_bits(), sb.noise_kpa.to_bits(), "frame {i}: noise");
+        assert_eq!((sa.no_load, sa.settled), (sb.no_load, sb.settled), "frame {i}");
+        // reconstructor: the same reference, so the same image.
+        assert_eq!(a.image.reference, b.image.reference, "frame {i}: reference");
+        assert_eq!(a.image.pixels, b.image.pixels, "frame {i}: pixels");
+        // segmenter: the same floor, so the same contacts.
+        let key = |c: &Contacts| c.contacts.iter().map(|k| (k.x_mm, k.y_mm, k.sum, k.area_mm2)).collect::<Vec<_>>();
+        assert_eq!(key(a.as_ref()), key(b.as_ref()), "frame {i}: contacts");
+        contacts += a.contacts.len();
+    }
+    assert!(contacts >= 4, "the presses are found ({contacts} contacts)");
+    assert!(base.iter().all(|c| c.image.elements.is_empty()));
+    assert!(!swapped.last().unwrap().image.elements.is_empty(), "the replacement's params apply");
+}
+
+#[test]
+fn a_new_lambda_keeps_the_no_load_reference() {
+    let swapped = run(&[("recon", recon_params(", lambda = 0.05"))]);
+    // Fewer no-load frames than `reference_frames`: the reference is their mean from the first
+    // loaded frame on, before and after the swap (a replacement without it would tare on a
+    // loaded frame: `Tare`).
+    for (i, c) in swapped.iter().enumerate() {
+        let want = if c.image.src.no_load { ReferenceSource::Accumulating } else { ReferenceSource::NoLoadMean };
+        assert_eq!(c.image.reference, want, "frame {i}");
+    }
+    assert!(swapped.iter().skip(GATE_FRAMES as usize).any(|c| !c.contacts.is_empty()));
+}

@@ -266,10 +266,15 @@ fn run(
         None => None,
     };
     let stop = interrupt_flag()?;
+    // Before the graph starts: a bad --control path fails without any data flowing.
+    let listener = control.map(cmd::live::bind_control_socket).transpose()?;
     let running = match RunningGraph::start(&spec) {
         Ok(r) => r,
         Err(e) => {
             eprintln!("{}: {e}", path.display());
+            if let (Some(sock), Some(_)) = (control, &listener) {
+                let _ = std::fs::remove_file(sock); // the socket bound above
+            }
             return Ok(ExitCode::from(1));
         }
     };
@@ -281,9 +286,9 @@ fn run(
         helpers.push(std::thread::spawn(move || cmd::live::watch(p, reg, spec, h, d)));
         eprintln!("watching {} for edits", path.display());
     }
-    if let Some(sock) = control {
+    if let (Some(sock), Some(listener)) = (control, listener) {
         let reg = registry_for(path)?.unwrap_or_else(|_| registry());
-        helpers.push(cmd::live::control_socket(sock, reg, running.handle(), done.clone())?);
+        helpers.push(cmd::live::control_socket(listener, sock, reg, running.handle(), done.clone()));
         eprintln!("control socket at {}", sock.display());
     }
     let report = running.wait(&RunOptions { duration, stop: Some(stop) });

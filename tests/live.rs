@@ -51,6 +51,13 @@ fn watch_swaps_edited_nodes_and_the_control_socket_answers() {
     let bad = ask(&sock, r#"{"cmd": "tare", "node": "nope"}"#);
     assert_eq!(bad["ok"], false);
     assert!(bad["error"].as_str().unwrap().contains("nope"), "{bad}");
+    // A command the node rejects is answered with the node's error, not ok.
+    let rejected = ask(&sock, r#"{"cmd": "control", "node": "f", "command": "bogus"}"#);
+    assert_eq!(rejected["ok"], false, "{rejected}");
+    let e = rejected["error"].as_str().unwrap();
+    assert!(e.contains("\"f\"") && e.contains("bogus") && e.contains("not supported"), "{e}");
+    let tare = ask(&sock, r#"{"cmd": "tare", "node": "f"}"#);
+    assert_eq!(tare["ok"], false, "scale has no tare: {tare}");
     // Wait until data flows, then an invalid edit (rejected), then a valid one (swapped).
     std::thread::sleep(Duration::from_millis(600));
     std::fs::write(&g, graph("factr = 3", "out.csv")).unwrap();
@@ -75,4 +82,23 @@ fn watch_swaps_edited_nodes_and_the_control_socket_answers() {
         assert_eq!(seq, i as u64);
         assert_eq!(y, if i < switch { 2 * seq } else { seq + 1_000_000 }, "row {i}");
     }
+}
+
+#[test]
+fn control_refuses_to_replace_a_file_that_is_not_a_socket() {
+    let d = workdir("live", "control-file");
+    let g = d.join("g.toml");
+    std::fs::write(&g, graph("factor = 2", "out.csv")).unwrap();
+    let precious = d.join("notes.txt");
+    std::fs::write(&precious, "keep me").unwrap();
+    let out = Command::new(bin())
+        .args(["run", g.to_str().unwrap(), "--control", precious.to_str().unwrap()])
+        .env("RUST_LOG", "warn")
+        .output()
+        .unwrap();
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains(&format!("{}: --control: exists and is not a socket (a file)", precious.display())), "{err}");
+    assert_eq!(std::fs::read_to_string(&precious).unwrap(), "keep me", "the file is left alone");
+    assert!(!d.join("out.csv").exists(), "the graph did not run");
 }

@@ -2,24 +2,28 @@
 //! and `--control SOCKET` serves JSON lines on a Unix domain socket.
 //!
 //! Watch: an edit that changes nodes' kinds or parameters swaps those nodes (unchanged nodes
-//! keep running with their state; queues are kept, so `block` edges lose nothing). An invalid
-//! edit, or one that adds, removes or rewires nodes and edges, is rejected with its error and
-//! the running graph goes on.
+//! keep running with their state; queues are kept, so `block` edges lose nothing; a swapped
+//! node's replacement takes over its learned state, e.g. the EIT reference, P0 and noise
+//! estimates, see `skinflow_core::runtime::GraphHandle`). An invalid edit, or one that adds,
+//! removes or rewires nodes and edges, is rejected with its error and the running graph goes on.
 //!
 //! Control socket, one JSON object per line, one reply per line (`{"ok": true, ...}` or
-//! `{"ok": false, "error": "..."}`):
+//! `{"ok": false, "error": "..."}`; `tare` and `control` wait for the node's answer, so a
+//! command the node rejects gives its error). The socket path must not exist or be a stale
+//! socket; any other file there is refused, never replaced:
 //! `{"cmd": "stats"}`, `{"cmd": "tare", "node": "sync"}`,
 //! `{"cmd": "control", "node": "recon", "command": "tare"}`,
 //! `{"cmd": "swap", "node": "split", "kind": "splitter", "params": {"strategy": "proportional"}}`.
 
 use std::io::{BufRead, BufReader, Write};
+use std::os::unix::fs::FileTypeExt;
 use std::os::unix::net::{UnixListener, UnixStream};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, SystemTime};
 
-use anyhow::{Context as _, Result};
+use anyhow::{Context as _, Result, bail};
 use serde_json::{Value, json};
 use skinflow_core::graph::{EdgeSpec, SourceFile};
 use skinflow_core::{GraphHandle, GraphSpec, Params, Registry};
@@ -101,6 +105,9 @@ pub fn watch(path: PathBuf, registry: Registry, mut current: GraphSpec, handle: 
     }
 }
 
+/// Longest a `tare` or `control` request waits for the node to run the command.
+const CONTROL_REPLY_TIMEOUT: Duration = Duration::from_secs(10);
+
 fn reply(handle: &GraphHandle, registry: &Registry, line: &str) -> Value {
     let req: Value = match serde_json::from_str(line) {
         Ok(v) => v,
@@ -110,11 +117,15 @@ fn reply(handle: &GraphHandle, registry: &Registry, line: &str) -> Value {
     let result: Result<Value, String> = match s("cmd") {
         Some("stats") => serde_json::to_value(handle.stats()).map_err(|e| e.to_string()),
         Some("tare") => match s("node") {
-            Some(n) => handle.control(n, "tare").map(|()| json!({})).map_err(|e| e.to_string()),
+            Some(n) => {
+                handle.control_wait(n, "tare", CONTROL_REPLY_TIMEOUT).map(|()| json!({})).map_err(|e| e.to_string())
+            }
             None => Err("\"tare\" needs \"node\"".into()),
         },
         Some("control") => match (s("node"), s("command")) {
-            (Some(n), Some(c)) => handle.control(n, c).map(|()| json!({})).map_err(|e| e.to_string()),
+            (Some(n), Some(c)) => {
+                handle.control_wait(n, c, CONTROL_REPLY_TIMEOUT).map(|()| json!({})).map_err(|e| e.to_string())
+            }
             _ => Err("\"control\" needs \"node\" and \"command\"".into()),
         },
         Some("swap") => match (s("node"), s("kind")) {
@@ -160,21 +171,43 @@ fn serve(stream: UnixStream, handle: GraphHandle, registry: Registry) {
     }
 }
 
+/// Binds the control socket. An existing socket at `path` (left by an earlier run) is
+/// replaced; any other existing file is refused and left alone.
+pub fn bind_control_socket(path: &Path) -> Result<UnixListener> {
+    match std::fs::symlink_metadata(path) {
+        Ok(m) if m.file_type().is_socket() => {
+            std::fs::remove_file(path).with_context(|| format!("{}: cannot replace the old socket", path.display()))?;
+        }
+        Ok(m) => bail!(
+            "{}: --control: exists and is not a socket ({}); refusing to replace it: remove it or choose another path",
+            path.display(),
+            if m.is_dir() {
+                "a directory"
+            } else if m.file_type().is_symlink() {
+                "a symbolic link"
+            } else {
+                "a file"
+            }
+        ),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+        Err(e) => bail!("{}: --control: cannot inspect the path: {e}", path.display()),
+    }
+    let listener =
+        UnixListener::bind(path).with_context(|| format!("{}: cannot bind the control socket", path.display()))?;
+    listener.set_nonblocking(true).with_context(|| format!("{}: control socket", path.display()))?;
+    Ok(listener)
+}
+
 /// Serves the control socket until `done`; removes the socket file at the end.
 pub fn control_socket(
+    listener: UnixListener,
     path: &Path,
     registry: Registry,
     handle: GraphHandle,
     done: Arc<AtomicBool>,
-) -> Result<std::thread::JoinHandle<()>> {
-    if path.exists() {
-        std::fs::remove_file(path).with_context(|| format!("{}: cannot replace the old socket", path.display()))?;
-    }
-    let listener =
-        UnixListener::bind(path).with_context(|| format!("{}: cannot bind the control socket", path.display()))?;
-    listener.set_nonblocking(true)?;
+) -> std::thread::JoinHandle<()> {
     let path = path.to_path_buf();
-    Ok(std::thread::spawn(move || {
+    std::thread::spawn(move || {
         while !done.load(Ordering::SeqCst) {
             match listener.accept() {
                 Ok((s, _)) => {
@@ -186,5 +219,5 @@ pub fn control_socket(
             }
         }
         let _ = std::fs::remove_file(&path);
-    }))
+    })
 }

@@ -36,6 +36,10 @@ pub enum SchemaProblem {
     BadSensor { reason: String },
     #[error("time {t_s} is not finite")]
     NonFiniteTime { t_s: f64 },
+    #[error("row {row} is not a finite time ({t_s})")]
+    NonFiniteTimeAt { row: usize, t_s: f64 },
+    #[error("is not increasing at row {row} ({t_s} s after {previous_s} s)")]
+    NotIncreasing { row: usize, t_s: f64, previous_s: f64 },
     #[error("has element type {found}, expected a number")]
     NotNumericData { found: String },
 }

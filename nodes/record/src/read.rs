@@ -1,7 +1,10 @@
 //! The reader: `Recording::open` validates a format-v1 file (written by skinflow, h5py, MATLAB)
 //! and loads its streams whole as flat row-major vectors. Streams are `None` when their group
 //! is absent; each present stream has consistent lengths and widths, and EIT frames have the
-//! width M of the sensor's protocol. Times are seconds, EIT volts, pressure kPa, truth mm/N.
+//! width M of the sensor's protocol, and the times of every stream are finite and in time
+//! order (a NaN or a step back is refused naming the dataset and row). A stream may be absent
+//! (e.g. a logger without pressure connected); callers that need one use `require_*`.
+//! Times are seconds, EIT volts, pressure kPa, truth mm/N.
 
 mod attr;
 mod data;
@@ -239,6 +242,26 @@ impl Recording {
     }
 }
 
+/// Times of a stream must be finite and in time order (equal times allowed): the replay merges
+/// the streams by time and the truth lookup searches them.
+fn check_times(fpath: &Path, path: &str, t: &[f64]) -> Result<(), RecordError> {
+    let mut previous = f64::NEG_INFINITY;
+    for (row, &t_s) in t.iter().enumerate() {
+        if !t_s.is_finite() {
+            return Err(RecordError::schema(fpath, path, SchemaProblem::NonFiniteTimeAt { row, t_s }));
+        }
+        if t_s < previous {
+            return Err(RecordError::schema(
+                fpath,
+                path,
+                SchemaProblem::NotIncreasing { row, t_s, previous_s: previous },
+            ));
+        }
+        previous = t_s;
+    }
+    Ok(())
+}
+
 fn read_eit(file: &File, fpath: &Path, sensor: &Sensor) -> Result<Option<EitStream>, RecordError> {
     if !file.link_exists("/eit") {
         return Ok(None);
@@ -248,6 +271,7 @@ fn read_eit(file: &File, fpath: &Path, sensor: &Sensor) -> Result<Option<EitStre
     let v = data::read::<f64>(file, fpath, layout::EIT_V, 2)?;
     data::expect_rows(fpath, layout::EIT_SEQ, &seq, layout::EIT_T, t.rows())?;
     data::expect_rows(fpath, layout::EIT_V, &v, layout::EIT_T, t.rows())?;
+    check_times(fpath, layout::EIT_T, &t.values)?;
     let expected = sensor.measurement_count();
     if v.width() != expected {
         let problem =
@@ -264,6 +288,7 @@ fn read_pressure(file: &File, fpath: &Path) -> Result<Option<PressureStream>, Re
     let t = data::read::<f64>(file, fpath, layout::PRESSURE_T, 1)?;
     let kpa = data::read::<f64>(file, fpath, layout::PRESSURE_KPA, 1)?;
     data::expect_rows(fpath, layout::PRESSURE_KPA, &kpa, layout::PRESSURE_T, t.rows())?;
+    check_times(fpath, layout::PRESSURE_T, &t.values)?;
     Ok(Some(PressureStream { t_s: t.values, kpa: kpa.values }))
 }
 
@@ -274,6 +299,7 @@ fn read_truth(file: &File, fpath: &Path) -> Result<Option<TruthStream>, RecordEr
     let t = data::read::<f64>(file, fpath, layout::TRUTH_T, 1)?;
     let x = data::read::<f64>(file, fpath, layout::TRUTH_X_MM, 2)?;
     data::expect_rows(fpath, layout::TRUTH_X_MM, &x, layout::TRUTH_T, t.rows())?;
+    check_times(fpath, layout::TRUTH_T, &t.values)?;
     let column = |path: &str| -> Result<Vec<f64>, RecordError> {
         let d = data::read::<f64>(file, fpath, path, 2)?;
         data::expect_rows(fpath, path, &d, layout::TRUTH_T, t.rows())?;

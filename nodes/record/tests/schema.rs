@@ -139,6 +139,24 @@ fn every_violation_is_refused_with_file_path_and_problem() {
             SchemaProblem::ColumnMismatch { found: 119, other: "/eit/v".into(), expected: 120 },
         ),
         (
+            "infinite time in eit/t",
+            |f| replace_dataset(f, "/eit/t", &[0.0, 0.1, 0.2, f64::INFINITY, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9], &[10]),
+            "/eit/t",
+            SchemaProblem::NonFiniteTimeAt { row: 3, t_s: f64::INFINITY },
+        ),
+        (
+            "pressure/t steps back",
+            |f| replace_dataset(f, "/pressure/t", &[0.0, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.35, 0.8, 0.9], &[10]),
+            "/pressure/t",
+            SchemaProblem::NotIncreasing { row: 7, t_s: 0.35, previous_s: 0.6 },
+        ),
+        (
+            "truth/t steps back",
+            |f| replace_dataset(f, "/truth/t", &[0.5, 0.0], &[2]),
+            "/truth/t",
+            SchemaProblem::NotIncreasing { row: 1, t_s: 0.0, previous_s: 0.5 },
+        ),
+        (
             "eit/t holds strings",
             |f| {
                 f.unlink("/eit/t").unwrap();
@@ -162,6 +180,16 @@ fn every_violation_is_refused_with_file_path_and_problem() {
             other => panic!("{what}: expected a schema error, got {other}"),
         }
     }
+    // A NaN time (NaN != NaN, so checked by its message).
+    let file = valid_file(&dir, "nan-time.h5");
+    replace_dataset(
+        &hdf5::File::open_rw(&file).unwrap(),
+        "/eit/t",
+        &[0.0, 0.1, 0.2, 0.3, 0.4, f64::NAN, 0.6, 0.7, 0.8, 0.9],
+        &[10],
+    );
+    let msg = Recording::open(&file).unwrap_err().to_string();
+    assert_eq!(msg, format!("{}: /eit/t: row 5 is not a finite time (NaN)", file.display()));
     // The sensor's protocol decides M: a 12-electrode sensor has 66 pairwise measurements.
     let file = valid_file(&dir, "sensor12.h5");
     set_str_attr(&hdf5::File::open_rw(&file).unwrap(), "sensor", &sensor_12);

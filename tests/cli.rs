@@ -106,6 +106,62 @@ fn calibrate_then_eval_writes_the_contract_json() {
     assert!(by_pressure > 0, "{err}");
 }
 
+/// Without /pressure, or with times out of order, calibrate and eval refuse up front naming the
+/// file and the dataset (instead of all-zero forces or "no loaded single-contact frame").
+#[test]
+fn calibrate_and_eval_refuse_a_recording_without_pressure_or_with_bad_times() {
+    let d = workdir("nopressure");
+    simulate(&d, "tiny-eval.toml", "rec.h5");
+    let graph = "[graph]\nmode = \"lockstep\"\n\
+        [[node]]\nid = \"replay\"\nkind = \"replay\"\nparams = { path = \"rec.h5\", speed = 0.0 }\n\
+        [[node]]\nid = \"log\"\nkind = \"hdf5_logger\"\nparams = { path = \"nop.h5\" }\n\
+        [[edge]]\nfrom = \"replay.eit\"\nto = \"log.eit\"\n\
+        [[edge]]\nfrom = \"replay.truth\"\nto = \"log.truth\"\n";
+    std::fs::write(d.join("strip.toml"), graph).unwrap();
+    ok(&skinflow(&d, &["run", "strip.toml"]));
+    let calib = fixture("../../graphs/calib/paper.toml");
+    for args in
+        [vec!["eval", "nop.h5", "--calib", calib.to_str().unwrap()], vec!["calibrate", "nop.h5", "--out", "c.toml"]]
+    {
+        let out = skinflow(&d, &args);
+        assert_eq!(out.status.code(), Some(1), "{args:?}");
+        let err = stderr(&out);
+        assert!(err.contains("nop.h5: the recording has no pressure samples (/pressure is missing"), "{args:?}: {err}");
+        assert!(!d.join("c.toml").exists());
+    }
+    // The same recording with its pressure clock stepping back at row 17.
+    let rec = skinflow_record::Recording::open(d.join("rec.h5")).unwrap();
+    let mut opts = skinflow_record::WriterOptions::new(rec.sensor_toml.clone());
+    opts.streams =
+        skinflow_record::Streams { eit: true, pressure: true, truth: true, ..skinflow_record::Streams::default() };
+    opts.truth_max_contacts = rec.truth.as_ref().unwrap().max_contacts;
+    let mut w = skinflow_record::RecordingWriter::create(d.join("back.h5"), &opts).unwrap();
+    let eit = rec.eit.as_ref().unwrap();
+    for i in 0..eit.len() {
+        w.append_eit(eit.t_s[i], eit.seq[i], eit.frame(i)).unwrap();
+    }
+    let p = rec.pressure.as_ref().unwrap();
+    for i in 0..p.len() {
+        let t = if i == 17 { p.t_s[16] - 0.5 } else { p.t_s[i] };
+        w.append_pressure(t, p.kpa[i]).unwrap();
+    }
+    let truth = rec.truth.as_ref().unwrap();
+    for i in 0..truth.len() {
+        let row = truth.row(i);
+        let contacts: Vec<skinflow_record::TruthContact> = row.contacts().collect();
+        w.append_truth(truth.t_s[i], &contacts).unwrap();
+    }
+    w.close().unwrap();
+    for args in
+        [vec!["eval", "back.h5", "--calib", calib.to_str().unwrap()], vec!["calibrate", "back.h5", "--out", "c.toml"]]
+    {
+        let out = skinflow(&d, &args);
+        assert_eq!(out.status.code(), Some(1), "{args:?}");
+        let err = stderr(&out);
+        assert!(err.contains("back.h5: /pressure/t: is not increasing at row 17 ("), "{args:?}: {err}");
+    }
+}
+
 #[test]
 fn eval_refuses_a_recording_without_truth() {
     let d = workdir("notruth");
@@ -135,6 +191,28 @@ fn replayed_pipeline_logs_derived_streams_without_drops() {
     assert!(text.contains("guards:   pneumatic-locaware: "), "{text}");
     let shares = derived_streams_agree(&out, frames);
     assert!(shares.loaded > 0, "no loaded frame with contacts");
+}
+
+/// Forces of a strategy the logger was not told about (e.g. after a swap renamed it) are left
+/// out with one warning and counted, not an error per frame; the other streams are complete.
+#[test]
+fn forces_of_an_unlisted_strategy_warn_once_and_are_counted() {
+    let d = workdir("unlisted-strategy");
+    simulate(&d, "tiny-eval.toml", "rec.h5");
+    let g = pipeline_graph(&d, "rec.h5", "eit-nocal");
+    let out = skinflow(&d, &["run", &g, "--stats-json", "stats.json"]);
+    ok(&out);
+    let err = stderr(&out);
+    let (frames, log) = check_pipeline_stats(&d);
+    assert_eq!(err.matches("is not in `strategies`").count(), 1, "{err}");
+    assert!(err.contains("forces of strategy \"pneumatic-locaware\" are not logged"), "{err}");
+    assert!(err.contains(&format!("frames={frames}")) && err.contains("force frames not logged"), "{err}");
+    let stats: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(d.join("stats.json")).unwrap()).unwrap();
+    let log_node = stats["nodes"].as_array().unwrap().iter().find(|n| n["id"] == "log").unwrap().clone();
+    assert_eq!(log_node["errors"], 0, "{log_node}");
+    let rec = skinflow_record::Recording::open(&log).unwrap();
+    assert_eq!(rec.derived.sync.as_ref().expect("/derived/sync").t_s.len(), frames);
 }
 
 /// Drift the tare cannot follow pushes dP to or below zero while the EIT layer still sees the
@@ -206,6 +284,13 @@ fn a_dead_electrode_is_masked_and_contacts_are_still_found_and_weighed() {
 /// logging the derived streams to `out.h5`; checks that nothing was dropped and every frame
 /// went through every stage. Returns the frame count and the log's path.
 fn replay_pipeline(d: &Path, rec: &str) -> (usize, PathBuf) {
+    let out = skinflow(d, &["run", &pipeline_graph(d, rec, "pneumatic-locaware"), "--stats-json", "stats.json"]);
+    ok(&out);
+    check_pipeline_stats(d)
+}
+
+/// Writes the replayed pipeline graph (logging `logged`'s forces) into `d`; returns its name.
+fn pipeline_graph(d: &Path, rec: &str, logged: &str) -> String {
     let calib = fixture("../../graphs/calib/paper.toml");
     let graph = format!(
         "[graph]\nmode = \"lockstep\"\n\
@@ -215,7 +300,7 @@ fn replay_pipeline(d: &Path, rec: &str) -> (usize, PathBuf) {
         [[node]]\nid = \"seg\"\nkind = \"segmenter\"\n\
         [[node]]\nid = \"split\"\nkind = \"splitter\"\n\
         [[node]]\nid = \"force\"\nkind = \"corrector\"\nparams = {{ calibration = {calib:?} }}\n\
-        [[node]]\nid = \"log\"\nkind = \"hdf5_logger\"\nparams = {{ path = \"out.h5\", strategies = [\"pneumatic-locaware\"] }}\n\
+        [[node]]\nid = \"log\"\nkind = \"hdf5_logger\"\nparams = {{ path = \"out.h5\", strategies = [{logged:?}] }}\n\
         [[edge]]\nfrom = \"replay.eit\"\nto = \"sync.eit\"\n\
         [[edge]]\nfrom = \"replay.pressure\"\nto = \"sync.pressure\"\n\
         [[edge]]\nfrom = \"replay.truth\"\nto = \"sync.truth\"\n\
@@ -230,8 +315,11 @@ fn replay_pipeline(d: &Path, rec: &str) -> (usize, PathBuf) {
         [[edge]]\nfrom = \"sync.frame\"\nto = \"log.sync\"\n"
     );
     std::fs::write(d.join("g.toml"), graph).unwrap();
-    let out = skinflow(d, &["run", "g.toml", "--stats-json", "stats.json"]);
-    ok(&out);
+    "g.toml".to_owned()
+}
+
+/// Checks the statistics of a [`pipeline_graph`] run; returns the frame count and the log's path.
+fn check_pipeline_stats(d: &Path) -> (usize, PathBuf) {
     let stats: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(d.join("stats.json")).unwrap()).unwrap();
     let total_drops: u64 = stats["edges"].as_array().unwrap().iter().map(|e| e["drops"].as_u64().unwrap()).sum();
@@ -300,6 +388,64 @@ fn derived_streams_agree(path: &Path, frames: usize) -> Shares {
     shares
 }
 
+/// Output flags are checked before any work: never the same file as an input (under any
+/// name), their directory must exist, `--calib` must be a calibration, `simulate` does not
+/// replace a file without `--overwrite`, and `reproduce` needs its scenes before it creates
+/// anything. Inputs are left untouched.
+#[test]
+fn outputs_and_inputs_are_checked_before_any_work() {
+    let d = workdir("io-checks");
+    std::fs::create_dir_all(d.join("sub")).unwrap();
+    std::fs::write(d.join("rec.h5"), "recording bytes").unwrap();
+    std::fs::write(d.join("c.toml"), "calibration bytes").unwrap();
+    std::fs::write(d.join("other.toml"), "x = 1\n").unwrap();
+    let calib = fixture("../../graphs/calib/paper.toml");
+    let calib = calib.to_str().unwrap();
+    let scene = fixture("tiny-eval.toml");
+    let cases: Vec<(Vec<&str>, String)> = vec![
+        (vec!["calibrate", "rec.h5", "--out", "rec.h5"], "--out rec.h5: is the recording rec.h5; refusing".into()),
+        (vec!["calibrate", "rec.h5", "--out", "sub/../rec.h5"], "is the recording rec.h5; refusing".into()),
+        (
+            vec!["calibrate", "rec.h5", "--out", "nope/dir/x.toml"],
+            "--out nope/dir/x.toml: directory nope/dir does not exist".into(),
+        ),
+        (
+            vec!["eval", "rec.h5", "--calib", "c.toml", "--json", "rec.h5"],
+            "--json rec.h5: is the recording rec.h5".into(),
+        ),
+        (
+            vec!["eval", "rec.h5", "--calib", "c.toml", "--contacts-csv", "c.toml"],
+            "--contacts-csv c.toml: is the --calib c.toml".into(),
+        ),
+        (
+            vec!["eval", "rec.h5", "--calib", "c.toml", "--json", "./c.toml"],
+            "--json ./c.toml: is the --calib c.toml".into(),
+        ),
+        (
+            vec!["eval", "rec.h5", "--calib", calib, "--json", "nope/r.json"],
+            "--json nope/r.json: directory nope does not exist".into(),
+        ),
+        (vec!["eval", "rec.h5", "--calib", "missing.toml"], "--calib missing.toml: does not exist".into()),
+        (vec!["eval", "rec.h5", "--calib", "other.toml"], "--calib: other.toml: ".into()),
+        (
+            vec!["simulate", scene.to_str().unwrap(), "--out", "rec.h5"],
+            "--out rec.h5: exists (pass --overwrite to replace it)".into(),
+        ),
+        (vec!["reproduce", "--out", "rep"], "--scenes graphs/scenes: missing scene file(s)".into()),
+    ];
+    for (args, want) in cases {
+        let out = skinflow(&d, &args);
+        let err = stderr(&out);
+        assert_eq!(out.status.code(), Some(1), "{args:?}: {err}");
+        assert!(err.contains(&want), "{args:?}: want {want:?} in:\n{err}");
+        assert_eq!(err.lines().filter(|l| l.starts_with("error:")).count(), 1, "{args:?}: one line: {err}");
+    }
+    assert_eq!(std::fs::read_to_string(d.join("rec.h5")).unwrap(), "recording bytes");
+    assert_eq!(std::fs::read_to_string(d.join("c.toml")).unwrap(), "calibration bytes");
+    assert!(!d.join("rep").exists(), "reproduce created its output directory before failing");
+    assert!(!d.join("nope").exists());
+}
+
 #[test]
 fn a_missing_recording_stops_run_before_data_flows() {
     let d = workdir("missing");
@@ -310,6 +456,7 @@ fn a_missing_recording_stops_run_before_data_flows() {
     assert!(!out.status.success());
     let err = stderr(&out);
     assert!(err.contains("\"replay\"") && err.contains("nope.h5"), "{err}");
+    assert_eq!(err.matches("nope.h5").count(), 1, "the path is named once: {err}");
 }
 
 /// The `paper` profile must keep reproducing the paper's baselines through the project's own

@@ -14,6 +14,10 @@
 //! ```
 //! Inputs (all optional): `eit`, `pressure`, `truth`, `image`, `contacts`, `forces` (multi),
 //! `sync` (the `sync` node's frames).
+//!
+//! Forces of a strategy not in `strategies` (e.g. after a hot swap renamed a corrector's
+//! strategy) are not logged: one warning per strategy name, and the frames left out are
+//! counted and reported at stop.
 
 use std::path::{Path, PathBuf};
 
@@ -99,6 +103,8 @@ pub struct Logger {
     writer: Option<RecordingWriter>,
     truth_buf: Vec<RecTruth>,
     forces_buf: Vec<ForceRow>,
+    /// Per strategy not in `strategies`: the force frames not logged.
+    unlisted: Vec<(String, u64)>,
 }
 
 fn io(path: &Path, e: impl std::fmt::Display) -> NodeError {
@@ -132,6 +138,7 @@ impl Logger {
             writer: None,
             truth_buf: Vec::with_capacity(16),
             forces_buf: Vec::with_capacity(64),
+            unlisted: Vec::new(),
         })
     }
 
@@ -178,11 +185,11 @@ impl Sink for Logger {
         Ok(())
     }
 
-    fn consume(&mut self, _ctx: &mut Context, inputs: &Inputs) -> Result<(), NodeError> {
+    fn consume(&mut self, ctx: &mut Context, inputs: &Inputs) -> Result<(), NodeError> {
         let path = self.path.clone();
         let fatal = |e: skinflow_record::error::RecordError| io(&path, e).fatal();
         self.ensure_writer(inputs)?;
-        let Logger { writer, truth_buf, forces_buf, .. } = self;
+        let Logger { writer, truth_buf, forces_buf, unlisted, .. } = self;
         let w = writer.as_mut().expect("ensured above");
         if let Some(m) = inputs.get(EIT)
             && let Some(f) = m.get::<EitFrame>()
@@ -221,10 +228,19 @@ impl Sink for Logger {
         for (_, m) in inputs.iter_port(FORCES) {
             let Some(f) = m.get::<Forces>() else { continue };
             let Some(k) = w.strategy_index(&f.strategy) else {
-                return Err(NodeError::Input {
-                    port: "forces".into(),
-                    problem: format!("strategy \"{}\" is not in `strategies`", f.strategy),
-                });
+                match unlisted.iter_mut().find(|(name, _)| *name == f.strategy) {
+                    Some((_, n)) => *n += 1,
+                    None => {
+                        tracing::warn!(
+                            node = ctx.id(),
+                            path = %path.display(),
+                            "forces of strategy \"{}\" are not logged: it is not in `strategies` (warned once; frames counted)",
+                            f.strategy
+                        );
+                        unlisted.push((f.strategy.clone(), 1));
+                    }
+                }
+                continue;
             };
             forces_buf.clear();
             forces_buf.extend(f.forces.iter().map(|e| ForceRow {
@@ -252,6 +268,15 @@ impl Sink for Logger {
     }
 
     fn stop(&mut self, ctx: &mut Context) -> Result<(), NodeError> {
+        for (strategy, frames) in &self.unlisted {
+            tracing::warn!(
+                node = ctx.id(),
+                path = %self.path.display(),
+                strategy = %strategy,
+                frames,
+                "force frames not logged: strategy not in `strategies`"
+            );
+        }
         if let Some(w) = self.writer.take() {
             let s = w.close().map_err(|e| io(&self.path, e))?;
             tracing::info!(

@@ -207,8 +207,7 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
         .param(ParamDoc::new("loop", "bool", "false", "start again at the end")),
         |p: ReplayParams, ctx| {
             let path = ctx.resolve(&p.path);
-            let rec =
-                Recording::open(&path).map_err(|e| NodeError::Path { path: path.clone(), problem: e.to_string() })?;
+            let rec = Recording::open(&path).map_err(NodeError::other)?; // names the file
             Ok(NodeImpl::Source(Box::new(Replay::new(rec, p.speed, p.repeat))))
         },
     ))

@@ -136,8 +136,7 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
             .param(ParamDoc::new("pacing", "string", "none", "override the scene: realtime | fast")),
         |p: SimParams, ctx| {
             let path = ctx.resolve(&p.scene);
-            let scene =
-                Scene::from_file(&path).map_err(|e| NodeError::Path { path: path.clone(), problem: e.to_string() })?;
+            let scene = Scene::from_file(&path).map_err(NodeError::other)?; // names the file
             Ok(NodeImpl::Source(Box::new(Sim::new(&scene, p.seed, p.pacing.as_deref())?)))
         },
     ))

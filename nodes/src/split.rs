@@ -64,7 +64,8 @@ impl NodeParams for SplitterParams {
 /// Reads a calibration file named by a node parameter.
 pub(crate) fn load_calibration(path: &std::path::Path, ctx: &BuildContext) -> Result<Calibration, NodeError> {
     let p = ctx.resolve(path);
-    Calibration::read(&p).map_err(|e| NodeError::Path { path: p.clone(), problem: e.to_string() })
+    // The file's error names the path already.
+    Calibration::read(&p).map_err(NodeError::other)
 }
 
 /// How weights are computed.

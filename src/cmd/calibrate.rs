@@ -90,6 +90,7 @@ pub fn collect(recording: &Path, args: &PipelineArgs) -> Result<(Vec<CalibSample
 }
 
 pub fn run(recording: &Path, out: &Path, fit_toml: &str, args: &PipelineArgs) -> Result<()> {
+    super::paths::check_outputs(&[("recording", recording)], &[("--out", out)])?;
     let params = fit_params(fit_toml)?;
     let fitted = fit(recording, &params, args)?;
     for w in &fitted.warnings {

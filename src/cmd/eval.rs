@@ -210,6 +210,16 @@ pub fn run(
     contacts_csv: Option<&Path>,
     args: &PipelineArgs,
 ) -> Result<()> {
+    let inputs = [("recording", recording), ("--calib", calib)];
+    let outputs: Vec<(&str, &Path)> =
+        [("--json", json), ("--contacts-csv", contacts_csv)].into_iter().filter_map(|(f, p)| Some((f, p?))).collect();
+    super::paths::check_outputs(&inputs, &outputs)?;
+    if let Some(dir) = plots_dir
+        && inputs.iter().any(|(_, p)| super::paths::same_file(p, dir))
+    {
+        anyhow::bail!("--plots {}: is an input file, not a directory for the plots", dir.display());
+    }
+    check_calibration(calib)?;
     let outcome = evaluate(recording, calib, args, contacts_csv.is_some())?;
     if let Some(p) = contacts_csv {
         let mut text = contacts_csv_header();
@@ -230,6 +240,16 @@ pub fn run(
     if let Some(dir) = plots_dir {
         write_plots(dir, calib, &outcome, args)?;
     }
+    Ok(())
+}
+
+/// Refuses a `--calib` that is missing or not a calibration before the pipeline runs.
+pub fn check_calibration(calib: &Path) -> Result<()> {
+    if !calib.is_file() {
+        let why = if calib.exists() { "is not a file" } else { "does not exist" };
+        anyhow::bail!("--calib {}: {why} (pass a calibration from `skinflow calibrate`)", calib.display());
+    }
+    Calibration::read(calib).map_err(|e| anyhow::anyhow!("--calib: {e}"))?;
     Ok(())
 }
 

@@ -6,6 +6,7 @@ pub mod emulate;
 pub mod eval;
 pub mod inspect;
 pub mod live;
+pub mod paths;
 pub mod pipeline;
 pub mod reproduce;
 pub mod simulate;

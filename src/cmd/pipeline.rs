@@ -75,11 +75,18 @@ impl PipelineArgs {
     }
 }
 
-/// Refuses recordings the pipeline cannot evaluate against truth; returns the recording.
+/// Refuses recordings the pipeline cannot evaluate against truth (no EIT frames, no
+/// pressure, no truth; the reader refuses bad times); returns the recording.
 pub fn require_truth(path: &Path) -> Result<Recording> {
     let rec = Recording::open(path).map_err(anyhow::Error::msg)?;
     if rec.eit.as_ref().is_none_or(|e| e.is_empty()) {
         bail!("{}: the recording has no EIT frames (/eit/v is missing or empty)", path.display());
+    }
+    if rec.pressure.as_ref().is_none_or(|p| p.is_empty()) {
+        bail!(
+            "{}: the recording has no pressure samples (/pressure is missing or empty); calibrate and eval need the pneumatic channel",
+            path.display()
+        );
     }
     if rec.truth.as_ref().is_none_or(|t| t.is_empty()) {
         bail!(

@@ -7,7 +7,7 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use anyhow::{Context as _, Result};
+use anyhow::{Context as _, Result, bail};
 use skinflow_contact::correct::{CalibParams, FFit, calibrate};
 use skinflow_contact::eval::EvalReport;
 
@@ -48,6 +48,20 @@ fn f(v: Option<f64>, p: usize) -> String {
 
 pub fn run(scenes_dir: &Path, out: &Path, seed: u64, fit_toml: &str, args: &PipelineArgs) -> Result<()> {
     let params = super::calibrate::fit_params(fit_toml)?;
+    // Before anything is created: every scene file is there.
+    let missing: Vec<String> = SCENES
+        .iter()
+        .map(|s| scenes_dir.join(format!("{s}.toml")))
+        .filter(|p| !p.is_file())
+        .map(|p| p.display().to_string())
+        .collect();
+    if !missing.is_empty() {
+        bail!(
+            "--scenes {}: missing scene file(s) {} (run from the repository root, or pass --scenes DIR with the scenes of graphs/scenes)",
+            scenes_dir.display(),
+            missing.join(", ")
+        );
+    }
     let t0 = Instant::now();
     std::fs::create_dir_all(out).with_context(|| format!("{}: cannot create", out.display()))?;
     let ctx = Run { scenes_dir, out, seed, params: &params, args };

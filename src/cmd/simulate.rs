@@ -9,6 +9,10 @@ use skinflow_record::write::{RecordingWriter, Streams, TruthContact, WriterOptio
 use skinflow_sim::{Scene, SimEvent, Simulator};
 
 pub fn run(scene_path: &Path, out: &Path, seed: u64, overwrite: bool) -> Result<()> {
+    super::paths::check_outputs(&[("scene", scene_path)], &[("--out", out)])?;
+    if !overwrite && std::fs::symlink_metadata(out).is_ok() {
+        anyhow::bail!("--out {}: exists (pass --overwrite to replace it)", out.display());
+    }
     let t0 = Instant::now();
     let scene = Scene::from_file(scene_path).map_err(anyhow::Error::msg)?;
     let mut sim =

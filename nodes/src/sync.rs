@@ -9,7 +9,7 @@
 //! more than three frames are pending. Before the first truth row with a contact, a frame
 //! also waits until some input (or a newer frame) shows time past its window's end, so a first
 //! contact stamped inside the window cannot be missed. P0 is the mean pressure of the leading no-load period: before the
-//! first truth row with a contact, or the first `tare_s` seconds without truth. A frame is a
+//! first truth row with a contact, or without truth the first `tare_s` seconds after the earliest time seen on either input (a device clock need not start at 0). A frame is a
 //! no-load frame (an EIT reference candidate) only when its whole window lies in that period; a `tare`
 //! control command re-tares from the last `tare_window_s` seconds of pressure.
 //!
@@ -120,6 +120,9 @@ pub struct Sync {
     truth: VecDeque<(f64, Arc<Truth>)>,
     /// Time of the first truth row with a contact: the no-load period ends there.
     first_contact_s: Option<f64>,
+    /// Earliest time seen on the pressure or EIT input: without truth, the no-load period is
+    /// the first `tare_s` seconds after it (a recording's clock need not start at 0).
+    start_s: Option<f64>,
     /// No-load pressure accumulation for P0 and the noise SD: sums of (kPa - p0_shift) and
     /// of its square (shifted by the first sample, so the variance does not cancel).
     p0_sum: f64,
@@ -148,6 +151,7 @@ struct SyncState {
     pressure_period_s: Option<f64>,
     truth: VecDeque<(f64, Arc<Truth>)>,
     first_contact_s: Option<f64>,
+    start_s: Option<f64>,
     p0_sum: f64,
     p0_sq: f64,
     p0_n: u64,
@@ -172,6 +176,7 @@ impl Sync {
             pressure_period_s: None,
             truth: VecDeque::with_capacity(64),
             first_contact_s: None,
+            start_s: None,
             p0_sum: 0.0,
             p0_sq: 0.0,
             p0_n: 0,
@@ -195,6 +200,7 @@ impl Sync {
             pressure_period_s: self.pressure_period_s,
             truth: std::mem::take(&mut self.truth),
             first_contact_s: self.first_contact_s,
+            start_s: self.start_s,
             p0_sum: self.p0_sum,
             p0_sq: self.p0_sq,
             p0_n: self.p0_n,
@@ -215,6 +221,7 @@ impl Sync {
         self.pressure_period_s = s.pressure_period_s;
         self.truth = s.truth;
         self.first_contact_s = s.first_contact_s;
+        self.start_s = s.start_s;
         self.p0_sum = s.p0_sum;
         self.p0_sq = s.p0_sq;
         self.p0_n = s.p0_n;
@@ -247,12 +254,27 @@ impl Sync {
     /// Whether a frame window ending (exclusive) at `end_s` lies wholly in the leading
     /// no-load period.
     fn window_in_no_load(&self, end_s: f64) -> bool {
-        if self.truth_connected { self.first_contact_s.is_none_or(|t0| end_s <= t0) } else { end_s <= self.p.tare_s }
+        if self.truth_connected {
+            self.first_contact_s.is_none_or(|t0| end_s <= t0)
+        } else {
+            end_s <= self.tare_end_s()
+        }
+    }
+
+    /// Without truth: the end of the first `tare_s` seconds after the earliest time seen.
+    fn tare_end_s(&self) -> f64 {
+        self.start_s.unwrap_or(0.0) + self.p.tare_s
+    }
+
+    fn saw(&mut self, t_s: f64) {
+        if t_s.is_finite() {
+            self.start_s = Some(self.start_s.map_or(t_s, |s| s.min(t_s)));
+        }
     }
 
     /// Whether the sample at `t_s` lies in the leading no-load period.
     fn in_no_load(&self, t_s: f64) -> bool {
-        if self.truth_connected { self.first_contact_s.is_none_or(|t0| t_s < t0) } else { t_s < self.p.tare_s }
+        if self.truth_connected { self.first_contact_s.is_none_or(|t0| t_s < t0) } else { t_s < self.tare_end_s() }
     }
 
     /// The no-load offset, kPa; NaN while no no-load sample has been seen (P0 is never
@@ -275,6 +297,7 @@ impl Sync {
     }
 
     fn on_pressure(&mut self, t_s: f64, kpa: f64) {
+        self.saw(t_s);
         if let Some(&(last, _)) = self.pressure.back() {
             let dt = t_s - last;
             if dt > 0.0 {
@@ -314,6 +337,7 @@ impl Sync {
 
     fn on_frame(&mut self, h: Header, f: Arc<EitFrame>) {
         let t = h.t_s();
+        self.saw(t);
         if let Some(last) = self.last_frame_s
             && t > last
         {
@@ -597,6 +621,24 @@ mod tests {
         );
         assert!(s.p0().is_nan());
         assert_eq!(s.noise_kpa(), None);
+    }
+
+    #[test]
+    fn without_truth_the_no_load_period_follows_the_first_time_seen() {
+        // A device clock that started long before the recording: no-load is [1000, 1002) s.
+        let mut s = sync();
+        s.truth_connected = false;
+        for i in 0..60 {
+            s.on_pressure(1000.0 + 0.05 * f64::from(i), if i < 40 { 0.3 } else { 0.8 });
+        }
+        assert!((s.p0() - 0.3).abs() < 1e-12, "P0 from the first 2 s after t = 1000 s: {}", s.p0());
+        assert!(s.window_in_no_load(1001.5) && !s.window_in_no_load(1002.5));
+        // The earliest time seen on either input counts (an EIT frame before the first sample).
+        let mut s = sync();
+        s.truth_connected = false;
+        s.on_frame(Header { seq: 0, t_ns: 500_000_000_000, origin: 0 }, Arc::new(EitFrame { v: vec![1.0] }));
+        s.on_pressure(501.0, 0.3);
+        assert!((s.tare_end_s() - 502.0).abs() < 1e-9, "{}", s.tare_end_s());
     }
 
     #[test]

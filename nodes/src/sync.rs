@@ -112,7 +112,15 @@ pub struct Sync {
     p: SyncParams,
     pressure_connected: bool,
     truth_connected: bool,
+    scratch: Vec<f64>,
+    ring: Recycler<SyncedFrame>,
     // Internal state
+    st: SyncState,
+}
+
+/// The stream state of a `sync` node: moved whole to a replacement at a hot swap.
+#[derive(Default)]
+struct SyncState {
     /// (t_s, kPa), time order.
     pressure: VecDeque<(f64, f64)>,
     pressure_period_s: Option<f64>,
@@ -138,30 +146,8 @@ pub struct Sync {
     pending: VecDeque<(Header, Arc<EitFrame>)>,
     last_frame_s: Option<f64>,
     intervals: VecDeque<f64>,
-    scratch: Vec<f64>,
     /// The acquisition window T in use, s: `frame_period_s`, else the median of `intervals`
     /// (updated per frame, read per pressure sample).
-    period_s: f64,
-    ring: Recycler<SyncedFrame>,
-}
-
-/// What a replaced `sync` hands to its replacement: its internal state, moved.
-struct SyncState {
-    pressure: VecDeque<(f64, f64)>,
-    pressure_period_s: Option<f64>,
-    truth: VecDeque<(f64, Arc<Truth>)>,
-    first_contact_s: Option<f64>,
-    start_s: Option<f64>,
-    p0_sum: f64,
-    p0_sq: f64,
-    p0_n: u64,
-    p0_shift: Option<f64>,
-    p0_recent: VecDeque<(f64, f64)>,
-    p0_fixed: Option<f64>,
-    noise_fixed: Option<f64>,
-    pending: VecDeque<(Header, Arc<EitFrame>)>,
-    last_frame_s: Option<f64>,
-    intervals: VecDeque<f64>,
     period_s: f64,
 }
 
@@ -172,82 +158,42 @@ impl Sync {
             p,
             pressure_connected: true,
             truth_connected: true,
-            pressure: VecDeque::with_capacity(4096),
-            pressure_period_s: None,
-            truth: VecDeque::with_capacity(64),
-            first_contact_s: None,
-            start_s: None,
-            p0_sum: 0.0,
-            p0_sq: 0.0,
-            p0_n: 0,
-            p0_shift: None,
-            p0_recent: VecDeque::with_capacity(P0_RECENT + 1),
-            p0_fixed: None,
-            noise_fixed: None,
-            pending: VecDeque::with_capacity(MAX_PENDING + 2),
-            last_frame_s: None,
-            intervals: VecDeque::with_capacity(PERIOD_HISTORY + 1),
             scratch: Vec::with_capacity(PERIOD_HISTORY),
-            period_s,
             ring: Recycler::new(128, SyncedFrame::default),
+            st: SyncState {
+                pressure: VecDeque::with_capacity(4096),
+                truth: VecDeque::with_capacity(64),
+                p0_recent: VecDeque::with_capacity(P0_RECENT + 1),
+                pending: VecDeque::with_capacity(MAX_PENDING + 2),
+                intervals: VecDeque::with_capacity(PERIOD_HISTORY + 1),
+                period_s,
+                ..SyncState::default()
+            },
         }
     }
 
     /// Moves the internal state out (this instance is being replaced).
     fn take_state(&mut self) -> SyncState {
-        SyncState {
-            pressure: std::mem::take(&mut self.pressure),
-            pressure_period_s: self.pressure_period_s,
-            truth: std::mem::take(&mut self.truth),
-            first_contact_s: self.first_contact_s,
-            start_s: self.start_s,
-            p0_sum: self.p0_sum,
-            p0_sq: self.p0_sq,
-            p0_n: self.p0_n,
-            p0_shift: self.p0_shift,
-            p0_recent: std::mem::take(&mut self.p0_recent),
-            p0_fixed: self.p0_fixed,
-            noise_fixed: self.noise_fixed,
-            pending: std::mem::take(&mut self.pending),
-            last_frame_s: self.last_frame_s,
-            intervals: std::mem::take(&mut self.intervals),
-            period_s: self.period_s,
-        }
+        std::mem::take(&mut self.st)
     }
 
     /// Takes over a replaced instance's state; the window T follows this instance's params.
     fn put_state(&mut self, s: SyncState) {
-        self.pressure = s.pressure;
-        self.pressure_period_s = s.pressure_period_s;
-        self.truth = s.truth;
-        self.first_contact_s = s.first_contact_s;
-        self.start_s = s.start_s;
-        self.p0_sum = s.p0_sum;
-        self.p0_sq = s.p0_sq;
-        self.p0_n = s.p0_n;
-        self.p0_shift = s.p0_shift;
-        self.p0_recent = s.p0_recent;
-        self.p0_fixed = s.p0_fixed;
-        self.noise_fixed = s.noise_fixed;
-        self.pending = s.pending;
-        self.last_frame_s = s.last_frame_s;
-        self.intervals = s.intervals;
-        self.period_s = match self.p.frame_period_s {
-            Some(t) => t,
-            None if !self.intervals.is_empty() => {
-                self.scratch.clear();
-                self.scratch.extend(self.intervals.iter().copied());
-                self.scratch.sort_by(f64::total_cmp);
-                self.scratch[self.scratch.len() / 2]
-            }
-            None => s.period_s,
-        };
+        self.st = s;
+        if let Some(t) = self.p.frame_period_s {
+            self.st.period_s = t;
+        } else if !self.st.intervals.is_empty() {
+            self.scratch.clear();
+            self.scratch.extend(self.st.intervals.iter().copied());
+            self.scratch.sort_by(f64::total_cmp);
+            self.st.period_s = self.scratch[self.scratch.len() / 2];
+        }
     }
 
     /// Newest time seen on the pressure or truth input: both histories keep their newest entry.
     fn latest_input_s(&self) -> Option<f64> {
-        let p = self.pressure.back().map(|&(t, _)| t);
-        let t = self.truth.back().map(|&(t, _)| t);
+        let p = self.st.pressure.back().map(|&(t, _)| t);
+        let t = self.st.truth.back().map(|&(t, _)| t);
         p.into_iter().chain(t).reduce(f64::max)
     }
 
@@ -255,7 +201,7 @@ impl Sync {
     /// no-load period.
     fn window_in_no_load(&self, end_s: f64) -> bool {
         if self.truth_connected {
-            self.first_contact_s.is_none_or(|t0| end_s <= t0)
+            self.st.first_contact_s.is_none_or(|t0| end_s <= t0)
         } else {
             end_s <= self.tare_end_s()
         }
@@ -263,112 +209,116 @@ impl Sync {
 
     /// Without truth: the end of the first `tare_s` seconds after the earliest time seen.
     fn tare_end_s(&self) -> f64 {
-        self.start_s.unwrap_or(0.0) + self.p.tare_s
+        self.st.start_s.unwrap_or(0.0) + self.p.tare_s
     }
 
     fn saw(&mut self, t_s: f64) {
         if t_s.is_finite() {
-            self.start_s = Some(self.start_s.map_or(t_s, |s| s.min(t_s)));
+            self.st.start_s = Some(self.st.start_s.map_or(t_s, |s| s.min(t_s)));
         }
     }
 
     /// Whether the sample at `t_s` lies in the leading no-load period.
     fn in_no_load(&self, t_s: f64) -> bool {
-        if self.truth_connected { self.first_contact_s.is_none_or(|t0| t_s < t0) } else { t_s < self.tare_end_s() }
+        if self.truth_connected { self.st.first_contact_s.is_none_or(|t0| t_s < t0) } else { t_s < self.tare_end_s() }
     }
 
     /// The no-load offset, kPa; NaN while no no-load sample has been seen (P0 is never
     /// assumed zero: such frames carry a NaN dP, which correctors turn into 0 N, flagged).
     fn p0(&self) -> f64 {
-        let shift = self.p0_shift.unwrap_or(0.0);
-        self.p0_fixed.unwrap_or(if self.p0_n > 0 { shift + self.p0_sum / self.p0_n as f64 } else { f64::NAN })
+        let shift = self.st.p0_shift.unwrap_or(0.0);
+        self.st.p0_fixed.unwrap_or(if self.st.p0_n > 0 {
+            shift + self.st.p0_sum / self.st.p0_n as f64
+        } else {
+            f64::NAN
+        })
     }
 
     /// The sensor's noise SD, kPa: of the no-load samples, or of a `tare` command's window;
     /// `None` with fewer than [`MIN_NOISE_SAMPLES`] such samples.
     fn noise_kpa(&self) -> Option<f64> {
-        if self.noise_fixed.is_some() {
-            return self.noise_fixed;
+        if self.st.noise_fixed.is_some() {
+            return self.st.noise_fixed;
         }
-        (self.p0_n >= MIN_NOISE_SAMPLES).then(|| {
-            let n = self.p0_n as f64;
-            ((self.p0_sq - self.p0_sum * self.p0_sum / n) / (n - 1.0)).max(0.0).sqrt()
+        (self.st.p0_n >= MIN_NOISE_SAMPLES).then(|| {
+            let n = self.st.p0_n as f64;
+            ((self.st.p0_sq - self.st.p0_sum * self.st.p0_sum / n) / (n - 1.0)).max(0.0).sqrt()
         })
     }
 
     fn on_pressure(&mut self, t_s: f64, kpa: f64) {
         self.saw(t_s);
-        if let Some(&(last, _)) = self.pressure.back() {
+        if let Some(&(last, _)) = self.st.pressure.back() {
             let dt = t_s - last;
             if dt > 0.0 {
                 // A smoothed period estimate; the first interval seeds it.
-                self.pressure_period_s = Some(self.pressure_period_s.map_or(dt, |p| 0.9 * p + 0.1 * dt));
+                self.st.pressure_period_s = Some(self.st.pressure_period_s.map_or(dt, |p| 0.9 * p + 0.1 * dt));
             }
         }
-        if self.p0_fixed.is_none() && self.in_no_load(t_s) && kpa.is_finite() {
-            let d = kpa - *self.p0_shift.get_or_insert(kpa);
-            self.p0_sum += d;
-            self.p0_sq += d * d;
-            self.p0_n += 1;
-            self.p0_recent.push_back((t_s, kpa));
-            if self.p0_recent.len() > P0_RECENT {
-                self.p0_recent.pop_front();
+        if self.st.p0_fixed.is_none() && self.in_no_load(t_s) && kpa.is_finite() {
+            let d = kpa - *self.st.p0_shift.get_or_insert(kpa);
+            self.st.p0_sum += d;
+            self.st.p0_sq += d * d;
+            self.st.p0_n += 1;
+            self.st.p0_recent.push_back((t_s, kpa));
+            if self.st.p0_recent.len() > P0_RECENT {
+                self.st.p0_recent.pop_front();
             }
         }
-        self.pressure.push_back((t_s, kpa));
+        self.st.pressure.push_back((t_s, kpa));
     }
 
     fn on_truth(&mut self, t_s: f64, row: Arc<Truth>) {
-        if self.first_contact_s.is_none() && !row.contacts.is_empty() {
-            self.first_contact_s = Some(t_s);
+        if self.st.first_contact_s.is_none() && !row.contacts.is_empty() {
+            self.st.first_contact_s = Some(t_s);
             // Samples at or after the first contact are loaded: out of P0.
-            while let Some(&(tp, kpa)) = self.p0_recent.back()
+            while let Some(&(tp, kpa)) = self.st.p0_recent.back()
                 && tp >= t_s
             {
-                self.p0_recent.pop_back();
-                let d = kpa - self.p0_shift.unwrap_or(0.0);
-                self.p0_sum -= d;
-                self.p0_sq -= d * d;
-                self.p0_n -= 1;
+                self.st.p0_recent.pop_back();
+                let d = kpa - self.st.p0_shift.unwrap_or(0.0);
+                self.st.p0_sum -= d;
+                self.st.p0_sq -= d * d;
+                self.st.p0_n -= 1;
             }
         }
-        self.truth.push_back((t_s, row));
+        self.st.truth.push_back((t_s, row));
     }
 
     fn on_frame(&mut self, h: Header, f: Arc<EitFrame>) {
         let t = h.t_s();
         self.saw(t);
-        if let Some(last) = self.last_frame_s
+        if let Some(last) = self.st.last_frame_s
             && t > last
         {
-            self.intervals.push_back(t - last);
-            if self.intervals.len() > PERIOD_HISTORY {
-                self.intervals.pop_front();
+            self.st.intervals.push_back(t - last);
+            if self.st.intervals.len() > PERIOD_HISTORY {
+                self.st.intervals.pop_front();
             }
             if self.p.frame_period_s.is_none() {
                 self.scratch.clear();
-                self.scratch.extend(self.intervals.iter().copied());
+                self.scratch.extend(self.st.intervals.iter().copied());
                 self.scratch.sort_by(f64::total_cmp);
-                self.period_s = self.scratch[self.scratch.len() / 2];
+                self.st.period_s = self.scratch[self.scratch.len() / 2];
             }
         }
-        self.last_frame_s = Some(t);
-        self.pending.push_back((h, f));
+        self.st.last_frame_s = Some(t);
+        self.st.pending.push_back((h, f));
     }
 
     /// Whether the oldest pending frame's window can receive no more samples.
     fn oldest_complete(&self) -> bool {
-        let Some((h, _)) = self.pending.front() else { return false };
-        if self.pending.len() > MAX_PENDING {
+        let Some((h, _)) = self.st.pending.front() else { return false };
+        if self.st.pending.len() > MAX_PENDING {
             return true;
         }
-        let end = h.t_s() + 0.5 * self.period_s;
+        let end = h.t_s() + 0.5 * self.st.period_s;
         // Before the first contact, a frame is a no-load (reference) candidate: it waits until
         // some input (or a newer frame) shows time past its window's end, so a first contact
         // row stamped inside the window cannot arrive after the frame was judged.
         if self.truth_connected
-            && self.first_contact_s.is_none()
-            && self.pending.len() < 2
+            && self.st.first_contact_s.is_none()
+            && self.st.pending.len() < 2
             && self.latest_input_s().is_none_or(|t| t < end)
         {
             return false;
@@ -376,7 +326,7 @@ impl Sync {
         if !self.pressure_connected {
             return true;
         }
-        match (self.pressure.back(), self.pressure_period_s) {
+        match (self.st.pressure.back(), self.st.pressure_period_s) {
             (Some(&(last, _)), Some(dt)) => last + dt >= end,
             (Some(&(last, _)), None) => last >= end,
             _ => false,
@@ -384,12 +334,13 @@ impl Sync {
     }
 
     fn emit_oldest(&mut self, ctx: &Context, out: &mut Outputs) -> Result<(), NodeError> {
-        let (h, frame) = self.pending.pop_front().expect("called with a pending frame");
+        let (h, frame) = self.st.pending.pop_front().expect("called with a pending frame");
         let t = h.t_s();
-        let half = 0.5 * self.period_s;
+        let half = 0.5 * self.st.period_s;
         let (lo, hi) = (t - half, t + half);
-        let (n, mean, sd) =
-            mean_sd(self.pressure.iter().filter(|&&(tp, kpa)| tp >= lo && tp < hi && kpa.is_finite()).map(|&(_, k)| k));
+        let (n, mean, sd) = mean_sd(
+            self.st.pressure.iter().filter(|&&(tp, kpa)| tp >= lo && tp < hi && kpa.is_finite()).map(|&(_, k)| k),
+        );
         let noise = self.noise_kpa();
         let settled = noise.is_some_and(|noise| {
             let threshold = (self.p.settle_factor * noise).max(self.p.settle_floor_kpa);
@@ -397,15 +348,15 @@ impl Sync {
         });
         // Samples before this window can serve no later frame; a `tare` command still needs
         // the last `tare_window_s` seconds.
-        let newest = self.pressure.back().map_or(lo, |&(tp, _)| tp);
+        let newest = self.st.pressure.back().map_or(lo, |&(tp, _)| tp);
         let keep_from = lo.min(newest - self.p.tare_window_s);
-        while self.pressure.front().is_some_and(|&(tp, _)| tp < keep_from) && self.pressure.len() > 1 {
-            self.pressure.pop_front();
+        while self.st.pressure.front().is_some_and(|&(tp, _)| tp < keep_from) && self.st.pressure.len() > 1 {
+            self.st.pressure.pop_front();
         }
-        while self.truth.len() > 1 && self.truth[1].0 <= t {
-            self.truth.pop_front();
+        while self.st.truth.len() > 1 && self.st.truth[1].0 <= t {
+            self.st.truth.pop_front();
         }
-        let truth = self.truth.front().filter(|(tt, _)| *tt <= t).map(|(_, r)| r.clone());
+        let truth = self.st.truth.front().filter(|(tt, _)| *tt <= t).map(|(_, r)| r.clone());
         // The whole window must precede the first contact: a frame whose acquisition saw the
         // first press begin would put part of that contact into the EIT reference.
         let no_load = self.window_in_no_load(hi);
@@ -427,11 +378,12 @@ impl Sync {
 
     /// Re-tares P0 and the noise from the last `tare_window_s` seconds of pressure.
     fn tare(&mut self) -> Result<(), NodeError> {
-        let Some(&(last, _)) = self.pressure.back() else {
+        let Some(&(last, _)) = self.st.pressure.back() else {
             return Err(NodeError::msg("tare: no pressure sample received yet"));
         };
         let from = last - self.p.tare_window_s;
-        let (n, p0, sd) = mean_sd(self.pressure.iter().filter(|(t, k)| *t >= from && k.is_finite()).map(|&(_, k)| k));
+        let (n, p0, sd) =
+            mean_sd(self.st.pressure.iter().filter(|(t, k)| *t >= from && k.is_finite()).map(|&(_, k)| k));
         if n == 0 {
             return Err(NodeError::msg(format!(
                 "tare: no finite pressure sample in the last {} s (tare_window_s); P0 unchanged",
@@ -447,8 +399,8 @@ impl Sync {
             );
         }
         tracing::info!(p0_kpa = p0, samples = n, noise_kpa = noise, "sync: re-tared P0");
-        self.p0_fixed = Some(p0);
-        self.noise_fixed = noise.or(self.noise_fixed);
+        self.st.p0_fixed = Some(p0);
+        self.st.noise_fixed = noise.or(self.st.noise_fixed);
         Ok(())
     }
 }
@@ -501,17 +453,17 @@ impl Processor for Sync {
             node = ctx.id(),
             p0_kpa = self.p0(),
             noise_kpa = self.noise_kpa(),
-            pending_frames = self.pending.len(),
+            pending_frames = self.st.pending.len(),
             "P0, noise and pending frames taken over (hot swap)"
         );
         Ok(())
     }
 
     fn stop(&mut self, ctx: &mut Context) -> Result<(), NodeError> {
-        if !self.pending.is_empty() {
+        if !self.st.pending.is_empty() {
             tracing::warn!(
                 node = ctx.id(),
-                frames = self.pending.len(),
+                frames = self.st.pending.len(),
                 "frames still waiting for pressure at stop were not emitted"
             );
         }
@@ -658,8 +610,8 @@ mod tests {
         let mut b = Sync::new(SyncParams { frame_period_s: Some(0.5), ..sync().p });
         b.put_state(a.take_state());
         assert_eq!((b.p0().to_bits(), b.noise_kpa()), (p0.to_bits(), noise));
-        assert_eq!((b.first_contact_s, b.pending.len(), b.period_s), (Some(1.0), 1, 0.5));
-        assert!(a.pending.is_empty(), "moved, not copied: the old instance reports nothing pending");
+        assert_eq!((b.st.first_contact_s, b.st.pending.len(), b.st.period_s), (Some(1.0), 1, 0.5));
+        assert!(a.st.pending.is_empty(), "moved, not copied: the old instance reports nothing pending");
         // Loaded pressure after the swap does not move P0.
         b.on_pressure(1.05, 5.0);
         assert_eq!(b.p0().to_bits(), p0.to_bits());

@@ -182,18 +182,20 @@ impl Reconstructor {
             recon.cache_dir = Some(p.cache_dir.as_ref().map_or_else(default_cache_dir, |d| ctx.resolve(d)));
         }
         let t0 = Instant::now();
-        let math = skinflow_eit::Reconstructor::new(&sensor, &recon)
+        let mut math = skinflow_eit::Reconstructor::new(&sensor, &recon)
             .map_err(|e| NodeError::Param { param: "reconstruction".into(), problem: e.to_string() })?;
+        // Built before the log line, so its setup time includes the model the point spread
+        // needs (mesh, forward solve, Jacobian) when the matrix came from the cache.
+        let spread = point_spread(&mut math, p.point_spread_mm)?;
         let info = math.info();
         tracing::info!(
             node = %ctx.node_id, elements = info.elements, lambda = info.lambda, prior = %info.prior,
-            cache = ?info.cache, min_angle_deg = ?info.mesh_min_angle_deg, setup_ms = t0.elapsed().as_secs_f64() * 1e3,
+            cache = ?info.cache, min_angle_deg = ?info.mesh_min_angle_deg, point_spread = spread.is_some(),
+            setup_ms = t0.elapsed().as_secs_f64() * 1e3,
             "reconstruction matrix ready"
         );
         let m = sensor.measurement_count();
         let mask = math.mask().clone();
-        let mut math = math;
-        let spread = point_spread(&mut math, p.point_spread_mm)?;
         Ok(Reconstructor {
             tracker: ReferenceTracker::new(m, p.reference_frames)
                 .map_err(|e| NodeError::Param { param: "reference_frames".into(), problem: e.to_string() })?,

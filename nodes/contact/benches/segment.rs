@@ -48,8 +48,8 @@ fn bench(c: &mut Criterion) {
         fn source_into(&self, x_mm: f64, y_mm: f64, out: &mut [f64]) {
             self.0.source_into(x_mm, y_mm, out)
         }
-        fn add_pixel_row(&self, pixel: usize, out: &mut [f64]) {
-            self.0.add_pixel_row(pixel, out)
+        fn add_pixel_run(&self, first: usize, end: usize, out: &mut [f64]) {
+            self.0.add_pixel_run(first, end, out)
         }
     }
     let mut recon =

@@ -26,9 +26,11 @@ impl PointSpread for Dense {
             *o = 1.0 + 0.01 * (k as f64 + x_mm - y_mm).sin();
         }
     }
-    fn add_pixel_row(&self, pixel: usize, out: &mut [f64]) {
-        for (o, r) in out.iter_mut().zip(&self.rows[pixel * 120..(pixel + 1) * 120]) {
-            *o += r;
+    fn add_pixel_run(&self, first: usize, end: usize, out: &mut [f64]) {
+        for row in self.rows[first * 120..end * 120].chunks_exact(120) {
+            for (o, r) in out.iter_mut().zip(row) {
+                *o += r;
+            }
         }
     }
 }

@@ -31,8 +31,10 @@ impl PointSpread for Mirrored {
             *o = psf(x_mm, y_mm, g.x_mm(q % N), g.y_mm(q / N));
         }
     }
-    fn add_pixel_row(&self, pixel: usize, out: &mut [f64]) {
-        out[pixel] += 1.0;
+    fn add_pixel_run(&self, first: usize, end: usize, out: &mut [f64]) {
+        for o in &mut out[first..end] {
+            *o += 1.0;
+        }
     }
 }
 
@@ -139,8 +141,8 @@ fn a_singular_system_leaves_the_contacts_as_segmented() {
         fn source_into(&self, _: f64, _: f64, out: &mut [f64]) {
             out.fill(0.0);
         }
-        fn add_pixel_row(&self, _: usize, out: &mut [f64]) {
-            out[0] += 1.0;
+        fn add_pixel_run(&self, first: usize, end: usize, out: &mut [f64]) {
+            out[0] += (end - first) as f64;
         }
     }
     let img = image(&[(-20.0, -44.0, 1.0)]);

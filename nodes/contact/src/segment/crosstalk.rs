@@ -11,7 +11,7 @@
 //!
 //! with S_i the contact's conductivity sum C_i, a_j the unknown depths, u_j the data of a unit
 //! source at contact j and w_i the sum of the image matrix's rows over ROI i (both given by a
-//! [`PointSpread`]). Solving the k x k system gives each contact's own share `a_i P_ii / S_i`:
+//! [`PointSpread`], w_i as a sum over the ROI's runs of consecutive pixels). Solving the k x k system gives each contact's own share `a_i P_ii / S_i`:
 //! about 1 for a press, about 0 for a region that only the other contacts' sidelobes put there (a
 //! "ghost": on the paper's square sensor, a press near a corner mirrors across the corner's
 //! diagonal at a fifth of its peak). Regions whose own share is below `ghost_share` are removed
@@ -35,8 +35,11 @@ pub trait PointSpread: Send + Sync {
     fn data_len(&self) -> usize;
     /// `out = u(x, y)`, the data of a unit source centred at (x, y) mm. Must not allocate.
     fn source_into(&self, x_mm: f64, y_mm: f64, out: &mut [f64]);
-    /// `out += row_q` for pixel q (row-major image index). Must not allocate.
-    fn add_pixel_row(&self, pixel: usize, out: &mut [f64]);
+    /// `out += sum of row_q for q in first..end` (row-major image indices; a run may cross
+    /// image rows). The pass calls it once per run of consecutive ROI pixels of one contact, so
+    /// an implementation that keeps running sums of its rows answers in O(data_len) per run.
+    /// Must not allocate.
+    fn add_pixel_run(&self, first: usize, end: usize, out: &mut [f64]);
 }
 
 /// What a crosstalk pass did to one frame.
@@ -103,13 +106,18 @@ impl Crosstalk {
             self.slot[c.label as usize] = i as u32;
         }
         self.w[..k * m].fill(0.0);
-        for p in 0..pixels {
-            if let Some(l) = in_roi(p) {
-                let i = self.slot[l as usize];
-                if i != u32::MAX {
+        // w_i: the ROI's rows summed run by run (maximal runs of consecutive pixels that belong
+        // to the same reported contact).
+        let mut run: Option<(u32, usize)> = None;
+        for p in 0..=pixels {
+            let here =
+                if p < pixels { in_roi(p).map(|l| self.slot[l as usize]).filter(|&i| i != u32::MAX) } else { None };
+            if run.map(|(i, _)| i) != here {
+                if let Some((i, first)) = run {
                     let i = i as usize;
-                    spread.add_pixel_row(p, &mut self.w[i * m..(i + 1) * m]);
+                    spread.add_pixel_run(first, p, &mut self.w[i * m..(i + 1) * m]);
                 }
+                run = here.map(|i| (i, p));
             }
         }
         for (i, c) in out.items.iter().enumerate() {

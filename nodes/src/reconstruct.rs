@@ -62,7 +62,8 @@ pub struct ReconstructorParams {
     pub cem: Option<CemParams>,
     pub mask: Option<MaskParams>,
     /// Radius of the source disc of the point spread attached to each image, mm (for the
-    /// segmenter's crosstalk pass); 0 attaches none (and skips building the model on a cache hit).
+    /// segmenter's crosstalk pass); 0 attaches none. Its Jacobian is cached on disk beside the
+    /// matrix, so a start on a cache hit builds no model either way.
     #[serde(default = "default_point_spread_mm")]
     pub point_spread_mm: f64,
 }
@@ -184,8 +185,8 @@ impl Reconstructor {
         let t0 = Instant::now();
         let mut math = skinflow_eit::Reconstructor::new(&sensor, &recon)
             .map_err(|e| NodeError::Param { param: "reconstruction".into(), problem: e.to_string() })?;
-        // Built before the log line, so its setup time includes the model the point spread
-        // needs (mesh, forward solve, Jacobian) when the matrix came from the cache.
+        // Built before the log line, so its setup time includes reading (or, on the first
+        // start, building) the Jacobian the point spread needs.
         let spread = point_spread(&mut math, p.point_spread_mm)?;
         let info = math.info();
         tracing::info!(

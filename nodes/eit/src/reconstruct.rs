@@ -193,6 +193,48 @@ impl Reconstructor {
         )
     }
 
+    /// The canonical description of what the point-spread basis depends on (the model, not the
+    /// prior, lambda, image grid or channel mask).
+    fn basis_description(&self) -> String {
+        let p = &self.params;
+        let s = &self.sensor;
+        let el: Vec<_> = s.electrodes.iter().map(|e| (e.start_mm, e.end_mm)).collect();
+        format!(
+            "skinflow-eit {} point-spread basis v1|sensor {:?}x{:?} {} {:?}|mesh {:?}|cem {:?}|mode {:?}",
+            env!("CARGO_PKG_VERSION"),
+            s.width_mm,
+            s.height_mm,
+            s.protocol.name(),
+            el,
+            p.mesh,
+            p.cem,
+            p.mode,
+        )
+    }
+
+    /// The point-spread basis: from memory, the disk cache, or the model (then stored).
+    fn spread_basis(&mut self) -> Result<&SpreadBasis, EitError> {
+        if self.spread_basis.is_none() {
+            let key = cache::key_of(&self.basis_description());
+            let cached = match &self.params.cache_dir {
+                Some(dir) => cache::load_basis(dir, &key)?,
+                None => None,
+            };
+            let basis = match cached {
+                Some(parts) => SpreadBasis::from_parts(parts)?,
+                None => {
+                    let basis = SpreadBasis::new(self.model()?);
+                    if let Some(dir) = &self.params.cache_dir {
+                        cache::store_basis(dir, &key, &basis.to_parts())?;
+                    }
+                    basis
+                }
+            };
+            self.spread_basis = Some(basis);
+        }
+        Ok(self.spread_basis.as_ref().expect("built above"))
+    }
+
     /// The folded matrix for `mask`: from memory, the disk cache, or computed.
     fn folded_for(&mut self, mask: &ChannelMask) -> Result<Arc<Folded>, EitError> {
         if let Some(f) = self.by_mask.get(&mask.excluded) {
@@ -236,14 +278,12 @@ impl Reconstructor {
     }
 
     /// The linear point spread of the active matrix for sources of radius `radius_mm` (see
-    /// [`crate::spread`]). The first call builds the model (mesh, forward solve, Jacobian) if the
-    /// matrix came from the cache; call it again after `set_mask` or `set_lambda`.
+    /// [`crate::spread`]). The first call reads the Jacobian from the disk cache, or builds the
+    /// model (mesh, forward solve, Jacobian) and stores it; call it again after `set_mask` or
+    /// `set_lambda`.
     pub fn point_spread(&mut self, radius_mm: f64) -> Result<PointSpread, EitError> {
-        if self.spread_basis.is_none() {
-            let basis = SpreadBasis::new(self.model()?);
-            self.spread_basis = Some(basis);
-        }
-        self.spread_basis.as_ref().expect("built above").spread(&self.active, radius_mm)
+        let active = self.active.clone();
+        self.spread_basis()?.spread(&active, radius_mm)
     }
 
     pub fn info(&self) -> &ReconInfo {

@@ -122,6 +122,24 @@ impl SpreadBasis {
         SpreadBasis { jt: jt.into(), centroids: model.mesh.element_centroids_mm().into(), measurements: m }
     }
 
+    /// A basis from its stored parts (see [`crate::cache`]); checks that the sizes agree.
+    pub fn from_parts(parts: crate::cache::BasisParts) -> Result<SpreadBasis, EitError> {
+        let (m, e) = (parts.measurements, parts.centroids.len());
+        if m == 0 || parts.jt.len() != m * e {
+            return Err(EitError::Length { what: "point-spread Jacobian", expected: m * e, got: parts.jt.len() });
+        }
+        Ok(SpreadBasis { jt: parts.jt.into(), centroids: parts.centroids.into(), measurements: m })
+    }
+
+    /// The parts to store (see [`crate::cache`]).
+    pub fn to_parts(&self) -> crate::cache::BasisParts {
+        crate::cache::BasisParts {
+            measurements: self.measurements,
+            centroids: self.centroids.to_vec(),
+            jt: self.jt.to_vec(),
+        }
+    }
+
     /// The point spread through `folded` (one channel mask), for sources of radius `radius_mm`.
     pub fn spread(&self, folded: &Folded, radius_mm: f64) -> Result<PointSpread, EitError> {
         check_positive("point_spread_mm", radius_mm)?;

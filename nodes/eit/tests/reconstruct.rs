@@ -195,6 +195,41 @@ fn disk_cache_hits_with_the_same_key_and_misses_otherwise() {
 }
 
 #[test]
+fn the_point_spread_basis_is_cached_and_a_hit_builds_no_model() {
+    let dir = std::env::temp_dir().join(format!("skinflow-eit-basis-test-{}", std::process::id()));
+    let params = ReconParams { lambda: 0.07, cache_dir: Some(dir.clone()), ..Default::default() };
+    let s = Sensor::paper_100mm();
+    let mut first = Reconstructor::new(&s, &params).unwrap();
+    let a = first.point_spread(5.0).unwrap();
+    assert!(first.info().mesh_nodes.is_some(), "the first start builds the model");
+    let mut second = Reconstructor::new(&s, &params).unwrap();
+    assert_eq!(second.info().cache, CacheStatus::Hit);
+    let b = second.point_spread(5.0).unwrap();
+    assert!(second.info().mesh_nodes.is_none(), "a cache hit builds no mesh, forward solution or Jacobian");
+    let m = a.measurement_count();
+    let (mut ua, mut ub, mut wa, mut wb) = (vec![0.0; m], vec![0.0; m], vec![0.0; m], vec![0.0; m]);
+    for (x, y) in [(0.0, 0.0), (-44.0, 31.0), (49.0, -49.0)] {
+        a.source_into(x, y, &mut ua);
+        b.source_into(x, y, &mut ub);
+        assert_eq!(ua, ub, "source at ({x}, {y})");
+    }
+    a.add_pixel_run(0, a.pixel_count(), &mut wa);
+    b.add_pixel_run(0, b.pixel_count(), &mut wb);
+    assert_eq!(wa, wb);
+    // A damaged basis file is reported with its path, not silently rebuilt.
+    let file = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .find(|p| p.file_name().unwrap().to_string_lossy().starts_with("skinflow-eit-jt-"))
+        .expect("basis file written");
+    let bytes = std::fs::read(&file).unwrap();
+    std::fs::write(&file, &bytes[..bytes.len() - 8]).unwrap();
+    let err = Reconstructor::new(&s, &params).unwrap().point_spread(5.0).unwrap_err().to_string();
+    assert!(err.contains(&file.display().to_string()) && err.contains("bytes"), "{err}");
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+#[test]
 fn gcv_picks_a_moderate_lambda_for_noisy_inclusions() {
     let mut r = recon(ReconParams::default());
     let mut rng = ChaCha8Rng::seed_from_u64(11);

@@ -82,7 +82,8 @@ fn a_run_of_pixels_sums_what_the_reconstruction_images_over_it() {
     let n = s.pixel_count();
     let width = r.grid().nx;
     // Empty, single pixel, within one image row, across several rows, the whole image.
-    for (first, end) in [(100, 100), (1000, 1001), (3 * width + 5, 4 * width - 2), (1500, 1500 + 3 * width + 7), (0, n)] {
+    for (first, end) in [(100, 100), (1000, 1001), (3 * width + 5, 4 * width - 2), (1500, 1500 + 3 * width + 7), (0, n)]
+    {
         let mut w = vec![0.0; s.measurement_count()];
         s.add_pixel_run(first, end, &mut w);
         let predicted = depth * w.iter().zip(&u).map(|(a, b)| a * b).sum::<f64>();

@@ -4,7 +4,7 @@
 
 use super::SceneError;
 use super::parse::{RawContact, RawForces, RawStep};
-use super::validate::{ErrFn, non_negative, positive};
+use super::validate::{ErrFn, MAX_FORCE_N, at_most, non_negative, positive};
 use crate::timeline::{Segment, SegmentContact};
 use skinflow_eit::Sensor;
 use toml::Spanned;
@@ -144,8 +144,9 @@ pub(super) fn expand_step(
         for c in list.get_ref() {
             let RawContact { x_mm, y_mm, diameter_mm, force_n } = c.get_ref();
             inside(*x_mm.get_ref(), *y_mm.get_ref(), c.span())?;
-            let d = positive("diameter_mm", diameter_mm, err)?;
+            let d = diameter(diameter_mm, sensor, err)?;
             let f = non_negative("force_n", force_n, err)?;
+            let f = at_most("force_n", force_n, f, MAX_FORCE_N, err)?;
             spots.push(Spot { x_mm: *x_mm.get_ref(), y_mm: *y_mm.get_ref(), diameter_mm: d });
             forces.push(f);
         }
@@ -165,7 +166,7 @@ pub(super) fn expand_step(
 
     // Single contact at each of several positions.
     let diameter = match &s.diameter_mm {
-        Some(d) => positive("diameter_mm", d, err)?,
+        Some(d) => diameter(d, sensor, err)?,
         None => {
             return Err(err(step_span, "a contact step needs \"diameter_mm\"".into()));
         }
@@ -200,10 +201,13 @@ pub(super) fn expand_step(
                     ),
                 ));
             }
-            if !(p[1].is_finite() && p[1] >= 0.0) {
+            if !(p[1].is_finite() && p[1] >= 0.0 && p[1] <= MAX_FORCE_N) {
                 return Err(err(
                     profile.span(),
-                    format!("\"force_profile\": point {i}: force must be finite and >= 0 (got {} N)", p[1]),
+                    format!(
+                        "\"force_profile\": point {i}: force must be finite, >= 0 and at most {MAX_FORCE_N} N (got {} N)",
+                        p[1]
+                    ),
                 ));
             }
         }
@@ -297,8 +301,11 @@ fn forces(f: &Spanned<RawForces>, err: &ErrFn<'_>) -> Result<Vec<f64>, SceneErro
     if list.is_empty() {
         return Err(err(f.span(), "\"forces_n\": empty list".into()));
     }
-    if let Some(bad) = list.iter().find(|x| !(x.is_finite() && **x >= 0.0)) {
-        return Err(err(f.span(), format!("\"forces_n\": a force must be finite and >= 0 (got {bad} N)")));
+    if let Some(bad) = list.iter().find(|x| !(x.is_finite() && **x >= 0.0 && **x <= MAX_FORCE_N)) {
+        return Err(err(
+            f.span(),
+            format!("\"forces_n\": a force must be finite, >= 0 and at most {MAX_FORCE_N} N (got {bad} N)"),
+        ));
     }
     Ok(list)
 }
@@ -336,4 +343,10 @@ fn positions(s: &RawStep, step_span: std::ops::Range<usize>, err: &ErrFn<'_>) ->
             Ok(ys.iter().flat_map(|&y| xs.iter().map(move |&x| (x, y, g.span()))).collect())
         }
     }
+}
+
+/// An indenter diameter, mm: positive and no wider than the sensor's shorter side.
+fn diameter(v: &Spanned<f64>, sensor: &Sensor, err: &ErrFn<'_>) -> Result<f64, SceneError> {
+    let d = positive("diameter_mm", v, err)?;
+    at_most("diameter_mm", v, d, sensor.width_mm.min(sensor.height_mm), err)
 }

@@ -106,6 +106,34 @@ fn negative_force_and_diameter_are_rejected() {
 }
 
 #[test]
+fn absurd_forces_diameters_durations_and_rates_are_rejected_at_their_line() {
+    let step = |body: &str| format!("{HEAD}[[step]]\nat_mm = [[0.0, 0.0]]\n{body}");
+    for (text, line, what) in [
+        (step("diameter_mm = 10.0\nforces_n = [1.0, 5e9]\nhold_s = 1.0\n"), 11, "forces_n"),
+        (step("diameter_mm = 150.0\nforces_n = [1.0]\nhold_s = 1.0\n"), 10, "diameter_mm"),
+        (step("diameter_mm = 10.0\nforce_profile = [[0.0, 1.0], [1.0, 300.0]]\n"), 11, "force_profile"),
+        (
+            format!(
+                "{HEAD}[[step]]\ncontacts = [{{ x_mm = 0.0, y_mm = 0.0, diameter_mm = 10.0, force_n = 1e4 }}]\nhold_s = 1.0\n"
+            ),
+            9,
+            "force_n",
+        ),
+        (format!("[rates]\neit_fps = 1e6\n\n{HEAD}"), 2, "eit_fps"),
+        (format!("[rates]\npressure_hz = 1e7\n\n{HEAD}"), 2, "pressure_hz"),
+    ] {
+        let (l, _, msg) = fails(&text);
+        assert!(msg.contains(what) && msg.contains("at most"), "{what}: {msg}");
+        assert_eq!(l, line, "{what}: {msg}");
+    }
+    // The timeline as a whole: 5e9 s of rest is a slip, not an experiment.
+    let (_, _, msg) = fails(&format!("{HEAD}[[step]]\nrest_s = 5e9\n"));
+    assert!(msg.contains("add up to") && msg.contains("11.6 days"), "{msg}");
+    // The limits themselves are accepted.
+    parse(&step("diameter_mm = 100.0\nforces_n = [200.0]\nhold_s = 1.0\n")).unwrap();
+}
+
+#[test]
 fn empty_timeline_is_rejected() {
     let (_, _, msg) = fails("[scene]\nname = \"x\"\n");
     assert!(msg.contains("empty timeline"), "{msg}");

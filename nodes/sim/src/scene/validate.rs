@@ -11,6 +11,15 @@ use toml::Spanned;
 
 const DEFAULT_EIT_FPS: f64 = 1.3;
 const DEFAULT_PRESSURE_HZ: f64 = 20.0;
+/// Largest force per contact, N: the skin model (foam compression, chamber saturation) is made
+/// for fingertip loads (the paper's go to 10 N); far beyond, its output means nothing.
+pub(super) const MAX_FORCE_N: f64 = 200.0;
+/// Longest timeline, s (11.6 days: a typing slip such as `rest_s = 5e9` is refused instead of
+/// simulating for ever).
+const MAX_DURATION_S: f64 = 1e6;
+/// Highest rates: far above any EIT board (tens of frames/s) or pressure sensor (kHz).
+const MAX_EIT_FPS: f64 = 1000.0;
+const MAX_PRESSURE_HZ: f64 = 100_000.0;
 pub(super) fn validate(raw: RawScene, text: &str, at: &Locator<'_>) -> Result<Scene, SceneError> {
     let err = |span: std::ops::Range<usize>, problem: String| at.error(Some(span), problem);
 
@@ -67,6 +76,12 @@ pub(super) fn validate(raw: RawScene, text: &str, at: &Locator<'_>) -> Result<Sc
     let timeline = Timeline { segments: builder.segments };
     if timeline.duration_s() <= 0.0 {
         return Err(at.error(None, "empty timeline: the steps add up to 0 s".into()));
+    }
+    if timeline.duration_s() > MAX_DURATION_S {
+        return Err(at.error(
+            None,
+            format!("the steps add up to {:.4e} s, more than {MAX_DURATION_S:e} s (11.6 days)", timeline.duration_s()),
+        ));
     }
     let faults = raw.fault.iter().map(|f| fault(f, &sensor, &err)).collect::<Result<Vec<_>, _>>()?;
 
@@ -133,10 +148,10 @@ fn rates(raw: &RawScene, err: &ErrFn<'_>) -> Result<Rates, SceneError> {
         return Ok(rates);
     };
     if let Some(v) = &r.eit_fps {
-        rates.eit_fps = positive("eit_fps", v, err)?;
+        rates.eit_fps = at_most("eit_fps", v, positive("eit_fps", v, err)?, MAX_EIT_FPS, err)?;
     }
     if let Some(v) = &r.pressure_hz {
-        rates.pressure_hz = positive("pressure_hz", v, err)?;
+        rates.pressure_hz = at_most("pressure_hz", v, positive("pressure_hz", v, err)?, MAX_PRESSURE_HZ, err)?;
     }
     if let Some(p) = &r.pacing {
         rates.pacing = match p.get_ref().as_str() {
@@ -180,6 +195,11 @@ pub(super) fn positive(name: &str, v: &Spanned<f64>, err: &ErrFn<'_>) -> Result<
     } else {
         Err(err(v.span(), format!("\"{name}\": must be finite and > 0 (got {x})")))
     }
+}
+
+/// `x` (the value of `v`, already checked otherwise) when it is at most `max`.
+pub(super) fn at_most(name: &str, v: &Spanned<f64>, x: f64, max: f64, err: &ErrFn<'_>) -> Result<f64, SceneError> {
+    if x <= max { Ok(x) } else { Err(err(v.span(), format!("\"{name}\": must be at most {max} (got {x})"))) }
 }
 
 pub(super) fn non_negative(name: &str, v: &Spanned<f64>, err: &ErrFn<'_>) -> Result<f64, SceneError> {

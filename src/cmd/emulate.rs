@@ -71,7 +71,14 @@ pub fn run(
     faults: &[String],
     stop: Arc<AtomicBool>,
 ) -> Result<()> {
+    eprintln!("simulating {} (seed {seed}) before the devices open...", scene.display());
+    let t0 = std::time::Instant::now();
     let (eit, pressure, force) = feed(scene, seed)?;
+    eprintln!("simulated in {:.1} s", t0.elapsed().as_secs_f64());
+    let last_s = [eit.last().map(|e| e.t_s), pressure.last().map(|p| p.t_s), force.last().map(|f| f.t_s)]
+        .into_iter()
+        .flatten()
+        .fold(0.0f64, f64::max);
     let mut plan = FaultPlan::default();
     for f in faults {
         let (device, index, fault) = parse_fault(f)?;
@@ -96,8 +103,11 @@ pub fn run(
     for (device, path) in emu.paths() {
         println!("{} {}", device.name(), path.display());
     }
+    let until =
+        if fast { "as fast as the readers take them".to_string() } else { format!("in real time, {last_s:.1} s") };
     eprintln!(
-        "emulating {}: {n_eit} EIT frames, {n_p} pressure samples, {n_f} load-cell readings (Ctrl-C to stop)",
+        "emulating {}: {n_eit} EIT frames, {n_p} pressure samples, {n_f} load-cell readings, {until}; ends with the \
+         scene or at Ctrl-C",
         scene.display()
     );
     while !emu.finished() && !stop.load(Ordering::SeqCst) {

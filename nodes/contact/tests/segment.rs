@@ -141,6 +141,18 @@ fn more_components_than_capacity_keep_the_strongest() {
 }
 
 #[test]
+fn a_cloned_output_keeps_its_limit_not_its_length() {
+    let blobs = [(-30.0, -30.0, 0.5, 4.0), (30.0, -30.0, 1.0, 4.0), (0.0, 30.0, 0.8, 4.0)];
+    let mut seg = Segmenter::new(grid(), &SegmentParams::with_floor(0.05)).unwrap();
+    let one = seg.new_contacts();
+    // A clone of an empty output has no capacity; it must still take max_contacts (8).
+    let mut out = one.clone();
+    assert_eq!(out.max_len(), 8);
+    seg.segment_into(&image(&blobs, 0.0, 1), &mut out).unwrap();
+    assert_eq!((out.len(), out.dropped), (3, 0));
+}
+
+#[test]
 fn wrong_image_size_and_bad_params_are_errors() {
     let mut seg = Segmenter::new(grid(), &SegmentParams::with_floor(0.05)).unwrap();
     let mut out = seg.new_contacts();

@@ -188,6 +188,9 @@ pub struct Contact {
 #[derive(Debug, Clone)]
 pub struct Contacts {
     items: Vec<Contact>,
+    /// Most contacts kept (the Vec's capacity is not the limit: a clone's capacity is its
+    /// length).
+    max: usize,
     /// Otsu threshold on the normalized decrease, `None` when no threshold was computed.
     pub threshold_norm: Option<f64>,
     /// The same threshold as a decrease in image units, `None` likewise.
@@ -205,6 +208,7 @@ impl Contacts {
     pub fn with_capacity(capacity: usize) -> Self {
         Self {
             items: Vec::with_capacity(capacity),
+            max: capacity,
             threshold_norm: None,
             threshold: None,
             peak_decrease: 0.0,
@@ -216,6 +220,11 @@ impl Contacts {
     /// The contacts of the last frame.
     pub fn as_slice(&self) -> &[Contact] {
         &self.items
+    }
+
+    /// Most contacts this output keeps (`max_contacts`); more are counted in `dropped`.
+    pub fn max_len(&self) -> usize {
+        self.max
     }
 
     /// Number of contacts.
@@ -239,7 +248,7 @@ impl Contacts {
 
     /// Adds a contact; when full, keeps the largest sums and counts the rest as dropped.
     fn offer(&mut self, c: Contact) {
-        if self.items.len() < self.items.capacity() {
+        if self.items.len() < self.max {
             self.items.push(c);
             return;
         }

@@ -130,28 +130,12 @@ fn calibrate_and_eval_refuse_a_recording_without_pressure_or_with_bad_times() {
         assert!(!d.join("c.toml").exists());
     }
     // The same recording with its pressure clock stepping back at row 17.
-    let rec = skinflow_record::Recording::open(d.join("rec.h5")).unwrap();
-    let mut opts = skinflow_record::WriterOptions::new(rec.sensor_toml.clone());
-    opts.streams =
-        skinflow_record::Streams { eit: true, pressure: true, truth: true, ..skinflow_record::Streams::default() };
-    opts.truth_max_contacts = rec.truth.as_ref().unwrap().max_contacts;
-    let mut w = skinflow_record::RecordingWriter::create(d.join("back.h5"), &opts).unwrap();
-    let eit = rec.eit.as_ref().unwrap();
-    for i in 0..eit.len() {
-        w.append_eit(eit.t_s[i], eit.seq[i], eit.frame(i)).unwrap();
-    }
-    let p = rec.pressure.as_ref().unwrap();
-    for i in 0..p.len() {
-        let t = if i == 17 { p.t_s[16] - 0.5 } else { p.t_s[i] };
-        w.append_pressure(t, p.kpa[i]).unwrap();
-    }
-    let truth = rec.truth.as_ref().unwrap();
-    for i in 0..truth.len() {
-        let row = truth.row(i);
-        let contacts: Vec<skinflow_record::TruthContact> = row.contacts().collect();
-        w.append_truth(truth.t_s[i], &contacts).unwrap();
-    }
-    w.close().unwrap();
+    let mut prev = 0.0;
+    super::support::rewrite_pressure(&d.join("rec.h5"), &d.join("back.h5"), |i, t, kpa| {
+        let t = if i == 17 { prev - 0.5 } else { t };
+        prev = t;
+        Some((t, kpa))
+    });
     for args in
         [vec!["eval", "back.h5", "--calib", calib.to_str().unwrap()], vec!["calibrate", "back.h5", "--out", "c.toml"]]
     {
@@ -203,7 +187,7 @@ fn forces_of_an_unlisted_strategy_warn_once_and_are_counted() {
     let out = skinflow(&d, &["run", &g, "--stats-json", "stats.json"]);
     ok(&out);
     let err = stderr(&out);
-    let (frames, log) = check_pipeline_stats(&d);
+    let (frames, log) = check_pipeline_stats(&d, "rec.h5");
     assert_eq!(err.matches("is not in `strategies`").count(), 1, "{err}");
     assert!(err.contains("forces of strategy \"pneumatic-locaware\" are not logged"), "{err}");
     assert!(err.contains(&format!("frames={frames}")) && err.contains("force frames not logged"), "{err}");
@@ -281,16 +265,16 @@ fn a_dead_electrode_is_masked_and_contacts_are_still_found_and_weighed() {
 }
 
 /// Replays `rec` through sync, reconstructor, segmenter, splitter and corrector in lockstep,
-/// logging the derived streams to `out.h5`; checks that nothing was dropped and every frame
-/// went through every stage. Returns the frame count and the log's path.
+/// logging the derived streams to `out.h5`; checks that nothing was dropped and every recorded
+/// frame went through every stage. Returns the frame count and the log's path.
 fn replay_pipeline(d: &Path, rec: &str) -> (usize, PathBuf) {
     let out = skinflow(d, &["run", &pipeline_graph(d, rec, "pneumatic-locaware"), "--stats-json", "stats.json"]);
     ok(&out);
-    check_pipeline_stats(d)
+    check_pipeline_stats(d, rec)
 }
 
 /// Writes the replayed pipeline graph (logging `logged`'s forces) into `d`; returns its name.
-fn pipeline_graph(d: &Path, rec: &str, logged: &str) -> String {
+pub(super) fn pipeline_graph(d: &Path, rec: &str, logged: &str) -> String {
     let calib = fixture("../../graphs/calib/paper.toml");
     let graph = format!(
         "[graph]\nmode = \"lockstep\"\n\
@@ -318,34 +302,42 @@ fn pipeline_graph(d: &Path, rec: &str, logged: &str) -> String {
     "g.toml".to_owned()
 }
 
-/// Checks the statistics of a [`pipeline_graph`] run; returns the frame count and the log's path.
-fn check_pipeline_stats(d: &Path) -> (usize, PathBuf) {
+/// Checks the statistics of a [`pipeline_graph`] run over recording `rec`: nothing dropped or
+/// discarded, and every recorded EIT frame went through every stage (the last ones too: the
+/// sync node's end-of-stream flush emits them). Returns the frame count and the log's path.
+pub(super) fn check_pipeline_stats(d: &Path, rec: &str) -> (usize, PathBuf) {
     let stats: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(d.join("stats.json")).unwrap()).unwrap();
     let total_drops: u64 = stats["edges"].as_array().unwrap().iter().map(|e| e["drops"].as_u64().unwrap()).sum();
     assert_eq!(total_drops, 0, "{stats}");
+    for n in stats["nodes"].as_array().unwrap() {
+        assert_eq!((n["discarded"].as_u64(), n["drops"].as_u64()), (Some(0), Some(0)), "{n}");
+    }
     let node = |id: &str| stats["nodes"].as_array().unwrap().iter().find(|n| n["id"] == id).unwrap().clone();
-    // Every EIT frame goes through every stage.
-    let frames = node("recon")["msgs_in"].as_u64().unwrap();
-    assert!(frames > 10);
-    assert_eq!(node("force")["msgs_out"].as_u64().unwrap(), frames);
-    (frames as usize, d.join("out.h5"))
+    let recorded = skinflow_record::Recording::open(d.join(rec)).unwrap().eit.unwrap().len() as u64;
+    assert!(recorded > 10);
+    assert_eq!(node("sync")["msgs_out"].as_u64().unwrap(), recorded, "{stats}");
+    assert_eq!(node("recon")["msgs_in"].as_u64().unwrap(), recorded, "{stats}");
+    assert_eq!(node("force")["msgs_out"].as_u64().unwrap(), recorded, "{stats}");
+    (recorded as usize, d.join("out.h5"))
 }
 
 /// Shares counted by [`derived_streams_agree`].
 #[derive(Debug)]
-struct Shares {
+pub(super) struct Shares {
     /// Frames with contacts and dP > 0.
-    loaded: usize,
-    /// Shares with the no-load bit (dP share <= 0 or NaN).
-    no_load: usize,
+    pub loaded: usize,
+    /// Shares with the no-load bit (dP share <= 0).
+    pub no_load: usize,
+    /// Shares with the no-pressure bit (dP unknown: NaN).
+    pub no_pressure: usize,
 }
 
 /// What the logger recorded of the sync node and the corrector tells one story: a row per
-/// frame in both, the proportional shares add up to the frame's pressure change, and the
-/// no-load bit is set exactly on the shares <= 0 (the bit mapping itself is unit-tested in
-/// the logger).
-fn derived_streams_agree(path: &Path, frames: usize) -> Shares {
+/// frame in both, the proportional shares add up to the frame's pressure change, the no-load
+/// bit is set exactly on the shares <= 0 and the no-pressure bit exactly on the unknown (NaN)
+/// ones, never both (the bit mapping itself is unit-tested in the logger).
+pub(super) fn derived_streams_agree(path: &Path, frames: usize) -> Shares {
     use skinflow_record::layout::force_flags;
     let rec = skinflow_record::Recording::open(path).unwrap();
     let sync = rec.derived.sync.as_ref().expect("/derived/sync");
@@ -359,7 +351,7 @@ fn derived_streams_agree(path: &Path, frames: usize) -> Shares {
     // Forces of a frame arrive after its sync row: both streams are in frame order.
     assert_eq!(forces.t_s, sync.t_s);
     let c = forces.max_contacts;
-    let mut shares = Shares { loaded: 0, no_load: 0 };
+    let mut shares = Shares { loaded: 0, no_load: 0, no_pressure: 0 };
     for k in 0..frames {
         let row = k * c..(k + 1) * c;
         let n = forces.force_n[row.clone()].iter().take_while(|f| !f.is_nan()).count();
@@ -377,12 +369,15 @@ fn derived_streams_agree(path: &Path, frames: usize) -> Shares {
         }
         for j in row.start..row.start + n {
             let no_load = flags[j] as u32 & force_flags::NO_LOAD != 0;
-            let no_signal = dp[j].is_nan() || dp[j] <= 0.0;
-            assert_eq!(no_load, no_signal, "frame {k}: share {} flags {}", dp[j], flags[j]);
-            if no_load {
-                shares.no_load += 1;
+            let no_pressure = flags[j] as u32 & force_flags::NO_PRESSURE != 0;
+            assert_eq!(no_load, dp[j] <= 0.0, "frame {k}: share {} flags {}", dp[j], flags[j]);
+            assert_eq!(no_pressure, dp[j].is_nan(), "frame {k}: share {} flags {}", dp[j], flags[j]);
+            assert_eq!(no_pressure, sync.dp_kpa[k].is_nan(), "frame {k}: the frame's dP {}", sync.dp_kpa[k]);
+            if no_load || no_pressure {
                 assert_eq!(forces.force_n[j], 0.0);
             }
+            shares.no_load += usize::from(no_load);
+            shares.no_pressure += usize::from(no_pressure);
         }
     }
     shares

@@ -54,3 +54,31 @@ pub fn ok(out: &Output) -> String {
     assert!(out.status.success(), "exit {:?}\nstdout:\n{stdout}\nstderr:\n{}", out.status, text(&out.stderr));
     stdout
 }
+
+/// Copies the EIT frames and truth of recording `src` into a new recording `dst`, with each
+/// pressure sample `(row, t_s, kpa)` mapped by `pressure` (`None` leaves it out).
+pub fn rewrite_pressure(src: &Path, dst: &Path, mut pressure: impl FnMut(usize, f64, f64) -> Option<(f64, f64)>) {
+    let rec = skinflow_record::Recording::open(src).unwrap();
+    let mut opts = skinflow_record::WriterOptions::new(rec.sensor_toml.clone());
+    opts.streams =
+        skinflow_record::Streams { eit: true, pressure: true, truth: true, ..skinflow_record::Streams::default() };
+    opts.truth_max_contacts = rec.truth.as_ref().unwrap().max_contacts;
+    let mut w = skinflow_record::RecordingWriter::create(dst, &opts).unwrap();
+    let eit = rec.eit.as_ref().unwrap();
+    for i in 0..eit.len() {
+        w.append_eit(eit.t_s[i], eit.seq[i], eit.frame(i)).unwrap();
+    }
+    let p = rec.pressure.as_ref().unwrap();
+    for i in 0..p.len() {
+        if let Some((t, kpa)) = pressure(i, p.t_s[i], p.kpa[i]) {
+            w.append_pressure(t, kpa).unwrap();
+        }
+    }
+    let truth = rec.truth.as_ref().unwrap();
+    for i in 0..truth.len() {
+        let row = truth.row(i);
+        let contacts: Vec<skinflow_record::TruthContact> = row.contacts().collect();
+        w.append_truth(truth.t_s[i], &contacts).unwrap();
+    }
+    w.close().unwrap();
+}

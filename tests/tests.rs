@@ -6,3 +6,4 @@ mod hardware;
 mod live;
 mod plugins;
 mod support;
+mod sync;

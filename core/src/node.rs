@@ -3,8 +3,13 @@
 //! One trait per role: a [`Source`] produces messages (on its own thread, so it may block on
 //! I/O), a [`Processor`] turns inputs into outputs on the worker pool, a [`Sink`] consumes.
 //! Lifecycle: the kind's factory constructs the node (reads params, allocates every buffer,
-//! fails here) -> `start` -> `poll`/`process`/`consume` (hot: no allocation) -> `stop`
+//! fails here) -> `start` -> `poll`/`process`/`consume` (hot: no allocation) -> for processors,
+//! [`Processor::flush`] once the stream has ended (emit what is still buffered) -> `stop`
 //! (flush, close; called once, also after errors).
+//!
+//! No silent loss: whatever a node holds and can no longer emit (its flush could not run or
+//! finish) it counts with [`Context::count_discarded`] in its `stop`; the run report shows it
+//! beside the edges' drops.
 //!
 //! Hot swap (see [`crate::runtime::GraphHandle::swap`]): the replacement is built and started
 //! off the data path; between two calls the engine asks the old instance for its learned state
@@ -21,6 +26,7 @@ use std::time::{Duration, Instant};
 
 use crate::error::NodeError;
 use crate::io::{Inputs, Outputs};
+use crate::stats::NodeStats;
 
 /// How the graph is scheduled.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Deserialize, serde::Serialize)]
@@ -109,6 +115,22 @@ pub trait Processor: Send {
     }
     /// Handles the inputs selected by the node's trigger; at most one message per output port.
     fn process(&mut self, ctx: &mut Context, inputs: &Inputs, out: &mut Outputs) -> Result<(), NodeError>;
+    /// End of stream: emits what the node still buffers (e.g. frames waiting for a window that
+    /// no more input can fill), so nothing it received is lost when its sources end.
+    ///
+    /// Called once every node upstream of this one is done (sources finished or stopped on
+    /// request, processors flushed) and this node's inputs are drained; before the nodes
+    /// downstream are flushed and before any node is stopped, so what it emits is processed
+    /// downstream, reaches the sinks and is counted in the run report. At most one message per
+    /// output port per call, as in `process`: [`Context::request_rerun`] asks to be called
+    /// again once these outputs are published and there is room downstream. Also runs after a
+    /// stop request (Ctrl-C, a duration limit): data already received is still emitted, within
+    /// the shutdown's drain timeout. Not called on a dead instance (panicked, failed) or when
+    /// the drain timed out: `stop` then counts what is left with [`Context::count_discarded`].
+    /// Default: nothing buffered, nothing to emit.
+    fn flush(&mut self, _ctx: &mut Context, _out: &mut Outputs) -> Result<(), NodeError> {
+        Ok(())
+    }
     fn stop(&mut self, _ctx: &mut Context) -> Result<(), NodeError> {
         Ok(())
     }
@@ -172,6 +194,15 @@ impl NodeImpl {
         }
     }
 
+    /// End-of-stream flush: processors only (a source has nothing upstream to wait for, a
+    /// sink's `stop` is its flush).
+    pub(crate) fn flush(&mut self, ctx: &mut Context, out: &mut Outputs) -> Result<(), NodeError> {
+        match self {
+            NodeImpl::Processor(n) => n.flush(ctx, out),
+            NodeImpl::Source(_) | NodeImpl::Sink(_) => Ok(()),
+        }
+    }
+
     pub(crate) fn stop(&mut self, ctx: &mut Context) -> Result<(), NodeError> {
         match self {
             NodeImpl::Source(n) => n.stop(ctx),
@@ -213,7 +244,8 @@ impl NodeImpl {
     }
 }
 
-/// Per-node context: identity, the graph clock, the stop flag and rerun requests.
+/// Per-node context: identity, the graph clock, the stop flag, rerun requests and the
+/// node's counter of discarded messages.
 pub struct Context {
     pub(crate) index: u32,
     pub(crate) id: Arc<str>,
@@ -221,6 +253,8 @@ pub struct Context {
     pub(crate) mode: Mode,
     pub(crate) stop: Arc<AtomicBool>,
     pub(crate) rerun: bool,
+    /// The node's statistics (shared with the run report).
+    pub(crate) stats: Arc<NodeStats>,
 }
 
 /// Longest single park while a source paces, so a stop request is seen within this time even
@@ -228,13 +262,21 @@ pub struct Context {
 const PACE_SLICE: Duration = Duration::from_millis(50);
 
 impl Context {
-    pub(crate) fn new(index: u32, id: Arc<str>, origin: Instant, mode: Mode, stop: Arc<AtomicBool>) -> Context {
-        Context { index, id, origin, mode, stop, rerun: false }
+    pub(crate) fn new(
+        index: u32,
+        id: Arc<str>,
+        origin: Instant,
+        mode: Mode,
+        stop: Arc<AtomicBool>,
+        stats: Arc<NodeStats>,
+    ) -> Context {
+        Context { index, id, origin, mode, stop, rerun: false, stats }
     }
 
     /// A context for driving a node outside a graph (unit tests of nodes, benchmarks).
     pub fn detached(id: &str, mode: Mode) -> Context {
-        Context::new(0, Arc::from(id), Instant::now(), mode, Arc::new(AtomicBool::new(false)))
+        let stats = Arc::new(NodeStats::default());
+        Context::new(0, Arc::from(id), Instant::now(), mode, Arc::new(AtomicBool::new(false)), stats)
     }
 
     /// The node's id from the graph file.
@@ -269,6 +311,19 @@ impl Context {
     /// Asks to be called again although no new input arrived (e.g. more buffered output).
     pub fn request_rerun(&mut self) {
         self.rerun = true;
+    }
+
+    /// Counts `n` messages this node held and discards without emitting them (e.g. frames
+    /// still buffered in `stop` because the end-of-stream flush could not run). They appear
+    /// as the node's `discarded` in the run report and in its and the graph's drops: data is
+    /// never lost silently. A cold path (a locked add).
+    pub fn count_discarded(&self, n: u64) {
+        self.stats.discarded.fetch_add(n, Ordering::Relaxed);
+    }
+
+    /// Messages counted with [`Context::count_discarded`] so far (by this node's instances).
+    pub fn discarded(&self) -> u64 {
+        self.stats.discarded.load(Ordering::Relaxed)
     }
 
     /// Sleeps until the graph clock reads `t_ns`. Returns false if the graph is stopping.

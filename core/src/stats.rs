@@ -116,7 +116,10 @@ impl Histogram {
 /// Counters of one node.
 #[derive(Default)]
 pub struct NodeStats {
+    /// Calls of `poll`/`process`/`consume`.
     pub calls: AtomicU64,
+    /// End-of-stream flush calls (`Processor::flush`); not in `calls` nor the latency.
+    pub flushes: AtomicU64,
     pub msgs_in: AtomicU64,
     pub msgs_out: AtomicU64,
     pub errors: AtomicU64,
@@ -125,6 +128,9 @@ pub struct NodeStats {
     /// Hot swaps applied.
     pub swaps: AtomicU64,
     pub deadline_misses: AtomicU64,
+    /// Messages the node held and discarded without emitting them (its own count, through
+    /// `Context::count_discarded`: e.g. frames still buffered when it was stopped unflushed).
+    pub discarded: AtomicU64,
     /// Wall time per call.
     pub latency: Histogram,
 }
@@ -159,6 +165,8 @@ pub struct NodeReport {
     pub id: String,
     pub kind: String,
     pub calls: u64,
+    /// End-of-stream flush calls.
+    pub flushes: u64,
     pub msgs_in: u64,
     pub msgs_out: u64,
     pub errors: u64,
@@ -171,7 +179,9 @@ pub struct NodeReport {
     pub latency_us_max: f64,
     /// Deepest queue on any of its inputs.
     pub max_queue_depth: usize,
-    /// Drops on its input edges (all causes).
+    /// Messages the node held and discarded without emitting them (see `NodeStats::discarded`).
+    pub discarded: u64,
+    /// Drops on its input edges (all causes) plus the messages it discarded.
     pub drops: u64,
 }
 
@@ -204,10 +214,12 @@ pub struct StatsReport {
 impl NodeReport {
     pub(crate) fn from_stats(id: &str, kind: &str, s: &NodeStats, inputs: &[&EdgeStats]) -> NodeReport {
         let us = |ns: u64| ns as f64 / 1e3;
+        let discarded = s.discarded.load(Relaxed);
         NodeReport {
             id: id.to_owned(),
             kind: kind.to_owned(),
             calls: s.calls.load(Relaxed),
+            flushes: s.flushes.load(Relaxed),
             msgs_in: s.msgs_in.load(Relaxed),
             msgs_out: s.msgs_out.load(Relaxed),
             errors: s.errors.load(Relaxed),
@@ -219,7 +231,8 @@ impl NodeReport {
             latency_us_p99: us(s.latency.quantile(0.99)),
             latency_us_max: us(s.latency.max()),
             max_queue_depth: inputs.iter().map(|e| e.max_depth.load(Relaxed)).max().unwrap_or(0),
-            drops: inputs.iter().map(|e| e.drops()).sum(),
+            discarded,
+            drops: inputs.iter().map(|e| e.drops()).sum::<u64>() + discarded,
         }
     }
 }
@@ -243,9 +256,9 @@ impl EdgeReport {
 }
 
 impl StatsReport {
-    /// Total drops over all edges.
+    /// Total drops: over all edges, plus the messages nodes held and discarded.
     pub fn total_drops(&self) -> u64 {
-        self.edges.iter().map(|e| e.drops).sum()
+        self.edges.iter().map(|e| e.drops).sum::<u64>() + self.nodes.iter().map(|n| n.discarded).sum::<u64>()
     }
 
     pub fn node(&self, id: &str) -> Option<&NodeReport> {
@@ -295,6 +308,13 @@ impl fmt::Display for StatsReport {
                     e.dropped_coalesced,
                     e.undelivered
                 )?;
+            }
+        }
+        let discarding: Vec<&NodeReport> = self.nodes.iter().filter(|n| n.discarded > 0).collect();
+        if !discarding.is_empty() {
+            writeln!(f, "discarded by nodes (held, never emitted):")?;
+            for n in discarding {
+                writeln!(f, "  {} ({}): {}", n.id, n.kind, n.discarded)?;
             }
         }
         Ok(())

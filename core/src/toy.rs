@@ -8,9 +8,11 @@
 //! | `sum` | processor | `out = a + b` (use `trigger = "aligned"`) |
 //! | `delay` | processor | passes messages on after busy-waiting `delay_us` |
 //! | `panicker` | processor | passes messages on, panics on the `at`-th (1-based) |
+//! | `lag` | processor | holds the last `by` messages back; emits them at end of stream (flush) |
 //! | `collect` | sink | writes `seq,value` lines to `path` at stop; fails to start if it cannot create it |
 //! | `null` | sink | discards |
 
+use std::collections::VecDeque;
 use std::io::Write;
 use std::path::PathBuf;
 
@@ -21,7 +23,7 @@ use serde::Deserialize;
 use crate::error::NodeError;
 use crate::io::{Inputs, Outputs};
 use crate::message::{Header, Message, Payload};
-use crate::node::{Context, NodeImpl, Processor, Sink, Source, SourcePoll};
+use crate::node::{Context, NodeImpl, NodeState, Processor, Sink, Source, SourcePoll, StateRefused};
 use crate::params::{ParamError, positive};
 use crate::port::PortSpec;
 use crate::recycle::Recycler;
@@ -194,6 +196,65 @@ impl Processor for Panicker {
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
+struct LagParams {
+    by: usize,
+}
+
+impl NodeParams for LagParams {}
+
+/// Emits each message once `by` newer ones have arrived, so it always holds the last `by`:
+/// the shape of a node that buffers (a window, a reorder buffer). At end of stream its flush
+/// emits them, one per call; a hot swap hands them to the replacement; what is still held at
+/// stop is counted as discarded.
+struct Lag {
+    by: usize,
+    held: VecDeque<Message>,
+}
+
+impl Processor for Lag {
+    fn process(&mut self, ctx: &mut Context, inputs: &Inputs, out: &mut Outputs) -> Result<(), NodeError> {
+        if let Some(m) = inputs.get(0) {
+            self.held.push_back(m.clone());
+        }
+        if self.held.len() > self.by
+            && let Some(m) = self.held.pop_front()
+        {
+            out.send(0, m)?;
+            if self.held.len() > self.by {
+                ctx.request_rerun(); // a replacement with a smaller `by` has a backlog
+            }
+        }
+        Ok(())
+    }
+
+    fn flush(&mut self, ctx: &mut Context, out: &mut Outputs) -> Result<(), NodeError> {
+        if let Some(m) = self.held.pop_front() {
+            out.send(0, m)?;
+        }
+        if !self.held.is_empty() {
+            ctx.request_rerun();
+        }
+        Ok(())
+    }
+
+    fn export_state(&mut self, _ctx: &mut Context) -> Option<NodeState> {
+        Some(Box::new(std::mem::take(&mut self.held)))
+    }
+
+    fn import_state(&mut self, _ctx: &mut Context, state: NodeState) -> Result<(), StateRefused> {
+        let held = state.downcast::<VecDeque<Message>>().map_err(|s| StateRefused::new(s, "not a lag's state"))?;
+        self.held = *held;
+        Ok(())
+    }
+
+    fn stop(&mut self, ctx: &mut Context) -> Result<(), NodeError> {
+        ctx.count_discarded(self.held.len() as u64);
+        Ok(())
+    }
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
 struct CollectParams {
     path: PathBuf,
 }
@@ -287,6 +348,13 @@ pub fn register(r: &mut Registry) -> Result<(), crate::registry::DuplicateKind> 
             .output(out())
             .param(ParamDoc::new("at", "u64", "", "1-based index of the message that panics")),
         |p: PanickerParams, _| Ok(NodeImpl::Processor(Box::new(Panicker { at: p.at, seen: 0 }))),
+    ))?;
+    r.register(typed(
+        KindInfo::new("lag", Role::Processor, "toy: holds the last `by` messages back, emits them at end of stream")
+            .input(PortSpec::input::<Count>("in", "the value"))
+            .output(out())
+            .param(ParamDoc::new("by", "usize", "", "messages held back")),
+        |p: LagParams, _| Ok(NodeImpl::Processor(Box::new(Lag { by: p.by, held: VecDeque::with_capacity(p.by + 1) }))),
     ))?;
     r.register(typed(
         KindInfo::new("collect", Role::Sink, "toy: writes seq,value lines to a file at stop")

@@ -588,6 +588,7 @@ fn stats_report_has_the_documented_shape() {
             "id",
             "kind",
             "calls",
+            "flushes",
             "msgs_in",
             "msgs_out",
             "errors",
@@ -598,6 +599,7 @@ fn stats_report_has_the_documented_shape() {
             "latency_us_p99",
             "latency_us_max",
             "max_queue_depth",
+            "discarded",
             "drops",
         ] {
             assert!(n.get(key).is_some(), "node report lacks {key}: {n}");

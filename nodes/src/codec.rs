@@ -176,7 +176,10 @@ impl Codec for ForcesCodec {
         let payload = self.ring.fill(|f| {
             f.forces.clear();
             for (&force_n, &dp_kpa) in force.iter().zip(dp) {
-                let flags = ForceFlags { no_load: dp_kpa.is_nan() || dp_kpa <= 0.0, ..ForceFlags::default() };
+                // A plugin's guards are its own; the host flags what the share says: unknown
+                // (not finite: a frame without pressure) or no load (<= 0).
+                let flags =
+                    ForceFlags { no_pressure: !dp_kpa.is_finite(), no_load: dp_kpa <= 0.0, ..ForceFlags::default() };
                 f.forces.push(ForceEstimate { force_n, dp_kpa, flags });
             }
             f.strategy.clear();

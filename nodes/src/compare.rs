@@ -6,7 +6,9 @@
 //! localization error (CONTRACTS.md section 4 matching, `skinflow_contact::eval`); without truth,
 //! each lane's disagreement with the reference lane (force RMS difference over matched
 //! contacts). Live: a `tracing` info line per lane every `report_s`; at stop: a table on stdout
-//! and, with `json`, the same as JSON. No-load reference frames are not evaluated.
+//! and, with `json`, the same as JSON. No-load reference frames are not evaluated, nor a lane's
+//! forces of a frame without pressure (placeholders flagged `no_pressure`): those are counted
+//! per lane (`no_pressure_frames`) and reported at stop.
 //!
 //! ```toml
 //! params = { names = ["proportional", "peak-weighted"], report_s = 2.0, json = "../out/ab.json", print = true }
@@ -75,6 +77,8 @@ struct Lane {
     truth_frames: u64,
     disagree_sq_n2: f64,
     disagree_matched: u64,
+    /// Frames whose forces were placeholders for an unknown pressure change: not scored.
+    no_pressure_frames: u64,
 }
 
 /// One lane's figures (what the table and the JSON show).
@@ -93,6 +97,9 @@ pub struct LaneReport {
     pub spurious: u64,
     /// Force RMS difference from the reference lane over frames without truth; NaN without.
     pub disagreement_rmse_n: f64,
+    /// Frames left out because the lane's forces were placeholders for a frame without
+    /// pressure (flagged `no_pressure`); not in `frames`.
+    pub no_pressure_frames: u64,
 }
 
 fn ratio(num: f64, den: u64) -> f64 {
@@ -113,6 +120,7 @@ impl Lane {
             missed: self.missed,
             spurious: self.spurious,
             disagreement_rmse_n: ratio(self.disagree_sq_n2, self.disagree_matched).sqrt(),
+            no_pressure_frames: self.no_pressure_frames,
         }
     }
 }
@@ -184,6 +192,29 @@ impl Compare {
         }
     }
 
+    /// Accounts lane `i`'s forces of one frame: scored against the truth, or without truth
+    /// against the reference lane's forces of the frame (`reference`; placeholders are no
+    /// reference). No-load frames are skipped, placeholders for a frame without pressure
+    /// counted and skipped.
+    fn account(&mut self, i: usize, f: &Forces, reference: Option<&Forces>) {
+        let synced = &f.split.contacts.image.src;
+        let lane = self.lane(i, f);
+        if synced.no_load {
+            return;
+        }
+        if f.without_pressure() {
+            lane.no_pressure_frames += 1;
+            return;
+        }
+        lane.frames += 1;
+        lane.latency_us.push(f.pipeline_ns() as f64 / 1e3);
+        if synced.truth.is_some() {
+            self.score_truth(i, f);
+        } else if let Some(r) = reference.filter(|r| i != self.reference && !r.without_pressure()) {
+            self.score_disagreement(i, f, r);
+        }
+    }
+
     /// Every lane's figures so far.
     pub fn reports(&self) -> Vec<LaneReport> {
         self.lanes.iter().map(Lane::report).collect()
@@ -197,18 +228,7 @@ impl Sink for Compare {
         for (i, m) in inputs.iter_port(0) {
             let f =
                 m.get::<Forces>().ok_or(NodeError::Input { port: "forces".into(), problem: "not forces".into() })?;
-            let synced = &f.split.contacts.image.src;
-            let lane = self.lane(i, f);
-            if synced.no_load {
-                continue;
-            }
-            lane.frames += 1;
-            lane.latency_us.push(f.pipeline_ns() as f64 / 1e3);
-            if synced.truth.is_some() {
-                self.score_truth(i, f);
-            } else if let Some(r) = reference.as_deref().filter(|_| i != self.reference) {
-                self.score_disagreement(i, f, r);
-            }
+            self.account(i, f, reference.as_deref());
         }
         if self.report_ns > 0 && self.next_report_ns == 0 {
             self.next_report_ns = ctx.now_ns() + self.report_ns; // first line after one period
@@ -225,8 +245,16 @@ impl Sink for Compare {
         Ok(())
     }
 
-    fn stop(&mut self, _ctx: &mut Context) -> Result<(), NodeError> {
+    fn stop(&mut self, ctx: &mut Context) -> Result<(), NodeError> {
         let reports = self.reports();
+        for r in reports.iter().filter(|r| r.no_pressure_frames > 0) {
+            tracing::warn!(
+                node = ctx.id(),
+                lane = %r.name,
+                frames = r.no_pressure_frames,
+                "frames without pressure were not scored (forces flagged no_pressure)"
+            );
+        }
         if self.print {
             print!("{}", table(&reports));
         }
@@ -317,7 +345,7 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
 mod tests {
     use std::sync::Arc;
 
-    use skinflow_contact::{Contact, ForceEstimate};
+    use skinflow_contact::{Contact, ForceEstimate, ForceFlags};
 
     use super::*;
     use crate::payload::{Contacts, Image, Split, SyncedFrame, Truth, TruthContact};
@@ -400,6 +428,37 @@ mod tests {
         assert!(r[0].disagreement_rmse_n.is_nan(), "every frame had truth");
     }
 
+    /// What a pneumatic strategy gives a contact of a frame without pressure.
+    fn placeholder() -> ForceEstimate {
+        let flags = ForceFlags { no_pressure: true, ..ForceFlags::default() };
+        ForceEstimate { force_n: 0.0, dp_kpa: f64::NAN, flags }
+    }
+
+    #[test]
+    fn forces_of_a_frame_without_pressure_are_counted_not_scored() {
+        let mut c = compare();
+        let truth = [(0.0, 0.0, 2.0)];
+        let scored = forces("pneumatic", &[(0.0, 0.0, 3.0)], Some(&truth));
+        // The same frame without pressure: its share is NaN, its force a flagged 0 N placeholder.
+        let mut lost = forces("pneumatic", &[(0.0, 0.0, 0.0)], Some(&truth));
+        lost.forces[0] = placeholder();
+        c.account(0, &scored, None);
+        c.account(0, &lost, None);
+        let r = &c.reports()[0];
+        assert_eq!((r.frames, r.no_pressure_frames, r.matched), (1, 1, 1));
+        assert!((r.rmse_n - 1.0).abs() < 1e-12, "the placeholder's 0 N is not an error of 2 N: {}", r.rmse_n);
+        // Without truth, a reference lane of placeholders is no reference.
+        let mut c = compare();
+        let eit = forces("eit", &[(0.0, 0.0, 2.5)], None);
+        let mut lost = forces("pneumatic", &[(0.0, 0.0, 0.0)], None);
+        lost.forces[0] = placeholder();
+        c.account(0, &lost, Some(&lost));
+        c.account(1, &eit, Some(&lost));
+        let r = c.reports();
+        assert_eq!((r[0].frames, r[0].no_pressure_frames, r[1].frames), (0, 1, 1));
+        assert!(r[1].disagreement_rmse_n.is_nan());
+    }
+
     #[test]
     fn without_truth_lanes_are_compared_with_the_reference() {
         let mut c = compare();
@@ -427,6 +486,7 @@ mod tests {
             missed: 0,
             spurious: 0,
             disagreement_rmse_n: 0.5,
+            no_pressure_frames: 2,
         };
         let t = table(std::slice::from_ref(&r));
         assert!(t.contains("| a \"quoted\" lane | 3 | 12.2 | 20.0 | - |"), "{t}");
@@ -436,6 +496,7 @@ mod tests {
         assert_eq!(lane["frames"], 3);
         assert!(lane["rmse_n"].is_null() && lane["localization_mean_mm"].is_null(), "{j}");
         assert_eq!(lane["disagreement_rmse_n"], 0.5);
-        assert_eq!(lane.as_object().unwrap().len(), 11, "{j}");
+        assert_eq!(lane["no_pressure_frames"], 2);
+        assert_eq!(lane.as_object().unwrap().len(), 12, "{j}");
     }
 }

@@ -8,6 +8,12 @@
 //! monotonically and a centroid outside the calibrated region is clamped, both flagged.
 //! Math: `skinflow_contact::correct`.
 //!
+//! A frame without pressure (its dP is unknown: a dropout of the pressure board, no tare yet;
+//! see `SyncedFrame::has_pressure`) is not a no-load frame: a pneumatic strategy gives each of
+//! its contacts a 0 N placeholder flagged `no_pressure` instead of `no_load`; EIT strategies
+//! do not use the pressure and are unaffected. The frames without pressure are counted and
+//! reported at stop.
+//!
 //! ```toml
 //! params = { strategy = "pneumatic-locaware", calibration = "../out/calib.toml" }
 //! ```
@@ -17,7 +23,7 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use serde::Deserialize;
-use skinflow_contact::{Strategy, StrategyKind};
+use skinflow_contact::{ForceEstimate, Strategy, StrategyKind};
 use skinflow_core::{
     Context, Inputs, KindInfo, Message, NodeError, NodeImpl, NodeParams, Outputs, ParamDoc, ParamError, PortSpec,
     Processor, Recycler, Registry, Role, typed,
@@ -56,10 +62,22 @@ impl NodeParams for CorrectorParams {
     }
 }
 
+/// Each contact's force of `split` by `strategy`, into `out` (cleared first). For a frame
+/// without pressure the shares are NaN and a pneumatic strategy gives 0 N placeholders flagged
+/// `no_pressure` ([`Strategy::estimate`]), never a no-load 0 N.
+fn estimate_split(strategy: &Strategy, split: &Split, out: &mut Vec<ForceEstimate>) {
+    out.clear();
+    for (c, &dp) in split.contacts.contacts.iter().zip(&split.dp_kpa) {
+        out.push(strategy.estimate(c, dp));
+    }
+}
+
 pub struct Corrector {
     strategy: Strategy,
     name: Option<String>,
     ring: Recycler<Forces>,
+    /// Frames seen whose pressure change was unknown.
+    without_pressure: u64,
 }
 
 impl Processor for Corrector {
@@ -67,13 +85,11 @@ impl Processor for Corrector {
         let Some(m) = inputs.get(0) else { return Ok(()) };
         let t0 = Instant::now();
         let split = m.arc::<Split>().ok_or(NodeError::Input { port: "split".into(), problem: "not a split".into() })?;
+        self.without_pressure += u64::from(!split.contacts.image.src.has_pressure());
         let strategy = &self.strategy;
         let name = &self.name;
         let payload = self.ring.fill(|f| {
-            f.forces.clear();
-            for (c, &dp) in split.contacts.contacts.iter().zip(&split.dp_kpa) {
-                f.forces.push(strategy.estimate(c, dp));
-            }
+            estimate_split(strategy, &split, &mut f.forces);
             f.strategy.clear();
             match name {
                 Some(n) => f.strategy.push_str(n),
@@ -89,6 +105,20 @@ impl Processor for Corrector {
             f.split = split;
         });
         out.send(0, Message::from_arc(m.header, payload))
+    }
+
+    fn stop(&mut self, ctx: &mut Context) -> Result<(), NodeError> {
+        let frames = self.without_pressure;
+        if frames > 0 && self.strategy.kind().is_pneumatic() {
+            tracing::warn!(
+                node = ctx.id(),
+                frames,
+                "frames without pressure: their forces are 0 N placeholders flagged no_pressure"
+            );
+        } else if frames > 0 {
+            tracing::info!(node = ctx.id(), frames, "frames without pressure: this EIT strategy does not use it");
+        }
+        Ok(())
     }
 }
 
@@ -117,7 +147,54 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
                 strategy: Strategy::new(&cal, kind),
                 name: p.name,
                 ring: Recycler::new(128, Forces::default),
+                without_pressure: 0,
             })))
         },
     ))
+}
+
+#[cfg(test)]
+mod tests {
+    use std::sync::Arc;
+
+    use skinflow_contact::{Calibration, Contact, ForceFlags};
+
+    use super::*;
+    use crate::payload::{Contacts, Image, SyncedFrame};
+
+    /// A two-contact split of a frame with pressure change `dp_kpa`, shared half and half.
+    fn split(dp_kpa: f64, pressure_samples: u32) -> Split {
+        let src = Arc::new(SyncedFrame { dp_kpa, pressure_samples, ..SyncedFrame::default() });
+        let image = Arc::new(Image { src, ..Image::default() });
+        let c = |x_mm| Contact { x_mm, y_mm: 0.0, sum: 40.0, area_mm2: 150.0, peak: 0.1, label: 1 };
+        let contacts = Arc::new(Contacts { image, contacts: vec![c(-20.0), c(20.0)], compute_ns: 0 });
+        Split { contacts, strategy: "proportional", dp_kpa: vec![0.5 * dp_kpa; 2], compute_ns: 0 }
+    }
+
+    #[test]
+    fn a_frame_without_pressure_gives_flagged_placeholders_not_no_load_forces() {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../graphs/calib/paper.toml");
+        let cal = Calibration::read(&path).unwrap();
+        let mut out = Vec::new();
+        for kind in StrategyKind::ALL {
+            let strategy = Strategy::new(&cal, kind);
+            // No sample in the window: dP and the shares are NaN.
+            estimate_split(&strategy, &split(f64::NAN, 0), &mut out);
+            assert_eq!(out.len(), 2);
+            for e in &out {
+                if kind.is_pneumatic() {
+                    let only = ForceFlags { no_pressure: true, ..ForceFlags::default() };
+                    assert_eq!((e.force_n, e.flags), (0.0, only), "{kind:?}");
+                    assert!(e.dp_kpa.is_nan(), "{kind:?}: the unknown share is kept");
+                } else {
+                    assert!(!e.flags.no_pressure && e.force_n > 0.0, "{kind:?} uses no pressure: {e:?}");
+                }
+            }
+            // Pressure known but at or below the tare: a genuine no-load reading.
+            estimate_split(&strategy, &split(-0.05, 12), &mut out);
+            for e in out.iter().filter(|_| kind.is_pneumatic()) {
+                assert!(e.flags.no_load && !e.flags.no_pressure && e.force_n == 0.0, "{kind:?}: {e:?}");
+            }
+        }
+    }
 }

@@ -292,9 +292,11 @@ impl Sink for Logger {
 /// The recording's bit code of a force's guard flags (`skinflow_record::layout::force_flags`).
 fn flag_bits(f: &ForceFlags) -> u32 {
     // Destructured in full, so a new flag cannot be left out of the file unnoticed.
-    let ForceFlags { no_load, above_range, below_range, location_clamped, area_clamped, negative_clamped } = *f;
+    let ForceFlags { no_load, no_pressure, above_range, below_range, location_clamped, area_clamped, negative_clamped } =
+        *f;
     [
         (no_load, force_flags::NO_LOAD),
+        (no_pressure, force_flags::NO_PRESSURE),
         (above_range, force_flags::ABOVE_RANGE),
         (below_range, force_flags::BELOW_RANGE),
         (location_clamped, force_flags::LOCATION_CLAMPED),
@@ -355,8 +357,9 @@ mod tests {
             one(|f| f.location_clamped = true),
             one(|f| f.area_clamped = true),
             one(|f| f.negative_clamped = true),
+            one(|f| f.no_pressure = true),
         ];
-        assert_eq!(bits, [1, 2, 4, 8, 16, 32]);
+        assert_eq!(bits, [1, 2, 4, 8, 16, 32, 64]);
         assert_eq!(flag_bits(&ForceFlags::default()), 0);
         let all = ForceFlags {
             no_load: true,
@@ -365,7 +368,8 @@ mod tests {
             location_clamped: true,
             area_clamped: true,
             negative_clamped: true,
+            no_pressure: true,
         };
-        assert_eq!(flag_bits(&all), 63);
+        assert_eq!(flag_bits(&all), 127);
     }
 }

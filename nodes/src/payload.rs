@@ -54,7 +54,7 @@ impl Payload for Truth {
 pub struct SyncedFrame {
     pub frame: Arc<EitFrame>,
     /// Mean pressure over the frame's window minus the no-load offset P0, kPa (NaN when no
-    /// pressure sample fell in the window).
+    /// pressure sample fell in the window or P0 is not known yet: see [`SyncedFrame::has_pressure`]).
     pub dp_kpa: f64,
     /// Pressure samples averaged.
     pub pressure_samples: u32,
@@ -75,6 +75,18 @@ pub struct SyncedFrame {
 
 impl Payload for SyncedFrame {
     const TYPE: &'static str = "synced_frame";
+}
+
+impl SyncedFrame {
+    /// Whether the frame has a known pressure change: some pressure sample fell in its window
+    /// and the no-load offset P0 is known. Without (the pneumatic board dropped out or is not
+    /// connected, or no no-load sample was seen yet) `dp_kpa` is NaN and the frame is *not* a
+    /// no-load frame for that (`no_load` only says when it was acquired): pneumatic forces of
+    /// it are 0 N placeholders flagged `no_pressure` by the corrector, `eval`, `calibrate` and
+    /// the `compare` sink leave it out, and `sync` and the corrector count such frames at stop.
+    pub fn has_pressure(&self) -> bool {
+        self.dp_kpa.is_finite()
+    }
 }
 
 /// Where the reconstructor's reference frame came from.
@@ -171,6 +183,12 @@ impl Payload for Forces {
 }
 
 impl Forces {
+    /// Whether these are placeholders for a frame without pressure (a force flagged
+    /// `no_pressure`, see [`SyncedFrame::has_pressure`]): not to be scored.
+    pub fn without_pressure(&self) -> bool {
+        self.forces.iter().any(|e| e.flags.no_pressure)
+    }
+
     /// Total wall time from the EIT frame to these forces over the pipeline stages, ns.
     pub fn pipeline_ns(&self) -> u64 {
         let c = &self.split.contacts;

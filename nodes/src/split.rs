@@ -9,6 +9,8 @@
 //! compensated force ratios and shares dP so that, under the calibration's forward pneumatic
 //! model (pressure adds over contacts), each share is the pressure its contact's force
 //! causes; pair it with the `pneumatic-forward` corrector. Math: `skinflow_contact::split`.
+//! A frame without pressure (NaN dP, see `SyncedFrame::has_pressure`) gets NaN shares, never
+//! zeros: the corrector then gives flagged placeholders, not a no-load force.
 //!
 //! ```toml
 //! params = { strategy = "sensitivity-compensated", calibration = "../out/calib.toml" }

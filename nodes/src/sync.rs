@@ -24,6 +24,18 @@
 //! freedom); the noise is estimated, so the real rate is higher (about 0.6 % of frames with
 //! 60 no-load samples, 3 % with 20), and drift during the no-load period loosens it.
 //!
+//! Frames without pressure: a frame whose window got no pressure sample (the pressure board
+//! dropped out, or is not connected) has `pressure_samples` = 0 and a NaN dP, and so has a
+//! frame before P0 is known. Its `no_load` still only says whether it was acquired in the
+//! leading no-load period (its EIT data may serve as reference); it is a frame *without
+//! pressure* (`SyncedFrame::has_pressure`), never read as zero load downstream. Both causes are
+//! counted and reported at stop.
+//!
+//! End of stream: once its inputs are done the engine flushes the node, which emits every
+//! frame still pending, in order, with the samples its window got (a stream's last one or two
+//! frames are always pending: no later sample closes their window). A frame the node could not
+//! emit (it was stopped unflushed) is counted as discarded in the run report.
+//!
 //! Hot swap: the replacement takes over the whole stream state (P0 and its sums, a `tare`'s P0
 //! and noise, the end of the no-load period, the pressure and truth history, the frame period
 //! estimate and the frames still waiting for pressure), so it neither re-tares on loaded
@@ -116,6 +128,16 @@ pub struct Sync {
     ring: Recycler<SyncedFrame>,
     // Internal state
     st: SyncState,
+    /// Frames emitted without a known pressure change (NaN dP), by cause: no sample in the
+    /// window, or samples but no P0 yet. Reported at stop.
+    without_pressure: WithoutPressure,
+}
+
+/// Counts of frames emitted with an unknown pressure change.
+#[derive(Debug, Default, Clone, Copy, PartialEq, Eq)]
+struct WithoutPressure {
+    no_sample: u64,
+    no_tare: u64,
 }
 
 /// The stream state of a `sync` node: moved whole to a replacement at a hot swap.
@@ -169,6 +191,7 @@ impl Sync {
                 period_s,
                 ..SyncState::default()
             },
+            without_pressure: WithoutPressure::default(),
         }
     }
 
@@ -224,7 +247,8 @@ impl Sync {
     }
 
     /// The no-load offset, kPa; NaN while no no-load sample has been seen (P0 is never
-    /// assumed zero: such frames carry a NaN dP, which correctors turn into 0 N, flagged).
+    /// assumed zero: such frames carry a NaN dP, frames without pressure: see
+    /// `SyncedFrame::has_pressure`).
     fn p0(&self) -> f64 {
         let shift = self.st.p0_shift.unwrap_or(0.0);
         self.st.p0_fixed.unwrap_or(if self.st.p0_n > 0 {
@@ -362,6 +386,13 @@ impl Sync {
         let no_load = self.window_in_no_load(hi);
         let p0 = self.p0();
         let dp_kpa = mean - p0;
+        if !dp_kpa.is_finite() {
+            if n == 0 {
+                self.without_pressure.no_sample += 1;
+            } else {
+                self.without_pressure.no_tare += 1;
+            }
+        }
         let payload = self.ring.fill(|s| {
             s.frame = frame;
             s.dp_kpa = dp_kpa;
@@ -459,13 +490,43 @@ impl Processor for Sync {
         Ok(())
     }
 
-    fn stop(&mut self, ctx: &mut Context) -> Result<(), NodeError> {
+    /// End of stream: no more pressure or truth can arrive, so every pending frame's window is
+    /// as complete as it will ever be. Emits them oldest first, one per call, each with the
+    /// mean of the samples its window has (none: `pressure_samples` = 0 and a NaN dP, as in
+    /// the stream).
+    fn flush(&mut self, ctx: &mut Context, out: &mut Outputs) -> Result<(), NodeError> {
+        if self.st.pending.is_empty() {
+            return Ok(());
+        }
+        self.emit_oldest(ctx, out)?;
         if !self.st.pending.is_empty() {
+            ctx.request_rerun();
+        }
+        Ok(())
+    }
+
+    fn stop(&mut self, ctx: &mut Context) -> Result<(), NodeError> {
+        let WithoutPressure { no_sample, no_tare } = self.without_pressure;
+        if !self.pressure_connected {
+            tracing::info!(
+                node = ctx.id(),
+                "pressure not connected: every frame's pressure change is unknown (NaN dP)"
+            );
+        } else if no_sample + no_tare > 0 {
             tracing::warn!(
                 node = ctx.id(),
-                frames = self.st.pending.len(),
-                "frames still waiting for pressure at stop were not emitted"
+                no_sample_in_window = no_sample,
+                before_the_tare = no_tare,
+                "frames without pressure (NaN dP, flagged downstream, not no-load frames)"
             );
+        }
+        let n = self.st.pending.len();
+        if n > 0 {
+            // Only when the flush could not run (drain timeout, a failed instance, a
+            // replacement that refused the state): counted, never silently lost.
+            tracing::warn!(node = ctx.id(), frames = n, "frames never emitted (not flushed): counted as discarded");
+            ctx.count_discarded(n as u64);
+            self.st.pending.clear();
         }
         Ok(())
     }

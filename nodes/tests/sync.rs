@@ -5,8 +5,8 @@ use std::path::Path;
 use std::sync::{Arc, Mutex};
 
 use skinflow_core::graph::SourceFile;
-use skinflow_core::{GraphSpec, RunOptions};
-use skinflow_nodes::payload::SyncedFrame;
+use skinflow_core::{GraphSpec, Header, RunOptions};
+use skinflow_nodes::payload::{EitFrame, SyncedFrame};
 use skinflow_nodes::pipeline::{Captured, registry_with_capture};
 
 fn run_press() -> Vec<SyncedFrame> {
@@ -15,6 +15,16 @@ fn run_press() -> Vec<SyncedFrame> {
 
 /// Every sync output of a fixture scene with its time stamp, s.
 fn run_scene(fixture: &str) -> Vec<(f64, SyncedFrame)> {
+    run_scene_with_frames(fixture).1.into_iter().map(|(h, f)| (h.t_s(), f)).collect()
+}
+
+/// The EIT frames the simulated skin sent and every sync output, in arrival order, with their
+/// headers.
+type SceneRun = (Vec<(Header, Arc<EitFrame>)>, Vec<(Header, SyncedFrame)>);
+
+/// Runs a fixture scene through `sync`; one capture sink takes both the skin's EIT frames and
+/// the sync output (told apart by payload type).
+fn run_scene_with_frames(fixture: &str) -> SceneRun {
     let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures").join(fixture);
     let graph = format!(
         "[graph]\nmode = \"lockstep\"\n\
@@ -24,7 +34,8 @@ fn run_scene(fixture: &str) -> Vec<(f64, SyncedFrame)> {
          [[edge]]\nfrom = \"skin.eit\"\nto = \"sync.eit\"\n\
          [[edge]]\nfrom = \"skin.pressure\"\nto = \"sync.pressure\"\n\
          [[edge]]\nfrom = \"skin.truth\"\nto = \"sync.truth\"\n\
-         [[edge]]\nfrom = \"sync.frame\"\nto = \"cap.in\"\n"
+         [[edge]]\nfrom = \"sync.frame\"\nto = \"cap.in\"\n\
+         [[edge]]\nfrom = \"skin.eit\"\nto = \"cap.in\"\n"
     );
     let captured: Captured = Arc::new(Mutex::new(Vec::new()));
     let reg = registry_with_capture(captured.clone());
@@ -33,7 +44,15 @@ fn run_scene(fixture: &str) -> Vec<(f64, SyncedFrame)> {
     assert!(report.failures.is_empty(), "{:?}", report.failures);
     assert_eq!(report.stats.total_drops(), 0);
     let rows = captured.lock().unwrap();
-    rows.iter().map(|r| (r[0].header.t_s(), r[0].get::<SyncedFrame>().unwrap().clone())).collect()
+    let (mut eit, mut synced) = (Vec::new(), Vec::new());
+    for m in rows.iter().flatten() {
+        match (m.arc::<EitFrame>(), m.get::<SyncedFrame>()) {
+            (Some(f), _) => eit.push((m.header, f)),
+            (_, Some(s)) => synced.push((m.header, s.clone())),
+            _ => panic!("unexpected payload {}", m.type_name()),
+        }
+    }
+    (eit, synced)
 }
 
 #[test]
@@ -72,14 +91,31 @@ fn frames_carry_tared_pressure_truth_and_the_no_load_flag() {
     assert!(hi - lo < 0.05 * hi, "held dP spread {dps:?}");
 }
 
+/// Each EIT frame the skin sent comes out exactly once, in order, carrying that very frame:
+/// also the last ones, whose window no later pressure sample closes (the end-of-stream flush
+/// emits them, with the samples their window got).
 #[test]
 fn every_frame_is_emitted_once_and_in_order() {
-    let frames = run_press();
-    let seqs: Vec<u64> = frames.iter().map(|f| f.frame.v.len() as u64).collect();
-    assert!(seqs.iter().all(|&m| m == 120), "120 values per frame");
-    // The simulator's frame count for the scene: every one reaches the output.
-    let t_total: f64 = 3.0 + 0.2 + 4.0 / 1.3 + 0.2 + 1.0;
-    assert!(frames.len() as f64 >= (t_total * 1.3).floor() - 1.0, "{} frames for {t_total} s", frames.len());
+    for fixture in ["press.toml", "press-paper.toml"] {
+        let (eit, synced) = run_scene_with_frames(fixture);
+        // The simulator's frame count for the scene (3 s rest, 0.2 s ramp, 4 frames held,
+        // 0.2 s release, 1 s rest at 1.3 frames/s).
+        let t_total: f64 = 3.0 + 0.2 + 4.0 / 1.3 + 0.2 + 1.0;
+        assert!(eit.len() as f64 >= (t_total * 1.3).floor() - 1.0, "{fixture}: {} frames for {t_total} s", eit.len());
+        let key = |h: &Header| (h.seq, h.t_ns);
+        let sent: Vec<(u64, u64)> = eit.iter().map(|(h, _)| key(h)).collect();
+        let got: Vec<(u64, u64)> = synced.iter().map(|(h, _)| key(h)).collect();
+        assert_eq!(got, sent, "{fixture}: every frame once, in order");
+        for ((_, frame), (h, s)) in eit.iter().zip(&synced) {
+            assert!(Arc::ptr_eq(frame, &s.frame), "{fixture}: frame {} carries its own EIT data", h.seq);
+            assert_eq!(s.frame.v.len(), 120, "{fixture}: 120 values per frame");
+            // Pressure flows until the scene's end: every window, the last ones included, has
+            // samples (they are not mistaken for frames without pressure).
+            assert!(s.pressure_samples > 0 && s.dp_kpa.is_finite(), "{fixture}: frame {}: {s:?}", h.seq);
+        }
+        // Frames are stamped in increasing time.
+        assert!(got.windows(2).all(|w| w[0].1 < w[1].1), "{fixture}: {got:?}");
+    }
 }
 
 /// The settled flag on both skins: it is set exactly on the frames whose window holds no part
@@ -107,5 +143,110 @@ fn the_settled_flag_follows_the_load_not_the_noise() {
             if still { counts.0 += 1 } else { counts.1 += 1 }
         }
         assert!(counts.0 >= 6 && counts.1 >= 3, "{fixture}: settled / not: {counts:?}");
+    }
+}
+
+/// EIT frame period of [`write_cut_recording`], s.
+const T: f64 = 0.5;
+/// Frames of [`write_cut_recording`], the first at `T`.
+const FRAMES: u64 = 12;
+/// The frames whose window the pressure board missed: one in the no-load period, one loaded.
+const DROPOUTS: [u64; 2] = [1, 7];
+
+fn frame_t(k: u64) -> f64 {
+    T * (k + 1) as f64
+}
+
+/// The pressure of [`write_cut_recording`]: (t, kPa) at 20 Hz (offset so that no sample lies
+/// on a window's edge), 1 kPa at rest and 2 kPa from the first contact at 3 s, without the
+/// samples in the windows of [`DROPOUTS`], ending 0.35 s before the last frame: no sample can
+/// close the last two frames' windows, and the last window holds none.
+fn cut_pressure() -> Vec<(f64, f64)> {
+    let dropped = |t: f64| DROPOUTS.iter().any(|&k| (t - frame_t(k)).abs() <= 0.5 * T);
+    (0..)
+        .map(|i| 0.01 + 0.05 * f64::from(i))
+        .take_while(|&t| t < frame_t(FRAMES - 1) - 0.35)
+        .filter(|&t| !dropped(t))
+        .map(|t| (t, if t < 3.0 { 1.0 } else { 2.0 }))
+        .collect()
+}
+
+/// A recording of [`FRAMES`] frames with the pressure of [`cut_pressure`] and a first contact
+/// at 3 s.
+fn write_cut_recording(path: &Path) {
+    use skinflow_record::{RecordingWriter, Streams, TruthContact, WriterOptions};
+    let mut opts = WriterOptions::new(skinflow_eit::sensor::PAPER_100MM_TOML);
+    opts.streams = Streams { eit: true, pressure: true, truth: true, ..Streams::default() };
+    opts.overwrite = true;
+    let mut w = RecordingWriter::create(path, &opts).unwrap();
+    for (t, kpa) in cut_pressure() {
+        w.append_pressure(t, kpa).unwrap();
+    }
+    for k in 0..FRAMES {
+        w.append_eit(frame_t(k), k, &[1.0 + 1e-3 * k as f64; 120]).unwrap();
+    }
+    w.append_truth(0.0, &[]).unwrap();
+    w.append_truth(3.0, &[TruthContact { x_mm: 0.0, y_mm: 0.0, force_n: 4.0, diameter_mm: 15.0 }]).unwrap();
+    w.close().unwrap();
+}
+
+/// The recording replayed through `sync` in `mode`: the sync output in arrival order.
+fn replay_sync(path: &Path, mode: &str) -> Vec<(Header, SyncedFrame)> {
+    let graph = format!(
+        "[graph]\nmode = {mode:?}\n\
+         [[node]]\nid = \"replay\"\nkind = \"replay\"\nparams = {{ path = {path:?}, speed = 0.0 }}\n\
+         [[node]]\nid = \"sync\"\nkind = \"sync\"\n\
+         [[node]]\nid = \"cap\"\nkind = \"capture\"\n\
+         [[edge]]\nfrom = \"replay.eit\"\nto = \"sync.eit\"\n\
+         [[edge]]\nfrom = \"replay.pressure\"\nto = \"sync.pressure\"\n\
+         [[edge]]\nfrom = \"replay.truth\"\nto = \"sync.truth\"\n\
+         [[edge]]\nfrom = \"sync.frame\"\nto = \"cap.in\"\n"
+    );
+    let captured: Captured = Arc::new(Mutex::new(Vec::new()));
+    let reg = registry_with_capture(captured.clone());
+    let spec = GraphSpec::parse(SourceFile::new("cut-graph.toml", graph), &reg).unwrap();
+    let report = skinflow_core::run(&spec, &RunOptions::default()).unwrap();
+    assert!(report.failures.is_empty(), "{mode}: {:?}", report.failures);
+    assert_eq!(report.stats.total_drops(), 0, "{mode}: {}", report.stats);
+    let sync = report.stats.node("sync").unwrap();
+    assert_eq!(sync.discarded, 0, "{mode}");
+    let rows = captured.lock().unwrap();
+    rows.iter().flatten().map(|m| (m.header, m.get::<SyncedFrame>().unwrap().clone())).collect()
+}
+
+/// A recording that ends while the last frames' windows are still open: the end-of-stream
+/// flush emits them, in order, with the samples their windows got, in both executors. Frames
+/// whose window the pressure board missed come out too, without pressure: `pressure_samples`
+/// 0, a NaN dP, and `no_load` only where they were acquired before the first contact.
+#[test]
+fn a_cut_recording_keeps_every_frame_and_its_pressure_dropouts() {
+    let dir = std::env::temp_dir().join(format!("skinflow-nodes-sync-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("cut.h5");
+    write_cut_recording(&path);
+    let pressure = cut_pressure();
+    for mode in ["lockstep", "realtime"] {
+        let frames = replay_sync(&path, mode);
+        let seqs: Vec<u64> = frames.iter().map(|(h, _)| h.seq).collect();
+        assert_eq!(seqs, (0..FRAMES).collect::<Vec<_>>(), "{mode}: every frame once, in order");
+        for (h, f) in &frames {
+            let k = h.seq;
+            assert!((f.frame.v[0] - (1.0 + 1e-3 * k as f64)).abs() < 1e-12, "{mode}: frame {k} carries its data");
+            let (lo, hi) = (frame_t(k) - 0.5 * T, frame_t(k) + 0.5 * T);
+            assert_eq!(f.no_load, hi <= 3.0, "{mode}: frame {k}");
+            let window: Vec<f64> = pressure.iter().filter(|(t, _)| *t >= lo && *t < hi).map(|(_, p)| *p).collect();
+            assert_eq!(f.pressure_samples as usize, window.len(), "{mode}: frame {k}");
+            let without = DROPOUTS.contains(&k) || k == FRAMES - 1;
+            assert_eq!(f.has_pressure(), !without, "{mode}: frame {k}: {f:?}");
+            if without {
+                assert!(f.pressure_samples == 0 && f.dp_kpa.is_nan(), "{mode}: frame {k}: {f:?}");
+            } else {
+                // The window's mean over the tare (1 kPa at rest).
+                let want = window.iter().sum::<f64>() / window.len() as f64 - 1.0;
+                assert!((f.dp_kpa - want).abs() < 1e-9, "{mode}: frame {k}: want dP {want}: {f:?}");
+            }
+        }
+        let second_last = &frames[FRAMES as usize - 2].1;
+        assert!(second_last.pressure_samples < 10, "{mode}: a partial window: {second_last:?}");
     }
 }

@@ -18,18 +18,28 @@ pub fn content_hash(path: &Path) -> Result<String> {
     Ok(format!("sha256:{}", digest.iter().map(|b| format!("{b:02x}")).collect::<String>()))
 }
 
-/// One calibration sample per settled, loaded single-contact frame with a detection.
-pub fn samples(rows: &[Vec<skinflow_core::Message>], settled: &Settled) -> Vec<CalibSample> {
+/// Calibration samples: one per settled, loaded single-contact frame with a detection and a
+/// known pressure change. Also the number of loaded frames left out because their pressure
+/// change is unknown (`SyncedFrame::has_pressure`: a pressure dropout, no tare yet).
+pub fn samples(rows: &[Vec<skinflow_core::Message>], settled: &Settled) -> (Vec<CalibSample>, usize) {
     let mut out = Vec::new();
+    let mut without_pressure = 0;
     for row in rows {
         let Some(m) = row.first() else { continue };
         let Some(c) = m.get::<Contacts>() else { continue };
         let synced = &c.image.src;
+        if synced.no_load {
+            continue;
+        }
+        if !synced.has_pressure() {
+            without_pressure += 1;
+            continue;
+        }
         if !settled.is_settled(m.header.t_s(), synced) {
             continue;
         }
         let Some(truth) = synced.truth.as_ref() else { continue };
-        if synced.no_load || truth.contacts.len() != 1 || !synced.dp_kpa.is_finite() {
+        if truth.contacts.len() != 1 {
             continue;
         }
         let t = truth.contacts[0];
@@ -47,7 +57,7 @@ pub fn samples(rows: &[Vec<skinflow_core::Message>], settled: &Settled) -> Vec<C
             diameter_mm: t.diameter_mm,
         });
     }
-    out
+    (out, without_pressure)
 }
 
 /// The `--fit` option of `calibrate` and `reproduce`.
@@ -75,7 +85,14 @@ pub fn fit(recording: &Path, params: &CalibParams, args: &PipelineArgs) -> Resul
 /// Runs the pipeline over a calibration recording: its calibration samples and provenance.
 pub fn collect(recording: &Path, args: &PipelineArgs) -> Result<(Vec<CalibSample>, Provenance)> {
     let (rows, settled) = args.run(recording, |_| ())?;
-    let samples = samples(&rows, &settled);
+    let (samples, without_pressure) = samples(&rows, &settled);
+    if without_pressure > 0 {
+        eprintln!(
+            "{}: {without_pressure} frames without pressure (no sample in their acquisition window, or before the tare) \
+             were not used: their pressure change is unknown",
+            recording.display()
+        );
+    }
     settled
         .warn_unknown_noise(recording, rows.iter().filter_map(|r| r.first()?.get::<Contacts>()).map(|c| &*c.image.src));
     if samples.is_empty() {

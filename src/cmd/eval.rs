@@ -56,6 +56,7 @@ pub fn evaluate(recording: &Path, calib: &Path, args: &PipelineArgs, want_rows: 
     let mut truth = Vec::new();
     let mut detected = Vec::new();
     let mut transitions = 0usize;
+    let mut without_pressure = 0usize;
     // Frames (loaded, not no-load) settled by each criterion: [truth only, pressure only, both, neither].
     let mut agreement = [0usize; 4];
     let mut contact_rows = Vec::new();
@@ -65,6 +66,12 @@ pub fn evaluate(recording: &Path, calib: &Path, args: &PipelineArgs, want_rows: 
         let contacts = &first.split.contacts;
         let synced = &contacts.image.src;
         if synced.no_load {
+            continue;
+        }
+        // No pneumatic force exists for it (placeholders flagged `no_pressure`): the frame is
+        // left out for every strategy, so all are evaluated on the same frames.
+        if !synced.has_pressure() {
+            without_pressure += 1;
             continue;
         }
         let by_truth = settled.by_truth(row[0].header.t_s());
@@ -136,9 +143,16 @@ pub fn evaluate(recording: &Path, calib: &Path, args: &PipelineArgs, want_rows: 
             recording.display()
         );
     }
+    if without_pressure > 0 {
+        eprintln!(
+            "{}: {without_pressure} frames without pressure (no sample in their acquisition window, or before the tare) \
+             were not evaluated: their pneumatic forces are flagged placeholders",
+            recording.display()
+        );
+    }
     let [truth_only, pressure_only, both, neither] = agreement;
     eprintln!(
-        "{}: settled frames by truth / by pressure: {} / {} of {} frames after the no-load period ({both} both, \
+        "{}: settled frames by truth / by pressure: {} / {} of {} frames with pressure after the no-load period ({both} both, \
          {neither} neither, {truth_only} by truth only, {pressure_only} by pressure only)",
         recording.display(),
         truth_only + both,

@@ -1,6 +1,7 @@
 //! A node instance with its queue ends, and the per-call protocol shared by every executor:
 //! is it ready (trigger satisfied, room on its lossless outputs), then fire (select inputs,
-//! call the node under `catch_unwind`, time it, publish its outputs, wake its consumers).
+//! call the node under `catch_unwind`, time it, publish its outputs, wake its consumers); and
+//! the same for a processor's end-of-stream flush.
 
 use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::sync::Arc;
@@ -33,6 +34,16 @@ pub(crate) enum Fired {
     Ok,
     /// A source finished.
     Finished,
+    /// The node cannot go on and the graph must stop.
+    Fatal(NodeError),
+}
+
+/// Outcome of one end-of-stream flush call.
+pub(crate) enum Flushed {
+    /// The node asked to be flushed again (more buffered output).
+    More,
+    /// Nothing more to flush (or the call failed: an error ends the node's flush).
+    Done,
     /// The node cannot go on and the graph must stop.
     Fatal(NodeError),
 }
@@ -171,44 +182,80 @@ impl Cell {
     /// Runs one call of a processor/sink (`ready` returned true) or a source poll.
     pub fn fire(&mut self, n: &dyn Notify) -> Fired {
         let taken = if matches!(self.imp, NodeImpl::Source(_)) { 0 } else { self.select_inputs(n) };
+        self.call(n, Some(taken), |imp, ctx, in_io, out_io| match imp {
+            NodeImpl::Source(s) => s.poll(ctx, out_io),
+            NodeImpl::Processor(p) => p.process(ctx, in_io, out_io).map(|()| SourcePoll::Emitted),
+            NodeImpl::Sink(s) => s.consume(ctx, in_io).map(|()| SourcePoll::Emitted),
+        })
+        .0
+    }
+
+    /// Runs one end-of-stream flush call of a processor (see [`crate::Processor::flush`]) and
+    /// publishes what it emitted. The caller makes sure there is room on the outputs.
+    pub fn flush(&mut self, n: &dyn Notify) -> Flushed {
+        if self.dead || !matches!(self.imp, NodeImpl::Processor(_)) {
+            return Flushed::Done;
+        }
+        let (fired, ok) =
+            self.call(n, None, |imp, ctx, _, out_io| imp.flush(ctx, out_io).map(|()| SourcePoll::Emitted));
+        // A rerun request from a flush asks for another flush, never for a `process` call.
+        let more = std::mem::take(&mut self.ctx.rerun);
+        match fired {
+            Fired::Fatal(e) => Flushed::Fatal(e),
+            _ if ok && more && !self.dead => Flushed::More,
+            _ => Flushed::Done,
+        }
+    }
+
+    /// The per-call protocol around `f`: under `catch_unwind`, timed, counted; errors, panics
+    /// and the restart policy handled; outputs published. `taken`: the messages a call took
+    /// (`None` for a flush call, counted apart so `calls` and the latency stay per call of
+    /// `process`/`poll`/`consume`). Returns the outcome and whether the call returned `Ok`.
+    fn call(
+        &mut self,
+        n: &dyn Notify,
+        taken: Option<u64>,
+        f: impl FnOnce(&mut NodeImpl, &mut Context, &Inputs, &mut Outputs) -> Result<SourcePoll, NodeError>,
+    ) -> (Fired, bool) {
         self.ctx.rerun = false;
         let span = tracing::trace_span!("node", id = %self.ctx.id);
         let _enter = span.enter();
         let t0 = Instant::now();
         let Cell { imp, ctx, in_io, out_io, .. } = self;
-        let result = catch_unwind(AssertUnwindSafe(|| match imp {
-            NodeImpl::Source(s) => s.poll(ctx, out_io),
-            NodeImpl::Processor(p) => p.process(ctx, in_io, out_io).map(|()| SourcePoll::Emitted),
-            NodeImpl::Sink(s) => s.consume(ctx, in_io).map(|()| SourcePoll::Emitted),
-        }));
+        let result = catch_unwind(AssertUnwindSafe(|| f(imp, ctx, in_io, out_io)));
         let ns = t0.elapsed().as_nanos() as u64;
         drop(_enter);
         self.in_io.clear();
         let st = &self.stats;
-        bump(&st.calls, 1);
-        bump(&st.msgs_in, taken);
-        st.latency.record_single_writer(ns);
-        if self.deadline_ns.is_some_and(|d| ns > d) {
-            bump(&st.deadline_misses, 1);
+        match taken {
+            Some(taken) => {
+                bump(&st.calls, 1);
+                bump(&st.msgs_in, taken);
+                st.latency.record_single_writer(ns);
+                if self.deadline_ns.is_some_and(|d| ns > d) {
+                    bump(&st.deadline_misses, 1);
+                }
+            }
+            None => bump(&st.flushes, 1),
         }
         let outcome = match result {
-            Ok(Ok(SourcePoll::Finished)) => Fired::Finished,
-            Ok(Ok(_)) => Fired::Ok,
+            Ok(Ok(SourcePoll::Finished)) => (Fired::Finished, true),
+            Ok(Ok(_)) => (Fired::Ok, true),
             Ok(Err(e)) if e.is_fatal() => {
                 bump(&st.errors, 1);
                 self.dead = true;
-                Fired::Fatal(e)
+                (Fired::Fatal(e), false)
             }
             Ok(Err(e)) => {
                 bump(&st.errors, 1);
                 tracing::warn!(node = %self.ctx.id, "{e}");
-                Fired::Ok
+                (Fired::Ok, false)
             }
             Err(p) => {
                 bump(&st.panics, 1);
                 let msg = panic_message(p);
                 tracing::error!(node = %self.ctx.id, "panicked: {msg}");
-                self.after_panic(msg)
+                (self.after_panic(msg), false)
             }
         };
         self.publish(n);

@@ -124,8 +124,15 @@ impl GraphHandle {
         if imp.role() != info.role {
             return Err(swap_err(format!("factory built a {:?} for a kind declared {:?}", imp.role(), info.role)));
         }
-        let mut ctx =
-            Context::new(i as u32, Arc::from(node), self.inner.t0, self.inner.mode, self.inner.shared.stop.clone());
+        let shared = &self.inner.shared;
+        let mut ctx = Context::new(
+            i as u32,
+            Arc::from(node),
+            self.inner.t0,
+            self.inner.mode,
+            shared.stop.clone(),
+            shared.slots[i].stats.clone(),
+        );
         imp.start(&mut ctx).map_err(|e: NodeError| swap_err(format!("start failed: {e}")))?;
         let kind = info.name.to_string();
         self.push(

@@ -1,13 +1,16 @@
 //! The deterministic executor: one thread, fixed order. Each step polls every unfinished
 //! source once (in topological, then file, order) and then runs processors and sinks in
 //! topological order until none is ready. Periodic nodes fire once per step. No pacing, no
-//! races: the same inputs give bit-identical outputs run to run.
+//! races: the same inputs give bit-identical outputs run to run. When the sources are done
+//! (finished, or a stop was requested) the sources are stopped and every processor is flushed
+//! ([`super::flush`]), still on this thread and in a fixed order.
 
 use std::cell::Cell as StdCell;
 use std::sync::atomic::AtomicBool;
 use std::sync::atomic::Ordering::SeqCst;
 use std::time::Instant;
 
+use super::DRAIN_TIMEOUT;
 use super::cell::{Cell, Fired, Notify};
 use super::pool::{Exec, Shared, take_flag};
 use crate::error::NodeError;
@@ -16,7 +19,14 @@ use crate::graph::Trigger;
 /// Nodes that may have become runnable since they were last checked: a push gave them input,
 /// or a pop gave them room on a full output. Only these (and nodes with a tick or a rerun
 /// request) are checked, so an idle node costs one flag test per pass.
-struct Dirty(Vec<StdCell<bool>>);
+pub(crate) struct Dirty(Vec<StdCell<bool>>);
+
+impl Dirty {
+    /// Every one of `n` nodes marked: the first pass checks them all.
+    pub(crate) fn new(n: usize) -> Dirty {
+        Dirty((0..n).map(|_| StdCell::new(true)).collect())
+    }
+}
 
 impl Notify for Dirty {
     fn notify(&self, node: usize) {
@@ -24,7 +34,8 @@ impl Notify for Dirty {
     }
 }
 
-fn run_controls(shared: &Shared, i: usize, cell: &mut Cell) {
+/// Applies a node's queued control work (commands, a hot swap) between two of its calls.
+pub(crate) fn run_controls(shared: &Shared, i: usize, cell: &mut Cell) {
     let slot = &shared.slots[i];
     if take_flag(&slot.has_control) {
         while let Some(c) = slot.control.pop() {
@@ -39,7 +50,7 @@ pub(crate) fn run(shared: &Shared, topo: &[usize], external_stop: &AtomicBool, u
     let sources: Vec<usize> = topo.iter().copied().filter(|&i| shared.slots[i].exec == Exec::Source).collect();
     let others: Vec<usize> = topo.iter().copied().filter(|&i| shared.slots[i].exec != Exec::Source).collect();
     let mut finished = vec![false; cells.len()];
-    let n = Dirty((0..cells.len()).map(|_| StdCell::new(true)).collect());
+    let n = Dirty::new(cells.len());
     loop {
         if external_stop.load(SeqCst) || shared.stop.load(SeqCst) || until.is_some_and(|t| Instant::now() >= t) {
             break;
@@ -92,12 +103,15 @@ pub(crate) fn run(shared: &Shared, topo: &[usize], external_stop: &AtomicBool, u
         }
         cell.dead = true;
     }
+    // End of stream: what processors still buffer goes downstream before anything stops.
+    super::flush::flush_all(shared, &mut cells, topo, Instant::now() + DRAIN_TIMEOUT);
     for (slot, cell) in shared.slots.iter().zip(cells) {
         slot.cell.store(Some(cell));
     }
 }
 
-fn drain(shared: &Shared, cells: &mut [Box<Cell>], order: &[usize], n: &Dirty) {
+/// Runs the nodes of `order` (in that order, repeatedly) until none is ready.
+pub(crate) fn drain(shared: &Shared, cells: &mut [Box<Cell>], order: &[usize], n: &Dirty) {
     loop {
         let mut any = false;
         for &i in order {

@@ -1,8 +1,10 @@
 //! Running a validated graph: build every node (failing before any data flows), wire the
 //! edges, start the executor ([`pool`] threads or [`lockstep`]), and shut down in order:
-//! stop sources, drain queues, stop processors and sinks (flush, close), report.
+//! stop sources, drain queues, flush processors in topological order ([`flush`]: what they
+//! still buffer goes downstream), stop processors and sinks (flush, close), report.
 
 mod cell;
+mod flush;
 mod handle;
 mod lockstep;
 mod pool;
@@ -32,9 +34,10 @@ use crate::node::{Context, Mode, NodeImpl};
 use crate::registry::{BuildContext, Role};
 use crate::stats::{NodeStats, StatsReport};
 
-/// Longest the shutdown waits for queues to drain before it counts what is left as
-/// undelivered and stops the nodes anyway (a node that never stops asking to rerun).
-const DRAIN_TIMEOUT: Duration = Duration::from_secs(30);
+/// Longest the shutdown waits for queues to drain and processors to flush before it counts
+/// what is left as undelivered (or discarded, by the nodes holding it) and stops the nodes
+/// anyway (a node that never stops asking to rerun).
+pub(crate) const DRAIN_TIMEOUT: Duration = Duration::from_secs(30);
 
 /// Why a run did not go as planned.
 #[derive(Debug, thiserror::Error)]
@@ -145,7 +148,7 @@ impl RunningGraph {
             stats.push(st.clone());
             cells.push(Box::new(Cell {
                 imp: imps[i].take().expect("built above"),
-                ctx: Context::new(i as u32, Arc::from(ns.id.as_str()), t0, spec.mode, stop.clone()),
+                ctx: Context::new(i as u32, Arc::from(ns.id.as_str()), t0, spec.mode, stop.clone(), st.clone()),
                 inputs: ins.into_iter().map(|(_, rx)| rx).collect(),
                 in_io: Inputs::new(port_of),
                 outputs: outs,
@@ -386,13 +389,18 @@ impl RunningGraph {
             }
         }
         let deadline = Instant::now() + DRAIN_TIMEOUT;
-        while self.shared.active.load(SeqCst) != 0 {
+        let drained = loop {
+            if self.shared.active.load(SeqCst) == 0 {
+                break true;
+            }
             if Instant::now() >= deadline {
-                tracing::warn!("queues did not drain within {DRAIN_TIMEOUT:?}; stopping anyway");
-                break;
+                tracing::warn!(
+                    "queues did not drain within {DRAIN_TIMEOUT:?}; stopping anyway (processors are not flushed)"
+                );
+                break false;
             }
             std::thread::sleep(Duration::from_millis(1));
-        }
+        };
         self.shared.shutdown.store(true, SeqCst);
         for s in &self.shared.sleepers {
             s.unparker.unpark();
@@ -404,6 +412,27 @@ impl RunningGraph {
         }
         for h in self.threads.drain(..) {
             let _ = h.join();
+        }
+        if drained {
+            self.flush(deadline);
+        }
+    }
+
+    /// The end-of-stream flush, on this thread: every worker and node thread has exited, so
+    /// every cell is in its slot and this thread may own them all.
+    fn flush(&self, deadline: Instant) {
+        let taken: Vec<Option<Box<Cell>>> = self.shared.slots.iter().map(|s| s.cell.take()).collect();
+        if taken.iter().all(Option::is_some) {
+            let mut cells: Vec<Box<Cell>> = taken.into_iter().flatten().collect();
+            flush::flush_all(&self.shared, &mut cells, &self.topo, deadline);
+            for (slot, cell) in self.shared.slots.iter().zip(cells) {
+                slot.cell.store(Some(cell));
+            }
+        } else {
+            tracing::warn!("a node's state was not returned by its thread; processors are not flushed");
+            for (slot, cell) in self.shared.slots.iter().zip(taken) {
+                slot.cell.store(cell);
+            }
         }
     }
 

@@ -384,10 +384,16 @@ fn no_load_and_negative_drift_give_zero_force() {
     let cal = fitted();
     for kind in StrategyKind::ALL.into_iter().filter(|k| k.is_pneumatic()) {
         let s = Strategy::new(&cal, kind);
-        for dp in [0.0, -0.2, f64::NAN] {
+        for dp in [0.0, -0.2] {
             let e = s.estimate(&contact(0.0, 0.0, 100.0), dp);
             assert_eq!(e.force_n, 0.0, "{kind:?} dp {dp}");
-            assert!(e.flags.no_load);
+            assert!(e.flags.no_load && !e.flags.no_pressure);
+        }
+        // An unknown share (no pressure in the frame's window) is not a no-load reading.
+        for dp in [f64::NAN, f64::INFINITY] {
+            let e = s.estimate(&contact(0.0, 0.0, 100.0), dp);
+            assert_eq!(e.force_n, 0.0, "{kind:?} dp {dp}");
+            assert!(e.flags.no_pressure && !e.flags.no_load, "{kind:?} dp {dp}: {:?}", e.flags);
         }
     }
     let eit = Strategy::new(&cal, StrategyKind::EitLocAware);

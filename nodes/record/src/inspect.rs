@@ -97,6 +97,8 @@ pub struct SyncCounts {
     pub frames: usize,
     pub settled: usize,
     pub no_load: usize,
+    /// Frames whose pressure change is unknown (dP NaN: no sample in the window, no P0 yet).
+    pub without_pressure: usize,
 }
 
 /// How many forces of one strategy each guard touched (`/derived/forces/<name>/flags`).
@@ -110,13 +112,14 @@ pub struct GuardCounts {
 }
 
 /// Names and bits of the guard flags, in bit order.
-pub const GUARDS: [(&str, u32); 6] = [
+pub const GUARDS: [(&str, u32); 7] = [
     ("no load", layout::force_flags::NO_LOAD),
     ("above range", layout::force_flags::ABOVE_RANGE),
     ("below range", layout::force_flags::BELOW_RANGE),
     ("location clamped", layout::force_flags::LOCATION_CLAMPED),
     ("area clamped", layout::force_flags::AREA_CLAMPED),
     ("negative clamped", layout::force_flags::NEGATIVE_CLAMPED),
+    ("no pressure", layout::force_flags::NO_PRESSURE),
 ];
 
 /// Summary of one recording file.
@@ -202,6 +205,7 @@ impl Summary {
                 frames: s.t_s.len(),
                 settled: s.settled.iter().filter(|&&b| b).count(),
                 no_load: s.no_load.iter().filter(|&&b| b).count(),
+                without_pressure: s.dp_kpa.iter().filter(|d| !d.is_finite()).count(),
             }),
             guards: rec
                 .derived
@@ -283,7 +287,11 @@ impl fmt::Display for Summary {
             None => writeln!(f, "truth:    none")?,
         }
         if let Some(s) = &self.sync {
-            writeln!(f, "sync:     {} frames: {} settled, {} in the no-load period", s.frames, s.settled, s.no_load)?;
+            writeln!(
+                f,
+                "sync:     {} frames: {} settled, {} in the no-load period, {} without pressure",
+                s.frames, s.settled, s.no_load, s.without_pressure
+            )?;
         }
         for g in &self.guards {
             let touched: Vec<String> = GUARDS

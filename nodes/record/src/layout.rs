@@ -50,7 +50,7 @@ pub const SYNC_NOISE_KPA: &str = "/derived/sync/noise_kpa";
 /// Bits of `/derived/forces/<strategy>/flags`: what the corrector's guards did to a contact's
 /// force (stored as an f64 holding the integer sum of the bits that are set).
 pub mod force_flags {
-    /// Signal <= 0 or not finite: force set to 0 N.
+    /// Signal <= 0 (or not finite with the pressure known): force set to 0 N.
     pub const NO_LOAD: u32 = 1;
     /// Signal above the calibrated range (monotone extrapolation).
     pub const ABOVE_RANGE: u32 = 2;
@@ -62,6 +62,9 @@ pub mod force_flags {
     pub const AREA_CLAMPED: u32 = 16;
     /// The model gave a negative force, clamped to 0 N.
     pub const NEGATIVE_CLAMPED: u32 = 32;
+    /// The frame's pressure change is unknown (no pressure sample in its window, or no tare
+    /// yet): the force is a 0 N placeholder, not a no-load reading (bit 1 is not set).
+    pub const NO_PRESSURE: u32 = 64;
 }
 
 /// `/derived/forces/<strategy>/t`.

@@ -25,7 +25,7 @@
 //! | `/derived/forces/<strategy>/t` | f64 `[n]` | seconds |
 //! | `/derived/forces/<strategy>/force_n` | f64 `[n, Cmax]` | per-contact force of that strategy, N, in the order of the frame's contacts, NaN-padded |
 //! | `/derived/forces/<strategy>/dp_kpa` | f64 `[n, Cmax]` | each contact's pressure share from the splitter, kPa, NaN-padded (the pneumatic strategies' input; the EIT strategies use the contact's conductivity sum instead) |
-//! | `/derived/forces/<strategy>/flags` | f64 `[n, Cmax]` | guard bits of each force (integer values, NaN-padded): 1 no load (signal <= 0, force 0), 2 above and 4 below the calibrated range (extrapolated), 8 centroid clamped onto the calibrated region, 16 area clamped, 32 negative force clamped to 0 (`layout::force_flags`). Plugin lanes carry only bit 1, set where their share is <= 0 |
+//! | `/derived/forces/<strategy>/flags` | f64 `[n, Cmax]` | guard bits of each force (integer values, NaN-padded): 1 no load (signal <= 0, force 0), 2 above and 4 below the calibrated range (extrapolated), 8 centroid clamped onto the calibrated region, 16 area clamped, 32 negative force clamped to 0, 64 no pressure (the frame's dP is unknown: force 0 is a placeholder, bit 1 not set) (`layout::force_flags`). Plugin lanes carry only bits 1 and 64, set where their share is <= 0 or NaN |
 //! | `/derived/sync/t` | f64 `[n]` | seconds, time of the EIT frame |
 //! | `/derived/sync/dp_kpa` | f64 `[n]` | the frame's pressure change: window mean minus P0, kPa (NaN without samples or while P0 is unknown) |
 //! | `/derived/sync/pressure_samples`, `pressure_sd_kpa` | f64 `[n]` | samples in the window and their SD, kPa (NaN with fewer than 2) |

@@ -263,7 +263,8 @@ fn files_without_sync_or_force_flags_still_open() {
     assert_eq!(older.eit, full.eit);
 }
 
-/// `inspect` counts the settled frames and the forces each guard touched, padding excluded.
+/// `inspect` counts the settled frames, the frames without pressure and the forces each guard
+/// touched, padding excluded.
 #[test]
 fn inspect_counts_settled_frames_and_guarded_forces() {
     let dir = fresh_dir("guards");
@@ -271,29 +272,38 @@ fn inspect_counts_settled_frames_and_guarded_forces() {
     for i in 0..6u32 {
         let t = f64::from(i) * 0.1;
         w.append_eit(t, u64::from(i), &[1.0; 120]).unwrap();
+        // Frame 5 got no pressure sample: its dP is unknown, it is not settled.
+        let lost = i == 5;
         let row = SyncRow {
-            dp_kpa: 1.0,
-            pressure_samples: 3,
-            pressure_sd_kpa: 0.01,
-            settled: i >= 2,
+            dp_kpa: if lost { f64::NAN } else { 1.0 },
+            pressure_samples: if lost { 0 } else { 3 },
+            pressure_sd_kpa: if lost { f64::NAN } else { 0.01 },
+            settled: (2..5).contains(&i),
             no_load: i == 0,
             p0_kpa: 0.0,
             noise_kpa: 0.01,
         };
         w.append_sync(t, &row).unwrap();
-        // Frame i has i % 3 contacts; flags: 1 (no load) on the first, 2 | 8 on the second.
+        // Frame i has i % 3 contacts; flags: 1 (no load) on the first, 2 | 8 on the second;
+        // frame 5's are placeholders flagged 64 (no pressure) only.
         let forces =
             [ForceRow { force_n: 0.0, dp_kpa: -0.1, flags: 1 }, ForceRow { force_n: 3.0, dp_kpa: 9.0, flags: 10 }];
-        w.append_forces(0, t, &forces[..(i % 3) as usize]).unwrap();
+        let placeholders = [ForceRow { force_n: 0.0, dp_kpa: f64::NAN, flags: 64 }; 2];
+        let forces = if lost { &placeholders[..] } else { &forces[..(i % 3) as usize] };
+        w.append_forces(0, t, forces).unwrap();
     }
     w.close().unwrap();
     let s = skinflow_record::inspect(&path).unwrap();
-    assert_eq!(s.sync, Some(skinflow_record::SyncCounts { frames: 6, settled: 4, no_load: 1 }));
+    let counts = skinflow_record::SyncCounts { frames: 6, settled: 3, no_load: 1, without_pressure: 1 };
+    assert_eq!(s.sync, Some(counts));
     let g = &s.guards[0];
-    // Contacts per frame 0,1,2,0,1,2: 6 forces, 4 with bit 1, 2 with bits 2 and 8.
+    // Contacts per frame 0,1,2,0,1,2: 6 forces, 3 with bit 1, 1 with bits 2 and 8, 2 with 64.
     assert_eq!((g.strategy.as_str(), g.forces), ("s", 6));
-    assert_eq!(g.flagged, [4, 2, 0, 2, 0, 0]);
+    assert_eq!(g.flagged, [3, 1, 0, 1, 0, 0, 2]);
     let text = s.to_string();
-    assert!(text.contains("sync:     6 frames: 4 settled, 1 in the no-load period"), "{text}");
-    assert!(text.contains("guards:   s: 6 forces; 4 no load, 2 above range, 2 location clamped"), "{text}");
+    assert!(text.contains("sync:     6 frames: 3 settled, 1 in the no-load period, 1 without pressure"), "{text}");
+    assert!(
+        text.contains("guards:   s: 6 forces; 3 no load, 1 above range, 1 location clamped, 2 no pressure"),
+        "{text}"
+    );
 }

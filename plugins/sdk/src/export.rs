@@ -110,6 +110,10 @@ pub trait PluginNode: Send + Sized + 'static {
     fn new(params: Self::Params, base_dir: &Path) -> Result<Self, String>;
 
     /// One call: `inputs` in declaration order (absent ones have `present() == false`).
+    ///
+    /// ABI version 1 has no end-of-stream call (the engine's `Processor::flush`): emit what a
+    /// call computes in that call. A node that held messages back across calls would lose the
+    /// last ones when the stream ends.
     fn process(&mut self, inputs: &[Columns<'_>], out: &mut Outputs) -> Result<(), String>;
 }
 

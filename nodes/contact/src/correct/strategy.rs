@@ -96,6 +96,11 @@ impl StrategyKind {
 pub struct ForceFlags {
     /// Signal <= 0 (or not finite): force set to 0 N.
     pub no_load: bool,
+    /// The contact's pressure share is unknown (not finite: no pressure sample in the frame's
+    /// acquisition window, or no no-load offset P0 yet), so a pneumatic strategy has no force
+    /// to give. The force is a 0 N placeholder, not a measurement of no load: this is set
+    /// instead of `no_load`, and evaluations leave such forces out.
+    pub no_pressure: bool,
     /// Signal above the calibrated range (monotone linear extrapolation).
     pub above_range: bool,
     /// Signal below the calibrated range (monotone linear extrapolation).
@@ -197,9 +202,15 @@ impl Strategy {
     }
 
     /// Force of one contact given its pressure share `dp_i_kpa` (ignored by EIT strategies).
+    /// A share <= 0 gives 0 N flagged `no_load`; a share that is not finite (the frame's
+    /// pressure change is unknown) gives a 0 N placeholder flagged `no_pressure`.
     pub fn estimate(&self, contact: &Contact, dp_i_kpa: f64) -> ForceEstimate {
         let mut flags = ForceFlags::default();
         let signal = if self.kind.is_pneumatic() { dp_i_kpa } else { contact.sum };
+        if self.kind.is_pneumatic() && !dp_i_kpa.is_finite() {
+            flags.no_pressure = true;
+            return ForceEstimate { force_n: 0.0, dp_kpa: dp_i_kpa, flags };
+        }
         if !(signal > 0.0 && signal.is_finite()) {
             flags.no_load = true;
             return ForceEstimate { force_n: 0.0, dp_kpa: dp_i_kpa, flags };

@@ -3,6 +3,12 @@
 //! the inputs as columns, calls the plugin (which catches its own panics), and decodes the
 //! outputs. A plugin's panic is re-raised here as a host panic (without the panic hook), so
 //! the engine applies the node's restart policy exactly as for a built-in node.
+//!
+//! End of stream: the C ABI (version 1) has no flush function, and a plugin node emits what a
+//! call computes in that call (see `PluginNode::process`), so [`HostedNode`] keeps the engine's
+//! default `Processor::flush` (nothing held, nothing to emit). The hook is a default method on
+//! the host side only, so plugins built against ABI 1 load and run unchanged; a plugin-side
+//! flush would be a new `SfKind` function and thus `ABI_VERSION` 2.
 
 use std::ffi::c_void;
 use std::ptr::NonNull;

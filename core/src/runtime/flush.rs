@@ -1,0 +1,75 @@
+//! End of stream, for both executors: every processor emits what it still buffers
+//! ([`crate::Processor::flush`]) before any node is stopped, so nothing it received is lost.
+//!
+//! It runs on one thread that owns every cell, once no source produces any more and the
+//! queues have drained (lockstep: after its last pass; pool: after the workers have drained
+//! the queues and exited). Processors are flushed in topological order. Before a node's flush
+//! its pending control work is applied, so a hot swap queued at the end installs the
+//! replacement (which took over the buffered state) and the replacement flushes. After each
+//! flush call every node that became ready runs (a flushed frame goes through the whole
+//! pipeline to the sinks, and frees room on `block` edges for the next call), so a node is
+//! flushed only after everything upstream of it was flushed and processed. The whole phase is
+//! bounded by the shutdown's deadline: a node still flushing then is left, and its `stop`
+//! counts what it holds (`Context::count_discarded`).
+
+use std::time::Instant;
+
+use super::cell::{Cell, Flushed};
+use super::lockstep::{Dirty, drain, run_controls};
+use super::pool::{Exec, Shared};
+use crate::graph::Trigger;
+use crate::node::NodeImpl;
+
+/// Flushes every processor of `topo` (node indices in topological order); `cells` holds
+/// every node's cell, indexed by node.
+pub(crate) fn flush_all(shared: &Shared, cells: &mut [Box<Cell>], topo: &[usize], deadline: Instant) {
+    let order: Vec<usize> = topo.iter().copied().filter(|&i| shared.slots[i].exec != Exec::Source).collect();
+    let n = Dirty::new(cells.len());
+    settle(shared, cells, &order, &n);
+    for &i in &order {
+        run_controls(shared, i, &mut cells[i]);
+        if cells[i].dead || !matches!(cells[i].imp, NodeImpl::Processor(_)) {
+            continue; // a dead instance's state is not trusted; a sink's `stop` is its flush
+        }
+        loop {
+            if Instant::now() >= deadline {
+                tracing::warn!(
+                    node = %cells[i].ctx.id(),
+                    "end-of-stream flush stopped at the shutdown deadline; nodes not flushed count what they hold"
+                );
+                return;
+            }
+            if !cells[i].outputs_have_space() {
+                settle(shared, cells, &order, &n);
+                if !cells[i].outputs_have_space() {
+                    // The consumers cannot take more (dead, or waiting for an input that
+                    // will never come): what the node still holds is counted at its stop.
+                    tracing::warn!(node = %cells[i].ctx.id(), "end-of-stream flush: no room downstream");
+                    break;
+                }
+            }
+            let outcome = cells[i].flush(&n);
+            settle(shared, cells, &order, &n);
+            match outcome {
+                Flushed::More => continue,
+                Flushed::Done => break,
+                Flushed::Fatal(e) => {
+                    shared.fail(i, e);
+                    break;
+                }
+            }
+        }
+    }
+}
+
+/// Runs every node that is ready until none is. A periodic node with queued input gets a tick
+/// (its timer no longer runs), so flushed messages reach periodic consumers too.
+fn settle(shared: &Shared, cells: &mut [Box<Cell>], order: &[usize], n: &Dirty) {
+    for &i in order {
+        let c = &mut cells[i];
+        if matches!(c.trigger, Trigger::Periodic { .. }) && c.inputs.iter().any(|rx| rx.pending() > 0) {
+            c.tick = true;
+        }
+    }
+    drain(shared, cells, order, n);
+}

@@ -1,0 +1,77 @@
+//! The `sync` node through the binary, on a recording that ends while its last frames' windows
+//! are still open and whose pressure board missed two frames: every recorded frame comes out
+//! (the engine's end-of-stream flush), in both executors, and a frame without pressure goes
+//! down the pipeline flagged as such (logged with the no-pressure guard bit, never the no-load
+//! one), is counted by the nodes at stop, and is left out by `eval`.
+
+use std::path::Path;
+
+use super::cli::{check_pipeline_stats, derived_streams_agree, pipeline_graph};
+use super::support::{fixture, ok, rewrite_pressure, skinflow, stderr};
+
+/// EIT frames (0-based) whose acquisition window the pressure board misses: both after the
+/// first contact (tiny-eval rests 4 s, about 5 frames).
+const DROPOUTS: [usize; 2] = [12, 20];
+
+/// Simulates tiny-eval and writes `cut.h5`: its pressure without the samples in the windows of
+/// [`DROPOUTS`] and ending half a frame period before the last frame, whose window so holds no
+/// sample and can never be closed by a later one. Returns the EIT frame times.
+fn cut_recording(d: &Path) -> Vec<f64> {
+    ok(&skinflow(d, &["simulate", fixture("tiny-eval.toml").to_str().unwrap(), "--out", "rec.h5", "--seed", "3"]));
+    let eit_t = skinflow_record::Recording::open(d.join("rec.h5")).unwrap().eit.unwrap().t_s;
+    let half = 0.5 * (eit_t[1] - eit_t[0]);
+    let last = eit_t[eit_t.len() - 1];
+    // A margin of 10 ms keeps samples off the windows' edges.
+    let missed = |t: f64| DROPOUTS.iter().any(|&k| (t - eit_t[k]).abs() < half + 0.01);
+    rewrite_pressure(&d.join("rec.h5"), &d.join("cut.h5"), |_, t, kpa| {
+        (t < last - half - 0.01 && !missed(t)).then_some((t, kpa))
+    });
+    eit_t
+}
+
+#[test]
+fn every_recorded_frame_is_synced_and_a_frame_without_pressure_is_flagged() {
+    let d = super::support::workdir("sync", "cut");
+    let eit_t = cut_recording(&d);
+    let without: Vec<usize> = DROPOUTS.iter().copied().chain([eit_t.len() - 1]).collect();
+
+    // Real time first (the worker pool), then lockstep, whose log the checks below read.
+    let graph = pipeline_graph(&d, "cut.h5", "pneumatic-locaware");
+    let text = std::fs::read_to_string(d.join(&graph)).unwrap();
+    std::fs::write(d.join("realtime.toml"), text.replace("mode = \"lockstep\"", "mode = \"realtime\"")).unwrap();
+    for g in ["realtime.toml", graph.as_str()] {
+        let _ = std::fs::remove_file(d.join("out.h5"));
+        let out = skinflow(&d, &["run", g, "--stats-json", "stats.json"]);
+        ok(&out);
+        let (frames, _) = check_pipeline_stats(&d, "cut.h5");
+        assert_eq!(frames, eit_t.len(), "{g}");
+        // Counted at stop: by the sync node (by cause) and by the corrector.
+        let err = stderr(&out);
+        assert!(err.contains("no_sample_in_window=3") && err.contains("frames without pressure"), "{g}: {err}");
+        assert!(err.contains("frames=3") && err.contains("no_pressure"), "{g}: {err}");
+    }
+
+    let log = d.join("out.h5");
+    let shares = derived_streams_agree(&log, eit_t.len());
+    assert!(shares.no_pressure > 0 && shares.loaded > 0, "{shares:?}");
+    let rec = skinflow_record::Recording::open(&log).unwrap();
+    let sync = rec.derived.sync.as_ref().unwrap();
+    // A sync row per recorded frame, the last one included (times went through nanoseconds).
+    assert_eq!(sync.t_s.len(), eit_t.len());
+    assert!(sync.t_s.iter().zip(&eit_t).all(|(a, b)| (a - b).abs() < 1e-6), "{:?} vs {eit_t:?}", sync.t_s);
+    for (k, (dp, n)) in sync.dp_kpa.iter().zip(&sync.pressure_samples).enumerate() {
+        let lost = without.contains(&k);
+        assert_eq!((dp.is_nan(), *n == 0.0), (lost, lost), "frame {k}: dP {dp}, {n} samples");
+        assert!(!(lost && sync.no_load[k]), "frame {k}: a frame without pressure after the rest is not no-load");
+    }
+    let text = ok(&skinflow(&d, &["inspect", "out.h5"]));
+    assert!(text.contains("in the no-load period, 3 without pressure"), "{text}");
+    assert!(text.contains(&format!("{} no pressure", shares.no_pressure)), "{text}");
+
+    // eval leaves the frames without pressure out, and says so.
+    let calib = fixture("../../graphs/calib/paper.toml");
+    let out = skinflow(&d, &["eval", "cut.h5", "--calib", calib.to_str().unwrap(), "--json", "eval.json"]);
+    ok(&out);
+    let err = stderr(&out);
+    assert!(err.contains("cut.h5: 3 frames without pressure") && err.contains("were not evaluated"), "{err}");
+}

@@ -10,6 +10,14 @@
 //! forces of a frame without pressure (placeholders flagged `no_pressure`): those are counted
 //! per lane (`no_pressure_frames`) and reported at stop.
 //!
+//! Errors are scored on settled frames only (`frames = "settled"`, the default): a frame
+//! acquired while the load changed mixes two states in one image and has no single true force
+//! (`eval` leaves such frames out too). A live pipeline knows them by the `sync` node's
+//! pressure-only `settled` flag, so that is the criterion here, as `eval --settled-by pressure`
+//! (`eval`'s default judges by the truth rows, which can differ by a frame or two per
+//! recording). Unsettled frames still count for latency and are reported as `unsettled_frames`;
+//! `frames = "all"` scores them too.
+//!
 //! ```toml
 //! params = { names = ["proportional", "peak-weighted"], report_s = 2.0, json = "../out/ab.json", print = true }
 //! ```
@@ -45,6 +53,20 @@ pub struct CompareParams {
     /// Print the table on stdout at stop.
     #[serde(default = "default_print")]
     pub print: bool,
+    /// Which frames' errors are scored: settled ones (the default) or all.
+    #[serde(default)]
+    pub frames: ScoredFrames,
+}
+
+/// Which frames a `compare` sink scores errors on.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ScoredFrames {
+    /// Frames the `sync` node judged settled (the load did not change within the window).
+    #[default]
+    Settled,
+    /// Every frame with pressure after the no-load period.
+    All,
 }
 
 fn default_print() -> bool {
@@ -79,6 +101,8 @@ struct Lane {
     disagree_matched: u64,
     /// Frames whose forces were placeholders for an unknown pressure change: not scored.
     no_pressure_frames: u64,
+    /// Frames acquired while the load changed (not `settled`): timed, not scored.
+    unsettled_frames: u64,
 }
 
 /// One lane's figures (what the table and the JSON show).
@@ -100,6 +124,9 @@ pub struct LaneReport {
     /// Frames left out because the lane's forces were placeholders for a frame without
     /// pressure (flagged `no_pressure`); not in `frames`.
     pub no_pressure_frames: u64,
+    /// Frames in `frames` (timed) whose errors were not scored because the load changed while
+    /// they were acquired (`frames = "settled"`); 0 with `frames = "all"`.
+    pub unsettled_frames: u64,
 }
 
 fn ratio(num: f64, den: u64) -> f64 {
@@ -121,6 +148,7 @@ impl Lane {
             spurious: self.spurious,
             disagreement_rmse_n: ratio(self.disagree_sq_n2, self.disagree_matched).sqrt(),
             no_pressure_frames: self.no_pressure_frames,
+            unsettled_frames: self.unsettled_frames,
         }
     }
 }
@@ -132,6 +160,7 @@ pub struct Compare {
     json: Option<PathBuf>,
     reference: usize,
     print: bool,
+    scored: ScoredFrames,
     // Internal state
     lanes: Vec<Lane>,
     next_report_ns: u64,
@@ -198,6 +227,7 @@ impl Compare {
     /// counted and skipped.
     fn account(&mut self, i: usize, f: &Forces, reference: Option<&Forces>) {
         let synced = &f.split.contacts.image.src;
+        let unscored = self.scored == ScoredFrames::Settled && !synced.settled;
         let lane = self.lane(i, f);
         if synced.no_load {
             return;
@@ -208,6 +238,10 @@ impl Compare {
         }
         lane.frames += 1;
         lane.latency_us.push(f.pipeline_ns() as f64 / 1e3);
+        if unscored {
+            lane.unsettled_frames += 1;
+            return;
+        }
         if synced.truth.is_some() {
             self.score_truth(i, f);
         } else if let Some(r) = reference.filter(|r| i != self.reference && !r.without_pressure()) {
@@ -273,14 +307,15 @@ fn num(x: f64, digits: usize) -> String {
 /// The end-of-run table (Markdown).
 pub fn table(reports: &[LaneReport]) -> String {
     let mut s = String::from(
-        "| lane | frames | p50 us | p99 us | RMSE N | rel. err % | loc. mm | matched | missed | spurious | disagreement N |\n|---|---|---|---|---|---|---|---|---|---|---|\n",
+        "| lane | frames | unsettled | p50 us | p99 us | RMSE N | rel. err % | loc. mm | matched | missed | spurious | disagreement N |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for r in reports {
         let _ = writeln!(
             s,
-            "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
+            "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
             r.name,
             r.frames,
+            r.unsettled_frames,
             num(r.latency_us_p50, 1),
             num(r.latency_us_p99, 1),
             num(r.rmse_n, 3),
@@ -317,6 +352,7 @@ fn build(p: CompareParams, ctx: &BuildContext) -> Result<NodeImpl, NodeError> {
         json: p.json.map(|j| ctx.resolve(&j)),
         reference: p.reference,
         print: p.print,
+        scored: p.frames,
         lanes: Vec::new(),
         next_report_ns: 0,
         pred_xy: Vec::with_capacity(16),
@@ -336,7 +372,13 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
             ))
             .param(ParamDoc::new("report_s", "float", "2.0", "wall seconds between live report lines; 0 = none"))
             .param(ParamDoc::new("json", "path", "none", "write the final report as JSON here"))
-            .param(ParamDoc::new("reference", "integer", "0", "lane compared against when a frame has no truth")),
+            .param(ParamDoc::new("reference", "integer", "0", "lane compared against when a frame has no truth"))
+            .param(ParamDoc::new(
+                "frames",
+                "string",
+                "\"settled\"",
+                "frames whose errors are scored: settled (sync's pressure judgement) | all",
+            )),
         build,
     ))
 }
@@ -364,7 +406,7 @@ mod tests {
                     .collect(),
             })
         });
-        let src = Arc::new(SyncedFrame { truth, ..SyncedFrame::default() });
+        let src = Arc::new(SyncedFrame { truth, settled: true, ..SyncedFrame::default() });
         let image = Arc::new(Image { src, compute_ns: 100_000, ..Image::default() });
         let contacts = Arc::new(Contacts {
             image,
@@ -387,6 +429,7 @@ mod tests {
             json: None,
             reference: 0,
             print: false,
+            scored: ScoredFrames::Settled,
             lanes: Vec::new(),
             next_report_ns: 0,
             pred_xy: Vec::new(),
@@ -397,7 +440,14 @@ mod tests {
     #[test]
     fn the_kind_builds_a_sink() {
         let ctx = BuildContext { base_dir: ".".into(), mode: skinflow_core::Mode::Lockstep, node_id: "c".into() };
-        let p = CompareParams { names: vec![], report_s: 1.0, json: None, reference: 0, print: false };
+        let p = CompareParams {
+            names: vec![],
+            report_s: 1.0,
+            json: None,
+            reference: 0,
+            print: false,
+            frames: ScoredFrames::Settled,
+        };
         assert!(matches!(build(p, &ctx), Ok(NodeImpl::Sink(_))));
     }
 
@@ -405,6 +455,38 @@ mod tests {
         c.lane(i, f).frames += 1;
         c.lanes[i].latency_us.push(f.pipeline_ns() as f64 / 1e3);
         c.score_truth(i, f);
+    }
+
+    /// `f` as acquired while the load changed (`settled` false).
+    fn unsettled(mut f: Forces) -> Forces {
+        let split = Arc::make_mut(&mut f.split);
+        let contacts = Arc::make_mut(&mut split.contacts);
+        let image = Arc::make_mut(&mut contacts.image);
+        Arc::make_mut(&mut image.src).settled = false;
+        f
+    }
+
+    #[test]
+    fn frames_taken_while_the_load_changed_are_timed_not_scored_unless_all_are_asked_for() {
+        let truth = [(0.0, 0.0, 2.0)];
+        let steady = forces("p", &[(0.0, 0.0, 2.5)], Some(&truth));
+        let ramp = unsettled(forces("p", &[(0.0, 0.0, 4.0)], Some(&truth)));
+        let mut c = compare();
+        c.account(0, &steady, None);
+        c.account(0, &ramp, None);
+        let r = &c.reports()[0];
+        assert_eq!((r.frames, r.unsettled_frames, r.matched), (2, 1, 1));
+        assert!((r.rmse_n - 0.5).abs() < 1e-12, "the ramp frame's 2 N error is not scored: {}", r.rmse_n);
+        let mut c = Compare { scored: ScoredFrames::All, ..compare() };
+        c.account(0, &steady, None);
+        c.account(0, &ramp, None);
+        let r = &c.reports()[0];
+        assert_eq!((r.frames, r.unsettled_frames, r.matched), (2, 0, 2));
+        assert!((r.rmse_n - (0.5f64.powi(2) / 2.0 + 2.0).sqrt()).abs() < 1e-12, "{}", r.rmse_n);
+        // The parameter as written in a graph file.
+        let p: CompareParams = toml::from_str("frames = \"all\"").unwrap();
+        assert_eq!(p.frames, ScoredFrames::All);
+        assert!(toml::from_str::<CompareParams>("frames = \"some\"").is_err());
     }
 
     #[test]
@@ -487,9 +569,10 @@ mod tests {
             spurious: 0,
             disagreement_rmse_n: 0.5,
             no_pressure_frames: 2,
+            unsettled_frames: 1,
         };
         let t = table(std::slice::from_ref(&r));
-        assert!(t.contains("| a \"quoted\" lane | 3 | 12.2 | 20.0 | - |"), "{t}");
+        assert!(t.contains("| a \"quoted\" lane | 3 | 1 | 12.2 | 20.0 | - |"), "{t}");
         let j: serde_json::Value = serde_json::from_str(&to_json(&[r])).unwrap();
         let lane = &j["lanes"][0];
         assert_eq!(lane["name"], "a \"quoted\" lane");
@@ -497,6 +580,7 @@ mod tests {
         assert!(lane["rmse_n"].is_null() && lane["localization_mean_mm"].is_null(), "{j}");
         assert_eq!(lane["disagreement_rmse_n"], 0.5);
         assert_eq!(lane["no_pressure_frames"], 2);
-        assert_eq!(lane.as_object().unwrap().len(), 12, "{j}");
+        assert_eq!(lane["unsettled_frames"], 1);
+        assert_eq!(lane.as_object().unwrap().len(), 13, "{j}");
     }
 }

@@ -52,6 +52,11 @@
 //!   not touched between flushes, so after a SIGKILL it opens with every row up to the last
 //!   flush. A file killed while in SWMR mode keeps HDF5's "open for writing" mark; `Recording::open`
 //!   then opens it in SWMR-read mode (other tools: `h5clear -s FILE` removes the mark).
+//!   A new file (or part) is built under a hidden name beside it, `.NAME.PID.partial`, and
+//!   renamed (without `overwrite`: hard-linked, which refuses to replace a file) once its
+//!   structure is flushed: until then HDF5 has no valid superblock on disk, and a kill in that
+//!   window used to leave an unreadable file under the recording's name. A killed writer may
+//!   leave its `.partial` file behind; the recording's name only ever shows a file that opens.
 //!
 //! # Rotation and file names
 //!

@@ -20,7 +20,7 @@ use crate::layout;
 use crate::rotate::part_path;
 use crate::timestamp::iso8601_utc;
 use column::{ColumnSpec, Storage, Table};
-use create::{RootAttrs, create_file, ensure_parent_groups, write_reference, write_root_attrs};
+use create::{RootAttrs, create_file, ensure_parent_groups, publish, write_reference, write_root_attrs};
 pub use options::{ContactRow, ForceRow, Streams, SyncRow, TruthContact, WriterOptions, WriterStats};
 
 #[derive(Debug, Clone, Copy)]
@@ -464,7 +464,9 @@ impl RecordingWriter {
         self.part_start_t_s = None;
         self.rotate_due = false;
         self.stats.parts += 1;
-        self.flush_file()
+        // Built under a hidden name; named once its structure is on disk (see `publish`).
+        self.flush_file()?;
+        publish(&self.path, self.opts.overwrite)
     }
 
     fn close_file(&mut self) -> Result<(), RecordError> {

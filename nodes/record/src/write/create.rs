@@ -1,6 +1,6 @@
 //! Creating a part file: library version bounds, root attributes, groups, the reference frame.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use hdf5::File;
 use hdf5::file::LibraryVersion;
@@ -22,10 +22,23 @@ pub(crate) struct RootAttrs<'a> {
     pub part: Option<u32>,
 }
 
-/// Creates (or with `overwrite`, truncates) `path`. Without SWMR the object formats are
-/// bounded to the 1.8 library (`earliest`..`v18`), so h5dump/h5py/MATLAB built on HDF5 1.8 or
-/// 1.10 read the file; SWMR needs the 1.10 formats (`v110`..`v110`), which HDF5 1.10 reads.
+/// The hidden name a part is built under (`.NAME.PID.partial` beside it) until its structure
+/// is on disk: a file that was just created holds no valid superblock until the first flush,
+/// so a crash in that window would leave an unreadable file under the recording's name.
+pub(crate) fn staging_path(path: &Path) -> PathBuf {
+    let name = path.file_name().map_or_else(|| "recording".into(), |n| n.to_string_lossy().into_owned());
+    path.with_file_name(format!(".{name}.{}.partial", std::process::id()))
+}
+
+/// Creates the staging file of `path` ([`staging_path`]); [`publish`] gives it its name once
+/// its structure is flushed. Refuses an existing `path` unless `overwrite`. Without SWMR the
+/// object formats are bounded to the 1.8 library (`earliest`..`v18`), so h5dump/h5py/MATLAB
+/// built on HDF5 1.8 or 1.10 read the file; SWMR needs the 1.10 formats (`v110`..`v110`),
+/// which HDF5 1.10 reads.
 pub(crate) fn create_file(path: &Path, swmr: bool, overwrite: bool) -> Result<File, RecordError> {
+    if !overwrite && std::fs::symlink_metadata(path).is_ok() {
+        return Err(exists(path));
+    }
     let (low, high) = if swmr {
         (LibraryVersion::V110, LibraryVersion::V110)
     } else {
@@ -33,8 +46,32 @@ pub(crate) fn create_file(path: &Path, swmr: bool, overwrite: bool) -> Result<Fi
     };
     let mut builder = File::with_options();
     builder.with_fapl(|fapl| fapl.libver_bounds(low, high));
-    let made = if overwrite { builder.create(path) } else { builder.create_excl(path) };
-    made.map_err(|e| RecordError::hdf5(path, "/", e))
+    builder.create(staging_path(path)).map_err(|e| RecordError::hdf5(path, "/", e))
+}
+
+fn exists(path: &Path) -> RecordError {
+    RecordError::hdf5(path, "/", hdf5::Error::from("the file exists (set overwrite to replace it)".to_string()))
+}
+
+/// Gives the flushed staging file of `path` its name: atomically, so the name only ever shows a
+/// readable recording. Without `overwrite` a file that appeared at `path` meanwhile is kept
+/// (a hard link refuses to replace it) and the staging file removed.
+pub(crate) fn publish(path: &Path, overwrite: bool) -> Result<(), RecordError> {
+    let staging = staging_path(path);
+    let io = |e: std::io::Error| RecordError::hdf5(path, "/", hdf5::Error::from(e.to_string()));
+    let done = if overwrite {
+        std::fs::rename(&staging, path).map_err(io)
+    } else {
+        match std::fs::hard_link(&staging, path) {
+            Ok(()) => std::fs::remove_file(&staging).map_err(io),
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => Err(exists(path)),
+            Err(e) => Err(io(e)),
+        }
+    };
+    if done.is_err() {
+        let _ = std::fs::remove_file(&staging);
+    }
+    done
 }
 
 pub(crate) fn write_root_attrs(file: &File, path: &Path, attrs: &RootAttrs) -> Result<(), RecordError> {

@@ -168,14 +168,14 @@ impl Reconstructor {
         Ok(r)
     }
 
-    /// The canonical description hashed into cache keys.
-    fn cache_description(&self, excluded: &[bool]) -> String {
+    /// The canonical description of the model (sensor, mesh, CEM, difference mode): what both
+    /// cache keys depend on.
+    fn model_description(&self) -> String {
         let p = &self.params;
         let s = &self.sensor;
         let el: Vec<_> = s.electrodes.iter().map(|e| (e.start_mm, e.end_mm)).collect();
-        let ex: Vec<usize> = (0..excluded.len()).filter(|&k| excluded[k]).collect();
         format!(
-            "skinflow-eit {} matrix v2|sensor {:?}x{:?} {} {:?}|mesh {:?}|cem {:?}|prior {}|lambda {:?}|mode {:?}|image {}x{} sub {}|excluded {:?}",
+            "skinflow-eit {}|sensor {:?}x{:?} {} {:?}|mesh {:?}|cem {:?}|mode {:?}",
             env!("CARGO_PKG_VERSION"),
             s.width_mm,
             s.height_mm,
@@ -183,9 +183,19 @@ impl Reconstructor {
             el,
             p.mesh,
             p.cem,
+            p.mode
+        )
+    }
+
+    /// The canonical description of a folded matrix, hashed into its cache key.
+    fn cache_description(&self, excluded: &[bool]) -> String {
+        let p = &self.params;
+        let ex: Vec<usize> = (0..excluded.len()).filter(|&k| excluded[k]).collect();
+        format!(
+            "matrix v3|{}|prior {}|lambda {:?}|image {}x{} sub {}|excluded {:?}",
+            self.model_description(),
             p.prior.describe(),
             p.lambda,
-            p.mode,
             p.image_nx,
             p.image_ny,
             SUBSAMPLES,
@@ -193,23 +203,10 @@ impl Reconstructor {
         )
     }
 
-    /// The canonical description of what the point-spread basis depends on (the model, not the
-    /// prior, lambda, image grid or channel mask).
+    /// The canonical description of the point-spread basis (the model only: not the prior,
+    /// lambda, image grid or channel mask), hashed into its cache key.
     fn basis_description(&self) -> String {
-        let p = &self.params;
-        let s = &self.sensor;
-        let el: Vec<_> = s.electrodes.iter().map(|e| (e.start_mm, e.end_mm)).collect();
-        format!(
-            "skinflow-eit {} point-spread basis v1|sensor {:?}x{:?} {} {:?}|mesh {:?}|cem {:?}|mode {:?}",
-            env!("CARGO_PKG_VERSION"),
-            s.width_mm,
-            s.height_mm,
-            s.protocol.name(),
-            el,
-            p.mesh,
-            p.cem,
-            p.mode,
-        )
+        format!("point-spread basis v1|{}", self.model_description())
     }
 
     /// The point-spread basis: from memory, the disk cache, or the model (then stored).

@@ -5,5 +5,6 @@ mod engine;
 mod hardware;
 mod live;
 mod plugins;
+mod segment;
 mod support;
 mod sync;

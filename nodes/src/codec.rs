@@ -119,6 +119,7 @@ impl Codec for ContactsCodec {
                     label,
                 });
             }
+            c.dropped = 0; // a plugin segmenter's limit is its own: it reports what it keeps
             c.compute_ns = at.compute_ns;
             c.image = image;
         });
@@ -177,9 +178,14 @@ impl Codec for ForcesCodec {
             f.forces.clear();
             for (&force_n, &dp_kpa) in force.iter().zip(dp) {
                 // A plugin's guards are its own; the host flags what the share says: unknown
-                // (not finite: a frame without pressure) or no load (<= 0).
-                let flags =
-                    ForceFlags { no_pressure: !dp_kpa.is_finite(), no_load: dp_kpa <= 0.0, ..ForceFlags::default() };
+                // (not finite: a frame without pressure) or no load (<= 0), and what the frame
+                // says: regions beyond the segmenter's limit were not given a share.
+                let flags = ForceFlags {
+                    no_pressure: !dp_kpa.is_finite(),
+                    no_load: dp_kpa <= 0.0,
+                    contacts_dropped: split.contacts.dropped > 0,
+                    ..ForceFlags::default()
+                };
                 f.forces.push(ForceEstimate { force_n, dp_kpa, flags });
             }
             f.strategy.clear();
@@ -205,7 +211,7 @@ mod tests {
         let c = Contact { x_mm: 1.0, y_mm: 2.0, sum: 3.0, area_mm2: 4.0, peak: 5.0, label: 1 };
         let msg = Message::new(
             Header { seq: 9, t_ns: 90, origin: 0 },
-            Contacts { image, contacts: vec![c, c], compute_ns: 0 },
+            Contacts { image, contacts: vec![c, c], dropped: 0, compute_ns: 0 },
         );
         let mut buf = ColumnBuf::new();
         let mut codec = (codecs().get(Contacts::TYPE).expect("registered"))();

@@ -65,10 +65,15 @@ impl NodeParams for CorrectorParams {
 /// Each contact's force of `split` by `strategy`, into `out` (cleared first). For a frame
 /// without pressure the shares are NaN and a pneumatic strategy gives 0 N placeholders flagged
 /// `no_pressure` ([`Strategy::estimate`]), never a no-load 0 N.
+/// When the segmenter dropped regions beyond its limit, a pneumatic strategy's forces are
+/// flagged `contacts_dropped`: their shares include the dropped regions' part.
 fn estimate_split(strategy: &Strategy, split: &Split, out: &mut Vec<ForceEstimate>) {
     out.clear();
+    let crowded = split.contacts.dropped > 0 && strategy.kind().is_pneumatic();
     for (c, &dp) in split.contacts.contacts.iter().zip(&split.dp_kpa) {
-        out.push(strategy.estimate(c, dp));
+        let mut e = strategy.estimate(c, dp);
+        e.flags.contacts_dropped = crowded;
+        out.push(e);
     }
 }
 
@@ -167,7 +172,7 @@ mod tests {
         let src = Arc::new(SyncedFrame { dp_kpa, pressure_samples, ..SyncedFrame::default() });
         let image = Arc::new(Image { src, ..Image::default() });
         let c = |x_mm| Contact { x_mm, y_mm: 0.0, sum: 40.0, area_mm2: 150.0, peak: 0.1, label: 1 };
-        let contacts = Arc::new(Contacts { image, contacts: vec![c(-20.0), c(20.0)], compute_ns: 0 });
+        let contacts = Arc::new(Contacts { image, contacts: vec![c(-20.0), c(20.0)], dropped: 0, compute_ns: 0 });
         Split { contacts, strategy: "proportional", dp_kpa: vec![0.5 * dp_kpa; 2], compute_ns: 0 }
     }
 
@@ -194,6 +199,29 @@ mod tests {
             estimate_split(&strategy, &split(-0.05, 12), &mut out);
             for e in out.iter().filter(|_| kind.is_pneumatic()) {
                 assert!(e.flags.no_load && !e.flags.no_pressure && e.force_n == 0.0, "{kind:?}: {e:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn forces_of_a_frame_with_dropped_regions_are_flagged_for_pneumatic_strategies_only() {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../graphs/calib/paper.toml");
+        let cal = Calibration::read(&path).unwrap();
+        let mut out = Vec::new();
+        for kind in StrategyKind::ALL {
+            let strategy = Strategy::new(&cal, kind);
+            let full = split(1.5, 12);
+            estimate_split(&strategy, &full, &mut out);
+            let plain = out.clone();
+            assert!(plain.iter().all(|e| !e.flags.contacts_dropped), "{kind:?}: {plain:?}");
+            let mut crowded = full.clone();
+            crowded.contacts = Arc::new(Contacts { dropped: 3, ..(*full.contacts).clone() });
+            estimate_split(&strategy, &crowded, &mut out);
+            for (e, p) in out.iter().zip(&plain) {
+                // Same force: the flag says what the share includes, it changes nothing.
+                assert_eq!(e.force_n, p.force_n, "{kind:?}");
+                assert_eq!(e.flags.contacts_dropped, kind.is_pneumatic(), "{kind:?}: {e:?}");
+                assert_eq!(ForceFlags { contacts_dropped: false, ..e.flags }, p.flags, "{kind:?}");
             }
         }
     }

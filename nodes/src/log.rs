@@ -292,8 +292,16 @@ impl Sink for Logger {
 /// The recording's bit code of a force's guard flags (`skinflow_record::layout::force_flags`).
 fn flag_bits(f: &ForceFlags) -> u32 {
     // Destructured in full, so a new flag cannot be left out of the file unnoticed.
-    let ForceFlags { no_load, no_pressure, above_range, below_range, location_clamped, area_clamped, negative_clamped } =
-        *f;
+    let ForceFlags {
+        no_load,
+        no_pressure,
+        above_range,
+        below_range,
+        location_clamped,
+        area_clamped,
+        negative_clamped,
+        contacts_dropped,
+    } = *f;
     [
         (no_load, force_flags::NO_LOAD),
         (no_pressure, force_flags::NO_PRESSURE),
@@ -302,6 +310,7 @@ fn flag_bits(f: &ForceFlags) -> u32 {
         (location_clamped, force_flags::LOCATION_CLAMPED),
         (area_clamped, force_flags::AREA_CLAMPED),
         (negative_clamped, force_flags::NEGATIVE_CLAMPED),
+        (contacts_dropped, force_flags::CONTACTS_DROPPED),
     ]
     .into_iter()
     .filter(|(set, _)| *set)
@@ -358,8 +367,9 @@ mod tests {
             one(|f| f.area_clamped = true),
             one(|f| f.negative_clamped = true),
             one(|f| f.no_pressure = true),
+            one(|f| f.contacts_dropped = true),
         ];
-        assert_eq!(bits, [1, 2, 4, 8, 16, 32, 64]);
+        assert_eq!(bits, [1, 2, 4, 8, 16, 32, 64, 128]);
         assert_eq!(flag_bits(&ForceFlags::default()), 0);
         let all = ForceFlags {
             no_load: true,
@@ -369,7 +379,8 @@ mod tests {
             area_clamped: true,
             negative_clamped: true,
             no_pressure: true,
+            contacts_dropped: true,
         };
-        assert_eq!(flag_bits(&all), 127);
+        assert_eq!(flag_bits(&all), 255);
     }
 }

@@ -147,6 +147,9 @@ impl Payload for Image {
 pub struct Contacts {
     pub image: Arc<Image>,
     pub contacts: Vec<Contact>,
+    /// Regions of this image found beyond the segmenter's `max_contacts` and not reported
+    /// (the weakest ones); the frame's pressure change is then shared over `contacts` only.
+    pub dropped: u32,
     pub compute_ns: u64,
 }
 

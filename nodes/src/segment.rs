@@ -241,6 +241,7 @@ impl Processor for Segmenter {
             c.image = image;
             c.contacts.clear();
             c.contacts.extend_from_slice(found);
+            c.dropped = u32::try_from(buf.dropped).unwrap_or(u32::MAX);
             c.compute_ns = ns;
         });
         out.send(0, Message::from_arc(m.header, payload))

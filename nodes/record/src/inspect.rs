@@ -112,7 +112,7 @@ pub struct GuardCounts {
 }
 
 /// Names and bits of the guard flags, in bit order.
-pub const GUARDS: [(&str, u32); 7] = [
+pub const GUARDS: [(&str, u32); 8] = [
     ("no load", layout::force_flags::NO_LOAD),
     ("above range", layout::force_flags::ABOVE_RANGE),
     ("below range", layout::force_flags::BELOW_RANGE),
@@ -120,6 +120,7 @@ pub const GUARDS: [(&str, u32); 7] = [
     ("area clamped", layout::force_flags::AREA_CLAMPED),
     ("negative clamped", layout::force_flags::NEGATIVE_CLAMPED),
     ("no pressure", layout::force_flags::NO_PRESSURE),
+    ("contacts dropped", layout::force_flags::CONTACTS_DROPPED),
 ];
 
 /// Summary of one recording file.

@@ -65,6 +65,9 @@ pub mod force_flags {
     /// The frame's pressure change is unknown (no pressure sample in its window, or no tare
     /// yet): the force is a 0 N placeholder, not a no-load reading (bit 1 is not set).
     pub const NO_PRESSURE: u32 = 64;
+    /// The frame had more contact regions than were reported: a pneumatic strategy's share
+    /// includes the unreported ones' part.
+    pub const CONTACTS_DROPPED: u32 = 128;
 }
 
 /// `/derived/forces/<strategy>/t`.

@@ -284,10 +284,10 @@ fn inspect_counts_settled_frames_and_guarded_forces() {
             noise_kpa: 0.01,
         };
         w.append_sync(t, &row).unwrap();
-        // Frame i has i % 3 contacts; flags: 1 (no load) on the first, 2 | 8 on the second;
+        // Frame i has i % 3 contacts; flags: 1 (no load) on the first, 2 | 8 | 128 on the second;
         // frame 5's are placeholders flagged 64 (no pressure) only.
         let forces =
-            [ForceRow { force_n: 0.0, dp_kpa: -0.1, flags: 1 }, ForceRow { force_n: 3.0, dp_kpa: 9.0, flags: 10 }];
+            [ForceRow { force_n: 0.0, dp_kpa: -0.1, flags: 1 }, ForceRow { force_n: 3.0, dp_kpa: 9.0, flags: 138 }];
         let placeholders = [ForceRow { force_n: 0.0, dp_kpa: f64::NAN, flags: 64 }; 2];
         let forces = if lost { &placeholders[..] } else { &forces[..(i % 3) as usize] };
         w.append_forces(0, t, forces).unwrap();
@@ -297,13 +297,15 @@ fn inspect_counts_settled_frames_and_guarded_forces() {
     let counts = skinflow_record::SyncCounts { frames: 6, settled: 3, no_load: 1, without_pressure: 1 };
     assert_eq!(s.sync, Some(counts));
     let g = &s.guards[0];
-    // Contacts per frame 0,1,2,0,1,2: 6 forces, 3 with bit 1, 1 with bits 2 and 8, 2 with 64.
+    // Contacts per frame 0,1,2,0,1,2: 6 forces, 3 with bit 1, 1 with bits 2, 8 and 128, 2 with 64.
     assert_eq!((g.strategy.as_str(), g.forces), ("s", 6));
-    assert_eq!(g.flagged, [3, 1, 0, 1, 0, 0, 2]);
+    assert_eq!(g.flagged, [3, 1, 0, 1, 0, 0, 2, 1]);
     let text = s.to_string();
     assert!(text.contains("sync:     6 frames: 3 settled, 1 in the no-load period, 1 without pressure"), "{text}");
     assert!(
-        text.contains("guards:   s: 6 forces; 3 no load, 1 above range, 1 location clamped, 2 no pressure"),
+        text.contains(
+            "guards:   s: 6 forces; 3 no load, 1 above range, 1 location clamped, 2 no pressure, 1 contacts dropped"
+        ),
         "{text}"
     );
 }

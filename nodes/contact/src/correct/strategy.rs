@@ -111,6 +111,11 @@ pub struct ForceFlags {
     pub area_clamped: bool,
     /// The model gave a negative force, clamped to 0 N.
     pub negative_clamped: bool,
+    /// The frame had more contact regions than the segmenter reports (`max_contacts`): the
+    /// pressure change was shared over the reported contacts only, so a pneumatic strategy's
+    /// forces also carry the unreported regions' part (biased high). Set by the corrector node
+    /// from the frame, not by [`Strategy::estimate`]; EIT strategies are not affected.
+    pub contacts_dropped: bool,
 }
 
 /// Force of one contact.

@@ -1,16 +1,26 @@
 //! The C ABI between the host and a plugin library, version [`ABI_VERSION`].
 //!
 //! A plugin exports one symbol, [`ENTRY_SYMBOL`], an [`EntryFn`] returning a static
-//! [`SfPlugin`]: its kinds ([`SfKind`]) with their ports, params and three functions (create,
-//! process, destroy). A message crosses as named `f64` columns plus a header ([`SfMessage`]);
-//! the memory behind every pointer belongs to the side that wrote it and stays valid until that
-//! side's next call on the same node. The first two fields of [`SfPlugin`] never move, so any
-//! host can read the version of any plugin; all struct sizes are checked at load.
+//! [`SfPlugin`]: its kinds ([`SfKind`]), each with a role ([`SfRole`]: processor, source or
+//! sink), its ports, params and functions (check, create, process or poll, stop, destroy). A
+//! message crosses as named `f64` columns plus a header ([`SfMessage`]); the memory behind every
+//! pointer belongs to the side that wrote it and stays valid until that side's next call on the
+//! same node. The first two fields of [`SfPlugin`] never move, so any host can read the version
+//! of any plugin; all struct sizes are checked at load.
+//!
+//! Roles: a processor's `process` reads inputs and writes outputs; a sink is called through the
+//! same `process` with no output ports; a source has no inputs and is called through `poll`
+//! ([`SfPoll`]: the host passes its clock, the source says emitted / idle / finished and may
+//! name a time before which it need not be polled again; the host waits, and a stop request
+//! ends the wait). No call may block for long: a source that waits for a device reads with a
+//! timeout (at most ~100 ms) or returns idle, so a stop request is seen promptly.
+//!
+//! Version history: 1, processors only; 2, roles (sources, sinks), `poll`, `stop`, [`SfPoll`].
 
 use std::ffi::c_void;
 
 /// Bumped on any change of the structs or functions in this module.
-pub const ABI_VERSION: u32 = 1;
+pub const ABI_VERSION: u32 = 2;
 
 /// The exported entry point (NUL-terminated for `dlsym`).
 pub const ENTRY_SYMBOL: &[u8] = b"skinflow_plugin_entry\0";
@@ -121,8 +131,9 @@ pub type CheckFn = unsafe extern "C" fn(params_toml: SfStr, err: SfErrorSink) ->
 /// Builds a node from params (TOML text); relative paths in params resolve against `base_dir`
 /// (the graph file's directory). Null on failure (message written to `err`).
 pub type CreateFn = unsafe extern "C" fn(params_toml: SfStr, base_dir: SfStr, err: SfErrorSink) -> *mut c_void;
-/// One call: reads `n_inputs` messages, writes `n_outputs` (plugin-owned memory, valid until
-/// the next call on this node or its destruction).
+/// One call of a processor or sink: reads `n_inputs` messages (host-owned, valid for the
+/// call; absent ones have `present == 0`), writes `n_outputs` (plugin-owned memory, valid until
+/// the next call on this node or its destruction; always 0 for a sink).
 pub type ProcessFn = unsafe extern "C" fn(
     node: *mut c_void,
     inputs: *const SfMessage,
@@ -131,24 +142,95 @@ pub type ProcessFn = unsafe extern "C" fn(
     n_outputs: usize,
     err: SfErrorSink,
 ) -> SfStatus;
+/// One poll of a source: the host passes `poll` (its clock in, the outcome out: the plugin
+/// writes `state` and `wake_at_ns`) and `n_outputs` writable messages; the plugin writes its
+/// outputs there (plugin-owned memory, valid until the next call on this node or its
+/// destruction). `poll` and the host context inside it are valid for the call only.
+pub type PollFn = unsafe extern "C" fn(
+    node: *mut c_void,
+    poll: *mut SfPoll,
+    outputs: *mut SfMessage,
+    n_outputs: usize,
+    err: SfErrorSink,
+) -> SfStatus;
+/// End of the run: flush and close (called once, before `destroy`, on a node whose `create`
+/// succeeded; not after the node panicked, whose instance is poisoned).
+pub type StopFn = unsafe extern "C" fn(node: *mut c_void, err: SfErrorSink) -> SfStatus;
 /// Frees a node built by `create`.
 pub type DestroyFn = unsafe extern "C" fn(node: *mut c_void);
 
-/// A kind (role: processor).
+/// The role of a kind.
+#[repr(transparent)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct SfRole(pub u32);
+
+impl SfRole {
+    /// Inputs to outputs, through `process`.
+    pub const PROCESSOR: SfRole = SfRole(0);
+    /// No inputs; messages come from `poll`.
+    pub const SOURCE: SfRole = SfRole(1);
+    /// No outputs; messages are consumed by `process` (called with `n_outputs == 0`).
+    pub const SINK: SfRole = SfRole(2);
+}
+
+/// What a source's `poll` did ([`SfPoll::state`]).
+#[repr(transparent)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct SfPollState(pub u32);
+
+impl SfPollState {
+    /// Wrote messages (or consumed input without output); poll again.
+    pub const EMITTED: SfPollState = SfPollState(0);
+    /// Nothing now; poll again, not before `wake_at_ns` when it is set.
+    pub const IDLE: SfPollState = SfPollState(1);
+    /// Exhausted: never polled again (what the outputs hold is still sent).
+    pub const FINISHED: SfPollState = SfPollState(2);
+}
+
+/// The host's side of one poll (host-owned, valid for the call): the clock in, the outcome out.
+#[repr(C)]
+#[derive(Debug, Clone, Copy)]
+pub struct SfPoll {
+    /// In: the graph clock, ns since the graph started (monotonic).
+    pub now_ns: u64,
+    /// In: 1 when the source should pace itself to real time (mode `realtime`), 0 in
+    /// `lockstep`, where it emits as fast as it can (the host never waits there).
+    pub paced: u32,
+    /// Out: an [`SfPollState`] (the host sets `IDLE` before the call).
+    pub state: SfPollState,
+    /// Out, with `IDLE`: the graph time (ns) before which the source need not be polled again;
+    /// 0 for "soon" (the host backs off about a millisecond). The host waits in slices and
+    /// ends the wait on a stop request; in lockstep it does not wait.
+    pub wake_at_ns: u64,
+    /// In: the host's context, only for `stopping`.
+    pub host: *const c_void,
+    /// In: returns 1 once the graph is stopping (Ctrl-C, a duration limit, a failure). A poll
+    /// that loops over bounded reads checks it between them. Valid during the call only.
+    pub stopping: unsafe extern "C" fn(host: *const c_void) -> u32,
+}
+
+/// A kind.
 #[repr(C)]
 #[derive(Debug, Clone, Copy)]
 pub struct SfKind {
     pub name: SfStr,
     pub doc: SfStr,
+    pub role: SfRole,
+    /// Sources have none.
     pub inputs: *const SfPort,
     pub n_inputs: usize,
+    /// Sinks have none.
     pub outputs: *const SfPort,
     pub n_outputs: usize,
     pub params: *const SfParam,
     pub n_params: usize,
     pub check: CheckFn,
     pub create: CreateFn,
-    pub process: ProcessFn,
+    /// Processors and sinks; `None` for sources.
+    pub process: Option<ProcessFn>,
+    /// Sources; `None` for processors and sinks.
+    pub poll: Option<PollFn>,
+    pub stop: StopFn,
     pub destroy: DestroyFn,
 }
 
@@ -165,6 +247,7 @@ pub struct SfPlugin {
     pub param_size: u32,
     pub message_size: u32,
     pub column_size: u32,
+    pub poll_size: u32,
     /// The plugin's name and version, for messages.
     pub name: SfStr,
     pub version: SfStr,
@@ -176,7 +259,7 @@ pub struct SfPlugin {
 pub type EntryFn = unsafe extern "C" fn() -> *const SfPlugin;
 
 /// The struct sizes a peer must agree on, in [`SfPlugin`] order.
-pub const fn sizes() -> [(&'static str, u32); 6] {
+pub const fn sizes() -> [(&'static str, u32); 7] {
     [
         ("SfPlugin", size_of::<SfPlugin>() as u32),
         ("SfKind", size_of::<SfKind>() as u32),
@@ -184,12 +267,21 @@ pub const fn sizes() -> [(&'static str, u32); 6] {
         ("SfParam", size_of::<SfParam>() as u32),
         ("SfMessage", size_of::<SfMessage>() as u32),
         ("SfColumn", size_of::<SfColumn>() as u32),
+        ("SfPoll", size_of::<SfPoll>() as u32),
     ]
 }
 
 impl SfPlugin {
     /// The sizes this table declares, in [`sizes`] order.
-    pub fn declared_sizes(&self) -> [u32; 6] {
-        [self.plugin_size, self.kind_size, self.port_size, self.param_size, self.message_size, self.column_size]
+    pub fn declared_sizes(&self) -> [u32; 7] {
+        [
+            self.plugin_size,
+            self.kind_size,
+            self.port_size,
+            self.param_size,
+            self.message_size,
+            self.column_size,
+            self.poll_size,
+        ]
     }
 }

@@ -1,5 +1,6 @@
-//! The plugin author's side: implement [`PluginNode`] for an ordinary Rust struct and export it
-//! with [`export_plugin!`](crate::export_plugin). The macro's entry point builds the static
+//! The plugin author's side: implement [`PluginNode`] (a processor), [`PluginSource`] or
+//! [`PluginSink`] for an ordinary Rust struct and export it with
+//! [`export_plugin!`](crate::export_plugin). The macro's entry point builds the static
 //! [`SfPlugin`] table once; the `extern "C"` shims here run every author call under
 //! `catch_unwind`, so a panic never unwinds into the host: it comes back as
 //! [`SfStatus::PANIC`] with its message, and the instance refuses further calls.
@@ -12,8 +13,8 @@ use std::sync::OnceLock;
 use serde::de::DeserializeOwned;
 
 use crate::abi::{
-    ABI_VERSION, CheckFn, CreateFn, DestroyFn, ProcessFn, SfErrorSink, SfKind, SfMessage, SfParam, SfPlugin, SfPort,
-    SfStatus, SfStr,
+    ABI_VERSION, CheckFn, CreateFn, DestroyFn, PollFn, ProcessFn, SfErrorSink, SfKind, SfMessage, SfParam, SfPlugin,
+    SfPoll, SfPollState, SfPort, SfRole, SfStatus, SfStr, StopFn,
 };
 use crate::columns::{ColumnBuf, Columns};
 
@@ -90,6 +91,12 @@ impl Outputs {
     pub fn port(&mut self, i: usize) -> &mut ColumnBuf {
         &mut self.ports[i]
     }
+
+    fn clear(&mut self) {
+        for p in &mut self.ports {
+            p.clear();
+        }
+    }
 }
 
 /// A processor kind implemented in a plugin.
@@ -111,15 +118,161 @@ pub trait PluginNode: Send + Sized + 'static {
 
     /// One call: `inputs` in declaration order (absent ones have `present() == false`).
     ///
-    /// ABI version 1 has no end-of-stream call (the engine's `Processor::flush`): emit what a
+    /// The C ABI has no end-of-stream call (the engine's `Processor::flush`): emit what a
     /// call computes in that call. A node that held messages back across calls would lose the
     /// last ones when the stream ends.
     fn process(&mut self, inputs: &[Columns<'_>], out: &mut Outputs) -> Result<(), String>;
+
+    /// End of the run (called once; not after a panic). Default: nothing to do.
+    fn stop(&mut self) -> Result<(), String> {
+        Ok(())
+    }
 }
 
-fn parse<T: PluginNode>(text: &str) -> Result<T::Params, String> {
-    let p: T::Params = toml::from_str(text).map_err(|e| e.message().to_owned())?;
-    T::validate(&p)?;
+/// What a source's [`PluginSource::poll`] did.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Poll {
+    /// Wrote messages (or none this time, with more to come); poll again at once.
+    Emitted,
+    /// Nothing now; poll again soon (the host backs off about a millisecond in real time).
+    Idle,
+    /// Nothing before graph time `t_ns` ([`SourceCtx::now_ns`]'s clock): the host waits, and
+    /// a stop request (Ctrl-C, `--for`) ends the wait. Only in paced mode: in lockstep the
+    /// host polls again at once.
+    IdleUntil(u64),
+    /// Exhausted: never polled again. What the ports hold is still sent.
+    Finished,
+}
+
+/// The host's clock and stop flag during one poll.
+pub struct SourceCtx<'a> {
+    now_ns: u64,
+    paced: bool,
+    host: *const c_void,
+    stopping: unsafe extern "C" fn(*const c_void) -> u32,
+    _call: std::marker::PhantomData<&'a ()>,
+}
+
+impl SourceCtx<'_> {
+    /// The graph clock: ns since the graph started, monotonic. A message's default `t_ns`.
+    pub fn now_ns(&self) -> u64 {
+        self.now_ns
+    }
+
+    /// Whether to pace to real time (graph mode `realtime`). False in `lockstep`: emit as fast
+    /// as possible, never [`Poll::IdleUntil`] for pacing.
+    pub fn paced(&self) -> bool {
+        self.paced
+    }
+
+    /// Whether the graph is stopping: a poll that loops over bounded reads returns when true.
+    pub fn stopping(&self) -> bool {
+        // SAFETY: `host` and `stopping` come from the host's `SfPoll` of the current call, and
+        // this context does not outlive the call (its lifetime is the call's borrow).
+        unsafe { (self.stopping)(self.host) != 0 }
+    }
+}
+
+/// A source kind implemented in a plugin: no inputs, messages come from [`PluginSource::poll`].
+///
+/// A poll must not block for long: wait for a device with a read timeout of at most ~100 ms,
+/// or return [`Poll::Idle`] / [`Poll::IdleUntil`] and let the host wait (a stop request ends
+/// the host's wait at once).
+pub trait PluginSource: Send + Sized + 'static {
+    /// The params table, e.g. `#[derive(Deserialize)] #[serde(deny_unknown_fields)]`.
+    type Params: DeserializeOwned;
+
+    /// Name, doc, outputs and params (no inputs: a source with inputs is refused at load).
+    fn spec() -> KindSpec;
+
+    /// Range checks, run by `skinflow check` and before `new`.
+    fn validate(_params: &Self::Params) -> Result<(), String> {
+        Ok(())
+    }
+
+    /// Builds a node (open files, allocate buffers). Relative paths in params are meant
+    /// relative to `base_dir`, the graph file's directory.
+    fn new(params: Self::Params, base_dir: &Path) -> Result<Self, String>;
+
+    /// Writes at most one message per output port. A message's header defaults to
+    /// `seq` = 1, 2, ... (per port, messages this node sent on it) and `t_ns` = the poll's
+    /// [`SourceCtx::now_ns`]; set it with [`ColumnBuf::header`]. An `Err` is counted and logged,
+    /// whatever the ports hold is not sent, and the source is polled again.
+    fn poll(&mut self, ctx: &SourceCtx<'_>, out: &mut Outputs) -> Result<Poll, String>;
+
+    /// End of the run (called once; not after a panic): release devices. Default: nothing.
+    fn stop(&mut self) -> Result<(), String> {
+        Ok(())
+    }
+}
+
+/// A sink kind implemented in a plugin: inputs only.
+pub trait PluginSink: Send + Sized + 'static {
+    /// The params table, e.g. `#[derive(Deserialize)] #[serde(deny_unknown_fields)]`.
+    type Params: DeserializeOwned;
+
+    /// Name, doc, inputs and params (no outputs: a sink with outputs is refused at load).
+    fn spec() -> KindSpec;
+
+    /// Range checks, run by `skinflow check` and before `new`.
+    fn validate(_params: &Self::Params) -> Result<(), String> {
+        Ok(())
+    }
+
+    /// Builds a node (create files, connect). Relative paths in params are meant relative to
+    /// `base_dir`, the graph file's directory.
+    fn new(params: Self::Params, base_dir: &Path) -> Result<Self, String>;
+
+    /// One call: `inputs` in declaration order (absent ones have `present() == false`). An
+    /// `Err` is counted and logged, and the graph goes on.
+    fn consume(&mut self, inputs: &[Columns<'_>]) -> Result<(), String>;
+
+    /// End of the run, after every queued message was consumed (called once; not after a
+    /// panic): flush and close. Default: nothing (a `Drop` still runs when the node is freed).
+    fn stop(&mut self) -> Result<(), String> {
+        Ok(())
+    }
+}
+
+/// What the shims need of any role (implemented by the wrappers below, one per author trait).
+trait Author: Send + Sized + 'static {
+    type Params: DeserializeOwned;
+    fn spec() -> KindSpec;
+    fn validate(params: &Self::Params) -> Result<(), String>;
+    fn build(params: Self::Params, base_dir: &Path) -> Result<Self, String>;
+    fn stop(&mut self) -> Result<(), String>;
+}
+
+struct AsNode<T>(T);
+struct AsSource<T>(T);
+struct AsSink<T>(T);
+
+macro_rules! author {
+    ($wrap:ident, $tr:ident) => {
+        impl<T: $tr> Author for $wrap<T> {
+            type Params = T::Params;
+            fn spec() -> KindSpec {
+                T::spec()
+            }
+            fn validate(params: &T::Params) -> Result<(), String> {
+                T::validate(params)
+            }
+            fn build(params: T::Params, base_dir: &Path) -> Result<Self, String> {
+                T::new(params, base_dir).map($wrap)
+            }
+            fn stop(&mut self) -> Result<(), String> {
+                self.0.stop()
+            }
+        }
+    };
+}
+author!(AsNode, PluginNode);
+author!(AsSource, PluginSource);
+author!(AsSink, PluginSink);
+
+fn parse<A: Author>(text: &str) -> Result<A::Params, String> {
+    let p: A::Params = toml::from_str(text).map_err(|e| e.message().to_owned())?;
+    A::validate(&p)?;
     Ok(p)
 }
 
@@ -145,16 +298,91 @@ unsafe fn params_text<'a>(s: SfStr) -> Result<&'a str, String> {
     unsafe { s.to_str() }.map_err(|e| format!("params are not UTF-8: {e}"))
 }
 
-struct Instance<T> {
-    node: T,
+struct Instance<A> {
+    node: A,
     out: Outputs,
     out_types: Vec<&'static str>,
+    /// Per output port: messages sent on it (a source's default `seq`).
+    sent: Vec<u64>,
     poisoned: Option<String>,
 }
 
-unsafe extern "C" fn check<T: PluginNode>(params: SfStr, err: SfErrorSink) -> SfStatus {
+/// The instance behind a node pointer.
+///
+/// # Safety
+/// `node` must come from `create::<A>` and not be in use by another call (the host calls one
+/// node from one thread at a time).
+unsafe fn instance<'a, A>(node: *mut c_void) -> &'a mut Instance<A> {
+    // SAFETY: forwarded from the caller.
+    unsafe { &mut *node.cast::<Instance<A>>() }
+}
+
+/// Runs `f` on a live instance under `catch_unwind`: an `Err` becomes [`SfStatus::ERROR`], a
+/// panic [`SfStatus::PANIC`] and poisons the instance; a poisoned instance refuses the call.
+fn guarded<A>(
+    inst: &mut Instance<A>,
+    err: SfErrorSink,
+    f: impl FnOnce(&mut Instance<A>) -> Result<(), String>,
+) -> SfStatus {
+    if let Some(why) = &inst.poisoned {
+        report(err, &format!("node is unusable after an earlier panic ({why})"));
+        return SfStatus::ERROR;
+    }
+    match catch_unwind(AssertUnwindSafe(|| f(&mut *inst))) {
+        Ok(Ok(())) => SfStatus::OK,
+        Ok(Err(m)) => {
+            report(err, &m);
+            SfStatus::ERROR
+        }
+        Err(p) => {
+            let text = panic_text(&*p);
+            report(err, &text);
+            inst.poisoned = Some(text);
+            SfStatus::PANIC
+        }
+    }
+}
+
+/// The host's `n` messages at `p` (empty when `n == 0`).
+///
+/// # Safety
+/// When `n > 0`, `p` must point at `n` valid messages for `'a`.
+unsafe fn raw_slice<'a>(p: *const SfMessage, n: usize) -> &'a [SfMessage] {
+    if n == 0 || p.is_null() {
+        return &[];
+    }
+    // SAFETY: forwarded from the caller.
+    unsafe { std::slice::from_raw_parts(p, n) }
+}
+
+/// Points the host's `n` output messages at what the ports hold (absent when not written).
+///
+/// # Safety
+/// When `n > 0`, `outputs` must point at `n` writable messages for the call.
+unsafe fn write_outputs<A>(
+    inst: &mut Instance<A>,
+    outputs: *mut SfMessage,
+    n: usize,
+    header: impl Fn(usize, &[u64]) -> (u64, u64),
+) {
+    if n == 0 || outputs.is_null() {
+        return;
+    }
+    // SAFETY: forwarded from the caller.
+    let outs = unsafe { std::slice::from_raw_parts_mut(outputs, n) };
+    for (i, (o, buf)) in outs.iter_mut().zip(&mut inst.out.ports).enumerate() {
+        *o = if buf.is_written() {
+            inst.sent[i] += 1;
+            buf.view(inst.out_types[i], header(i, &inst.sent))
+        } else {
+            SfMessage::ABSENT
+        };
+    }
+}
+
+unsafe extern "C" fn check<A: Author>(params: SfStr, err: SfErrorSink) -> SfStatus {
     // SAFETY: the host passes params valid for the call.
-    let r = catch_unwind(|| unsafe { params_text(params) }.and_then(|t| parse::<T>(t).map(|_| ())));
+    let r = catch_unwind(|| unsafe { params_text(params) }.and_then(|t| parse::<A>(t).map(|_| ())));
     match r {
         Ok(Ok(())) => SfStatus::OK,
         Ok(Err(m)) => {
@@ -168,16 +396,17 @@ unsafe extern "C" fn check<T: PluginNode>(params: SfStr, err: SfErrorSink) -> Sf
     }
 }
 
-unsafe extern "C" fn create<T: PluginNode>(params: SfStr, base_dir: SfStr, err: SfErrorSink) -> *mut c_void {
+unsafe extern "C" fn create<A: Author>(params: SfStr, base_dir: SfStr, err: SfErrorSink) -> *mut c_void {
     let r = catch_unwind(|| -> Result<*mut c_void, String> {
         // SAFETY: the host passes params and base_dir valid for the call.
         let (params, base_dir) = unsafe { (params_text(params)?, params_text(base_dir)?) };
-        let node = T::new(parse::<T>(params)?, Path::new(base_dir))?;
-        let spec = T::spec();
-        let inst = Instance::<T> {
+        let node = A::build(parse::<A>(params)?, Path::new(base_dir))?;
+        let spec = A::spec();
+        let inst = Instance::<A> {
             node,
             out: Outputs::new(spec.outputs.len()),
             out_types: spec.outputs.iter().map(|o| o.type_name).collect(),
+            sent: vec![0; spec.outputs.len()],
             poisoned: None,
         };
         Ok(Box::into_raw(Box::new(inst)).cast())
@@ -203,65 +432,132 @@ unsafe extern "C" fn process<T: PluginNode>(
     n_outputs: usize,
     err: SfErrorSink,
 ) -> SfStatus {
-    // SAFETY: `node` came from `create::<T>` and the host calls one node from one thread at a time.
-    let inst = unsafe { &mut *node.cast::<Instance<T>>() };
-    if let Some(why) = &inst.poisoned {
-        report(err, &format!("node is unusable after an earlier panic ({why})"));
-        return SfStatus::ERROR;
-    }
-    let r = catch_unwind(AssertUnwindSafe(|| -> Result<(), String> {
-        let raw_in: &[SfMessage] =
-            if n_inputs == 0 { &[] } else { unsafe { std::slice::from_raw_parts(inputs, n_inputs) } };
-        // SAFETY (above and here): the host passes `n_inputs` messages whose memory is valid for the call.
-        let ins = unsafe { Columns::slice_from_raw(raw_in) };
-        for p in &mut inst.out.ports {
-            p.clear();
-        }
-        inst.node.process(ins, &mut inst.out)?;
+    // SAFETY: `node` came from `create::<AsNode<T>>`; one call at a time per node.
+    let inst = unsafe { instance::<AsNode<T>>(node) };
+    guarded(inst, err, |inst| {
+        // SAFETY: the host passes `n_inputs` messages whose memory is valid for the call.
+        let ins = unsafe { Columns::slice_from_raw(raw_slice(inputs, n_inputs)) };
+        inst.out.clear();
+        inst.node.0.process(ins, &mut inst.out)?;
         let header = ins.iter().find(|c| c.present()).map_or((0, 0), |c| (c.seq(), c.t_ns()));
-        let outs: &mut [SfMessage] =
-            if n_outputs == 0 { &mut [] } else { unsafe { std::slice::from_raw_parts_mut(outputs, n_outputs) } };
-        // SAFETY (above): the host passes `n_outputs` writable messages for the call.
-        for (i, (o, buf)) in outs.iter_mut().zip(&mut inst.out.ports).enumerate() {
-            *o = if buf.is_written() { buf.view(inst.out_types[i], header) } else { SfMessage::ABSENT };
-        }
+        // SAFETY: the host passes `n_outputs` writable messages for the call.
+        unsafe { write_outputs(inst, outputs, n_outputs, |_, _| header) };
         Ok(())
-    }));
-    match r {
-        Ok(Ok(())) => SfStatus::OK,
-        Ok(Err(m)) => {
-            report(err, &m);
-            SfStatus::ERROR
-        }
-        Err(p) => {
-            let text = panic_text(&*p);
-            report(err, &text);
-            inst.poisoned = Some(text);
-            SfStatus::PANIC
-        }
-    }
+    })
 }
 
-unsafe extern "C" fn destroy<T: PluginNode>(node: *mut c_void) {
+/// A sink's call: the ABI's `process` with no outputs.
+unsafe extern "C" fn consume<T: PluginSink>(
+    node: *mut c_void,
+    inputs: *const SfMessage,
+    n_inputs: usize,
+    _outputs: *mut SfMessage,
+    _n_outputs: usize,
+    err: SfErrorSink,
+) -> SfStatus {
+    // SAFETY: `node` came from `create::<AsSink<T>>`; one call at a time per node.
+    let inst = unsafe { instance::<AsSink<T>>(node) };
+    guarded(inst, err, |inst| {
+        // SAFETY: the host passes `n_inputs` messages whose memory is valid for the call.
+        let ins = unsafe { Columns::slice_from_raw(raw_slice(inputs, n_inputs)) };
+        inst.node.0.consume(ins)
+    })
+}
+
+unsafe extern "C" fn poll<T: PluginSource>(
+    node: *mut c_void,
+    poll: *mut SfPoll,
+    outputs: *mut SfMessage,
+    n_outputs: usize,
+    err: SfErrorSink,
+) -> SfStatus {
+    // SAFETY: `node` came from `create::<AsSource<T>>`; one call at a time per node.
+    let inst = unsafe { instance::<AsSource<T>>(node) };
+    if poll.is_null() {
+        report(err, "poll called without its SfPoll");
+        return SfStatus::ERROR;
+    }
+    // SAFETY: non-null; the host passes an `SfPoll` it owns, valid and unaliased for the call.
+    let p = unsafe { &mut *poll };
+    guarded(inst, err, |inst| {
+        let ctx = SourceCtx {
+            now_ns: p.now_ns,
+            paced: p.paced != 0,
+            host: p.host,
+            stopping: p.stopping,
+            _call: std::marker::PhantomData,
+        };
+        inst.out.clear();
+        let r = inst.node.0.poll(&ctx, &mut inst.out)?;
+        let now = p.now_ns;
+        // SAFETY: the host passes `n_outputs` writable messages for the call.
+        unsafe { write_outputs(inst, outputs, n_outputs, |i, sent| (sent[i], now)) };
+        (p.state, p.wake_at_ns) = match r {
+            Poll::Emitted => (SfPollState::EMITTED, 0),
+            Poll::Idle => (SfPollState::IDLE, 0),
+            Poll::IdleUntil(t) => (SfPollState::IDLE, t),
+            Poll::Finished => (SfPollState::FINISHED, 0),
+        };
+        Ok(())
+    })
+}
+
+unsafe extern "C" fn stop<A: Author>(node: *mut c_void, err: SfErrorSink) -> SfStatus {
+    // SAFETY: `node` came from `create::<A>`; one call at a time per node.
+    let inst = unsafe { instance::<A>(node) };
+    if inst.poisoned.is_some() {
+        // The author's state is not trusted after a panic: nothing to stop (its Drop still runs).
+        return SfStatus::OK;
+    }
+    guarded(inst, err, |inst| inst.node.stop())
+}
+
+unsafe extern "C" fn destroy<A: Author>(node: *mut c_void) {
     if node.is_null() {
         return;
     }
-    // SAFETY: `node` came from `create::<T>` and is destroyed once; a panicking Drop is caught.
-    let _ = catch_unwind(AssertUnwindSafe(|| drop(unsafe { Box::from_raw(node.cast::<Instance<T>>()) })));
+    // SAFETY: `node` came from `create::<A>` and is destroyed once; a panicking Drop is caught.
+    let _ = catch_unwind(AssertUnwindSafe(|| drop(unsafe { Box::from_raw(node.cast::<Instance<A>>()) })));
 }
 
-/// One kind for the table: its spec and monomorphized shims.
+/// One kind for the table: its spec, role and monomorphized shims.
 pub struct KindEntry {
     spec: KindSpec,
+    role: SfRole,
     check: CheckFn,
     create: CreateFn,
-    process: ProcessFn,
+    process: Option<ProcessFn>,
+    poll: Option<PollFn>,
+    stop: StopFn,
     destroy: DestroyFn,
 }
 
-/// The table entry of `T` (used by [`export_plugin!`](crate::export_plugin)).
+fn entry_of<A: Author>(role: SfRole, process: Option<ProcessFn>, poll: Option<PollFn>) -> KindEntry {
+    KindEntry {
+        spec: A::spec(),
+        role,
+        check: check::<A>,
+        create: create::<A>,
+        process,
+        poll,
+        stop: stop::<A>,
+        destroy: destroy::<A>,
+    }
+}
+
+/// The table entry of processor `T` (used by [`export_plugin!`](crate::export_plugin)).
 pub fn kind<T: PluginNode>() -> KindEntry {
-    KindEntry { spec: T::spec(), check: check::<T>, create: create::<T>, process: process::<T>, destroy: destroy::<T> }
+    entry_of::<AsNode<T>>(SfRole::PROCESSOR, Some(process::<T>), None)
+}
+
+/// The table entry of source `T` (used by [`export_plugin!`](crate::export_plugin)).
+pub fn source<T: PluginSource>() -> KindEntry {
+    entry_of::<AsSource<T>>(SfRole::SOURCE, None, Some(poll::<T>))
+}
+
+/// The table entry of sink `T` (used by [`export_plugin!`](crate::export_plugin)).
+pub fn sink<T: PluginSink>() -> KindEntry {
+    entry_of::<AsSink<T>>(SfRole::SINK, Some(consume::<T>), None)
 }
 
 /// The static description of a plugin: the table and the arrays it points into.
@@ -309,6 +605,7 @@ impl Table {
             kinds.push(SfKind {
                 name: SfStr::new(e.spec.name),
                 doc: SfStr::new(e.spec.doc),
+                role: e.role,
                 inputs: ins.as_ptr(),
                 n_inputs: ins.len(),
                 outputs: outs.as_ptr(),
@@ -318,6 +615,8 @@ impl Table {
                 check: e.check,
                 create: e.create,
                 process: e.process,
+                poll: e.poll,
+                stop: e.stop,
                 destroy: e.destroy,
             });
             // Moving a Vec keeps its heap buffer, so the pointers above stay valid.
@@ -334,6 +633,7 @@ impl Table {
             param_size: s[3].1,
             message_size: s[4].1,
             column_size: s[5].1,
+            poll_size: s[6].1,
             name: SfStr::new(name),
             version: SfStr::new(version),
             kinds: kinds.as_ptr(),
@@ -358,16 +658,33 @@ pub fn entry(
         .unwrap_or(std::ptr::null())
 }
 
-/// Exports plugin kinds: `export_plugin!(name = "my-plugin", kinds = [MySplitter, MyCorrector]);`
-/// in a `crate-type = ["cdylib"]` crate. Each kind is a [`PluginNode`].
+/// Exports plugin kinds from a `crate-type = ["cdylib"]` crate: processors ([`PluginNode`]),
+/// sources ([`PluginSource`]) and sinks ([`PluginSink`]), each list optional, in this order:
+///
+/// ```ignore
+/// export_plugin!(name = "my-plugin", kinds = [MySplitter], sources = [MyBoard], sinks = [MyForwarder]);
+/// ```
 #[macro_export]
 macro_rules! export_plugin {
-    (name = $name:expr, kinds = [$($kind:ty),+ $(,)?] $(,)?) => {
+    (
+        name = $name:expr
+        $(, kinds = [$($kind:ty),* $(,)?])?
+        $(, sources = [$($source:ty),* $(,)?])?
+        $(, sinks = [$($sink:ty),* $(,)?])?
+        $(,)?
+    ) => {
         /// The skinflow plugin entry point (ABI in `skinflow_plugin_sdk::abi`).
         #[unsafe(no_mangle)]
         pub extern "C" fn skinflow_plugin_entry() -> *const $crate::abi::SfPlugin {
             static TABLE: ::std::sync::OnceLock<$crate::export::Table> = ::std::sync::OnceLock::new();
-            $crate::export::entry(&TABLE, $name, env!("CARGO_PKG_VERSION"), || vec![$($crate::export::kind::<$kind>()),+])
+            $crate::export::entry(&TABLE, $name, env!("CARGO_PKG_VERSION"), || {
+                #[allow(unused_mut)]
+                let mut kinds = ::std::vec::Vec::new();
+                $($(kinds.push($crate::export::kind::<$kind>());)*)?
+                $($(kinds.push($crate::export::source::<$source>());)*)?
+                $($(kinds.push($crate::export::sink::<$sink>());)*)?
+                kinds
+            })
         }
     };
 }

@@ -3,6 +3,8 @@
 //! node makes its own codec per port, so a codec may keep a [`skinflow_core::Recycler`] and
 //! decode without allocating. Decoding sees the call's inputs, so an output can keep the
 //! upstream `Arc` chain (a plugin splitter's `Split` holds its input's `Arc<Contacts>`).
+//! A plugin source has no inputs: its outputs need codecs that build a payload from the
+//! columns alone ([`Codec::needs_provenance`] false), which the loader checks.
 
 use std::collections::BTreeMap;
 
@@ -17,13 +19,19 @@ pub trait Codec: Send {
     fn encode(&mut self, msg: &Message, out: &mut ColumnBuf) -> Result<(), String>;
     /// Builds the payload of a plugin output from its columns.
     fn decode(&mut self, cols: &Columns<'_>, at: &Decode<'_>) -> Result<Message, String>;
+    /// Whether `decode` needs the call's inputs (the provenance a derived payload holds), or
+    /// cannot decode at all. False for payloads built from the columns alone, which a plugin
+    /// source may emit (it has no inputs). Default: true.
+    fn needs_provenance(&self) -> bool {
+        true
+    }
 }
 
 /// What a decoder knows of the call besides the columns.
 pub struct Decode<'a> {
     /// The output's header (from the plugin, origin = the plugin node).
     pub header: Header,
-    /// The call's inputs: the provenance to re-attach.
+    /// The call's inputs: the provenance to re-attach (empty for a source).
     pub inputs: &'a Inputs,
     /// Number of input ports of the kind.
     pub n_inputs: usize,
@@ -94,5 +102,9 @@ impl Codec for CountCodec {
             return Err(format!("column \"value\" = {v} is not a count"));
         }
         Ok(Message::from_arc(at.header, self.ring.fill(|c| c.0 = v as u64)))
+    }
+
+    fn needs_provenance(&self) -> bool {
+        false
     }
 }

@@ -12,9 +12,9 @@ use std::sync::atomic::{AtomicU64, Ordering};
 
 use skinflow_core::{KindInfo, ParamDoc, PortSpec, Registry, Role};
 
-use super::codec::Codecs;
+use super::codec::{Codecs, MakeCodec};
 use super::node::{KindFns, PluginFactory, PluginKind};
-use crate::abi::{ABI_VERSION, ENTRY_SYMBOL, EntryFn, SfKind, SfPlugin, SfPort, SfStr, sizes};
+use crate::abi::{ABI_VERSION, ENTRY_SYMBOL, EntryFn, SfKind, SfPlugin, SfPort, SfRole, SfStr, sizes};
 
 /// Why a plugin could not be loaded. Every message names the library's path.
 #[derive(Debug, thiserror::Error)]
@@ -37,6 +37,8 @@ pub enum PluginError {
     Invalid { path: PathBuf, problem: String },
     #[error("plugin {}: kind \"{kind}\" {port}: no codec for payload type \"{ty}\" (known: {known})", path.display())]
     NoCodec { path: PathBuf, kind: String, port: String, ty: String, known: String },
+    #[error("plugin {}: kind \"{kind}\": {problem}", path.display())]
+    Kind { path: PathBuf, kind: String, problem: String },
     #[error("plugin {}: kind \"{kind}\" is already defined by {existing}", path.display())]
     DuplicateKind { path: PathBuf, kind: String, existing: String },
 }
@@ -131,13 +133,43 @@ fn port_spec(path: &Path, kind: &str, p: &SfPort, input: bool) -> Result<PortSpe
     })
 }
 
+/// The kind's role, checked against its functions and ports.
+fn role(path: &Path, name: &str, k: &SfKind) -> Result<Role, PluginError> {
+    let bad = |problem: String| PluginError::Kind { path: path.to_path_buf(), kind: name.to_owned(), problem };
+    let (role, word) = match k.role {
+        SfRole::PROCESSOR => (Role::Processor, "processor"),
+        SfRole::SOURCE => (Role::Source, "source"),
+        SfRole::SINK => (Role::Sink, "sink"),
+        SfRole(r) => return Err(bad(format!("unknown role {r} (0 processor, 1 source, 2 sink)"))),
+    };
+    let needs_poll = role == Role::Source;
+    if needs_poll != k.poll.is_some() || needs_poll == k.process.is_some() {
+        let want = if needs_poll { "a poll function and no process" } else { "a process function and no poll" };
+        return Err(bad(format!("a {word} has {want}")));
+    }
+    if role == Role::Source && k.n_inputs != 0 {
+        return Err(bad(format!("a source has no inputs (it declares {})", k.n_inputs)));
+    }
+    if role == Role::Source && k.n_outputs == 0 {
+        return Err(bad("a source needs at least one output".into()));
+    }
+    if role == Role::Sink && k.n_outputs != 0 {
+        return Err(bad(format!("a sink has no outputs (it declares {})", k.n_outputs)));
+    }
+    if role == Role::Sink && k.n_inputs == 0 {
+        return Err(bad("a sink needs at least one input".into()));
+    }
+    Ok(role)
+}
+
 /// Reads one kind's description and finds codecs for its ports.
 fn read_kind(path: &Path, origin: &str, k: &SfKind, codecs: &Codecs) -> Result<PluginKind, PluginError> {
     let name = text(path, "a kind name", k.name)?;
+    let role = role(path, &name, k)?;
     let mut info = KindInfo {
         name: Cow::Owned(name.clone()),
         doc: Cow::Owned(text(path, &format!("kind \"{name}\" doc"), k.doc)?),
-        role: Role::Processor,
+        role,
         inputs: Vec::new(),
         outputs: Vec::new(),
         params: Vec::new(),
@@ -170,8 +202,35 @@ fn read_kind(path: &Path, origin: &str, k: &SfKind, codecs: &Codecs) -> Result<P
         })
     };
     let in_codecs = info.inputs.iter().map(|p| codec(p, "input")).collect::<Result<_, _>>()?;
-    let out_codecs = info.outputs.iter().map(|p| codec(p, "output")).collect::<Result<_, _>>()?;
-    let fns = KindFns { check: k.check, create: k.create, process: k.process, destroy: k.destroy };
+    let out_codecs: Vec<MakeCodec> = info.outputs.iter().map(|p| codec(p, "output")).collect::<Result<_, _>>()?;
+    if role == Role::Source {
+        // A source has no inputs to take provenance from: each output must decode from its
+        // columns alone.
+        for (p, make) in info.outputs.iter().zip(&out_codecs) {
+            if make().needs_provenance() {
+                let standalone: Vec<&str> =
+                    codecs.names().filter(|t| !codecs.get(t).is_some_and(|m| m().needs_provenance())).collect();
+                return Err(PluginError::Kind {
+                    path: path.to_path_buf(),
+                    kind: name.clone(),
+                    problem: format!(
+                        "output \"{}\": a source cannot emit \"{}\" (its payload is derived from inputs a source does not have; a source can emit: {})",
+                        p.name,
+                        p.ty,
+                        standalone.join(", ")
+                    ),
+                });
+            }
+        }
+    }
+    let fns = KindFns {
+        check: k.check,
+        create: k.create,
+        process: k.process,
+        poll: k.poll,
+        stop: k.stop,
+        destroy: k.destroy,
+    };
     Ok(PluginKind { info, fns, in_codecs, out_codecs, library: None })
 }
 

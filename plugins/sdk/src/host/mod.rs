@@ -1,6 +1,7 @@
 //! The host side (feature `host`): [`load`] a plugin library into a
 //! [`skinflow_core::Registry`], with [`Codecs`] that turn payloads into columns and back.
-//! Plugin kinds then build [`HostedNode`]s, ordinary engine processors.
+//! Plugin kinds then build ordinary engine nodes by their role: [`HostedNode`] (processor),
+//! [`HostedSource`], [`HostedSink`].
 
 mod codec;
 mod load;
@@ -8,4 +9,4 @@ mod node;
 
 pub use codec::{Codec, Codecs, Decode, MakeCodec};
 pub use load::{Loaded, PluginError, PluginLibrary, load, load_all, read_table, register_kinds};
-pub use node::{HostedNode, KindFns, PluginFactory, PluginKind};
+pub use node::{HostedNode, HostedSink, HostedSource, KindFns, PluginFactory, PluginKind};

@@ -1,14 +1,16 @@
 //! A plugin kind as an engine node: [`PluginFactory`] checks params and builds nodes through
-//! the kind's function table; [`HostedNode`] is a normal [`Processor`] whose `process` encodes
-//! the inputs as columns, calls the plugin (which catches its own panics), and decodes the
-//! outputs. A plugin's panic is re-raised here as a host panic (without the panic hook), so
-//! the engine applies the node's restart policy exactly as for a built-in node.
+//! the kind's function table, by the kind's role: [`HostedNode`] is a normal [`Processor`]
+//! whose `process` encodes the inputs as columns, calls the plugin (which catches its own
+//! panics), and decodes the outputs; [`HostedSink`] is a [`Sink`] doing the same without
+//! outputs; [`HostedSource`] is a [`Source`] whose `poll` passes the graph clock to the
+//! plugin's poll, decodes what it wrote, and waits (interruptibly, with
+//! [`Context::sleep_until_ns`]) until the time the plugin asked to be polled again. A plugin's
+//! panic is re-raised here as a host panic (without the panic hook), so the engine applies
+//! the node's restart policy exactly as for a built-in node. `stop` calls the plugin's stop.
 //!
-//! End of stream: the C ABI (version 1) has no flush function, and a plugin node emits what a
-//! call computes in that call (see `PluginNode::process`), so [`HostedNode`] keeps the engine's
-//! default `Processor::flush` (nothing held, nothing to emit). The hook is a default method on
-//! the host side only, so plugins built against ABI 1 load and run unchanged; a plugin-side
-//! flush would be a new `SfKind` function and thus `ABI_VERSION` 2.
+//! End of stream: the C ABI has no flush function, and a plugin processor emits what a call
+//! computes in that call (see `PluginNode::process`), so [`HostedNode`] keeps the engine's
+//! default `Processor::flush` (nothing held, nothing to emit).
 
 use std::ffi::c_void;
 use std::ptr::NonNull;
@@ -17,12 +19,15 @@ use std::time::Instant;
 
 use skinflow_core::{
     BuildContext, Context, Header, Inputs, KindInfo, NodeError, NodeFactory, NodeImpl, Outputs, ParamError, Params,
-    Processor,
+    Processor, Role, Sink, Source, SourcePoll,
 };
 
 use super::codec::{Codec, Decode, MakeCodec};
 use super::load::PluginLibrary;
-use crate::abi::{CheckFn, CreateFn, DestroyFn, ProcessFn, SfErrorSink, SfMessage, SfStatus, SfStr};
+use crate::abi::{
+    CheckFn, CreateFn, DestroyFn, PollFn, ProcessFn, SfErrorSink, SfMessage, SfPoll, SfPollState, SfStatus, SfStr,
+    StopFn,
+};
 use crate::columns::{ColumnBuf, Columns};
 
 /// The functions of one kind, copied out of the plugin's table.
@@ -30,7 +35,11 @@ use crate::columns::{ColumnBuf, Columns};
 pub struct KindFns {
     pub check: CheckFn,
     pub create: CreateFn,
-    pub process: ProcessFn,
+    /// Processors and sinks.
+    pub process: Option<ProcessFn>,
+    /// Sources.
+    pub poll: Option<PollFn>,
+    pub stop: StopFn,
     pub destroy: DestroyFn,
 }
 
@@ -103,113 +112,292 @@ impl NodeFactory for PluginFactory {
         let text = params_toml(params).map_err(NodeError::msg)?;
         let base_dir = ctx.base_dir.to_string_lossy();
         let mut err = String::new();
-        // SAFETY: as in `check`; `create` returns an instance owned by us (destroyed in Drop)
-        // or null with a message.
+        // SAFETY: as in `check`; `create` returns an instance owned by us (destroyed by
+        // `Live`'s Drop) or null with a message.
         let raw = unsafe { (k.fns.create)(SfStr::new(&text), SfStr::new(&base_dir), sink(&mut err)) };
         let Some(raw) = NonNull::new(raw) else {
             return Err(NodeError::msg(k.fail("cannot build: ", &err)));
         };
-        Ok(NodeImpl::Processor(Box::new(HostedNode {
-            raw,
-            ins: k.in_codecs.iter().map(|m| (m(), ColumnBuf::new())).collect(),
-            outs: k.out_codecs.iter().map(|m| m()).collect(),
-            in_raw: vec![SfMessage::ABSENT; k.in_codecs.len()],
-            out_raw: vec![SfMessage::ABSENT; k.out_codecs.len()],
-            err: String::with_capacity(256),
-            kind: k.clone(),
-        })))
+        let live = Live { raw, err: String::with_capacity(256), kind: k.clone() };
+        let missing = |f: &str| NodeError::msg(k.fail("", &format!("its table has no {f} function")));
+        let outs = || k.out_codecs.iter().map(|m| m()).collect::<Vec<_>>();
+        Ok(match k.info.role {
+            Role::Processor => NodeImpl::Processor(Box::new(HostedNode {
+                process: k.fns.process.ok_or_else(|| missing("process"))?,
+                ins: Encoder::new(k),
+                outs: outs(),
+                out_raw: vec![SfMessage::ABSENT; k.out_codecs.len()],
+                live,
+            })),
+            Role::Sink => NodeImpl::Sink(Box::new(HostedSink {
+                process: k.fns.process.ok_or_else(|| missing("process"))?,
+                ins: Encoder::new(k),
+                live,
+            })),
+            Role::Source => NodeImpl::Source(Box::new(HostedSource {
+                poll: k.fns.poll.ok_or_else(|| missing("poll"))?,
+                outs: outs(),
+                out_raw: vec![SfMessage::ABSENT; k.out_codecs.len()],
+                no_inputs: Inputs::default(),
+                wake_at: None,
+                live,
+            })),
+        })
     }
 }
 
-/// A node of a plugin kind.
-pub struct HostedNode {
+/// A live plugin instance: destroyed exactly once, when this is dropped.
+struct Live {
     raw: NonNull<c_void>,
-    ins: Vec<(Box<dyn Codec>, ColumnBuf)>,
-    outs: Vec<Box<dyn Codec>>,
-    in_raw: Vec<SfMessage>,
-    out_raw: Vec<SfMessage>,
     err: String,
     // Last: the library must outlive `Drop::drop`'s call to destroy (fields drop after it).
     kind: Arc<PluginKind>,
 }
 
-// SAFETY: the instance behind `raw` is a `PluginNode: Send` built by the SDK shims, and the
-// engine calls a node from one thread at a time. `in_raw`/`out_raw` point into buffers owned
-// by this node (ColumnBuf) or by the plugin instance, which move with it.
-unsafe impl Send for HostedNode {}
+impl Live {
+    /// The host's answer to a plugin call's status: a panic is re-raised as the node's panic.
+    fn status(&self, status: SfStatus) -> Result<(), NodeError> {
+        match status {
+            SfStatus::OK => Ok(()),
+            SfStatus::PANIC => std::panic::resume_unwind(Box::new(self.kind.fail("", &self.err))),
+            SfStatus::ERROR => Err(NodeError::msg(self.kind.fail("", &self.err))),
+            SfStatus(s) => Err(NodeError::msg(self.kind.fail("", &format!("unknown status {s}")))),
+        }
+    }
 
-impl Processor for HostedNode {
-    fn process(&mut self, ctx: &mut Context, inputs: &Inputs, out: &mut Outputs) -> Result<(), NodeError> {
-        let t0 = Instant::now();
+    /// The plugin's stop (flush, close). Its errors are the node's stop errors; a panic in it
+    /// (caught in the plugin) is reported as an error: the run is ending anyway.
+    fn stop(&mut self) -> Result<(), NodeError> {
+        let err = sink(&mut self.err);
+        // SAFETY: `raw` is a live instance of this kind; the error sink outlives the call; the
+        // shim catches panics.
+        let status = unsafe { (self.kind.fns.stop)(self.raw.as_ptr(), err) };
+        match status {
+            SfStatus::OK => Ok(()),
+            SfStatus(_) => Err(NodeError::msg(self.kind.fail("stop: ", &self.err))),
+        }
+    }
+}
+
+impl Drop for Live {
+    fn drop(&mut self) {
+        // SAFETY: `raw` came from this kind's `create` and is destroyed exactly once, here,
+        // while `self.kind` still holds the library mapped. The shim catches panics.
+        unsafe { (self.kind.fns.destroy)(self.raw.as_ptr()) }
+    }
+}
+
+/// The inputs of a call as the ABI's messages: one codec and column buffer per input port.
+struct Encoder {
+    ins: Vec<(Box<dyn Codec>, ColumnBuf)>,
+    raw: Vec<SfMessage>,
+}
+
+impl Encoder {
+    fn new(k: &PluginKind) -> Encoder {
+        Encoder {
+            ins: k.in_codecs.iter().map(|m| (m(), ColumnBuf::new())).collect(),
+            raw: vec![SfMessage::ABSENT; k.in_codecs.len()],
+        }
+    }
+
+    /// Encodes the call's inputs into `self.raw` (absent ports as `SfMessage::ABSENT`).
+    fn encode(&mut self, kind: &PluginKind, inputs: &Inputs) -> Result<(), NodeError> {
         for (i, (codec, buf)) in self.ins.iter_mut().enumerate() {
-            self.in_raw[i] = match inputs.get(i) {
+            self.raw[i] = match inputs.get(i) {
                 Some(m) => {
                     buf.clear();
                     codec
                         .encode(m, buf)
-                        .map_err(|problem| NodeError::Input { port: self.kind.info.inputs[i].name.clone(), problem })?;
+                        .map_err(|problem| NodeError::Input { port: kind.info.inputs[i].name.clone(), problem })?;
                     buf.view(m.type_name(), (m.header.seq, m.header.t_ns))
                 }
                 None => SfMessage::ABSENT,
             };
         }
+        Ok(())
+    }
+}
+
+/// Decodes what a plugin wrote on its outputs and sends it (ports nobody reads are skipped).
+fn decode_outputs(
+    kind: &PluginKind,
+    codecs: &mut [Box<dyn Codec>],
+    out_raw: &[SfMessage],
+    ctx: &Context,
+    inputs: &Inputs,
+    t0: Instant,
+    out: &mut Outputs,
+) -> Result<(), NodeError> {
+    for (j, codec) in codecs.iter_mut().enumerate() {
+        let raw = out_raw[j];
+        if raw.present == 0 || !out.is_connected(j) {
+            continue;
+        }
+        // SAFETY: the plugin's outputs stay valid until its next call on this instance.
+        let cols = unsafe { Columns::from_raw(raw) };
+        let port = &kind.info.outputs[j];
+        if !cols.is_type(&port.ty) {
+            let got = cols.type_name();
+            return Err(NodeError::msg(
+                kind.fail("", &format!("output \"{}\" carries \"{got}\", declared \"{}\"", port.name, port.ty)),
+            ));
+        }
+        let at = Decode {
+            header: Header { seq: raw.seq, t_ns: raw.t_ns, origin: ctx.index() },
+            inputs,
+            n_inputs: kind.info.inputs.len(),
+            compute_ns: t0.elapsed().as_nanos() as u64,
+        };
+        let msg = codec
+            .decode(&cols, &at)
+            .map_err(|e| NodeError::msg(kind.fail(&format!("output \"{}\": ", port.name), &e)))?;
+        out.send(j, msg)?;
+    }
+    Ok(())
+}
+
+/// A node of a plugin processor kind.
+pub struct HostedNode {
+    process: ProcessFn,
+    ins: Encoder,
+    outs: Vec<Box<dyn Codec>>,
+    out_raw: Vec<SfMessage>,
+    live: Live,
+}
+
+// SAFETY: the instance behind `live.raw` is a `PluginNode: Send` built by the SDK shims, and
+// the engine calls a node from one thread at a time. `ins.raw`/`out_raw` point into buffers
+// owned by this node (ColumnBuf) or by the plugin instance, which move with it.
+unsafe impl Send for HostedNode {}
+
+impl Processor for HostedNode {
+    fn process(&mut self, ctx: &mut Context, inputs: &Inputs, out: &mut Outputs) -> Result<(), NodeError> {
+        let t0 = Instant::now();
+        let kind = &*self.live.kind;
+        self.ins.encode(kind, inputs)?;
         self.out_raw.fill(SfMessage::ABSENT);
-        let err = sink(&mut self.err);
-        // SAFETY: `raw` is a live instance of this kind; `in_raw` points into `self.ins`
+        let err = sink(&mut self.live.err);
+        // SAFETY: `raw` is a live instance of this kind; `ins.raw` points into `self.ins`
         // buffers and input payloads that outlive the call; `out_raw` is writable; the shim
         // catches panics, so nothing unwinds across the boundary.
         let status = unsafe {
-            (self.kind.fns.process)(
-                self.raw.as_ptr(),
-                self.in_raw.as_ptr(),
-                self.in_raw.len(),
+            (self.process)(
+                self.live.raw.as_ptr(),
+                self.ins.raw.as_ptr(),
+                self.ins.raw.len(),
                 self.out_raw.as_mut_ptr(),
                 self.out_raw.len(),
                 err,
             )
         };
-        match status {
-            SfStatus::OK => {}
-            SfStatus::PANIC => std::panic::resume_unwind(Box::new(self.kind.fail("", &self.err))),
-            SfStatus::ERROR => return Err(NodeError::msg(self.kind.fail("", &self.err))),
-            SfStatus(s) => {
-                return Err(NodeError::msg(self.kind.fail("", &format!("unknown status {s}"))));
-            }
-        }
-        for (j, codec) in self.outs.iter_mut().enumerate() {
-            let raw = self.out_raw[j];
-            if raw.present == 0 || !out.is_connected(j) {
-                continue;
-            }
-            // SAFETY: the plugin's outputs stay valid until its next call on this instance.
-            let cols = unsafe { Columns::from_raw(raw) };
-            let port = &self.kind.info.outputs[j];
-            if !cols.is_type(&port.ty) {
-                let got = cols.type_name();
-                return Err(NodeError::msg(
-                    self.kind
-                        .fail("", &format!("output \"{}\" carries \"{got}\", declared \"{}\"", port.name, port.ty)),
-                ));
-            }
-            let at = Decode {
-                header: Header { seq: raw.seq, t_ns: raw.t_ns, origin: ctx.index() },
-                inputs,
-                n_inputs: self.in_raw.len(),
-                compute_ns: t0.elapsed().as_nanos() as u64,
-            };
-            let msg = codec
-                .decode(&cols, &at)
-                .map_err(|e| NodeError::msg(self.kind.fail(&format!("output \"{}\": ", port.name), &e)))?;
-            out.send(j, msg)?;
-        }
-        Ok(())
+        self.live.status(status)?;
+        decode_outputs(&self.live.kind, &mut self.outs, &self.out_raw, ctx, inputs, t0, out)
+    }
+
+    fn stop(&mut self, _ctx: &mut Context) -> Result<(), NodeError> {
+        self.live.stop()
     }
 }
 
-impl Drop for HostedNode {
-    fn drop(&mut self) {
-        // SAFETY: `raw` came from this kind's `create` and is destroyed exactly once, here,
-        // while `self.kind` still holds the library mapped. The shim catches panics.
-        unsafe { (self.kind.fns.destroy)(self.raw.as_ptr()) }
+/// A node of a plugin sink kind.
+pub struct HostedSink {
+    process: ProcessFn,
+    ins: Encoder,
+    live: Live,
+}
+
+// SAFETY: as for `HostedNode` (a `PluginSink: Send` instance, one call at a time).
+unsafe impl Send for HostedSink {}
+
+impl Sink for HostedSink {
+    fn consume(&mut self, _ctx: &mut Context, inputs: &Inputs) -> Result<(), NodeError> {
+        self.ins.encode(&self.live.kind, inputs)?;
+        let err = sink(&mut self.live.err);
+        // SAFETY: as in `HostedNode::process`; a sink has no outputs (null, 0).
+        let status = unsafe {
+            (self.process)(
+                self.live.raw.as_ptr(),
+                self.ins.raw.as_ptr(),
+                self.ins.raw.len(),
+                std::ptr::null_mut(),
+                0,
+                err,
+            )
+        };
+        self.live.status(status)
+    }
+
+    fn stop(&mut self, _ctx: &mut Context) -> Result<(), NodeError> {
+        self.live.stop()
+    }
+}
+
+/// How long the host waits before polling again a source that said idle without a time (real
+/// time only), so an idle source does not spin a core.
+const IDLE_BACKOFF_NS: u64 = 1_000_000;
+
+/// `SfPoll::stopping`: whether the graph of the `Context` behind `host` is stopping.
+unsafe extern "C" fn host_stopping(host: *const c_void) -> u32 {
+    // SAFETY: `host` is the `&Context` the host passed in this poll's `SfPoll`, valid for the
+    // call; reading its stop flag cannot unwind.
+    u32::from(unsafe { &*host.cast::<Context>() }.stopping())
+}
+
+/// A node of a plugin source kind.
+pub struct HostedSource {
+    poll: PollFn,
+    outs: Vec<Box<dyn Codec>>,
+    out_raw: Vec<SfMessage>,
+    /// A source has no inputs: the decoders' (empty) provenance.
+    no_inputs: Inputs,
+    /// Graph time before which the plugin need not be polled (from its last idle poll).
+    wake_at: Option<u64>,
+    live: Live,
+}
+
+// SAFETY: as for `HostedNode` (a `PluginSource: Send` instance, one call at a time).
+unsafe impl Send for HostedSource {}
+
+impl Source for HostedSource {
+    fn poll(&mut self, ctx: &mut Context, out: &mut Outputs) -> Result<SourcePoll, NodeError> {
+        // The wait the plugin asked for, in the host: a stop request ends it (the engine then
+        // sees the stop flag and polls no more); never a wait in lockstep.
+        if let Some(t) = self.wake_at.take()
+            && !ctx.sleep_until_ns(t)
+        {
+            return Ok(SourcePoll::Idle);
+        }
+        let t0 = Instant::now();
+        self.out_raw.fill(SfMessage::ABSENT);
+        let now_ns = ctx.now_ns();
+        let mut p = SfPoll {
+            now_ns,
+            paced: u32::from(ctx.paced()),
+            state: SfPollState::IDLE,
+            wake_at_ns: 0,
+            host: std::ptr::from_ref::<Context>(ctx).cast(),
+            stopping: host_stopping,
+        };
+        let err = sink(&mut self.live.err);
+        // SAFETY: `raw` is a live instance of this kind; `p` (and the context it points at)
+        // and `out_raw` are valid and writable for the call; the shim catches panics.
+        let status =
+            unsafe { (self.poll)(self.live.raw.as_ptr(), &mut p, self.out_raw.as_mut_ptr(), self.out_raw.len(), err) };
+        self.live.status(status)?;
+        decode_outputs(&self.live.kind, &mut self.outs, &self.out_raw, ctx, &self.no_inputs, t0, out)?;
+        match p.state {
+            SfPollState::EMITTED => Ok(SourcePoll::Emitted),
+            SfPollState::FINISHED => Ok(SourcePoll::Finished),
+            SfPollState::IDLE => {
+                self.wake_at = Some(if p.wake_at_ns > 0 { p.wake_at_ns } else { now_ns + IDLE_BACKOFF_NS });
+                Ok(SourcePoll::Idle)
+            }
+            SfPollState(s) => Err(NodeError::msg(self.live.kind.fail("", &format!("unknown poll state {s}")))),
+        }
+    }
+
+    fn stop(&mut self, _ctx: &mut Context) -> Result<(), NodeError> {
+        self.live.stop()
     }
 }

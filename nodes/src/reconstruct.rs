@@ -9,7 +9,9 @@
 //! Math: `skinflow_eit`.
 //!
 //! Hot swap: the replacement takes over the reference (tracker, the running no-load mean, a
-//! pending tare) when the sensor has the same channel count. The reference is measured volts,
+//! pending tare) when the sensor has the same channel count; while the reference is still
+//! being averaged, the replacement's `reference_frames` applies (a count already reached
+//! completes it with the frames seen). The reference is measured volts,
 //! so it stays valid under a new lambda, prior or mesh (those only change the matrix); a
 //! replacement that had to re-learn it would tare on a loaded frame.
 //!
@@ -398,7 +400,10 @@ impl Processor for Reconstructor {
             return Err(StateRefused::new(s, reason));
         }
         let s = *s;
+        // The accumulation goes on, to this instance's `reference_frames`.
+        let wanted = self.tracker.wanted();
         self.tracker = s.tracker;
+        self.tracker.set_wanted(wanted);
         self.tare_pending = s.tare_pending;
         self.noload_sum = s.noload_sum;
         self.noload_mean = s.noload_mean;

@@ -105,8 +105,13 @@ fn recon_params(extra: &str) -> String {
 /// Runs the scene through sync -> reconstructor -> segmenter; with `swaps` (node, params),
 /// holds the source after `GATE_FRAMES` EIT frames, swaps those nodes (same kind) and goes on.
 fn run(swaps: &[(&str, String)]) -> Vec<Arc<Contacts>> {
+    run_gated(&recon_params(""), GATE_FRAMES, swaps)
+}
+
+/// As [`run`], with the reconstructor's params `recon` and the swaps after `gate_frames`.
+fn run_gated(recon: &str, gate_frames: u64, swaps: &[(&str, String)]) -> Vec<Arc<Contacts>> {
     let gate = Arc::new(Gate::default());
-    gate.limit.store(if swaps.is_empty() { u64::MAX } else { GATE_FRAMES }, SeqCst);
+    gate.limit.store(if swaps.is_empty() { u64::MAX } else { gate_frames }, SeqCst);
     let captured: Captured = Arc::new(Mutex::new(Vec::new()));
     let reg = registry(captured.clone(), gate.clone());
     let graph = format!(
@@ -123,7 +128,7 @@ fn run(swaps: &[(&str, String)]) -> Vec<Arc<Contacts>> {
          [[edge]]\nfrom = \"recon.image\"\nto = \"seg.image\"\n\
          [[edge]]\nfrom = \"seg.contacts\"\nto = \"cap.in\"\n",
         fixture("two-presses-paper.toml"),
-        recon_params("")
+        recon
     );
     let spec = GraphSpec::parse(SourceFile::new("handover.toml", graph), &reg).unwrap();
     let running = RunningGraph::start(&spec).unwrap();
@@ -197,4 +202,27 @@ fn a_new_lambda_keeps_the_no_load_reference() {
         assert_eq!(c.image.reference, want, "frame {i}");
     }
     assert!(swapped.iter().skip(GATE_FRAMES as usize).any(|c| !c.contacts.is_empty()));
+}
+
+#[test]
+fn a_swap_during_the_no_load_period_applies_the_new_reference_frame_count() {
+    // The rest gives 3 to 9 no-load frames. Lowered from 10 to 2 after 2 frames: the reference is
+    // completed at the swap with those 2; raised from 2 to 3 after 1: it waits for a third.
+    // Either way the images are those of a run with the new count from the start.
+    let cases = [(recon_params(""), 2, 2), (recon_params(", reference_frames = 2"), 1, 3)];
+    for (start, gate_frames, count) in cases {
+        let wanted = recon_params(&format!(", reference_frames = {count}"));
+        let base = run_gated(&wanted, u64::MAX, &[]);
+        let swapped = run_gated(&start, gate_frames, &[("recon", wanted.clone())]);
+        assert_eq!(base.len(), swapped.len());
+        let rest = base.iter().take_while(|c| c.image.src.no_load).count();
+        assert!((3..10).contains(&rest), "{rest} no-load frames: both counts and the swap fall within them");
+        for (i, (a, b)) in base.iter().zip(&swapped).enumerate() {
+            assert_eq!(a.image.reference, b.image.reference, "{count} frames, frame {i}");
+            assert_eq!(a.image.pixels, b.image.pixels, "{count} frames, frame {i}");
+        }
+        // And not those of the count it started with.
+        let unswapped = run_gated(&start, u64::MAX, &[]);
+        assert!(unswapped.iter().zip(&base).any(|(a, b)| a.image.pixels != b.image.pixels), "{count} frames");
+    }
 }

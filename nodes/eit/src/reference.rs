@@ -106,6 +106,24 @@ impl ReferenceTracker {
         self.source != ReferenceSource::None
     }
 
+    /// Frames the mean is to have (`reference_frames`).
+    pub fn wanted(&self) -> usize {
+        self.wanted
+    }
+
+    /// Changes the number of frames to average (a replacement node's `reference_frames`,
+    /// n >= 1, 0 is taken as 1). A reference already set stays; while accumulating, one that
+    /// has now seen at least `n` frames completes at once with the frames seen (their sum is
+    /// all it keeps, so it cannot go back to only the first `n`). Returns whether a reference
+    /// is set.
+    pub fn set_wanted(&mut self, n: usize) -> bool {
+        self.wanted = n.max(1);
+        if self.source == ReferenceSource::None && self.seen >= self.wanted {
+            self.finish();
+        }
+        self.source != ReferenceSource::None
+    }
+
     /// Makes `frame` the reference (a `tare` message).
     pub fn tare(&mut self, frame: &[f64]) -> Result<(), EitError> {
         self.check(frame)?;
@@ -155,6 +173,31 @@ mod tests {
         assert!(r.finish());
         assert_eq!(r.reference(), Some(&[1.5][..]));
         assert_eq!(r.source(), ReferenceSource::MeanOfFirst { frames: 2 });
+    }
+
+    #[test]
+    fn a_new_frame_count_applies_while_accumulating_only() {
+        let mut r = ReferenceTracker::new(1, 10).unwrap();
+        r.accumulate(&[1.0]).unwrap();
+        r.accumulate(&[2.0]).unwrap();
+        // More wanted: keeps accumulating up to the new count.
+        assert!(!r.set_wanted(3));
+        assert!(r.accumulate(&[6.0]).unwrap());
+        assert_eq!((r.reference(), r.source()), (Some(&[3.0][..]), ReferenceSource::MeanOfFirst { frames: 3 }));
+        // Set references do not move.
+        assert!(r.set_wanted(1));
+        assert_eq!(r.reference(), Some(&[3.0][..]));
+        // Fewer than seen: completes at once with every frame seen.
+        let mut r = ReferenceTracker::new(1, 10).unwrap();
+        for v in [1.0, 2.0, 3.0] {
+            r.accumulate(&[v]).unwrap();
+        }
+        assert!(r.set_wanted(2));
+        assert_eq!((r.reference(), r.source()), (Some(&[2.0][..]), ReferenceSource::MeanOfFirst { frames: 3 }));
+        assert_eq!(r.wanted(), 2);
+        let mut r = ReferenceTracker::new(1, 4).unwrap();
+        assert!(!r.set_wanted(0), "nothing seen: nothing to complete");
+        assert_eq!(r.wanted(), 1);
     }
 
     #[test]

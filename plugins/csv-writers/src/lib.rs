@@ -69,8 +69,9 @@ impl CsvFile {
     }
 }
 
+/// The header time in seconds (the nearest `f64`: `csv-pressure` reads back the same ns).
 fn t_s(c: &Columns<'_>) -> f64 {
-    c.t_ns() as f64 * 1e-9
+    c.t_ns() as f64 / 1e9
 }
 
 pub struct ForcesCsv {

@@ -343,9 +343,15 @@ fn a_plugin_source_error_is_counted_and_the_source_goes_on() {
     let d = workdir("source-error");
     let g = source_graph(&d, "error_at = 3", "never");
     let json = d.join("stats.json");
-    ok(&skinflow(&d, &["run", g.to_str().unwrap(), "--stats-json", json.to_str().unwrap()]));
+    let o = skinflow(&d, &["run", g.to_str().unwrap(), "--stats-json", json.to_str().unwrap()]);
+    ok(&o);
     // The erring poll emits nothing; the next poll emits the value it would have.
     assert_eq!(collected(&d), (1..=10).collect::<Vec<u64>>());
+    let lib = plugin("skinflow-plugin-fixture-faulty");
+    let e = stderr(&o);
+    let warning = e.lines().find(|l| l.contains("fixture source error at poll 3")).unwrap_or_else(|| panic!("{e}"));
+    assert!(warning.contains(&format!("plugin kind \"fixture-count\" ({})", lib.display())), "{warning}");
+    assert!(warning.contains("node=src"), "{warning}");
     let report = stats(&json);
     assert_eq!((count(&report, "src", "errors"), count(&report, "src", "msgs_out")), (1, 10));
 }

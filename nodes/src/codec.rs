@@ -69,15 +69,6 @@ fn encode_split(s: &Split, out: &mut ColumnBuf) {
     out.set("dp_kpa", s.dp_kpa.iter().copied());
 }
 
-/// A per-item column of exactly `n` values.
-fn per_item<'a>(cols: &Columns<'a>, name: &str, n: usize) -> Result<&'a [f64], String> {
-    let d = cols.require(name)?;
-    if d.len() != n {
-        return Err(format!("column \"{name}\" has {} values for {n} contacts", d.len()));
-    }
-    Ok(d)
-}
-
 /// The first input whose payload yields the provenance `T`.
 fn find<T>(at: &Decode<'_>, f: impl Fn(&Message) -> Option<T>) -> Option<T> {
     at.input_messages().find_map(f)
@@ -116,7 +107,7 @@ impl Codec for ContactsCodec {
         let image = find(at, |m| m.arc::<Image>().or_else(|| m.get::<Contacts>().map(|c| c.image.clone())))
             .ok_or("a contacts output needs an image or contacts input (its provenance)")?;
         let n = cols.require("x_mm")?.len();
-        let [x, y, sum, area, peak] = ["x_mm", "y_mm", "sum", "area_mm2", "peak"].map(|c| per_item(cols, c, n));
+        let [x, y, sum, area, peak] = ["x_mm", "y_mm", "sum", "area_mm2", "peak"].map(|c| cols.require_len(c, n));
         let (x, y, sum, area, peak) = (x?, y?, sum?, area?, peak?);
         let payload = self.ring.fill(|c| {
             c.contacts.clear();
@@ -153,7 +144,7 @@ impl Codec for SplitCodec {
         let contacts: Arc<Contacts> =
             find(at, |m| m.arc::<Contacts>().or_else(|| m.get::<Split>().map(|s| s.contacts.clone())))
                 .ok_or("a split output needs a contacts or split input (its provenance)")?;
-        let dp = per_item(cols, "dp_kpa", contacts.contacts.len())?;
+        let dp = cols.require_len("dp_kpa", contacts.contacts.len())?;
         let payload = self.ring.fill(|s| {
             s.dp_kpa.clear();
             s.dp_kpa.extend_from_slice(dp);
@@ -181,9 +172,9 @@ impl Codec for ForcesCodec {
         let split: Arc<Split> = find(at, |m| m.arc::<Split>().or_else(|| m.get::<Forces>().map(|f| f.split.clone())))
             .ok_or("a forces output needs a split or forces input (its provenance)")?;
         let n = split.contacts.contacts.len();
-        let force = per_item(cols, "force_n", n)?;
+        let force = cols.require_len("force_n", n)?;
         let dp = match cols.get("dp_kpa") {
-            Some(_) => per_item(cols, "dp_kpa", n)?,
+            Some(_) => cols.require_len("dp_kpa", n)?,
             None => &split.dp_kpa[..],
         };
         let payload = self.ring.fill(|f| {
@@ -281,7 +272,7 @@ impl Codec for TruthCodec {
 
     fn decode(&mut self, cols: &Columns<'_>, at: &Decode<'_>) -> Result<Message, String> {
         let n = cols.require("x_mm")?.len();
-        let [x, y, force, diameter] = ["x_mm", "y_mm", "force_n", "diameter_mm"].map(|c| per_item(cols, c, n));
+        let [x, y, force, diameter] = ["x_mm", "y_mm", "force_n", "diameter_mm"].map(|c| cols.require_len(c, n));
         let (x, y, force, diameter) = (x?, y?, force?, diameter?);
         let payload = self.ring.fill(|t| {
             t.contacts.clear();

@@ -99,13 +99,7 @@ impl PluginSink for ForcesCsv {
         }
         let force = f.require("force_n")?;
         let n = force.len();
-        let col = |name: &str| -> Result<&[f64], String> {
-            let c = f.require(name)?;
-            if c.len() != n {
-                return Err(format!("column \"{name}\" has {} values for {n} forces", c.len()));
-            }
-            Ok(c)
-        };
+        let col = |name| f.require_len(name, n);
         let (x, y, area, dp) = (col("x_mm")?, col("y_mm")?, col("area_mm2")?, col("dp_kpa")?);
         let (seq, t) = (f.seq(), t_s(f));
         self.file.rows(|w| {

@@ -102,6 +102,16 @@ impl<'a> Columns<'a> {
         self.get(name).ok_or_else(|| format!("message \"{}\" has no column \"{name}\"", self.type_name()))
     }
 
+    /// Column `name` holding exactly `n` values, one per item (contact, force, ...), or an
+    /// error naming it.
+    pub fn require_len(&self, name: &str, n: usize) -> Result<&'a [f64], String> {
+        let d = self.require(name)?;
+        if d.len() != n {
+            return Err(format!("column \"{name}\" has {} values for {n} items", d.len()));
+        }
+        Ok(d)
+    }
+
     /// The single value of column `name`.
     pub fn scalar(&self, name: &str) -> Result<f64, String> {
         match self.require(name)? {

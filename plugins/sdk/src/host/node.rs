@@ -165,6 +165,20 @@ impl Live {
         }
     }
 
+    /// One `process` call of this instance on the inputs `ins` encoded, the plugin writing its
+    /// messages into `outputs` (a sink's is empty).
+    fn process(&mut self, process: ProcessFn, ins: &Encoder, outputs: &mut [SfMessage]) -> Result<(), NodeError> {
+        let err = sink(&mut self.err);
+        // SAFETY: `raw` is a live instance of this kind; `ins.raw` points into `ins`' buffers
+        // and input payloads that outlive the call; `outputs` is writable for its length (the
+        // shim reads no pointer of an empty slice); the shim catches panics, so nothing unwinds
+        // across the boundary.
+        let status = unsafe {
+            process(self.raw.as_ptr(), ins.raw.as_ptr(), ins.raw.len(), outputs.as_mut_ptr(), outputs.len(), err)
+        };
+        self.status(status)
+    }
+
     /// The plugin's stop (flush, close). Its errors are the node's stop errors; a panic in it
     /// (caught in the plugin) is reported as an error: the run is ending anyway.
     fn stop(&mut self) -> Result<(), NodeError> {
@@ -277,21 +291,7 @@ impl Processor for HostedNode {
         let kind = &*self.live.kind;
         self.ins.encode(kind, inputs)?;
         self.out_raw.fill(SfMessage::ABSENT);
-        let err = sink(&mut self.live.err);
-        // SAFETY: `raw` is a live instance of this kind; `ins.raw` points into `self.ins`
-        // buffers and input payloads that outlive the call; `out_raw` is writable; the shim
-        // catches panics, so nothing unwinds across the boundary.
-        let status = unsafe {
-            (self.process)(
-                self.live.raw.as_ptr(),
-                self.ins.raw.as_ptr(),
-                self.ins.raw.len(),
-                self.out_raw.as_mut_ptr(),
-                self.out_raw.len(),
-                err,
-            )
-        };
-        self.live.status(status)?;
+        self.live.process(self.process, &self.ins, &mut self.out_raw)?;
         decode_outputs(&self.live.kind, &mut self.outs, &self.out_raw, ctx, inputs, t0, out)
     }
 
@@ -313,19 +313,7 @@ unsafe impl Send for HostedSink {}
 impl Sink for HostedSink {
     fn consume(&mut self, _ctx: &mut Context, inputs: &Inputs) -> Result<(), NodeError> {
         self.ins.encode(&self.live.kind, inputs)?;
-        let err = sink(&mut self.live.err);
-        // SAFETY: as in `HostedNode::process`; a sink has no outputs (null, 0).
-        let status = unsafe {
-            (self.process)(
-                self.live.raw.as_ptr(),
-                self.ins.raw.as_ptr(),
-                self.ins.raw.len(),
-                std::ptr::null_mut(),
-                0,
-                err,
-            )
-        };
-        self.live.status(status)
+        self.live.process(self.process, &self.ins, &mut []) // a sink has no outputs
     }
 
     fn stop(&mut self, _ctx: &mut Context) -> Result<(), NodeError> {

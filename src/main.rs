@@ -108,6 +108,16 @@ enum Cmd {
     },
     /// Summarise a recording: streams, counts, duration, rates, gaps, truth coverage.
     Inspect { recording: PathBuf },
+    /// Copy a recording whose last write was cut short (disk full, power loss, a killed logger),
+    /// each table cut to the rows all its datasets hold; the input is never modified.
+    Repair {
+        recording: PathBuf,
+        #[arg(long)]
+        out: PathBuf,
+        /// Replace an existing output file.
+        #[arg(long)]
+        overwrite: bool,
+    },
     /// Fit the force calibration from a single-contact recording with ground truth.
     Calibrate {
         recording: PathBuf,
@@ -191,6 +201,9 @@ fn dispatch(cmd: Cmd) -> Result<ExitCode> {
             cmd::reproduce::run(&scenes, &out, seed, &fit.fit, &pipeline).map(|()| ExitCode::SUCCESS)
         }
         Cmd::Inspect { recording } => cmd::inspect::run(&recording).map(|()| ExitCode::SUCCESS),
+        Cmd::Repair { recording, out, overwrite } => {
+            cmd::repair::run(&recording, &out, overwrite).map(|()| ExitCode::SUCCESS)
+        }
         Cmd::Calibrate { recording, out, fit, pipeline } => {
             cmd::calibrate::run(&recording, &out, &fit.fit, &pipeline).map(|()| ExitCode::SUCCESS)
         }

@@ -526,3 +526,37 @@ fn reproduce_pins_the_paper_baselines() {
     assert_eq!(cells[2].parse::<f64>().unwrap(), shipped, "{line}");
     assert!(cells[4].parse::<f64>().unwrap().is_finite(), "{line}");
 }
+
+#[test]
+fn repair_salvages_a_recording_whose_last_flush_was_cut_short() {
+    let d = workdir("repair");
+    simulate(&d, "tiny-eval.toml", "rec.h5");
+    let whole = ok(&skinflow(&d, &["inspect", "rec.h5"]));
+    // Values written before the times, as the logger orders them, and then the writer stopped.
+    {
+        let file = hdf5::File::open_rw(d.join("rec.h5")).unwrap();
+        let v = file.dataset("/eit/v").unwrap();
+        let mut shape = v.shape();
+        shape[0] += 3;
+        v.resize(shape).unwrap();
+        file.close().unwrap();
+    }
+    let out = skinflow(&d, &["inspect", "rec.h5"]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(stderr(&out).contains("rec.h5: /eit/v: has "), "{}", stderr(&out));
+
+    let text = ok(&skinflow(&d, &["repair", "rec.h5", "--out", "fixed.h5"]));
+    assert!(text.contains("rec.h5: /eit: rows were /eit/t "), "{text}");
+    assert!(text.contains("wrote fixed.h5: "), "{text}");
+    // The repaired copy is the recording as it was before the cut-short write.
+    let fixed = ok(&skinflow(&d, &["inspect", "fixed.h5"]));
+    assert_eq!(fixed.replace("fixed.h5", "rec.h5"), whole);
+
+    let again = skinflow(&d, &["repair", "rec.h5", "--out", "fixed.h5"]);
+    assert_eq!(again.status.code(), Some(1));
+    assert!(
+        stderr(&again).contains("fixed.h5: /: the file exists (set overwrite to replace it)"),
+        "{}",
+        stderr(&again)
+    );
+}

@@ -8,5 +8,6 @@ pub mod inspect;
 pub mod live;
 pub mod paths;
 pub mod pipeline;
+pub mod repair;
 pub mod reproduce;
 pub mod simulate;

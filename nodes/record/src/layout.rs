@@ -47,6 +47,14 @@ pub const SYNC_NO_LOAD: &str = "/derived/sync/no_load";
 pub const SYNC_P0_KPA: &str = "/derived/sync/p0_kpa";
 pub const SYNC_NOISE_KPA: &str = "/derived/sync/noise_kpa";
 
+/// The value columns of `/truth`, beside `/truth/t`, in the order the writer creates them.
+pub const TRUTH_COLUMNS: [&str; 4] = [TRUTH_X_MM, TRUTH_Y_MM, TRUTH_FORCE_N, TRUTH_DIAMETER_MM];
+/// The value columns of `/derived/contacts`, beside its `t`.
+pub const CONTACTS_COLUMNS: [&str; 4] = [CONTACTS_X_MM, CONTACTS_Y_MM, CONTACTS_SUM, CONTACTS_AREA_MM2];
+/// The value columns of `/derived/sync`, beside its `t`.
+pub const SYNC_COLUMNS: [&str; 7] =
+    [SYNC_DP_KPA, SYNC_PRESSURE_SAMPLES, SYNC_PRESSURE_SD_KPA, SYNC_SETTLED, SYNC_NO_LOAD, SYNC_P0_KPA, SYNC_NOISE_KPA];
+
 /// Bits of `/derived/forces/<strategy>/flags`: what the corrector's guards did to a contact's
 /// force (stored as an f64 holding the integer sum of the bits that are set).
 pub mod force_flags {

@@ -4,7 +4,8 @@
 //! chunk at a time, flushing at least every `flush_interval_s`, rotating parts by size or time.
 //! `Recording::open` (module `read`) validates a file from any writer (skinflow, h5py, MATLAB)
 //! and loads its streams; `Recording::events` (module `replay`) merges them in time order;
-//! `Recording::no_load` (module `tare`) finds the leading no-load period; `inspect` summarises.
+//! `Recording::no_load` (module `tare`) finds the leading no-load period; `inspect` summarises;
+//! `repair` salvages a file whose last write was cut short.
 //! Plain library: no engine types; the `hdf5_logger` and `replay` nodes wrap it.
 //!
 //! # Recording format: skinflow's extras
@@ -75,13 +76,15 @@
 //! `Recording::open` loads every stream whole (an hour of 120-value frames at 100 Hz is
 //! ~350 MB); rotation keeps parts small. It is strict: a file whose datasets disagree in
 //! length is refused, so a file still being written in SWMR mode may be refused mid-update
-//! (retry, or follow it with h5py's SWMR reader). Times are not required to increase;
-//! `inspect` counts backward steps and `Recording::events` merges in stored order.
+//! (retry, or follow it with h5py's SWMR reader). A file whose last flush was cut short (one
+//! table's datasets of different lengths) is refused too; `repair` (module `repair`) writes a
+//! copy with each table cut to the rows all its datasets hold.
 
 pub mod error;
 pub mod inspect;
 pub mod layout;
 pub mod read;
+pub mod repair;
 pub mod replay;
 pub mod rotate;
 pub mod tare;
@@ -94,6 +97,7 @@ pub use read::{
     ContactsStream, Derived, EitStream, ForceStream, ImageStream, PressureStream, Recording, SyncStream, TruthRow,
     TruthStream,
 };
+pub use repair::{RepairReport, TableCut, repair};
 pub use replay::{Event, Events};
 pub use tare::{DEFAULT_TARE_S, NoLoad, NoLoadSource};
 pub use timestamp::iso8601_utc;

@@ -6,7 +6,7 @@
 //! (e.g. a logger without pressure connected); callers that need one use `require_*`.
 //! Times are seconds, EIT volts, pressure kPa, truth mm/N.
 
-mod attr;
+pub(crate) mod attr;
 mod data;
 mod derived;
 
@@ -152,14 +152,45 @@ pub struct Recording {
 /// Opens read-only; a file left open for SWMR writing (a live writer, or one that was killed)
 /// carries a "file is open" mark that plain opening refuses, so that case retries in SWMR-read
 /// mode, which HDF5 allows on such files.
-fn open_file(path: &Path) -> Result<File, RecordError> {
+pub(crate) fn open_file(path: &Path) -> Result<File, RecordError> {
+    open_file_marked(path).map(|(file, _)| file)
+}
+
+/// [`open_file`], also saying whether the file carried the SWMR "open for writing" mark.
+pub(crate) fn open_file_marked(path: &Path) -> Result<(File, bool), RecordError> {
     if let Err(source) = std::fs::metadata(path) {
         return Err(RecordError::Io { path: path.to_path_buf(), source });
     }
     match File::open(path) {
-        Ok(f) => Ok(f),
-        Err(first) => File::open_as(path, OpenMode::ReadSWMR).map_err(|_| RecordError::hdf5(path, "/", first)),
+        Ok(f) => Ok((f, false)),
+        Err(first) => {
+            File::open_as(path, OpenMode::ReadSWMR).map(|f| (f, true)).map_err(|_| RecordError::hdf5(path, "/", first))
+        }
     }
+}
+
+/// The root attributes `format` and `format_version` of a skinflow recording: refuses another
+/// format, a missing or invalid version and a newer one; returns the version.
+pub(crate) fn check_format(file: &File, fpath: &Path) -> Result<i64, RecordError> {
+    let root = |name: &str| format!("/ attr {name}");
+    let format = attr::read_string(file, fpath, layout::ATTR_FORMAT)?
+        .ok_or_else(|| RecordError::schema(fpath, &root(layout::ATTR_FORMAT), SchemaProblem::Missing))?;
+    if format != FORMAT {
+        let problem = SchemaProblem::WrongFormat { found: format };
+        return Err(RecordError::schema(fpath, &root(layout::ATTR_FORMAT), problem));
+    }
+    let version_path = root(layout::ATTR_FORMAT_VERSION);
+    let format_version = attr::read_integer(file, fpath, layout::ATTR_FORMAT_VERSION)?
+        .ok_or_else(|| RecordError::schema(fpath, &version_path, SchemaProblem::Missing))?;
+    if format_version > FORMAT_VERSION {
+        let problem = SchemaProblem::NewerVersion { found: format_version, supported: FORMAT_VERSION };
+        return Err(RecordError::schema(fpath, &version_path, problem));
+    }
+    if format_version < 1 {
+        let problem = SchemaProblem::BadVersion { found: format_version.to_string() };
+        return Err(RecordError::schema(fpath, &version_path, problem));
+    }
+    Ok(format_version)
 }
 
 impl Recording {
@@ -167,24 +198,8 @@ impl Recording {
     pub fn open(path: impl AsRef<Path>) -> Result<Recording, RecordError> {
         let fpath = path.as_ref();
         let file = open_file(fpath)?;
+        let format_version = check_format(&file, fpath)?;
         let root = |name: &str| format!("/ attr {name}");
-        let format = attr::read_string(&file, fpath, layout::ATTR_FORMAT)?
-            .ok_or_else(|| RecordError::schema(fpath, &root(layout::ATTR_FORMAT), SchemaProblem::Missing))?;
-        if format != FORMAT {
-            let problem = SchemaProblem::WrongFormat { found: format };
-            return Err(RecordError::schema(fpath, &root(layout::ATTR_FORMAT), problem));
-        }
-        let version_path = root(layout::ATTR_FORMAT_VERSION);
-        let format_version = attr::read_integer(&file, fpath, layout::ATTR_FORMAT_VERSION)?
-            .ok_or_else(|| RecordError::schema(fpath, &version_path, SchemaProblem::Missing))?;
-        if format_version > FORMAT_VERSION {
-            let problem = SchemaProblem::NewerVersion { found: format_version, supported: FORMAT_VERSION };
-            return Err(RecordError::schema(fpath, &version_path, problem));
-        }
-        if format_version < 1 {
-            let problem = SchemaProblem::BadVersion { found: format_version.to_string() };
-            return Err(RecordError::schema(fpath, &version_path, problem));
-        }
         let sensor_path = root(layout::ATTR_SENSOR);
         let sensor_toml = attr::read_string(&file, fpath, layout::ATTR_SENSOR)?
             .ok_or_else(|| RecordError::schema(fpath, &sensor_path, SchemaProblem::Missing))?;

@@ -7,7 +7,7 @@
 //! `rotate_s`. Times are seconds on the recording clock, EIT values volts, pressure kPa.
 
 mod column;
-mod create;
+pub(crate) mod create;
 mod options;
 
 use std::path::{Path, PathBuf};
@@ -86,28 +86,19 @@ impl RecordingWriter {
                 .pressure
                 .then(|| Table::new(layout::PRESSURE_T, None, vec![ColumnSpec::new(layout::PRESSURE_KPA, &[])], rows)),
             truth: s.truth.then(|| {
-                let cols = [layout::TRUTH_X_MM, layout::TRUTH_Y_MM, layout::TRUTH_FORCE_N, layout::TRUTH_DIAMETER_MM];
-                Table::new(layout::TRUTH_T, None, cols.iter().map(|p| ColumnSpec::new(*p, &[tc])).collect(), rows)
+                let cols = layout::TRUTH_COLUMNS.iter().map(|p| ColumnSpec::new(*p, &[tc])).collect();
+                Table::new(layout::TRUTH_T, None, cols, rows)
             }),
             image: s.image_hw.map(|[h, w]| {
                 Table::new(layout::DERIVED_IMAGE_T, None, vec![ColumnSpec::new(layout::DERIVED_IMAGE, &[h, w])], rows)
             }),
             contacts: s.contacts.then(|| {
-                let cols =
-                    [layout::CONTACTS_X_MM, layout::CONTACTS_Y_MM, layout::CONTACTS_SUM, layout::CONTACTS_AREA_MM2];
-                Table::new(layout::CONTACTS_T, None, cols.iter().map(|p| ColumnSpec::new(*p, &[dc])).collect(), rows)
+                let cols = layout::CONTACTS_COLUMNS.iter().map(|p| ColumnSpec::new(*p, &[dc])).collect();
+                Table::new(layout::CONTACTS_T, None, cols, rows)
             }),
             sync: s.sync.then(|| {
-                let cols = [
-                    layout::SYNC_DP_KPA,
-                    layout::SYNC_PRESSURE_SAMPLES,
-                    layout::SYNC_PRESSURE_SD_KPA,
-                    layout::SYNC_SETTLED,
-                    layout::SYNC_NO_LOAD,
-                    layout::SYNC_P0_KPA,
-                    layout::SYNC_NOISE_KPA,
-                ];
-                Table::new(layout::SYNC_T, None, cols.iter().map(|p| ColumnSpec::new(*p, &[])).collect(), rows)
+                let cols = layout::SYNC_COLUMNS.iter().map(|p| ColumnSpec::new(*p, &[])).collect();
+                Table::new(layout::SYNC_T, None, cols, rows)
             }),
             forces: s
                 .force_strategies

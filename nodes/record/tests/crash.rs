@@ -16,6 +16,8 @@ fn example_binary() -> PathBuf {
     bin
 }
 
+/// Kills a writer after `flushes` flushes; checks the file keeps every flushed row and that
+/// `repair` copies it (without SWMR's "open for writing" mark) row for row.
 fn kill_after_flushes(mode: &str, flushes: usize) {
     let dir = std::env::temp_dir().join(format!("skinflow-record-crash-{mode}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
@@ -52,6 +54,13 @@ fn kill_after_flushes(mode: &str, flushes: usize) {
     for i in 0..p.len() {
         assert_eq!((p.t_s[i], p.kpa[i]), (i as f64 * 1e-3, -(i as f64)));
     }
+
+    let fixed = dir.join("fixed.h5");
+    let report = skinflow_record::repair(&path, &fixed, false).unwrap_or_else(|e| panic!("repair: {e}"));
+    assert_eq!(report.swmr_mark, mode == "swmr", "a killed SWMR writer leaves the mark");
+    assert!(hdf5::File::open(&fixed).is_ok(), "the copy opens without SWMR-read mode");
+    let copy = Recording::open(&fixed).unwrap();
+    assert_eq!((copy.eit, copy.pressure), (rec.eit, rec.pressure));
     let _ = std::fs::remove_dir_all(&dir);
 }
 

@@ -36,14 +36,24 @@ pub(crate) fn staging_path(path: &Path) -> PathBuf {
 /// built on HDF5 1.8 or 1.10 read the file; SWMR needs the 1.10 formats (`v110`..`v110`),
 /// which HDF5 1.10 reads.
 pub(crate) fn create_file(path: &Path, swmr: bool, overwrite: bool) -> Result<File, RecordError> {
-    if !overwrite && std::fs::symlink_metadata(path).is_ok() {
-        return Err(exists(path));
-    }
     let (low, high) = if swmr {
         (LibraryVersion::V110, LibraryVersion::V110)
     } else {
         (LibraryVersion::Earliest, LibraryVersion::V18)
     };
+    create_file_within(path, low, high, overwrite)
+}
+
+/// [`create_file`] with explicit library version bounds.
+pub(crate) fn create_file_within(
+    path: &Path,
+    low: LibraryVersion,
+    high: LibraryVersion,
+    overwrite: bool,
+) -> Result<File, RecordError> {
+    if !overwrite && std::fs::symlink_metadata(path).is_ok() {
+        return Err(exists(path));
+    }
     let mut builder = File::with_options();
     builder.with_fapl(|fapl| fapl.libver_bounds(low, high));
     builder.create(staging_path(path)).map_err(|e| RecordError::hdf5(path, "/", e))

@@ -1,0 +1,13 @@
+//! `skinflow repair REC.h5 --out FIXED.h5`: a recording whose last write was cut short (disk
+//! full, power loss, a killed logger) copied with each table cut to the rows all its datasets
+//! hold (`skinflow_record::repair`). The input is never modified.
+
+use std::path::Path;
+
+use anyhow::Result;
+
+pub fn run(input: &Path, out: &Path, overwrite: bool) -> Result<()> {
+    let report = skinflow_record::repair(input, out, overwrite).map_err(anyhow::Error::msg)?;
+    println!("{report}");
+    Ok(())
+}

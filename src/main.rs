@@ -62,6 +62,13 @@ enum Cmd {
         #[arg(long, default_value = "out/bench")]
         out: PathBuf,
     },
+    /// Send requests (JSON lines) to a graph run with `--control SOCKET`; print the replies.
+    Send {
+        socket: PathBuf,
+        /// e.g. '{"cmd":"control","node":"loadcell","command":"at 12.5 -25"}' (one or more).
+        #[arg(required = true, value_name = "JSON")]
+        requests: Vec<String>,
+    },
     /// Print a graph as Graphviz dot.
     Dot { graph: PathBuf },
     /// Simulate a scene and write it as a recording.
@@ -201,6 +208,7 @@ fn dispatch(cmd: Cmd) -> Result<ExitCode> {
             cmd::reproduce::run(&scenes, &out, seed, &fit.fit, &pipeline).map(|()| ExitCode::SUCCESS)
         }
         Cmd::Inspect { recording } => cmd::inspect::run(&recording).map(|()| ExitCode::SUCCESS),
+        Cmd::Send { socket, requests } => cmd::send::run(&socket, &requests).map(|()| ExitCode::SUCCESS),
         Cmd::Repair { recording, out, overwrite } => {
             cmd::repair::run(&recording, &out, overwrite).map(|()| ExitCode::SUCCESS)
         }

@@ -7,7 +7,7 @@ use std::os::unix::net::UnixStream;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use super::support::{bin, stderr, workdir};
+use super::support::{bin, skinflow, stderr, workdir};
 
 fn graph(scale_params: &str, out: &str) -> String {
     format!(
@@ -58,6 +58,18 @@ fn watch_swaps_edited_nodes_and_the_control_socket_answers() {
     assert!(e.contains("\"f\"") && e.contains("bogus") && e.contains("not supported"), "{e}");
     let tare = ask(&sock, r#"{"cmd": "tare", "node": "f"}"#);
     assert_eq!(tare["ok"], false, "scale has no tare: {tare}");
+    // `skinflow send`, the scripts' client: one reply line per request, failing on the first
+    // that is not ok (the requests after it are not sent).
+    let s = sock.to_str().unwrap();
+    let sent =
+        skinflow(&d, &["send", s, r#"{"cmd":"stats"}"#, r#"{"cmd":"control","node":"f","command":"bogus"}"#, "{}"]);
+    assert_eq!(sent.status.code(), Some(1));
+    let replies = String::from_utf8_lossy(&sent.stdout).into_owned();
+    assert_eq!(replies.lines().count(), 2, "{replies}");
+    assert!(replies.lines().next().unwrap().starts_with(r#"{"ok":true,"stats":"#), "{replies}");
+    let err = stderr(&sent);
+    assert!(err.contains(&format!("{s}: {{\"cmd\":\"control\",\"node\":\"f\",\"command\":\"bogus\"}}: ")), "{err}");
+    assert!(err.contains("not supported"), "{err}");
     // Wait until data flows, then an invalid edit (rejected), then a valid one (swapped).
     std::thread::sleep(Duration::from_millis(600));
     std::fs::write(&g, graph("factr = 3", "out.csv")).unwrap();
@@ -82,6 +94,15 @@ fn watch_swaps_edited_nodes_and_the_control_socket_answers() {
         assert_eq!(seq, i as u64);
         assert_eq!(y, if i < switch { 2 * seq } else { seq + 1_000_000 }, "row {i}");
     }
+}
+
+#[test]
+fn send_names_a_socket_nobody_serves() {
+    let d = workdir("live", "send-nobody");
+    let out = skinflow(&d, &["send", "none.sock", r#"{"cmd":"stats"}"#]);
+    assert_eq!(out.status.code(), Some(1));
+    let err = stderr(&out);
+    assert!(err.contains("none.sock: cannot connect (is `skinflow run GRAPH --control none.sock` running?)"), "{err}");
 }
 
 #[test]

@@ -7,7 +7,8 @@
 //! EIT frames are stamped at the middle of their acquisition window: reception time minus
 //! `frame_period_s / 2` (the board sends a frame when its acquisition ends). The load cell
 //! becomes a truth row with one contact at the rig's position (`x_mm`, `y_mm`,
-//! `diameter_mm`), or an empty row below `contact_threshold_n`.
+//! `diameter_mm`), or an empty row below `contact_threshold_n`; the control command
+//! `at X_MM Y_MM [DIAMETER_MM]` moves that position while the graph runs.
 //!
 //! ```toml
 //! params = { port = "/dev/ttyACM0", measurements = 120, frame_period_s = 0.769 }
@@ -282,6 +283,33 @@ impl Source for SerialLoadcell {
         report(ctx, self.reader.as_ref());
         Ok(())
     }
+
+    /// `at X_MM Y_MM [DIAMETER_MM]`: the rig moved the indenter; readings from now on are truth
+    /// at this position (and diameter). A calibration session over a grid sends one per point.
+    fn control(&mut self, ctx: &mut Context, cmd: &str) -> Result<(), NodeError> {
+        let (x_mm, y_mm, diameter_mm) = parse_at(cmd, self.p.diameter_mm)?;
+        (self.p.x_mm, self.p.y_mm, self.p.diameter_mm) = (x_mm, y_mm, diameter_mm);
+        tracing::info!(node = ctx.id(), x_mm, y_mm, diameter_mm, "indenter moved");
+        Ok(())
+    }
+}
+
+const AT_USAGE: &str = "at X_MM Y_MM [DIAMETER_MM]";
+
+/// Parses the load cell's `at` command; the diameter stays `diameter_mm` when not given.
+fn parse_at(cmd: &str, diameter_mm: f64) -> Result<(f64, f64, f64), NodeError> {
+    let mut words = cmd.split_whitespace();
+    if words.next() != Some("at") {
+        return Err(NodeError::msg(format!("unknown control command \"{cmd}\" (known: {AT_USAGE})")));
+    }
+    let numbers: Vec<Option<f64>> = words.map(|w| w.parse::<f64>().ok().filter(|v| v.is_finite())).collect();
+    let bad =
+        || NodeError::msg(format!("control command \"{cmd}\": expected {AT_USAGE}, finite numbers, diameter > 0"));
+    match numbers[..] {
+        [Some(x), Some(y)] => Ok((x, y, diameter_mm)),
+        [Some(x), Some(y), Some(d)] if d > 0.0 => Ok((x, y, d)),
+        _ => Err(bad()),
+    }
 }
 
 fn port_docs(k: KindInfo) -> KindInfo {
@@ -322,7 +350,7 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
         port_docs(KindInfo::new(
             "serial_loadcell",
             Role::Source,
-            "load cell on a serial port (ASCII force lines, N) as truth",
+            "load cell on a serial port (ASCII force lines, N) as truth; control `at X_MM Y_MM [DIAMETER_MM]` moves the rig position",
         ))
         .output(PortSpec::output::<Truth>("truth", "one contact at the rig position, or none below the threshold"))
         .param(ParamDoc::new("x_mm", "f64", "0", "indenter position"))
@@ -331,4 +359,21 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
         .param(ParamDoc::new("contact_threshold_n", "f64", "0.05", "below this: no contact")),
         |p: PortParams, _| Ok(NodeImpl::Source(Box::new(SerialLoadcell { p, reader: None, seq: 0 }))),
     ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::parse_at;
+
+    #[test]
+    fn at_takes_a_position_and_an_optional_diameter() {
+        assert_eq!(parse_at("at 12.5 -25", 15.0).unwrap(), (12.5, -25.0, 15.0));
+        assert_eq!(parse_at("  at  -37.5 0 20 ", 15.0).unwrap(), (-37.5, 0.0, 20.0));
+        for bad in ["at", "at 1", "at 1 x", "at 1 2 0", "at 1 2 -3", "at 1 2 3 4", "at NaN 0", "at 1 inf"] {
+            let e = parse_at(bad, 15.0).unwrap_err().to_string();
+            assert!(e.contains(&format!("\"{bad}\": expected at X_MM Y_MM [DIAMETER_MM]")), "{bad}: {e}");
+        }
+        let e = parse_at("move 1 2", 15.0).unwrap_err().to_string();
+        assert!(e.contains("unknown control command \"move 1 2\" (known: at X_MM Y_MM [DIAMETER_MM])"), "{e}");
+    }
 }

@@ -10,4 +10,5 @@ pub mod paths;
 pub mod pipeline;
 pub mod repair;
 pub mod reproduce;
+pub mod send;
 pub mod simulate;

@@ -1,0 +1,41 @@
+//! `skinflow send SOCKET REQUEST...`: a client of `skinflow run --control SOCKET` for scripts
+//! (a calibration session moving the indenter, a tare before a trial). Sends each request as
+//! one JSON line, prints each reply line, and fails on the first reply that is not `"ok": true`.
+
+use std::io::{BufRead, BufReader, Write};
+use std::os::unix::net::UnixStream;
+use std::path::Path;
+use std::time::Duration;
+
+use anyhow::{Context as _, Result, bail};
+
+/// Longer than the server's own wait for a node to run a command (10 s).
+const REPLY_TIMEOUT: Duration = Duration::from_secs(30);
+
+pub fn run(socket: &Path, requests: &[String]) -> Result<()> {
+    let s = socket.display();
+    let stream = UnixStream::connect(socket)
+        .with_context(|| format!("{s}: cannot connect (is `skinflow run GRAPH --control {s}` running?)"))?;
+    stream.set_read_timeout(Some(REPLY_TIMEOUT)).with_context(|| format!("{s}: setting the reply timeout"))?;
+    let mut writer = stream.try_clone().with_context(|| format!("{s}: cannot use the connection"))?;
+    let mut replies = BufReader::new(stream).lines();
+    for request in requests {
+        let line = request.trim();
+        if line.contains('\n') || line.is_empty() {
+            bail!("request {request:?}: must be one non-empty line of JSON");
+        }
+        writeln!(writer, "{line}").with_context(|| format!("{s}: sending {line}"))?;
+        let reply = match replies.next() {
+            Some(r) => r.with_context(|| format!("{s}: no reply to {line} within {} s", REPLY_TIMEOUT.as_secs()))?,
+            None => bail!("{s}: the graph closed the connection before replying to {line}"),
+        };
+        println!("{reply}");
+        let value: serde_json::Value =
+            serde_json::from_str(&reply).with_context(|| format!("{s}: reply to {line} is not JSON"))?;
+        if value.get("ok") != Some(&serde_json::Value::Bool(true)) {
+            let error = value.get("error").and_then(|e| e.as_str()).unwrap_or("no error given");
+            bail!("{s}: {line}: {error}");
+        }
+    }
+    Ok(())
+}

@@ -544,6 +544,11 @@ fn repair_salvages_a_recording_whose_last_flush_was_cut_short() {
     let out = skinflow(&d, &["inspect", "rec.h5"]);
     assert_eq!(out.status.code(), Some(1));
     assert!(stderr(&out).contains("rec.h5: /eit/v: has "), "{}", stderr(&out));
+    assert!(
+        stderr(&out).contains("(hint: a write cut short leaves this; `skinflow repair` copies"),
+        "{}",
+        stderr(&out)
+    );
 
     let text = ok(&skinflow(&d, &["repair", "rec.h5", "--out", "fixed.h5"]));
     assert!(text.contains("rec.h5: /eit: rows were /eit/t "), "{text}");

@@ -26,7 +26,10 @@ pub enum SchemaProblem {
     NotNumeric { found: String },
     #[error("has rank {found}, expected {expected}")]
     WrongRank { found: usize, expected: usize },
-    #[error("has {found} rows, but {other} has {expected}")]
+    #[error(
+        "has {found} rows, but {other} has {expected} (hint: a write cut short leaves this; \
+         `skinflow repair` copies the file with the rows all datasets hold)"
+    )]
     LengthMismatch { found: usize, other: String, expected: usize },
     #[error("has {found} columns, but {other} has {expected}")]
     ColumnMismatch { found: usize, other: String, expected: usize },

@@ -132,18 +132,18 @@ fn a_library_without_the_entry_point_is_not_a_plugin() {
 }
 
 #[test]
-fn a_plugin_of_abi_version_1_is_refused_with_one_line() {
+fn a_plugin_of_abi_version_2_is_refused_with_one_line() {
     let d = workdir("bad-abi");
     let lib = plugin("skinflow-plugin-fixture-bad-abi");
     let o = skinflow(&d, &["check", toy_graph(&d, std::slice::from_ref(&lib), "", "never").to_str().unwrap()]);
     assert!(!o.status.success());
     let e = stderr(&o);
-    // The fixture is a version-1 table (processors only), as a plugin built before sources
-    // and sinks looks to this host.
+    // The fixture is a version-2 table (roles, no end-of-stream flush), as a plugin built
+    // before processors could flush looks to this host.
     assert_eq!(
         e.trim(),
         format!(
-            "error: plugin {}: built for plugin ABI version 1, this skinflow loads version 2 (rebuild it against this skinflow-plugin-sdk)",
+            "error: plugin {}: built for plugin ABI version 2, this skinflow loads version 3 (rebuild it against this skinflow-plugin-sdk)",
             lib.display()
         )
     );

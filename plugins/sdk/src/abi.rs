@@ -8,19 +8,25 @@
 //! same node. The first two fields of [`SfPlugin`] never move, so any host can read the version
 //! of any plugin; all struct sizes are checked at load.
 //!
-//! Roles: a processor's `process` reads inputs and writes outputs; a sink is called through the
-//! same `process` with no output ports; a source has no inputs and is called through `poll`
+//! Roles: a processor's `process` reads inputs and writes outputs, and at end of stream its
+//! `flush` writes what it still holds, one message per output per call, saying whether it holds
+//! more ([`SfFlushState`]); a sink is called through the same `process` with no output ports; a
+//! source has no inputs and is called through `poll`
 //! ([`SfPoll`]: the host passes its clock, the source says emitted / idle / finished and may
 //! name a time before which it need not be polled again; the host waits, and a stop request
 //! ends the wait). No call may block for long: a source that waits for a device reads with a
 //! timeout (at most ~100 ms) or returns idle, so a stop request is seen promptly.
 //!
-//! Version history: 1, processors only; 2, roles (sources, sinks), `poll`, `stop`, [`SfPoll`].
+//! Version history: 1, processors only; 2, roles (sources, sinks), `poll`, `stop`, [`SfPoll`];
+//! 3, a processor's end-of-stream `flush` ([`FlushFn`], [`SfFlushState`]) and the messages a
+//! node discards reported by `stop`.
 
 use std::ffi::c_void;
 
-/// Bumped on any change of the structs or functions in this module.
-pub const ABI_VERSION: u32 = 2;
+/// Bumped on any change of the structs or functions in this module. The host loads exactly
+/// this version: the table is not designed for backward-compatible extension (struct sizes
+/// must match exactly, and the kinds array is read with the host's stride).
+pub const ABI_VERSION: u32 = 3;
 
 /// The exported entry point (NUL-terminated for `dlsym`).
 pub const ENTRY_SYMBOL: &[u8] = b"skinflow_plugin_entry\0";
@@ -153,9 +159,25 @@ pub type PollFn = unsafe extern "C" fn(
     n_outputs: usize,
     err: SfErrorSink,
 ) -> SfStatus;
+/// A processor's end-of-stream call: every node upstream is done and its inputs are drained.
+/// The plugin writes at most one message per output into the host's `n_outputs` writable
+/// messages (plugin-owned memory, valid until the next call on this node or its destruction)
+/// and says in `state` whether it holds more ([`SfFlushState::MORE`]: called again once these
+/// are sent) or not (the host sets [`SfFlushState::DONE`] before the call). `state` is valid
+/// for the call only. Not called after an error or a panic of a flush call.
+pub type FlushFn = unsafe extern "C" fn(
+    node: *mut c_void,
+    state: *mut SfFlushState,
+    outputs: *mut SfMessage,
+    n_outputs: usize,
+    err: SfErrorSink,
+) -> SfStatus;
 /// End of the run: flush and close (called once, before `destroy`, on a node whose `create`
-/// succeeded; not after the node panicked, whose instance is poisoned).
-pub type StopFn = unsafe extern "C" fn(node: *mut c_void, err: SfErrorSink) -> SfStatus;
+/// succeeded; not after the node panicked, whose instance is poisoned). The plugin writes to
+/// `discarded` how many messages the node held and drops without emitting them (e.g. a
+/// processor whose flush could not run or finish); the host sets 0 before the call and counts
+/// them in the run report. `discarded` is valid for the call only.
+pub type StopFn = unsafe extern "C" fn(node: *mut c_void, discarded: *mut u64, err: SfErrorSink) -> SfStatus;
 /// Frees a node built by `create`.
 pub type DestroyFn = unsafe extern "C" fn(node: *mut c_void);
 
@@ -185,6 +207,18 @@ impl SfPollState {
     pub const IDLE: SfPollState = SfPollState(1);
     /// Exhausted: never polled again (what the outputs hold is still sent).
     pub const FINISHED: SfPollState = SfPollState(2);
+}
+
+/// What a processor's `flush` did (written by the plugin into the host's state).
+#[repr(transparent)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct SfFlushState(pub u32);
+
+impl SfFlushState {
+    /// Holds nothing more: not called again (what the outputs hold is still sent).
+    pub const DONE: SfFlushState = SfFlushState(0);
+    /// Holds more: call again once these outputs are sent and there is room downstream.
+    pub const MORE: SfFlushState = SfFlushState(1);
 }
 
 /// The host's side of one poll (host-owned, valid for the call): the clock in, the outcome out.
@@ -230,6 +264,9 @@ pub struct SfKind {
     pub process: Option<ProcessFn>,
     /// Sources; `None` for processors and sinks.
     pub poll: Option<PollFn>,
+    /// Processors (`None`: the processor holds nothing across calls); `None` for sources and
+    /// sinks (a sink's `stop` is its flush).
+    pub flush: Option<FlushFn>,
     pub stop: StopFn,
     pub destroy: DestroyFn,
 }

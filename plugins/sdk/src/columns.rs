@@ -197,7 +197,9 @@ impl ColumnBuf {
         self.column(name).extend(values);
     }
 
-    /// Sets the header (default: that of the call's first present input).
+    /// Sets the header (default: in a processor's `process`, that of the call's first present
+    /// input; in its `flush`, that of the last input it received; in a source, `seq` 1, 2, ...
+    /// per port and the poll's graph clock).
     pub fn header(&mut self, seq: u64, t_ns: u64) {
         self.written = true;
         self.seq = Some((seq, t_ns));

@@ -1,7 +1,8 @@
 //! The plugin author's side: implement [`PluginNode`] (a processor), [`PluginSource`] or
 //! [`PluginSink`] for an ordinary Rust struct and export it with
 //! [`export_plugin!`](crate::export_plugin). The macro's entry point builds the static
-//! [`SfPlugin`] table once; the `extern "C"` shims here run every author call under
+//! [`SfPlugin`] table once; the `extern "C"` shims here run every author call (including a
+//! processor's end-of-stream [`PluginNode::flush`]) under
 //! `catch_unwind`, so a panic never unwinds into the host: it comes back as
 //! [`SfStatus::PANIC`] with its message, and the instance refuses further calls.
 
@@ -13,8 +14,8 @@ use std::sync::OnceLock;
 use serde::de::DeserializeOwned;
 
 use crate::abi::{
-    ABI_VERSION, CheckFn, CreateFn, DestroyFn, PollFn, ProcessFn, SfErrorSink, SfKind, SfMessage, SfParam, SfPlugin,
-    SfPoll, SfPollState, SfPort, SfRole, SfStatus, SfStr, StopFn,
+    ABI_VERSION, CheckFn, CreateFn, DestroyFn, FlushFn, PollFn, ProcessFn, SfErrorSink, SfFlushState, SfKind,
+    SfMessage, SfParam, SfPlugin, SfPoll, SfPollState, SfPort, SfRole, SfStatus, SfStr, StopFn,
 };
 use crate::columns::{ColumnBuf, Columns};
 
@@ -116,17 +117,55 @@ pub trait PluginNode: Send + Sized + 'static {
     /// to `base_dir`, the graph file's directory.
     fn new(params: Self::Params, base_dir: &Path) -> Result<Self, String>;
 
-    /// One call: `inputs` in declaration order (absent ones have `present() == false`).
-    ///
-    /// The C ABI has no end-of-stream call (the engine's `Processor::flush`): emit what a
-    /// call computes in that call. A node that held messages back across calls would lose the
-    /// last ones when the stream ends.
+    /// One call: `inputs` in declaration order (absent ones have `present() == false`). A
+    /// message's header defaults to that of the call's first present input; set it with
+    /// [`ColumnBuf::header`]. An `Err` is counted and logged, and what the ports hold is not
+    /// sent. A node that holds messages back across calls (a window, a lookahead, a batch)
+    /// emits them at end of stream in [`PluginNode::flush`] and reports them in
+    /// [`PluginNode::held`].
     fn process(&mut self, inputs: &[Columns<'_>], out: &mut Outputs) -> Result<(), String>;
+
+    /// End of stream (the engine's `Processor::flush`): every node upstream is done and this
+    /// node's inputs are drained. Writes what the node still holds, at most one message per
+    /// output port, and returns [`Flush::More`] to be called again (once these messages are
+    /// sent and there is room downstream) or [`Flush::Done`]; what the ports hold is sent
+    /// either way.
+    ///
+    /// A message's header defaults to that of the last input the node received: set it with
+    /// [`ColumnBuf::header`] (e.g. to the header of the input a held message came from). There
+    /// are no inputs, so an output decodes from its columns alone, as a source's does
+    /// (`count`, `pressure`, `eit_frame`, `truth`); an output of a payload derived from inputs
+    /// (`contacts`, `split`, `forces`) cannot be emitted here (an error).
+    ///
+    /// An `Err` is counted and logged, what the ports hold is not sent, and the node is not
+    /// flushed again: what it still holds is counted at stop ([`PluginNode::held`]). A panic is
+    /// handled as in `process`. Default: nothing held, [`Flush::Done`].
+    fn flush(&mut self, _out: &mut Outputs) -> Result<Flush, String> {
+        Ok(Flush::Done)
+    }
+
+    /// How many messages the node holds and has not emitted (what `flush` would still emit).
+    /// Asked once at the end of the run, just before `stop`: what is still held then (its
+    /// flush failed, the shutdown deadline passed, nothing downstream could take more, or a
+    /// hot swap replaced the node) is counted as the node's `discarded` in the run report, so
+    /// nothing is lost silently. Default: 0.
+    fn held(&self) -> u64 {
+        0
+    }
 
     /// End of the run (called once; not after a panic). Default: nothing to do.
     fn stop(&mut self) -> Result<(), String> {
         Ok(())
     }
+}
+
+/// What a processor's [`PluginNode::flush`] did.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Flush {
+    /// Holds nothing more: not called again. What the ports hold is still sent.
+    Done,
+    /// Holds more: called again once what the ports hold is sent.
+    More,
 }
 
 /// What a source's [`PluginSource::poll`] did.
@@ -240,6 +279,8 @@ trait Author: Send + Sized + 'static {
     fn spec() -> KindSpec;
     fn validate(params: &Self::Params) -> Result<(), String>;
     fn build(params: Self::Params, base_dir: &Path) -> Result<Self, String>;
+    /// Messages held and not emitted (asked before `stop`; only processors hold any).
+    fn held(&self) -> u64;
     fn stop(&mut self) -> Result<(), String>;
 }
 
@@ -248,7 +289,7 @@ struct AsSource<T>(T);
 struct AsSink<T>(T);
 
 macro_rules! author {
-    ($wrap:ident, $tr:ident) => {
+    ($wrap:ident, $tr:ident, $held:path) => {
         impl<T: $tr> Author for $wrap<T> {
             type Params = T::Params;
             fn spec() -> KindSpec {
@@ -260,15 +301,23 @@ macro_rules! author {
             fn build(params: T::Params, base_dir: &Path) -> Result<Self, String> {
                 T::new(params, base_dir).map($wrap)
             }
+            fn held(&self) -> u64 {
+                $held(&self.0)
+            }
             fn stop(&mut self) -> Result<(), String> {
                 self.0.stop()
             }
         }
     };
 }
-author!(AsNode, PluginNode);
-author!(AsSource, PluginSource);
-author!(AsSink, PluginSink);
+author!(AsNode, PluginNode, PluginNode::held);
+author!(AsSource, PluginSource, nothing_held);
+author!(AsSink, PluginSink, nothing_held);
+
+/// Sources and sinks hold nothing for a flush (a sink's `stop` is its flush).
+fn nothing_held<T>(_: &T) -> u64 {
+    0
+}
 
 fn parse<A: Author>(text: &str) -> Result<A::Params, String> {
     let p: A::Params = toml::from_str(text).map_err(|e| e.message().to_owned())?;
@@ -304,6 +353,8 @@ struct Instance<A> {
     out_types: Vec<&'static str>,
     /// Per output port: messages sent on it (a source's default `seq`).
     sent: Vec<u64>,
+    /// Header of the last input a processor received (its flush's default header).
+    last_header: (u64, u64),
     poisoned: Option<String>,
 }
 
@@ -407,6 +458,7 @@ unsafe extern "C" fn create<A: Author>(params: SfStr, base_dir: SfStr, err: SfEr
             out: Outputs::new(spec.outputs.len()),
             out_types: spec.outputs.iter().map(|o| o.type_name).collect(),
             sent: vec![0; spec.outputs.len()],
+            last_header: (0, 0),
             poisoned: None,
         };
         Ok(Box::into_raw(Box::new(inst)).cast())
@@ -439,9 +491,41 @@ unsafe extern "C" fn process<T: PluginNode>(
         let ins = unsafe { Columns::slice_from_raw(raw_slice(inputs, n_inputs)) };
         inst.out.clear();
         inst.node.0.process(ins, &mut inst.out)?;
-        let header = ins.iter().find(|c| c.present()).map_or((0, 0), |c| (c.seq(), c.t_ns()));
+        let header = ins.iter().find(|c| c.present()).map(|c| (c.seq(), c.t_ns()));
+        inst.last_header = header.unwrap_or(inst.last_header);
+        let header = header.unwrap_or((0, 0));
         // SAFETY: the host passes `n_outputs` writable messages for the call.
         unsafe { write_outputs(inst, outputs, n_outputs, |_, _| header) };
+        Ok(())
+    })
+}
+
+/// A processor's end-of-stream call.
+unsafe extern "C" fn flush<T: PluginNode>(
+    node: *mut c_void,
+    state: *mut SfFlushState,
+    outputs: *mut SfMessage,
+    n_outputs: usize,
+    err: SfErrorSink,
+) -> SfStatus {
+    // SAFETY: `node` came from `create::<AsNode<T>>`; one call at a time per node.
+    let inst = unsafe { instance::<AsNode<T>>(node) };
+    if state.is_null() {
+        report(err, "flush called without its state");
+        return SfStatus::ERROR;
+    }
+    // SAFETY: non-null; the host passes a state it owns, valid and unaliased for the call.
+    let state = unsafe { &mut *state };
+    guarded(inst, err, |inst| {
+        inst.out.clear();
+        let r = inst.node.0.flush(&mut inst.out)?;
+        let header = inst.last_header;
+        // SAFETY: the host passes `n_outputs` writable messages for the call.
+        unsafe { write_outputs(inst, outputs, n_outputs, |_, _| header) };
+        *state = match r {
+            Flush::Done => SfFlushState::DONE,
+            Flush::More => SfFlushState::MORE,
+        };
         Ok(())
     })
 }
@@ -502,14 +586,21 @@ unsafe extern "C" fn poll<T: PluginSource>(
     })
 }
 
-unsafe extern "C" fn stop<A: Author>(node: *mut c_void, err: SfErrorSink) -> SfStatus {
+unsafe extern "C" fn stop<A: Author>(node: *mut c_void, discarded: *mut u64, err: SfErrorSink) -> SfStatus {
     // SAFETY: `node` came from `create::<A>`; one call at a time per node.
     let inst = unsafe { instance::<A>(node) };
     if inst.poisoned.is_some() {
         // The author's state is not trusted after a panic: nothing to stop (its Drop still runs).
         return SfStatus::OK;
     }
-    guarded(inst, err, |inst| inst.node.stop())
+    guarded(inst, err, |inst| {
+        let held = inst.node.held();
+        if held > 0 && !discarded.is_null() {
+            // SAFETY: non-null; the host passes a counter it owns, writable for the call.
+            unsafe { *discarded = held };
+        }
+        inst.node.stop()
+    })
 }
 
 unsafe extern "C" fn destroy<A: Author>(node: *mut c_void) {
@@ -528,11 +619,17 @@ pub struct KindEntry {
     create: CreateFn,
     process: Option<ProcessFn>,
     poll: Option<PollFn>,
+    flush: Option<FlushFn>,
     stop: StopFn,
     destroy: DestroyFn,
 }
 
-fn entry_of<A: Author>(role: SfRole, process: Option<ProcessFn>, poll: Option<PollFn>) -> KindEntry {
+fn entry_of<A: Author>(
+    role: SfRole,
+    process: Option<ProcessFn>,
+    poll: Option<PollFn>,
+    flush: Option<FlushFn>,
+) -> KindEntry {
     KindEntry {
         spec: A::spec(),
         role,
@@ -540,6 +637,7 @@ fn entry_of<A: Author>(role: SfRole, process: Option<ProcessFn>, poll: Option<Po
         create: create::<A>,
         process,
         poll,
+        flush,
         stop: stop::<A>,
         destroy: destroy::<A>,
     }
@@ -547,17 +645,17 @@ fn entry_of<A: Author>(role: SfRole, process: Option<ProcessFn>, poll: Option<Po
 
 /// The table entry of processor `T` (used by [`export_plugin!`](crate::export_plugin)).
 pub fn kind<T: PluginNode>() -> KindEntry {
-    entry_of::<AsNode<T>>(SfRole::PROCESSOR, Some(process::<T>), None)
+    entry_of::<AsNode<T>>(SfRole::PROCESSOR, Some(process::<T>), None, Some(flush::<T>))
 }
 
 /// The table entry of source `T` (used by [`export_plugin!`](crate::export_plugin)).
 pub fn source<T: PluginSource>() -> KindEntry {
-    entry_of::<AsSource<T>>(SfRole::SOURCE, None, Some(poll::<T>))
+    entry_of::<AsSource<T>>(SfRole::SOURCE, None, Some(poll::<T>), None)
 }
 
 /// The table entry of sink `T` (used by [`export_plugin!`](crate::export_plugin)).
 pub fn sink<T: PluginSink>() -> KindEntry {
-    entry_of::<AsSink<T>>(SfRole::SINK, Some(consume::<T>), None)
+    entry_of::<AsSink<T>>(SfRole::SINK, Some(consume::<T>), None, None)
 }
 
 /// The static description of a plugin: the table and the arrays it points into.
@@ -616,6 +714,7 @@ impl Table {
                 create: e.create,
                 process: e.process,
                 poll: e.poll,
+                flush: e.flush,
                 stop: e.stop,
                 destroy: e.destroy,
             });

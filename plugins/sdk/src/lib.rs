@@ -3,7 +3,8 @@
 //!
 //! - [`abi`]: the versioned `#[repr(C)]` function table and message layout (named `f64`
 //!   columns plus a header), the only thing both sides share.
-//! - [`export`]: for plugin authors. Implement [`PluginNode`] (a processor), [`PluginSource`] or
+//! - [`export`]: for plugin authors. Implement [`PluginNode`] (a processor, optionally with an
+//!   end-of-stream [`PluginNode::flush`]), [`PluginSource`] or
 //!   [`PluginSink`] on an ordinary struct, then
 //!   `skinflow_plugin_sdk::export_plugin!(name = "my-plugin", kinds = [MyNode], sources = [MyBoard], sinks = [MyOut]);`.
 //!   Panics are caught in the plugin and reported as errors; they never cross the boundary.
@@ -18,4 +19,4 @@ pub mod export;
 pub mod host;
 
 pub use columns::{ColumnBuf, Columns};
-pub use export::{KindSpec, Outputs, PluginNode, PluginSink, PluginSource, Poll, SourceCtx};
+pub use export::{Flush, KindSpec, Outputs, PluginNode, PluginSink, PluginSource, Poll, SourceCtx};

@@ -1,6 +1,7 @@
 //! The host's checks of a plugin table, on tables built in this binary by the SDK's export
-//! code (the same bytes a plugin's entry point returns): version and struct-size mismatches,
-//! ports without a codec, duplicate kinds, params checked by the plugin, the kind description.
+//! code (the same bytes a plugin's entry point returns): version (older ones named) and
+//! struct-size mismatches, a flush only on processors, ports without a codec, duplicate kinds,
+//! params checked by the plugin, the kind description.
 //! Running plugin nodes in graphs (errors, panics, restart) is tested in the workspace's
 //! tests/plugins.rs on built libraries.
 
@@ -9,7 +10,7 @@ use std::sync::OnceLock;
 
 use serde::Deserialize;
 use skinflow_core::{BuildContext, Mode, NodeImpl, Params, Registry};
-use skinflow_plugin_sdk::abi::{ABI_VERSION, SfPlugin};
+use skinflow_plugin_sdk::abi::{ABI_VERSION, SfKind, SfPlugin, SfRole};
 use skinflow_plugin_sdk::export::{Table, entry, kind};
 use skinflow_plugin_sdk::host::{Codecs, PluginError, read_table, register_kinds};
 use skinflow_plugin_sdk::{Columns, KindSpec, Outputs, PluginNode};
@@ -88,6 +89,46 @@ fn a_table_of_another_version_is_refused_before_anything_else_is_read() {
         }
         other => panic!("expected an ABI version error, got {:?}", other.err()),
     }
+}
+
+#[test]
+fn a_table_of_an_older_version_is_refused_with_one_line_naming_it() {
+    // Version 1 (processors only) and 2 (roles, no end-of-stream flush): only the version is read.
+    for old in 1..ABI_VERSION {
+        let mut t = table();
+        t.abi_version = old;
+        t.kinds = std::ptr::null();
+        t.n_kinds = 7;
+        let e = read_table(path(), &t, &Codecs::new()).err().expect("refused").to_string();
+        assert_eq!(
+            e,
+            format!(
+                "plugin libtest.so: built for plugin ABI version {old}, this skinflow loads version {ABI_VERSION} (rebuild it against this skinflow-plugin-sdk)"
+            )
+        );
+    }
+}
+
+/// `f` applied to the first kind of `table()`, read back.
+fn with_kind(f: impl FnOnce(&mut SfKind)) -> Result<(), String> {
+    let mut t = table();
+    // SAFETY: the table's kinds array holds `n_kinds` kinds (one), static in this binary.
+    let mut k = unsafe { *t.kinds };
+    f(&mut k);
+    t.kinds = &k;
+    t.n_kinds = 1;
+    read_table(path(), &t, &Codecs::new()).map(drop).map_err(|e| e.to_string())
+}
+
+#[test]
+fn only_processors_have_a_flush_and_it_is_optional() {
+    let e = with_kind(|k| k.role = SfRole::SINK).expect_err("a sink with a flush is refused");
+    assert_eq!(
+        e,
+        "plugin libtest.so: kind \"test-add\": a sink has no flush function (only processors are flushed at end of stream)"
+    );
+    // A hand-written table may leave a processor's flush out: it holds nothing across calls.
+    with_kind(|k| k.flush = None).expect("a processor without a flush is accepted");
 }
 
 #[test]

@@ -147,6 +147,9 @@ fn role(path: &Path, name: &str, k: &SfKind) -> Result<Role, PluginError> {
         let want = if needs_poll { "a poll function and no process" } else { "a process function and no poll" };
         return Err(bad(format!("a {word} has {want}")));
     }
+    if role != Role::Processor && k.flush.is_some() {
+        return Err(bad(format!("a {word} has no flush function (only processors are flushed at end of stream)")));
+    }
     if role == Role::Source && k.n_inputs != 0 {
         return Err(bad(format!("a source has no inputs (it declares {})", k.n_inputs)));
     }
@@ -228,6 +231,7 @@ fn read_kind(path: &Path, origin: &str, k: &SfKind, codecs: &Codecs) -> Result<P
         create: k.create,
         process: k.process,
         poll: k.poll,
+        flush: k.flush,
         stop: k.stop,
         destroy: k.destroy,
     };

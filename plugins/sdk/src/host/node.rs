@@ -6,11 +6,13 @@
 //! plugin's poll, decodes what it wrote, and waits (interruptibly, with
 //! [`Context::sleep_until_ns`]) until the time the plugin asked to be polled again. A plugin's
 //! panic is re-raised here as a host panic (without the panic hook), so the engine applies
-//! the node's restart policy exactly as for a built-in node. `stop` calls the plugin's stop.
+//! the node's restart policy exactly as for a built-in node. `stop` calls the plugin's stop
+//! and counts the messages the plugin says it discards (`Context::count_discarded`).
 //!
-//! End of stream: the C ABI has no flush function, and a plugin processor emits what a call
-//! computes in that call (see `PluginNode::process`), so [`HostedNode`] keeps the engine's
-//! default `Processor::flush` (nothing held, nothing to emit).
+//! End of stream: [`HostedNode`]'s `Processor::flush` calls the plugin's flush, decodes what it
+//! wrote like `process` does (without inputs: outputs that need provenance cannot be emitted
+//! there) and asks for another flush (`Context::request_rerun`) while the plugin says it holds
+//! more; errors and panics are handled as in `process`.
 
 use std::ffi::c_void;
 use std::ptr::NonNull;
@@ -25,8 +27,8 @@ use skinflow_core::{
 use super::codec::{Codec, Decode, MakeCodec};
 use super::load::PluginLibrary;
 use crate::abi::{
-    CheckFn, CreateFn, DestroyFn, PollFn, ProcessFn, SfErrorSink, SfMessage, SfPoll, SfPollState, SfStatus, SfStr,
-    StopFn,
+    CheckFn, CreateFn, DestroyFn, FlushFn, PollFn, ProcessFn, SfErrorSink, SfFlushState, SfMessage, SfPoll,
+    SfPollState, SfStatus, SfStr, StopFn,
 };
 use crate::columns::{ColumnBuf, Columns};
 
@@ -39,6 +41,8 @@ pub struct KindFns {
     pub process: Option<ProcessFn>,
     /// Sources.
     pub poll: Option<PollFn>,
+    /// Processors that hold messages across calls (`None`: nothing to flush).
+    pub flush: Option<FlushFn>,
     pub stop: StopFn,
     pub destroy: DestroyFn,
 }
@@ -124,6 +128,7 @@ impl NodeFactory for PluginFactory {
         Ok(match k.info.role {
             Role::Processor => NodeImpl::Processor(Box::new(HostedNode {
                 process: k.fns.process.ok_or_else(|| missing("process"))?,
+                flush: k.fns.flush,
                 ins: Encoder::new(k),
                 outs: outs(),
                 out_raw: vec![SfMessage::ABSENT; k.out_codecs.len()],
@@ -156,12 +161,13 @@ struct Live {
 
 impl Live {
     /// The host's answer to a plugin call's status: a panic is re-raised as the node's panic.
-    fn status(&self, status: SfStatus) -> Result<(), NodeError> {
+    /// `what` prefixes the plugin's message (e.g. "flush: ").
+    fn status(&self, what: &str, status: SfStatus) -> Result<(), NodeError> {
         match status {
             SfStatus::OK => Ok(()),
-            SfStatus::PANIC => std::panic::resume_unwind(Box::new(self.kind.fail("", &self.err))),
-            SfStatus::ERROR => Err(NodeError::msg(self.kind.fail("", &self.err))),
-            SfStatus(s) => Err(NodeError::msg(self.kind.fail("", &format!("unknown status {s}")))),
+            SfStatus::PANIC => std::panic::resume_unwind(Box::new(self.kind.fail(what, &self.err))),
+            SfStatus::ERROR => Err(NodeError::msg(self.kind.fail(what, &self.err))),
+            SfStatus(s) => Err(NodeError::msg(self.kind.fail(what, &format!("unknown status {s}")))),
         }
     }
 
@@ -176,16 +182,42 @@ impl Live {
         let status = unsafe {
             process(self.raw.as_ptr(), ins.raw.as_ptr(), ins.raw.len(), outputs.as_mut_ptr(), outputs.len(), err)
         };
-        self.status(status)
+        self.status("", status)
+    }
+
+    /// One end-of-stream `flush` call of this processor instance, the plugin writing its
+    /// messages into `outputs`. Returns whether it holds more.
+    fn flush(&mut self, flush: FlushFn, outputs: &mut [SfMessage]) -> Result<bool, NodeError> {
+        let err = sink(&mut self.err);
+        let mut state = SfFlushState::DONE;
+        // SAFETY: `raw` is a live instance of this kind; `state` and `outputs` are writable for
+        // the call (for `outputs`, its length); the shim catches panics.
+        let status = unsafe { flush(self.raw.as_ptr(), &mut state, outputs.as_mut_ptr(), outputs.len(), err) };
+        self.status("flush: ", status)?;
+        match state {
+            SfFlushState::DONE => Ok(false),
+            SfFlushState::MORE => Ok(true),
+            SfFlushState(s) => Err(NodeError::msg(self.kind.fail("flush: ", &format!("unknown flush state {s}")))),
+        }
     }
 
     /// The plugin's stop (flush, close). Its errors are the node's stop errors; a panic in it
-    /// (caught in the plugin) is reported as an error: the run is ending anyway.
-    fn stop(&mut self) -> Result<(), NodeError> {
+    /// (caught in the plugin) is reported as an error: the run is ending anyway. The messages
+    /// the plugin says it discards (held, never emitted) are counted in the run report.
+    fn stop(&mut self, ctx: &Context) -> Result<(), NodeError> {
         let err = sink(&mut self.err);
-        // SAFETY: `raw` is a live instance of this kind; the error sink outlives the call; the
-        // shim catches panics.
-        let status = unsafe { (self.kind.fns.stop)(self.raw.as_ptr(), err) };
+        let mut discarded = 0u64;
+        // SAFETY: `raw` is a live instance of this kind; `discarded` and the error sink outlive
+        // the call; the shim catches panics.
+        let status = unsafe { (self.kind.fns.stop)(self.raw.as_ptr(), &mut discarded, err) };
+        if discarded > 0 {
+            ctx.count_discarded(discarded);
+            tracing::warn!(
+                node = %ctx.id(),
+                "{}",
+                self.kind.fail("", &format!("{discarded} held message(s) discarded at stop (never emitted)"))
+            );
+        }
         match status {
             SfStatus::OK => Ok(()),
             SfStatus(_) => Err(NodeError::msg(self.kind.fail("stop: ", &self.err))),
@@ -234,15 +266,25 @@ impl Encoder {
 }
 
 /// Decodes what a plugin wrote on its outputs and sends it (ports nobody reads are skipped).
+/// `inputs`: the call's, the provenance a derived payload re-attaches (empty for a source);
+/// `None` for a processor's end-of-stream flush, which has none.
 fn decode_outputs(
     kind: &PluginKind,
     codecs: &mut [Box<dyn Codec>],
     out_raw: &[SfMessage],
     ctx: &Context,
-    inputs: &Inputs,
+    inputs: Option<&Inputs>,
     t0: Instant,
     out: &mut Outputs,
 ) -> Result<(), NodeError> {
+    let none;
+    let (inputs, flush, what) = match inputs {
+        Some(inputs) => (inputs, false, ""),
+        None => {
+            none = Inputs::default();
+            (&none, true, "flush: ")
+        }
+    };
     for (j, codec) in codecs.iter_mut().enumerate() {
         let raw = out_raw[j];
         if raw.present == 0 || !out.is_connected(j) {
@@ -254,8 +296,17 @@ fn decode_outputs(
         if !cols.is_type(&port.ty) {
             let got = cols.type_name();
             return Err(NodeError::msg(
-                kind.fail("", &format!("output \"{}\" carries \"{got}\", declared \"{}\"", port.name, port.ty)),
+                kind.fail(what, &format!("output \"{}\" carries \"{got}\", declared \"{}\"", port.name, port.ty)),
             ));
+        }
+        if flush && codec.needs_provenance() {
+            return Err(NodeError::msg(kind.fail(
+                what,
+                &format!(
+                    "output \"{}\": \"{}\" cannot be emitted at end of stream (its payload takes its provenance from the call's inputs, and a flush has none)",
+                    port.name, port.ty
+                ),
+            )));
         }
         let at = Decode {
             header: Header { seq: raw.seq, t_ns: raw.t_ns, origin: ctx.index() },
@@ -265,7 +316,7 @@ fn decode_outputs(
         };
         let msg = codec
             .decode(&cols, &at)
-            .map_err(|e| NodeError::msg(kind.fail(&format!("output \"{}\": ", port.name), &e)))?;
+            .map_err(|e| NodeError::msg(kind.fail(&format!("{what}output \"{}\": ", port.name), &e)))?;
         out.send(j, msg)?;
     }
     Ok(())
@@ -274,6 +325,8 @@ fn decode_outputs(
 /// A node of a plugin processor kind.
 pub struct HostedNode {
     process: ProcessFn,
+    /// `None`: the processor holds nothing across calls.
+    flush: Option<FlushFn>,
     ins: Encoder,
     outs: Vec<Box<dyn Codec>>,
     out_raw: Vec<SfMessage>,
@@ -292,11 +345,23 @@ impl Processor for HostedNode {
         self.ins.encode(kind, inputs)?;
         self.out_raw.fill(SfMessage::ABSENT);
         self.live.process(self.process, &self.ins, &mut self.out_raw)?;
-        decode_outputs(&self.live.kind, &mut self.outs, &self.out_raw, ctx, inputs, t0, out)
+        decode_outputs(&self.live.kind, &mut self.outs, &self.out_raw, ctx, Some(inputs), t0, out)
     }
 
-    fn stop(&mut self, _ctx: &mut Context) -> Result<(), NodeError> {
-        self.live.stop()
+    fn flush(&mut self, ctx: &mut Context, out: &mut Outputs) -> Result<(), NodeError> {
+        let Some(flush) = self.flush else { return Ok(()) };
+        let t0 = Instant::now();
+        self.out_raw.fill(SfMessage::ABSENT);
+        let more = self.live.flush(flush, &mut self.out_raw)?;
+        decode_outputs(&self.live.kind, &mut self.outs, &self.out_raw, ctx, None, t0, out)?;
+        if more {
+            ctx.request_rerun();
+        }
+        Ok(())
+    }
+
+    fn stop(&mut self, ctx: &mut Context) -> Result<(), NodeError> {
+        self.live.stop(ctx)
     }
 }
 
@@ -316,8 +381,8 @@ impl Sink for HostedSink {
         self.live.process(self.process, &self.ins, &mut []) // a sink has no outputs
     }
 
-    fn stop(&mut self, _ctx: &mut Context) -> Result<(), NodeError> {
-        self.live.stop()
+    fn stop(&mut self, ctx: &mut Context) -> Result<(), NodeError> {
+        self.live.stop(ctx)
     }
 }
 
@@ -372,8 +437,8 @@ impl Source for HostedSource {
         // and `out_raw` are valid and writable for the call; the shim catches panics.
         let status =
             unsafe { (self.poll)(self.live.raw.as_ptr(), &mut p, self.out_raw.as_mut_ptr(), self.out_raw.len(), err) };
-        self.live.status(status)?;
-        decode_outputs(&self.live.kind, &mut self.outs, &self.out_raw, ctx, &self.no_inputs, t0, out)?;
+        self.live.status("", status)?;
+        decode_outputs(&self.live.kind, &mut self.outs, &self.out_raw, ctx, Some(&self.no_inputs), t0, out)?;
         match p.state {
             SfPollState::EMITTED => Ok(SourcePoll::Emitted),
             SfPollState::FINISHED => Ok(SourcePoll::Finished),
@@ -385,7 +450,7 @@ impl Source for HostedSource {
         }
     }
 
-    fn stop(&mut self, _ctx: &mut Context) -> Result<(), NodeError> {
-        self.live.stop()
+    fn stop(&mut self, ctx: &mut Context) -> Result<(), NodeError> {
+        self.live.stop(ctx)
     }
 }

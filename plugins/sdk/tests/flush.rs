@@ -8,6 +8,8 @@
 //! (`restart = "always"`); an output that needs its inputs' provenance cannot be emitted at
 //! flush (an error, and the rest counted as discarded).
 
+mod common;
+
 use std::collections::VecDeque;
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
@@ -15,10 +17,9 @@ use std::sync::OnceLock;
 use serde::Deserialize;
 use skinflow_core::graph::SourceFile;
 use skinflow_core::stats::NodeReport;
-use skinflow_core::{GraphSpec, Message, Registry, RunOptions, RunReport};
-use skinflow_plugin_sdk::export::{Table, entry, kind, sink};
-use skinflow_plugin_sdk::host::{Codec, Codecs, Decode, read_table, register_kinds};
-use skinflow_plugin_sdk::{ColumnBuf, Columns, Flush, KindSpec, Outputs, PluginNode, PluginSink};
+use skinflow_core::{GraphSpec, Registry, RunOptions, RunReport};
+use skinflow_plugin_sdk::export::{Table, kind, sink};
+use skinflow_plugin_sdk::{Columns, Flush, KindSpec, Outputs, PluginNode, PluginSink};
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -146,32 +147,11 @@ impl PluginSink for DropDerived {
     }
 }
 
-/// A payload only derivable from inputs (like `split`): its decoder needs provenance.
-struct Derived;
-
-impl Codec for Derived {
-    fn encode(&mut self, _: &Message, _: &mut ColumnBuf) -> Result<(), String> {
-        Ok(())
-    }
-
-    fn decode(&mut self, _: &Columns<'_>, _: &Decode<'_>) -> Result<Message, String> {
-        Err("needs its input".into())
-    }
-}
-
 fn registry() -> Registry {
     static TABLE: OnceLock<Table> = OnceLock::new();
-    let table = entry(&TABLE, "flush", "0", || vec![kind::<Hold>(), kind::<HoldDerived>(), sink::<DropDerived>()]);
-    // SAFETY: `entry` returned a pointer to the static table above (non-null: it did not panic).
-    let table = unsafe { &*table };
-    let mut codecs = Codecs::new();
-    codecs.register("derived", || Box::new(Derived));
-    let path = Path::new("libflush.so");
-    let kinds = read_table(path, table, &codecs).expect("valid table");
-    let mut reg = Registry::new();
-    skinflow_core::toy::register(&mut reg).expect("toy kinds");
-    register_kinds(path, kinds, &mut reg).expect("no duplicates");
-    reg
+    common::registry(&TABLE, "flush", "libflush.so", || {
+        vec![kind::<Hold>(), kind::<HoldDerived>(), sink::<DropDerived>()]
+    })
 }
 
 /// A fresh directory for one test's files.

@@ -5,6 +5,8 @@
 //! counted and its panics handled by the restart policy. Built libraries are run in the
 //! workspace's tests/plugins.rs.
 
+mod common;
+
 use std::collections::HashMap;
 use std::path::Path;
 use std::sync::{Mutex, OnceLock};
@@ -12,10 +14,10 @@ use std::time::Duration;
 
 use serde::Deserialize;
 use skinflow_core::graph::SourceFile;
-use skinflow_core::{GraphSpec, Message, Registry, Role, RunOptions, RunReport};
+use skinflow_core::{GraphSpec, Registry, Role, RunOptions, RunReport};
 use skinflow_plugin_sdk::export::{KindEntry, Table, entry, sink, source};
-use skinflow_plugin_sdk::host::{Codec, Codecs, Decode, read_table, register_kinds};
-use skinflow_plugin_sdk::{ColumnBuf, Columns, KindSpec, Outputs, PluginSink, PluginSource, Poll, SourceCtx};
+use skinflow_plugin_sdk::host::{Codecs, read_table};
+use skinflow_plugin_sdk::{Columns, KindSpec, Outputs, PluginSink, PluginSource, Poll, SourceCtx};
 
 /// What the test kinds saw, per `tag` (tests run in parallel, each with its own tag).
 #[derive(Default, Debug, Clone)]
@@ -141,34 +143,13 @@ impl PluginSink for Record {
 
 fn codecs() -> Codecs {
     let mut c = Codecs::new();
-    c.register("derived", || Box::new(Derived));
+    c.register("derived", || Box::new(common::Derived));
     c
-}
-
-/// A payload only derivable from inputs (like `contacts`): no source may emit it.
-struct Derived;
-
-impl Codec for Derived {
-    fn encode(&mut self, _: &Message, _: &mut ColumnBuf) -> Result<(), String> {
-        Ok(())
-    }
-
-    fn decode(&mut self, _: &Columns<'_>, _: &Decode<'_>) -> Result<Message, String> {
-        Err("needs its input".into())
-    }
 }
 
 fn registry() -> Registry {
     static TABLE: OnceLock<Table> = OnceLock::new();
-    let table = entry(&TABLE, "roles", "0", || vec![source::<Count>(), sink::<Record>()]);
-    // SAFETY: `entry` returned a pointer to the static table above (non-null: it did not panic).
-    let table = unsafe { &*table };
-    let path = Path::new("libroles.so");
-    let kinds = read_table(path, table, &codecs()).expect("valid table");
-    let mut reg = Registry::new();
-    skinflow_core::toy::register(&mut reg).expect("toy kinds");
-    register_kinds(path, kinds, &mut reg).expect("no duplicates");
-    reg
+    common::registry(&TABLE, "roles", "libroles.so", || vec![source::<Count>(), sink::<Record>()])
 }
 
 /// t-count -> scale (x10, built-in) -> t-record.

@@ -87,6 +87,9 @@ pub enum RecordError {
     /// A stream that a caller needs is absent from the file.
     #[error("{}: {path}: stream is required here but absent", file.display())]
     MissingStream { file: PathBuf, path: String },
+    /// `repair` cannot give a copy that the reader accepts (or was given its input as output).
+    #[error("{}: cannot be repaired: {reason}", file.display())]
+    NotRepairable { file: PathBuf, reason: String },
     /// A file system operation failed (file not found, listing rotated parts).
     #[error("{}: {source}", path.display())]
     Io {

@@ -63,8 +63,8 @@ pub struct RepairReport {
 /// `output` unless `overwrite`, and an `output` that is the input.
 pub fn repair(input: &Path, output: &Path, overwrite: bool) -> Result<RepairReport, RecordError> {
     if same_file(input, output) {
-        let problem = "the output is the input file; repair writes a new file and never modifies its input";
-        return Err(RecordError::InvalidOption { name: "out", problem: problem.into() });
+        let reason = "the output is the input file; repair writes a new file and never modifies its input";
+        return Err(RecordError::NotRepairable { file: input.to_path_buf(), reason: reason.into() });
     }
     let (src, swmr_mark) = open_file_marked(input)?;
     check_format(&src, input)?;
@@ -111,8 +111,7 @@ fn still_refused(input: &Path, cuts: &[TableCut], e: RecordError) -> RecordError
         let tables: Vec<String> = cuts.iter().map(|c| format!("{} to {} rows", c.table, c.rows_kept)).collect();
         format!("after cutting {}", tables.join(", "))
     };
-    let problem = format!("cannot be repaired: {cut}, it is still refused ({e})");
-    RecordError::hdf5(input, "/", hdf5::Error::from(problem))
+    RecordError::NotRepairable { file: input.to_path_buf(), reason: format!("{cut}, it is still refused ({e})") }
 }
 
 /// Copies the root attributes and objects of `src` into `dst` (open under the hidden name

@@ -125,9 +125,11 @@ enum Cmd {
         #[arg(long)]
         overwrite: bool,
     },
-    /// Fit the force calibration from a single-contact recording with ground truth.
+    /// Fit the force calibration from single-contact recordings with ground truth (several are
+    /// pooled, each reconstructed against its own no-load reference).
     Calibrate {
-        recording: PathBuf,
+        #[arg(required = true, value_name = "RECORDING")]
+        recordings: Vec<PathBuf>,
         #[arg(long)]
         out: PathBuf,
         #[command(flatten)]
@@ -212,8 +214,8 @@ fn dispatch(cmd: Cmd) -> Result<ExitCode> {
         Cmd::Repair { recording, out, overwrite } => {
             cmd::repair::run(&recording, &out, overwrite).map(|()| ExitCode::SUCCESS)
         }
-        Cmd::Calibrate { recording, out, fit, pipeline } => {
-            cmd::calibrate::run(&recording, &out, &fit.fit, &pipeline).map(|()| ExitCode::SUCCESS)
+        Cmd::Calibrate { recordings, out, fit, pipeline } => {
+            cmd::calibrate::run(&recordings, &out, &fit.fit, &pipeline).map(|()| ExitCode::SUCCESS)
         }
         Cmd::Eval { recording, calib, json, plots, contacts_csv, pipeline } => {
             cmd::eval::run(&recording, &calib, json.as_deref(), plots.as_deref(), contacts_csv.as_deref(), &pipeline)

@@ -106,6 +106,53 @@ fn calibrate_then_eval_writes_the_contract_json() {
     assert!(by_pressure > 0, "{err}");
 }
 
+/// `calibrate A.h5 B.h5` pools the two recordings' samples (each against its own no-load
+/// reference): as many samples as the two alone, both recordings in the provenance in the order
+/// given; the same recording twice is refused, since its samples would count double.
+#[test]
+fn calibrate_pools_several_recordings_and_names_each_in_the_provenance() {
+    let d = workdir("pooled");
+    simulate(&d, "tiny-calibration.toml", "a.h5");
+    ok(&skinflow(
+        &d,
+        &["simulate", fixture("tiny-calibration.toml").to_str().unwrap(), "--out", "b.h5", "--seed", "4"],
+    ));
+    // "samples: N frames -> M used ..." of a calibrate run.
+    let frames = |out: &str| -> u64 {
+        let rest = out.split("samples: ").nth(1).unwrap_or_else(|| panic!("no samples line:\n{out}"));
+        rest.split(' ').next().unwrap().parse().unwrap()
+    };
+    let a = frames(&ok(&skinflow(&d, &["calibrate", "a.h5", "--out", "a.toml"])));
+    let b = frames(&ok(&skinflow(&d, &["calibrate", "b.h5", "--out", "b.toml"])));
+    let run = skinflow(&d, &["calibrate", "a.h5", "b.h5", "--out", "ab.toml"]);
+    let both = frames(&ok(&run));
+    assert!(a > 0 && b > 0);
+    assert_eq!(both, a + b, "pooled samples are the two recordings' samples");
+    let err = stderr(&run);
+    assert!(err.contains(&format!("a.h5: {a} calibration samples")), "{err}");
+    assert!(err.contains(&format!("b.h5: {b} calibration samples")), "{err}");
+    let text = std::fs::read_to_string(d.join("ab.toml")).unwrap();
+    let cal: toml::Value = toml::from_str(&text).unwrap();
+    let prov = &cal["provenance"];
+    assert_eq!(prov["recording"].as_str(), Some("a.h5"), "{text}");
+    let more = prov["more_recordings"].as_array().unwrap();
+    assert_eq!(more.len(), 1, "{text}");
+    assert_eq!(more[0]["recording"].as_str(), Some("b.h5"));
+    assert!(more[0]["recording_hash"].as_str().unwrap().starts_with("sha256:"));
+    assert_ne!(more[0]["recording_hash"], prov["recording_hash"]);
+    // One recording writes no list.
+    assert!(!std::fs::read_to_string(d.join("a.toml")).unwrap().contains("more_recordings"));
+    // The same recording twice, under another name too, is refused before any work.
+    std::fs::copy(d.join("a.h5"), d.join("a-copy.h5")).unwrap();
+    let twice = skinflow(&d, &["calibrate", "a.h5", "a-copy.h5", "--out", "twice.toml"]);
+    let err = stderr(&twice);
+    assert!(!twice.status.success() && err.contains("a-copy.h5: the same recording as a.h5"), "{err}");
+    assert!(!d.join("twice.toml").exists());
+    // An output naming any of the inputs is refused.
+    let clobber = skinflow(&d, &["calibrate", "a.h5", "b.h5", "--out", "b.h5"]);
+    assert!(!clobber.status.success() && stderr(&clobber).contains("is the recording b.h5"), "{}", stderr(&clobber));
+}
+
 /// Without /pressure, or with times out of order, calibrate and eval refuse up front naming the
 /// file and the dataset (instead of all-zero forces or "no loaded single-contact frame").
 #[test]

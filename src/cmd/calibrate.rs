@@ -1,12 +1,15 @@
-//! `skinflow calibrate REC.h5 --out CALIB.toml`: fits the force calibration (paper section III)
-//! from a single-contact recording with ground truth, and prints the paper's Table II.
+//! `skinflow calibrate REC.h5 [MORE.h5 ...] --out CALIB.toml`: fits the force calibration
+//! (paper section III) from single-contact recordings with ground truth, and prints the paper's
+//! Table II. Several recordings (sessions of one skin, e.g. a grid recorded in two parts, or a
+//! repaired recording and the one that finished the grid) are pooled: each is reconstructed
+//! against its own no-load reference, and their samples are fitted together.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use anyhow::{Context as _, Result, bail};
 use sha2::{Digest, Sha256};
 use skinflow_contact::CalibSample;
-use skinflow_contact::correct::{CalibParams, Calibrated, FFit, Provenance, calibrate};
+use skinflow_contact::correct::{CalibParams, Calibrated, FFit, Provenance, RecordingRef, calibrate};
 use skinflow_nodes::payload::Contacts;
 
 use super::pipeline::{PipelineArgs, Settled};
@@ -78,12 +81,48 @@ pub fn fit_params(text: &str) -> Result<CalibParams> {
 
 /// Runs the pipeline over a calibration recording and fits the calibration.
 pub fn fit(recording: &Path, params: &CalibParams, args: &PipelineArgs) -> Result<Calibrated> {
-    let (samples, provenance) = collect(recording, args)?;
+    let (samples, provenance) = collect(&[recording.to_path_buf()], args)?;
     calibrate(&samples, params, provenance).map_err(anyhow::Error::msg)
 }
 
-/// Runs the pipeline over a calibration recording: its calibration samples and provenance.
-pub fn collect(recording: &Path, args: &PipelineArgs) -> Result<(Vec<CalibSample>, Provenance)> {
+/// Runs the pipeline over each calibration recording (each with its own no-load reference
+/// and tare, as recorded) and pools their samples: the samples in the order given, and the
+/// provenance naming every recording. Refuses a recording that gives no sample and the same
+/// recording given twice (its samples would count double), naming the files.
+pub fn collect(recordings: &[PathBuf], args: &PipelineArgs) -> Result<(Vec<CalibSample>, Provenance)> {
+    let mut refs: Vec<RecordingRef> = Vec::with_capacity(recordings.len());
+    for recording in recordings {
+        let hash = content_hash(recording)?;
+        if let Some(same) = refs.iter().find(|r| r.recording_hash == hash) {
+            bail!(
+                "{}: the same recording as {} (both {hash}); give each recording once, or its samples count double",
+                recording.display(),
+                same.recording
+            );
+        }
+        refs.push(RecordingRef { recording: recording.display().to_string(), recording_hash: hash });
+    }
+    let mut all = Vec::new();
+    for recording in recordings {
+        let samples = collect_one(recording, args)?;
+        if recordings.len() > 1 {
+            eprintln!("{}: {} calibration samples", recording.display(), samples.len());
+        }
+        all.extend(samples);
+    }
+    let mut refs = refs.into_iter();
+    let first = refs.next().ok_or_else(|| anyhow::anyhow!("no calibration recording given"))?;
+    let provenance = Provenance {
+        recording: first.recording,
+        recording_hash: first.recording_hash,
+        software_version: concat!("skinflow ", env!("CARGO_PKG_VERSION")).to_owned(),
+        more_recordings: refs.collect(),
+    };
+    Ok((all, provenance))
+}
+
+/// The calibration samples of one recording (see [`samples`]); refused when there are none.
+fn collect_one(recording: &Path, args: &PipelineArgs) -> Result<Vec<CalibSample>> {
     let (rows, settled) = args.run(recording, |_| ())?;
     let (samples, without_pressure) = samples(&rows, &settled);
     if without_pressure > 0 {
@@ -98,18 +137,15 @@ pub fn collect(recording: &Path, args: &PipelineArgs) -> Result<(Vec<CalibSample
     if samples.is_empty() {
         bail!("{}: no loaded single-contact frame with a detected contact to calibrate from", recording.display());
     }
-    let provenance = Provenance {
-        recording: recording.display().to_string(),
-        recording_hash: content_hash(recording)?,
-        software_version: concat!("skinflow ", env!("CARGO_PKG_VERSION")).to_owned(),
-    };
-    Ok((samples, provenance))
+    Ok(samples)
 }
 
-pub fn run(recording: &Path, out: &Path, fit_toml: &str, args: &PipelineArgs) -> Result<()> {
-    super::paths::check_outputs(&[("recording", recording)], &[("--out", out)])?;
+pub fn run(recordings: &[PathBuf], out: &Path, fit_toml: &str, args: &PipelineArgs) -> Result<()> {
+    let inputs: Vec<(&str, &Path)> = recordings.iter().map(|r| ("recording", r.as_path())).collect();
+    super::paths::check_outputs(&inputs, &[("--out", out)])?;
     let params = fit_params(fit_toml)?;
-    let fitted = fit(recording, &params, args)?;
+    let (samples, provenance) = collect(recordings, args)?;
+    let fitted = calibrate(&samples, &params, provenance).map_err(anyhow::Error::msg)?;
     for w in &fitted.warnings {
         eprintln!("warning: {w}");
     }

@@ -70,7 +70,7 @@ pub fn run(scenes_dir: &Path, out: &Path, seed: u64, fit_toml: &str, args: &Pipe
         super::simulate::run(&scenes_dir.join(format!("{s}.toml")), &rec(s), seed, true)?;
     }
     let calib_path = out.join("calib.toml");
-    let (samples, provenance) = super::calibrate::collect(&rec("calibration"), args)?;
+    let (samples, provenance) = super::calibrate::collect(&[rec("calibration")], args)?;
     let fitted = calibrate(&samples, &params, provenance.clone()).map_err(anyhow::Error::msg)?;
     fitted.calibration.write(&calib_path).map_err(anyhow::Error::msg)?;
     let cal = &fitted.calibration;

@@ -5,7 +5,7 @@ mod synth;
 use skinflow_contact::correct::average_holds;
 use skinflow_contact::correct::calibrate::{CalibParams, CalibSample, CalibWarning, calibrate};
 use skinflow_contact::correct::calibration::{
-    Calibration, CvGroups, FFit, FORMAT_VERSION, OLDEST_FORMAT_VERSION, Provenance,
+    Calibration, CvGroups, FFit, FORMAT_VERSION, OLDEST_FORMAT_VERSION, Provenance, RecordingRef,
 };
 use skinflow_contact::correct::field::{NPHI, Region, phi};
 use skinflow_contact::correct::fit::{CvSearch, RidgeProblem, cross_validate, fold_of};
@@ -16,6 +16,7 @@ fn provenance() -> Provenance {
         recording: "synthetic.h5".into(),
         recording_hash: "sha256:0000".into(),
         software_version: "0.1.0".into(),
+        more_recordings: Vec::new(),
     }
 }
 
@@ -323,6 +324,20 @@ fn calibration_file_round_trips_and_rejects_unknown_keys() {
     assert_eq!(old.training.cv_groups, CvGroups::Sample);
     assert_eq!(old.training.holdout_rmse_n, cal.training.holdout_rmse_n);
     assert_eq!(old.format_version, FORMAT_VERSION);
+    // Version 5 files (one recording only) load with no further recordings.
+    let v5 = text.replacen(&format!("format_version = {FORMAT_VERSION}"), "format_version = 5", 1);
+    let old = Calibration::from_toml_str(&v5, "v5.toml").unwrap();
+    assert!(old.provenance.more_recordings.is_empty() && old.provenance == cal.provenance);
+    assert!(!text.contains("more_recordings"), "not written for one recording:\n{text}");
+    // Several recordings: the further ones are written in order and read back.
+    let mut pooled = cal.clone();
+    pooled.provenance.more_recordings = vec![
+        RecordingRef { recording: "b.h5".into(), recording_hash: "sha256:bbbb".into() },
+        RecordingRef { recording: "c.h5".into(), recording_hash: "sha256:cccc".into() },
+    ];
+    let pooled_text = pooled.to_toml_string().unwrap();
+    assert!(pooled_text.find("\"b.h5\"").unwrap() < pooled_text.find("\"c.h5\"").unwrap(), "{pooled_text}");
+    assert_eq!(Calibration::from_toml_str(&pooled_text, "<test>").unwrap(), pooled);
     // Another format version is named as such (with what to do), not reported as a parse error.
     for v in ["2", "99"] {
         let wrong = text.replacen(&format!("format_version = {FORMAT_VERSION}"), &format!("format_version = {v}"), 1);

@@ -18,21 +18,35 @@ use std::path::Path;
 /// Value of the `format` key.
 pub const FORMAT: &str = "skinflow-calibration";
 /// Current `format_version`.
-pub const FORMAT_VERSION: u32 = 5;
+pub const FORMAT_VERSION: u32 = 6;
 /// Oldest `format_version` still read (version 3 lacks the location-held-out figures, versions
-/// 3 and 4 the `cv_groups` choice).
+/// 3 and 4 the `cv_groups` choice, versions 3 to 5 `provenance.more_recordings`).
 pub const OLDEST_FORMAT_VERSION: u32 = 3;
 
 /// Where a calibration came from (all given by the caller).
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Provenance {
-    /// Path of the recording the samples came from.
+    /// Path of the recording the samples came from (the first, when there were several).
     pub recording: String,
     /// Content hash of that recording (e.g. "sha256:...").
     pub recording_hash: String,
     /// Version of the software that fitted it.
     pub software_version: String,
+    /// The further recordings whose samples were pooled with the first, in the order given
+    /// (`skinflow calibrate A.h5 B.h5 ...`); empty, and not written, for one recording.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub more_recordings: Vec<RecordingRef>,
+}
+
+/// One recording of a calibration's provenance.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RecordingRef {
+    /// Its path as given.
+    pub recording: String,
+    /// Content hash of its bytes (e.g. "sha256:...").
+    pub recording_hash: String,
 }
 
 /// How the f of the location-aware model is fitted.

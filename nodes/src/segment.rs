@@ -213,16 +213,18 @@ impl Processor for Segmenter {
             self.math = Some((grid, seg, buf));
         }
         let (_, seg, buf) = self.math.as_mut().expect("set above");
-        seg.segment_into(&image.pixels, buf)
-            .map_err(|e| NodeError::Input { port: "image".into(), problem: e.to_string() })?;
-        if self.params.ghost_share > 0.0 || self.params.deblend {
-            match &image.spread {
-                Some(spread) => {
-                    let o = seg.correct_crosstalk(&image.pixels, spread.0.as_ref(), buf);
-                    self.ghosts += o.ghosts as u64;
-                    self.unsolved += u64::from(!o.solved);
-                }
-                None if buf.len() > 1 => {
+        let input_error =
+            |e: skinflow_contact::SegmentError| NodeError::Input { port: "image".into(), problem: e.to_string() };
+        let crosstalk = self.params.ghost_share > 0.0 || self.params.deblend;
+        match (&image.spread, crosstalk) {
+            (Some(spread), true) => {
+                let o = seg.segment_with_spread(&image.pixels, spread.0.as_ref(), buf).map_err(input_error)?;
+                self.ghosts += o.ghosts as u64;
+                self.unsolved += u64::from(!o.solved);
+            }
+            _ => {
+                seg.segment_into(&image.pixels, buf).map_err(input_error)?;
+                if crosstalk && buf.len() > 1 {
                     if self.no_spread == 0 {
                         tracing::warn!(
                             node = ctx.id(),
@@ -231,7 +233,6 @@ impl Processor for Segmenter {
                     }
                     self.no_spread += 1;
                 }
-                None => {}
             }
         }
         self.dropped_components += buf.dropped as u64;

@@ -57,15 +57,9 @@ fn bench(c: &mut Criterion) {
     let spread = Eit(recon.point_spread(5.0).unwrap());
     for (name, deblend) in [("crosstalk_real_3contacts", false), ("crosstalk_real_3contacts_deblend", true)] {
         let mut s = Segmenter::new(grid, &SegmentParams { deblend, ..SegmentParams::with_floor(2e-4) }).unwrap();
-        s.segment_into(&real, &mut contacts).unwrap();
-        let o = s.correct_crosstalk(&real, &spread, &mut contacts);
+        let o = s.segment_with_spread(&real, &spread, &mut contacts).unwrap();
         assert!(o.solved && o.ghosts == 0 && contacts.len() == 3, "{name}: {o:?}");
-        c.bench_function(name, |b| {
-            b.iter(|| {
-                s.segment_into(black_box(&real), &mut contacts).unwrap();
-                s.correct_crosstalk(black_box(&real), &spread, &mut contacts)
-            })
-        });
+        c.bench_function(name, |b| b.iter(|| s.segment_with_spread(black_box(&real), &spread, &mut contacts).unwrap()));
     }
     // The paper's plain connected components (no saddle separation), for comparison.
     let paper = SegmentParams { separation: 0.0, weak_peak: 0.0, ..SegmentParams::with_floor(synth::FLOOR) };

@@ -53,13 +53,11 @@ fn segment_split_and_correct_do_not_allocate_per_frame() {
     let mut forces = [ForceEstimate::default(); 8];
     // Warm-up pass (nothing lazily allocated should remain after it; the crosstalk pass sizes
     // its scratch on its first frame with two or more contacts).
-    seg.segment_into(&images[1], &mut contacts).unwrap();
-    assert!(seg.correct_crosstalk(&images[1], &spread, &mut contacts).solved);
+    assert!(seg.segment_with_spread(&images[1], &spread, &mut contacts).unwrap().solved);
     let before = CountingAlloc::total();
     for _ in 0..3 {
         for img in &images {
-            seg.segment_into(img, &mut contacts).unwrap();
-            seg.correct_crosstalk(img, &spread, &mut contacts);
+            seg.segment_with_spread(img, &spread, &mut contacts).unwrap();
             let n = contacts.len();
             Splitter::Proportional.split_into(1.2, contacts.as_slice(), &mut shares[..n]);
             for s in &strategies {

@@ -56,7 +56,7 @@ fn run(img: &[f64], p: &SegmentParams) -> (Vec<Contact>, Vec<Contact>, usize) {
     let mut out = seg.new_contacts();
     seg.segment_into(img, &mut out).unwrap();
     let before = out.as_slice().to_vec();
-    let o = seg.correct_crosstalk(img, &Mirrored, &mut out);
+    let o = seg.segment_with_spread(img, &Mirrored, &mut out).unwrap();
     assert!(o.solved);
     assert_eq!(o.ghosts, out.ghosts);
     (before, out.as_slice().to_vec(), o.ghosts)
@@ -152,10 +152,39 @@ fn a_singular_system_leaves_the_contacts_as_segmented() {
     seg.segment_into(&img, &mut out).unwrap();
     let before = out.as_slice().to_vec();
     assert_eq!(before.len(), 2);
-    let o = seg.correct_crosstalk(&img, &Blind, &mut out);
+    let o = seg.segment_with_spread(&img, &Blind, &mut out).unwrap();
     assert!(!o.solved);
     assert_eq!(o.ghosts, 0);
     assert_eq!(out.as_slice(), &before[..]);
+}
+
+/// Under `max_contacts`, a sidelobe never takes a press's place: the regions are held through
+/// the sidelobe pass and the weakest dropped after it. Here a press's sidelobe has a larger sum
+/// than a second, light press on the diagonal (its own mirror); with room for two contacts,
+/// cutting before the pass kept the press and its sidelobe and lost the light press.
+#[test]
+fn a_sidelobe_does_not_take_a_press_place_under_max_contacts() {
+    let img = image(&[(-20.0, -44.0, 1.0), (30.0, 30.0, 0.18)]);
+    let p = SegmentParams { max_contacts: 2, ..params(0.5, false) };
+    let mut seg = Segmenter::new(grid(), &p).unwrap();
+    let mut out = seg.new_contacts();
+    // Without the pass: the press and its sidelobe are the two largest sums.
+    seg.segment_into(&img, &mut out).unwrap();
+    assert_eq!((out.len(), out.dropped), (2, 1), "{:?}", out.as_slice());
+    assert!(out.as_slice().iter().any(|c| near(c, -44.0, -20.0)), "the sidelobe outranks the light press");
+    assert!(!out.as_slice().iter().any(|c| near(c, 30.0, 30.0)));
+    // With it: the sidelobe is removed, and both presses are reported, nothing dropped.
+    let o = seg.segment_with_spread(&img, &Mirrored, &mut out).unwrap();
+    assert_eq!((o.ghosts, out.len(), out.dropped, out.ghosts), (1, 2, 0, 1), "{:?}", out.as_slice());
+    assert!(near(&out.as_slice()[0], -20.0, -44.0) || near(&out.as_slice()[1], -20.0, -44.0));
+    assert!(out.as_slice().iter().any(|c| near(c, 30.0, 30.0)), "{:?}", out.as_slice());
+    // With room for one, the light press is dropped after the pass, and counted.
+    let p1 = SegmentParams { max_contacts: 1, ..p };
+    let mut seg = Segmenter::new(grid(), &p1).unwrap();
+    let mut out = seg.new_contacts();
+    seg.segment_with_spread(&img, &Mirrored, &mut out).unwrap();
+    assert_eq!((out.len(), out.dropped, out.ghosts), (1, 1, 1), "{:?}", out.as_slice());
+    assert!(near(&out.as_slice()[0], -20.0, -44.0));
 }
 
 #[test]

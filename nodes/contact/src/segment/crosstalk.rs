@@ -101,7 +101,7 @@ impl Crosstalk {
             return outcome;
         }
         let m = spread.data_len();
-        self.reserve(labels, out.max_len().max(k), m);
+        self.reserve(labels, out.hold_len().max(k), m);
         for (i, c) in out.items.iter().enumerate() {
             self.slot[c.label as usize] = i as u32;
         }

@@ -55,7 +55,7 @@ pub struct SegmentParams {
     /// cut of the paper, under which a light press beside a heavy one vanishes.
     #[serde(default = "default_weak_peak")]
     pub weak_peak: f64,
-    /// Sidelobes: with the reconstruction's point spread ([`Segmenter::correct_crosstalk`]), a
+    /// Sidelobes: with the reconstruction's point spread ([`Segmenter::segment_with_spread`]), a
     /// region whose own share of its conductivity sum is below this is another contact's
     /// sidelobe and is removed ([`crosstalk`]); 0 keeps every region (the paper).
     #[serde(default = "default_ghost_share")]
@@ -184,31 +184,41 @@ pub struct Contact {
     pub label: u32,
 }
 
+/// Regions held per reported contact while the sidelobe pass runs
+/// ([`Segmenter::segment_with_spread`]): room for every reported contact to bring one sidelobe,
+/// so a sidelobe never takes a press's place under `max_contacts`.
+const HOLD_PER_CONTACT: usize = 2;
+
 /// Fixed-capacity per-frame output of the segmenter.
 #[derive(Debug, Clone)]
 pub struct Contacts {
     items: Vec<Contact>,
-    /// Most contacts kept (the Vec's capacity is not the limit: a clone's capacity is its
+    /// Most contacts reported (the Vec's capacity is not the limit: a clone's capacity is its
     /// length).
     max: usize,
+    /// Most regions held before the sidelobe pass (`HOLD_PER_CONTACT * max`).
+    hold: usize,
     /// Otsu threshold on the normalized decrease, `None` when no threshold was computed.
     pub threshold_norm: Option<f64>,
     /// The same threshold as a decrease in image units, `None` likewise.
     pub threshold: Option<f64>,
     /// Largest decrease in the image (image units; <= 0 when nothing decreased).
     pub peak_decrease: f64,
-    /// Components found beyond `max_contacts` and not reported.
+    /// Regions found beyond `max_contacts` and not reported (the weakest sums). With the
+    /// sidelobe pass, counted after it: a removed sidelobe frees its place for a press.
     pub dropped: usize,
-    /// Regions removed as other contacts' sidelobes ([`Segmenter::correct_crosstalk`]).
+    /// Regions removed as other contacts' sidelobes ([`Segmenter::segment_with_spread`]).
     pub ghosts: usize,
 }
 
 impl Contacts {
     /// Empty output able to hold `capacity` contacts without reallocating.
     pub fn with_capacity(capacity: usize) -> Self {
+        let hold = HOLD_PER_CONTACT * capacity;
         Self {
-            items: Vec::with_capacity(capacity),
+            items: Vec::with_capacity(hold),
             max: capacity,
+            hold,
             threshold_norm: None,
             threshold: None,
             peak_decrease: 0.0,
@@ -225,6 +235,11 @@ impl Contacts {
     /// Most contacts this output keeps (`max_contacts`); more are counted in `dropped`.
     pub fn max_len(&self) -> usize {
         self.max
+    }
+
+    /// Most regions held through the sidelobe pass before the cut to `max_contacts`.
+    pub(crate) fn hold_len(&self) -> usize {
+        self.hold.max(self.max)
     }
 
     /// Number of contacts.
@@ -246,9 +261,9 @@ impl Contacts {
         self.ghosts = 0;
     }
 
-    /// Adds a contact; when full, keeps the largest sums and counts the rest as dropped.
-    fn offer(&mut self, c: Contact) {
-        if self.items.len() < self.max {
+    /// Adds a contact; with `limit` held, keeps the largest sums and counts the rest as dropped.
+    fn offer(&mut self, c: Contact, limit: usize) {
+        if self.items.len() < limit {
             self.items.push(c);
             return;
         }
@@ -258,6 +273,15 @@ impl Contacts {
             && self.items[i].sum < c.sum
         {
             self.items[i] = c;
+        }
+    }
+
+    /// Drops the weakest sums beyond `max_contacts` (counted), keeping the others' order.
+    fn cap(&mut self) {
+        while self.items.len() > self.max {
+            let weakest = self.items.iter().enumerate().min_by(|a, b| a.1.sum.total_cmp(&b.1.sum)).map(|(i, _)| i);
+            self.items.remove(weakest.expect("more than max >= 1 items"));
+            self.dropped += 1;
         }
     }
 }
@@ -354,31 +378,46 @@ impl Segmenter {
         &self.labels
     }
 
-    /// Crosstalk pass over the contacts [`Segmenter::segment_into`] just found in `image`
-    /// (same image, same `out`): removes sidelobes and, with `deblend`, the other contacts'
-    /// spill from each sum ([`crosstalk`]). Does nothing with fewer than two contacts or with
-    /// `ghost_share = 0` and `deblend = false`. Allocates only on its first call with a
-    /// given data length.
-    pub fn correct_crosstalk(
+    /// Segments one image as [`Segmenter::segment_into`] does, then runs the crosstalk pass with
+    /// the reconstruction's point spread ([`crosstalk`]): removes sidelobes and, with `deblend`,
+    /// the other contacts' spill from each sum. Up to twice `max_contacts` regions are held
+    /// through the pass and the weakest beyond `max_contacts` dropped after it, so a sidelobe
+    /// never takes a press's place. With `ghost_share = 0` and `deblend = false` it is
+    /// `segment_into`. Allocates only on its first call with a given data length.
+    pub fn segment_with_spread(
         &mut self,
         image: &[f64],
         spread: &dyn PointSpread,
         out: &mut Contacts,
-    ) -> CrosstalkOutcome {
+    ) -> Result<CrosstalkOutcome, SegmentError> {
+        if self.params.ghost_share <= 0.0 && !self.params.deblend {
+            self.segment_into(image, out)?;
+            return Ok(CrosstalkOutcome { ghosts: 0, solved: true });
+        }
+        self.segment_held(image, out, out.hold_len())?;
         let weak = self.params.weak_peak > 0.0;
         let (labels, cuts) = (&self.labels, &self.region_cut);
-        // The ROI of a contact, as `segment_into` summed it: its region's pixels, above the
+        // The ROI of a contact, as `segment_held` summed it: its region's pixels, above the
         // region's own cut when weak contacts are on.
         let in_roi = |p: usize| {
             let l = labels[p];
             (l != 0 && (!weak || -image[p] >= cuts[l as usize])).then_some(l)
         };
-        self.crosstalk.apply(&self.params, labels.len() + 1, image.len().min(labels.len()), in_roi, spread, out)
+        let outcome =
+            self.crosstalk.apply(&self.params, labels.len() + 1, image.len().min(labels.len()), in_roi, spread, out);
+        out.cap();
+        Ok(outcome)
     }
 
     /// Segments one image (row-major, row 0 = bottom, negative = conductivity decrease) into
-    /// `out`. Never allocates if `out` came from [`Segmenter::new_contacts`].
+    /// `out`, at most `max_contacts` (the largest sums; the rest counted in `dropped`). Never
+    /// allocates if `out` came from [`Segmenter::new_contacts`].
     pub fn segment_into(&mut self, image: &[f64], out: &mut Contacts) -> Result<(), SegmentError> {
+        self.segment_held(image, out, out.max)
+    }
+
+    /// [`Segmenter::segment_into`] holding up to `limit` contacts.
+    fn segment_held(&mut self, image: &[f64], out: &mut Contacts, limit: usize) -> Result<(), SegmentError> {
         let g = self.grid;
         if image.len() != g.len() {
             return Err(SegmentError::ImageSize {
@@ -470,7 +509,7 @@ impl Segmenter {
             // Weights are > 0 in practice (every component keeps pixels >= floor > 0);
             // the geometric centroid is the guard against an all-zero component.
             let (x_mm, y_mm) = if a.w > 0.0 { (a.wx / a.w, a.wy / a.w) } else { (a.x / n, a.y / n) };
-            out.offer(Contact { x_mm, y_mm, sum: a.w, area_mm2: n * pixel_area, peak: a.peak, label });
+            out.offer(Contact { x_mm, y_mm, sum: a.w, area_mm2: n * pixel_area, peak: a.peak, label }, limit);
         };
         if self.params.separation > 0.0 {
             let k = self.separator.run(

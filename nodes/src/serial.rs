@@ -10,6 +10,15 @@
 //! `diameter_mm`), or an empty row below `contact_threshold_n`; the control command
 //! `at X_MM Y_MM [DIAMETER_MM]` moves that position while the graph runs.
 //!
+//! Hot swap: the load cell hands its indenter position over to its replacement. When the
+//! replacement's params give the same position (`x_mm`, `y_mm`, `diameter_mm`) as the replaced
+//! instance's params did, it goes on at the position the last `at` set (another threshold, say,
+//! does not send a calibration session's truth back to the params' position); when they give
+//! another position, the new params win. Either way it is logged. The EIT and pressure sources
+//! hand nothing over. The replacement opens its port while the replaced instance still holds it
+//! and ports are opened exclusively, so a swap that keeps the same port is refused at the
+//! replacement's start (the running instance goes on unchanged).
+//!
 //! ```toml
 //! params = { port = "/dev/ttyACM0", measurements = 120, frame_period_s = 0.769 }
 //! ```
@@ -20,8 +29,8 @@ use std::time::{Duration, Instant};
 use serde::Deserialize;
 use skinflow_core::params::{non_negative, positive};
 use skinflow_core::{
-    Context, Header, KindInfo, Message, NodeError, NodeImpl, NodeParams, Outputs, ParamDoc, ParamError, PortSpec,
-    Recycler, Registry, Role, Source, SourcePoll, typed,
+    Context, Header, KindInfo, Message, NodeError, NodeImpl, NodeParams, NodeState, Outputs, ParamDoc, ParamError,
+    PortSpec, Recycler, Registry, Role, Source, SourcePoll, StateRefused, typed,
 };
 use skinflow_serial::{
     Decode, EitDecoder, EitReader, ForceDecoder, LoadcellReader, PressureDecoder, PressureReader, ReaderConfig,
@@ -251,10 +260,43 @@ impl Source for SerialPressure {
     }
 }
 
+/// The rig's indenter: where (and how wide) a load-cell reading is truth.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Position {
+    x_mm: f64,
+    y_mm: f64,
+    diameter_mm: f64,
+}
+
+impl Position {
+    fn of(p: &PortParams) -> Position {
+        Position { x_mm: p.x_mm, y_mm: p.y_mm, diameter_mm: p.diameter_mm }
+    }
+}
+
+/// What a load cell hands over in a hot swap: where the indenter is now (the last `at`) and
+/// where its params put it, so the replacement can tell whether its own params move it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct LoadcellState {
+    current: Position,
+    from_params: Position,
+}
+
 pub struct SerialLoadcell {
     p: PortParams,
     reader: Option<LoadcellReader>,
     seq: u64,
+    /// The position the params give.
+    from_params: Position,
+    /// The position readings are truth at: the params', then the last `at`'s.
+    at: Position,
+}
+
+impl SerialLoadcell {
+    fn new(p: PortParams) -> SerialLoadcell {
+        let from_params = Position::of(&p);
+        SerialLoadcell { p, reader: None, seq: 0, from_params, at: from_params }
+    }
 }
 
 impl Source for SerialLoadcell {
@@ -267,8 +309,9 @@ impl Source for SerialLoadcell {
         let Some(r) = next(&mut self.reader, &self.p.port)? else { return Ok(SourcePoll::Idle) };
         self.seq += 1;
         let f = r.record.force_n;
+        let Position { x_mm, y_mm, diameter_mm } = self.at;
         let contacts = if f >= self.p.contact_threshold_n {
-            vec![TruthContact { x_mm: self.p.x_mm, y_mm: self.p.y_mm, force_n: f, diameter_mm: self.p.diameter_mm }]
+            vec![TruthContact { x_mm, y_mm, force_n: f, diameter_mm }]
         } else {
             Vec::new()
         };
@@ -287,9 +330,38 @@ impl Source for SerialLoadcell {
     /// `at X_MM Y_MM [DIAMETER_MM]`: the rig moved the indenter; readings from now on are truth
     /// at this position (and diameter). A calibration session over a grid sends one per point.
     fn control(&mut self, ctx: &mut Context, cmd: &str) -> Result<(), NodeError> {
-        let (x_mm, y_mm, diameter_mm) = parse_at(cmd, self.p.diameter_mm)?;
-        (self.p.x_mm, self.p.y_mm, self.p.diameter_mm) = (x_mm, y_mm, diameter_mm);
+        let (x_mm, y_mm, diameter_mm) = parse_at(cmd, self.at.diameter_mm)?;
+        self.at = Position { x_mm, y_mm, diameter_mm };
         tracing::info!(node = ctx.id(), x_mm, y_mm, diameter_mm, "indenter moved");
+        Ok(())
+    }
+
+    /// The indenter position now and the one the params gave.
+    fn export_state(&mut self, _ctx: &mut Context) -> Option<NodeState> {
+        Some(Box::new(LoadcellState { current: self.at, from_params: self.from_params }))
+    }
+
+    /// Goes on at the replaced instance's position unless this instance's params give another
+    /// one than the replaced instance's did (the user moved it): then the params win.
+    fn import_state(&mut self, ctx: &mut Context, state: NodeState) -> Result<(), StateRefused> {
+        let s = state.downcast::<LoadcellState>().map_err(|s| StateRefused::new(s, "not a load cell's position"))?;
+        let Position { x_mm, y_mm, diameter_mm } = s.current;
+        if s.from_params == self.from_params {
+            self.at = s.current;
+            tracing::info!(node = ctx.id(), x_mm, y_mm, diameter_mm, "indenter position taken over (hot swap)");
+        } else {
+            let Position { x_mm: params_x_mm, y_mm: params_y_mm, diameter_mm: params_diameter_mm } = self.at;
+            tracing::info!(
+                node = ctx.id(),
+                x_mm = params_x_mm,
+                y_mm = params_y_mm,
+                diameter_mm = params_diameter_mm,
+                replaced_x_mm = x_mm,
+                replaced_y_mm = y_mm,
+                replaced_diameter_mm = diameter_mm,
+                "indenter position from the new params (hot swap): they changed it, the replaced instance's is dropped"
+            );
+        }
         Ok(())
     }
 }
@@ -357,13 +429,111 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
         .param(ParamDoc::new("y_mm", "f64", "0", "indenter position"))
         .param(ParamDoc::new("diameter_mm", "f64", "15", "indenter diameter"))
         .param(ParamDoc::new("contact_threshold_n", "f64", "0.05", "below this: no contact")),
-        |p: PortParams, _| Ok(NodeImpl::Source(Box::new(SerialLoadcell { p, reader: None, seq: 0 }))),
+        |p: PortParams, _| Ok(NodeImpl::Source(Box::new(SerialLoadcell::new(p)))),
     ))
 }
 
 #[cfg(test)]
 mod tests {
-    use super::parse_at;
+    use std::path::PathBuf;
+
+    use skinflow_core::{BuildContext, Context, Mode, NodeImpl, NodeState, Params, Registry, Source};
+
+    use super::{LoadcellState, Position, parse_at, register};
+
+    /// A `kind` node with `params` (the port is never opened: no `start`).
+    fn build(kind: &str, params: &str) -> Box<dyn Source> {
+        let mut r = Registry::new();
+        register(&mut r).unwrap();
+        let params = Params::from_toml(&format!("port = \"/dev/null\"\n{params}")).unwrap();
+        let ctx = BuildContext { base_dir: PathBuf::new(), mode: Mode::Lockstep, node_id: "lc".into() };
+        match r.get(kind).unwrap().build(&params, &ctx).unwrap() {
+            NodeImpl::Source(n) => n,
+            _ => unreachable!("{kind} is a source"),
+        }
+    }
+
+    fn loadcell(params: &str) -> Box<dyn Source> {
+        build("serial_loadcell", params)
+    }
+
+    fn pos(x_mm: f64, y_mm: f64, diameter_mm: f64) -> Position {
+        Position { x_mm, y_mm, diameter_mm }
+    }
+
+    /// A load cell's exported state, as a value.
+    fn exported(n: &mut dyn Source, ctx: &mut Context) -> LoadcellState {
+        *n.export_state(ctx).expect("a load cell exports its position").downcast::<LoadcellState>().unwrap()
+    }
+
+    /// Hot swap as the engine does it: `old`'s state into `new`.
+    fn hand_over(old: &mut dyn Source, new: &mut dyn Source, ctx: &mut Context) {
+        let state = old.export_state(ctx).unwrap();
+        new.import_state(ctx, state).unwrap();
+    }
+
+    #[test]
+    fn a_swap_keeps_the_at_position_unless_the_new_params_move_it() {
+        let ctx = &mut Context::detached("lc", Mode::Lockstep);
+        let mut old = loadcell("x_mm = -10.0\ny_mm = 5.0");
+        assert_eq!(
+            exported(old.as_mut(), ctx),
+            LoadcellState { current: pos(-10.0, 5.0, 15.0), from_params: pos(-10.0, 5.0, 15.0) }
+        );
+        old.control(ctx, "at 12.5 -25 20").unwrap();
+        let at = pos(12.5, -25.0, 20.0);
+        assert_eq!(exported(old.as_mut(), ctx), LoadcellState { current: at, from_params: pos(-10.0, 5.0, 15.0) });
+
+        // Same position in the params, another threshold: the `at` position goes on.
+        let mut same = loadcell("x_mm = -10.0\ny_mm = 5.0\ndiameter_mm = 15.0\ncontact_threshold_n = 0.2");
+        hand_over(old.as_mut(), same.as_mut(), ctx);
+        assert_eq!(exported(same.as_mut(), ctx), LoadcellState { current: at, from_params: pos(-10.0, 5.0, 15.0) });
+        // ... and a later `at` without a diameter keeps the taken-over one.
+        same.control(ctx, "at 1 2").unwrap();
+        assert_eq!(exported(same.as_mut(), ctx).current, pos(1.0, 2.0, 20.0));
+
+        // Swapped again, same params: still taken over (the params are compared with the replaced
+        // instance's params, not with its position).
+        let mut again = loadcell("x_mm = -10.0\ny_mm = 5.0\ncontact_threshold_n = 0.3");
+        hand_over(same.as_mut(), again.as_mut(), ctx);
+        assert_eq!(exported(again.as_mut(), ctx).current, pos(1.0, 2.0, 20.0));
+
+        // The new params give another position (any of x, y, diameter): they win.
+        for (params, expected) in [
+            ("x_mm = 30.0\ny_mm = 5.0", pos(30.0, 5.0, 15.0)),
+            ("x_mm = -10.0\ny_mm = 40.0", pos(-10.0, 40.0, 15.0)),
+            ("x_mm = -10.0\ny_mm = 5.0\ndiameter_mm = 8.0", pos(-10.0, 5.0, 8.0)),
+            // Where the `at` was, but the params changed: the params' position, which is the same.
+            ("x_mm = 1.0\ny_mm = 2.0\ndiameter_mm = 20.0", pos(1.0, 2.0, 20.0)),
+        ] {
+            let mut moved = loadcell(params);
+            hand_over(again.as_mut(), moved.as_mut(), ctx);
+            assert_eq!(
+                exported(moved.as_mut(), ctx),
+                LoadcellState { current: expected, from_params: expected },
+                "{params}"
+            );
+        }
+    }
+
+    #[test]
+    fn a_load_cell_refuses_other_state_and_the_other_serial_kinds_hand_over_nothing() {
+        let ctx = &mut Context::detached("lc", Mode::Lockstep);
+        let mut lc = loadcell("x_mm = 3.0");
+        let refused = lc.import_state(ctx, Box::new(7_u32)).unwrap_err();
+        assert_eq!(refused.reason, "not a load cell's position");
+        assert_eq!(*refused.state.downcast::<u32>().unwrap(), 7, "the state goes back unchanged");
+        assert_eq!(exported(lc.as_mut(), ctx).current, pos(3.0, 0.0, 15.0), "the params' position stays");
+
+        // EIT and pressure: no state out, a load cell's state refused (as before).
+        for kind in ["serial_eit", "serial_pressure"] {
+            let mut n = build(kind, "");
+            assert!(n.export_state(ctx).is_none(), "{kind}");
+            let state: NodeState = lc.export_state(ctx).unwrap();
+            let refused = n.import_state(ctx, state).unwrap_err();
+            assert!(refused.state.downcast::<LoadcellState>().is_ok(), "{kind}");
+        }
+    }
 
     #[test]
     fn at_takes_a_position_and_an_optional_diameter() {

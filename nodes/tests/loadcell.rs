@@ -3,13 +3,21 @@
 //! press, a 1.5 s pause and a second press at real rates; the command is sent in the pause
 //! (after the first press and a few pause readings have arrived), so only the second press is
 //! at the new position.
+//!
+//! Hot swap keeps the `at` position: the running node moves to a second emulated load cell
+//! (the only swap the engine can complete today: it starts the replacement while the replaced
+//! instance still holds its port, and ports are opened exclusively, so a swap on the same port
+//! is refused, which the last test pins) with params that give the same position as before,
+//! and the second load cell's presses are truth at the `at` position; with params that move the
+//! position, at the params'. Deterministic: rows are told apart by their force, and every wait
+//! is for a condition.
 
 use std::sync::atomic::{AtomicBool, Ordering::SeqCst};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use skinflow_core::graph::SourceFile;
-use skinflow_core::{GraphSpec, RunOptions, RunningGraph};
+use skinflow_core::{GraphSpec, Params, RunOptions, RunningGraph};
 use skinflow_nodes::payload::Truth;
 use skinflow_nodes::pipeline::{Captured, registry_with_capture};
 use skinflow_serial::{Device, Emulator, EmulatorConfig, EmulatorFeed, FaultPlan, TimedForce};
@@ -91,5 +99,150 @@ fn at_moves_the_truth_position_of_the_following_readings() {
             _ => vec![(12.5, -25.0, 20.0, 3.0)],
         };
         assert_eq!(at(row), expected, "reading {i}");
+    }
+}
+
+/// A truth row's contacts as (x, y, diameter, force).
+fn contacts(t: &Truth) -> Vec<(f64, f64, f64, f64)> {
+    t.contacts.iter().map(|c| (c.x_mm, c.y_mm, c.diameter_mm, c.force_n)).collect()
+}
+
+/// Rows with a contact of `force_n`.
+fn pressed(captured: &Captured, force_n: f64) -> Vec<Arc<Truth>> {
+    truth_rows(captured).into_iter().filter(|t| t.contacts.iter().any(|c| c.force_n == force_n)).collect()
+}
+
+fn wait_for_pressed(captured: &Captured, force_n: f64, n: usize) {
+    let t0 = Instant::now();
+    while pressed(captured, force_n).len() < n {
+        assert!(t0.elapsed() < LIMIT, "only {} of {n} {force_n} N readings arrived", pressed(captured, force_n).len());
+        std::thread::sleep(Duration::from_millis(5));
+    }
+}
+
+/// An emulated load cell sending `readings` at real rates.
+fn load_cell(readings: Vec<TimedForce>) -> (Emulator, String) {
+    let emulator = Emulator::spawn(
+        EmulatorConfig::default(),
+        EmulatorFeed::default().with_loadcell(readings),
+        FaultPlan::default(),
+    )
+    .expect("emulator");
+    let port = format!("{:?}", emulator.path(Device::Loadcell).expect("load cell pty"));
+    (emulator, port)
+}
+
+/// Readings one per `PERIOD_S`: `n` of each `force_n` in turn.
+fn feed(parts: &[(usize, f64)]) -> Vec<TimedForce> {
+    parts
+        .iter()
+        .flat_map(|&(n, force_n)| std::iter::repeat_n(force_n, n))
+        .enumerate()
+        .map(|(i, force_n)| TimedForce { t_s: i as f64 * PERIOD_S, force_n })
+        .collect()
+}
+
+/// The rig's first load cell presses `FIRST` readings at 2 N at (-10, 5), then rests (0 N)
+/// longer than the test needs; `at 12.5 -25 20` is sent in the rest, then the node is swapped
+/// with `swap_params` (`{port}`: the second load cell's port) to a second load cell that rests
+/// and then presses `SECOND` readings at 3 N. Returns the second load cell's pressed rows.
+fn swap_after_at(swap_params: &str) -> Vec<Arc<Truth>> {
+    let (first, second) = (feed(&[(FIRST, 2.0), (200, 0.0)]), feed(&[(PAUSE, 0.0), (SECOND, 3.0)]));
+    let (first_cell, first_port) = load_cell(first);
+    let captured: Captured = Arc::new(Mutex::new(Vec::new()));
+    let reg = registry_with_capture(captured.clone());
+    let graph = format!(
+        "[[node]]\nid = \"lc\"\nkind = \"serial_loadcell\"\nparams = {{ port = {first_port}, x_mm = -10.0, y_mm = 5.0 }}\n\
+         [[node]]\nid = \"cap\"\nkind = \"capture\"\n\
+         [[edge]]\nfrom = \"lc.truth\"\nto = \"cap.in\"\n"
+    );
+    let spec = GraphSpec::parse(SourceFile::new("loadcell.toml", graph), &reg).unwrap();
+    let running = RunningGraph::start(&spec).unwrap();
+    let handle = running.handle();
+    let stop = Arc::new(AtomicBool::new(false));
+    let opts = RunOptions { duration: None, stop: Some(stop.clone()) };
+    let runner = std::thread::spawn(move || running.wait(&opts));
+
+    // In the rest: the press and three rest readings are in.
+    wait_for_rows(&captured, FIRST + 3);
+    handle.control_wait("lc", "at 12.5 -25 20", Duration::from_secs(5)).unwrap();
+    let (second_cell, second_port) = load_cell(second);
+    let params = Params::from_toml(&swap_params.replace("{port}", &second_port)).unwrap();
+    handle.swap("lc", reg.get("serial_loadcell").unwrap().clone(), params).unwrap();
+    wait_for_pressed(&captured, 3.0, SECOND);
+    stop.store(true, SeqCst);
+    let report = runner.join().unwrap();
+    assert!(report.failures.is_empty(), "{:?}", report.failures);
+    assert_eq!(report.stats.node("lc").unwrap().swaps, 1);
+    first_cell.stop().unwrap();
+    second_cell.stop().unwrap();
+
+    let before = pressed(&captured, 2.0);
+    assert_eq!(before.len(), FIRST, "the first press");
+    for (i, row) in before.iter().enumerate() {
+        assert_eq!(contacts(row), vec![(-10.0, 5.0, 15.0, 2.0)], "first press, reading {i}");
+    }
+    let after = pressed(&captured, 3.0);
+    assert_eq!(after.len(), SECOND, "the second load cell's press, whole");
+    let with_contacts = truth_rows(&captured).iter().filter(|t| !t.contacts.is_empty()).count();
+    assert_eq!(before.len() + after.len(), with_contacts, "no other contacts");
+    after
+}
+
+#[test]
+fn a_hot_swap_with_the_same_position_in_its_params_keeps_the_at_position() {
+    // Another port and threshold; x, y and diameter as before (the diameter by default).
+    let after = swap_after_at("port = {port}\nx_mm = -10.0\ny_mm = 5.0\ncontact_threshold_n = 0.1");
+    for (i, row) in after.iter().enumerate() {
+        assert_eq!(contacts(row), vec![(12.5, -25.0, 20.0, 3.0)], "after the swap, reading {i}");
+    }
+}
+
+#[test]
+fn a_hot_swap_whose_params_move_the_position_puts_the_truth_there() {
+    let after = swap_after_at("port = {port}\nx_mm = 30.0\ny_mm = 40.0");
+    for (i, row) in after.iter().enumerate() {
+        assert_eq!(contacts(row), vec![(30.0, 40.0, 15.0, 3.0)], "after the swap, reading {i}");
+    }
+}
+
+/// Pins today's limit: the replacement is started while the running instance holds the port,
+/// which it opened exclusively, so a swap on the same port is refused and the running instance
+/// goes on at the `at` position. When serial sources can be swapped in place, this becomes a
+/// same-port version of the tests above.
+#[test]
+fn a_hot_swap_on_the_same_port_is_refused_and_the_at_position_stays() {
+    let (emulator, port) = load_cell(readings());
+    let captured: Captured = Arc::new(Mutex::new(Vec::new()));
+    let reg = registry_with_capture(captured.clone());
+    let graph = format!(
+        "[[node]]\nid = \"lc\"\nkind = \"serial_loadcell\"\nparams = {{ port = {port}, x_mm = -10.0, y_mm = 5.0 }}\n\
+         [[node]]\nid = \"cap\"\nkind = \"capture\"\n\
+         [[edge]]\nfrom = \"lc.truth\"\nto = \"cap.in\"\n"
+    );
+    let spec = GraphSpec::parse(SourceFile::new("loadcell.toml", graph), &reg).unwrap();
+    let running = RunningGraph::start(&spec).unwrap();
+    let handle = running.handle();
+    let stop = Arc::new(AtomicBool::new(false));
+    let opts = RunOptions { duration: None, stop: Some(stop.clone()) };
+    let runner = std::thread::spawn(move || running.wait(&opts));
+
+    wait_for_rows(&captured, FIRST + 3);
+    handle.control_wait("lc", "at 12.5 -25 20", Duration::from_secs(5)).unwrap();
+    let params =
+        Params::from_toml(&format!("port = {port}\nx_mm = -10.0\ny_mm = 5.0\ncontact_threshold_n = 0.1")).unwrap();
+    let e = handle.swap("lc", reg.get("serial_loadcell").unwrap().clone(), params).unwrap_err().to_string();
+    assert!(e.contains("start failed") && e.contains("cannot open"), "{e}");
+    wait_for_rows(&captured, FIRST + PAUSE + SECOND);
+    stop.store(true, SeqCst);
+    let report = runner.join().unwrap();
+    assert!(report.failures.is_empty(), "{:?}", report.failures);
+    assert_eq!(report.stats.node("lc").unwrap().swaps, 0);
+    emulator.stop().unwrap();
+
+    let rows = truth_rows(&captured);
+    assert_eq!(rows.len(), FIRST + PAUSE + SECOND);
+    for (i, row) in rows.iter().enumerate().skip(FIRST + PAUSE) {
+        assert_eq!(contacts(row), vec![(12.5, -25.0, 20.0, 3.0)], "reading {i}");
     }
 }

@@ -10,21 +10,22 @@
 //! `diameter_mm`), or an empty row below `contact_threshold_n`; the control command
 //! `at X_MM Y_MM [DIAMETER_MM]` moves that position while the graph runs.
 //!
-//! Hot swap: the load cell hands its indenter position over to its replacement. When the
-//! replacement's params give the same position (`x_mm`, `y_mm`, `diameter_mm`) as the replaced
-//! instance's params did, it goes on at the position the last `at` set (another threshold, say,
-//! does not send a calibration session's truth back to the params' position); when they give
-//! another position, the new params win. Either way it is logged. The EIT and pressure sources
-//! hand nothing over. The replacement opens its port while the replaced instance still holds it
-//! and ports are opened exclusively, so a swap that keeps the same port is refused at the
-//! replacement's start (the running instance goes on unchanged).
+//! Hot swap: a serial source hands its open port to its replacement when the port and its
+//! settings stay the same (the reader goes on with its buffered bytes and counters; no reading
+//! is lost), and otherwise closes it at the switch for the replacement to open
+//! ([`crate::serial_link`]); two nodes on one device are refused at start. The EIT source also
+//! hands over the device counter it unwraps, the pressure source and the load cell their
+//! sequence numbers. The load cell hands over its indenter position: when the replacement's
+//! params give the same position (`x_mm`, `y_mm`, `diameter_mm`) as the replaced instance's
+//! params did, it goes on at the position the last `at` set (another threshold, say, does not
+//! send a calibration session's truth back to the params' position); when they give another
+//! position, the new params win. Either way it is logged.
 //!
 //! ```toml
 //! params = { port = "/dev/ttyACM0", measurements = 120, frame_period_s = 0.769 }
 //! ```
 
 use std::path::PathBuf;
-use std::time::{Duration, Instant};
 
 use serde::Deserialize;
 use skinflow_core::params::{non_negative, positive};
@@ -32,15 +33,10 @@ use skinflow_core::{
     Context, Header, KindInfo, Message, NodeError, NodeImpl, NodeParams, NodeState, Outputs, ParamDoc, ParamError,
     PortSpec, Recycler, Registry, Role, Source, SourcePoll, StateRefused, typed,
 };
-use skinflow_serial::{
-    Decode, EitDecoder, EitReader, ForceDecoder, LoadcellReader, PressureDecoder, PressureReader, ReaderConfig,
-    SerialReader,
-};
+use skinflow_serial::{EitDecoder, ForceDecoder, PressureDecoder, ReaderConfig};
 
 use crate::payload::{EitFrame, PressureSample, Truth, TruthContact};
-
-/// Longest a poll blocks, so a stop request is seen promptly.
-const POLL_SLICE: Duration = Duration::from_millis(100);
+use crate::serial_link::{Port, PortHandover};
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -124,7 +120,7 @@ impl NodeParams for PortParams {
 }
 
 impl PortParams {
-    fn config(&self) -> ReaderConfig {
+    pub(crate) fn config(&self) -> ReaderConfig {
         let mut c = ReaderConfig::new(&self.port);
         c.baud = self.baud;
         c.read_timeout_s = self.read_timeout_s;
@@ -134,77 +130,43 @@ impl PortParams {
     }
 }
 
-/// The graph clock's origin as an `Instant`, so readers stamp on the graph clock.
-fn graph_origin(ctx: &Context) -> Instant {
-    Instant::now() - Duration::from_nanos(ctx.now_ns())
-}
-
 fn ns(t_s: f64) -> u64 {
     (t_s.max(0.0) * 1e9).round() as u64
 }
 
-fn open<D: Decode>(p: &PortParams, decoder: D, ctx: &Context) -> Result<SerialReader<D>, NodeError> {
-    SerialReader::open(p.config(), decoder, graph_origin(ctx))
-        .map_err(|e| NodeError::Path { path: p.port.clone(), problem: e.to_string() })
-}
-
-/// The next record, waiting at most [`POLL_SLICE`]; a configuration mismatch the stream
-/// proves (e.g. another frame width) stops the graph.
-fn next<'a, D: Decode>(
-    reader: &'a mut Option<SerialReader<D>>,
-    port: &std::path::Path,
-) -> Result<Option<skinflow_serial::Reading<D::Record<'a>>>, NodeError> {
-    let reader = reader.as_mut().ok_or_else(|| NodeError::msg("polled before start"))?;
-    reader
-        .poll_next(Instant::now() + POLL_SLICE)
-        .map_err(|e| NodeError::Path { path: port.to_path_buf(), problem: e.to_string() }.fatal())
-}
-
-/// Logs the link's counters at stop: a warning when anything was lost.
-fn report<D: Decode>(ctx: &Context, r: Option<&SerialReader<D>>) {
-    let Some(r) = r else { return };
-    let d = r.decode_stats();
-    let l = r.link_stats();
-    let lossy = d.crc_errors + d.lost_frames + d.torn_frames + d.bad_lines + l.disconnects > 0;
-    let msg = "serial link closed";
-    if lossy {
-        tracing::warn!(
-            node = ctx.id(),
-            frames = d.frames,
-            crc_errors = d.crc_errors,
-            lost = d.lost_frames,
-            torn = d.torn_frames,
-            bad_lines = d.bad_lines,
-            discarded_bytes = d.discarded_bytes,
-            disconnects = l.disconnects,
-            reconnects = l.reconnects,
-            stalls = l.stalls,
-            "{msg}"
-        );
-    } else {
-        tracing::info!(node = ctx.id(), frames = d.frames, bytes = l.bytes, "{msg}");
-    }
-}
-
 pub struct SerialEit {
     p: PortParams,
-    reader: Option<EitReader>,
+    port: Port<EitDecoder>,
     frames: Recycler<EitFrame>,
     /// Device counter unwrapped to 64 bits.
     last_counter: Option<u32>,
     seq: u64,
 }
 
+/// What an EIT source hands over in a hot swap: its port, and the device counter it unwraps
+/// (continued only when the open port is taken over: another device counts on its own).
+struct EitHandover {
+    port: PortHandover<EitDecoder>,
+    last_counter: Option<u32>,
+    seq: u64,
+}
+
+impl SerialEit {
+    fn new(p: PortParams) -> Result<SerialEit, NodeError> {
+        let dec = EitDecoder::try_new(p.measurements)
+            .map_err(|e| NodeError::Param { param: "measurements".into(), problem: e.to_string() })?;
+        let port = Port::new(&p, dec, p.measurements as u64);
+        Ok(SerialEit { p, port, frames: Recycler::new(64, EitFrame::default), last_counter: None, seq: 0 })
+    }
+}
+
 impl Source for SerialEit {
     fn start(&mut self, ctx: &mut Context) -> Result<(), NodeError> {
-        let dec = EitDecoder::try_new(self.p.measurements)
-            .map_err(|e| NodeError::Param { param: "measurements".into(), problem: e.to_string() })?;
-        self.reader = Some(open(&self.p, dec, ctx)?);
-        Ok(())
+        self.port.start(&self.p, ctx)
     }
 
     fn poll(&mut self, ctx: &mut Context, out: &mut Outputs) -> Result<SourcePoll, NodeError> {
-        let Some(r) = next(&mut self.reader, &self.p.port)? else { return Ok(SourcePoll::Idle) };
+        let Some(r) = self.port.next(&self.p, ctx)? else { return Ok(SourcePoll::Idle) };
         let c = r.record.counter;
         self.seq = match self.last_counter {
             Some(prev) => self.seq + u64::from(c.wrapping_sub(prev)),
@@ -222,27 +184,51 @@ impl Source for SerialEit {
     }
 
     fn stop(&mut self, ctx: &mut Context) -> Result<(), NodeError> {
-        report(ctx, self.reader.as_ref());
+        self.port.report(ctx);
+        Ok(())
+    }
+
+    fn export_state(&mut self, _ctx: &mut Context) -> Option<NodeState> {
+        Some(Box::new(EitHandover { port: self.port.hand_over(), last_counter: self.last_counter, seq: self.seq }))
+    }
+
+    fn import_state(&mut self, ctx: &mut Context, state: NodeState) -> Result<(), StateRefused> {
+        let s = state.downcast::<EitHandover>().map_err(|s| StateRefused::new(s, "not an EIT source's state"))?;
+        if self.port.take_over(ctx, s.port) {
+            (self.last_counter, self.seq) = (s.last_counter, s.seq);
+        }
         Ok(())
     }
 }
 
 pub struct SerialPressure {
     p: PortParams,
-    reader: Option<PressureReader>,
+    port: Port<PressureDecoder>,
     seq: u64,
+}
+
+/// What a pressure source hands over in a hot swap: its port and its sample count.
+struct PressureHandover {
+    port: PortHandover<PressureDecoder>,
+    seq: u64,
+}
+
+impl SerialPressure {
+    fn new(p: PortParams) -> Result<SerialPressure, NodeError> {
+        let dec = PressureDecoder::try_new(Some(p.period_ms))
+            .map_err(|e| NodeError::Param { param: "period_ms".into(), problem: e.to_string() })?;
+        let port = Port::new(&p, dec, u64::from(p.period_ms));
+        Ok(SerialPressure { p, port, seq: 0 })
+    }
 }
 
 impl Source for SerialPressure {
     fn start(&mut self, ctx: &mut Context) -> Result<(), NodeError> {
-        let dec = PressureDecoder::try_new(Some(self.p.period_ms))
-            .map_err(|e| NodeError::Param { param: "period_ms".into(), problem: e.to_string() })?;
-        self.reader = Some(open(&self.p, dec, ctx)?);
-        Ok(())
+        self.port.start(&self.p, ctx)
     }
 
     fn poll(&mut self, ctx: &mut Context, out: &mut Outputs) -> Result<SourcePoll, NodeError> {
-        let Some(r) = next(&mut self.reader, &self.p.port)? else { return Ok(SourcePoll::Idle) };
+        let Some(r) = self.port.next(&self.p, ctx)? else { return Ok(SourcePoll::Idle) };
         self.seq += 1;
         out.send(
             0,
@@ -255,7 +241,19 @@ impl Source for SerialPressure {
     }
 
     fn stop(&mut self, ctx: &mut Context) -> Result<(), NodeError> {
-        report(ctx, self.reader.as_ref());
+        self.port.report(ctx);
+        Ok(())
+    }
+
+    fn export_state(&mut self, _ctx: &mut Context) -> Option<NodeState> {
+        Some(Box::new(PressureHandover { port: self.port.hand_over(), seq: self.seq }))
+    }
+
+    fn import_state(&mut self, ctx: &mut Context, state: NodeState) -> Result<(), StateRefused> {
+        let s =
+            state.downcast::<PressureHandover>().map_err(|s| StateRefused::new(s, "not a pressure source's state"))?;
+        self.port.take_over(ctx, s.port);
+        self.seq = s.seq;
         Ok(())
     }
 }
@@ -282,9 +280,16 @@ struct LoadcellState {
     from_params: Position,
 }
 
+/// What a load cell hands over in a hot swap: its port, its reading count and its position.
+struct LoadcellHandover {
+    port: PortHandover<ForceDecoder>,
+    seq: u64,
+    position: LoadcellState,
+}
+
 pub struct SerialLoadcell {
     p: PortParams,
-    reader: Option<LoadcellReader>,
+    port: Port<ForceDecoder>,
     seq: u64,
     /// The position the params give.
     from_params: Position,
@@ -295,18 +300,18 @@ pub struct SerialLoadcell {
 impl SerialLoadcell {
     fn new(p: PortParams) -> SerialLoadcell {
         let from_params = Position::of(&p);
-        SerialLoadcell { p, reader: None, seq: 0, from_params, at: from_params }
+        let port = Port::new(&p, ForceDecoder::new(), 0);
+        SerialLoadcell { p, port, seq: 0, from_params, at: from_params }
     }
 }
 
 impl Source for SerialLoadcell {
     fn start(&mut self, ctx: &mut Context) -> Result<(), NodeError> {
-        self.reader = Some(open(&self.p, ForceDecoder::new(), ctx)?);
-        Ok(())
+        self.port.start(&self.p, ctx)
     }
 
     fn poll(&mut self, ctx: &mut Context, out: &mut Outputs) -> Result<SourcePoll, NodeError> {
-        let Some(r) = next(&mut self.reader, &self.p.port)? else { return Ok(SourcePoll::Idle) };
+        let Some(r) = self.port.next(&self.p, ctx)? else { return Ok(SourcePoll::Idle) };
         self.seq += 1;
         let f = r.record.force_n;
         let Position { x_mm, y_mm, diameter_mm } = self.at;
@@ -323,7 +328,7 @@ impl Source for SerialLoadcell {
     }
 
     fn stop(&mut self, ctx: &mut Context) -> Result<(), NodeError> {
-        report(ctx, self.reader.as_ref());
+        self.port.report(ctx);
         Ok(())
     }
 
@@ -336,15 +341,20 @@ impl Source for SerialLoadcell {
         Ok(())
     }
 
-    /// The indenter position now and the one the params gave.
+    /// The port, the reading count, and the indenter position now and the one the params gave.
     fn export_state(&mut self, _ctx: &mut Context) -> Option<NodeState> {
-        Some(Box::new(LoadcellState { current: self.at, from_params: self.from_params }))
+        let position = LoadcellState { current: self.at, from_params: self.from_params };
+        Some(Box::new(LoadcellHandover { port: self.port.hand_over(), seq: self.seq, position }))
     }
 
-    /// Goes on at the replaced instance's position unless this instance's params give another
-    /// one than the replaced instance's did (the user moved it): then the params win.
+    /// Takes the port over (see [`crate::serial_link`]) and goes on at the replaced instance's
+    /// position unless this instance's params give another one than the replaced instance's
+    /// did (the user moved it): then the params win.
     fn import_state(&mut self, ctx: &mut Context, state: NodeState) -> Result<(), StateRefused> {
-        let s = state.downcast::<LoadcellState>().map_err(|s| StateRefused::new(s, "not a load cell's position"))?;
+        let h = state.downcast::<LoadcellHandover>().map_err(|s| StateRefused::new(s, "not a load cell's state"))?;
+        self.port.take_over(ctx, h.port);
+        self.seq = h.seq;
+        let s = h.position;
         let Position { x_mm, y_mm, diameter_mm } = s.current;
         if s.from_params == self.from_params {
             self.at = s.current;
@@ -398,15 +408,7 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
             .output(PortSpec::output::<EitFrame>("eit", "EIT frames, volts"))
             .param(ParamDoc::new("measurements", "usize", "120", "values per frame"))
             .param(ParamDoc::new("frame_period_s", "f64", "0.769", "acquisition window, s")),
-        |p: PortParams, _| {
-            Ok(NodeImpl::Source(Box::new(SerialEit {
-                p,
-                reader: None,
-                frames: Recycler::new(64, EitFrame::default),
-                last_counter: None,
-                seq: 0,
-            })))
-        },
+        |p: PortParams, _| Ok(NodeImpl::Source(Box::new(SerialEit::new(p)?))),
     ))?;
     r.register(typed(
         port_docs(KindInfo::new(
@@ -416,7 +418,7 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
         ))
         .output(PortSpec::output::<PressureSample>("pressure", "gauge pressure, kPa"))
         .param(ParamDoc::new("period_ms", "u32", "50", "nominal sample period (gap detection)")),
-        |p: PortParams, _| Ok(NodeImpl::Source(Box::new(SerialPressure { p, reader: None, seq: 0 }))),
+        |p: PortParams, _| Ok(NodeImpl::Source(Box::new(SerialPressure::new(p)?))),
     ))?;
     r.register(typed(
         port_docs(KindInfo::new(
@@ -439,7 +441,7 @@ mod tests {
 
     use skinflow_core::{BuildContext, Context, Mode, NodeImpl, NodeState, Params, Registry, Source};
 
-    use super::{LoadcellState, Position, parse_at, register};
+    use super::{LoadcellHandover, LoadcellState, Position, parse_at, register};
 
     /// A `kind` node with `params` (the port is never opened: no `start`).
     fn build(kind: &str, params: &str) -> Box<dyn Source> {
@@ -463,7 +465,7 @@ mod tests {
 
     /// A load cell's exported state, as a value.
     fn exported(n: &mut dyn Source, ctx: &mut Context) -> LoadcellState {
-        *n.export_state(ctx).expect("a load cell exports its position").downcast::<LoadcellState>().unwrap()
+        n.export_state(ctx).expect("a load cell exports its position").downcast::<LoadcellHandover>().unwrap().position
     }
 
     /// Hot swap as the engine does it: `old`'s state into `new`.
@@ -517,21 +519,27 @@ mod tests {
     }
 
     #[test]
-    fn a_load_cell_refuses_other_state_and_the_other_serial_kinds_hand_over_nothing() {
+    fn each_serial_kind_takes_over_only_its_own_kind_of_state() {
         let ctx = &mut Context::detached("lc", Mode::Lockstep);
         let mut lc = loadcell("x_mm = 3.0");
         let refused = lc.import_state(ctx, Box::new(7_u32)).unwrap_err();
-        assert_eq!(refused.reason, "not a load cell's position");
+        assert_eq!(refused.reason, "not a load cell's state");
         assert_eq!(*refused.state.downcast::<u32>().unwrap(), 7, "the state goes back unchanged");
         assert_eq!(exported(lc.as_mut(), ctx).current, pos(3.0, 0.0, 15.0), "the params' position stays");
 
-        // EIT and pressure: no state out, a load cell's state refused (as before).
-        for kind in ["serial_eit", "serial_pressure"] {
-            let mut n = build(kind, "");
-            assert!(n.export_state(ctx).is_none(), "{kind}");
-            let state: NodeState = lc.export_state(ctx).unwrap();
-            let refused = n.import_state(ctx, state).unwrap_err();
-            assert!(refused.state.downcast::<LoadcellState>().is_ok(), "{kind}");
+        // EIT and pressure hand over their port (none open here) and refuse each other's and
+        // a load cell's state, which goes back unchanged.
+        let kinds = ["serial_eit", "serial_pressure", "serial_loadcell"];
+        for (i, kind) in kinds.iter().enumerate() {
+            for (j, other) in kinds.iter().enumerate() {
+                let state: NodeState = build(other, "").export_state(ctx).expect("a serial source hands over");
+                let result = build(kind, "").import_state(ctx, state);
+                assert_eq!(result.is_ok(), i == j, "{other}'s state into {kind}");
+                if let Err(refused) = result {
+                    let back = build(other, "").import_state(ctx, refused.state);
+                    assert!(back.is_ok(), "{other} takes its own state back");
+                }
+            }
         }
     }
 

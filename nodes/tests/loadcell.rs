@@ -16,7 +16,7 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use skinflow_core::graph::SourceFile;
-use skinflow_core::{GraphSpec, Params, RunOptions, RunningGraph};
+use skinflow_core::{GraphHandle, GraphSpec, Params, Registry, RunOptions, RunReport, RunningGraph};
 use skinflow_nodes::payload::Truth;
 use skinflow_nodes::pipeline::{Captured, registry_with_capture};
 use skinflow_serial::{Device, Emulator, EmulatorConfig, EmulatorFeed, FaultPlan, TimedForce};
@@ -54,50 +54,75 @@ fn wait_for_rows(captured: &Captured, n: usize) {
     }
 }
 
+/// A running graph: load cell "lc" on `port` (quoted) at (-10, 5), its truth into "cap".
+struct Rig {
+    captured: Captured,
+    reg: Registry,
+    handle: GraphHandle,
+    stop: Arc<AtomicBool>,
+    runner: std::thread::JoinHandle<RunReport>,
+}
+
+impl Rig {
+    fn start(port: &str) -> Rig {
+        let captured: Captured = Arc::new(Mutex::new(Vec::new()));
+        let reg = registry_with_capture(captured.clone());
+        let graph = format!(
+            "[[node]]\nid = \"lc\"\nkind = \"serial_loadcell\"\nparams = {{ port = {port}, x_mm = -10.0, y_mm = 5.0 }}\n\
+             [[node]]\nid = \"cap\"\nkind = \"capture\"\n\
+             [[edge]]\nfrom = \"lc.truth\"\nto = \"cap.in\"\n"
+        );
+        let spec = GraphSpec::parse(SourceFile::new("loadcell.toml", graph), &reg).unwrap();
+        let running = RunningGraph::start(&spec).unwrap();
+        let handle = running.handle();
+        let stop = Arc::new(AtomicBool::new(false));
+        let opts = RunOptions { duration: None, stop: Some(stop.clone()) };
+        let runner = std::thread::spawn(move || running.wait(&opts));
+        Rig { captured, reg, handle, stop, runner }
+    }
+
+    /// Sends `at 12.5 -25 20`, swaps "lc" for a load cell with `params`, waits for the whole
+    /// 3 N press, and finishes the run.
+    fn at_then_swap(self, params: &str) -> RunReport {
+        self.handle.control_wait("lc", "at 12.5 -25 20", Duration::from_secs(5)).unwrap();
+        let params = Params::from_toml(params).unwrap();
+        self.handle.swap("lc", self.reg.get("serial_loadcell").unwrap().clone(), params).unwrap();
+        wait_for_pressed(&self.captured, 3.0, SECOND);
+        self.finish()
+    }
+
+    /// Stops the run; it must have had no failure.
+    fn finish(self) -> RunReport {
+        self.stop.store(true, SeqCst);
+        let report = self.runner.join().unwrap();
+        assert!(report.failures.is_empty(), "{:?}", report.failures);
+        report
+    }
+}
+
 #[test]
 fn at_moves_the_truth_position_of_the_following_readings() {
-    let emulator = Emulator::spawn(
-        EmulatorConfig::default(),
-        EmulatorFeed::default().with_loadcell(readings()),
-        FaultPlan::default(),
-    )
-    .expect("emulator");
-    let port = emulator.path(Device::Loadcell).expect("load cell pty").to_path_buf();
-    let captured: Captured = Arc::new(Mutex::new(Vec::new()));
-    let reg = registry_with_capture(captured.clone());
-    let graph = format!(
-        "[[node]]\nid = \"lc\"\nkind = \"serial_loadcell\"\nparams = {{ port = {port:?}, x_mm = -10.0, y_mm = 5.0 }}\n\
-         [[node]]\nid = \"cap\"\nkind = \"capture\"\n\
-         [[edge]]\nfrom = \"lc.truth\"\nto = \"cap.in\"\n"
-    );
-    let spec = GraphSpec::parse(SourceFile::new("loadcell.toml", graph), &reg).unwrap();
-    let running = RunningGraph::start(&spec).unwrap();
-    let handle = running.handle();
-    let stop = Arc::new(AtomicBool::new(false));
-    let opts = RunOptions { duration: None, stop: Some(stop.clone()) };
-    let runner = std::thread::spawn(move || running.wait(&opts));
-
+    let (emulator, port) = load_cell(readings());
+    let rig = Rig::start(&port);
     // In the pause: the first press and three pause readings are in.
-    wait_for_rows(&captured, FIRST + 3);
-    handle.control_wait("lc", "at 12.5 -25 20", Duration::from_secs(5)).unwrap();
-    let e = handle.control_wait("lc", "at 12.5", Duration::from_secs(5)).unwrap_err().to_string();
+    wait_for_rows(&rig.captured, FIRST + 3);
+    rig.handle.control_wait("lc", "at 12.5 -25 20", Duration::from_secs(5)).unwrap();
+    let e = rig.handle.control_wait("lc", "at 12.5", Duration::from_secs(5)).unwrap_err().to_string();
     assert!(e.contains("expected at X_MM Y_MM [DIAMETER_MM]"), "{e}");
-    wait_for_rows(&captured, FIRST + PAUSE + SECOND);
-    stop.store(true, SeqCst);
-    let report = runner.join().unwrap();
-    assert!(report.failures.is_empty(), "{:?}", report.failures);
+    wait_for_rows(&rig.captured, FIRST + PAUSE + SECOND);
+    let captured = rig.captured.clone();
+    rig.finish();
     emulator.stop().unwrap();
 
     let rows = truth_rows(&captured);
     assert_eq!(rows.len(), FIRST + PAUSE + SECOND);
-    let at = |t: &Truth| t.contacts.iter().map(|c| (c.x_mm, c.y_mm, c.diameter_mm, c.force_n)).collect::<Vec<_>>();
     for (i, row) in rows.iter().enumerate() {
         let expected = match i {
             i if i < FIRST => vec![(-10.0, 5.0, 15.0, 2.0)],
             i if i < FIRST + PAUSE => vec![],
             _ => vec![(12.5, -25.0, 20.0, 3.0)],
         };
-        assert_eq!(at(row), expected, "reading {i}");
+        assert_eq!(contacts(row), expected, "reading {i}");
     }
 }
 
@@ -148,30 +173,12 @@ fn feed(parts: &[(usize, f64)]) -> Vec<TimedForce> {
 fn swap_after_at(swap_params: &str) -> Vec<Arc<Truth>> {
     let (first, second) = (feed(&[(FIRST, 2.0), (200, 0.0)]), feed(&[(PAUSE, 0.0), (SECOND, 3.0)]));
     let (first_cell, first_port) = load_cell(first);
-    let captured: Captured = Arc::new(Mutex::new(Vec::new()));
-    let reg = registry_with_capture(captured.clone());
-    let graph = format!(
-        "[[node]]\nid = \"lc\"\nkind = \"serial_loadcell\"\nparams = {{ port = {first_port}, x_mm = -10.0, y_mm = 5.0 }}\n\
-         [[node]]\nid = \"cap\"\nkind = \"capture\"\n\
-         [[edge]]\nfrom = \"lc.truth\"\nto = \"cap.in\"\n"
-    );
-    let spec = GraphSpec::parse(SourceFile::new("loadcell.toml", graph), &reg).unwrap();
-    let running = RunningGraph::start(&spec).unwrap();
-    let handle = running.handle();
-    let stop = Arc::new(AtomicBool::new(false));
-    let opts = RunOptions { duration: None, stop: Some(stop.clone()) };
-    let runner = std::thread::spawn(move || running.wait(&opts));
-
+    let rig = Rig::start(&first_port);
     // In the rest: the press and three rest readings are in.
-    wait_for_rows(&captured, FIRST + 3);
-    handle.control_wait("lc", "at 12.5 -25 20", Duration::from_secs(5)).unwrap();
+    wait_for_rows(&rig.captured, FIRST + 3);
     let (second_cell, second_port) = load_cell(second);
-    let params = Params::from_toml(&swap_params.replace("{port}", &second_port)).unwrap();
-    handle.swap("lc", reg.get("serial_loadcell").unwrap().clone(), params).unwrap();
-    wait_for_pressed(&captured, 3.0, SECOND);
-    stop.store(true, SeqCst);
-    let report = runner.join().unwrap();
-    assert!(report.failures.is_empty(), "{:?}", report.failures);
+    let captured = rig.captured.clone();
+    let report = rig.at_then_swap(&swap_params.replace("{port}", &second_port));
     assert_eq!(report.stats.node("lc").unwrap().swaps, 1);
     first_cell.stop().unwrap();
     second_cell.stop().unwrap();
@@ -210,28 +217,10 @@ fn a_hot_swap_whose_params_move_the_position_puts_the_truth_there() {
 /// Returns the truth rows with their header seq, once all of them arrived, and the run's swaps.
 fn swap_in_place(swap_params: &str) -> (Vec<(u64, Arc<Truth>)>, u64) {
     let (emulator, port) = load_cell(readings());
-    let captured: Captured = Arc::new(Mutex::new(Vec::new()));
-    let reg = registry_with_capture(captured.clone());
-    let graph = format!(
-        "[[node]]\nid = \"lc\"\nkind = \"serial_loadcell\"\nparams = {{ port = {port}, x_mm = -10.0, y_mm = 5.0 }}\n\
-         [[node]]\nid = \"cap\"\nkind = \"capture\"\n\
-         [[edge]]\nfrom = \"lc.truth\"\nto = \"cap.in\"\n"
-    );
-    let spec = GraphSpec::parse(SourceFile::new("loadcell.toml", graph), &reg).unwrap();
-    let running = RunningGraph::start(&spec).unwrap();
-    let handle = running.handle();
-    let stop = Arc::new(AtomicBool::new(false));
-    let opts = RunOptions { duration: None, stop: Some(stop.clone()) };
-    let runner = std::thread::spawn(move || running.wait(&opts));
-
-    wait_for_rows(&captured, FIRST + 3);
-    handle.control_wait("lc", "at 12.5 -25 20", Duration::from_secs(5)).unwrap();
-    let params = Params::from_toml(&swap_params.replace("{port}", &port)).unwrap();
-    handle.swap("lc", reg.get("serial_loadcell").unwrap().clone(), params).unwrap();
-    wait_for_pressed(&captured, 3.0, SECOND);
-    stop.store(true, SeqCst);
-    let report = runner.join().unwrap();
-    assert!(report.failures.is_empty(), "{:?}", report.failures);
+    let rig = Rig::start(&port);
+    wait_for_rows(&rig.captured, FIRST + 3);
+    let captured = rig.captured.clone();
+    let report = rig.at_then_swap(&swap_params.replace("{port}", &port));
     emulator.stop().unwrap();
     let rows = captured.lock().unwrap().iter().flatten().map(|m| (m.header.seq, m.arc::<Truth>().unwrap())).collect();
     (rows, report.stats.node("lc").unwrap().swaps)

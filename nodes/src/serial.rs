@@ -13,7 +13,7 @@
 //! Hot swap: a serial source hands its open port to its replacement when the port and its
 //! settings stay the same (the reader goes on with its buffered bytes and counters; no reading
 //! is lost), and otherwise closes it at the switch for the replacement to open
-//! ([`crate::serial_link`]); two nodes on one device are refused at start. The EIT source also
+//! (`serial_link.rs`); two nodes on one device are refused at start. The EIT source also
 //! hands over the device counter it unwraps, the pressure source and the load cell their
 //! sequence numbers. The load cell hands over its indenter position: when the replacement's
 //! params give the same position (`x_mm`, `y_mm`, `diameter_mm`) as the replaced instance's
@@ -347,7 +347,7 @@ impl Source for SerialLoadcell {
         Some(Box::new(LoadcellHandover { port: self.port.hand_over(), seq: self.seq, position }))
     }
 
-    /// Takes the port over (see [`crate::serial_link`]) and goes on at the replaced instance's
+    /// Takes the port over (see `serial_link.rs`) and goes on at the replaced instance's
     /// position unless this instance's params give another one than the replaced instance's
     /// did (the user moved it): then the params win.
     fn import_state(&mut self, ctx: &mut Context, state: NodeState) -> Result<(), StateRefused> {

@@ -196,8 +196,6 @@ pub struct Contacts {
     /// Most contacts reported (the Vec's capacity is not the limit: a clone's capacity is its
     /// length).
     max: usize,
-    /// Most regions held before the sidelobe pass (`HOLD_PER_CONTACT * max`).
-    hold: usize,
     /// Otsu threshold on the normalized decrease, `None` when no threshold was computed.
     pub threshold_norm: Option<f64>,
     /// The same threshold as a decrease in image units, `None` likewise.
@@ -214,11 +212,9 @@ pub struct Contacts {
 impl Contacts {
     /// Empty output able to hold `capacity` contacts without reallocating.
     pub fn with_capacity(capacity: usize) -> Self {
-        let hold = HOLD_PER_CONTACT * capacity;
         Self {
-            items: Vec::with_capacity(hold),
+            items: Vec::with_capacity(HOLD_PER_CONTACT * capacity),
             max: capacity,
-            hold,
             threshold_norm: None,
             threshold: None,
             peak_decrease: 0.0,
@@ -239,7 +235,7 @@ impl Contacts {
 
     /// Most regions held through the sidelobe pass before the cut to `max_contacts`.
     pub(crate) fn hold_len(&self) -> usize {
-        self.hold.max(self.max)
+        HOLD_PER_CONTACT * self.max
     }
 
     /// Number of contacts.

@@ -137,9 +137,11 @@ enum Cmd {
         #[command(flatten)]
         pipeline: cmd::pipeline::PipelineArgs,
     },
-    /// Run every force strategy on a recording with ground truth and print the comparison.
+    /// Run every force strategy on recordings with ground truth and print the comparison.
     Eval {
-        recording: PathBuf,
+        /// Recordings with ground truth; several are pooled into one report.
+        #[arg(required = true, value_name = "RECORDING")]
+        recordings: Vec<PathBuf>,
         #[arg(long)]
         calib: PathBuf,
         /// Write the CONTRACTS.md JSON report here.
@@ -217,8 +219,8 @@ fn dispatch(cmd: Cmd) -> Result<ExitCode> {
         Cmd::Calibrate { recordings, out, fit, pipeline } => {
             cmd::calibrate::run(&recordings, &out, &fit.fit, &pipeline).map(|()| ExitCode::SUCCESS)
         }
-        Cmd::Eval { recording, calib, json, plots, contacts_csv, pipeline } => {
-            cmd::eval::run(&recording, &calib, json.as_deref(), plots.as_deref(), contacts_csv.as_deref(), &pipeline)
+        Cmd::Eval { recordings, calib, json, plots, contacts_csv, pipeline } => {
+            cmd::eval::run(&recordings, &calib, json.as_deref(), plots.as_deref(), contacts_csv.as_deref(), &pipeline)
                 .map(|()| ExitCode::SUCCESS)
         }
         Cmd::Dot { graph } => match load(&graph)? {

@@ -153,6 +153,70 @@ fn calibrate_pools_several_recordings_and_names_each_in_the_provenance() {
     assert!(!clobber.status.success() && stderr(&clobber).contains("is the recording b.h5"), "{}", stderr(&clobber));
 }
 
+/// `eval A.h5 B.h5` pools the two recordings into one report: its counts are the sums of the
+/// two alone and its RMSEs their pooled root mean squares; the JSON names both; each CSV row
+/// names its recording; the same recording twice is refused.
+#[test]
+fn eval_pools_several_recordings_into_one_report() {
+    let d = workdir("eval-pooled");
+    simulate(&d, "tiny-calibration.toml", "cal.h5");
+    simulate(&d, "tiny-eval.toml", "a.h5");
+    ok(&skinflow(&d, &["simulate", fixture("tiny-eval.toml").to_str().unwrap(), "--out", "b.h5", "--seed", "4"]));
+    ok(&skinflow(&d, &["calibrate", "cal.h5", "--out", "calib.toml"]));
+    let json = |name: &str| -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(d.join(name)).unwrap()).unwrap()
+    };
+    ok(&skinflow(&d, &["eval", "a.h5", "--calib", "calib.toml", "--json", "a.json"]));
+    ok(&skinflow(&d, &["eval", "b.h5", "--calib", "calib.toml", "--json", "b.json"]));
+    let run = skinflow(
+        &d,
+        &["eval", "a.h5", "b.h5", "--calib", "calib.toml", "--json", "ab.json", "--contacts-csv", "ab.csv"],
+    );
+    let text = ok(&run);
+    assert!(text.contains("Pooled over 2 recordings: a.h5, b.h5"), "{text}");
+    let (a, b, ab) = (json("a.json"), json("b.json"), json("ab.json"));
+    assert!(a.get("more_recordings").is_none(), "one recording writes no list: {a}");
+    assert_eq!(ab["recording"], "a.h5");
+    assert_eq!(ab["more_recordings"], serde_json::json!(["b.h5"]));
+    let count = |v: &serde_json::Value, path: &[&str]| path.iter().fold(v, |v, k| &v[*k]).as_u64().unwrap();
+    for path in
+        [&["frames"][..], &["localization", "matched"], &["localization", "missed"], &["localization", "spurious"]]
+    {
+        assert_eq!(count(&ab, path), count(&a, path) + count(&b, path), "{path:?}");
+    }
+    let err = stderr(&run);
+    for (name, v) in [("a.h5", &a), ("b.h5", &b)] {
+        assert!(err.contains(&format!("{name}: {} frames evaluated", count(v, &["frames"]))), "{err}");
+    }
+    // Pooled RMSE^2 = (n_a RMSE_a^2 + n_b RMSE_b^2) / (n_a + n_b), over matched contacts.
+    let (na, nb) = (count(&a, &["localization", "matched"]) as f64, count(&b, &["localization", "matched"]) as f64);
+    assert!(na > 0.0 && nb > 0.0);
+    for s in ["pneumatic-locaware", "pneumatic-forward"] {
+        let r = |v: &serde_json::Value| v["strategies"][s]["rmse_n"].as_f64().unwrap();
+        let pooled = ((na * r(&a).powi(2) + nb * r(&b).powi(2)) / (na + nb)).sqrt();
+        assert!((r(&ab) - pooled).abs() <= 1e-9 * pooled.max(1.0), "{s}: {} against {pooled}", r(&ab));
+    }
+    // Every CSV row names its recording; matched rows per recording as in the lone reports.
+    let csv = std::fs::read_to_string(d.join("ab.csv")).unwrap();
+    let mut lines = csv.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
+    let (kind, rec) = (col("kind"), col("recording"));
+    let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
+    for (name, v) in [("a.h5", &a), ("b.h5", &b)] {
+        let matched = rows.iter().filter(|r| r[rec] == name && r[kind] == "matched").count() as u64;
+        assert_eq!(matched, count(v, &["localization", "matched"]), "{name}");
+    }
+    assert_eq!(rows.iter().filter(|r| r[rec] != "a.h5" && r[rec] != "b.h5").count(), 0);
+    // The same recording twice, under another name too, is refused before any work.
+    std::fs::copy(d.join("a.h5"), d.join("a-copy.h5")).unwrap();
+    let twice = skinflow(&d, &["eval", "a.h5", "a-copy.h5", "--calib", "calib.toml", "--json", "twice.json"]);
+    let err = stderr(&twice);
+    assert!(!twice.status.success() && err.contains("a-copy.h5: the same recording as a.h5"), "{err}");
+    assert!(err.contains("frames count double"), "{err}");
+    assert!(!d.join("twice.json").exists());
+}
+
 /// Without /pressure, or with times out of order, calibrate and eval refuse up front naming the
 /// file and the dataset (instead of all-zero forces or "no loaded single-contact frame").
 #[test]
@@ -297,8 +361,10 @@ fn a_dead_electrode_is_masked_and_contacts_are_still_found_and_weighed() {
     for (a, b) in dead.iter().zip(&healthy) {
         assert!(a[col("kind")] == "matched" && b[col("kind")] == "matched", "{a:?} / {b:?}");
         assert_eq!(a[col("t_s")], b[col("t_s")]);
+        assert!(a[col("recording")] == "dead.h5" && b[col("recording")] == "healthy.h5");
         if num(a, "t_s") < 35.0 {
-            assert_eq!(a, b, "before the fault nothing differs");
+            let but_recording = |r: &[String]| [&r[..col("recording")], &r[col("recording") + 1..]].concat();
+            assert_eq!(but_recording(a), but_recording(b), "before the fault nothing differs");
             continue;
         }
         after += 1;

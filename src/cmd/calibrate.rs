@@ -85,23 +85,30 @@ pub fn fit(recording: &Path, params: &CalibParams, args: &PipelineArgs) -> Resul
     calibrate(&samples, params, provenance).map_err(anyhow::Error::msg)
 }
 
-/// Runs the pipeline over each calibration recording (each with its own no-load reference
-/// and tare, as recorded) and pools their samples: the samples in the order given, and the
-/// provenance naming every recording. Refuses a recording that gives no sample and the same
-/// recording given twice (its samples would count double), naming the files.
-pub fn collect(recordings: &[PathBuf], args: &PipelineArgs) -> Result<(Vec<CalibSample>, Provenance)> {
+/// Each recording with its content hash, in the order given; refuses the same recording given
+/// twice (under any name), since its `what` (samples, frames) would count double.
+pub fn distinct(recordings: &[PathBuf], what: &str) -> Result<Vec<RecordingRef>> {
     let mut refs: Vec<RecordingRef> = Vec::with_capacity(recordings.len());
     for recording in recordings {
         let hash = content_hash(recording)?;
         if let Some(same) = refs.iter().find(|r| r.recording_hash == hash) {
             bail!(
-                "{}: the same recording as {} (both {hash}); give each recording once, or its samples count double",
+                "{}: the same recording as {} (both {hash}); give each recording once, or its {what} count double",
                 recording.display(),
                 same.recording
             );
         }
         refs.push(RecordingRef { recording: recording.display().to_string(), recording_hash: hash });
     }
+    Ok(refs)
+}
+
+/// Runs the pipeline over each calibration recording (each with its own no-load reference
+/// and tare, as recorded) and pools their samples: the samples in the order given, and the
+/// provenance naming every recording. Refuses a recording that gives no sample and the same
+/// recording given twice (its samples would count double), naming the files.
+pub fn collect(recordings: &[PathBuf], args: &PipelineArgs) -> Result<(Vec<CalibSample>, Provenance)> {
+    let refs = distinct(recordings, "samples")?;
     let mut all = Vec::new();
     for recording in recordings {
         let samples = collect_one(recording, args)?;

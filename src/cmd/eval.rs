@@ -1,6 +1,7 @@
-//! `skinflow eval REC.h5 --calib CALIB.toml [--json OUT] [--plots DIR]`: every force strategy
-//! on a recording with ground truth: the paper's Table III plus per-diameter RMSE,
+//! `skinflow eval REC.h5 [MORE.h5 ...] --calib CALIB.toml [--json OUT] [--plots DIR]`: every
+//! force strategy on recordings with ground truth: the paper's Table III plus per-diameter RMSE,
 //! localization, multi-contact per-contact RMSE, RES50/RES75 and each strategy's latency.
+//! Several recordings (test sessions of one skin) are pooled into one report.
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -43,23 +44,42 @@ pub struct EvalOutcome {
     pub example: Option<Example>,
 }
 
-/// Runs every lane over the recording and feeds the evaluator; `want_rows` says whether to
-/// build the per-contact CSV lines.
-pub fn evaluate(recording: &Path, calib: &Path, args: &PipelineArgs, want_rows: bool) -> Result<EvalOutcome> {
+/// Runs every lane over each recording and feeds one evaluator, so the figures pool the
+/// recordings' frames (each recording is reconstructed against its own no-load reference and
+/// tared on its own, as recorded); `want_rows` says whether to build the per-contact CSV lines.
+pub fn evaluate(recordings: &[PathBuf], calib: &Path, args: &PipelineArgs, want_rows: bool) -> Result<EvalOutcome> {
+    let labels: Vec<(&str, &str)> = LANES.iter().map(|(n, _, _, l)| (*n, *l)).collect();
+    let mut outcome = EvalOutcome { evaluator: Evaluator::new(&labels), contact_rows: Vec::new(), example: None };
+    for recording in recordings {
+        let frames = outcome.evaluator.frames();
+        evaluate_one(recording, calib, args, want_rows, &mut outcome)?;
+        if recordings.len() > 1 {
+            eprintln!("{}: {} frames evaluated", recording.display(), outcome.evaluator.frames() - frames);
+        }
+    }
+    Ok(outcome)
+}
+
+/// One recording's frames into `outcome` (see [`evaluate`]).
+fn evaluate_one(
+    recording: &Path,
+    calib: &Path,
+    args: &PipelineArgs,
+    want_rows: bool,
+    outcome: &mut EvalOutcome,
+) -> Result<()> {
     let (rows, settled) = args.run(recording, |spec| {
         spec.calibration = Some(calib.to_path_buf());
         spec.lanes = LANES.iter().map(|(n, s, c, _)| ((*n).to_owned(), (*s).to_owned(), (*c).to_owned())).collect();
     })?;
-    let labels: Vec<(&str, &str)> = LANES.iter().map(|(n, _, _, l)| (*n, *l)).collect();
-    let mut ev = Evaluator::new(&labels);
-    let mut example: Option<Example> = None;
+    let EvalOutcome { evaluator: ev, contact_rows, example } = outcome;
     let mut truth = Vec::new();
     let mut detected = Vec::new();
     let mut transitions = 0usize;
     let mut without_pressure = 0usize;
     // Frames (loaded, not no-load) settled by each criterion: [truth only, pressure only, both, neither].
     let mut agreement = [0usize; 4];
-    let mut contact_rows = Vec::new();
+    let csv_recording = csv_field(&recording.display().to_string());
     for row in &rows {
         let forces: Vec<&Forces> = row.iter().filter_map(|m| m.get::<Forces>()).collect();
         let Some(first) = forces.first() else { continue };
@@ -115,7 +135,13 @@ pub fn evaluate(recording: &Path, calib: &Path, args: &PipelineArgs, want_rows: 
             })
             .map_err(anyhow::Error::msg)?;
         if want_rows {
-            let ctx = CsvFrame { frame, t_s: row[0].header.t_s(), dp_kpa: synced.dp_kpa, n_truth: truth.len() };
+            let ctx = CsvFrame {
+                recording: &csv_recording,
+                frame,
+                t_s: row[0].header.t_s(),
+                dp_kpa: synced.dp_kpa,
+                n_truth: truth.len(),
+            };
             for (t, truth_c) in truth.iter().enumerate() {
                 let pred = pairs.iter().find(|p| p.truth == t).map(|p| p.pred);
                 let lane_forces: Vec<f64> = pred.map_or_else(Vec::new, |p| per_lane.iter().map(|l| l[p]).collect());
@@ -130,7 +156,7 @@ pub fn evaluate(recording: &Path, calib: &Path, args: &PipelineArgs, want_rows: 
         }
         let better = example.as_ref().is_none_or(|(_, t)| truth.len() > t.len());
         if better && !contacts.contacts.is_empty() {
-            example = Some((contacts.image.clone(), truth.iter().map(|t| (t.x_mm, t.y_mm)).collect()));
+            *example = Some((contacts.image.clone(), truth.iter().map(|t| (t.x_mm, t.y_mm)).collect()));
         }
     }
     if transitions > 0 {
@@ -162,18 +188,25 @@ pub fn evaluate(recording: &Path, calib: &Path, args: &PipelineArgs, want_rows: 
     let synced =
         rows.iter().filter_map(|r| r.iter().find_map(|m| m.get::<Forces>())).map(|f| &*f.split.contacts.image.src);
     settled.warn_unknown_noise(recording, synced);
-    Ok(EvalOutcome { evaluator: ev, contact_rows, example })
+    Ok(())
+}
+
+/// A CSV field, quoted (RFC 4180) when it holds a comma, a quote or a line break.
+fn csv_field(text: &str) -> String {
+    if text.contains([',', '"', '\n', '\r']) { format!("\"{}\"", text.replace('"', "\"\"")) } else { text.to_owned() }
 }
 
 /// Per-frame columns of the `--contacts-csv` table.
-struct CsvFrame {
+struct CsvFrame<'a> {
+    /// The recording's path, as a CSV field.
+    recording: &'a str,
     frame: usize,
     t_s: f64,
     dp_kpa: f64,
     n_truth: usize,
 }
 
-impl CsvFrame {
+impl CsvFrame<'_> {
     /// One row: `kind` is `matched`, `missed` (truth without detection) or `spurious`.
     fn line(&self, truth: Option<&TruthContact>, det: Option<&skinflow_contact::Contact>, forces: &[f64]) -> String {
         let kind = match (truth, det) {
@@ -186,6 +219,7 @@ impl CsvFrame {
             self.frame.to_string(),
             format!("{:.6}", self.t_s),
             kind.to_owned(),
+            self.recording.to_owned(),
             self.n_truth.to_string(),
             format!("{:.6}", self.dp_kpa),
             opt(truth.map(|t| t.x_mm)),
@@ -204,10 +238,11 @@ impl CsvFrame {
 }
 
 /// Header of the `--contacts-csv` table (units in the names). `eval_frame` counts evaluated
-/// frames (no-load and load-change frames are skipped); `t_s` is the frame's time.
+/// frames over all recordings (no-load and load-change frames are skipped); `recording` is the
+/// frame's recording as given on the command line; `t_s` is the frame's time in it.
 pub fn contacts_csv_header() -> String {
     let mut h = String::from(
-        "eval_frame,t_s,kind,truth_contacts,dp_kpa,true_x_mm,true_y_mm,true_force_n,true_diameter_mm,\
+        "eval_frame,t_s,kind,recording,truth_contacts,dp_kpa,true_x_mm,true_y_mm,true_force_n,true_diameter_mm,\
          x_mm,y_mm,c_sum,area_mm2,peak",
     );
     for (name, ..) in LANES {
@@ -217,14 +252,15 @@ pub fn contacts_csv_header() -> String {
 }
 
 pub fn run(
-    recording: &Path,
+    recordings: &[PathBuf],
     calib: &Path,
     json: Option<&Path>,
     plots_dir: Option<&Path>,
     contacts_csv: Option<&Path>,
     args: &PipelineArgs,
 ) -> Result<()> {
-    let inputs = [("recording", recording), ("--calib", calib)];
+    let mut inputs: Vec<(&str, &Path)> = recordings.iter().map(|r| ("recording", r.as_path())).collect();
+    inputs.push(("--calib", calib));
     let outputs: Vec<(&str, &Path)> =
         [("--json", json), ("--contacts-csv", contacts_csv)].into_iter().filter_map(|(f, p)| Some((f, p?))).collect();
     super::paths::check_outputs(&inputs, &outputs)?;
@@ -234,7 +270,10 @@ pub fn run(
         anyhow::bail!("--plots {}: is an input file, not a directory for the plots", dir.display());
     }
     check_calibration(calib)?;
-    let outcome = evaluate(recording, calib, args, contacts_csv.is_some())?;
+    if recordings.len() > 1 {
+        super::calibrate::distinct(recordings, "frames")?;
+    }
+    let outcome = evaluate(recordings, calib, args, contacts_csv.is_some())?;
     if let Some(p) = contacts_csv {
         let mut text = contacts_csv_header();
         text.push('\n');
@@ -245,7 +284,9 @@ pub fn run(
         std::fs::write(p, text).with_context(|| format!("{}: cannot write", p.display()))?;
         eprintln!("per-contact table written to {}", p.display());
     }
-    let report = outcome.evaluator.report(&recording.display().to_string());
+    let mut names = recordings.iter().map(|r| r.display().to_string());
+    let mut report = outcome.evaluator.report(&names.next().unwrap_or_default());
+    report.more_recordings = names.collect();
     println!("{report}");
     if let Some(p) = json {
         std::fs::write(p, report.to_json()).with_context(|| format!("{}: cannot write", p.display()))?;
@@ -288,4 +329,16 @@ fn write_plots(dir: &Path, calib: &Path, o: &EvalOutcome, args: &PipelineArgs) -
     }
     eprintln!("plots written to {}", dir.display());
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::csv_field;
+
+    #[test]
+    fn csv_fields_are_quoted_only_when_needed() {
+        assert_eq!(csv_field("out/a.h5"), "out/a.h5");
+        assert_eq!(csv_field("runs,2/a.h5"), "\"runs,2/a.h5\"");
+        assert_eq!(csv_field("say \"hi\".h5"), "\"say \"\"hi\"\".h5\"");
+    }
 }

@@ -279,7 +279,9 @@ impl Run<'_> {
     /// Evaluates the recording of `scene` with a calibration.
     fn report(&self, scene: &str, calib: &Path) -> Result<EvalReport> {
         let rec = self.rec(scene);
-        Ok(super::eval::evaluate(&rec, calib, self.args, false)?.evaluator.report(&rec.display().to_string()))
+        Ok(super::eval::evaluate(std::slice::from_ref(&rec), calib, self.args, false)?
+            .evaluator
+            .report(&rec.display().to_string()))
     }
 
     /// Evaluates as [`Run::report`] and writes the JSON as `OUT/{json}.json`.

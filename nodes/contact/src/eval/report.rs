@@ -67,8 +67,12 @@ pub struct ResolutionReport {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct EvalReport {
-    /// Recording path.
+    /// Recording path (the first, when several were pooled).
     pub recording: String,
+    /// The other recordings pooled into this report, in the order given (`skinflow eval A.h5
+    /// B.h5 ...`); absent from the JSON when there are none.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub more_recordings: Vec<String>,
     /// Evaluated frames.
     pub frames: usize,
     /// Per strategy name.
@@ -141,6 +145,7 @@ impl Evaluator {
         });
         EvalReport {
             recording: recording.to_string(),
+            more_recordings: Vec::new(),
             frames: self.frames,
             strategies,
             localization: LocalizationReport {
@@ -180,6 +185,15 @@ impl fmt::Display for EvalReport {
             self.order.clone()
         };
         let matched = self.localization.matched;
+        if !self.more_recordings.is_empty() {
+            writeln!(
+                f,
+                "Pooled over {} recordings: {}, {}",
+                1 + self.more_recordings.len(),
+                self.recording,
+                self.more_recordings.join(", ")
+            )?;
+        }
         writeln!(f, "Force estimation ({} frames, {matched} matched contacts). Lower is better.", self.frames)?;
         writeln!(
             f,

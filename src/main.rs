@@ -97,6 +97,10 @@ enum Cmd {
         /// Inject a fault: device:index:kind[=value], e.g. eit:10:crc, eit:20:unplug=0.5.
         #[arg(long = "fault")]
         faults: Vec<String>,
+        /// The devices to serve, comma-separated (with --fast, only those a graph reads: an
+        /// unread device never finishes).
+        #[arg(long, default_value = "eit,pressure,loadcell")]
+        devices: String,
     },
     /// Reproduce the paper's experiments on the simulated skin and write a Markdown report.
     Reproduce {
@@ -169,12 +173,46 @@ fn main() -> ExitCode {
         .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
         .init();
     let cli = Cli::parse();
+    if cli.cmd.only_prints() {
+        default_sigpipe();
+    }
     match dispatch(cli.cmd) {
         Ok(code) => code,
         Err(e) => {
             eprintln!("error: {e:#}");
-            ExitCode::from(1)
+            ExitCode::from(if e.is::<cmd::InvalidGraph>() { 2 } else { 1 })
         }
+    }
+}
+
+impl Cmd {
+    /// Commands whose only pipes are standard output and error: no user graph (whose nodes may
+    /// write to sockets or devices), no control socket, no emulated device.
+    fn only_prints(&self) -> bool {
+        matches!(
+            self,
+            Cmd::Check { .. }
+                | Cmd::Nodes { .. }
+                | Cmd::Dot { .. }
+                | Cmd::Simulate { .. }
+                | Cmd::Inspect { .. }
+                | Cmd::Repair { .. }
+                | Cmd::Calibrate { .. }
+                | Cmd::Eval { .. }
+                | Cmd::Reproduce { .. }
+        )
+    }
+}
+
+/// Restores the default action of SIGPIPE, which Rust's runtime ignores: a closed standard
+/// output (`skinflow eval ... | head -1`) then ends the process quietly, as it ends `cat`,
+/// instead of a panic in `println!`. Not for commands that run user graphs or serve sockets:
+/// there a peer that hangs up must be an error of one write, not the end of the process.
+fn default_sigpipe() {
+    // SAFETY: `signal` with SIG_DFL installs no handler code; it is called once, from `main`,
+    // before any thread of this process is started, so no other thread observes the change.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
     }
 }
 
@@ -205,8 +243,8 @@ fn dispatch(cmd: Cmd) -> Result<ExitCode> {
         Cmd::Simulate { scene, out, seed, overwrite } => {
             cmd::simulate::run(&scene, &out, seed, overwrite).map(|()| ExitCode::SUCCESS)
         }
-        Cmd::Emulate { scene, seed, fast, dir, faults } => {
-            cmd::emulate::run(&scene, seed, fast, dir, &faults, interrupt_flag()?).map(|()| ExitCode::SUCCESS)
+        Cmd::Emulate { scene, seed, fast, dir, faults, devices } => {
+            cmd::emulate::run(&scene, seed, fast, dir, &faults, &devices, interrupt_flag()?).map(|()| ExitCode::SUCCESS)
         }
         Cmd::Reproduce { out, scenes, seed, fit, pipeline } => {
             cmd::reproduce::run(&scenes, &out, seed, &fit.fit, &pipeline).map(|()| ExitCode::SUCCESS)
@@ -244,7 +282,12 @@ fn registry_for(path: &Path) -> Result<Result<Registry, ExitCode>> {
     if let Ok(src) = skinflow_core::graph::SourceFile::read(path) {
         match skinflow_core::graph::plugin_paths(&src) {
             Ok(plugins) => {
-                skinflow_nodes::codec::load_plugins(&plugins, &mut reg)?;
+                // A graph naming a library that does not load cannot be validated: exit 2,
+                // with the graph named (the library may just not be built yet).
+                if let Err(e) = skinflow_nodes::codec::load_plugins(&plugins, &mut reg) {
+                    eprintln!("{}: {e}", path.display());
+                    return Ok(Err(ExitCode::from(2)));
+                }
             }
             Err(errs) => {
                 for e in &errs.0 {
@@ -290,8 +333,11 @@ fn run(
         Some(s) => bail!("--for must be a positive number of seconds (got {s})"),
         None => None,
     };
+    // Before the graph starts: a bad --stats-json or --control path fails without any data flowing.
+    if let Some(stats) = stats_json {
+        cmd::paths::check_outputs(&[("graph", path)], &[("--stats-json", stats)])?;
+    }
     let stop = interrupt_flag()?;
-    // Before the graph starts: a bad --control path fails without any data flowing.
     let listener = control.map(cmd::live::bind_control_socket).transpose()?;
     let running = match RunningGraph::start(&spec) {
         Ok(r) => r,

@@ -273,6 +273,14 @@ fn eval_refuses_a_recording_without_truth() {
     assert!(!out.status.success());
     let err = stderr(&out);
     assert!(err.contains("bare.h5") && err.contains("no ground truth"), "{err}");
+    // Truth, but nothing pressed: no frame to evaluate is an error, not an empty table.
+    std::fs::write(d.join("rest.toml"), "[scene]\nname = \"rest\"\nprofile = \"paper\"\n[[step]]\nrest_s = 8.0\n")
+        .unwrap();
+    ok(&skinflow(&d, &["simulate", "rest.toml", "--out", "rest.h5"]));
+    let out = skinflow(&d, &["eval", "rest.h5", "--calib", fixture("../../graphs/calib/paper.toml").to_str().unwrap()]);
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("rest.h5: no frame to evaluate"), "{err}");
 }
 
 #[test]
@@ -510,6 +518,7 @@ fn outputs_and_inputs_are_checked_before_any_work() {
     let calib = fixture("../../graphs/calib/paper.toml");
     let calib = calib.to_str().unwrap();
     let scene = fixture("tiny-eval.toml");
+    let chain = root().join("graphs/chain.toml").to_string_lossy().into_owned();
     let cases: Vec<(Vec<&str>, String)> = vec![
         (vec!["calibrate", "rec.h5", "--out", "rec.h5"], "--out rec.h5: is the recording rec.h5; refusing".into()),
         (vec!["calibrate", "rec.h5", "--out", "sub/../rec.h5"], "is the recording rec.h5; refusing".into()),
@@ -540,6 +549,31 @@ fn outputs_and_inputs_are_checked_before_any_work() {
             "--out rec.h5: exists (pass --overwrite to replace it)".into(),
         ),
         (vec!["reproduce", "--out", "rep"], "--scenes graphs/scenes: missing scene file(s)".into()),
+        // The pipeline flags are checked against the nodes' params before any work.
+        (
+            vec!["calibrate", "rec.h5", "--out", "x.toml", "--segment", "flor = 1"],
+            "--segment 'flor = 1': unknown field `flor`".into(),
+        ),
+        (
+            vec!["eval", "rec.h5", "--calib", calib, "--sync", "tare_s=abc"],
+            "--sync 'tare_s=abc': not a TOML table body".into(),
+        ),
+        (vec!["reproduce", "--out", "rep", "--recon", "lambda = \"x\""], "--recon 'lambda = \"x\"': ".into()),
+        (vec!["eval", "rec.h5", "--calib", calib], "rec.h5: not an HDF5 file".into()),
+        (vec!["repair", "rec.h5", "--out", "c.toml"], "--out c.toml: exists (pass --overwrite to replace it)".into()),
+        (vec!["repair", "rec.h5", "--out", "nope/x.h5"], "--out nope/x.h5: directory nope does not exist".into()),
+        (
+            vec!["run", &chain, "--stats-json", "nope/s.json"],
+            "--stats-json nope/s.json: directory nope does not exist".into(),
+        ),
+        (
+            vec!["emulate", scene.to_str().unwrap(), "--devices", "eit", "--fault", "pressure:1:crc"],
+            "--fault \"pressure:1:crc\": device pressure is not served (see --devices)".into(),
+        ),
+        (
+            vec!["emulate", scene.to_str().unwrap(), "--fault", "foo:1:crc"],
+            "--fault \"foo:1:crc\": unknown device \"foo\" (devices: eit, pressure, loadcell)".into(),
+        ),
     ];
     for (args, want) in cases {
         let out = skinflow(&d, &args);
@@ -552,6 +586,34 @@ fn outputs_and_inputs_are_checked_before_any_work() {
     assert_eq!(std::fs::read_to_string(d.join("c.toml")).unwrap(), "calibration bytes");
     assert!(!d.join("rep").exists(), "reproduce created its output directory before failing");
     assert!(!d.join("nope").exists());
+}
+
+/// Exit status 2 means an invalid graph for `bench` as for `check` and `run`; a command that
+/// only prints ends quietly when its reader goes away (`| head`), without a panic.
+#[test]
+fn bench_exits_2_on_an_invalid_graph_and_printing_commands_survive_a_closed_pipe() {
+    let d = workdir("exit-codes");
+    std::fs::write(d.join("rec.h5"), "not read before the graph validates").unwrap();
+    let graph = std::fs::read_to_string(root().join("graphs/ab-replay.toml")).unwrap();
+    let bad = graph.replacen("kind = \"segmenter\"", "kind = \"segmentor\"", 1);
+    assert_ne!(bad, graph);
+    std::fs::write(d.join("bad.toml"), bad).unwrap();
+    let out = skinflow(&d, &["bench", "bad.toml", "--replay", "rec.h5", "--vary", "recon.lambda=0.1,0.2"]);
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(err.contains("segmentor"), "{err}");
+
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_skinflow"))
+        .arg("nodes")
+        .current_dir(&d)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    drop(child.stdout.take()); // the reader goes away before the first line
+    let out = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!err.contains("panicked") && out.status.code() != Some(101), "{:?}: {err}", out.status);
 }
 
 #[test]
@@ -672,9 +734,5 @@ fn repair_salvages_a_recording_whose_last_flush_was_cut_short() {
 
     let again = skinflow(&d, &["repair", "rec.h5", "--out", "fixed.h5"]);
     assert_eq!(again.status.code(), Some(1));
-    assert!(
-        stderr(&again).contains("fixed.h5: /: the file exists (set overwrite to replace it)"),
-        "{}",
-        stderr(&again)
-    );
+    assert!(stderr(&again).contains("--out fixed.h5: exists (pass --overwrite to replace it)"), "{}", stderr(&again));
 }

@@ -148,8 +148,9 @@ fn variant_text(
 
 fn registry_for(src: &SourceFile) -> Result<Registry> {
     let mut reg = skinflow_nodes::registry();
-    let plugins = plugin_paths(src).map_err(|e| anyhow!("{e}"))?;
-    skinflow_nodes::codec::load_plugins(&plugins, &mut reg)?;
+    let plugins = plugin_paths(src).map_err(|e| anyhow::Error::new(super::InvalidGraph(e.to_string())))?;
+    skinflow_nodes::codec::load_plugins(&plugins, &mut reg)
+        .map_err(|e| anyhow::Error::new(super::InvalidGraph(format!("{}: {e}", src.path.display()))))?;
     Ok(reg)
 }
 
@@ -275,7 +276,7 @@ fn invalid_variant(graph: &Path, text: &str, reg: &Registry, label: &str, errs: 
             }
         })
         .collect();
-    anyhow!(lines.join("\n"))
+    anyhow::Error::new(super::InvalidGraph(lines.join("\n")))
 }
 
 /// Runs the variants and writes `bench.md`, `bench.json` and `pareto.png` into `out_dir`.

@@ -151,11 +151,10 @@ pub fn run(recordings: &[PathBuf], out: &Path, fit_toml: &str, args: &PipelineAr
     let inputs: Vec<(&str, &Path)> = recordings.iter().map(|r| ("recording", r.as_path())).collect();
     super::paths::check_outputs(&inputs, &[("--out", out)])?;
     let params = fit_params(fit_toml)?;
+    args.validate()?;
     let (samples, provenance) = collect(recordings, args)?;
+    // Its warnings are logged by `calibrate` itself (target skinflow::calibrate).
     let fitted = calibrate(&samples, &params, provenance).map_err(anyhow::Error::msg)?;
-    for w in &fitted.warnings {
-        eprintln!("warning: {w}");
-    }
     let cal = &fitted.calibration;
     println!("{}", cal.r2);
     let lam = |v: Option<f64>| v.map_or_else(|| "prior".to_string(), |v| format!("{v:.3e}"));

@@ -1,6 +1,8 @@
 //! `skinflow emulate SCENE.toml`: pseudo-terminals that speak the three boards' protocols
 //! (nodes/serial/PROTOCOLS.md) from a simulated scene, at the real rates (or `--fast`), with
-//! optional faults. Prints the device paths, then runs until the scene ends or Ctrl-C.
+//! optional faults. Prints the device paths, then runs until the scene ends or Ctrl-C. With
+//! `--fast` a device sends only as fast as it is read, so serve only the devices a graph reads
+//! (`--devices eit,pressure`): an unread one would never finish.
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -41,12 +43,7 @@ fn parse_fault(s: &str) -> Result<(Device, usize, Fault)> {
     };
     let mut it = s.splitn(3, ':');
     let (dev, idx, kind) = (it.next().ok_or_else(bad)?, it.next().ok_or_else(bad)?, it.next().ok_or_else(bad)?);
-    let device = match dev {
-        "eit" => Device::Eit,
-        "pressure" => Device::Pressure,
-        "loadcell" => Device::Loadcell,
-        _ => return Err(bad()),
-    };
+    let device = parse_device(dev).map_err(|e| anyhow::anyhow!("--fault \"{s}\": {e}"))?;
     let index: usize = idx.parse().map_err(|_| bad())?;
     let (k, v) = kind.split_once('=').map_or((kind, None), |(k, v)| (k, Some(v)));
     let secs = || v.and_then(|v| v.parse::<f64>().ok()).ok_or_else(bad);
@@ -63,57 +60,97 @@ fn parse_fault(s: &str) -> Result<(Device, usize, Fault)> {
     Ok((device, index, fault))
 }
 
+/// A device by its name on the command line.
+fn parse_device(name: &str) -> Result<Device> {
+    match name {
+        "eit" => Ok(Device::Eit),
+        "pressure" => Ok(Device::Pressure),
+        "loadcell" => Ok(Device::Loadcell),
+        _ => anyhow::bail!("unknown device {name:?} (devices: eit, pressure, loadcell)"),
+    }
+}
+
+/// Parses `--devices eit,pressure` (the devices to serve).
+fn parse_devices(list: &str) -> Result<Vec<Device>> {
+    let mut devices = Vec::new();
+    for name in list.split(',').map(str::trim) {
+        let d = parse_device(name).map_err(|e| anyhow::anyhow!("--devices {list:?}: {e}"))?;
+        if !devices.contains(&d) {
+            devices.push(d);
+        }
+    }
+    Ok(devices)
+}
+
 pub fn run(
     scene: &Path,
     seed: u64,
     fast: bool,
     dir: Option<PathBuf>,
     faults: &[String],
+    devices: &str,
     stop: Arc<AtomicBool>,
 ) -> Result<()> {
-    eprintln!("simulating {} (seed {seed}) before the devices open...", scene.display());
-    let t0 = std::time::Instant::now();
-    let (eit, pressure, force) = feed(scene, seed)?;
-    eprintln!("simulated in {:.1} s", t0.elapsed().as_secs_f64());
-    let last_s = [eit.last().map(|e| e.t_s), pressure.last().map(|p| p.t_s), force.last().map(|f| f.t_s)]
-        .into_iter()
-        .flatten()
-        .fold(0.0f64, f64::max);
+    // Every option is checked before the simulation, which takes seconds.
+    let devices = parse_devices(devices)?;
     let mut plan = FaultPlan::default();
     for f in faults {
         let (device, index, fault) = parse_fault(f)?;
+        if !devices.contains(&device) {
+            anyhow::bail!("--fault \"{f}\": device {} is not served (see --devices)", device.name());
+        }
         match device {
             Device::Eit => plan.eit.push((index, fault)),
             Device::Pressure => plan.pressure.push((index, fault)),
             Device::Loadcell => plan.loadcell.push((index, fault)),
         }
     }
+    eprintln!("simulating {} (seed {seed}) before the devices open...", scene.display());
+    let t0 = std::time::Instant::now();
+    let (eit, pressure, force) = feed(scene, seed)?;
+    eprintln!("simulated in {:.1} s", t0.elapsed().as_secs_f64());
+    let serves = |d: Device| devices.contains(&d);
+    let last_s = [
+        eit.last().filter(|_| serves(Device::Eit)).map(|e| e.t_s),
+        pressure.last().filter(|_| serves(Device::Pressure)).map(|p| p.t_s),
+        force.last().filter(|_| serves(Device::Loadcell)).map(|f| f.t_s),
+    ]
+    .into_iter()
+    .flatten()
+    .fold(0.0f64, f64::max);
     let config = EmulatorConfig {
         dir,
         pacing: if fast { Pacing::AsFastAsPossible } else { Pacing::RealTime },
         first_counter: 0,
     };
-    let (n_eit, n_p, n_f) = (eit.len(), pressure.len(), force.len());
-    let emu = Emulator::spawn(
-        config,
-        EmulatorFeed::default().with_eit(eit).with_pressure(pressure).with_loadcell(force),
-        plan,
-    )
-    .map_err(anyhow::Error::msg)?;
+    let mut feed = EmulatorFeed::default();
+    let mut served = Vec::new();
+    if serves(Device::Eit) {
+        served.push(format!("{} EIT frames", eit.len()));
+        feed = feed.with_eit(eit);
+    }
+    if serves(Device::Pressure) {
+        served.push(format!("{} pressure samples", pressure.len()));
+        feed = feed.with_pressure(pressure);
+    }
+    if serves(Device::Loadcell) {
+        served.push(format!("{} load-cell readings", force.len()));
+        feed = feed.with_loadcell(force);
+    }
+    let emu = Emulator::spawn(config, feed, plan).map_err(anyhow::Error::msg)?;
     for (device, path) in emu.paths() {
         println!("{} {}", device.name(), path.display());
     }
-    let until =
-        if fast { "as fast as the readers take them".to_string() } else { format!("in real time, {last_s:.1} s") };
-    eprintln!(
-        "emulating {}: {n_eit} EIT frames, {n_p} pressure samples, {n_f} load-cell readings, {until}; ends with the \
-         scene or at Ctrl-C",
-        scene.display()
-    );
+    let until = if fast {
+        "as fast as the readers take them (every served device must be read to the end)".to_string()
+    } else {
+        format!("in real time, {last_s:.1} s")
+    };
+    eprintln!("emulating {}: {}, {until}; ends with the scene or at Ctrl-C", scene.display(), served.join(", "));
     while !emu.finished() && !stop.load(Ordering::SeqCst) {
         std::thread::sleep(Duration::from_millis(50));
     }
-    for d in [Device::Eit, Device::Pressure, Device::Loadcell] {
+    for d in devices {
         if let Some(s) = emu.stats(d) {
             eprintln!("{}: {s:?}", d.name());
         }

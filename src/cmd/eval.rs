@@ -6,7 +6,7 @@
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-use anyhow::{Context as _, Result};
+use anyhow::{Context as _, Result, bail};
 use skinflow_contact::eval::metrics::{FrameInput, TruthContact, resolution};
 use skinflow_contact::eval::{Evaluator, plots};
 use skinflow_contact::{Calibration, ImageGrid, Segmenter};
@@ -53,8 +53,16 @@ pub fn evaluate(recordings: &[PathBuf], calib: &Path, args: &PipelineArgs, want_
     for recording in recordings {
         let frames = outcome.evaluator.frames();
         evaluate_one(recording, calib, args, want_rows, &mut outcome)?;
+        let evaluated = outcome.evaluator.frames() - frames;
+        if evaluated == 0 {
+            bail!(
+                "{}: no frame to evaluate: every frame is a no-load frame (nothing pressed), was acquired while the \
+                 load changed, or has no pressure (counts above)",
+                recording.display()
+            );
+        }
         if recordings.len() > 1 {
-            eprintln!("{}: {} frames evaluated", recording.display(), outcome.evaluator.frames() - frames);
+            eprintln!("{}: {evaluated} frames evaluated", recording.display());
         }
     }
     Ok(outcome)
@@ -270,6 +278,7 @@ pub fn run(
         anyhow::bail!("--plots {}: is an input file, not a directory for the plots", dir.display());
     }
     check_calibration(calib)?;
+    args.validate()?;
     if recordings.len() > 1 {
         super::calibrate::distinct(recordings, "frames")?;
     }

@@ -12,3 +12,16 @@ pub mod repair;
 pub mod reproduce;
 pub mod send;
 pub mod simulate;
+
+/// An error that means "the graph is invalid": the process exits with status 2, as `check`
+/// and `run` do for a graph that does not validate. The text is the errors, one per line.
+#[derive(Debug)]
+pub struct InvalidGraph(pub String);
+
+impl std::fmt::Display for InvalidGraph {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for InvalidGraph {}

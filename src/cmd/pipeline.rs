@@ -42,7 +42,28 @@ pub enum SettledBy {
     Pressure,
 }
 
+/// Parses `text` as the body of a node's params table and deserializes it as `T`, so a typo
+/// in `--recon`, `--segment` or `--sync` is refused before any work, naming the flag (instead
+/// of a position in the generated pipeline graph).
+fn check_params<T: serde::de::DeserializeOwned>(flag: &str, text: &str) -> Result<()> {
+    let doc = format!("params = {{ {text} }}");
+    let mut table: toml::Table =
+        toml::from_str(&doc).map_err(|e| anyhow::anyhow!("{flag} '{text}': not a TOML table body: {}", e.message()))?;
+    let params = table.remove("params").unwrap_or_else(|| toml::Value::Table(toml::Table::new()));
+    T::deserialize(params).map_err(|e| anyhow::anyhow!("{flag} '{text}': {}", e.message()))?;
+    Ok(())
+}
+
 impl PipelineArgs {
+    /// Refuses `--recon`, `--segment` and `--sync` values that are not valid params of their
+    /// node (syntax, unknown or mistyped fields); run before any work.
+    pub fn validate(&self) -> Result<()> {
+        check_params::<skinflow_nodes::reconstruct::ReconstructorParams>("--recon", &self.recon)?;
+        check_params::<skinflow_nodes::segment::SegmenterParams>("--segment", &self.segment)?;
+        check_params::<skinflow_nodes::sync::SyncParams>("--sync", &self.sync)?;
+        Ok(())
+    }
+
     pub fn spec(&self, recording: PathBuf) -> PipelineSpec {
         PipelineSpec {
             recording,

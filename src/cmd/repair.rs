@@ -7,6 +7,10 @@ use std::path::Path;
 use anyhow::Result;
 
 pub fn run(input: &Path, out: &Path, overwrite: bool) -> Result<()> {
+    super::paths::check_outputs(&[("recording", input)], &[("--out", out)])?;
+    if !overwrite && std::fs::symlink_metadata(out).is_ok() {
+        anyhow::bail!("--out {}: exists (pass --overwrite to replace it)", out.display());
+    }
     let report = skinflow_record::repair(input, out, overwrite).map_err(anyhow::Error::msg)?;
     println!("{report}");
     Ok(())

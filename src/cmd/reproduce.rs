@@ -48,6 +48,7 @@ fn f(v: Option<f64>, p: usize) -> String {
 
 pub fn run(scenes_dir: &Path, out: &Path, seed: u64, fit_toml: &str, args: &PipelineArgs) -> Result<()> {
     let params = super::calibrate::fit_params(fit_toml)?;
+    args.validate()?;
     // Before anything is created: every scene file is there.
     let missing: Vec<String> = SCENES
         .iter()

@@ -34,7 +34,7 @@ pub fn run(socket: &Path, requests: &[String]) -> Result<()> {
             serde_json::from_str(&reply).with_context(|| format!("{s}: reply to {line} is not JSON"))?;
         if value.get("ok") != Some(&serde_json::Value::Bool(true)) {
             let error = value.get("error").and_then(|e| e.as_str()).unwrap_or("no error given");
-            bail!("{s}: {line}: {error}");
+            bail!("{s}: {line}: {}", error.trim_end());
         }
     }
     Ok(())

@@ -90,6 +90,16 @@ pub enum RecordError {
     /// `repair` cannot give a copy that the reader accepts (or was given its input as output).
     #[error("{}: cannot be repaired: {reason}", file.display())]
     NotRepairable { file: PathBuf, reason: String },
+    /// The file is not HDF5 at all (no HDF5 signature where the format puts one).
+    #[error("{}: not an HDF5 file (a skinflow recording is HDF5: CONTRACTS.md section 2)", file.display())]
+    NotHdf5 { file: PathBuf },
+    /// An HDF5 file that is not a skinflow recording (no `format` attribute on its root).
+    #[error(
+        "{}: an HDF5 file, but not a skinflow recording (its root has no `format` attribute; \
+         CONTRACTS.md section 2)",
+        file.display()
+    )]
+    NotARecording { file: PathBuf },
     /// A file system operation failed (file not found, listing rotated parts).
     #[error("{}: {source}", path.display())]
     Io {

@@ -163,10 +163,38 @@ pub(crate) fn open_file_marked(path: &Path) -> Result<(File, bool), RecordError>
     }
     match File::open(path) {
         Ok(f) => Ok((f, false)),
-        Err(first) => {
-            File::open_as(path, OpenMode::ReadSWMR).map(|f| (f, true)).map_err(|_| RecordError::hdf5(path, "/", first))
-        }
+        Err(first) => File::open_as(path, OpenMode::ReadSWMR).map(|f| (f, true)).map_err(|_| {
+            if has_hdf5_signature(path) {
+                RecordError::hdf5(path, "/", first)
+            } else {
+                RecordError::NotHdf5 { file: path.to_path_buf() }
+            }
+        }),
     }
+}
+
+/// The 8-byte signature HDF5 puts at the start of its superblock.
+const HDF5_SIGNATURE: [u8; 8] = *b"\x89HDF\r\n\x1a\n";
+
+/// Whether the file has the HDF5 signature where the format allows the superblock: at byte 0,
+/// 512, 1024, 2048, ... (a user block may come first). Unreadable counts as having it, so the
+/// caller reports the library's own error.
+fn has_hdf5_signature(path: &Path) -> bool {
+    use std::io::{Read, Seek, SeekFrom};
+    let Ok(mut f) = std::fs::File::open(path) else { return true };
+    let Ok(len) = f.metadata().map(|m| m.len()) else { return true };
+    let mut at = 0u64;
+    while at + 8 <= len {
+        let mut sig = [0u8; 8];
+        if f.seek(SeekFrom::Start(at)).is_err() || f.read_exact(&mut sig).is_err() {
+            return true;
+        }
+        if sig == HDF5_SIGNATURE {
+            return true;
+        }
+        at = if at == 0 { 512 } else { 2 * at };
+    }
+    false
 }
 
 /// The root attributes `format` and `format_version` of a skinflow recording: refuses another
@@ -174,7 +202,7 @@ pub(crate) fn open_file_marked(path: &Path) -> Result<(File, bool), RecordError>
 pub(crate) fn check_format(file: &File, fpath: &Path) -> Result<i64, RecordError> {
     let root = |name: &str| format!("/ attr {name}");
     let format = attr::read_string(file, fpath, layout::ATTR_FORMAT)?
-        .ok_or_else(|| RecordError::schema(fpath, &root(layout::ATTR_FORMAT), SchemaProblem::Missing))?;
+        .ok_or_else(|| RecordError::NotARecording { file: fpath.to_path_buf() })?;
     if format != FORMAT {
         let problem = SchemaProblem::WrongFormat { found: format };
         return Err(RecordError::schema(fpath, &root(layout::ATTR_FORMAT), problem));

@@ -53,6 +53,8 @@ fn garbage_empty_and_missing_files_are_refused() {
         let path = dir.join(name);
         std::fs::write(&path, content).unwrap();
         assert_refused(&path, name);
+        // Not HDF5 at all: said so, not as the library's "file signature not found".
+        assert!(matches!(Recording::open(&path), Err(RecordError::NotHdf5 { .. })), "{name}");
     }
     let missing = dir.join("missing.h5");
     assert!(matches!(Recording::open(&missing), Err(RecordError::Io { .. })));

@@ -262,7 +262,7 @@ fn outputs_are_never_clobbered_and_other_files_are_refused() {
     file.new_attr::<i64>().shape(()).create("format_version").unwrap().write_scalar(&1).unwrap();
     file.close().unwrap();
     let err = repair(&other, &dir.join("x.h5"), false).unwrap_err().to_string();
-    assert!(err.contains("/ attr format: is missing"), "{err}");
+    assert!(err.contains("other.h5: an HDF5 file, but not a skinflow recording"), "{err}");
     let err = repair(&dir.join("absent.h5"), &dir.join("y.h5"), false).unwrap_err().to_string();
     assert!(err.contains("absent.h5"), "{err}");
     let _ = std::fs::remove_dir_all(&dir);

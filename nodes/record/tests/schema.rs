@@ -69,7 +69,6 @@ fn every_violation_is_refused_with_file_path_and_problem() {
             "/ attr format",
             SchemaProblem::WrongFormat { found: "other-thing".into() },
         ),
-        ("no format", |f| f.delete_attr("format").unwrap(), "/ attr format", SchemaProblem::Missing),
         (
             "format is a number",
             |f| {
@@ -207,6 +206,11 @@ fn every_violation_is_refused_with_file_path_and_problem() {
         Recording::open(&file),
         Err(RecordError::Schema { problem: SchemaProblem::BadSensor { .. }, .. })
     ));
+    // No format attribute at all: HDF5, but not a skinflow recording.
+    let file = valid_file(&dir, "no-format.h5");
+    hdf5::File::open_rw(&file).unwrap().delete_attr("format").unwrap();
+    let msg = Recording::open(&file).unwrap_err().to_string();
+    assert!(msg.starts_with(&format!("{}: an HDF5 file, but not a skinflow recording", file.display())), "{msg}");
 }
 
 #[test]

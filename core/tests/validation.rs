@@ -8,7 +8,7 @@
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-use skinflow_core::graph::{Policy, Trigger};
+use skinflow_core::graph::{GraphErrorKind, Policy, ThreadMode, Trigger};
 use skinflow_core::registry::{KindInfo, NodeParams, Registry, Role, typed};
 use skinflow_core::{GraphSpec, Inputs, NodeError, NodeImpl, Outputs, Payload, PortSpec, Sink, Source, SourcePoll};
 
@@ -143,6 +143,13 @@ fn errors_name_the_node_where_one_is_involved() {
         ("invalid-unconnected.toml", "s"),
         ("invalid-deadline.toml", "s"),
         ("invalid-periodic-needs-period.toml", "s"),
+        ("invalid-node-field-type.toml", "s"),
+        ("invalid-node-field-cpu.toml", "n"),
+        ("invalid-unknown-trigger.toml", "n"),
+        ("invalid-restart.toml", "n"),
+        ("invalid-unknown-node-key.toml", "c"),
+        ("invalid-align-misplaced.toml", "s"),
+        ("invalid-pool-rt-priority.toml", "s"),
     ] {
         let errs = GraphSpec::load(&dir.join(case), &reg).err().unwrap().0;
         assert_eq!(errs[0].node.as_deref(), Some(node), "{case}");
@@ -198,4 +205,55 @@ fn valid_triggers_are_parsed() {
     // Two edges into the multi-input sink, in file order.
     let into_sink: Vec<&str> = g.edges.iter().filter(|e| e.to == "sink.in").map(|e| e.from.as_str()).collect();
     assert_eq!(into_sink, ["tick.out", "by-time.out"]);
+}
+
+#[test]
+fn schema_errors_in_a_node_without_a_usable_id_say_so() {
+    let reg = registry();
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/cases");
+    for (case, problem) in [
+        ("invalid-node-without-id.toml", "without an id"),
+        ("invalid-node-field-bad-id.toml", "with an invalid id \"c.1\""),
+    ] {
+        let errs = GraphSpec::load(&dir.join(case), &reg).err().unwrap().0;
+        assert_eq!(errs.len(), 1, "{case}");
+        assert_eq!(errs[0].node, None, "{case}");
+        let GraphErrorKind::UnnamedNode { problem: got, .. } = &errs[0].kind else { panic!("{case}: {:?}", errs[0]) };
+        assert_eq!(got, problem, "{case}");
+    }
+}
+
+#[test]
+fn duplicate_edge_is_one_error_naming_both_lines() {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/cases/invalid-duplicate-edge-single.toml");
+    let errs = GraphSpec::load(&path, &registry()).err().unwrap().0;
+    assert_eq!(errs.len(), 1, "{errs:?}");
+    assert_eq!(
+        errs[0].kind,
+        GraphErrorKind::DuplicateEdge { from: "c.out".into(), to: "s.in".into(), first_line: 16, line: 24 }
+    );
+}
+
+#[test]
+fn cycle_error_names_only_the_nodes_on_the_cycle() {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/cases/invalid-cycle-downstream.toml");
+    let errs = GraphSpec::load(&path, &registry()).err().unwrap().0;
+    assert_eq!(errs.len(), 1, "{errs:?}");
+    assert_eq!(
+        errs[0].kind,
+        GraphErrorKind::Cycle { path: "a -> b -> a".into(), from: "b.out".into(), to: "a.b".into() }
+    );
+    assert!(!errs[0].to_string().contains('z'), "{}", errs[0]);
+}
+
+#[test]
+fn valid_placement_keeps_the_thread_as_written() {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/cases/valid-placement.toml");
+    let g = GraphSpec::load(&path, &registry()).unwrap();
+    let node = |id: &str| &g.nodes[g.node_index(id).unwrap()];
+    assert_eq!(node("c").rt_priority, Some(20));
+    // Absent means pool; the runtime gives a node with rt_priority or cpu a thread of its own.
+    assert_eq!((node("implied").thread, node("implied").rt_priority), (ThreadMode::Pool, Some(10)));
+    assert_eq!((node("written").thread, node("written").cpu), (ThreadMode::Dedicated, Some(0)));
+    assert_eq!(node("pooled").thread, ThreadMode::Pool);
 }

@@ -31,12 +31,31 @@ pub enum GraphErrorKind {
     SecondEdge { to: String, from: String, first: String },
     #[error("required input \"{0}\" is not connected")]
     Unconnected(String),
-    #[error("cycle: {0}")]
-    Cycle(String),
+    #[error(
+        "duplicate edge \"{from}\" -> \"{to}\" (lines {first_line} and {line}): every message would be delivered twice; remove one"
+    )]
+    DuplicateEdge { from: String, to: String, first_line: usize, line: usize },
+    /// `path` lists the nodes in cycle order, the first again at the end (`a -> b -> a`).
+    #[error("cycle: {path} (the edge \"{from}\" -> \"{to}\" closes it); a dataflow graph must be acyclic")]
+    Cycle { path: String, from: String, to: String },
+    #[error("the graph has no nodes: add at least one [[node]] table")]
+    NoNodes,
+    /// A `[[node]]` value that does not fit the schema (`key` is the key it belongs to), or
+    /// a key the schema lacks.
+    #[error("{}{cause}", key_prefix(.key))]
+    NodeField { key: Option<String>, cause: String },
+    /// As [`GraphErrorKind::NodeField`], in a `[[node]]` table whose id cannot name it:
+    /// `problem` says why ("without an id", ...).
+    #[error("node {problem}: {}{cause}", key_prefix(.key))]
+    UnnamedNode { problem: String, key: Option<String>, cause: String },
     #[error("{0}")]
     Option(String),
     #[error("plugin {path}: {problem}")]
     Plugin { path: String, problem: String },
+}
+
+fn key_prefix(key: &Option<String>) -> String {
+    key.as_ref().map(|k| format!("{k}: ")).unwrap_or_default()
 }
 
 /// One located error: `file:line:col: node "id": cause`.

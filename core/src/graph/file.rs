@@ -20,6 +20,8 @@
 //! policy = "block"           # or "drop_oldest"
 //! ```
 
+use std::collections::BTreeMap;
+
 use serde::Deserialize;
 use toml::Spanned;
 
@@ -114,7 +116,7 @@ pub(crate) struct NodeEntry {
     pub params: Option<toml::Table>,
     #[serde(default)]
     pub trigger: TriggerKind,
-    pub align: Option<AlignBy>,
+    pub align: Option<Spanned<AlignBy>>,
     pub align_window_us: Option<Spanned<f64>>,
     pub period_ms: Option<Spanned<f64>>,
     pub deadline_us: Option<Spanned<f64>>,
@@ -122,8 +124,16 @@ pub(crate) struct NodeEntry {
     pub rt_priority: Option<Spanned<u8>>,
     #[serde(default)]
     pub restart: Restart,
+    /// Absent = pool (or dedicated, when `cpu` or `rt_priority` asks for a thread of its own).
+    pub thread: Option<Spanned<ThreadMode>>,
+}
+
+/// The `[[node]]` tables read without their schema: every key and value with its span, so a
+/// schema error inside a table can name the node (by its `id`) and the key at fault.
+#[derive(Debug, Deserialize)]
+pub(crate) struct LooseFile {
     #[serde(default)]
-    pub thread: ThreadMode,
+    pub node: Vec<Spanned<BTreeMap<Spanned<String>, Spanned<toml::Value>>>>,
 }
 
 #[derive(Debug, Deserialize)]

@@ -2,21 +2,63 @@
 //! Every error found is reported, each located in the file. Nothing here touches files or
 //! devices named in params: that happens when nodes are built.
 
-use std::collections::HashMap;
+use std::collections::{BTreeMap, HashMap};
 use std::ops::Range;
 use std::path::PathBuf;
 use std::time::Duration;
 
+use toml::Spanned;
+
 use super::error::{GraphError, GraphErrorKind as K, GraphErrors};
-use super::file::{AlignBy, GraphFile, NodeEntry, TriggerKind};
+use super::file::{AlignBy, GraphFile, LooseFile, NodeEntry, ThreadMode, TriggerKind};
 use super::source::SourceFile;
 use super::{DEFAULT_CAPACITY, EdgeSpec, GraphSpec, NodeSpec, Trigger};
 use crate::params::Params;
 use crate::registry::{Registry, Role};
 
 fn parse_file(src: &SourceFile) -> Result<GraphFile, GraphErrors> {
-    toml::from_str::<GraphFile>(&src.text)
-        .map_err(|e| GraphErrors(vec![GraphError::at(src, e.span(), None, K::Syntax(e.message().trim().to_owned()))]))
+    toml::from_str::<GraphFile>(&src.text).map_err(|e| GraphErrors(vec![schema_error(src, &e)]))
+}
+
+/// A `[[node]]` table as written: keys and values with their spans.
+type LooseNode = BTreeMap<Spanned<String>, Spanned<toml::Value>>;
+
+/// The error for a file that is not TOML or does not fit the schema. One inside a `[[node]]`
+/// table names the node (or says why its id cannot) and the key whose value is wrong.
+fn schema_error(src: &SourceFile, e: &toml::de::Error) -> GraphError {
+    let cause = e.message().trim().to_owned();
+    let span = e.span();
+    let Some((at, table)) = span.as_ref().and_then(|s| Some((s.start, node_table_at(src, s.start)?))) else {
+        return GraphError::at(src, span, None, K::Syntax(cause));
+    };
+    let key = table.iter().find(|(_, v)| v.span().contains(&at)).map(|(k, _)| k.get_ref().clone());
+    match node_name(&table) {
+        Ok(id) => GraphError::at(src, span, Some(&id), K::NodeField { key, cause }),
+        Err(problem) => GraphError::at(src, span, None, K::UnnamedNode { problem, key, cause }),
+    }
+}
+
+/// The `[[node]]` table holding byte `at` of the file, if the file is valid TOML.
+fn node_table_at(src: &SourceFile, at: usize) -> Option<LooseNode> {
+    let file: LooseFile = toml::from_str(&src.text).ok()?;
+    file.node.into_iter().find(|n| extent(n).contains(&at)).map(Spanned::into_inner)
+}
+
+/// The bytes a `[[node]]` table covers: its header (the span of the table itself) to its
+/// last key or value.
+fn extent(node: &Spanned<LooseNode>) -> Range<usize> {
+    let parts = node.get_ref().iter().flat_map(|(k, v)| [k.span(), v.span()]);
+    parts.fold(node.span(), |all, s| all.start.min(s.start)..all.end.max(s.end))
+}
+
+/// The id that names a `[[node]]` table, or why it cannot.
+fn node_name(table: &LooseNode) -> Result<String, String> {
+    match table.iter().find(|(k, _)| k.get_ref() == "id").map(|(_, v)| v.get_ref()) {
+        None => Err("without an id".into()),
+        Some(toml::Value::String(id)) if valid_id(id) => Ok(id.clone()),
+        Some(toml::Value::String(id)) => Err(format!("with an invalid id \"{id}\"")),
+        Some(other) => Err(format!("with an id that is not a string ({other})")),
+    }
 }
 
 pub(super) fn plugin_paths(src: &SourceFile) -> Result<Vec<PathBuf>, GraphErrors> {
@@ -69,19 +111,8 @@ pub(super) fn validate(src: SourceFile, registry: &Registry) -> Result<GraphSpec
         if role == Role::Source && n.trigger != TriggerKind::Any {
             err(Some(entry.span()), Some(&id), K::Option("a source has no trigger: it runs on its own thread".into()));
         }
-        if let Some(d) = &n.deadline_us
-            && !(d.get_ref().is_finite() && *d.get_ref() > 0.0)
-        {
-            err(
-                Some(d.span()),
-                Some(&id),
-                K::Option(format!("deadline_us must be finite and > 0 (got {})", d.get_ref())),
-            );
-        }
-        if let Some(p) = &n.rt_priority
-            && !(1..=99).contains(p.get_ref())
-        {
-            err(Some(p.span()), Some(&id), K::Option(format!("rt_priority must be in 1..=99 (got {})", p.get_ref())));
+        for (span, msg) in option_errors(n).into_iter().chain(placement_error(n, role)) {
+            err(Some(span), Some(&id), K::Option(msg));
         }
         nodes.push(Some(NodeSpec {
             id,
@@ -93,12 +124,14 @@ pub(super) fn validate(src: SourceFile, registry: &Registry) -> Result<GraphSpec
             cpu: n.cpu,
             rt_priority: n.rt_priority.as_ref().map(|p| *p.get_ref()),
             restart: n.restart,
-            thread: n.thread,
+            thread: n.thread.as_ref().map_or_else(ThreadMode::default, |t| *t.get_ref()),
         }));
     }
 
     // Edges: endpoints, ports, types, capacities, single inputs.
     let mut edges: Vec<EdgeSpec> = Vec::new();
+    // Where each of `edges` is written: the span of its `from`.
+    let mut edge_spans: Vec<Range<usize>> = Vec::new();
     let mut first_into: HashMap<(usize, usize), String> = HashMap::new();
     let mut attempted: Vec<(usize, String)> = Vec::new();
     for e in &file.edge {
@@ -153,6 +186,16 @@ pub(super) fn validate(src: SourceFile, registry: &Registry) -> Result<GraphSpec
             );
         }
         let (Some(fport), Some(tport)) = (fport, tport) else { continue };
+        if let Some(first) =
+            edges.iter().position(|x| (x.from_node, x.from_port, x.to_node, x.to_port) == (fnode, fport, tnode, tport))
+        {
+            // One mistake, one error: the copy is neither type-checked nor a second edge.
+            let (first_line, _) = src.line_col(edge_spans[first].start);
+            let (line, _) = src.line_col(ed.from.span().start);
+            let (from, to) = (ed.from.get_ref().clone(), ed.to.get_ref().clone());
+            err(Some(ed.from.span()), None, K::DuplicateEdge { from, to, first_line, line });
+            continue;
+        }
         let (fp, tp) = (&finfo.outputs[fport], &tinfo.inputs[tport]);
         if !tp.accepts(&fp.ty) {
             err(
@@ -191,6 +234,7 @@ pub(super) fn validate(src: SourceFile, registry: &Registry) -> Result<GraphSpec
             from: ed.from.get_ref().clone(),
             to: ed.to.get_ref().clone(),
         });
+        edge_spans.push(ed.from.span());
     }
 
     // Required inputs.
@@ -208,24 +252,21 @@ pub(super) fn validate(src: SourceFile, registry: &Registry) -> Result<GraphSpec
         }
     }
 
-    // Cycles (Kahn's algorithm; ties broken by file order so `topo` is deterministic).
+    // Cycles: Kahn's algorithm (ties broken by file order so `topo` is deterministic) leaves
+    // the nodes on or downstream of a cycle; one cycle among them is reported.
     let topo = topo_order(nodes.len(), &edges);
     if topo.len() < nodes.len() {
-        let stuck: Vec<usize> = (0..nodes.len()).filter(|i| !topo.contains(i)).collect();
-        let e = edges.iter().position(|e| stuck.contains(&e.from_node) && stuck.contains(&e.to_node));
-        let names: Vec<String> = stuck.iter().map(|&i| file.node[i].get_ref().id.get_ref().clone()).collect();
-        let span = e.and_then(|k| {
-            let (from, to) = (&edges[k].from, &edges[k].to);
-            file.edge
-                .iter()
-                .find(|x| x.get_ref().from.get_ref() == from && x.get_ref().to.get_ref() == to)
-                .map(|x| x.get_ref().from.span())
-        });
-        err(
-            span,
-            None,
-            K::Cycle(format!("nodes {} feed each other; a dataflow graph must be acyclic", names.join(", "))),
-        );
+        let cycle = find_cycle(nodes.len(), &edges).expect("Kahn's algorithm stopped, so there is a cycle");
+        let last = *cycle.last().expect("a cycle has an edge");
+        let mut path: Vec<&str> =
+            cycle.iter().map(|&k| file.node[edges[k].from_node].get_ref().id.get_ref().as_str()).collect();
+        path.push(path[0]);
+        let (from, to) = (edges[last].from.clone(), edges[last].to.clone());
+        err(Some(edge_spans[last].clone()), None, K::Cycle { path: path.join(" -> "), from, to });
+    }
+
+    if file.node.is_empty() {
+        err(None, None, K::NoNodes);
     }
 
     if !errs.is_empty() {
@@ -249,12 +290,52 @@ pub(super) fn validate(src: SourceFile, registry: &Registry) -> Result<GraphSpec
     })
 }
 
+/// Range errors of `deadline_us` and `rt_priority`.
+fn option_errors(n: &NodeEntry) -> Vec<(Range<usize>, String)> {
+    let mut out = Vec::new();
+    if let Some(d) = &n.deadline_us
+        && !(d.get_ref().is_finite() && *d.get_ref() > 0.0)
+    {
+        out.push((d.span(), format!("deadline_us must be finite and > 0 (got {})", d.get_ref())));
+    }
+    if let Some(p) = &n.rt_priority
+        && !(1..=99).contains(p.get_ref())
+    {
+        out.push((p.span(), format!("rt_priority must be in 1..=99 (got {})", p.get_ref())));
+    }
+    out
+}
+
+/// `thread = "pool"` on a processor or sink that also sets `rt_priority` or `cpu`: the
+/// runtime gives such a node a thread of its own anyway (see `RunningGraph::start`), so
+/// the pool request would be silently ignored. A source always has its own thread.
+fn placement_error(n: &NodeEntry, role: Role) -> Option<(Range<usize>, String)> {
+    let thread = n.thread.as_ref().filter(|t| *t.get_ref() == ThreadMode::Pool && role != Role::Source)?;
+    let option = if n.rt_priority.is_some() {
+        "rt_priority"
+    } else if n.cpu.is_some() {
+        "cpu"
+    } else {
+        return None;
+    };
+    Some((
+        thread.span(),
+        format!(
+            "{option} applies only to a thread of its own, not to the shared pool: \
+             set thread = \"dedicated\" (or leave thread out), or remove {option}"
+        ),
+    ))
+}
+
 fn trigger_of(n: &NodeEntry) -> Result<Trigger, (Option<Range<usize>>, String)> {
     let misplaced = |what: &str, span: Range<usize>, t: &str| {
         Err((Some(span), format!("{what} applies only to trigger = \"{t}\"")))
     };
     match n.trigger {
         TriggerKind::Any => {
+            if let Some(a) = &n.align {
+                return misplaced("align", a.span(), "aligned");
+            }
             if let Some(w) = &n.align_window_us {
                 return misplaced("align_window_us", w.span(), "aligned");
             }
@@ -268,7 +349,9 @@ fn trigger_of(n: &NodeEntry) -> Result<Trigger, (Option<Range<usize>>, String)> 
                 return misplaced("period_ms", p.span(), "periodic");
             }
             match (
-                n.align.unwrap_or(if n.align_window_us.is_some() { AlignBy::Time } else { AlignBy::Seq }),
+                n.align
+                    .as_ref()
+                    .map_or(if n.align_window_us.is_some() { AlignBy::Time } else { AlignBy::Seq }, |a| *a.get_ref()),
                 &n.align_window_us,
             ) {
                 (AlignBy::Seq, None) => Ok(Trigger::AlignedSeq),
@@ -285,6 +368,9 @@ fn trigger_of(n: &NodeEntry) -> Result<Trigger, (Option<Range<usize>>, String)> 
             }
         }
         TriggerKind::Periodic => {
+            if let Some(a) = &n.align {
+                return misplaced("align", a.span(), "aligned");
+            }
             if let Some(w) = &n.align_window_us {
                 return misplaced("align_window_us", w.span(), "aligned");
             }
@@ -322,6 +408,54 @@ fn resolve(
             None
         }
     }
+}
+
+/// The edges (indices into `edges`) of one cycle, in order, the closing edge last: the first
+/// back edge of a depth-first search that visits nodes and their out-edges in file order.
+fn find_cycle(n: usize, edges: &[EdgeSpec]) -> Option<Vec<usize>> {
+    #[derive(Clone, Copy, PartialEq)]
+    enum Mark {
+        New,
+        OnPath,
+        Done,
+    }
+    // A node's out-edges, last first, so that popping follows them in file order.
+    let out = |node: usize| -> Vec<usize> { (0..edges.len()).rev().filter(|&k| edges[k].from_node == node).collect() };
+    let mut mark = vec![Mark::New; n];
+    for root in 0..n {
+        if mark[root] != Mark::New {
+            continue;
+        }
+        // The path from `root`: per node on it, the edge it was entered by (none for `root`)
+        // and its out-edges still to follow.
+        mark[root] = Mark::OnPath;
+        let mut path: Vec<(Option<usize>, Vec<usize>)> = vec![(None, out(root))];
+        while let Some((_, todo)) = path.last_mut() {
+            let Some(k) = todo.pop() else {
+                let (into, _) = path.pop().expect("the path is not empty");
+                let node = into.map_or(root, |k| edges[k].to_node);
+                mark[node] = Mark::Done;
+                continue;
+            };
+            let next = edges[k].to_node;
+            match mark[next] {
+                Mark::Done => {}
+                Mark::New => {
+                    mark[next] = Mark::OnPath;
+                    path.push((Some(k), out(next)));
+                }
+                Mark::OnPath => {
+                    // The cycle runs from `next` along the path back to this edge.
+                    let on_path: Vec<usize> = path.iter().filter_map(|(into, _)| *into).collect();
+                    let start = on_path.iter().position(|&e| edges[e].from_node == next).unwrap_or(on_path.len());
+                    let mut cycle = on_path[start..].to_vec();
+                    cycle.push(k);
+                    return Some(cycle);
+                }
+            }
+        }
+    }
+    None
 }
 
 /// Kahn's algorithm; among ready nodes the lowest index goes first.

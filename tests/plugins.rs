@@ -135,15 +135,18 @@ fn a_library_without_the_entry_point_is_not_a_plugin() {
 fn a_plugin_of_abi_version_2_is_refused_with_one_line() {
     let d = workdir("bad-abi");
     let lib = plugin("skinflow-plugin-fixture-bad-abi");
-    let o = skinflow(&d, &["check", toy_graph(&d, std::slice::from_ref(&lib), "", "never").to_str().unwrap()]);
-    assert!(!o.status.success());
+    let graph = toy_graph(&d, std::slice::from_ref(&lib), "", "never");
+    let o = skinflow(&d, &["check", graph.to_str().unwrap()]);
+    // The graph cannot be validated: exit 2, as for an invalid graph, naming the graph.
+    assert_eq!(o.status.code(), Some(2));
     let e = stderr(&o);
     // The fixture is a version-2 table (roles, no end-of-stream flush), as a plugin built
     // before processors could flush looks to this host.
     assert_eq!(
         e.trim(),
         format!(
-            "error: plugin {}: built for plugin ABI version 2, this skinflow loads version 3 (rebuild it against this skinflow-plugin-sdk)",
+            "{}: plugin {}: built for plugin ABI version 2, this skinflow loads version 3 (rebuild it against this skinflow-plugin-sdk)",
+            graph.display(),
             lib.display()
         )
     );

@@ -23,7 +23,7 @@
 //! ```
 
 use std::fmt::Write as _;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 use skinflow_contact::eval::match_contacts;
@@ -255,7 +255,29 @@ impl Compare {
     }
 }
 
+/// Checks that the JSON report can go to `path` (its directory exists, it is no directory),
+/// so a wrong path stops the graph before any data flows instead of losing the run's result
+/// at stop.
+fn check_json_path(path: &Path) -> Result<(), NodeError> {
+    let dir = path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let problem = if !dir.is_dir() {
+        format!("{}: directory {} does not exist", path.display(), dir.display())
+    } else if path.is_dir() {
+        format!("{}: is a directory", path.display())
+    } else {
+        return Ok(());
+    };
+    Err(NodeError::Param { param: "json".into(), problem })
+}
+
 impl Sink for Compare {
+    fn start(&mut self, _ctx: &mut Context) -> Result<(), NodeError> {
+        match &self.json {
+            Some(p) => check_json_path(p),
+            None => Ok(()),
+        }
+    }
+
     fn consume(&mut self, ctx: &mut Context, inputs: &Inputs) -> Result<(), NodeError> {
         let reference =
             inputs.iter_port(0).find(|(lane, _)| *lane == self.reference).and_then(|(_, m)| m.arc::<Forces>());
@@ -293,8 +315,10 @@ impl Sink for Compare {
             print!("{}", table(&reports));
         }
         if let Some(p) = &self.json {
-            std::fs::write(p, to_json(&reports))
-                .map_err(|e| NodeError::Path { path: p.clone(), problem: e.to_string() })?;
+            std::fs::write(p, to_json(&reports)).map_err(|e| NodeError::Param {
+                param: "json".into(),
+                problem: format!("cannot write the report to {}: {e}", p.display()),
+            })?;
         }
         Ok(())
     }
@@ -371,8 +395,14 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
                 "lane names in edge order (default: strategy names)",
             ))
             .param(ParamDoc::new("report_s", "float", "2.0", "wall seconds between live report lines; 0 = none"))
-            .param(ParamDoc::new("json", "path", "none", "write the final report as JSON here"))
+            .param(ParamDoc::new(
+                "json",
+                "path",
+                "none",
+                "write the final report as JSON here (relative to the graph file; its directory must exist)",
+            ))
             .param(ParamDoc::new("reference", "integer", "0", "lane compared against when a frame has no truth"))
+            .param(ParamDoc::new("print", "bool", "true", "print the table on stdout at stop"))
             .param(ParamDoc::new(
                 "frames",
                 "string",
@@ -450,6 +480,30 @@ mod tests {
             frames: ScoredFrames::Settled,
         };
         assert!(matches!(build(p, &ctx), Ok(NodeImpl::Sink(_))));
+    }
+
+    #[test]
+    fn a_json_path_that_cannot_be_written_is_refused_at_start() {
+        let ctx = &mut Context::detached("compare", skinflow_core::Mode::Lockstep);
+        let tmp = std::env::temp_dir();
+        let missing = tmp.join(format!("skinflow-compare-missing-{}", std::process::id()));
+        assert!(!missing.exists());
+        let with_json = |p: &Path| Compare { json: Some(p.to_path_buf()), ..compare() };
+
+        let json = missing.join("ab.json");
+        let e = with_json(&json).start(ctx).unwrap_err().to_string();
+        let expected = format!("param \"json\": {}: directory {} does not exist", json.display(), missing.display());
+        assert_eq!(e, expected);
+        let e = with_json(&tmp).start(ctx).unwrap_err().to_string();
+        assert_eq!(e, format!("param \"json\": {}: is a directory", tmp.display()));
+
+        // A file in an existing directory is fine, and start does not create it.
+        let json = tmp.join(format!("skinflow-compare-{}.json", std::process::id()));
+        with_json(&json).start(ctx).unwrap();
+        assert!(!json.exists());
+        compare().start(ctx).unwrap();
+        // A bare file name is in the working directory, which exists.
+        with_json(Path::new("ab.json")).start(ctx).unwrap();
     }
 
     fn feed(c: &mut Compare, i: usize, f: &Forces) {

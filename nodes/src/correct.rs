@@ -38,7 +38,7 @@ pub struct CorrectorParams {
     /// Strategy name (CONTRACTS.md section 4 keys).
     #[serde(default = "default_strategy")]
     pub strategy: String,
-    /// Calibration file from `skinflow calibrate`.
+    /// Calibration file from `skinflow calibrate` (relative to the graph file).
     pub calibration: PathBuf,
     /// Name written on the output (e.g. for A/B lanes); default: the strategy, suffixed with
     /// the splitter's name when it is not proportional.
@@ -142,8 +142,18 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
             "\"pneumatic-locaware\"",
             "eit-nocal | pneumatic-nocal | eit-locaware | pneumatic-locaware | pneumatic-area-aware | pneumatic-forward (the eval names pneumatic-locaware-sensitivity and pneumatic-forward-balance act as their base here: the splitter node chooses the split)",
         ))
-        .param(ParamDoc::new("calibration", "path", "", "calibration TOML from `skinflow calibrate`"))
-        .param(ParamDoc::new("name", "string", "none", "name on the output (default: strategy[-splitter])")),
+        .param(ParamDoc::new(
+            "calibration",
+            "path",
+            "",
+            "calibration TOML from `skinflow calibrate` (relative to the graph file)",
+        ))
+        .param(ParamDoc::new(
+            "name",
+            "string",
+            "none",
+            "name on the output (default: strategy[-splitter]); correctors feeding one hdf5_logger need distinct names",
+        )),
         |p: CorrectorParams, ctx| {
             let kind =
                 kind_of(&p.strategy).map_err(|e| NodeError::Param { param: "strategy".into(), problem: e.problem })?;

@@ -17,7 +17,15 @@
 //!
 //! Forces of a strategy not in `strategies` (e.g. after a hot swap renamed a corrector's
 //! strategy) are not logged: one warning per strategy name, and the frames left out are
-//! counted and reported at stop.
+//! counted and reported at stop. Each logged strategy has one table, so it must come from one
+//! input: forces of one name from two `forces` edges (two correctors with the same `name`)
+//! stop the graph at the first clash, with the rows recorded so far kept.
+//!
+//! Images are logged at the size of the first image (the reconstructor's `image_nx` x
+//! `image_ny`); one recording holds one size. The logger's own `image_nx` / `image_ny` are
+//! optional: given, they must match the images (a mismatch stops the graph naming them), and
+//! with `swmr = true` they are needed when `image` is connected, since a SWMR file cannot get
+//! the image dataset after it is created.
 
 use std::path::{Path, PathBuf};
 
@@ -28,6 +36,7 @@ use skinflow_core::{
     BuildContext, Context, Inputs, KindInfo, NodeError, NodeImpl, NodeParams, ParamDoc, ParamError, PortSpec, Registry,
     Role, Sink, typed,
 };
+use skinflow_record::error::RecordError;
 use skinflow_record::layout::force_flags;
 use skinflow_record::write::{
     ContactRow, ForceRow, RecordingWriter, Streams, SyncRow, TruthContact as RecTruth, WriterOptions,
@@ -54,20 +63,16 @@ pub struct LoggerParams {
     /// Force strategies logged under `/derived/forces/<name>` (needed when `forces` is connected).
     #[serde(default)]
     pub strategies: Vec<String>,
-    /// Image size of logged images, pixels.
-    #[serde(default = "default_image")]
-    pub image_nx: usize,
-    #[serde(default = "default_image")]
-    pub image_ny: usize,
+    /// Width of the logged images, pixels: absent, the first image's; given, it must match.
+    pub image_nx: Option<usize>,
+    /// Height of the logged images, pixels, likewise.
+    pub image_ny: Option<usize>,
     #[serde(default = "default_deflate")]
     pub deflate_level: u8,
 }
 
 fn default_flush() -> f64 {
     1.0
-}
-fn default_image() -> usize {
-    64
 }
 fn default_deflate() -> u8 {
     1
@@ -81,6 +86,11 @@ impl NodeParams for LoggerParams {
         }
         if let Some(s) = self.rotate_s {
             positive("rotate_s", s)?;
+        }
+        for (param, n) in [("image_nx", self.image_nx), ("image_ny", self.image_ny)] {
+            if n == Some(0) {
+                return Err(ParamError::new(param, "must be >= 1 pixel (got 0)"));
+            }
         }
         if self.deflate_level > 9 {
             return Err(ParamError::new("deflate_level", format!("must be 0-9 (got {})", self.deflate_level)));
@@ -100,15 +110,48 @@ const SYNC: usize = 6;
 pub struct Logger {
     path: PathBuf,
     opts: Option<WriterOptions>,
+    /// `image_nx`, `image_ny` as given.
+    image_size: (Option<usize>, Option<usize>),
     writer: Option<RecordingWriter>,
     truth_buf: Vec<RecTruth>,
     forces_buf: Vec<ForceRow>,
     /// Per strategy not in `strategies`: the force frames not logged.
     unlisted: Vec<(String, u64)>,
+    /// Per `forces` edge (lane): the logged strategy it delivered last.
+    lane_strategy: Vec<Option<String>>,
 }
 
 fn io(path: &Path, e: impl std::fmt::Display) -> NodeError {
     NodeError::Path { path: path.to_path_buf(), problem: e.to_string() }
+}
+
+/// A writer error: those naming the file already are kept as they are, the others (an option
+/// out of range) get the file's path.
+fn record_error(path: &Path, e: RecordError) -> NodeError {
+    match e {
+        RecordError::InvalidOption { .. } => io(path, e),
+        e => NodeError::other(e),
+    }
+}
+
+/// The `hdf5_logger` param an image of `width` x `height` pixels contradicts (`image_nx`
+/// first), with the problem; `None` when the given sizes match.
+fn image_size_mismatch((nx, ny): (Option<usize>, Option<usize>), width: usize, height: usize) -> Option<NodeError> {
+    let param = match (nx, ny) {
+        (Some(nx), _) if nx != width => "image_nx",
+        (_, Some(ny)) if ny != height => "image_ny",
+        _ => return None,
+    };
+    let given: Vec<String> =
+        [("image_nx", nx), ("image_ny", ny)].into_iter().filter_map(|(p, n)| n.map(|n| format!("{p} = {n}"))).collect();
+    Some(NodeError::Param {
+        param: param.into(),
+        problem: format!(
+            "the images are {width} x {height} pixels (width x height), but {}; give the reconstructor's image \
+             size, or leave image_nx and image_ny out to log the images at their own size",
+            given.join(", ")
+        ),
+    })
 }
 
 impl Logger {
@@ -127,7 +170,7 @@ impl Logger {
             eit: false,
             pressure: false,
             truth: false,
-            image_hw: Some([p.image_ny, p.image_nx]),
+            image_hw: p.image_nx.zip(p.image_ny).map(|(nx, ny)| [ny, nx]),
             contacts: false,
             sync: false,
             force_strategies: p.strategies,
@@ -135,10 +178,12 @@ impl Logger {
         Ok(Logger {
             path,
             opts: Some(o),
+            image_size: (p.image_nx, p.image_ny),
             writer: None,
             truth_buf: Vec::with_capacity(16),
             forces_buf: Vec::with_capacity(64),
             unlisted: Vec::new(),
+            lane_strategy: Vec::new(),
         })
     }
 
@@ -151,6 +196,15 @@ impl Logger {
             o.streams.truth = inputs.lanes(TRUTH) > 0;
             if inputs.lanes(IMAGE) == 0 {
                 o.streams.image_hw = None;
+            } else if o.swmr && o.streams.image_hw.is_none() {
+                let param = if self.image_size.0.is_none() { "image_nx" } else { "image_ny" };
+                return Err(NodeError::Param {
+                    param: param.into(),
+                    problem: "with swmr = true and `image` connected, give image_nx and image_ny (the reconstructor's \
+                              image size): a SWMR file cannot get the image dataset once it is created"
+                        .into(),
+                }
+                .fatal());
             }
             o.streams.contacts = inputs.lanes(CONTACTS) > 0;
             o.streams.sync = inputs.lanes(SYNC) > 0;
@@ -163,7 +217,8 @@ impl Logger {
                 }
                 .fatal());
             }
-            let w = RecordingWriter::create(&self.path, &o).map_err(|e| io(&self.path, e).fatal())?;
+            let w = RecordingWriter::create(&self.path, &o).map_err(|e| record_error(&self.path, e).fatal())?;
+            self.lane_strategy = vec![None; inputs.lanes(FORCES)];
             tracing::info!(path = %self.path.display(), "recording");
             self.writer = Some(w);
         }
@@ -187,9 +242,9 @@ impl Sink for Logger {
 
     fn consume(&mut self, ctx: &mut Context, inputs: &Inputs) -> Result<(), NodeError> {
         let path = self.path.clone();
-        let fatal = |e: skinflow_record::error::RecordError| io(&path, e).fatal();
+        let fatal = |e: RecordError| record_error(&path, e).fatal();
         self.ensure_writer(inputs)?;
-        let Logger { writer, truth_buf, forces_buf, unlisted, .. } = self;
+        let Logger { writer, truth_buf, forces_buf, unlisted, lane_strategy, image_size, .. } = self;
         let w = writer.as_mut().expect("ensured above");
         if let Some(m) = inputs.get(EIT)
             && let Some(f) = m.get::<EitFrame>()
@@ -216,6 +271,21 @@ impl Sink for Logger {
         if let Some(m) = inputs.get(IMAGE)
             && let Some(img) = m.get::<Image>()
         {
+            if let Some(e) = image_size_mismatch(*image_size, img.width, img.height) {
+                return Err(e.fatal());
+            }
+            match w.image_hw() {
+                None => w.declare_image([img.height, img.width]).map_err(fatal)?,
+                Some([height, width]) if [height, width] != [img.height, img.width] => {
+                    let problem = format!(
+                        "an image of {} x {} pixels (width x height), but this recording's images are \
+                         {width} x {height} (the first image's size): one recording holds one image size",
+                        img.width, img.height
+                    );
+                    return Err(NodeError::Input { port: "image".into(), problem }.fatal());
+                }
+                Some(_) => {}
+            }
             w.append_image(m.header.t_s(), &img.pixels).map_err(fatal)?;
         }
         if let Some(m) = inputs.get(CONTACTS)
@@ -225,9 +295,11 @@ impl Sink for Logger {
                 c.contacts.iter().map(|c| ContactRow { x_mm: c.x_mm, y_mm: c.y_mm, sum: c.sum, area_mm2: c.area_mm2 });
             w.append_contacts(m.header.t_s(), rows).map_err(fatal)?;
         }
-        for (_, m) in inputs.iter_port(FORCES) {
+        for (lane, m) in inputs.iter_port(FORCES) {
             let Some(f) = m.get::<Forces>() else { continue };
-            let Some(k) = w.strategy_index(&f.strategy) else {
+            let k = w.strategy_index(&f.strategy);
+            claim_strategy(lane_strategy, lane, k.map(|_| f.strategy.as_str()))?;
+            let Some(k) = k else {
                 match unlisted.iter_mut().find(|(name, _)| *name == f.strategy) {
                     Some((_, n)) => *n += 1,
                     None => {
@@ -278,7 +350,7 @@ impl Sink for Logger {
             );
         }
         if let Some(w) = self.writer.take() {
-            let s = w.close().map_err(|e| io(&self.path, e))?;
+            let s = w.close().map_err(|e| record_error(&self.path, e))?;
             tracing::info!(
                 node = ctx.id(), path = %self.path.display(), eit = s.eit_rows, pressure = s.pressure_rows, truth = s.truth_rows,
                 images = s.image_rows, contacts = s.contacts_rows, sync = s.sync_rows, forces = s.force_rows,
@@ -287,6 +359,31 @@ impl Sink for Logger {
         }
         Ok(())
     }
+}
+
+/// Records that `forces` edge `lane` delivers the logged strategy `name` (`None`: a strategy
+/// not logged); refused (a fatal error) when another edge delivers that logged strategy too:
+/// the two streams' rows would interleave in one table. An edge whose strategy was renamed
+/// (hot swap) gives its old name up with the first frame of its new one.
+fn claim_strategy(lane_strategy: &mut Vec<Option<String>>, lane: usize, name: Option<&str>) -> Result<(), NodeError> {
+    if lane >= lane_strategy.len() {
+        lane_strategy.resize(lane + 1, None);
+    }
+    let Some(name) = name else {
+        lane_strategy[lane] = None;
+        return Ok(());
+    };
+    if let Some(other) = lane_strategy.iter().enumerate().position(|(l, s)| l != lane && s.as_deref() == Some(name)) {
+        let problem = format!(
+            "two inputs deliver forces named \"{name}\" (edges {other} and {lane} of `forces`, in graph file order): \
+             their rows would interleave in one table; give each corrector its own `name`"
+        );
+        return Err(NodeError::Input { port: "forces".into(), problem }.fatal());
+    }
+    if lane_strategy[lane].as_deref() != Some(name) {
+        lane_strategy[lane] = Some(name.to_owned());
+    }
+    Ok(())
 }
 
 /// The recording's bit code of a force's guard flags (`skinflow_record::layout::force_flags`).
@@ -328,21 +425,36 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
             .input(PortSpec::input::<Contacts>("contacts", "segmented contacts").optional())
             .input(PortSpec::input::<Forces>("forces", "per-strategy forces").optional().multi())
             .input(PortSpec::input::<SyncedFrame>("sync", "the sync node's frames (pressure judgement)").optional())
-            .param(ParamDoc::new("path", "path", "", "output file"))
+            .param(ParamDoc::new("path", "path", "", "output file (relative to the graph file)"))
             .param(ParamDoc::new(
                 "sensor",
                 "path",
                 "none",
-                "sensor TOML for the `sensor` attribute (default paper-100mm)",
+                "sensor TOML for the `sensor` attribute (relative to the graph file; default paper-100mm)",
             ))
             .param(ParamDoc::new("flush_interval_s", "f64", "1.0", "longest time rows stay in memory, s"))
             .param(ParamDoc::new("rotate_mb", "f64", "none", "start a new part at this size, MB"))
             .param(ParamDoc::new("rotate_s", "f64", "none", "start a new part after this many seconds"))
             .param(ParamDoc::new("swmr", "bool", "false", "single-writer/multiple-reader mode for live readers"))
             .param(ParamDoc::new("overwrite", "bool", "false", "replace an existing file"))
-            .param(ParamDoc::new("strategies", "[string]", "[]", "force strategies to log"))
-            .param(ParamDoc::new("image_nx", "usize", "64", "logged image width"))
-            .param(ParamDoc::new("image_ny", "usize", "64", "logged image height"))
+            .param(ParamDoc::new(
+                "strategies",
+                "[string]",
+                "[]",
+                "force strategies (corrector output names) to log; each from one `forces` edge",
+            ))
+            .param(ParamDoc::new(
+                "image_nx",
+                "usize",
+                "none",
+                "width of the logged images, pixels (the reconstructor's image_nx); absent: the first image's; given: an image of another width stops the graph; needed with swmr = true and `image` connected",
+            ))
+            .param(ParamDoc::new(
+                "image_ny",
+                "usize",
+                "none",
+                "height of the logged images, pixels (the reconstructor's image_ny); as image_nx",
+            ))
             .param(ParamDoc::new("deflate_level", "u8", "1", "0-9")),
         |p: LoggerParams, ctx| Ok(NodeImpl::Sink(Box::new(Logger::new(p, ctx)?))),
     ))
@@ -351,6 +463,30 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_logged_strategy_name_belongs_to_one_forces_edge_at_a_time() {
+        let mut lanes = Vec::new();
+        claim_strategy(&mut lanes, 0, Some("a")).unwrap();
+        claim_strategy(&mut lanes, 2, Some("b")).unwrap();
+        claim_strategy(&mut lanes, 0, Some("a")).unwrap();
+        let e = claim_strategy(&mut lanes, 1, Some("a")).unwrap_err();
+        assert!(e.is_fatal());
+        assert_eq!(
+            e.to_string(),
+            "input \"forces\": two inputs deliver forces named \"a\" (edges 0 and 1 of `forces`, in graph file \
+             order): their rows would interleave in one table; give each corrector its own `name`"
+        );
+        assert_eq!(lanes, [Some("a".to_owned()), None, Some("b".to_owned())], "the refused claim changes nothing");
+        // A corrector renamed by a hot swap gives its old name up with its first frame of the new
+        // one, logged or not.
+        claim_strategy(&mut lanes, 0, Some("c")).unwrap();
+        claim_strategy(&mut lanes, 1, Some("a")).unwrap();
+        assert!(claim_strategy(&mut lanes, 2, Some("c")).is_err());
+        claim_strategy(&mut lanes, 0, None).unwrap();
+        claim_strategy(&mut lanes, 2, Some("c")).unwrap();
+        assert_eq!(lanes, [None, Some("a".to_owned()), Some("c".to_owned())]);
+    }
 
     #[test]
     fn each_flag_has_its_own_bit() {

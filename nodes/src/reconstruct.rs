@@ -424,7 +424,7 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
         .input(PortSpec::input::<SyncedFrame>("frame", "synced EIT frames"))
         .input(PortSpec::input::<EitFrame>("reference", "recorded no-load reference frame").optional())
         .output(PortSpec::output::<Image>("image", "conductivity change, S/m, negative = contact"))
-        .param(ParamDoc::new("sensor", "path", "none", "sensor TOML (default paper-100mm)"))
+        .param(ParamDoc::new("sensor", "path", "none", "sensor TOML, relative to the graph file (default paper-100mm)"))
         .param(ParamDoc::new("lambda", "f64", "0.1", "regularisation weight (dimensionless)"))
         .param(ParamDoc::new("prior", "table", "{ noser = { p = 0.5 } }", "noser {p} | identity | laplacian {epsilon}"))
         .param(ParamDoc::new("mode", "string", "\"normalized\"", "normalized | plain difference data"))
@@ -442,7 +442,12 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
             "5",
             "source radius of the point spread attached to images (segmenter crosstalk), mm; 0 = none",
         ))
-        .param(ParamDoc::new("cache_dir", "path", "~/.cache/skinflow", "matrix cache directory"))
+        .param(ParamDoc::new(
+            "cache_dir",
+            "path",
+            "~/.cache/skinflow",
+            "matrix cache directory, relative to the graph file",
+        ))
         .param(ParamDoc::new("no_cache", "bool", "false", "do not use the disk cache")),
         |p: ReconstructorParams, ctx| Ok(NodeImpl::Processor(Box::new(Reconstructor::new(&p, ctx)?))),
     ))

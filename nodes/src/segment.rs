@@ -121,9 +121,10 @@ impl SegmenterParams {
 impl NodeParams for SegmenterParams {
     fn validate(&self) -> Result<(), ParamError> {
         skinflow_core::params::non_negative("floor_over_noise", self.floor_over_noise)?;
-        self.math().validate().map_err(|e| match e {
-            skinflow_contact::SegmentError::Param { name, .. } => ParamError::new(name, e.to_string()),
-            other => ParamError { param: None, problem: other.to_string(), span: None },
+        // The parameter is named once, by the `ParamError` (the math's own message names it too).
+        self.math().validate().map_err(|e| match e.param_problem() {
+            Some((name, problem)) => ParamError::new(name, problem),
+            None => ParamError { param: None, problem: e.to_string(), span: None },
         })
     }
 }
@@ -329,4 +330,35 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
         )),
         |p: SegmenterParams, _| Ok(NodeImpl::Processor(Box::new(Segmenter::new(&p)))),
     ))
+}
+
+#[cfg(test)]
+mod tests {
+    use skinflow_core::{Params, Registry};
+
+    use super::register;
+
+    /// The segmenter's check of `params`, as `skinflow check` runs it.
+    fn check(params: &str) -> Result<(), String> {
+        let mut r = Registry::new();
+        register(&mut r).unwrap();
+        r.get("segmenter").unwrap().check(&Params::from_toml(params).unwrap()).map_err(|e| e.to_string())
+    }
+
+    #[test]
+    fn a_bad_param_is_named_once() {
+        assert_eq!(check("floor = 0.002\nseparation = 0.0\nweak_peak = 0.0"), Ok(()));
+        for (params, expected) in [
+            ("floor = 0.0", "param \"floor\": must be finite and > 0 (got 0)"),
+            ("radius_frac = 0.5", "param \"radius_frac\": must be finite and in [0, 0.5) (got 0.5)"),
+            ("max_contacts = 0", "param \"max_contacts\": must be >= 1 (got 0)"),
+            (
+                "separation = 0.0",
+                "param \"weak_peak\": must be 0 when separation = 0 (the paper's segmentation sets both to 0) (got 0.15)",
+            ),
+            ("floor_over_noise = -1.0", "param \"floor_over_noise\": must be finite and >= 0 (got -1)"),
+        ] {
+            assert_eq!(check(params), Err(expected.to_owned()), "{params}");
+        }
+    }
 }

@@ -38,39 +38,98 @@ use skinflow_serial::{EitDecoder, ForceDecoder, PressureDecoder, ReaderConfig};
 use crate::payload::{EitFrame, PressureSample, Truth, TruthContact};
 use crate::serial_link::{Port, PortHandover};
 
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
+/// The port settings every serial source takes (`port`, `baud`, `read_timeout_s`,
+/// `backoff_initial_s`, `backoff_max_s`), as the link (`serial_link.rs`) uses them.
+#[derive(Debug, Clone, PartialEq)]
 pub struct PortParams {
     /// Device path (e.g. /dev/ttyACM0, /dev/serial/by-id/..., or an emulator's link).
     pub port: PathBuf,
-    #[serde(default = "default_baud")]
     pub baud: u32,
     /// Longest single blocking read, s.
-    #[serde(default = "default_read_timeout")]
     pub read_timeout_s: f64,
-    #[serde(default = "default_backoff_initial")]
+    /// First reconnect delay, s.
     pub backoff_initial_s: f64,
-    #[serde(default = "default_backoff_max")]
+    /// Largest reconnect delay, s.
     pub backoff_max_s: f64,
-    /// EIT: values per frame (120 for the paper's board).
-    #[serde(default = "default_measurements")]
-    pub measurements: usize,
-    /// EIT: acquisition window, s (1 / 1.3 frames/s by default).
-    #[serde(default = "default_frame_period")]
-    pub frame_period_s: f64,
-    /// Pressure: nominal sample period of the board, ms (gap detection).
-    #[serde(default = "default_pressure_period")]
-    pub period_ms: u32,
-    /// Load cell: the rig's indenter position and diameter.
-    #[serde(default)]
-    pub x_mm: f64,
-    #[serde(default)]
-    pub y_mm: f64,
-    #[serde(default = "default_diameter")]
-    pub diameter_mm: f64,
-    /// Load cell: below this force the row says "no contact", N.
-    #[serde(default = "default_threshold")]
-    pub contact_threshold_n: f64,
+}
+
+/// Defines one serial kind's params struct: the port settings of [`PortParams`] followed by
+/// the kind's own fields. Each kind has its own struct so `deny_unknown_fields` refuses (and
+/// its error lists) exactly that kind's parameters; serde's `flatten` would share the port
+/// fields but cannot be combined with `deny_unknown_fields`.
+macro_rules! serial_params {
+    ($(#[$meta:meta])* $name:ident { $($(#[$fmeta:meta])* $field:ident: $ty:ty,)* }) => {
+        $(#[$meta])*
+        #[derive(Debug, Deserialize)]
+        #[serde(deny_unknown_fields)]
+        pub struct $name {
+            /// Device path (e.g. /dev/ttyACM0, /dev/serial/by-id/..., or an emulator's link).
+            pub port: PathBuf,
+            #[serde(default = "default_baud")]
+            pub baud: u32,
+            /// Longest single blocking read, s.
+            #[serde(default = "default_read_timeout")]
+            pub read_timeout_s: f64,
+            /// First reconnect delay, s.
+            #[serde(default = "default_backoff_initial")]
+            pub backoff_initial_s: f64,
+            /// Largest reconnect delay, s.
+            #[serde(default = "default_backoff_max")]
+            pub backoff_max_s: f64,
+            $($(#[$fmeta])* pub $field: $ty,)*
+        }
+
+        impl $name {
+            /// The port settings.
+            pub fn port_params(&self) -> PortParams {
+                PortParams {
+                    port: self.port.clone(),
+                    baud: self.baud,
+                    read_timeout_s: self.read_timeout_s,
+                    backoff_initial_s: self.backoff_initial_s,
+                    backoff_max_s: self.backoff_max_s,
+                }
+            }
+        }
+    };
+}
+
+serial_params! {
+    /// Params of `serial_eit`.
+    EitParams {
+        /// Values per frame (120 for the paper's board).
+        #[serde(default = "default_measurements")]
+        measurements: usize,
+        /// Acquisition window, s (1 / 1.3 frames/s by default).
+        #[serde(default = "default_frame_period")]
+        frame_period_s: f64,
+    }
+}
+
+serial_params! {
+    /// Params of `serial_pressure`.
+    PressureParams {
+        /// Nominal sample period of the board, ms (gap detection).
+        #[serde(default = "default_pressure_period")]
+        period_ms: u32,
+    }
+}
+
+serial_params! {
+    /// Params of `serial_loadcell`.
+    LoadcellParams {
+        /// The rig's indenter position, mm.
+        #[serde(default)]
+        x_mm: f64,
+        #[serde(default)]
+        y_mm: f64,
+        /// The indenter's diameter, mm.
+        #[serde(default = "default_diameter")]
+        diameter_mm: f64,
+        /// Below this force the row says "no contact", N.
+        #[serde(default = "default_threshold")]
+        contact_threshold_n: f64,
+    }
 }
 
 fn default_baud() -> u32 {
@@ -101,22 +160,23 @@ fn default_threshold() -> f64 {
     0.05
 }
 
-impl NodeParams for PortParams {
-    fn validate(&self) -> Result<(), ParamError> {
-        positive("read_timeout_s", self.read_timeout_s)?;
-        positive("backoff_initial_s", self.backoff_initial_s)?;
-        positive("backoff_max_s", self.backoff_max_s)?;
-        positive("frame_period_s", self.frame_period_s)?;
-        positive("diameter_mm", self.diameter_mm)?;
-        non_negative("contact_threshold_n", self.contact_threshold_n)?;
-        if self.measurements == 0 || self.measurements > 65_535 {
-            return Err(ParamError::new("measurements", format!("must be in 1..=65535 (got {})", self.measurements)));
+/// A serial crate's parameter error as a node parameter error (its message names the
+/// parameter already, so only the problem is kept).
+fn serial_param_error(e: skinflow_serial::ParamError) -> ParamError {
+    use skinflow_serial::ParamError as E;
+    match e {
+        E::MeasurementCount { got } => ParamError::new("measurements", format!("must be in 1..=65535 (got {got})")),
+        E::Seconds { param, rule, got } => {
+            ParamError::new(param, format!("must be a finite number of seconds {rule} (got {got})"))
         }
-        if self.baud == 0 {
-            return Err(ParamError::new("baud", "must be > 0"));
-        }
-        Ok(())
+        E::Positive { param, got } => ParamError::new(param, format!("must be > 0 (got {got})")),
     }
+}
+
+/// [`serial_param_error`] for a node being built.
+fn serial_node_error(e: skinflow_serial::ParamError) -> NodeError {
+    let e = serial_param_error(e);
+    NodeError::Param { param: e.param.unwrap_or_default(), problem: e.problem }
 }
 
 impl PortParams {
@@ -128,6 +188,57 @@ impl PortParams {
         c.backoff_max_s = self.backoff_max_s;
         c
     }
+
+    /// The checks every serial kind runs at load: the reader's own (baud, durations), and
+    /// the backoff growing from its first delay to its largest.
+    fn validate(&self) -> Result<(), ParamError> {
+        self.config().validate().map_err(serial_param_error)?;
+        if self.backoff_initial_s > self.backoff_max_s {
+            return Err(ParamError::new(
+                "backoff_initial_s",
+                format!(
+                    "must be <= backoff_max_s (got backoff_initial_s = {}, backoff_max_s = {})",
+                    self.backoff_initial_s, self.backoff_max_s
+                ),
+            ));
+        }
+        Ok(())
+    }
+}
+
+impl NodeParams for EitParams {
+    fn validate(&self) -> Result<(), ParamError> {
+        self.port_params().validate()?;
+        positive("frame_period_s", self.frame_period_s)?;
+        if self.measurements == 0 || self.measurements > 65_535 {
+            return Err(ParamError::new("measurements", format!("must be in 1..=65535 (got {})", self.measurements)));
+        }
+        Ok(())
+    }
+}
+
+impl NodeParams for PressureParams {
+    fn validate(&self) -> Result<(), ParamError> {
+        self.port_params().validate()?;
+        if self.period_ms == 0 {
+            return Err(ParamError::new("period_ms", "must be >= 1 ms (got 0)"));
+        }
+        Ok(())
+    }
+}
+
+impl NodeParams for LoadcellParams {
+    fn validate(&self) -> Result<(), ParamError> {
+        self.port_params().validate()?;
+        finite("x_mm", self.x_mm)?;
+        finite("y_mm", self.y_mm)?;
+        positive("diameter_mm", self.diameter_mm)?;
+        non_negative("contact_threshold_n", self.contact_threshold_n)
+    }
+}
+
+fn finite(param: &str, x: f64) -> Result<(), ParamError> {
+    if x.is_finite() { Ok(()) } else { Err(ParamError::new(param, format!("must be finite (got {x})"))) }
 }
 
 fn ns(t_s: f64) -> u64 {
@@ -136,6 +247,7 @@ fn ns(t_s: f64) -> u64 {
 
 pub struct SerialEit {
     p: PortParams,
+    frame_period_s: f64,
     port: Port<EitDecoder>,
     frames: Recycler<EitFrame>,
     /// Device counter unwrapped to 64 bits.
@@ -152,11 +264,18 @@ struct EitHandover {
 }
 
 impl SerialEit {
-    fn new(p: PortParams) -> Result<SerialEit, NodeError> {
-        let dec = EitDecoder::try_new(p.measurements)
-            .map_err(|e| NodeError::Param { param: "measurements".into(), problem: e.to_string() })?;
-        let port = Port::new(&p, dec, p.measurements as u64);
-        Ok(SerialEit { p, port, frames: Recycler::new(64, EitFrame::default), last_counter: None, seq: 0 })
+    fn new(params: EitParams) -> Result<SerialEit, NodeError> {
+        let dec = EitDecoder::try_new(params.measurements).map_err(serial_node_error)?;
+        let p = params.port_params();
+        let port = Port::new(&p, dec, params.measurements as u64);
+        Ok(SerialEit {
+            p,
+            frame_period_s: params.frame_period_s,
+            port,
+            frames: Recycler::new(64, EitFrame::default),
+            last_counter: None,
+            seq: 0,
+        })
     }
 }
 
@@ -178,7 +297,7 @@ impl Source for SerialEit {
             f.v.clear();
             f.v.extend_from_slice(volts);
         });
-        let t = r.host_t_s - 0.5 * self.p.frame_period_s;
+        let t = r.host_t_s - 0.5 * self.frame_period_s;
         out.send(0, Message::from_arc(Header { seq: self.seq, t_ns: ns(t), origin: ctx.index() }, payload))?;
         Ok(SourcePoll::Emitted)
     }
@@ -214,10 +333,10 @@ struct PressureHandover {
 }
 
 impl SerialPressure {
-    fn new(p: PortParams) -> Result<SerialPressure, NodeError> {
-        let dec = PressureDecoder::try_new(Some(p.period_ms))
-            .map_err(|e| NodeError::Param { param: "period_ms".into(), problem: e.to_string() })?;
-        let port = Port::new(&p, dec, u64::from(p.period_ms));
+    fn new(params: PressureParams) -> Result<SerialPressure, NodeError> {
+        let dec = PressureDecoder::try_new(Some(params.period_ms)).map_err(serial_node_error)?;
+        let p = params.port_params();
+        let port = Port::new(&p, dec, u64::from(params.period_ms));
         Ok(SerialPressure { p, port, seq: 0 })
     }
 }
@@ -267,7 +386,7 @@ struct Position {
 }
 
 impl Position {
-    fn of(p: &PortParams) -> Position {
+    fn of(p: &LoadcellParams) -> Position {
         Position { x_mm: p.x_mm, y_mm: p.y_mm, diameter_mm: p.diameter_mm }
     }
 }
@@ -289,6 +408,8 @@ struct LoadcellHandover {
 
 pub struct SerialLoadcell {
     p: PortParams,
+    /// Below this force a reading is "no contact", N.
+    contact_threshold_n: f64,
     port: Port<ForceDecoder>,
     seq: u64,
     /// The position the params give.
@@ -298,10 +419,18 @@ pub struct SerialLoadcell {
 }
 
 impl SerialLoadcell {
-    fn new(p: PortParams) -> SerialLoadcell {
-        let from_params = Position::of(&p);
+    fn new(params: LoadcellParams) -> SerialLoadcell {
+        let from_params = Position::of(&params);
+        let p = params.port_params();
         let port = Port::new(&p, ForceDecoder::new(), 0);
-        SerialLoadcell { p, port, seq: 0, from_params, at: from_params }
+        SerialLoadcell {
+            p,
+            contact_threshold_n: params.contact_threshold_n,
+            port,
+            seq: 0,
+            from_params,
+            at: from_params,
+        }
     }
 }
 
@@ -315,7 +444,7 @@ impl Source for SerialLoadcell {
         self.seq += 1;
         let f = r.record.force_n;
         let Position { x_mm, y_mm, diameter_mm } = self.at;
-        let contacts = if f >= self.p.contact_threshold_n {
+        let contacts = if f >= self.contact_threshold_n {
             vec![TruthContact { x_mm, y_mm, force_n: f, diameter_mm }]
         } else {
             Vec::new()
@@ -397,9 +526,9 @@ fn parse_at(cmd: &str, diameter_mm: f64) -> Result<(f64, f64, f64), NodeError> {
 fn port_docs(k: KindInfo) -> KindInfo {
     k.param(ParamDoc::new("port", "path", "", "device path"))
         .param(ParamDoc::new("baud", "u32", "115200", "bit/s (ignored by USB CDC and ptys)"))
-        .param(ParamDoc::new("read_timeout_s", "f64", "0.05", "longest blocking read"))
-        .param(ParamDoc::new("backoff_initial_s", "f64", "0.05", "first reconnect delay"))
-        .param(ParamDoc::new("backoff_max_s", "f64", "1.0", "largest reconnect delay"))
+        .param(ParamDoc::new("read_timeout_s", "f64", "0.05", "longest blocking read, s"))
+        .param(ParamDoc::new("backoff_initial_s", "f64", "0.05", "first reconnect delay, s (<= backoff_max_s)"))
+        .param(ParamDoc::new("backoff_max_s", "f64", "1.0", "largest reconnect delay, s"))
 }
 
 pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::DuplicateKind> {
@@ -408,7 +537,7 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
             .output(PortSpec::output::<EitFrame>("eit", "EIT frames, volts"))
             .param(ParamDoc::new("measurements", "usize", "120", "values per frame"))
             .param(ParamDoc::new("frame_period_s", "f64", "0.769", "acquisition window, s")),
-        |p: PortParams, _| Ok(NodeImpl::Source(Box::new(SerialEit::new(p)?))),
+        |p: EitParams, _| Ok(NodeImpl::Source(Box::new(SerialEit::new(p)?))),
     ))?;
     r.register(typed(
         port_docs(KindInfo::new(
@@ -417,8 +546,8 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
             "pressure board on a serial port (ASCII t_ms,kPa lines)",
         ))
         .output(PortSpec::output::<PressureSample>("pressure", "gauge pressure, kPa"))
-        .param(ParamDoc::new("period_ms", "u32", "50", "nominal sample period (gap detection)")),
-        |p: PortParams, _| Ok(NodeImpl::Source(Box::new(SerialPressure::new(p)?))),
+        .param(ParamDoc::new("period_ms", "u32", "50", "nominal sample period, ms, >= 1 (gap detection)")),
+        |p: PressureParams, _| Ok(NodeImpl::Source(Box::new(SerialPressure::new(p)?))),
     ))?;
     r.register(typed(
         port_docs(KindInfo::new(
@@ -431,7 +560,7 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
         .param(ParamDoc::new("y_mm", "f64", "0", "indenter position"))
         .param(ParamDoc::new("diameter_mm", "f64", "15", "indenter diameter"))
         .param(ParamDoc::new("contact_threshold_n", "f64", "0.05", "below this: no contact")),
-        |p: PortParams, _| Ok(NodeImpl::Source(Box::new(SerialLoadcell::new(p)))),
+        |p: LoadcellParams, _| Ok(NodeImpl::Source(Box::new(SerialLoadcell::new(p)))),
     ))
 }
 
@@ -541,6 +670,69 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// `kind`'s check of `params` (after a port), as `skinflow check` runs it.
+    fn check(kind: &str, params: &str) -> Result<(), String> {
+        let mut r = Registry::new();
+        register(&mut r).unwrap();
+        let params = Params::from_toml(&format!("port = \"/dev/null\"\n{params}")).unwrap();
+        r.get(kind).unwrap().check(&params).map_err(|e| e.to_string().trim_end().to_owned())
+    }
+
+    #[test]
+    fn each_serial_kind_takes_only_its_own_params_and_lists_only_those() {
+        let port = "`port`, `baud`, `read_timeout_s`, `backoff_initial_s`, `backoff_max_s`";
+        let kinds: [(&str, &[&str], &str); 3] = [
+            ("serial_eit", &["measurements = 7", "frame_period_s = 0.5"], "`measurements`, `frame_period_s`"),
+            ("serial_pressure", &["period_ms = 10"], "`period_ms`"),
+            (
+                "serial_loadcell",
+                &["x_mm = 1.0", "y_mm = -2.0", "diameter_mm = 99.0", "contact_threshold_n = 3.0"],
+                "`x_mm`, `y_mm`, `diameter_mm`, `contact_threshold_n`",
+            ),
+        ];
+        for (kind, _, own) in kinds {
+            let shared = "baud = 9600\nread_timeout_s = 0.1\nbackoff_initial_s = 0.5\nbackoff_max_s = 2.0";
+            assert_eq!(check(kind, shared), Ok(()), "{kind}: the port settings");
+            for (other, params, _) in kinds {
+                for p in params {
+                    let result = check(kind, p);
+                    if kind == other {
+                        assert_eq!(result, Ok(()), "{kind}: {p}");
+                        continue;
+                    }
+                    let field = p.split(' ').next().unwrap();
+                    let expected = format!("unknown field `{field}`, expected one of {port}, {own}");
+                    assert_eq!(result, Err(expected), "{kind}: {p}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn a_backoff_shrinking_or_a_zero_period_is_refused_at_load_naming_the_param() {
+        for kind in ["serial_eit", "serial_pressure", "serial_loadcell"] {
+            let e = check(kind, "backoff_initial_s = 5.0\nbackoff_max_s = 1.0").unwrap_err();
+            assert_eq!(
+                e,
+                "param \"backoff_initial_s\": must be <= backoff_max_s (got backoff_initial_s = 5, backoff_max_s = 1)",
+                "{kind}"
+            );
+            assert_eq!(check(kind, "backoff_initial_s = 1.0\nbackoff_max_s = 1.0"), Ok(()), "{kind}: equal is fine");
+            let e = check(kind, "read_timeout_s = 0.0").unwrap_err();
+            assert_eq!(e, "param \"read_timeout_s\": must be a finite number of seconds in (0, 1e9) (got 0)", "{kind}");
+            let e = check(kind, "baud = 0").unwrap_err();
+            assert_eq!(e, "param \"baud\": must be > 0 (got 0)", "{kind}");
+        }
+        let e = check("serial_pressure", "period_ms = 0").unwrap_err();
+        assert_eq!(e, "param \"period_ms\": must be >= 1 ms (got 0)");
+        let e = check("serial_eit", "frame_period_s = 0.0").unwrap_err();
+        assert_eq!(e, "param \"frame_period_s\": must be finite and > 0 (got 0)");
+        let e = check("serial_eit", "measurements = 0").unwrap_err();
+        assert_eq!(e, "param \"measurements\": must be in 1..=65535 (got 0)");
+        let e = check("serial_loadcell", "x_mm = nan").unwrap_err();
+        assert_eq!(e, "param \"x_mm\": must be finite (got NaN)");
     }
 
     #[test]

@@ -195,10 +195,10 @@ mod tests {
     use skinflow_serial::{Device, Emulator, EmulatorConfig, EmulatorFeed, FaultPlan, ForceDecoder, TimedForce};
 
     use super::{Port, held};
-    use crate::serial::PortParams;
+    use crate::serial::{LoadcellParams, PortParams};
 
     fn params(toml_text: &str) -> PortParams {
-        toml::from_str(toml_text).unwrap()
+        toml::from_str::<LoadcellParams>(toml_text).unwrap().port_params()
     }
 
     /// The hand-over steps of two hot swaps and a second node, on an emulated load cell's pty.

@@ -43,7 +43,8 @@ pub enum SplitStrategy {
 pub struct SplitterParams {
     #[serde(default = "default_strategy")]
     pub strategy: SplitStrategy,
-    /// Calibration file (TOML from `skinflow calibrate`); required by every strategy but `proportional`.
+    /// Calibration file (TOML from `skinflow calibrate`, relative to the graph file); required by
+    /// every strategy but `proportional`.
     pub calibration: Option<PathBuf>,
 }
 
@@ -132,7 +133,7 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
                 "calibration",
                 "path",
                 "none",
-                "calibration TOML (needed by every strategy but proportional)",
+                "calibration TOML (relative to the graph file; needed by every strategy but proportional)",
             )),
         |p: SplitterParams, ctx| {
             let cal = || load_calibration(p.calibration.as_ref().expect("validated: calibration is set"), ctx);

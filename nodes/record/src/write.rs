@@ -199,6 +199,42 @@ impl RecordingWriter {
         self.after_append(Slot::Truth)
     }
 
+    /// The declared image size `[H, W]` (`Streams::image_hw`, or [`RecordingWriter::declare_image`]).
+    pub fn image_hw(&self) -> Option<[usize; 2]> {
+        self.opts.streams.image_hw
+    }
+
+    /// Declares the image stream `[H, W]` after the file was created, for a caller that learns
+    /// the size from the first image: `/derived/image` is created, empty, in the current part
+    /// and in every later one. Refused when images are declared already, for a size of 0, and
+    /// once SWMR writing started (a SWMR file cannot get new datasets): a SWMR writer declares
+    /// its images in `Streams::image_hw`.
+    pub fn declare_image(&mut self, hw: [usize; 2]) -> Result<(), RecordError> {
+        let [h, w] = hw;
+        let refuse = |problem: String| Err(RecordError::InvalidOption { name: "streams.image_hw", problem });
+        if let Some([dh, dw]) = self.opts.streams.image_hw {
+            return refuse(format!("images are declared already ({dh} x {dw} pixels)"));
+        }
+        if h == 0 || w == 0 {
+            return refuse(format!("must be >= 1 x 1 pixels (got {h} x {w})"));
+        }
+        if self.opts.swmr {
+            return refuse("cannot be declared after creation with SWMR (declare it in the options)".into());
+        }
+        let spec = ColumnSpec::new(layout::DERIVED_IMAGE, &[h, w]);
+        let mut table = Table::new(layout::DERIVED_IMAGE_T, None, vec![spec], self.opts.chunk_rows);
+        if let Some(file) = self.file.as_ref() {
+            for p in table.paths() {
+                ensure_parent_groups(file, &self.path, p)?;
+            }
+            table.create(file, Storage { deflate_level: self.opts.deflate_level })?;
+            file.flush().map_err(|e| RecordError::hdf5(&self.path, layout::DERIVED_IMAGE, e))?;
+        }
+        self.image = Some(table);
+        self.opts.streams.image_hw = Some(hw);
+        Ok(())
+    }
+
     /// One reconstructed image, row-major `[H][W]` as declared in `Streams::image_hw`.
     pub fn append_image(&mut self, t_s: f64, pixels: &[f64]) -> Result<(), RecordError> {
         let expected = self.opts.streams.image_hw.map_or(0, |[h, w]| h * w);
@@ -487,5 +523,77 @@ impl Drop for RecordingWriter {
             let _ = self.flush();
             let _ = self.close_file();
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use skinflow_eit::sensor::PAPER_100MM_TOML;
+
+    use super::*;
+    use crate::Recording;
+
+    fn tempdir(name: &str) -> PathBuf {
+        let dir = std::env::temp_dir().join(format!("skinflow-record-unit-{name}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        dir
+    }
+
+    fn image(i: usize, n: usize) -> Vec<f64> {
+        (0..n).map(|k| (i * 1000 + k) as f64).collect()
+    }
+
+    #[test]
+    fn images_declared_after_creation_go_into_this_part_and_the_later_ones() {
+        let dir = tempdir("declare-image");
+        let mut opts = WriterOptions::new(PAPER_100MM_TOML);
+        opts.streams = Streams { pressure: true, ..Streams::default() };
+        opts.rotate_s = Some(1.0);
+        let mut w = RecordingWriter::create(dir.join("rec.h5"), &opts).unwrap();
+        w.append_pressure(0.0, 1.0).unwrap();
+        w.flush().unwrap(); // rows on disk before the images are declared
+        let e = w.append_image(0.1, &image(0, 12)).unwrap_err().to_string();
+        assert!(e.ends_with("/derived/image: stream was not declared in the writer options"), "{e}");
+        assert_eq!(w.image_hw(), None);
+        let e = w.declare_image([3, 0]).unwrap_err().to_string();
+        assert_eq!(e, "writer option \"streams.image_hw\": must be >= 1 x 1 pixels (got 3 x 0)");
+        w.declare_image([3, 4]).unwrap();
+        assert_eq!(w.image_hw(), Some([3, 4]));
+        let e = w.declare_image([3, 4]).unwrap_err().to_string();
+        assert_eq!(e, "writer option \"streams.image_hw\": images are declared already (3 x 4 pixels)");
+        for (i, t) in [0.2, 0.5, 1.5].into_iter().enumerate() {
+            w.append_image(t, &image(i, 12)).unwrap();
+        }
+        let e = w.append_image(1.6, &image(3, 16)).unwrap_err().to_string();
+        assert!(e.ends_with("/derived/image: row has 16 values, expected 12"), "{e}");
+        let stats = w.close().unwrap();
+        assert_eq!((stats.parts, stats.image_rows), (2, 3));
+
+        let first = Recording::open(part_path(&dir.join("rec.h5"), 1)).unwrap();
+        let img = first.derived.image.expect("declared in the open part");
+        assert_eq!((img.hw, img.t_s.clone()), ([3, 4], vec![0.2, 0.5]));
+        assert_eq!(img.pixels[12..], image(1, 12)[..]);
+        assert_eq!(first.pressure.unwrap().kpa, [1.0]);
+        let second = Recording::open(part_path(&dir.join("rec.h5"), 2)).unwrap();
+        let img = second.derived.image.expect("declared in the later part");
+        assert_eq!((img.hw, img.t_s), ([3, 4], vec![1.5]));
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn a_swmr_writer_declares_its_images_at_creation() {
+        let dir = tempdir("declare-image-swmr");
+        let mut opts = WriterOptions::new(PAPER_100MM_TOML);
+        opts.streams = Streams { pressure: true, ..Streams::default() };
+        opts.swmr = true;
+        let mut w = RecordingWriter::create(dir.join("rec.h5"), &opts).unwrap();
+        let e = w.declare_image([3, 4]).unwrap_err().to_string();
+        assert_eq!(
+            e,
+            "writer option \"streams.image_hw\": cannot be declared after creation with SWMR (declare it in the options)"
+        );
+        w.close().unwrap();
+        let _ = std::fs::remove_dir_all(&dir);
     }
 }

@@ -167,6 +167,18 @@ pub enum SegmentError {
     ImageSize { got: usize, expected: usize, width: usize, height: usize },
 }
 
+impl SegmentError {
+    /// For [`SegmentError::Param`]: the parameter and what is wrong with its value, without
+    /// the `segment: param "..."` prefix, for callers that name the parameter themselves (a
+    /// node's parameter error); `None` for the other variants.
+    pub fn param_problem(&self) -> Option<(&'static str, String)> {
+        match self {
+            Self::Param { name, expected, got } => Some((name, format!("must be {expected} (got {got})"))),
+            _ => None,
+        }
+    }
+}
+
 /// One segmented contact (ROI).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Contact {

@@ -34,6 +34,11 @@ pub fn positive(param: &str, x: f64) -> Result<(), ParamError> {
     }
 }
 
+/// Checks `x.is_finite()` for a named parameter.
+pub fn finite(param: &str, x: f64) -> Result<(), ParamError> {
+    if x.is_finite() { Ok(()) } else { Err(ParamError::new(param, format!("must be finite (got {x})"))) }
+}
+
 /// Checks `x.is_finite() && x >= 0.0` for a named parameter.
 pub fn non_negative(param: &str, x: f64) -> Result<(), ParamError> {
     if x.is_finite() && x >= 0.0 {

@@ -255,19 +255,13 @@ impl Compare {
     }
 }
 
-/// Checks that the JSON report can go to `path` (its directory exists, it is no directory),
-/// so a wrong path stops the graph before any data flows instead of losing the run's result
-/// at stop.
+/// Checks that the JSON report can go to `path`, so a wrong path stops the graph before any
+/// data flows instead of losing the run's result at stop.
 fn check_json_path(path: &Path) -> Result<(), NodeError> {
-    let dir = path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
-    let problem = if !dir.is_dir() {
-        format!("{}: directory {} does not exist", path.display(), dir.display())
-    } else if path.is_dir() {
-        format!("{}: is a directory", path.display())
-    } else {
-        return Ok(());
-    };
-    Err(NodeError::Param { param: "json".into(), problem })
+    match crate::output::unwritable(path) {
+        Some(why) => Err(NodeError::Param { param: "json".into(), problem: format!("{}: {why}", path.display()) }),
+        None => Ok(()),
+    }
 }
 
 impl Sink for Compare {

@@ -10,6 +10,7 @@ pub mod compare;
 pub mod correct;
 pub mod log;
 pub mod order;
+pub mod output;
 pub mod payload;
 pub mod pipeline;
 pub mod reconstruct;

@@ -117,8 +117,8 @@ pub struct Logger {
     forces_buf: Vec<ForceRow>,
     /// Per strategy not in `strategies`: the force frames not logged.
     unlisted: Vec<(String, u64)>,
-    /// Per `forces` edge (lane): the logged strategy it delivered last.
-    lane_strategy: Vec<Option<String>>,
+    /// Per `forces` edge (lane): the logged strategy (its writer index) it delivered last.
+    lane_strategy: Vec<Option<usize>>,
 }
 
 fn io(path: &Path, e: impl std::fmt::Display) -> NodeError {
@@ -229,9 +229,8 @@ impl Logger {
 impl Sink for Logger {
     fn start(&mut self, _ctx: &mut Context) -> Result<(), NodeError> {
         // Fail before any data flows when the file cannot be created.
-        let dir = self.path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
-        if !dir.is_dir() {
-            return Err(io(&self.path, format!("directory {} does not exist", dir.display())));
+        if let Some(why) = crate::output::unwritable(&self.path) {
+            return Err(io(&self.path, why));
         }
         let overwrite = self.opts.as_ref().is_some_and(|o| o.overwrite);
         if self.path.exists() && !overwrite {
@@ -298,7 +297,7 @@ impl Sink for Logger {
         for (lane, m) in inputs.iter_port(FORCES) {
             let Some(f) = m.get::<Forces>() else { continue };
             let k = w.strategy_index(&f.strategy);
-            claim_strategy(lane_strategy, lane, k.map(|_| f.strategy.as_str()))?;
+            claim_strategy(lane_strategy, lane, k, &f.strategy)?;
             let Some(k) = k else {
                 match unlisted.iter_mut().find(|(name, _)| *name == f.strategy) {
                     Some((_, n)) => *n += 1,
@@ -361,28 +360,32 @@ impl Sink for Logger {
     }
 }
 
-/// Records that `forces` edge `lane` delivers the logged strategy `name` (`None`: a strategy
-/// not logged); refused (a fatal error) when another edge delivers that logged strategy too:
-/// the two streams' rows would interleave in one table. An edge whose strategy was renamed
-/// (hot swap) gives its old name up with the first frame of its new one.
-fn claim_strategy(lane_strategy: &mut Vec<Option<String>>, lane: usize, name: Option<&str>) -> Result<(), NodeError> {
+/// Records that `forces` edge `lane` delivers the logged strategy of writer index `k`, named
+/// `name` (`k` `None`: a strategy not logged); refused (a fatal error) when another edge
+/// delivers that logged strategy too: the two streams' rows would interleave in one table. An
+/// edge whose strategy was renamed (hot swap) gives its old one up with the first frame of its
+/// new one.
+fn claim_strategy(
+    lane_strategy: &mut Vec<Option<usize>>,
+    lane: usize,
+    k: Option<usize>,
+    name: &str,
+) -> Result<(), NodeError> {
     if lane >= lane_strategy.len() {
         lane_strategy.resize(lane + 1, None);
     }
-    let Some(name) = name else {
+    let Some(k) = k else {
         lane_strategy[lane] = None;
         return Ok(());
     };
-    if let Some(other) = lane_strategy.iter().enumerate().position(|(l, s)| l != lane && s.as_deref() == Some(name)) {
+    if let Some(other) = lane_strategy.iter().enumerate().position(|(l, s)| l != lane && *s == Some(k)) {
         let problem = format!(
             "two inputs deliver forces named \"{name}\" (edges {other} and {lane} of `forces`, in graph file order): \
              their rows would interleave in one table; give each corrector its own `name`"
         );
         return Err(NodeError::Input { port: "forces".into(), problem }.fatal());
     }
-    if lane_strategy[lane].as_deref() != Some(name) {
-        lane_strategy[lane] = Some(name.to_owned());
-    }
+    lane_strategy[lane] = Some(k);
     Ok(())
 }
 
@@ -466,26 +469,31 @@ mod tests {
 
     #[test]
     fn a_logged_strategy_name_belongs_to_one_forces_edge_at_a_time() {
+        // Logged strategies a, b, c at writer indices 0, 1, 2; "x" is not logged.
+        let claim = |lanes: &mut Vec<Option<usize>>, lane: usize, name: &str| {
+            let k = ["a", "b", "c"].iter().position(|s| *s == name);
+            claim_strategy(lanes, lane, k, name)
+        };
         let mut lanes = Vec::new();
-        claim_strategy(&mut lanes, 0, Some("a")).unwrap();
-        claim_strategy(&mut lanes, 2, Some("b")).unwrap();
-        claim_strategy(&mut lanes, 0, Some("a")).unwrap();
-        let e = claim_strategy(&mut lanes, 1, Some("a")).unwrap_err();
+        claim(&mut lanes, 0, "a").unwrap();
+        claim(&mut lanes, 2, "b").unwrap();
+        claim(&mut lanes, 0, "a").unwrap();
+        let e = claim(&mut lanes, 1, "a").unwrap_err();
         assert!(e.is_fatal());
         assert_eq!(
             e.to_string(),
             "input \"forces\": two inputs deliver forces named \"a\" (edges 0 and 1 of `forces`, in graph file \
              order): their rows would interleave in one table; give each corrector its own `name`"
         );
-        assert_eq!(lanes, [Some("a".to_owned()), None, Some("b".to_owned())], "the refused claim changes nothing");
+        assert_eq!(lanes, [Some(0), None, Some(1)], "the refused claim changes nothing");
         // A corrector renamed by a hot swap gives its old name up with its first frame of the new
         // one, logged or not.
-        claim_strategy(&mut lanes, 0, Some("c")).unwrap();
-        claim_strategy(&mut lanes, 1, Some("a")).unwrap();
-        assert!(claim_strategy(&mut lanes, 2, Some("c")).is_err());
-        claim_strategy(&mut lanes, 0, None).unwrap();
-        claim_strategy(&mut lanes, 2, Some("c")).unwrap();
-        assert_eq!(lanes, [None, Some("a".to_owned()), Some("c".to_owned())]);
+        claim(&mut lanes, 0, "c").unwrap();
+        claim(&mut lanes, 1, "a").unwrap();
+        assert!(claim(&mut lanes, 2, "c").is_err());
+        claim(&mut lanes, 0, "x").unwrap();
+        claim(&mut lanes, 2, "c").unwrap();
+        assert_eq!(lanes, [None, Some(0), Some(2)]);
     }
 
     #[test]

@@ -28,7 +28,7 @@
 use std::path::PathBuf;
 
 use serde::Deserialize;
-use skinflow_core::params::{non_negative, positive};
+use skinflow_core::params::{finite, non_negative, positive};
 use skinflow_core::{
     Context, Header, KindInfo, Message, NodeError, NodeImpl, NodeParams, NodeState, Outputs, ParamDoc, ParamError,
     PortSpec, Recycler, Registry, Role, Source, SourcePoll, StateRefused, typed,
@@ -235,10 +235,6 @@ impl NodeParams for LoadcellParams {
         positive("diameter_mm", self.diameter_mm)?;
         non_negative("contact_threshold_n", self.contact_threshold_n)
     }
-}
-
-fn finite(param: &str, x: f64) -> Result<(), ParamError> {
-    if x.is_finite() { Ok(()) } else { Err(ParamError::new(param, format!("must be finite (got {x})"))) }
 }
 
 fn ns(t_s: f64) -> u64 {

@@ -60,14 +60,12 @@ fn parse_fault(s: &str) -> Result<(Device, usize, Fault)> {
     Ok((device, index, fault))
 }
 
-/// A device by its name on the command line.
+/// A device by its name on the command line ([`Device::name`]).
 fn parse_device(name: &str) -> Result<Device> {
-    match name {
-        "eit" => Ok(Device::Eit),
-        "pressure" => Ok(Device::Pressure),
-        "loadcell" => Ok(Device::Loadcell),
-        _ => anyhow::bail!("unknown device {name:?} (devices: eit, pressure, loadcell)"),
-    }
+    Device::ALL.into_iter().find(|d| d.name() == name).ok_or_else(|| {
+        let names: Vec<&str> = Device::ALL.iter().map(|d| d.name()).collect();
+        anyhow::anyhow!("unknown device {name:?} (devices: {})", names.join(", "))
+    })
 }
 
 /// Parses `--devices eit,pressure` (the devices to serve).

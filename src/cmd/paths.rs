@@ -1,6 +1,6 @@
 //! Checks of the files a command writes, done before any work: an output must not be one of
-//! the command's inputs (the same file under another name included), and its directory must
-//! exist.
+//! the command's inputs (the same file under another name included), and it must be creatable
+//! (its directory exists, it is no directory).
 
 use std::path::Path;
 
@@ -28,9 +28,8 @@ pub fn check_outputs(inputs: &[(&str, &Path)], outputs: &[(&str, &Path)]) -> Res
                 bail!("{flag} {} and {other} {} name the same file", out.display(), path.display());
             }
         }
-        let dir = out.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
-        if !dir.is_dir() {
-            bail!("{flag} {}: directory {} does not exist", out.display(), dir.display());
+        if let Some(why) = skinflow_nodes::output::unwritable(out) {
+            bail!("{flag} {}: {why}", out.display());
         }
     }
     Ok(())

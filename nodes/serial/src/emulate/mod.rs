@@ -34,6 +34,9 @@ pub enum Device {
 }
 
 impl Device {
+    /// The three boards, in the order the emulator lists them.
+    pub const ALL: [Device; 3] = [Device::Eit, Device::Pressure, Device::Loadcell];
+
     /// File name of the device's link in the emulator directory.
     #[must_use]
     pub fn name(self) -> &'static str {

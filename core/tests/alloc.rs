@@ -17,14 +17,13 @@ static GLOBAL: CountingAlloc = CountingAlloc;
 /// buffers, more than can be in flight).
 fn chain(count: u64, mode: Mode) -> GraphSpec {
     let mode = match mode {
-        Mode::Lockstep => "lockstep",
-        Mode::Realtime => "realtime",
+        Mode::Lockstep => "mode = \"lockstep\"",
+        Mode::Realtime => "mode = \"realtime\"\n        workers = 2",
     };
     let text = format!(
         r#"
         [graph]
-        mode = "{mode}"
-        workers = 2
+        {mode}
         [[node]]
         id = "src"
         kind = "counter"

@@ -194,7 +194,7 @@ fn valid_triggers_are_parsed() {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/cases/valid-triggers.toml");
     let g = GraphSpec::load(&path, &registry()).unwrap();
     let node = |id: &str| &g.nodes[g.node_index(id).unwrap()];
-    assert_eq!(g.mode, skinflow_core::Mode::Lockstep);
+    assert_eq!(g.mode, skinflow_core::Mode::Realtime);
     assert_eq!(g.workers, 2);
     assert_eq!(node("by-seq").trigger, Trigger::AlignedSeq);
     assert_eq!(node("by-time").trigger, Trigger::AlignedWindow { window_ns: 50_000 });

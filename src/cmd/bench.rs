@@ -5,7 +5,9 @@
 //! The graph needs a `replay` node (its `path` is replaced by `--replay`) and a `compare` sink,
 //! whose per-lane report (latency p50/p99, force RMSE against truth) gives one point per
 //! (variant, lane). Each variant is the graph's TOML with the params overridden, so relative
-//! paths and `[[plugin]]` entries resolve as in the original file.
+//! paths and `[[plugin]]` entries resolve as in the original file. Thread placement
+//! (`[graph] workers`, a node's `cpu`, `rt_priority`, `thread`) is dropped: a lockstep run is one
+//! thread, and lockstep graphs refuse those options.
 
 use std::fmt::Write as _;
 use std::path::Path;
@@ -109,10 +111,18 @@ fn variant_text(
 ) -> Result<String> {
     let mut doc = base.clone();
     let graph = doc.entry("graph").or_insert_with(|| toml::Value::Table(toml::Table::new()));
-    graph.as_table_mut().ok_or_else(|| anyhow!("[graph] is not a table"))?.insert("mode".into(), "lockstep".into());
+    let graph = graph.as_table_mut().ok_or_else(|| anyhow!("[graph] is not a table"))?;
+    graph.insert("mode".into(), "lockstep".into());
+    // Thread placement means nothing in lockstep (validation refuses it there).
+    graph.remove("workers");
     let nodes = nodes_mut(&mut doc)?;
     let (mut replays, mut compares) = (0, 0);
     for n in nodes.iter_mut() {
+        if let Some(table) = n.as_table_mut() {
+            for placement in ["cpu", "rt_priority", "thread"] {
+                table.remove(placement);
+            }
+        }
         match field(n, "kind") {
             Some("replay") => {
                 replays += 1;
@@ -379,5 +389,36 @@ mod tests {
         mark_pareto(&mut pts);
         let marks: Vec<bool> = pts.iter().map(|p| p.pareto).collect();
         assert_eq!(marks, vec![true, true, false, true, true], "(3, 3) is beaten by (2, 2); equal points both stay");
+    }
+
+    #[test]
+    fn a_variant_runs_in_lockstep_without_thread_placement() {
+        let base: toml::Table = toml::from_str(
+            r#"
+            [graph]
+            mode = "realtime"
+            workers = 2
+            [[node]]
+            id = "replay"
+            kind = "replay"
+            rt_priority = 10
+            cpu = 0
+            [[node]]
+            id = "cmp"
+            kind = "compare"
+            thread = "dedicated"
+            "#,
+        )
+        .unwrap();
+        let text = variant_text(&base, Path::new("r.h5"), &[], Path::new("o.json")).unwrap();
+        let doc: toml::Table = toml::from_str(&text).unwrap();
+        assert_eq!(doc["graph"].as_table().unwrap().get("mode").and_then(toml::Value::as_str), Some("lockstep"));
+        assert!(doc["graph"].as_table().unwrap().get("workers").is_none());
+        for n in doc["node"].as_array().unwrap() {
+            let n = n.as_table().unwrap();
+            for key in ["cpu", "rt_priority", "thread"] {
+                assert!(n.get(key).is_none(), "{key} left in {n:?}");
+            }
+        }
     }
 }

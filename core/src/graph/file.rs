@@ -47,7 +47,7 @@ pub(crate) struct GraphSection {
     #[serde(default)]
     pub mode: Mode,
     /// Worker threads for processors; 0 or absent = one per core.
-    pub workers: Option<usize>,
+    pub workers: Option<Spanned<usize>>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -120,7 +120,7 @@ pub(crate) struct NodeEntry {
     pub align_window_us: Option<Spanned<f64>>,
     pub period_ms: Option<Spanned<f64>>,
     pub deadline_us: Option<Spanned<f64>>,
-    pub cpu: Option<usize>,
+    pub cpu: Option<Spanned<usize>>,
     pub rt_priority: Option<Spanned<u8>>,
     #[serde(default)]
     pub restart: Restart,

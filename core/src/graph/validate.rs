@@ -13,6 +13,7 @@ use super::error::{GraphError, GraphErrorKind as K, GraphErrors};
 use super::file::{AlignBy, GraphFile, LooseFile, NodeEntry, ThreadMode, TriggerKind};
 use super::source::SourceFile;
 use super::{DEFAULT_CAPACITY, EdgeSpec, GraphSpec, NodeSpec, Trigger};
+use crate::node::Mode;
 use crate::params::Params;
 use crate::registry::{Registry, Role};
 
@@ -111,7 +112,11 @@ pub(super) fn validate(src: SourceFile, registry: &Registry) -> Result<GraphSpec
         if role == Role::Source && n.trigger != TriggerKind::Any {
             err(Some(entry.span()), Some(&id), K::Option("a source has no trigger: it runs on its own thread".into()));
         }
-        for (span, msg) in option_errors(n).into_iter().chain(placement_error(n, role)) {
+        let placement = match file.graph.mode {
+            Mode::Lockstep => lockstep_errors(n),
+            Mode::Realtime => placement_error(n, role).into_iter().collect(),
+        };
+        for (span, msg) in option_errors(n).into_iter().chain(placement) {
             err(Some(span), Some(&id), K::Option(msg));
         }
         nodes.push(Some(NodeSpec {
@@ -121,7 +126,7 @@ pub(super) fn validate(src: SourceFile, registry: &Registry) -> Result<GraphSpec
             params,
             trigger,
             deadline_us: n.deadline_us.as_ref().map(|d| *d.get_ref()),
-            cpu: n.cpu,
+            cpu: n.cpu.as_ref().map(|c| *c.get_ref()),
             rt_priority: n.rt_priority.as_ref().map(|p| *p.get_ref()),
             restart: n.restart,
             thread: n.thread.as_ref().map_or_else(ThreadMode::default, |t| *t.get_ref()),
@@ -268,6 +273,9 @@ pub(super) fn validate(src: SourceFile, registry: &Registry) -> Result<GraphSpec
     if file.node.is_empty() {
         err(None, None, K::NoNodes);
     }
+    if let (Mode::Lockstep, Some(w)) = (file.graph.mode, &file.graph.workers) {
+        err(Some(w.span()), None, K::Option(lockstep_ignores("workers")));
+    }
 
     if !errs.is_empty() {
         errs.sort_by_key(|e| (e.line, e.col)); // stable: same place keeps discovery order
@@ -281,7 +289,7 @@ pub(super) fn validate(src: SourceFile, registry: &Registry) -> Result<GraphSpec
             .clone()
             .unwrap_or_else(|| src.path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default()),
         mode: file.graph.mode,
-        workers: file.graph.workers.unwrap_or(0),
+        workers: file.graph.workers.as_ref().map_or(0, |w| *w.get_ref()),
         plugins: file.plugin.iter().map(|p| base.join(p.path.get_ref())).collect(),
         nodes: nodes.into_iter().map(|n| n.expect("errors were reported for missing nodes")).collect(),
         edges,
@@ -325,6 +333,29 @@ fn placement_error(n: &NodeEntry, role: Role) -> Option<(Range<usize>, String)> 
              set thread = \"dedicated\" (or leave thread out), or remove {option}"
         ),
     ))
+}
+
+/// `cpu`, `rt_priority` or `thread` in a `mode = "lockstep"` graph: lockstep runs every node
+/// on the calling thread, so they would be silently ignored.
+fn lockstep_errors(n: &NodeEntry) -> Vec<(Range<usize>, String)> {
+    let mut out = Vec::new();
+    if let Some(c) = &n.cpu {
+        out.push((c.span(), lockstep_ignores("cpu")));
+    }
+    if let Some(p) = &n.rt_priority {
+        out.push((p.span(), lockstep_ignores("rt_priority")));
+    }
+    if let Some(t) = &n.thread {
+        out.push((t.span(), lockstep_ignores("thread")));
+    }
+    out
+}
+
+fn lockstep_ignores(option: &str) -> String {
+    format!(
+        "{option} is ignored in mode = \"lockstep\" (every node runs on the calling thread): \
+         remove it, or set mode = \"realtime\" in [graph]"
+    )
 }
 
 fn trigger_of(n: &NodeEntry) -> Result<Trigger, (Option<Range<usize>>, String)> {

@@ -29,8 +29,18 @@ type LooseNode = BTreeMap<Spanned<String>, Spanned<toml::Value>>;
 fn schema_error(src: &SourceFile, e: &toml::de::Error) -> GraphError {
     let cause = e.message().trim().to_owned();
     let span = e.span();
-    let Some((at, table)) = span.as_ref().and_then(|s| Some((s.start, node_table_at(src, s.start)?))) else {
+    let Some(at) = span.as_ref().map(|s| s.start) else {
         return GraphError::at(src, span, None, K::Syntax(cause));
+    };
+    let Some(table) = node_table_at(src, at) else {
+        // Not TOML at all: name the `[[node]]` section the error is in from the text, and the
+        // key a "duplicate key" error points at.
+        let key = (cause == "duplicate key").then(|| key_at(&src.text, at)).flatten();
+        return match node_section_by_text(&src.text, at) {
+            None => GraphError::at(src, span, None, K::Syntax(cause)),
+            Some(Ok(id)) => GraphError::at(src, span, Some(&id), K::NodeField { key, cause }),
+            Some(Err(problem)) => GraphError::at(src, span, None, K::UnnamedNode { problem, key, cause }),
+        };
     };
     let key = table.iter().find(|(_, v)| v.span().contains(&at)).map(|(k, _)| k.get_ref().clone());
     match node_name(&table) {
@@ -50,6 +60,45 @@ fn node_table_at(src: &SourceFile, at: usize) -> Option<LooseNode> {
 fn extent(node: &Spanned<LooseNode>) -> Range<usize> {
     let parts = node.get_ref().iter().flat_map(|(k, v)| [k.span(), v.span()]);
     parts.fold(node.span(), |all, s| all.start.min(s.start)..all.end.max(s.end))
+}
+
+/// For a file that is not valid TOML: the id of the `[[node]]` section holding byte `at`, read
+/// from the section's `id = "..."` line (or why it cannot name it); `None` outside a node.
+fn node_section_by_text(text: &str, at: usize) -> Option<Result<String, String>> {
+    let header = |line: &str| line.trim_start().starts_with('[');
+    let before = &text[..at.min(text.len())];
+    let start =
+        before.rfind("[[node]]").filter(|&h| before[..h].rsplit('\n').next().is_some_and(|l| l.trim().is_empty()))?;
+    let section = &text[start + "[[node]]".len()..];
+    let section_end = section.find('\n').map_or(section.len(), |first| {
+        let body = &section[first + 1..];
+        first + 1 + body.split_inclusive('\n').take_while(|l| !header(l)).map(str::len).sum::<usize>()
+    });
+    // Another table header between the node's and `at`: the error is not in this node.
+    if at > start + "[[node]]".len() + section_end {
+        return None;
+    }
+    let id_line = section[..section_end].lines().find(|l| {
+        let l = l.trim_start();
+        l.strip_prefix("id").is_some_and(|rest| rest.trim_start().starts_with('='))
+    });
+    let Some(line) = id_line else { return Some(Err("without an id".into())) };
+    let id = toml::from_str::<toml::Table>(line).ok().and_then(|t| t.get("id").cloned());
+    Some(match id {
+        Some(toml::Value::String(id)) if valid_id(&id) => Ok(id),
+        Some(toml::Value::String(id)) => Err(format!("with an invalid id \"{id}\"")),
+        _ => Err("whose id line cannot be read".into()),
+    })
+}
+
+/// The bare or quoted key starting at byte `at`, if there is one.
+fn key_at(text: &str, at: usize) -> Option<String> {
+    let rest = text.get(at..)?;
+    let key: String = match rest.strip_prefix('"') {
+        Some(quoted) => quoted.split('"').next()?.to_owned(),
+        None => rest.chars().take_while(|c| c.is_ascii_alphanumeric() || *c == '_' || *c == '-').collect(),
+    };
+    (!key.is_empty()).then_some(key)
 }
 
 /// The id that names a `[[node]]` table, or why it cannot.

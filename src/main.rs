@@ -338,6 +338,13 @@ fn run(
         cmd::paths::check_outputs(&[("graph", path)], &[("--stats-json", stats)])?;
     }
     let stop = interrupt_flag()?;
+    // The kinds live swaps can use: the graph's plugins loaded again (fresh copies, so a
+    // rebuilt library is told apart later); they loaded a moment ago for validation.
+    let kinds = if watch || control.is_some() {
+        Some(cmd::live::Kinds::load(&spec.plugins).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?)
+    } else {
+        None
+    };
     let listener = control.map(cmd::live::bind_control_socket).transpose()?;
     let running = match RunningGraph::start(&spec) {
         Ok(r) => r,
@@ -351,15 +358,14 @@ fn run(
     };
     let done = Arc::new(AtomicBool::new(false));
     let mut helpers = Vec::new();
-    if watch {
-        let reg = registry_for(path)?.unwrap_or_else(|_| registry());
-        let (p, spec, h, d) = (path.to_path_buf(), spec.clone(), running.handle(), done.clone());
-        helpers.push(std::thread::spawn(move || cmd::live::watch(p, reg, spec, h, d)));
-        eprintln!("watching {} for edits", path.display());
+    let live = kinds.map(|k| cmd::live::Live::new(&spec, k, running.handle()));
+    if let (true, Some(live)) = (watch, &live) {
+        let (p, live, d) = (path.to_path_buf(), Arc::clone(live), done.clone());
+        helpers.push(std::thread::spawn(move || cmd::live::watch(p, live, d)));
+        eprintln!("watching {} and its plugins for edits", path.display());
     }
-    if let (Some(sock), Some(listener)) = (control, listener) {
-        let reg = registry_for(path)?.unwrap_or_else(|_| registry());
-        helpers.push(cmd::live::control_socket(listener, sock, reg, running.handle(), done.clone()));
+    if let (Some(sock), Some(listener), Some(live)) = (control, listener, &live) {
+        helpers.push(cmd::live::control_socket(listener, sock, Arc::clone(live), done.clone()));
         eprintln!("control socket at {}", sock.display());
     }
     let report = running.wait(&RunOptions { duration, stop: Some(stop) });

@@ -4,7 +4,8 @@
 
 use std::io::{BufRead, BufReader, Write};
 use std::os::unix::net::UnixStream;
-use std::process::{Command, Stdio};
+use std::path::Path;
+use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 use super::support::{bin, skinflow, stderr, workdir};
@@ -27,24 +28,40 @@ fn ask(sock: &std::path::Path, req: &str) -> serde_json::Value {
     serde_json::from_str(&line).unwrap()
 }
 
+/// `skinflow run G --watch [--control SOCK]`, once the socket (if any) answers.
+fn run_watched(g: &Path, sock: Option<&Path>) -> Child {
+    let mut cmd = Command::new(bin());
+    cmd.args(["run", g.to_str().unwrap(), "--watch"]);
+    if let Some(sock) = sock {
+        cmd.args(["--control", sock.to_str().unwrap()]);
+    }
+    let child = cmd.env("RUST_LOG", "warn").stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().unwrap();
+    let t0 = Instant::now();
+    while sock.is_some_and(|s| !s.exists()) {
+        assert!(t0.elapsed() < Duration::from_secs(20), "no control socket");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    child
+}
+
+/// The (seq, value) rows the collect sink wrote.
+fn rows(path: &Path) -> Vec<(u64, u64)> {
+    let text = std::fs::read_to_string(path).unwrap();
+    text.lines()
+        .map(|l| {
+            let (a, b) = l.split_once(',').unwrap();
+            (a.parse().unwrap(), b.parse().unwrap())
+        })
+        .collect()
+}
+
 #[test]
 fn watch_swaps_edited_nodes_and_the_control_socket_answers() {
     let d = workdir("live", "watch");
     let g = d.join("g.toml");
     let sock = d.join("ctl.sock");
     std::fs::write(&g, graph("factor = 2", "out.csv")).unwrap();
-    let child = Command::new(bin())
-        .args(["run", g.to_str().unwrap(), "--watch", "--control", sock.to_str().unwrap()])
-        .env("RUST_LOG", "warn")
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let t0 = Instant::now();
-    while !sock.exists() {
-        assert!(t0.elapsed() < Duration::from_secs(20), "no control socket");
-        std::thread::sleep(Duration::from_millis(20));
-    }
+    let child = run_watched(&g, Some(&sock));
     let stats = ask(&sock, r#"{"cmd": "stats"}"#);
     assert_eq!(stats["ok"], true, "{stats}");
     assert!(stats["stats"]["nodes"].as_array().unwrap().iter().any(|n| n["id"] == "f"));
@@ -80,14 +97,7 @@ fn watch_swaps_edited_nodes_and_the_control_socket_answers() {
     assert!(out.status.success(), "{stderr}");
     assert!(stderr.contains("edit rejected") && stderr.contains("factr"), "{stderr}");
     assert!(stderr.contains("swapped f"), "{stderr}");
-    let rows: Vec<(u64, u64)> = std::fs::read_to_string(d.join("out.csv"))
-        .unwrap()
-        .lines()
-        .map(|l| {
-            let (a, b) = l.split_once(',').unwrap();
-            (a.parse().unwrap(), b.parse().unwrap())
-        })
-        .collect();
+    let rows = rows(&d.join("out.csv"));
     assert_eq!(rows.len(), 1500, "nothing lost across the swap");
     let switch = rows.iter().position(|&(_, y)| y >= 1_000_000).expect("the edit took effect");
     for (i, &(seq, y)) in rows.iter().enumerate() {
@@ -122,4 +132,80 @@ fn control_refuses_to_replace_a_file_that_is_not_a_socket() {
     assert!(err.contains(&format!("{}: --control: exists and is not a socket (a file)", precious.display())), "{err}");
     assert_eq!(std::fs::read_to_string(&precious).unwrap(), "keep me", "the file is left alone");
     assert!(!d.join("out.csv").exists(), "the graph did not run");
+}
+
+/// An edit is compared with what runs now, not with the last file read: a socket swap, then an
+/// edit whose second swap cannot build (applied in part, and said so), then the original file
+/// again, which swaps `f` back.
+#[test]
+fn an_edit_is_compared_with_the_running_graph_and_a_partial_edit_is_reported() {
+    let d = workdir("live", "partial");
+    let g = d.join("g.toml");
+    let sock = d.join("ctl.sock");
+    let original = graph("factor = 2", "out.csv").replace("count = 1500", "count = 3000");
+    std::fs::write(&g, &original).unwrap();
+    let child = run_watched(&g, Some(&sock));
+    std::thread::sleep(Duration::from_millis(600));
+    let swap = ask(&sock, r#"{"cmd": "swap", "node": "f", "kind": "scale", "params": {"factor": 5}}"#);
+    assert_eq!(swap["ok"], true, "{swap}");
+    let one = ask(&sock, r#"{"cmd": "stats", "node": "f"}"#);
+    assert_eq!(one["node"]["id"], "f", "{one}");
+    let none = ask(&sock, r#"{"cmd": "stats", "node": "nope"}"#);
+    assert!(none["error"].as_str().unwrap().contains("no node \"nope\""), "{none}");
+    std::thread::sleep(Duration::from_millis(600));
+    // `f` builds; `out` cannot (its directory does not exist), so the edit stops there.
+    std::fs::write(&g, graph("factor = 3", "no-such-dir/out.csv").replace("count = 1500", "count = 3000")).unwrap();
+    std::thread::sleep(Duration::from_millis(600));
+    std::fs::write(&g, &original).unwrap();
+    let out = child.wait_with_output().unwrap();
+    let stderr = stderr(&out);
+    assert!(out.status.success(), "{stderr}");
+    assert!(stderr.contains("edit partly applied: swapped f; then node \"out\""), "{stderr}");
+    assert!(stderr.contains("edit applied: swapped f\n"), "the original file differs from the running f: {stderr}");
+    let rows = rows(&d.join("out.csv"));
+    assert_eq!(rows.len(), 3000, "nothing lost across the swaps");
+    let mut factors: Vec<u64> = Vec::new();
+    for &(seq, y) in rows.iter().filter(|r| r.0 > 0) {
+        assert_eq!(y % seq, 0, "row {seq}: {y}");
+        if factors.last() != Some(&(y / seq)) {
+            factors.push(y / seq);
+        }
+    }
+    assert_eq!(factors, [2, 5, 3, 2], "the file's, the socket's, the partial edit's, the file's again");
+}
+
+/// A plugin library whose file changes is loaded again and the running nodes of its kinds are
+/// swapped to it; a file that is not a library is refused and the nodes keep running.
+#[test]
+fn a_rebuilt_plugin_is_reloaded_and_its_nodes_swapped() {
+    let d = workdir("live", "plugin-reload");
+    let built = super::plugins::plugin("skinflow-plugin-fixture-faulty");
+    let lib = d.join("lib.so");
+    std::fs::copy(&built, &lib).unwrap();
+    let g = d.join("g.toml");
+    std::fs::write(
+        &g,
+        graph("factor = 2", "out.csv")
+            .replace("count = 1500", "count = 2000")
+            .replace("kind = \"scale\"", "kind = \"fixture-scale\"")
+            .replacen("[[node]]", "[[plugin]]\npath = \"lib.so\"\n[[node]]", 1),
+    )
+    .unwrap();
+    let child = run_watched(&g, None);
+    // Replaced the way cargo does (a new file), then by something that is not a library.
+    let replace = |bytes: &[u8]| {
+        std::thread::sleep(Duration::from_millis(1000));
+        let tmp = d.join("lib.so.new");
+        std::fs::write(&tmp, bytes).unwrap();
+        std::fs::rename(&tmp, &lib).unwrap();
+    };
+    replace(&std::fs::read(&built).unwrap());
+    replace(b"not a library");
+    let out = child.wait_with_output().unwrap();
+    let stderr = stderr(&out);
+    assert!(out.status.success(), "{stderr}");
+    assert!(stderr.contains("plugin rebuilt and reloaded: swapped f"), "{stderr}");
+    assert!(stderr.contains("changed but was not reloaded (running nodes keep its previous code)"), "{stderr}");
+    let rows = std::fs::read_to_string(d.join("out.csv")).unwrap();
+    assert_eq!(rows.lines().count(), 2000, "nothing lost across the swap");
 }

@@ -29,6 +29,6 @@ pub use node::{Context, Mode, NodeImpl, NodeState, Processor, Sink, Source, Sour
 pub use params::{ParamError, Params};
 pub use port::PortSpec;
 pub use recycle::Recycler;
-pub use registry::{BuildContext, KindInfo, NodeFactory, NodeParams, ParamDoc, Registry, Role, typed};
+pub use registry::{BuildContext, KindInfo, NodeFactory, NodeParams, ParamDoc, Registry, Role, Wiring, typed};
 pub use runtime::{GraphHandle, RunError, RunOptions, RunReport, RunningGraph, run};
 pub use stats::StatsReport;

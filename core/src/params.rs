@@ -103,19 +103,33 @@ impl Params {
                 (p, Vec::new())
             }
         };
-        parsed.validate().map_err(|mut e| {
-            if e.span.is_none() {
-                e.span = e.param.as_ref().and_then(|k| key_spans.iter().find(|(n, _)| n == k).map(|(_, s)| s.clone()));
-            }
-            e
-        })?;
+        parsed.validate().map_err(|e| located(e, &key_spans))?;
         Ok(parsed)
     }
+
+    /// Gives an error about a named param without a span the span of that param's key and
+    /// value in the graph file, when these params come from one.
+    pub fn locate<T>(&self, r: Result<T, ParamError>) -> Result<T, ParamError> {
+        r.map_err(|e| match &self.located {
+            Some(loc) if e.span.is_none() => match parse_located::<toml::Table>(loc) {
+                Ok((_, key_spans)) => located(e, &key_spans),
+                Err(_) => e,
+            },
+            _ => e,
+        })
+    }
+}
+
+fn located(mut e: ParamError, key_spans: &KeySpans) -> ParamError {
+    if e.span.is_none() {
+        e.span = e.param.as_ref().and_then(|k| key_spans.iter().find(|(n, _)| n == k).map(|(_, s)| s.clone()));
+    }
+    e
 }
 
 type KeySpans = Vec<(String, Range<usize>)>;
 
-fn parse_located<P: NodeParams>(loc: &Located) -> Result<(P, KeySpans), ParamError> {
+fn parse_located<P: serde::de::DeserializeOwned>(loc: &Located) -> Result<(P, KeySpans), ParamError> {
     use toml::de::{DeTable, DeValue};
     let to_err = |e: toml::de::Error| ParamError { param: None, problem: e.message().to_owned(), span: e.span() };
     let doc = DeTable::parse(&loc.text).map_err(to_err)?;

@@ -118,12 +118,40 @@ pub trait NodeFactory: Send + Sync {
     fn check(&self, params: &Params) -> Result<(), ParamError>;
     /// Builds a node: parses params, opens what it needs, allocates its buffers.
     fn build(&self, params: &Params, ctx: &BuildContext) -> Result<NodeImpl, NodeError>;
+    /// Checks params against which inputs the graph connects (a param required only when an
+    /// input has an edge); run at load, after [`NodeFactory::check`] passed. No side effects.
+    fn check_wiring(&self, _params: &Params, _wiring: &Wiring<'_>) -> Result<(), ParamError> {
+        Ok(())
+    }
+}
+
+/// Which of a node's inputs have at least one edge in the graph.
+#[derive(Debug, Clone, Copy)]
+pub struct Wiring<'a> {
+    connected: &'a [&'a str],
+}
+
+impl<'a> Wiring<'a> {
+    /// `connected`: the names of the inputs with an edge.
+    pub fn new(connected: &'a [&'a str]) -> Wiring<'a> {
+        Wiring { connected }
+    }
+
+    pub fn has_input(&self, port: &str) -> bool {
+        self.connected.contains(&port)
+    }
 }
 
 /// A node's parameters: a serde struct with `deny_unknown_fields` plus range checks.
 pub trait NodeParams: DeserializeOwned + Send + Sync + 'static {
     /// Range and consistency checks, run at load so `skinflow check` reports them.
     fn validate(&self) -> Result<(), ParamError> {
+        Ok(())
+    }
+
+    /// Checks against the graph's wiring (e.g. a param required when an input is connected),
+    /// run at load after [`NodeParams::validate`], so `skinflow check` reports it too.
+    fn validate_wiring(&self, _wiring: &Wiring<'_>) -> Result<(), ParamError> {
         Ok(())
     }
 }
@@ -155,6 +183,11 @@ where
 
     fn check(&self, params: &Params) -> Result<(), ParamError> {
         params.parse::<P>().map(|_| ())
+    }
+
+    fn check_wiring(&self, params: &Params, wiring: &Wiring<'_>) -> Result<(), ParamError> {
+        let p = params.parse::<P>()?;
+        params.locate(p.validate_wiring(wiring))
     }
 
     fn build(&self, params: &Params, ctx: &BuildContext) -> Result<NodeImpl, NodeError> {

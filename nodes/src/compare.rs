@@ -18,6 +18,17 @@
 //! recording). Unsettled frames still count for latency and are reported as `unsettled_frames`;
 //! `frames = "all"` scores them too.
 //!
+//! A lane is one strategy: when the strategy arriving on an edge changes mid-run (a hot swap of
+//! its corrector or splitter: the forces' name or the split's strategy differs from the
+//! previous frame's), the lane's figures so far are closed and a new lane starts on that edge,
+//! named after what changed and the frame it starts at (`eit-force (from frame 412)`; the closed
+//! one becomes `proportional (to frame 411)`), so no figure blends two strategies. The live
+//! lines, the table and the JSON list every lane of an edge in order; the JSON adds each lane's
+//! edge (`input`), `segment`, `strategy`, `split`, `first_frame`, `last_frame` and `superseded`.
+//! A swap that keeps both names (a new `lambda` upstream, another calibration file) cannot be
+//! told apart here: no message says which instance or params made it, so such a lane's figures
+//! span both settings.
+//!
 //! ```toml
 //! params = { names = ["proportional", "peak-weighted"], report_s = 2.0, json = "../out/ab.json", print = true }
 //! ```
@@ -39,7 +50,8 @@ use crate::payload::Forces;
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct CompareParams {
-    /// Lane names in edge order (default: each lane's strategy name, else `lane<i>`).
+    /// Lane names in edge order (default: each lane's strategy name, else `lane<i>`). A lane
+    /// whose strategy changes mid-run goes on as `NAME: <new strategy> (from frame N)`.
     #[serde(default)]
     pub names: Vec<String>,
     /// Wall seconds between live report lines; 0 = none.
@@ -83,10 +95,23 @@ impl NodeParams for CompareParams {
     }
 }
 
-/// Accumulated results of one lane.
+/// Accumulated results of one lane: one strategy on one input edge.
 #[derive(Default)]
 struct Lane {
+    /// The name without its frame range (configured, the strategy, or what a swap changed).
     name: String,
+    /// The `forces` edge (lane in graph file order) the forces come in on.
+    input: usize,
+    /// 0 for the edge's first strategy, k after its k-th change.
+    segment: usize,
+    /// The forces' strategy name and the split's strategy this lane stands for.
+    strategy: String,
+    split: &'static str,
+    /// Sequence numbers of the first and last frames received (`None` before any).
+    first_frame: Option<u64>,
+    last_frame: Option<u64>,
+    /// The strategy changed after `last_frame`: a later lane of the same edge took over.
+    superseded: bool,
     frames: u64,
     /// Per evaluated frame, us (exact percentiles; grows by amortized doubling only).
     latency_us: Vec<f64>,
@@ -127,6 +152,19 @@ pub struct LaneReport {
     /// Frames in `frames` (timed) whose errors were not scored because the load changed while
     /// they were acquired (`frames = "settled"`); 0 with `frames = "all"`.
     pub unsettled_frames: u64,
+    /// The `forces` edge (graph file order) of the lane; several lanes share one when its
+    /// strategy changed during the run (hot swap), in order of `segment`.
+    pub input: usize,
+    /// 0 for the edge's first strategy, k after its k-th change.
+    pub segment: usize,
+    /// The forces' strategy name (a corrector's `name`) and the split's strategy.
+    pub strategy: String,
+    pub split: String,
+    /// Sequence numbers of the first and last frames the lane received (null before any).
+    pub first_frame: Option<u64>,
+    pub last_frame: Option<u64>,
+    /// The strategy changed after `last_frame`: the lane with the next `segment` took over.
+    pub superseded: bool,
 }
 
 fn ratio(num: f64, den: u64) -> f64 {
@@ -134,9 +172,24 @@ fn ratio(num: f64, den: u64) -> f64 {
 }
 
 impl Lane {
+    fn new(input: usize, name: String) -> Lane {
+        Lane { name, input, latency_us: Vec::with_capacity(4096), ..Lane::default() }
+    }
+
+    /// The name with the frames it covers when its edge changed strategy: `(to frame M)` for
+    /// the first of several, `(from frame N)` for the last, `(frames N-M)` between.
+    fn display_name(&self) -> String {
+        match (self.segment, self.superseded, self.first_frame, self.last_frame) {
+            (0, true, _, Some(last)) => format!("{} (to frame {last})", self.name),
+            (1.., false, Some(first), _) => format!("{} (from frame {first})", self.name),
+            (1.., true, Some(first), Some(last)) => format!("{} (frames {first}-{last})", self.name),
+            _ => self.name.clone(),
+        }
+    }
+
     fn report(&self) -> LaneReport {
         LaneReport {
-            name: self.name.clone(),
+            name: self.display_name(),
             frames: self.frames,
             latency_us_p50: percentile(&self.latency_us, 50.0).unwrap_or(f64::NAN),
             latency_us_p99: percentile(&self.latency_us, 99.0).unwrap_or(f64::NAN),
@@ -149,12 +202,21 @@ impl Lane {
             disagreement_rmse_n: ratio(self.disagree_sq_n2, self.disagree_matched).sqrt(),
             no_pressure_frames: self.no_pressure_frames,
             unsettled_frames: self.unsettled_frames,
+            input: self.input,
+            segment: self.segment,
+            strategy: self.strategy.clone(),
+            split: self.split.to_owned(),
+            first_frame: self.first_frame,
+            last_frame: self.last_frame,
+            superseded: self.superseded,
         }
     }
 }
 
 pub struct Compare {
     // Configuration
+    /// The node's id (for the log line of a lane's change of strategy).
+    id: String,
     names: Vec<String>,
     report_ns: u64,
     json: Option<PathBuf>,
@@ -162,24 +224,70 @@ pub struct Compare {
     print: bool,
     scored: ScoredFrames,
     // Internal state
+    /// The current lane of each input edge.
     lanes: Vec<Lane>,
+    /// Lanes closed by a change of strategy on their edge, in the order they were closed.
+    closed: Vec<Lane>,
+    /// Sequence number of the frame being accounted.
+    frame: u64,
     next_report_ns: u64,
     pred_xy: Vec<(f64, f64)>,
     truth_xy: Vec<(f64, f64)>,
 }
 
 impl Compare {
+    /// The current lane of input `i` for forces `f` (of frame `self.frame`): a new one when
+    /// the strategy changed.
     fn lane(&mut self, i: usize, f: &Forces) -> &mut Lane {
         while self.lanes.len() <= i {
             let k = self.lanes.len();
             let name = self.names.get(k).cloned().unwrap_or_default();
-            self.lanes.push(Lane { name, latency_us: Vec::with_capacity(4096), ..Lane::default() });
+            self.lanes.push(Lane::new(k, name));
+        }
+        let lane = &self.lanes[i];
+        if lane.first_frame.is_none() {
+            let lane = &mut self.lanes[i];
+            if lane.name.is_empty() {
+                lane.name = if f.strategy.is_empty() { format!("lane{i}") } else { f.strategy.clone() };
+            }
+            lane.strategy.clone_from(&f.strategy);
+            lane.split = f.split.strategy;
+            lane.first_frame = Some(self.frame);
+        } else if lane.strategy != f.strategy || lane.split != f.split.strategy {
+            self.next_segment(i, f);
         }
         let lane = &mut self.lanes[i];
-        if lane.name.is_empty() {
-            lane.name = if f.strategy.is_empty() { format!("lane{i}") } else { f.strategy.clone() };
-        }
+        lane.last_frame = Some(self.frame);
         lane
+    }
+
+    /// Closes input `i`'s lane, whose strategy `f` changed (a hot swap upstream), and starts
+    /// the next one, named after what changed.
+    #[cold]
+    fn next_segment(&mut self, i: usize, f: &Forces) {
+        let old = &self.lanes[i];
+        let changed = if old.strategy != f.strategy { f.strategy.as_str() } else { f.split.strategy };
+        let changed = if changed.is_empty() { format!("lane{i}") } else { changed.to_owned() };
+        let name = match self.names.get(i).filter(|n| !n.is_empty()) {
+            Some(n) => format!("{n}: {changed}"),
+            None => changed,
+        };
+        let mut new = Lane::new(i, name);
+        new.segment = old.segment + 1;
+        new.strategy.clone_from(&f.strategy);
+        new.split = f.split.strategy;
+        new.first_frame = Some(self.frame);
+        let mut old = std::mem::replace(&mut self.lanes[i], new);
+        old.superseded = true;
+        tracing::info!(
+            node = %self.id,
+            lane = %old.display_name(),
+            next = %self.lanes[i].display_name(),
+            strategy = %f.strategy,
+            split = f.split.strategy,
+            "compare: the lane's strategy changed; its figures are closed and a new lane starts"
+        );
+        self.closed.push(old);
     }
 
     /// Scores one lane's forces against the frame's truth.
@@ -249,9 +357,14 @@ impl Compare {
         }
     }
 
-    /// Every lane's figures so far.
+    /// Every lane's figures so far: by input edge, each edge's lanes in order.
     pub fn reports(&self) -> Vec<LaneReport> {
-        self.lanes.iter().map(Lane::report).collect()
+        let mut out = Vec::with_capacity(self.lanes.len() + self.closed.len());
+        for (i, lane) in self.lanes.iter().enumerate() {
+            out.extend(self.closed.iter().filter(|l| l.input == i).map(Lane::report));
+            out.push(lane.report());
+        }
+        out
     }
 }
 
@@ -278,6 +391,7 @@ impl Sink for Compare {
         for (i, m) in inputs.iter_port(0) {
             let f =
                 m.get::<Forces>().ok_or(NodeError::Input { port: "forces".into(), problem: "not forces".into() })?;
+            self.frame = m.header.seq;
             self.account(i, f, reference.as_deref());
         }
         if self.report_ns > 0 && self.next_report_ns == 0 {
@@ -354,8 +468,9 @@ struct JsonReport<'a> {
     lanes: &'a [LaneReport],
 }
 
-/// The report as JSON: `{"lanes": [{"name": ..., "frames": ..., "latency_us_p50": ..., ...}]}`;
-/// values that cannot be computed (NaN) are `null`.
+/// The report as JSON: `{"lanes": [{"name": ..., "frames": ..., "latency_us_p50": ..., ...}]}`
+/// (the fields of [`LaneReport`], an edge's lanes in order of `segment`); values that cannot be
+/// computed (NaN) are `null`.
 pub fn to_json(reports: &[LaneReport]) -> String {
     // serde_json writes NaN as null; strings and numbers cannot fail to serialize.
     let mut s = serde_json::to_string_pretty(&JsonReport { lanes: reports }).expect("lane reports serialize");
@@ -365,6 +480,7 @@ pub fn to_json(reports: &[LaneReport]) -> String {
 
 fn build(p: CompareParams, ctx: &BuildContext) -> Result<NodeImpl, NodeError> {
     Ok(NodeImpl::Sink(Box::new(Compare {
+        id: ctx.node_id.clone(),
         names: p.names,
         report_ns: (p.report_s * 1e9) as u64,
         json: p.json.map(|j| ctx.resolve(&j)),
@@ -372,6 +488,8 @@ fn build(p: CompareParams, ctx: &BuildContext) -> Result<NodeImpl, NodeError> {
         print: p.print,
         scored: p.frames,
         lanes: Vec::new(),
+        closed: Vec::new(),
+        frame: 0,
         next_report_ns: 0,
         pred_xy: Vec::with_capacity(16),
         truth_xy: Vec::with_capacity(16),
@@ -386,7 +504,7 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
                 "names",
                 "array of strings",
                 "[]",
-                "lane names in edge order (default: strategy names)",
+                "lane names in edge order (default: strategy names); an edge whose strategy changes mid-run (hot swap) starts a new lane, \"NAME: <new strategy> (from frame N)\"",
             ))
             .param(ParamDoc::new("report_s", "float", "2.0", "wall seconds between live report lines; 0 = none"))
             .param(ParamDoc::new(
@@ -449,6 +567,7 @@ mod tests {
 
     fn compare() -> Compare {
         Compare {
+            id: "compare".into(),
             names: Vec::new(),
             report_ns: 0,
             json: None,
@@ -456,6 +575,8 @@ mod tests {
             print: false,
             scored: ScoredFrames::Settled,
             lanes: Vec::new(),
+            closed: Vec::new(),
+            frame: 0,
             next_report_ns: 0,
             pred_xy: Vec::new(),
             truth_xy: Vec::new(),
@@ -603,6 +724,104 @@ mod tests {
         assert!(r[1].rmse_n.is_nan());
     }
 
+    /// `f` with the split's strategy `split`.
+    fn split_by(mut f: Forces, split: &'static str) -> Forces {
+        Arc::make_mut(&mut f.split).strategy = split;
+        f
+    }
+
+    /// Accounts `f` as frame `seq` of input `i`.
+    fn at(c: &mut Compare, seq: u64, i: usize, f: &Forces) {
+        c.frame = seq;
+        c.account(i, f, None);
+    }
+
+    #[test]
+    fn a_change_of_strategy_on_an_edge_closes_its_lane_and_starts_a_new_one() {
+        let truth = [(0.0, 0.0, 2.0)];
+        // The corrector keeps its name; the splitter swapped to eit-force at frame 3, back at 5.
+        let prop = split_by(forces("proportional", &[(0.0, 0.0, 3.0)], Some(&truth)), "proportional");
+        let eit = split_by(forces("proportional", &[(0.0, 0.0, 2.5)], Some(&truth)), "eit-force");
+        let other = split_by(forces("sensitivity-compensated", &[(0.0, 0.0, 2.0)], Some(&truth)), "proportional");
+        let mut c = compare();
+        for seq in 0..7 {
+            at(&mut c, seq, 0, if (3..5).contains(&seq) { &eit } else { &prop });
+            at(&mut c, seq, 1, &other);
+        }
+        let r = c.reports();
+        let names: Vec<&str> = r.iter().map(|l| l.name.as_str()).collect();
+        assert_eq!(
+            names,
+            [
+                "proportional (to frame 2)",
+                "eit-force (frames 3-4)",
+                "proportional (from frame 5)",
+                "sensitivity-compensated"
+            ]
+        );
+        let rows: Vec<_> =
+            r.iter().map(|l| (l.input, l.segment, l.frames, l.first_frame, l.last_frame, l.superseded)).collect();
+        assert_eq!(
+            rows,
+            [
+                (0, 0, 3, Some(0), Some(2), true),
+                (0, 1, 2, Some(3), Some(4), true),
+                (0, 2, 2, Some(5), Some(6), false),
+                (1, 0, 7, Some(0), Some(6), false)
+            ]
+        );
+        assert_eq!((r[1].strategy.as_str(), r[1].split.as_str()), ("proportional", "eit-force"));
+        // Each lane's error is its own strategy's, not a blend: 1 N, 0.5 N, 1 N.
+        let rmse: Vec<f64> = r.iter().map(|l| l.rmse_n).collect();
+        assert_eq!(rmse, [1.0, 0.5, 1.0, 0.0]);
+        assert_eq!(r.iter().map(|l| l.matched).collect::<Vec<_>>(), [3, 2, 2, 7]);
+        // The table and the JSON show every lane with its frames.
+        let t = table(&r);
+        assert!(t.contains("| proportional (to frame 2) | 3 |"), "{t}");
+        assert!(t.contains("| eit-force (frames 3-4) | 2 |"), "{t}");
+        assert!(t.contains("| proportional (from frame 5) | 2 |"), "{t}");
+        let j: serde_json::Value = serde_json::from_str(&to_json(&r)).unwrap();
+        let lanes = j["lanes"].as_array().unwrap();
+        assert_eq!(lanes.len(), 4);
+        assert_eq!(lanes[1]["name"], "eit-force (frames 3-4)");
+        assert_eq!(
+            (&lanes[1]["input"], &lanes[1]["segment"], &lanes[1]["split"]),
+            (&0.into(), &1.into(), &"eit-force".into())
+        );
+        assert_eq!((&lanes[2]["first_frame"], &lanes[2]["superseded"]), (&5.into(), &false.into()));
+    }
+
+    #[test]
+    fn a_new_lane_is_named_after_what_changed_and_keeps_a_configured_name() {
+        let truth = [(0.0, 0.0, 2.0)];
+        let f = |name: &str, split| split_by(forces(name, &[(0.0, 0.0, 2.0)], Some(&truth)), split);
+        // A corrector renamed (its default name carries the split): the new forces name.
+        let mut c = compare();
+        at(&mut c, 10, 0, &f("pneumatic-locaware", "proportional"));
+        at(&mut c, 11, 0, &f("pneumatic-locaware-eit-force", "eit-force"));
+        let names: Vec<String> = c.reports().into_iter().map(|l| l.name).collect();
+        assert_eq!(names, ["pneumatic-locaware (to frame 10)", "pneumatic-locaware-eit-force (from frame 11)"]);
+        // A configured name stays, with what changed.
+        let mut c = Compare { names: vec!["A".into()], ..compare() };
+        at(&mut c, 0, 0, &f("proportional", "proportional"));
+        at(&mut c, 1, 0, &f("proportional", "eit-force"));
+        let names: Vec<String> = c.reports().into_iter().map(|l| l.name).collect();
+        assert_eq!(names, ["A (to frame 0)", "A: eit-force (from frame 1)"]);
+        // The same strategy throughout (a swap of params only cannot be seen): one lane.
+        let mut c = compare();
+        for seq in 0..3 {
+            at(&mut c, seq, 0, &f("proportional", "proportional"));
+        }
+        let r = c.reports();
+        assert_eq!((r.len(), r[0].name.as_str(), r[0].frames, r[0].superseded), (1, "proportional", 3, false));
+        // No-load and no-pressure frames count for the lane's frame range, not its scores.
+        let mut lost = f("proportional", "eit-force");
+        lost.forces[0] = placeholder();
+        at(&mut c, 3, 0, &lost);
+        let r = c.reports();
+        assert_eq!((r[1].name.as_str(), r[1].frames, r[1].no_pressure_frames), ("eit-force (from frame 3)", 0, 1));
+    }
+
     #[test]
     fn table_and_json_show_missing_values_plainly() {
         let r = LaneReport {
@@ -619,6 +838,13 @@ mod tests {
             disagreement_rmse_n: 0.5,
             no_pressure_frames: 2,
             unsettled_frames: 1,
+            input: 0,
+            segment: 0,
+            strategy: "a".into(),
+            split: "proportional".into(),
+            first_frame: Some(4),
+            last_frame: Some(9),
+            superseded: false,
         };
         let t = table(std::slice::from_ref(&r));
         assert!(t.contains("| a \"quoted\" lane | 3 | 1 | 12.2 | 20.0 | - |"), "{t}");
@@ -630,6 +856,6 @@ mod tests {
         assert_eq!(lane["disagreement_rmse_n"], 0.5);
         assert_eq!(lane["no_pressure_frames"], 2);
         assert_eq!(lane["unsettled_frames"], 1);
-        assert_eq!(lane.as_object().unwrap().len(), 13, "{j}");
+        assert_eq!(lane.as_object().unwrap().len(), 20, "{j}");
     }
 }

@@ -15,6 +15,11 @@
 //! Inputs (all optional): `eit`, `pressure`, `truth`, `image`, `contacts`, `forces` (multi),
 //! `sync` (the `sync` node's frames).
 //!
+//! `strategies` is required exactly when `forces` is connected: graph validation
+//! (`skinflow check`, and before a run starts) refuses a logger with `forces` connected and no
+//! list, naming the param's line. A node swapped in at run time is checked again at its first
+//! message, which names the strategies that arrived, before the file is created.
+//!
 //! Forces of a strategy not in `strategies` (e.g. after a hot swap renamed a corrector's
 //! strategy) are not logged: one warning per strategy name, and the frames left out are
 //! counted and reported at stop. Each logged strategy has one table, so it must come from one
@@ -24,8 +29,8 @@
 //! Images are logged at the size of the first image (the reconstructor's `image_nx` x
 //! `image_ny`); one recording holds one size. The logger's own `image_nx` / `image_ny` are
 //! optional: given, they must match the images (a mismatch stops the graph naming them), and
-//! with `swmr = true` they are needed when `image` is connected, since a SWMR file cannot get
-//! the image dataset after it is created.
+//! with `swmr = true` they are needed when `image` is connected (refused at load without them),
+//! since a SWMR file cannot get the image dataset after it is created.
 
 use std::path::{Path, PathBuf};
 
@@ -34,7 +39,7 @@ use skinflow_contact::correct::ForceFlags;
 use skinflow_core::params::positive;
 use skinflow_core::{
     BuildContext, Context, Inputs, KindInfo, NodeError, NodeImpl, NodeParams, ParamDoc, ParamError, PortSpec, Registry,
-    Role, Sink, typed,
+    Role, Sink, Wiring, typed,
 };
 use skinflow_record::error::RecordError;
 use skinflow_record::layout::force_flags;
@@ -60,7 +65,8 @@ pub struct LoggerParams {
     pub swmr: bool,
     #[serde(default)]
     pub overwrite: bool,
-    /// Force strategies logged under `/derived/forces/<name>` (needed when `forces` is connected).
+    /// Force strategies logged under `/derived/forces/<name>`: required exactly when `forces`
+    /// is connected (checked at the first message: see the module docs).
     #[serde(default)]
     pub strategies: Vec<String>,
     /// Width of the logged images, pixels: absent, the first image's; given, it must match.
@@ -97,7 +103,26 @@ impl NodeParams for LoggerParams {
         }
         Ok(())
     }
+
+    /// What the graph's edges make required: `strategies` with `forces` connected, and the
+    /// image size with `swmr = true` and `image` connected. Checked at load (`skinflow check`).
+    fn validate_wiring(&self, wiring: &Wiring<'_>) -> Result<(), ParamError> {
+        if wiring.has_input("forces") && self.strategies.is_empty() {
+            return Err(ParamError::new(
+                "strategies",
+                "required when `forces` is connected: list the force strategies (corrector output names) to log",
+            ));
+        }
+        if self.swmr && wiring.has_input("image") && (self.image_nx.is_none() || self.image_ny.is_none()) {
+            let param = if self.image_nx.is_none() { "image_nx" } else { "image_ny" };
+            return Err(ParamError::new(param, SWMR_NEEDS_IMAGE_SIZE));
+        }
+        Ok(())
+    }
 }
+
+const SWMR_NEEDS_IMAGE_SIZE: &str = "with swmr = true and `image` connected, give image_nx and image_ny (the \
+     reconstructor's image size): a SWMR file cannot get the image dataset once it is created";
 
 const EIT: usize = 0;
 const PRESSURE: usize = 1;
@@ -198,24 +223,14 @@ impl Logger {
                 o.streams.image_hw = None;
             } else if o.swmr && o.streams.image_hw.is_none() {
                 let param = if self.image_size.0.is_none() { "image_nx" } else { "image_ny" };
-                return Err(NodeError::Param {
-                    param: param.into(),
-                    problem: "with swmr = true and `image` connected, give image_nx and image_ny (the reconstructor's \
-                              image size): a SWMR file cannot get the image dataset once it is created"
-                        .into(),
-                }
-                .fatal());
+                return Err(NodeError::Param { param: param.into(), problem: SWMR_NEEDS_IMAGE_SIZE.into() }.fatal());
             }
             o.streams.contacts = inputs.lanes(CONTACTS) > 0;
             o.streams.sync = inputs.lanes(SYNC) > 0;
             if inputs.lanes(FORCES) == 0 {
                 o.streams.force_strategies.clear();
             } else if o.streams.force_strategies.is_empty() {
-                return Err(NodeError::Param {
-                    param: "strategies".into(),
-                    problem: "list the force strategies to log when `forces` is connected".into(),
-                }
-                .fatal());
+                return Err(missing_strategies(inputs).fatal());
             }
             let w = RecordingWriter::create(&self.path, &o).map_err(|e| record_error(&self.path, e).fatal())?;
             self.lane_strategy = vec![None; inputs.lanes(FORCES)];
@@ -360,6 +375,26 @@ impl Sink for Logger {
     }
 }
 
+/// The error of a logger with `forces` connected and no `strategies`, naming the strategies
+/// of the forces in this call (a cold path: it stops the graph).
+fn missing_strategies(inputs: &Inputs) -> NodeError {
+    let mut names: Vec<String> = Vec::new();
+    for f in inputs.iter_port(FORCES).filter_map(|(_, m)| m.get::<Forces>()) {
+        let name = format!("{:?}", f.strategy);
+        if !names.contains(&name) {
+            names.push(name);
+        }
+    }
+    let arrived = if names.is_empty() { String::new() } else { format!(" (arriving now: {})", names.join(", ")) };
+    NodeError::Param {
+        param: "strategies".into(),
+        problem: format!(
+            "required when `forces` is connected: list the force strategies (corrector output names) to log{arrived}; \
+             nothing was recorded"
+        ),
+    }
+}
+
 /// Records that `forces` edge `lane` delivers the logged strategy of writer index `k`, named
 /// `name` (`k` `None`: a strategy not logged); refused (a fatal error) when another edge
 /// delivers that logged strategy too: the two streams' rows would interleave in one table. An
@@ -444,7 +479,7 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
                 "strategies",
                 "[string]",
                 "[]",
-                "force strategies (corrector output names) to log; each from one `forces` edge",
+                "force strategies (corrector output names) to log; each from one `forces` edge; required exactly when `forces` is connected (checked at load)",
             ))
             .param(ParamDoc::new(
                 "image_nx",

@@ -206,10 +206,6 @@ fn an_image_size_the_params_contradict_stops_the_graph_naming_them() {
         (", image_ny = 64", format!("param \"image_ny\": {but} image_ny = 64;")),
         (", image_nx = 64, image_ny = 64", format!("param \"image_ny\": {but} image_nx = 64, image_ny = 64;")),
         (", image_nx = 48, image_ny = 64", format!("param \"image_nx\": {but} image_nx = 48, image_ny = 64;")),
-        (
-            ", swmr = true",
-            "param \"image_nx\": with swmr = true and `image` connected, give image_nx and image_ny".to_owned(),
-        ),
     ] {
         let d = dir("image-mismatch");
         let report = run(&d, &images(&sizes), params).unwrap();
@@ -221,6 +217,14 @@ fn an_image_size_the_params_contradict_stops_the_graph_naming_them() {
     for param in ["image_nx", "image_ny"] {
         let e = run(&dir("image-zero"), &images(&sizes), &format!(", {param} = 0")).unwrap_err();
         assert!(e.contains(&format!("node \"log\": param \"{param}\": must be >= 1 pixel (got 0)")), "{e}");
+    }
+    // So is SWMR with `image` connected and no size (the file gets its image dataset at creation).
+    for (params, missing) in [(", swmr = true", "image_nx"), (", swmr = true, image_nx = 64", "image_ny")] {
+        let e = run(&dir("image-swmr-no-size"), &images(&sizes), params).unwrap_err();
+        let expected = format!(
+            "node \"log\": param \"{missing}\": with swmr = true and `image` connected, give image_nx and image_ny"
+        );
+        assert!(e.contains(&expected), "{params}: {e}");
     }
 }
 
@@ -236,4 +240,48 @@ fn an_image_of_another_size_than_the_first_stops_the_graph_with_the_first_ones_k
     );
     let image = Recording::open(d.join("rec.h5")).unwrap().derived.image.unwrap();
     assert_eq!((image.t_s.len(), image.hw), (2, [48, 64]));
+}
+
+#[test]
+fn forces_without_strategies_are_refused_at_load_and_at_a_swap_naming_the_param() {
+    let d = dir("no-strategies");
+    let nodes = forces_node("a", "pneumatic-locaware", 1.0);
+    // The params alone are fine; the wiring needs the list, so the graph is refused at load,
+    // the error located at the logger's node.
+    let params = skinflow_core::Params::from_toml("path = \"rec.h5\"").unwrap();
+    registry().get("hdf5_logger").unwrap().check(&params).unwrap();
+    let e = run(&d, &nodes, "").unwrap_err();
+    assert!(
+        e.ends_with(
+            "graph.toml:10:1: node \"log\": param \"strategies\": required when `forces` is connected: list the \
+             force strategies (corrector output names) to log"
+        ),
+        "{e}"
+    );
+    // A replacement swapped in at run time is checked against the same wiring and refused.
+    let spec = GraphSpec::parse(
+        SourceFile::new(
+            d.join("graph.toml"),
+            format!(
+                "[graph]\nmode = \"lockstep\"\n{nodes}[[node]]\nid = \"log\"\nkind = \"hdf5_logger\"\n\
+                 params = {{ path = \"other.h5\", strategies = [\"pneumatic-locaware\"] }}\n"
+            ),
+        ),
+        &registry(),
+    )
+    .unwrap();
+    let running = skinflow_core::RunningGraph::start(&spec).unwrap();
+    let factory = registry().get("hdf5_logger").unwrap().clone();
+    let e = running.handle().swap("log", factory, params).unwrap_err().to_string();
+    assert!(e.contains("param \"strategies\": required when `forces` is connected"), "{e}");
+    drop(running.wait(&RunOptions::default()));
+    std::fs::remove_file(d.join("other.h5")).unwrap();
+    let left: Vec<_> = std::fs::read_dir(&d).unwrap().map(|e| e.unwrap().file_name()).collect();
+    assert!(left.is_empty(), "{left:?}");
+
+    // Without `forces`, no list is needed.
+    let d = dir("no-forces");
+    let report = run(&d, &images(&[[8, 8]]), "").unwrap();
+    assert_eq!(failures(&report), Vec::<String>::new());
+    assert!(Recording::open(d.join("rec.h5")).unwrap().derived.forces.is_empty());
 }

@@ -6,12 +6,16 @@
 //! node's replacement takes over its learned state, e.g. the EIT reference, P0 and noise
 //! estimates, see `skinflow_core::runtime::GraphHandle`). An invalid edit, or one that adds,
 //! removes or rewires nodes and edges, is rejected with its error and the running graph goes on.
+//! An edit is compared with what runs now (swaps made through the socket included), and when one
+//! of its swaps fails (a node that cannot build), the swaps before it stay and the message names
+//! them. A plugin library whose file changes (rebuilt) is loaded again as a fresh copy, and every
+//! running node of its kinds is swapped to the new code with its params.
 //!
 //! Control socket, one JSON object per line, one reply per line (`{"ok": true, ...}` or
 //! `{"ok": false, "error": "..."}`; `tare` and `control` wait for the node's answer, so a
 //! command the node rejects gives its error). The socket path must not exist or be a stale
 //! socket; any other file there is refused, never replaced:
-//! `{"cmd": "stats"}`, `{"cmd": "tare", "node": "sync"}`,
+//! `{"cmd": "stats"}` (or one node's: `{"cmd": "stats", "node": "recon"}`), `{"cmd": "tare", "node": "sync"}`,
 //! `{"cmd": "control", "node": "recon", "command": "tare"}`,
 //! `{"cmd": "swap", "node": "split", "kind": "splitter", "params": {"strategy": "proportional"}}`.
 
@@ -19,62 +23,230 @@ use std::io::{BufRead, BufReader, Write};
 use std::os::unix::fs::FileTypeExt;
 use std::os::unix::net::{UnixListener, UnixStream};
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
 use std::time::{Duration, SystemTime};
 
 use anyhow::{Context as _, Result, bail};
 use serde_json::{Value, json};
 use skinflow_core::graph::{EdgeSpec, SourceFile};
+use skinflow_core::registry::NodeFactory;
 use skinflow_core::{GraphHandle, GraphSpec, Params, Registry};
 
-/// What a node is, for diffing two versions of a graph file.
-fn node_key(spec: &GraphSpec) -> Vec<(String, String, toml::Table)> {
-    spec.nodes.iter().map(|n| (n.id.clone(), n.kind.clone(), n.params.table().clone())).collect()
+/// What a node runs: (id, kind, params).
+type NodeNow = (String, String, Params);
+
+fn node_key(spec: &GraphSpec) -> Vec<NodeNow> {
+    spec.nodes.iter().map(|n| (n.id.clone(), n.kind.clone(), n.params.clone())).collect()
 }
 
 fn edge_key(e: &EdgeSpec) -> (String, String, usize, String) {
     (e.from.clone(), e.to.clone(), e.capacity, format!("{:?}", e.policy))
 }
 
-/// Applies one edit: validates, checks the structure is unchanged, swaps changed nodes.
-/// Returns the ids swapped.
-pub fn apply_edit(old: &GraphSpec, new: &GraphSpec, handle: &GraphHandle) -> Result<Vec<String>, String> {
-    let (a, b) = (node_key(old), node_key(new));
-    let ids = |k: &[(String, String, toml::Table)]| k.iter().map(|n| n.0.clone()).collect::<Vec<_>>();
-    if ids(&a) != ids(&b) {
-        return Err("nodes were added, removed or reordered: that needs a restart".into());
+/// A plugin library as last loaded.
+struct Library {
+    path: PathBuf,
+    mtime: Option<SystemTime>,
+    kinds: Vec<String>,
+}
+
+/// The kinds a running graph can swap in: the built-ins and the graph's `[[plugin]]` libraries.
+/// When a library file changes (a rebuilt plugin), every library is loaded again as a fresh
+/// copy, so the next swap, from an edit or the socket, builds from the new code.
+pub struct Kinds {
+    registry: Registry,
+    libraries: Vec<Library>,
+}
+
+impl Kinds {
+    pub fn load(plugins: &[PathBuf]) -> Result<Kinds, String> {
+        let mut registry = skinflow_nodes::registry();
+        let loaded = skinflow_nodes::codec::load_plugins(plugins, &mut registry).map_err(|e| e.to_string())?;
+        let libraries = plugins
+            .iter()
+            .zip(loaded)
+            .map(|(path, l)| Library { path: path.clone(), mtime: mtime(path), kinds: l.kinds })
+            .collect();
+        Ok(Kinds { registry, libraries })
     }
-    let (ea, eb): (Vec<_>, Vec<_>) =
-        (old.edges.iter().map(edge_key).collect(), new.edges.iter().map(edge_key).collect());
-    if ea != eb {
-        return Err("edges were added, removed or changed: that needs a restart".into());
+
+    /// The libraries whose file changed since they were loaded.
+    fn changed(&self) -> Vec<&Library> {
+        self.libraries.iter().filter(|l| mtime(&l.path) != l.mtime).collect()
     }
-    for (o, n) in old.nodes.iter().zip(&new.nodes) {
-        if o.trigger != n.trigger || o.thread != n.thread || o.cpu != n.cpu || o.rt_priority != n.rt_priority {
-            return Err(format!("node \"{}\": trigger or thread options changed: that needs a restart", n.id));
+
+    fn paths(&self) -> Vec<PathBuf> {
+        self.libraries.iter().map(|l| l.path.clone()).collect()
+    }
+}
+
+/// The live graph as the watcher and the control socket see it: its structure as started, what
+/// each node runs now (updated by every swap, whether from an edit or the socket, so an edit is
+/// compared with the running graph, not with the last file read) and the kinds it can swap in.
+pub struct Live {
+    handle: GraphHandle,
+    started: GraphSpec,
+    nodes: Mutex<Vec<NodeNow>>,
+    kinds: Mutex<Kinds>,
+}
+
+/// An edit that could not be applied whole: the nodes swapped before the failure keep their
+/// new kind and params (the running graph now differs from the file in the failed node only).
+#[derive(Debug)]
+pub struct EditError {
+    pub swapped: Vec<String>,
+    pub error: String,
+}
+
+impl std::fmt::Display for EditError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        if self.swapped.is_empty() {
+            write!(f, "edit rejected: {}", self.error)
+        } else {
+            write!(
+                f,
+                "edit partly applied: swapped {}; then {} (that node runs as before the edit)",
+                self.swapped.join(", "),
+                self.error
+            )
         }
     }
-    let mut swapped = Vec::new();
-    for ((old_n, new_n), (ka, kb)) in old.nodes.iter().zip(&new.nodes).zip(a.iter().zip(&b)) {
-        if ka != kb {
-            handle.swap(&new_n.id, new_n.factory.clone(), new_n.params.clone()).map_err(|e| e.to_string())?;
-            tracing::info!(node = %new_n.id, from = %old_n.kind, to = %new_n.kind, "node replaced after an edit");
-            swapped.push(new_n.id.clone());
-        }
+}
+
+impl Live {
+    /// `spec` is the graph as started, `kinds` its plugins loaded for swaps (`Kinds::load`).
+    pub fn new(spec: &GraphSpec, kinds: Kinds, handle: GraphHandle) -> Arc<Live> {
+        Arc::new(Live { handle, started: spec.clone(), nodes: Mutex::new(node_key(spec)), kinds: Mutex::new(kinds) })
     }
-    Ok(swapped)
+
+    fn lock_nodes(&self) -> std::sync::MutexGuard<'_, Vec<NodeNow>> {
+        self.nodes.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
+    }
+
+    fn lock_kinds(&self) -> std::sync::MutexGuard<'_, Kinds> {
+        self.kinds.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
+    }
+
+    /// Swaps `node` to `kind` with `params` and records it.
+    fn swap(&self, node: &str, factory: Arc<dyn NodeFactory>, kind: &str, params: Params) -> Result<(), String> {
+        self.handle.swap(node, factory, params.clone()).map_err(|e| e.to_string())?;
+        if let Some(n) = self.lock_nodes().iter_mut().find(|n| n.0 == node) {
+            (n.1, n.2) = (kind.to_owned(), params);
+        }
+        Ok(())
+    }
+
+    /// Applies one validated edit: checks the structure is unchanged, swaps the nodes whose kind
+    /// or params differ from what runs now. Returns the ids swapped.
+    pub fn apply_edit(&self, new: &GraphSpec) -> Result<Vec<String>, EditError> {
+        let rejected = |error: String| EditError { swapped: Vec::new(), error };
+        let old = &self.started;
+        let ids = |s: &GraphSpec| s.nodes.iter().map(|n| n.id.clone()).collect::<Vec<_>>();
+        if ids(old) != ids(new) {
+            let (was, now) = (ids(old), ids(new));
+            let added: Vec<_> = now.iter().filter(|i| !was.contains(i)).map(|i| format!("\"{i}\"")).collect();
+            let removed: Vec<_> = was.iter().filter(|i| !now.contains(i)).map(|i| format!("\"{i}\"")).collect();
+            let what = match (added.is_empty(), removed.is_empty()) {
+                (false, false) => format!("nodes {} added and {} removed", added.join(", "), removed.join(", ")),
+                (false, true) => format!("nodes {} added", added.join(", ")),
+                (true, false) => format!("nodes {} removed", removed.join(", ")),
+                (true, true) => "nodes reordered".to_owned(),
+            };
+            return Err(rejected(format!("{what}: that needs a restart")));
+        }
+        let (ea, eb): (Vec<_>, Vec<_>) =
+            (old.edges.iter().map(edge_key).collect(), new.edges.iter().map(edge_key).collect());
+        if ea != eb {
+            return Err(rejected("edges were added, removed or changed: that needs a restart".into()));
+        }
+        for (o, n) in old.nodes.iter().zip(&new.nodes) {
+            if o.trigger != n.trigger || o.thread != n.thread || o.cpu != n.cpu || o.rt_priority != n.rt_priority {
+                return Err(rejected(format!(
+                    "node \"{}\": trigger or thread options changed: that needs a restart",
+                    n.id
+                )));
+            }
+        }
+        let now = self.lock_nodes().clone();
+        let mut swapped = Vec::new();
+        for (running, new_n) in now.iter().zip(&new.nodes) {
+            if (&running.1, running.2.table()) != (&new_n.kind, new_n.params.table()) {
+                if let Err(e) = self.swap(&new_n.id, new_n.factory.clone(), &new_n.kind, new_n.params.clone()) {
+                    return Err(EditError { swapped, error: e });
+                }
+                tracing::info!(node = %new_n.id, from = %running.1, to = %new_n.kind, "node replaced after an edit");
+                swapped.push(new_n.id.clone());
+            }
+        }
+        Ok(swapped)
+    }
+
+    /// Loads the plugin libraries again when one of their files changed, and swaps every node of
+    /// a kind from a changed library to the new code (same params). `None` when nothing changed.
+    fn reload_changed_plugins(&self) -> Option<Result<Vec<String>, String>> {
+        let mut kinds = self.lock_kinds();
+        let changed: Vec<(PathBuf, Vec<String>)> =
+            kinds.changed().into_iter().map(|l| (l.path.clone(), l.kinds.clone())).collect();
+        if changed.is_empty() {
+            return None;
+        }
+        let names = changed.iter().map(|(p, _)| p.display().to_string()).collect::<Vec<_>>().join(", ");
+        let fresh = match Kinds::load(&kinds.paths()) {
+            Ok(k) => k,
+            Err(e) => {
+                // Not swapped: the running nodes keep the old code. The file's time is taken as
+                // seen, so a half-written library is tried again only when it changes again.
+                for l in kinds.libraries.iter_mut() {
+                    l.mtime = mtime(&l.path);
+                }
+                return Some(Err(format!(
+                    "plugin {names} changed but was not reloaded (running nodes keep its previous code): {e}"
+                )));
+            }
+        };
+        *kinds = fresh;
+        let stale: Vec<&String> = changed.iter().flat_map(|(_, k)| k).collect();
+        let now = self.lock_nodes().clone();
+        let mut swapped: Vec<String> = Vec::new();
+        let failed = |swapped: &[String], error: String| {
+            let before =
+                if swapped.is_empty() { String::new() } else { format!("swapped {}; then ", swapped.join(", ")) };
+            Some(Err(format!("plugin {names} reloaded: {before}{error} (that node runs its previous code)")))
+        };
+        for (id, kind, params) in now.iter().filter(|n| stale.contains(&&n.1)) {
+            let Some(factory) = kinds.registry.get(kind).cloned() else {
+                return failed(&swapped, format!("node \"{id}\": kind \"{kind}\" is no longer in the library"));
+            };
+            if let Err(e) = self.swap(id, factory, kind, params.clone()) {
+                return failed(&swapped, e);
+            }
+            swapped.push(id.clone());
+        }
+        Some(Ok(swapped))
+    }
 }
 
 fn mtime(p: &Path) -> Option<SystemTime> {
     std::fs::metadata(p).and_then(|m| m.modified()).ok()
 }
 
-/// Watches the graph file until `done`; applies valid edits, reports rejected ones.
-pub fn watch(path: PathBuf, registry: Registry, mut current: GraphSpec, handle: GraphHandle, done: Arc<AtomicBool>) {
+/// Watches the graph file and its plugin libraries until `done`: applies valid edits and
+/// rebuilt plugins, reports rejected ones.
+pub fn watch(path: PathBuf, live: Arc<Live>, done: Arc<AtomicBool>) {
     let mut seen = mtime(&path);
     while !done.load(Ordering::SeqCst) {
         std::thread::sleep(Duration::from_millis(200));
+        match live.reload_changed_plugins() {
+            None => {}
+            Some(Ok(swapped)) if swapped.is_empty() => {
+                eprintln!("{}: plugin rebuilt and reloaded: no running node uses it", path.display())
+            }
+            Some(Ok(swapped)) => {
+                eprintln!("{}: plugin rebuilt and reloaded: swapped {}", path.display(), swapped.join(", "))
+            }
+            Some(Err(e)) => eprintln!("{}: {e}", path.display()),
+        }
         let now = mtime(&path);
         if now == seen {
             continue;
@@ -87,19 +259,39 @@ pub fn watch(path: PathBuf, registry: Registry, mut current: GraphSpec, handle: 
                 continue;
             }
         };
-        match GraphSpec::parse(src, &registry) {
+        // An edit may name other libraries: they are loaded (fresh copies) for this edit.
+        let plugins = match skinflow_core::graph::plugin_paths(&src) {
+            Ok(p) => p,
+            Err(errs) => {
+                for e in &errs.0 {
+                    eprintln!("edit rejected: {e}");
+                }
+                continue;
+            }
+        };
+        let parsed = {
+            let mut kinds = live.lock_kinds();
+            if plugins != kinds.paths() {
+                match Kinds::load(&plugins) {
+                    Ok(k) => *kinds = k,
+                    Err(e) => {
+                        eprintln!("{}: edit rejected: {e}", path.display());
+                        continue;
+                    }
+                }
+            }
+            GraphSpec::parse(src, &kinds.registry)
+        };
+        match parsed {
             Err(errs) => {
                 for e in &errs.0 {
                     eprintln!("edit rejected: {e}");
                 }
             }
-            Ok(new) => match apply_edit(&current, &new, &handle) {
+            Ok(new) => match live.apply_edit(&new) {
                 Ok(swapped) if swapped.is_empty() => eprintln!("{}: edit applied: no node changed", path.display()),
-                Ok(swapped) => {
-                    eprintln!("{}: edit applied: swapped {}", path.display(), swapped.join(", "));
-                    current = new;
-                }
-                Err(e) => eprintln!("{}: edit rejected: {e}", path.display()),
+                Ok(swapped) => eprintln!("{}: edit applied: swapped {}", path.display(), swapped.join(", ")),
+                Err(e) => eprintln!("{}: {e}", path.display()),
             },
         }
     }
@@ -108,14 +300,21 @@ pub fn watch(path: PathBuf, registry: Registry, mut current: GraphSpec, handle: 
 /// Longest a `tare` or `control` request waits for the node to run the command.
 const CONTROL_REPLY_TIMEOUT: Duration = Duration::from_secs(10);
 
-fn reply(handle: &GraphHandle, registry: &Registry, line: &str) -> Value {
+fn reply(live: &Live, line: &str) -> Value {
+    let handle = &live.handle;
     let req: Value = match serde_json::from_str(line) {
         Ok(v) => v,
         Err(e) => return json!({"ok": false, "error": format!("not JSON: {e}")}),
     };
     let s = |k: &str| req.get(k).and_then(Value::as_str);
     let result: Result<Value, String> = match s("cmd") {
-        Some("stats") => serde_json::to_value(handle.stats()).map_err(|e| e.to_string()),
+        Some("stats") => match s("node") {
+            None => serde_json::to_value(handle.stats()).map_err(|e| e.to_string()),
+            Some(n) => match handle.stats().nodes.into_iter().find(|x| x.id == n) {
+                Some(one) => serde_json::to_value(one).map(|v| json!({ "node": v })).map_err(|e| e.to_string()),
+                None => Err(format!("no node \"{n}\" (nodes: {})", handle.node_ids().join(", "))),
+            },
+        },
         Some("tare") => match s("node") {
             Some(n) => {
                 handle.control_wait(n, "tare", CONTROL_REPLY_TIMEOUT).map(|()| json!({})).map_err(|e| e.to_string())
@@ -129,19 +328,22 @@ fn reply(handle: &GraphHandle, registry: &Registry, line: &str) -> Value {
             _ => Err("\"control\" needs \"node\" and \"command\"".into()),
         },
         Some("swap") => match (s("node"), s("kind")) {
-            (Some(n), Some(k)) => match registry.get(k) {
-                None => Err(format!("unknown kind \"{k}\"")),
-                Some(f) => {
-                    let params = req.get("params").cloned().unwrap_or(json!({}));
-                    match toml::Table::try_from(params) {
-                        Ok(t) => handle
-                            .swap(n, f.clone(), Params::from_table(t))
-                            .map(|()| json!({}))
-                            .map_err(|e| e.to_string()),
-                        Err(e) => Err(format!("params: {e}")),
+            (Some(n), Some(k)) => {
+                let factory = live.lock_kinds().registry.get(k).cloned();
+                match factory {
+                    None => Err(format!(
+                        "unknown kind \"{k}\" (a plugin's kinds are those of the libraries the graph file names; \
+                         `skinflow nodes --plugin LIB` lists a library's)"
+                    )),
+                    Some(f) => {
+                        let params = req.get("params").cloned().unwrap_or(json!({}));
+                        match toml::Table::try_from(params) {
+                            Ok(t) => live.swap(n, f, k, Params::from_table(t)).map(|()| json!({})),
+                            Err(e) => Err(format!("params: {e}")),
+                        }
                     }
                 }
-            },
+            }
             _ => Err("\"swap\" needs \"node\" and \"kind\"".into()),
         },
         Some(other) => Err(format!("unknown cmd \"{other}\" (known: stats, tare, control, swap)")),
@@ -157,14 +359,14 @@ fn reply(handle: &GraphHandle, registry: &Registry, line: &str) -> Value {
     }
 }
 
-fn serve(stream: UnixStream, handle: GraphHandle, registry: Registry) {
+fn serve(stream: UnixStream, live: Arc<Live>) {
     let Ok(mut out) = stream.try_clone() else { return };
     for line in BufReader::new(stream).lines() {
         let Ok(line) = line else { return };
         if line.trim().is_empty() {
             continue;
         }
-        let r = reply(&handle, &registry, &line);
+        let r = reply(&live, &line);
         if writeln!(out, "{r}").is_err() {
             return;
         }
@@ -202,8 +404,7 @@ pub fn bind_control_socket(path: &Path) -> Result<UnixListener> {
 pub fn control_socket(
     listener: UnixListener,
     path: &Path,
-    registry: Registry,
-    handle: GraphHandle,
+    live: Arc<Live>,
     done: Arc<AtomicBool>,
 ) -> std::thread::JoinHandle<()> {
     let path = path.to_path_buf();
@@ -212,8 +413,8 @@ pub fn control_socket(
             match listener.accept() {
                 Ok((s, _)) => {
                     let _ = s.set_nonblocking(false);
-                    let (h, r) = (handle.clone(), registry.clone());
-                    std::thread::spawn(move || serve(s, h, r));
+                    let live = Arc::clone(&live);
+                    std::thread::spawn(move || serve(s, live));
                 }
                 Err(_) => std::thread::sleep(Duration::from_millis(50)),
             }

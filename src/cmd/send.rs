@@ -29,12 +29,22 @@ pub fn run(socket: &Path, requests: &[String]) -> Result<()> {
             Some(r) => r.with_context(|| format!("{s}: no reply to {line} within {} s", REPLY_TIMEOUT.as_secs()))?,
             None => bail!("{s}: the graph closed the connection before replying to {line}"),
         };
-        println!("{reply}");
+        // A closed standard output (`skinflow send ... | head -c 300`) ends the session quietly:
+        // the requests after this one are not sent. (SIGPIPE stays ignored: this command also
+        // writes to a socket, whose peer hanging up must be an error, not the end of the process.)
+        // The reply's status still decides the exit code.
+        let printed = match writeln!(std::io::stdout(), "{reply}") {
+            Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => false,
+            r => r.map(|()| true).context("writing the reply to standard output")?,
+        };
         let value: serde_json::Value =
             serde_json::from_str(&reply).with_context(|| format!("{s}: reply to {line} is not JSON"))?;
         if value.get("ok") != Some(&serde_json::Value::Bool(true)) {
             let error = value.get("error").and_then(|e| e.as_str()).unwrap_or("no error given");
             bail!("{s}: {line}: {}", error.trim_end());
+        }
+        if !printed {
+            return Ok(());
         }
     }
     Ok(())

@@ -104,6 +104,15 @@ impl GraphSpec {
     pub fn node_index(&self, id: &str) -> Option<usize> {
         self.nodes.iter().position(|n| n.id == id)
     }
+
+    /// The names of node `i`'s inputs that have at least one edge, in port order.
+    pub fn connected_inputs(&self, i: usize) -> Vec<String> {
+        let inputs = &self.nodes[i].factory.info().inputs;
+        (0..inputs.len())
+            .filter(|&p| self.edges.iter().any(|e| e.to_node == i && e.to_port == p))
+            .map(|p| inputs[p].name.to_string())
+            .collect()
+    }
 }
 
 /// The `[[plugin]] path` entries of a graph file, resolved against its directory, so the

@@ -15,6 +15,7 @@ use super::source::SourceFile;
 use super::{DEFAULT_CAPACITY, EdgeSpec, GraphSpec, NodeSpec, Trigger};
 use crate::node::Mode;
 use crate::params::Params;
+use crate::registry::Wiring;
 use crate::registry::{Registry, Role};
 
 fn parse_file(src: &SourceFile) -> Result<GraphFile, GraphErrors> {
@@ -303,6 +304,21 @@ pub(super) fn validate(src: SourceFile, registry: &Registry) -> Result<GraphSpec
                     K::Unconnected(format!("{}.{}", n.id, port.name)),
                 );
             }
+        }
+    }
+
+    // Params that depend on which inputs are connected.
+    for (i, n) in nodes.iter().enumerate() {
+        let Some(n) = n else { continue };
+        let inputs = &n.factory.info().inputs;
+        let connected: Vec<&str> = (0..inputs.len())
+            .filter(|&p| edges.iter().any(|e| e.to_node == i && e.to_port == p))
+            .map(|p| inputs[p].name.as_ref())
+            .collect();
+        if n.factory.check(&n.params).is_ok()
+            && let Err(e) = n.factory.check_wiring(&n.params, &Wiring::new(&connected))
+        {
+            err(e.span.clone().or(Some(file.node[i].span())), Some(&n.id), K::Param(e.to_string()));
         }
     }
 

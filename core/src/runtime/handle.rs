@@ -27,7 +27,7 @@ use crate::edge::EdgeShared;
 use crate::error::NodeError;
 use crate::node::{Context, Mode};
 use crate::params::Params;
-use crate::registry::{BuildContext, KindInfo, NodeFactory};
+use crate::registry::{BuildContext, KindInfo, NodeFactory, Wiring};
 use crate::stats::{EdgeReport, NodeReport, StatsReport};
 
 /// (name, type) of each port, in declaration order.
@@ -46,6 +46,9 @@ pub(crate) struct Inner {
     pub ids: Vec<String>,
     pub kinds: Mutex<Vec<String>>,
     pub signatures: Vec<Signature>,
+    /// Per node, the names of its inputs with an edge (a replacement's params are checked
+    /// against them, as at load).
+    pub wired: Vec<Vec<String>>,
     pub edges: Vec<Arc<EdgeShared>>,
     pub name: String,
     pub mode: Mode,
@@ -118,6 +121,8 @@ impl GraphHandle {
             )));
         }
         factory.check(&params).map_err(|e| swap_err(e.to_string()))?;
+        let wired: Vec<&str> = self.inner.wired[i].iter().map(String::as_str).collect();
+        factory.check_wiring(&params, &Wiring::new(&wired)).map_err(|e| swap_err(e.to_string()))?;
         let build =
             BuildContext { base_dir: self.inner.base_dir.clone(), mode: self.inner.mode, node_id: node.to_owned() };
         let mut imp = factory.build(&params, &build).map_err(|e| swap_err(format!("build failed: {e}")))?;

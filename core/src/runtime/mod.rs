@@ -228,6 +228,7 @@ impl RunningGraph {
             ids: spec.nodes.iter().map(|n| n.id.clone()).collect(),
             kinds: std::sync::Mutex::new(spec.nodes.iter().map(|n| n.kind.clone()).collect()),
             signatures: spec.nodes.iter().map(|n| GraphHandle::signature_of(n.factory.info())).collect(),
+            wired: (0..spec.nodes.len()).map(|i| spec.connected_inputs(i)).collect(),
             edges,
             name: spec.name.clone(),
             mode: spec.mode,

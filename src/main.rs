@@ -285,7 +285,13 @@ fn registry_for(path: &Path) -> Result<Result<Registry, ExitCode>> {
                 // A graph naming a library that does not load cannot be validated: exit 2,
                 // with the graph named (the library may just not be built yet).
                 if let Err(e) = skinflow_nodes::codec::load_plugins(&plugins, &mut reg) {
-                    eprintln!("{}: {e}", path.display());
+                    let hint = if plugins.iter().any(|p| !p.exists()) {
+                        " (a [[plugin]] path is relative to the graph file; not built yet? `cargo build --workspace` \
+                         builds this workspace's plugins into target/debug/)"
+                    } else {
+                        ""
+                    };
+                    eprintln!("{}: {e}{hint}", path.display());
                     return Ok(Err(ExitCode::from(2)));
                 }
             }

@@ -3,7 +3,8 @@
 //! kind) as one clear line naming the path (and kind), a plugin's error and panic handled per
 //! the node's restart policy (processors and sources), plugin sources and sinks in the shipped
 //! CSV graphs checked end to end, a paced plugin source stopped by `run --for`, the example
-//! plugins in A/B lanes, and `skinflow bench`.
+//! plugins in A/B lanes (each plugin lane named after its node, so `compare` and
+//! `hdf5_logger` tell them apart), and `skinflow bench`.
 //!
 //! The libraries are the workspace's cdylib members, found next to the binary
 //! (target/<profile>/lib<name>.so); a missing one is built with `cargo build -p`.
@@ -19,7 +20,7 @@ fn profile_dir() -> PathBuf {
 }
 
 /// The built library of workspace package `package`, built now if it is missing.
-fn plugin(package: &str) -> PathBuf {
+pub(crate) fn plugin(package: &str) -> PathBuf {
     let dir = profile_dir();
     let lib = dir.join(format!("lib{}.so", package.replace('-', "_")));
     if lib.is_file() {
@@ -246,6 +247,82 @@ fn example_plugins_run_as_ab_lanes_and_compare_reports_each() {
     // Same contacts in every lane (one segmentation): identical localization.
     let loc: Vec<f64> = lanes.iter().map(|l| l["localization_mean_mm"].as_f64().unwrap()).collect();
     assert!(loc.iter().all(|&x| x == loc[0]), "{loc:?}");
+}
+
+/// Three `fused-corrector` lanes and a built-in corrector after a plugin splitter, into one
+/// `compare` (no `names`) and one `hdf5_logger`: each plugin output is named after its node
+/// (its id, or its `name` param), so the lanes are told apart and the logger takes all four;
+/// every plugin output is attached to its own frame (no provenance or value errors).
+#[test]
+fn plugin_lanes_are_named_after_their_nodes_in_compare_and_the_logger() {
+    let d = workdir("names");
+    let calib = quoted(&root().join("graphs/calib/paper.toml"));
+    let mut g = format!(
+        "[graph]\nname = \"plugin-names\"\nmode = \"lockstep\"\n\n\
+         [[plugin]]\npath = {}\n\n[[plugin]]\npath = {}\n\n\
+         [[node]]\nid = \"sim\"\nkind = \"sim\"\nparams = {{ scene = {}, pacing = \"fast\" }}\n\n\
+         [[node]]\nid = \"sync\"\nkind = \"sync\"\n\n[[node]]\nid = \"recon\"\nkind = \"reconstructor\"\n\n\
+         [[node]]\nid = \"segment\"\nkind = \"segmenter\"\n\n[[node]]\nid = \"split\"\nkind = \"splitter\"\n\n\
+         [[node]]\nid = \"split-area\"\nkind = \"area-weighted-splitter\"\n\n\
+         [[node]]\nid = \"fused-a\"\nkind = \"fused-corrector\"\nparams = {{ calibration = {calib}, weight_pneumatic = 0.8 }}\n\n\
+         [[node]]\nid = \"fused-b\"\nkind = \"fused-corrector\"\nparams = {{ calibration = {calib}, weight_pneumatic = 0.3 }}\n\n\
+         [[node]]\nid = \"fused-c\"\nkind = \"fused-corrector\"\nparams = {{ calibration = {calib}, name = \"fused-eit\", weight_pneumatic = 0.0 }}\n\n\
+         [[node]]\nid = \"force-area\"\nkind = \"corrector\"\nparams = {{ calibration = {calib} }}\n\n\
+         [[node]]\nid = \"compare\"\nkind = \"compare\"\ntrigger = \"aligned\"\nparams = {{ json = \"ab.json\" }}\n\n\
+         [[node]]\nid = \"log\"\nkind = \"hdf5_logger\"\n\
+         params = {{ path = \"log.h5\", strategies = [\"fused-a\", \"fused-b\", \"fused-eit\", \"pneumatic-locaware-split-area\"] }}\n\n",
+        quoted(&plugin("skinflow-plugin-split-weighted")),
+        quoted(&plugin("skinflow-plugin-correct-fused")),
+        quoted(&root().join("tests/fixtures/tiny-eval.toml")),
+    );
+    let edges = [
+        ("sim.eit", "sync.eit"),
+        ("sim.pressure", "sync.pressure"),
+        ("sim.truth", "sync.truth"),
+        ("sync.frame", "recon.frame"),
+        ("recon.image", "segment.image"),
+        ("segment.contacts", "split.contacts"),
+        ("segment.contacts", "split-area.contacts"),
+        ("split.split", "fused-a.split"),
+        ("split.split", "fused-b.split"),
+        ("split.split", "fused-c.split"),
+        ("split-area.split", "force-area.split"),
+    ];
+    for (from, to) in edges {
+        g.push_str(&format!("[[edge]]\nfrom = \"{from}\"\nto = \"{to}\"\n\n"));
+    }
+    for lane in ["fused-a", "fused-b", "fused-c", "force-area"] {
+        for sink in ["compare", "log"] {
+            g.push_str(&format!("[[edge]]\nfrom = \"{lane}.forces\"\nto = \"{sink}.forces\"\ncapacity = 1024\n\n"));
+        }
+    }
+    let graph = d.join("names.toml");
+    std::fs::write(&graph, g).unwrap();
+    let json = d.join("stats.json");
+    ok(&skinflow(&d, &["run", graph.to_str().unwrap(), "--stats-json", json.to_str().unwrap()]));
+
+    let names = ["fused-a", "fused-b", "fused-eit", "pneumatic-locaware-split-area"];
+    let report: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(d.join("ab.json")).unwrap()).unwrap();
+    let lanes: Vec<&str> = report["lanes"].as_array().unwrap().iter().map(|l| l["name"].as_str().unwrap()).collect();
+    assert_eq!(lanes, names, "compare's lanes are named after the nodes");
+    let stats = stats(&json);
+    let frames = count(&stats, "split", "msgs_out");
+    assert!(frames > 10, "the pipeline produced frames");
+    for id in ["split-area", "fused-a", "fused-b", "fused-c"] {
+        assert_eq!((count(&stats, id, "errors"), count(&stats, id, "msgs_out")), (0, frames), "{id}");
+    }
+    let rec = skinflow_record::Recording::open(d.join("log.h5")).unwrap();
+    let logged: Vec<&str> = rec.derived.forces.iter().map(|f| f.name.as_str()).collect();
+    for name in names {
+        let f = rec.derived.forces.iter().find(|f| f.name == name).unwrap_or_else(|| panic!("{name}: {logged:?}"));
+        assert_eq!(f.t_s.len() as u64, frames, "{name}: every frame logged");
+    }
+    let forces = |name: &str| -> Vec<f64> {
+        let f = rec.derived.forces.iter().find(|f| f.name == name).unwrap();
+        f.force_n.iter().copied().filter(|x| !x.is_nan()).collect() // NaN: padding past the contacts
+    };
+    assert!(!forces("fused-a").is_empty(), "frames with contacts");
+    assert_ne!(forces("fused-a"), forces("fused-b"), "two lanes, two tables");
 }
 
 #[test]

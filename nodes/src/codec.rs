@@ -15,6 +15,21 @@
 //!
 //! Headers: `seq` and `t_ns` cross as the message's header (`Columns::seq`, `Columns::t_ns`);
 //! a plugin source sets them with `ColumnBuf::header` (default: 1, 2, ... and the graph clock).
+//!
+//! Provenance is the input message with the output's header (`seq` and `t_ns`), among the
+//! call's inputs and the node's retained earlier ones (`Decode::provenance`): a plugin that
+//! holds a frame back emits it under that frame's header and gets that frame's contacts,
+//! pressure and truth; an output under a header no such input has is refused, naming both.
+//!
+//! Names: a plugin's `split` and `forces` carry the node's name (`Decode::name`: the node id,
+//! or its `name` param when the kind declares one) as their strategy, so two plugin lanes in
+//! one graph are told apart by `compare` and `hdf5_logger`.
+//!
+//! Values: a plugin's `dp_kpa` and `force_n` must be finite where the frame has a pressure
+//! change (the provenance's share is finite); a non-finite one is an error naming the column
+//! and the contact, and the message is not sent. NaN shares are the frame's own only when it
+//! had no pressure: its forces are then flagged `no_pressure` (a non-finite `force_n` there
+//! becomes the 0 N placeholder the built-in corrector gives), as for a built-in corrector.
 
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -69,11 +84,6 @@ fn encode_split(s: &Split, out: &mut ColumnBuf) {
     out.set("dp_kpa", s.dp_kpa.iter().copied());
 }
 
-/// The first input whose payload yields the provenance `T`.
-fn find<T>(at: &Decode<'_>, f: impl Fn(&Message) -> Option<T>) -> Option<T> {
-    at.input_messages().find_map(f)
-}
-
 struct ImageCodec;
 
 impl Codec for ImageCodec {
@@ -104,8 +114,9 @@ impl Codec for ContactsCodec {
     }
 
     fn decode(&mut self, cols: &Columns<'_>, at: &Decode<'_>) -> Result<Message, String> {
-        let image = find(at, |m| m.arc::<Image>().or_else(|| m.get::<Contacts>().map(|c| c.image.clone())))
-            .ok_or("a contacts output needs an image or contacts input (its provenance)")?;
+        let image = at.provenance("a contacts output needs an image or contacts input", |m| {
+            m.arc::<Image>().or_else(|| m.get::<Contacts>().map(|c| c.image.clone()))
+        })?;
         let n = cols.require("x_mm")?.len();
         let [x, y, sum, area, peak] = ["x_mm", "y_mm", "sum", "area_mm2", "peak"].map(|c| cols.require_len(c, n));
         let (x, y, sum, area, peak) = (x?, y?, sum?, area?, peak?);
@@ -141,14 +152,23 @@ impl Codec for SplitCodec {
     }
 
     fn decode(&mut self, cols: &Columns<'_>, at: &Decode<'_>) -> Result<Message, String> {
-        let contacts: Arc<Contacts> =
-            find(at, |m| m.arc::<Contacts>().or_else(|| m.get::<Split>().map(|s| s.contacts.clone())))
-                .ok_or("a split output needs a contacts or split input (its provenance)")?;
+        let contacts: Arc<Contacts> = at.provenance("a split output needs a contacts or split input", |m| {
+            m.arc::<Contacts>().or_else(|| m.get::<Split>().map(|s| s.contacts.clone()))
+        })?;
         let dp = cols.require_len("dp_kpa", contacts.contacts.len())?;
+        let frame_dp = contacts.image.src.dp_kpa;
+        if frame_dp.is_finite()
+            && let Some(i) = dp.iter().position(|v| !v.is_finite())
+        {
+            return Err(format!(
+                "column \"dp_kpa\" is {} at contact {i}, but the frame's pressure change is known ({frame_dp} kPa): a share must be finite (NaN only for a frame without pressure)",
+                dp[i]
+            ));
+        }
         let payload = self.ring.fill(|s| {
             s.dp_kpa.clear();
             s.dp_kpa.extend_from_slice(dp);
-            s.strategy = "plugin";
+            s.strategy = at.name;
             s.compute_ns = at.compute_ns;
             s.contacts = contacts;
         });
@@ -169,30 +189,52 @@ impl Codec for ForcesCodec {
     }
 
     fn decode(&mut self, cols: &Columns<'_>, at: &Decode<'_>) -> Result<Message, String> {
-        let split: Arc<Split> = find(at, |m| m.arc::<Split>().or_else(|| m.get::<Forces>().map(|f| f.split.clone())))
-            .ok_or("a forces output needs a split or forces input (its provenance)")?;
+        let split: Arc<Split> = at.provenance("a forces output needs a split or forces input", |m| {
+            m.arc::<Split>().or_else(|| m.get::<Forces>().map(|f| f.split.clone()))
+        })?;
         let n = split.contacts.contacts.len();
         let force = cols.require_len("force_n", n)?;
         let dp = match cols.get("dp_kpa") {
             Some(_) => cols.require_len("dp_kpa", n)?,
             None => &split.dp_kpa[..],
         };
+        // Where the input share is known (finite), the plugin's values must be too: NaN from a
+        // plugin is its failure, not a frame without pressure.
+        for (i, (&share, (&force_n, &dp_kpa))) in split.dp_kpa.iter().zip(force.iter().zip(dp)).enumerate() {
+            if !share.is_finite() {
+                continue;
+            }
+            let why = || {
+                format!(
+                    "but the contact's input share is known (dp_kpa {share} kPa): the plugin's value must be finite"
+                )
+            };
+            if !force_n.is_finite() {
+                return Err(format!("column \"force_n\" is {force_n} at contact {i}, {}", why()));
+            }
+            if !dp_kpa.is_finite() {
+                return Err(format!("column \"dp_kpa\" is {dp_kpa} at contact {i}, {}", why()));
+            }
+        }
         let payload = self.ring.fill(|f| {
             f.forces.clear();
-            for (&force_n, &dp_kpa) in force.iter().zip(dp) {
-                // A plugin's guards are its own; the host flags what the share says: unknown
-                // (not finite: a frame without pressure) or no load (<= 0), and what the frame
-                // says: regions beyond the segmenter's limit were not given a share.
+            for ((&force_n, &dp_kpa), &share) in force.iter().zip(dp).zip(&split.dp_kpa) {
+                // A plugin's guards are its own; the host flags what the frame says: no pressure
+                // (the input share is not finite; the force is then the 0 N placeholder if the
+                // plugin gave none), no load (the share used <= 0), and regions beyond the
+                // segmenter's limit that were not given a share.
+                let no_pressure = !share.is_finite();
                 let flags = ForceFlags {
-                    no_pressure: !dp_kpa.is_finite(),
+                    no_pressure,
                     no_load: dp_kpa <= 0.0,
                     contacts_dropped: split.contacts.dropped > 0,
                     ..ForceFlags::default()
                 };
+                let force_n = if no_pressure && !force_n.is_finite() { 0.0 } else { force_n };
                 f.forces.push(ForceEstimate { force_n, dp_kpa, flags });
             }
             f.strategy.clear();
-            f.strategy.push_str("plugin");
+            f.strategy.push_str(at.name);
             f.compute_ns = at.compute_ns;
             f.split = Arc::clone(&split);
         });
@@ -361,7 +403,7 @@ mod tests {
         // SAFETY: `raw` points into `buf`, alive and unchanged while `cols` is used.
         let cols = unsafe { Columns::from_raw(raw) };
         let inputs = skinflow_core::Inputs::default();
-        let at = Decode { header: msg.header, inputs: &inputs, n_inputs: 0, compute_ns: 0 };
+        let at = Decode { header: msg.header, inputs: &inputs, n_inputs: 0, earlier: &[], name: "src", compute_ns: 0 };
         codec.decode(&cols, &at)
     }
 
@@ -404,5 +446,126 @@ mod tests {
         assert_eq!(cols.scalar("dp_kpa"), Ok(0.25));
         assert_eq!(cols.scalar("pressure_samples"), Ok(7.0));
         assert_eq!((cols.scalar("settled"), cols.scalar("no_load")), (Ok(1.0), Ok(0.0)));
+    }
+
+    /// Contacts of a frame whose pressure change is `frame_dp` kPa: `n` contacts at x = 0, 1, ...
+    fn contacts(seq: u64, frame_dp: f64, n: usize) -> Message {
+        let src = Arc::new(SyncedFrame { dp_kpa: frame_dp, ..SyncedFrame::default() });
+        let image = Arc::new(Image { src, ..Image::default() });
+        let c = |i: usize| Contact { x_mm: i as f64, y_mm: 0.0, sum: 1.0, area_mm2: 1.0, peak: 1.0, label: 1 };
+        let cs = Contacts { image, contacts: (0..n).map(c).collect(), dropped: 0, compute_ns: 0 };
+        Message::new(Header { seq, t_ns: seq * 10, origin: 1 }, cs)
+    }
+
+    /// A built-in split of `contacts(seq, frame_dp, shares.len())` with these shares.
+    fn split(seq: u64, frame_dp: f64, shares: &[f64]) -> Message {
+        let c = contacts(seq, frame_dp, shares.len()).arc::<Contacts>().unwrap();
+        let s = Split { contacts: c, strategy: "proportional", dp_kpa: shares.to_vec(), compute_ns: 0 };
+        Message::new(Header { seq, t_ns: seq * 10, origin: 2 }, s)
+    }
+
+    /// Decodes a plugin output of type `ty` with columns `cols` and header `seq` (t_ns = 10
+    /// seq), its provenance among `earlier` (no inputs in the call), the node named `name`.
+    fn decode(
+        ty: &'static str,
+        seq: u64,
+        cols: &[(&'static str, &[f64])],
+        earlier: &[Message],
+        name: &'static str,
+    ) -> Result<Message, String> {
+        let mut codec = (codecs().get(ty).expect("registered"))();
+        let mut buf = ColumnBuf::new();
+        for (c, v) in cols {
+            buf.set(c, v.iter().copied());
+        }
+        let raw = buf.view(ty, (seq, seq * 10));
+        // SAFETY: `raw` points into `buf`, alive and unchanged while `cols` is used.
+        let cols = unsafe { Columns::from_raw(raw) };
+        let inputs = skinflow_core::Inputs::default();
+        let header = Header { seq, t_ns: seq * 10, origin: 3 };
+        let at = Decode { header, inputs: &inputs, n_inputs: 1, earlier, name, compute_ns: 0 };
+        codec.decode(&cols, &at)
+    }
+
+    #[test]
+    fn plugin_splits_and_forces_carry_the_node_name_shared_not_copied() {
+        let name = "split-area";
+        let m = decode(Split::TYPE, 4, &[("dp_kpa", &[1.0, 2.0])], &[contacts(4, 3.0, 2)], name).unwrap();
+        let s = m.get::<Split>().unwrap();
+        assert!(std::ptr::eq(s.strategy, name), "the node's name, not a copy");
+        let name = "fused-b";
+        let m = decode(Forces::TYPE, 4, &[("force_n", &[1.0, 2.0])], &[split(4, 3.0, &[1.0, 2.0])], name).unwrap();
+        assert_eq!(m.get::<Forces>().unwrap().strategy, "fused-b");
+    }
+
+    #[test]
+    fn provenance_is_the_input_with_the_output_header_else_an_error_naming_both() {
+        let name = "late";
+        let earlier = [contacts(4, 1.0, 2), contacts(5, 2.0, 3)];
+        // Seq 4, emitted after seq 5 arrived: seq 4's contacts, not the latest ones.
+        let m = decode(Split::TYPE, 4, &[("dp_kpa", &[0.5, 0.5])], &earlier, name).unwrap();
+        let want = earlier[0].arc::<Contacts>().unwrap();
+        assert!(Arc::ptr_eq(&m.get::<Split>().unwrap().contacts, &want));
+        assert_eq!(m.header.seq, 4);
+        // A header no input has: refused, not attached to another frame.
+        let e = decode(Split::TYPE, 6, &[("dp_kpa", &[0.5, 0.5])], &earlier, name).unwrap_err();
+        assert!(e.starts_with("header seq 6 (t_ns 60) is not the header of any input"), "{e}");
+        assert!(e.contains("none of the node's last 2 earlier inputs has that header; not sent"), "{e}");
+        // Same seq, another time: another frame (e.g. another source's counter).
+        let e = decode(Forces::TYPE, 4, &[("force_n", &[1.0])], &[split(4, 1.0, &[1.0])], name);
+        assert!(e.is_ok());
+        let mut other = split(4, 1.0, &[1.0]);
+        other.header.t_ns += 1;
+        let e = decode(Forces::TYPE, 4, &[("force_n", &[1.0])], &[other], name).unwrap_err();
+        assert!(e.starts_with("header seq 4 (t_ns 40) is not the header"), "{e}");
+        // No input of a provenance type at all: the old message.
+        let e = decode(Forces::TYPE, 4, &[("force_n", &[1.0])], &earlier, name).unwrap_err();
+        assert_eq!(e, "a forces output needs a split or forces input (its provenance)");
+    }
+
+    #[test]
+    fn non_finite_plugin_values_are_errors_where_the_frame_has_pressure() {
+        let name = "p";
+        // A splitter's NaN share of a frame with pressure: the plugin's failure, named.
+        let e = decode(Split::TYPE, 1, &[("dp_kpa", &[1.0, f64::NAN])], &[contacts(1, 2.0, 2)], name).unwrap_err();
+        assert_eq!(
+            e,
+            "column \"dp_kpa\" is NaN at contact 1, but the frame's pressure change is known (2 kPa): a share must be finite (NaN only for a frame without pressure)"
+        );
+        // A frame without pressure: NaN shares are the frame's.
+        let m = decode(Split::TYPE, 1, &[("dp_kpa", &[f64::NAN; 2])], &[contacts(1, f64::NAN, 2)], name).unwrap();
+        assert!(m.get::<Split>().unwrap().dp_kpa.iter().all(|d| d.is_nan()));
+
+        let known = [split(2, 3.0, &[1.0, 2.0])];
+        let e = decode(Forces::TYPE, 2, &[("force_n", &[1.0, f64::NAN])], &known, name).unwrap_err();
+        assert!(
+            e.starts_with(
+                "column \"force_n\" is NaN at contact 1, but the contact's input share is known (dp_kpa 2 kPa)"
+            ),
+            "{e}"
+        );
+        let cols: &[(&'static str, &[f64])] = &[("force_n", &[1.0, 1.0]), ("dp_kpa", &[f64::INFINITY, 2.0])];
+        let e = decode(Forces::TYPE, 2, cols, &known, name).unwrap_err();
+        assert!(
+            e.starts_with(
+                "column \"dp_kpa\" is inf at contact 0, but the contact's input share is known (dp_kpa 1 kPa)"
+            ),
+            "{e}"
+        );
+        let m = decode(Forces::TYPE, 2, &[("force_n", &[1.0, 0.0])], &known, name).unwrap();
+        let f = m.get::<Forces>().unwrap();
+        assert!(!f.without_pressure(), "a frame with pressure is scored");
+        assert_eq!(f.forces.iter().map(|e| (e.force_n, e.dp_kpa)).collect::<Vec<_>>(), [(1.0, 1.0), (0.0, 2.0)]);
+    }
+
+    #[test]
+    fn a_frame_without_pressure_is_flagged_no_pressure_with_placeholder_forces() {
+        let name = "p";
+        let none = [split(3, f64::NAN, &[f64::NAN, f64::NAN])];
+        let m = decode(Forces::TYPE, 3, &[("force_n", &[f64::NAN, 0.5])], &none, name).unwrap();
+        let f = m.get::<Forces>().unwrap();
+        assert!(f.without_pressure());
+        assert!(f.forces.iter().all(|e| e.flags.no_pressure && !e.flags.no_load));
+        assert_eq!(f.forces.iter().map(|e| e.force_n).collect::<Vec<_>>(), [0.0, 0.5], "NaN -> the 0 N placeholder");
     }
 }

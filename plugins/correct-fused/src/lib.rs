@@ -6,9 +6,11 @@
 //! dP_i <= 0 gives 0 N; forces are clamped to >= 0. Units: kPa, image units x pixels, N.
 //!
 //! ```toml
-//! params = { calibration = "calib/paper.toml", weight_pneumatic = 0.8 }
+//! params = { calibration = "calib/paper.toml", weight_pneumatic = 0.8, name = "fused-0.8" }
 //! ```
-//! Input `split` (columns `dp_kpa`, `sum`), output `forces` (column `force_n`).
+//! Input `split` (columns `dp_kpa`, `sum`), output `forces` (column `force_n`). The forces are
+//! named after the node (its id, or `name`: the host reads that param), so several fused lanes
+//! in one graph are told apart by `compare` and `hdf5_logger`.
 
 use std::path::{Path, PathBuf};
 
@@ -74,6 +76,9 @@ pub struct FusedParams {
     /// Weight w of the pneumatic estimate, in [0, 1].
     #[serde(default = "default_weight")]
     pub weight_pneumatic: f64,
+    /// The forces' strategy name; read by the host (see `KindSpec::param`), not used here.
+    #[serde(default)]
+    pub name: Option<String>,
 }
 
 fn default_weight() -> f64 {
@@ -107,6 +112,12 @@ impl PluginNode for Fused {
             .output("forces", "forces", "per-contact forces, N")
             .param("calibration", "path", "", "calibration TOML from `skinflow calibrate`")
             .param("weight_pneumatic", "float", "0.8", "weight of the pneumatic estimate, in [0, 1]")
+            .param(
+                "name",
+                "string",
+                "none",
+                "strategy name of the forces (compare lane, logger table); default: the node id",
+            )
     }
 
     fn validate(p: &FusedParams) -> Result<(), String> {

@@ -29,10 +29,23 @@ pub struct PortDecl {
     pub optional: bool,
 }
 
+/// The type names a param may be documented with ([`KindSpec::param`]): those `skinflow
+/// nodes` lists for the built-in kinds, plus an array of one, written `[T]` (e.g. `[string]`).
+/// The host refuses a library with any other (a typo such as `flaot` would mislead users).
+pub const PARAM_TYPES: &[&str] =
+    &["bool", "integer", "float", "string", "path", "table", "f64", "u8", "u32", "u64", "usize"];
+
+/// Whether `ty` is one of [`PARAM_TYPES`] or `[T]` of one.
+pub fn is_param_type(ty: &str) -> bool {
+    let scalar = ty.strip_prefix('[').and_then(|t| t.strip_suffix(']')).unwrap_or(ty);
+    PARAM_TYPES.contains(&scalar)
+}
+
 /// A documented param.
 #[derive(Debug, Clone, Copy)]
 pub struct ParamDecl {
     pub name: &'static str,
+    /// One of [`PARAM_TYPES`], or `[T]` of one (checked by the host at load).
     pub ty: &'static str,
     /// TOML text, empty when required.
     pub default: &'static str,
@@ -71,6 +84,13 @@ impl KindSpec {
         self
     }
 
+    /// A documented param: `ty` is one of [`PARAM_TYPES`] or `[T]` of one (the host refuses
+    /// the library otherwise), `default` TOML text (empty: required).
+    ///
+    /// A param named `name` (type `string`) is also read by the host: the node's derived
+    /// outputs (`split`, `forces`) carry it as their strategy name (the `compare` lane, the
+    /// `hdf5_logger` table, a built-in corrector's suffix) instead of the node id. Declare it
+    /// and accept it in `Params` (e.g. `name: Option<String>`) to let a graph name the output.
     pub fn param(mut self, name: &'static str, ty: &'static str, default: &'static str, doc: &'static str) -> KindSpec {
         self.params.push(ParamDecl { name, ty, default, doc });
         self
@@ -123,6 +143,13 @@ pub trait PluginNode: Send + Sized + 'static {
     /// sent. A node that holds messages back across calls (a window, a lookahead, a batch)
     /// emits them at end of stream in [`PluginNode::flush`] and reports them in
     /// [`PluginNode::held`].
+    ///
+    /// Derived payloads (`contacts`, `split`, `forces`) take their provenance (the frame's
+    /// image, contacts, pressure and truth) from the input message with the same header
+    /// (`seq` and `t_ns`): the call's, or one of the node's last
+    /// `host::RETAINED_INPUTS` (32) earlier inputs. So a message held back must be emitted
+    /// under the header of the input it was made from; a header no such input has is an error
+    /// (counted and logged, naming the node and both headers), and that message is not sent.
     fn process(&mut self, inputs: &[Columns<'_>], out: &mut Outputs) -> Result<(), String>;
 
     /// End of stream (the engine's `Processor::flush`): every node upstream is done and this
@@ -132,10 +159,11 @@ pub trait PluginNode: Send + Sized + 'static {
     /// either way.
     ///
     /// A message's header defaults to that of the last input the node received: set it with
-    /// [`ColumnBuf::header`] (e.g. to the header of the input a held message came from). There
-    /// are no inputs, so an output decodes from its columns alone, as a source's does
-    /// (`count`, `pressure`, `eit_frame`, `truth`); an output of a payload derived from inputs
-    /// (`contacts`, `split`, `forces`) cannot be emitted here (an error).
+    /// [`ColumnBuf::header`] to the header of the input a held message came from. There are no
+    /// inputs: an output of a payload derived from inputs (`contacts`, `split`, `forces`)
+    /// takes its provenance from the node's last `host::RETAINED_INPUTS` (32) inputs, by
+    /// header, as in `process`; one held back longer cannot be emitted (an error). Payloads
+    /// built from their columns alone (`count`, `pressure`, `eit_frame`, `truth`) always can.
     ///
     /// An `Err` is counted and logged, what the ports hold is not sent, and the node is not
     /// flushed again: what it still holds is counted at stop ([`PluginNode::held`]). A panic is

@@ -11,6 +11,31 @@
 //! - [`columns`]: reading ([`Columns`]) and writing ([`ColumnBuf`]) messages as columns.
 //! - `host` (feature `host`): loading libraries, checking ABI version and struct sizes, and
 //!   wrapping plugin kinds as engine processors, sources and sinks through payload codecs.
+//!
+//! # A plugin crate outside the skinflow workspace
+//!
+//! This crate is not published: depend on it by path (or git), without the `host` feature,
+//! and give `version` and `edition` explicitly (the in-tree examples inherit them from the
+//! workspace, so a copy of one fails with "error inheriting edition from workspace"):
+//!
+//! ```toml
+//! [package]
+//! name = "my-plugin"
+//! version = "0.1.0"
+//! edition = "2024"
+//!
+//! [lib]
+//! crate-type = ["cdylib"]
+//!
+//! [dependencies]
+//! skinflow-plugin-sdk = { path = "/path/to/skinflow/plugins/sdk" }
+//! serde = { version = "1", features = ["derive"] }
+//! ```
+//!
+//! Param docs ([`KindSpec::param`]) use the type names of [`export::PARAM_TYPES`] (checked at
+//! load); a param `name` is also read by the host as the name of the node's outputs. What a
+//! derived output (`contacts`, `split`, `forces`) carries of its input is found by header:
+//! see [`PluginNode::process`]. More in `plugins/README.md`.
 
 pub mod abi;
 pub mod columns;

@@ -6,7 +6,8 @@
 //! counted, ends the node's flush, and what the node still holds is counted as discarded at
 //! stop; a flush panic stops the graph (`restart = "never"`) or rebuilds the node
 //! (`restart = "always"`); an output that needs its inputs' provenance cannot be emitted at
-//! flush (an error, and the rest counted as discarded).
+//! flush once its input left the host's window of retained inputs (an error, and the rest
+//! counted as discarded; within the window it can, `tests/provenance.rs`).
 
 mod common;
 
@@ -128,7 +129,7 @@ impl PluginNode for HoldDerived {
 #[serde(deny_unknown_fields)]
 struct NoParams {}
 
-/// Consumes derived payloads (none arrive: they cannot be emitted at flush).
+/// Consumes derived payloads (none arrive here: they are held beyond the provenance window).
 struct DropDerived;
 
 impl PluginSink for DropDerived {
@@ -287,14 +288,19 @@ fn a_flush_panic_with_restart_always_rebuilds_the_node() {
 }
 
 #[test]
-fn an_output_that_needs_provenance_cannot_be_emitted_at_flush() {
-    let r = run("[[node]]\nid = \"src\"\nkind = \"counter\"\nparams = { count = 5 }\n\n\
+fn an_output_held_beyond_the_provenance_window_cannot_be_emitted_at_flush() {
+    use skinflow_plugin_sdk::host::RETAINED_INPUTS;
+    let count = RETAINED_INPUTS as u64 + 8;
+    let r = run(&format!(
+        "[[node]]\nid = \"src\"\nkind = \"counter\"\nparams = {{ count = {count} }}\n\n\
          [[node]]\nid = \"hold\"\nkind = \"t-hold-derived\"\n\n[[node]]\nid = \"out\"\nkind = \"t-drop-derived\"\n\n\
-         [[edge]]\nfrom = \"src.out\"\nto = \"hold.in\"\n\n[[edge]]\nfrom = \"hold.out\"\nto = \"out.in\"\n");
+         [[edge]]\nfrom = \"src.out\"\nto = \"hold.in\"\n\n[[edge]]\nfrom = \"hold.out\"\nto = \"out.in\"\n"
+    ));
     assert!(r.failures.is_empty(), "{:?}", r.failures);
     let hold = node(&r, "hold");
-    // The first flush's message cannot be decoded (an error, not sent); that ends the flush,
-    // and the 4 values still held are counted as discarded.
-    assert_eq!((hold.flushes, hold.errors, hold.msgs_out, hold.discarded), (1, 1, 0, 4));
+    // The first flush's message (seq 0) is older than the retained window (the last 32
+    // inputs): its provenance is not known, so it is an error, not sent; that ends the flush,
+    // and the values still held are counted as discarded.
+    assert_eq!((hold.flushes, hold.errors, hold.msgs_out, hold.discarded), (1, 1, 0, count - 1));
     assert_eq!(node(&r, "out").msgs_in, 0);
 }

@@ -143,7 +143,7 @@ impl PluginSink for Record {
 
 fn codecs() -> Codecs {
     let mut c = Codecs::new();
-    c.register("derived", || Box::new(common::Derived));
+    c.register("derived", common::Derived::codec);
     c
 }
 

@@ -1,7 +1,7 @@
 //! The host's checks of a plugin table, on tables built in this binary by the SDK's export
 //! code (the same bytes a plugin's entry point returns): version (older ones named) and
 //! struct-size mismatches, a flush only on processors, ports without a codec, duplicate kinds,
-//! params checked by the plugin, the kind description.
+//! param doc types, params checked by the plugin, the kind description.
 //! Running plugin nodes in graphs (errors, panics, restart) is tested in the workspace's
 //! tests/plugins.rs on built libraries.
 
@@ -10,7 +10,7 @@ use std::sync::OnceLock;
 
 use serde::Deserialize;
 use skinflow_core::{BuildContext, Mode, NodeImpl, Params, Registry};
-use skinflow_plugin_sdk::abi::{ABI_VERSION, SfKind, SfPlugin, SfRole};
+use skinflow_plugin_sdk::abi::{ABI_VERSION, SfKind, SfParam, SfPlugin, SfRole, SfStr};
 use skinflow_plugin_sdk::export::{Table, entry, kind};
 use skinflow_plugin_sdk::host::{Codecs, PluginError, read_table, register_kinds};
 use skinflow_plugin_sdk::{Columns, KindSpec, Outputs, PluginNode};
@@ -129,6 +129,28 @@ fn only_processors_have_a_flush_and_it_is_optional() {
     );
     // A hand-written table may leave a processor's flush out: it holds nothing across calls.
     with_kind(|k| k.flush = None).expect("a processor without a flush is accepted");
+}
+
+#[test]
+fn a_param_type_outside_the_listed_names_is_refused_naming_kind_and_param() {
+    let with_type = |ty: &'static str| {
+        with_kind(|k| {
+            // SAFETY: the kind's params array holds `n_params` params (one), static in this binary.
+            let p = unsafe { *k.params };
+            // Leaked: the table keeps pointing at it while `read_table` reads it.
+            let p: &'static SfParam = Box::leak(Box::new(SfParam { ty: SfStr::new(ty), ..p }));
+            k.params = p;
+        })
+    };
+    let e = with_type("flaot").expect_err("a misspelt type is refused");
+    assert_eq!(
+        e,
+        "plugin libtest.so: kind \"test-add\": param \"add\": unknown type \"flaot\" (known: bool, integer, float, string, path, table, f64, u8, u32, u64, usize, or an array of one, e.g. [string])"
+    );
+    for ok in ["float", "u64", "[string]", "[float]"] {
+        with_type(ok).unwrap_or_else(|e| panic!("{ok}: {e}"));
+    }
+    assert!(with_type("[flaot]").is_err());
 }
 
 #[test]

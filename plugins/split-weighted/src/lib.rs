@@ -7,7 +7,9 @@
 //! - `peak-weighted-splitter`: w_i = peak_i^exponent (largest conductivity decrease of the ROI).
 //!
 //! dP_i = w_i / sum_j w_j * dP; all-zero weights share dP equally. Input `contacts`
-//! (columns `area_mm2`, `peak`, `frame_dp_kpa`), output `split` (column `dp_kpa`, kPa).
+//! (columns `area_mm2`, `peak`, `frame_dp_kpa`), output `split` (column `dp_kpa`, kPa), named
+//! after the node (its id, or its `name` param, which the host reads): a built-in corrector
+//! after it names its forces `<strategy>-<that name>`.
 
 use std::path::Path;
 
@@ -25,7 +27,14 @@ pub fn share(dp_kpa: f64, weights: impl Iterator<Item = f64> + Clone, out: &mut 
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct AreaParams {}
+pub struct AreaParams {
+    /// The split's strategy name; read by the host (see `KindSpec::param`), not used here.
+    #[serde(default)]
+    pub name: Option<String>,
+}
+
+/// The `name` param's doc line (both kinds).
+const NAME_DOC: &str = "strategy name of the split (a built-in corrector's suffix); default: the node id";
 
 /// `area-weighted-splitter`.
 pub struct AreaWeighted;
@@ -37,6 +46,7 @@ impl PluginNode for AreaWeighted {
         KindSpec::new("area-weighted-splitter", "splits dP among contacts in proportion to their ROI areas")
             .input("contacts", "contacts", "segmented contacts (carry the synced dP)")
             .output("split", "split", "dP_i per contact, kPa")
+            .param("name", "string", "none", NAME_DOC)
     }
 
     fn new(_: AreaParams, _: &Path) -> Result<Self, String> {
@@ -60,6 +70,9 @@ pub struct PeakParams {
     /// Weight = peak^exponent.
     #[serde(default = "one")]
     pub exponent: f64,
+    /// As [`AreaParams::name`].
+    #[serde(default)]
+    pub name: Option<String>,
 }
 
 fn one() -> f64 {
@@ -79,6 +92,7 @@ impl PluginNode for PeakWeighted {
             .input("contacts", "contacts", "segmented contacts (carry the synced dP)")
             .output("split", "split", "dP_i per contact, kPa")
             .param("exponent", "float", "1.0", "weight = peak^exponent, in [0, 4]")
+            .param("name", "string", "none", NAME_DOC)
     }
 
     fn validate(p: &PeakParams) -> Result<(), String> {

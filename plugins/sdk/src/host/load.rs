@@ -15,6 +15,7 @@ use skinflow_core::{KindInfo, ParamDoc, PortSpec, Registry, Role};
 use super::codec::{Codecs, MakeCodec};
 use super::node::{KindFns, PluginFactory, PluginKind};
 use crate::abi::{ABI_VERSION, ENTRY_SYMBOL, EntryFn, SfKind, SfPlugin, SfPort, SfRole, SfStr, sizes};
+use crate::export::{PARAM_TYPES, is_param_type};
 
 /// Why a plugin could not be loaded. Every message names the library's path.
 #[derive(Debug, thiserror::Error)]
@@ -188,8 +189,19 @@ fn read_kind(path: &Path, origin: &str, k: &SfKind, codecs: &Codecs) -> Result<P
     for p in unsafe { items(k.params, k.n_params) } {
         let pname = text(path, &format!("kind \"{name}\" param name"), p.name)?;
         let what = |f: &str| format!("kind \"{name}\" param \"{pname}\" {f}");
+        let ty = text(path, &what("type"), p.ty)?;
+        if !is_param_type(&ty) {
+            return Err(PluginError::Kind {
+                path: path.to_path_buf(),
+                kind: name.clone(),
+                problem: format!(
+                    "param \"{pname}\": unknown type \"{ty}\" (known: {}, or an array of one, e.g. [string])",
+                    PARAM_TYPES.join(", ")
+                ),
+            });
+        }
         info.params.push(ParamDoc {
-            ty: Cow::Owned(text(path, &what("type"), p.ty)?),
+            ty: Cow::Owned(ty),
             default: Cow::Owned(text(path, &what("default"), p.default)?),
             doc: Cow::Owned(text(path, &what("doc"), p.doc)?),
             name: Cow::Owned(pname),

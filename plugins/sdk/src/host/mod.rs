@@ -7,6 +7,6 @@ mod codec;
 mod load;
 mod node;
 
-pub use codec::{Codec, Codecs, Decode, MakeCodec};
+pub use codec::{Codec, Codecs, Decode, MakeCodec, RETAINED_INPUTS};
 pub use load::{Loaded, PluginError, PluginLibrary, load, load_all, read_table, register_kinds};
 pub use node::{HostedNode, HostedSink, HostedSource, KindFns, PluginFactory, PluginKind};

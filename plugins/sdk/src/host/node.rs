@@ -10,21 +10,35 @@
 //! and counts the messages the plugin says it discards (`Context::count_discarded`).
 //!
 //! End of stream: [`HostedNode`]'s `Processor::flush` calls the plugin's flush, decodes what it
-//! wrote like `process` does (without inputs: outputs that need provenance cannot be emitted
-//! there) and asks for another flush (`Context::request_rerun`) while the plugin says it holds
-//! more; errors and panics are handled as in `process`.
+//! wrote like `process` does (without inputs: an output that needs provenance takes it from
+//! the node's retained earlier inputs, see below) and asks for another flush
+//! (`Context::request_rerun`) while the plugin says it holds more; errors and panics are
+//! handled as in `process`.
+//!
+//! Provenance: a derived output (`contacts`, `split`, `forces`) re-attaches the input message
+//! with its header (`seq`, `t_ns`), from the call's inputs or from the node's last
+//! [`RETAINED_INPUTS`] earlier inputs, which [`HostedNode`] keeps (shared `Arc`s, no copies; a
+//! ring allocated at build). So a plugin may hold messages back and emit them later, in
+//! `process` or at flush, under the header of the input each came from. An output whose header
+//! matches none is an error of that call (counted and logged with the node id and both
+//! headers) and is not sent; the call's other outputs still are. A message held back longer
+//! than the window cannot be emitted as a derived payload (the same error).
+//!
+//! Names: a derived payload's strategy name ([`Decode::name`]) is the node id, or the node's
+//! `name` param when the kind declares a param `name` and the graph gives a string.
 
+use std::collections::BTreeSet;
 use std::ffi::c_void;
 use std::ptr::NonNull;
-use std::sync::Arc;
+use std::sync::{Arc, Mutex, PoisonError};
 use std::time::Instant;
 
 use skinflow_core::{
-    BuildContext, Context, Header, Inputs, KindInfo, NodeError, NodeFactory, NodeImpl, Outputs, ParamError, Params,
-    Processor, Role, Sink, Source, SourcePoll,
+    BuildContext, Context, Header, Inputs, KindInfo, Message, NodeError, NodeFactory, NodeImpl, Outputs, ParamError,
+    Params, Processor, Role, Sink, Source, SourcePoll,
 };
 
-use super::codec::{Codec, Decode, MakeCodec};
+use super::codec::{Codec, Decode, MakeCodec, RETAINED_INPUTS};
 use super::load::PluginLibrary;
 use crate::abi::{
     CheckFn, CreateFn, DestroyFn, FlushFn, PollFn, ProcessFn, SfErrorSink, SfFlushState, SfMessage, SfPoll,
@@ -89,6 +103,30 @@ fn params_toml(params: &Params) -> Result<String, String> {
     toml::to_string(params.table()).map_err(|e| format!("params cannot be written as TOML: {e}"))
 }
 
+/// The name a node's derived outputs carry ([`Decode::name`]): its `name` param when the kind
+/// declares a param `name` and the graph gives it as a string, else the node id.
+fn output_name(info: &KindInfo, params: &Params, node_id: &str) -> &'static str {
+    let declared = info.params.iter().any(|p| p.name == "name");
+    match params.table().get("name") {
+        Some(toml::Value::String(name)) if declared => intern(name),
+        _ => intern(node_id),
+    }
+}
+
+/// `name` as a `&'static str` (payloads name their strategy so: `Split::strategy`), leaked
+/// once per distinct name for the life of the process: bounded by the node ids and `name`
+/// params of the graphs run, however often nodes are rebuilt (restart, hot swap).
+fn intern(name: &str) -> &'static str {
+    static NAMES: Mutex<BTreeSet<&'static str>> = Mutex::new(BTreeSet::new());
+    let mut names = NAMES.lock().unwrap_or_else(PoisonError::into_inner);
+    if let Some(&n) = names.get(name) {
+        return n;
+    }
+    let n: &'static str = Box::leak(name.to_owned().into_boxed_str());
+    names.insert(n);
+    n
+}
+
 /// The factory of a plugin kind.
 pub struct PluginFactory(pub Arc<PluginKind>);
 
@@ -123,6 +161,7 @@ impl NodeFactory for PluginFactory {
             return Err(NodeError::msg(k.fail("cannot build: ", &err)));
         };
         let live = Live { raw, err: String::with_capacity(256), kind: k.clone() };
+        let name = output_name(&k.info, params, &ctx.node_id);
         let missing = |f: &str| NodeError::msg(k.fail("", &format!("its table has no {f} function")));
         let outs = || k.out_codecs.iter().map(|m| m()).collect::<Vec<_>>();
         Ok(match k.info.role {
@@ -132,6 +171,8 @@ impl NodeFactory for PluginFactory {
                 ins: Encoder::new(k),
                 outs: outs(),
                 out_raw: vec![SfMessage::ABSENT; k.out_codecs.len()],
+                earlier: Retained::new(),
+                name,
                 live,
             })),
             Role::Sink => NodeImpl::Sink(Box::new(HostedSink {
@@ -145,6 +186,7 @@ impl NodeFactory for PluginFactory {
                 out_raw: vec![SfMessage::ABSENT; k.out_codecs.len()],
                 no_inputs: Inputs::default(),
                 wake_at: None,
+                name,
                 live,
             })),
         })
@@ -265,26 +307,67 @@ impl Encoder {
     }
 }
 
+/// The last [`RETAINED_INPUTS`] input messages of a processor's calls: the provenance of
+/// messages the plugin held back. A ring of shared messages, allocated at build. It keeps
+/// those payloads alive, so an upstream `Recycler` may grow by that many buffers once.
+struct Retained {
+    msgs: Vec<Message>,
+    /// Where the next message goes once the ring is full (the oldest).
+    next: usize,
+}
+
+impl Retained {
+    fn new() -> Retained {
+        Retained { msgs: Vec::with_capacity(RETAINED_INPUTS), next: 0 }
+    }
+
+    /// Keeps every input message of a call (an `Arc` clone each; no allocation).
+    fn keep(&mut self, inputs: &Inputs, n_inputs: usize) {
+        for (_, m) in (0..n_inputs).flat_map(|p| inputs.iter_port(p)) {
+            if self.msgs.len() < RETAINED_INPUTS {
+                self.msgs.push(m.clone());
+            } else {
+                self.msgs[self.next] = m.clone();
+                self.next = (self.next + 1) % RETAINED_INPUTS;
+            }
+        }
+    }
+}
+
+/// What a decode call knows of the node besides the plugin's outputs.
+struct DecodeAt<'a> {
+    ctx: &'a Context,
+    /// The call's inputs (empty for a source); `None` for a processor's end-of-stream flush.
+    inputs: Option<&'a Inputs>,
+    /// The node's earlier inputs (empty for a source).
+    earlier: &'a [Message],
+    name: &'static str,
+    t0: Instant,
+}
+
 /// Decodes what a plugin wrote on its outputs and sends it (ports nobody reads are skipped).
-/// `inputs`: the call's, the provenance a derived payload re-attaches (empty for a source);
-/// `None` for a processor's end-of-stream flush, which has none.
+/// A port whose message cannot be decoded (a wrong type, unusable columns, a header no input
+/// has) sends nothing; the others still send, and the first such error is the call's error,
+/// naming the node and the port.
 fn decode_outputs(
     kind: &PluginKind,
     codecs: &mut [Box<dyn Codec>],
     out_raw: &[SfMessage],
-    ctx: &Context,
-    inputs: Option<&Inputs>,
-    t0: Instant,
+    at: DecodeAt<'_>,
     out: &mut Outputs,
 ) -> Result<(), NodeError> {
     let none;
-    let (inputs, flush, what) = match inputs {
-        Some(inputs) => (inputs, false, ""),
+    let (inputs, what) = match at.inputs {
+        Some(inputs) => (inputs, ""),
         None => {
             none = Inputs::default();
-            (&none, true, "flush: ")
+            (&none, "flush: ")
         }
     };
+    let fail = |port: &str, msg: &str| {
+        NodeError::msg(kind.fail(&format!("node \"{}\": {what}output \"{port}\": ", at.ctx.id()), msg))
+    };
+    let mut first_err = None;
     for (j, codec) in codecs.iter_mut().enumerate() {
         let raw = out_raw[j];
         if raw.present == 0 || !out.is_connected(j) {
@@ -293,33 +376,28 @@ fn decode_outputs(
         // SAFETY: the plugin's outputs stay valid until its next call on this instance.
         let cols = unsafe { Columns::from_raw(raw) };
         let port = &kind.info.outputs[j];
-        if !cols.is_type(&port.ty) {
+        let decoded = if cols.is_type(&port.ty) {
+            let d = Decode {
+                header: Header { seq: raw.seq, t_ns: raw.t_ns, origin: at.ctx.index() },
+                inputs,
+                n_inputs: kind.info.inputs.len(),
+                earlier: at.earlier,
+                name: at.name,
+                compute_ns: at.t0.elapsed().as_nanos() as u64,
+            };
+            codec.decode(&cols, &d).map_err(|e| fail(&port.name, &e))
+        } else {
             let got = cols.type_name();
-            return Err(NodeError::msg(
-                kind.fail(what, &format!("output \"{}\" carries \"{got}\", declared \"{}\"", port.name, port.ty)),
-            ));
-        }
-        if flush && codec.needs_provenance() {
-            return Err(NodeError::msg(kind.fail(
-                what,
-                &format!(
-                    "output \"{}\": \"{}\" cannot be emitted at end of stream (its payload takes its provenance from the call's inputs, and a flush has none)",
-                    port.name, port.ty
-                ),
-            )));
-        }
-        let at = Decode {
-            header: Header { seq: raw.seq, t_ns: raw.t_ns, origin: ctx.index() },
-            inputs,
-            n_inputs: kind.info.inputs.len(),
-            compute_ns: t0.elapsed().as_nanos() as u64,
+            Err(fail(&port.name, &format!("carries \"{got}\", declared \"{}\"", port.ty)))
         };
-        let msg = codec
-            .decode(&cols, &at)
-            .map_err(|e| NodeError::msg(kind.fail(&format!("{what}output \"{}\": ", port.name), &e)))?;
-        out.send(j, msg)?;
+        match decoded {
+            Ok(msg) => out.send(j, msg)?,
+            Err(e) => {
+                first_err.get_or_insert(e);
+            }
+        }
     }
-    Ok(())
+    first_err.map_or(Ok(()), Err)
 }
 
 /// A node of a plugin processor kind.
@@ -330,6 +408,10 @@ pub struct HostedNode {
     ins: Encoder,
     outs: Vec<Box<dyn Codec>>,
     out_raw: Vec<SfMessage>,
+    /// Inputs of earlier calls: the provenance of what the plugin emits later.
+    earlier: Retained,
+    /// The strategy name of derived outputs ([`Decode::name`]).
+    name: &'static str,
     live: Live,
 }
 
@@ -341,11 +423,10 @@ unsafe impl Send for HostedNode {}
 impl Processor for HostedNode {
     fn process(&mut self, ctx: &mut Context, inputs: &Inputs, out: &mut Outputs) -> Result<(), NodeError> {
         let t0 = Instant::now();
-        let kind = &*self.live.kind;
-        self.ins.encode(kind, inputs)?;
-        self.out_raw.fill(SfMessage::ABSENT);
-        self.live.process(self.process, &self.ins, &mut self.out_raw)?;
-        decode_outputs(&self.live.kind, &mut self.outs, &self.out_raw, ctx, Some(inputs), t0, out)
+        let r = self.call(ctx, inputs, t0, out);
+        // Whatever the call's outcome, the plugin may have kept these inputs.
+        self.earlier.keep(inputs, self.live.kind.info.inputs.len());
+        r
     }
 
     fn flush(&mut self, ctx: &mut Context, out: &mut Outputs) -> Result<(), NodeError> {
@@ -353,7 +434,8 @@ impl Processor for HostedNode {
         let t0 = Instant::now();
         self.out_raw.fill(SfMessage::ABSENT);
         let more = self.live.flush(flush, &mut self.out_raw)?;
-        decode_outputs(&self.live.kind, &mut self.outs, &self.out_raw, ctx, None, t0, out)?;
+        let at = DecodeAt { ctx, inputs: None, earlier: &self.earlier.msgs, name: self.name, t0 };
+        decode_outputs(&self.live.kind, &mut self.outs, &self.out_raw, at, out)?;
         if more {
             ctx.request_rerun();
         }
@@ -362,6 +444,17 @@ impl Processor for HostedNode {
 
     fn stop(&mut self, ctx: &mut Context) -> Result<(), NodeError> {
         self.live.stop(ctx)
+    }
+}
+
+impl HostedNode {
+    /// One `process` call: encode, call the plugin, decode and send its outputs.
+    fn call(&mut self, ctx: &Context, inputs: &Inputs, t0: Instant, out: &mut Outputs) -> Result<(), NodeError> {
+        self.ins.encode(&self.live.kind, inputs)?;
+        self.out_raw.fill(SfMessage::ABSENT);
+        self.live.process(self.process, &self.ins, &mut self.out_raw)?;
+        let at = DecodeAt { ctx, inputs: Some(inputs), earlier: &self.earlier.msgs, name: self.name, t0 };
+        decode_outputs(&self.live.kind, &mut self.outs, &self.out_raw, at, out)
     }
 }
 
@@ -406,6 +499,8 @@ pub struct HostedSource {
     no_inputs: Inputs,
     /// Graph time before which the plugin need not be polled (from its last idle poll).
     wake_at: Option<u64>,
+    /// [`Decode::name`] (a source's outputs are not derived payloads; kept for the codecs).
+    name: &'static str,
     live: Live,
 }
 
@@ -438,7 +533,8 @@ impl Source for HostedSource {
         let status =
             unsafe { (self.poll)(self.live.raw.as_ptr(), &mut p, self.out_raw.as_mut_ptr(), self.out_raw.len(), err) };
         self.live.status("", status)?;
-        decode_outputs(&self.live.kind, &mut self.outs, &self.out_raw, ctx, Some(&self.no_inputs), t0, out)?;
+        let at = DecodeAt { ctx, inputs: Some(&self.no_inputs), earlier: &[], name: self.name, t0 };
+        decode_outputs(&self.live.kind, &mut self.outs, &self.out_raw, at, out)?;
         match p.state {
             SfPollState::EMITTED => Ok(SourcePoll::Emitted),
             SfPollState::FINISHED => Ok(SourcePoll::Finished),
@@ -452,5 +548,26 @@ impl Source for HostedSource {
 
     fn stop(&mut self, ctx: &mut Context) -> Result<(), NodeError> {
         self.live.stop(ctx)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use skinflow_core::ParamDoc;
+
+    use super::*;
+
+    #[test]
+    fn outputs_are_named_by_the_node_id_or_a_declared_name_param() {
+        let plain = KindInfo::new("k", Role::Processor, "doc");
+        let named = KindInfo::new("k", Role::Processor, "doc").param(ParamDoc::new("name", "string", "none", "?"));
+        let p = |t: &str| Params::from_toml(t).unwrap();
+        assert_eq!(output_name(&plain, &p(""), "split-a"), "split-a");
+        assert_eq!(output_name(&named, &p(""), "split-a"), "split-a");
+        assert_eq!(output_name(&named, &p("name = \"area\""), "split-a"), "area");
+        // Undeclared: the plugin's own param of that name, not the host's business.
+        assert_eq!(output_name(&plain, &p("name = \"area\""), "split-a"), "split-a");
+        // Interned: one leaked copy per distinct name, however many nodes are built.
+        assert!(std::ptr::eq(output_name(&plain, &p(""), "split-a"), intern("split-a")));
     }
 }

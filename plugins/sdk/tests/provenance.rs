@@ -5,8 +5,10 @@
 //! is an error naming the node, the port and both headers, counted, and not sent.
 
 mod common;
+#[path = "common/late.rs"]
+mod late;
 
-use std::collections::{HashMap, VecDeque};
+use std::collections::HashMap;
 use std::io::Write;
 use std::path::Path;
 use std::sync::{Mutex, OnceLock};
@@ -17,66 +19,7 @@ use skinflow_core::stats::NodeReport;
 use skinflow_core::{GraphSpec, Registry, RunOptions, RunReport};
 use skinflow_plugin_sdk::export::{Table, kind, sink};
 use skinflow_plugin_sdk::host::RETAINED_INPUTS;
-use skinflow_plugin_sdk::{Columns, Flush, KindSpec, Outputs, PluginNode, PluginSink};
-
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-struct LateParams {
-    /// Emits each input `lag` calls after it arrived (the rest at flush).
-    lag: usize,
-    /// Added to the seq of every header it writes (> 0: a header no input has).
-    #[serde(default)]
-    shift: u64,
-}
-
-/// Holds inputs (seq, t_ns) and emits each `lag` calls later, under its own header (plus
-/// `shift`), as a derived payload; at flush, the rest, one per call.
-struct Late {
-    p: LateParams,
-    held: VecDeque<(u64, u64)>,
-}
-
-impl Late {
-    fn emit(&mut self, out: &mut Outputs) {
-        if let Some((seq, t_ns)) = self.held.pop_front() {
-            out.port(0).header(seq + self.p.shift, t_ns);
-            out.port(0).scalar("from", 0.0); // the host takes the value from the provenance
-        }
-    }
-}
-
-impl PluginNode for Late {
-    type Params = LateParams;
-
-    fn spec() -> KindSpec {
-        KindSpec::new("t-late", "emits each input lag calls later, as a derived payload")
-            .input("in", "count", "values")
-            .output("out", "derived", "the value of the input it was made from")
-            .param("lag", "integer", "", "calls an input is held")
-            .param("shift", "integer", "0", "added to the seq of written headers")
-    }
-
-    fn new(p: LateParams, _: &Path) -> Result<Self, String> {
-        Ok(Late { held: VecDeque::with_capacity(p.lag + 1), p })
-    }
-
-    fn process(&mut self, inputs: &[Columns<'_>], out: &mut Outputs) -> Result<(), String> {
-        self.held.push_back((inputs[0].seq(), inputs[0].t_ns()));
-        if self.held.len() > self.p.lag {
-            self.emit(out);
-        }
-        Ok(())
-    }
-
-    fn flush(&mut self, out: &mut Outputs) -> Result<Flush, String> {
-        self.emit(out);
-        Ok(if self.held.is_empty() { Flush::Done } else { Flush::More })
-    }
-
-    fn held(&self) -> u64 {
-        self.held.len() as u64
-    }
-}
+use skinflow_plugin_sdk::{Columns, KindSpec, PluginSink};
 
 /// Per `tag` (tests run in parallel): (seq, from) of each derived payload recorded.
 type Seen = Mutex<HashMap<String, Vec<(u64, u64)>>>;
@@ -115,7 +58,7 @@ impl PluginSink for Record {
 
 fn registry() -> Registry {
     static TABLE: OnceLock<Table> = OnceLock::new();
-    common::registry(&TABLE, "prov", "libprov.so", || vec![kind::<Late>(), sink::<Record>()])
+    common::registry(&TABLE, "prov", "libprov.so", || vec![kind::<late::Late>(), sink::<Record>()])
 }
 
 /// What the engine logged (a global subscriber: node threads log too), as text.

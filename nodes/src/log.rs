@@ -17,8 +17,9 @@
 //!
 //! `strategies` is required exactly when `forces` is connected: graph validation
 //! (`skinflow check`, and before a run starts) refuses a logger with `forces` connected and no
-//! list, naming the param's line. A node swapped in at run time is checked again at its first
-//! message, which names the strategies that arrived, before the file is created.
+//! list, naming the param's line, and so does a hot swap. A logger built outside a validated
+//! graph (`NodeFactory::build` called directly) is checked again at its first message, which
+//! names the strategies that arrived, before the file is created.
 //!
 //! Forces of a strategy not in `strategies` (e.g. after a hot swap renamed a corrector's
 //! strategy) are not logged: one warning per strategy name, and the frames left out are
@@ -66,7 +67,7 @@ pub struct LoggerParams {
     #[serde(default)]
     pub overwrite: bool,
     /// Force strategies logged under `/derived/forces/<name>`: required exactly when `forces`
-    /// is connected (checked at the first message: see the module docs).
+    /// is connected (checked at load and at a swap: see the module docs).
     #[serde(default)]
     pub strategies: Vec<String>,
     /// Width of the logged images, pixels: absent, the first image's; given, it must match.

@@ -104,12 +104,18 @@ impl std::fmt::Display for EditError {
         if self.swapped.is_empty() {
             write!(f, "edit rejected: {}", self.error)
         } else {
-            write!(
-                f,
-                "edit partly applied: swapped {}; then {} (that node runs as before the edit)",
-                self.swapped.join(", "),
-                self.error
-            )
+            write!(f, "edit partly applied: {} (that node runs as before the edit)", self.partly())
+        }
+    }
+}
+
+impl EditError {
+    /// `swapped a, b; then <error>`, or the error alone when nothing was swapped.
+    fn partly(&self) -> String {
+        if self.swapped.is_empty() {
+            self.error.clone()
+        } else {
+            format!("swapped {}; then {}", self.swapped.join(", "), self.error)
         }
     }
 }
@@ -143,8 +149,8 @@ impl Live {
         let rejected = |error: String| EditError { swapped: Vec::new(), error };
         let old = &self.started;
         let ids = |s: &GraphSpec| s.nodes.iter().map(|n| n.id.clone()).collect::<Vec<_>>();
-        if ids(old) != ids(new) {
-            let (was, now) = (ids(old), ids(new));
+        let (was, now) = (ids(old), ids(new));
+        if was != now {
             let added: Vec<_> = now.iter().filter(|i| !was.contains(i)).map(|i| format!("\"{i}\"")).collect();
             let removed: Vec<_> = was.iter().filter(|i| !now.contains(i)).map(|i| format!("\"{i}\"")).collect();
             let what = match (added.is_empty(), removed.is_empty()) {
@@ -209,17 +215,16 @@ impl Live {
         let stale: Vec<&String> = changed.iter().flat_map(|(_, k)| k).collect();
         let now = self.lock_nodes().clone();
         let mut swapped: Vec<String> = Vec::new();
-        let failed = |swapped: &[String], error: String| {
-            let before =
-                if swapped.is_empty() { String::new() } else { format!("swapped {}; then ", swapped.join(", ")) };
-            Some(Err(format!("plugin {names} reloaded: {before}{error} (that node runs its previous code)")))
+        let failed = |swapped: Vec<String>, error: String| {
+            let e = EditError { swapped, error };
+            Some(Err(format!("plugin {names} reloaded: {} (that node runs its previous code)", e.partly())))
         };
         for (id, kind, params) in now.iter().filter(|n| stale.contains(&&n.1)) {
             let Some(factory) = kinds.registry.get(kind).cloned() else {
-                return failed(&swapped, format!("node \"{id}\": kind \"{kind}\" is no longer in the library"));
+                return failed(swapped, format!("node \"{id}\": kind \"{kind}\" is no longer in the library"));
             };
             if let Err(e) = self.swap(id, factory, kind, params.clone()) {
-                return failed(&swapped, e);
+                return failed(swapped, e);
             }
             swapped.push(id.clone());
         }

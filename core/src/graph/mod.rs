@@ -17,6 +17,7 @@ pub use source::SourceFile;
 
 use crate::node::Mode;
 use crate::params::Params;
+use crate::port::PortSpec;
 use crate::registry::{NodeFactory, Registry};
 
 /// Default queue capacity of an edge, in messages.
@@ -107,11 +108,7 @@ impl GraphSpec {
 
     /// The names of node `i`'s inputs that have at least one edge, in port order.
     pub fn connected_inputs(&self, i: usize) -> Vec<String> {
-        let inputs = &self.nodes[i].factory.info().inputs;
-        (0..inputs.len())
-            .filter(|&p| self.edges.iter().any(|e| e.to_node == i && e.to_port == p))
-            .map(|p| inputs[p].name.to_string())
-            .collect()
+        connected_inputs(&self.nodes[i].factory.info().inputs, i, &self.edges).into_iter().map(str::to_owned).collect()
     }
 }
 
@@ -119,4 +116,12 @@ impl GraphSpec {
 /// caller can load them into the registry before validation.
 pub fn plugin_paths(src: &SourceFile) -> Result<Vec<PathBuf>, GraphErrors> {
     validate::plugin_paths(src)
+}
+
+/// The names of node `node`'s `inputs` that one of `edges` reaches, in port order.
+pub(crate) fn connected_inputs<'a>(inputs: &'a [PortSpec], node: usize, edges: &[EdgeSpec]) -> Vec<&'a str> {
+    (0..inputs.len())
+        .filter(|&p| edges.iter().any(|e| e.to_node == node && e.to_port == p))
+        .map(|p| inputs[p].name.as_ref())
+        .collect()
 }

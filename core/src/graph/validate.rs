@@ -12,7 +12,7 @@ use toml::Spanned;
 use super::error::{GraphError, GraphErrorKind as K, GraphErrors};
 use super::file::{AlignBy, GraphFile, LooseFile, NodeEntry, ThreadMode, TriggerKind};
 use super::source::SourceFile;
-use super::{DEFAULT_CAPACITY, EdgeSpec, GraphSpec, NodeSpec, Trigger};
+use super::{DEFAULT_CAPACITY, EdgeSpec, GraphSpec, NodeSpec, Trigger, connected_inputs};
 use crate::node::Mode;
 use crate::params::Params;
 use crate::registry::Wiring;
@@ -130,6 +130,8 @@ pub(super) fn validate(src: SourceFile, registry: &Registry) -> Result<GraphSpec
 
     // Nodes: ids, kinds, params, trigger options.
     let mut nodes: Vec<Option<NodeSpec>> = Vec::with_capacity(file.node.len());
+    // Per `[[node]]` table, in order: whether its kind is known and its params passed its check.
+    let mut params_ok: Vec<bool> = Vec::with_capacity(file.node.len());
     let mut by_id: HashMap<String, usize> = HashMap::new();
     for (i, entry) in file.node.iter().enumerate() {
         let n: &NodeEntry = entry.get_ref();
@@ -145,12 +147,15 @@ pub(super) fn validate(src: SourceFile, registry: &Registry) -> Result<GraphSpec
             let known = registry.names().collect::<Vec<_>>().join(", ");
             err(Some(n.kind.span()), Some(&id), K::UnknownKind { kind: n.kind.get_ref().clone(), known });
             nodes.push(None);
+            params_ok.push(false);
             continue;
         };
         let params = Params::in_graph(src.text.clone(), i, n.params.clone().unwrap_or_default());
-        if let Err(e) = factory.check(&params) {
+        let checked = factory.check(&params);
+        if let Err(e) = &checked {
             err(e.span.clone().or(Some(entry.span())), Some(&id), K::Param(e.to_string()));
         }
+        params_ok.push(checked.is_ok());
         let role = factory.info().role;
         let trigger = match trigger_of(n) {
             Ok(t) => t,
@@ -307,15 +312,11 @@ pub(super) fn validate(src: SourceFile, registry: &Registry) -> Result<GraphSpec
         }
     }
 
-    // Params that depend on which inputs are connected.
+    // Params that depend on which inputs are connected (once the params themselves passed).
     for (i, n) in nodes.iter().enumerate() {
         let Some(n) = n else { continue };
-        let inputs = &n.factory.info().inputs;
-        let connected: Vec<&str> = (0..inputs.len())
-            .filter(|&p| edges.iter().any(|e| e.to_node == i && e.to_port == p))
-            .map(|p| inputs[p].name.as_ref())
-            .collect();
-        if n.factory.check(&n.params).is_ok()
+        let connected = connected_inputs(&n.factory.info().inputs, i, &edges);
+        if params_ok[i]
             && let Err(e) = n.factory.check_wiring(&n.params, &Wiring::new(&connected))
         {
             err(e.span.clone().or(Some(file.node[i].span())), Some(&n.id), K::Param(e.to_string()));

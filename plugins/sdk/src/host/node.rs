@@ -165,15 +165,20 @@ impl NodeFactory for PluginFactory {
         let missing = |f: &str| NodeError::msg(k.fail("", &format!("its table has no {f} function")));
         let outs = || k.out_codecs.iter().map(|m| m()).collect::<Vec<_>>();
         Ok(match k.info.role {
-            Role::Processor => NodeImpl::Processor(Box::new(HostedNode {
-                process: k.fns.process.ok_or_else(|| missing("process"))?,
-                flush: k.fns.flush,
-                ins: Encoder::new(k),
-                outs: outs(),
-                out_raw: vec![SfMessage::ABSENT; k.out_codecs.len()],
-                earlier: Retained::new(),
-                name,
-                live,
+            Role::Processor => NodeImpl::Processor(Box::new({
+                let outs = outs();
+                // Only derived outputs look into earlier inputs; a kind without any keeps none.
+                let derived = outs.iter().any(|c| c.needs_provenance());
+                HostedNode {
+                    process: k.fns.process.ok_or_else(|| missing("process"))?,
+                    flush: k.fns.flush,
+                    ins: Encoder::new(k),
+                    out_raw: vec![SfMessage::ABSENT; k.out_codecs.len()],
+                    earlier: Retained::new(if derived { RETAINED_INPUTS } else { 0 }),
+                    outs,
+                    name,
+                    live,
+                }
             })),
             Role::Sink => NodeImpl::Sink(Box::new(HostedSink {
                 process: k.fns.process.ok_or_else(|| missing("process"))?,
@@ -309,26 +314,31 @@ impl Encoder {
 
 /// The last [`RETAINED_INPUTS`] input messages of a processor's calls: the provenance of
 /// messages the plugin held back. A ring of shared messages, allocated at build. It keeps
-/// those payloads alive, so an upstream `Recycler` may grow by that many buffers once.
+/// those payloads alive, so an upstream `Recycler` may grow by that many buffers once. Empty
+/// (capacity 0) for a kind without derived outputs, which never looks into it.
 struct Retained {
     msgs: Vec<Message>,
+    capacity: usize,
     /// Where the next message goes once the ring is full (the oldest).
     next: usize,
 }
 
 impl Retained {
-    fn new() -> Retained {
-        Retained { msgs: Vec::with_capacity(RETAINED_INPUTS), next: 0 }
+    fn new(capacity: usize) -> Retained {
+        Retained { msgs: Vec::with_capacity(capacity), capacity, next: 0 }
     }
 
     /// Keeps every input message of a call (an `Arc` clone each; no allocation).
     fn keep(&mut self, inputs: &Inputs, n_inputs: usize) {
+        if self.capacity == 0 {
+            return;
+        }
         for (_, m) in (0..n_inputs).flat_map(|p| inputs.iter_port(p)) {
-            if self.msgs.len() < RETAINED_INPUTS {
+            if self.msgs.len() < self.capacity {
                 self.msgs.push(m.clone());
             } else {
                 self.msgs[self.next] = m.clone();
-                self.next = (self.next + 1) % RETAINED_INPUTS;
+                self.next = (self.next + 1) % self.capacity;
             }
         }
     }

@@ -176,6 +176,43 @@ fn pixels_outside_the_domain_and_invalid_values_are_ignored() {
     assert!(c[0].sum.is_finite() && (c[0].peak - 1.0).abs() < 0.05);
 }
 
+/// Otsu splits any range, however small: a uniform decrease above the floor (global drift)
+/// with a rounding-level bump must not become a contact, in either mode; a real blob on the
+/// same offset still is.
+#[test]
+fn a_uniform_offset_above_the_floor_is_no_contact() {
+    let mut img = vec![-0.5; N * N];
+    for r in 20..30 {
+        for c in 20..30 {
+            img[r * N + c] -= 1e-13;
+        }
+    }
+    assert!(segment_with(&img, 0.01, 0.0, 0.0).is_empty(), "paper mode");
+    assert!(segment(&img, 0.01).is_empty(), "default (weak-region) mode");
+    let blob: Vec<f64> = image(&[(10.0, -10.0, 1.0, 8.0)], 0.0, 1).iter().map(|v| v - 0.5).collect();
+    for c in [segment_with(&blob, 0.01, 0.0, 0.0), segment(&blob, 0.01)] {
+        assert_eq!(c.len(), 1, "{c:?}");
+        assert!((c[0].x_mm - 10.0).hypot(c[0].y_mm + 10.0) < grid().dx_mm(), "{c:?}");
+    }
+}
+
+/// A cluster of -inf pixels (invalid values, not a decrease) never becomes a contact: in the
+/// paper's mode it used to pass the cut as an infinite decrease and come out as a contact with
+/// sum 0. The real blob beside it is kept.
+#[test]
+fn a_cluster_of_infinite_pixels_is_no_contact() {
+    let mut img = image(&[(20.0, 20.0, 1.0, 6.0)], 0.0, 1);
+    for r in 10..20 {
+        for c in 10..20 {
+            img[r * N + c] = f64::NEG_INFINITY;
+        }
+    }
+    for c in [segment_with(&img, 0.05, 0.0, 0.0), segment(&img, 0.05)] {
+        assert_eq!(c.len(), 1, "{c:?}");
+        assert!((c[0].x_mm - 20.0).hypot(c[0].y_mm - 20.0) < grid().dx_mm() && c[0].sum > 0.0, "{c:?}");
+    }
+}
+
 fn segment_with(img: &[f64], floor: f64, separation: f64, weak_peak: f64) -> Vec<skinflow_contact::Contact> {
     segment_params(img, &SegmentParams { separation, weak_peak, ..SegmentParams::with_floor(floor) })
 }

@@ -3,7 +3,8 @@
 //! Contacts are conductivity DECREASES: the reconstructor's image is negative where pressed.
 //! Per frame, [`Segmenter::segment_into`] works on `d = -image` (the decrease): normalize d
 //! to [0, 1] over the image, Otsu threshold, keep pixels with `d_norm >= t*` AND `d >= floor`
-//! (absolute floor, image units, so noise alone never makes a contact), opening then closing
+//! (absolute floor, image units, so noise alone never makes a contact; the image's range must
+//! reach it too, so a uniform offset is no contact either), opening then closing
 //! with a disk of radius `radius_frac * max(width, height)` pixels, 8-connected components,
 //! components split at deep saddles when `separation > 0` ([`separate`]; the paper keeps
 //! plain components, `separation = 0`), and per component the intensity-weighted centroid (mm), the decrease sum `C` (image units
@@ -33,8 +34,8 @@ use serde::{Deserialize, Serialize};
 #[serde(deny_unknown_fields)]
 pub struct SegmentParams {
     /// Absolute floor on the conductivity decrease (image units, > 0): a pixel is foreground
-    /// only if its decrease is at least this, and an image whose largest decrease is below it
-    /// has no contact. Set it a few times above the peak decrease of no-load frames
+    /// only if its decrease is at least this, and an image whose largest decrease is below it,
+    /// or exceeds its smallest by less than it (a uniform offset), has no contact. Set it a few times above the peak decrease of no-load frames
     /// (see [`peak_decrease`]).
     pub floor: f64,
     /// Disk radius of the opening/closing as a fraction of max(width, height); paper: 0.02.
@@ -460,8 +461,10 @@ impl Segmenter {
         if d_max.is_finite() {
             out.peak_decrease = d_max;
         }
-        // No pixel reaches the floor: no contact, and no division by a zero range below.
-        if d_max < self.params.floor || d_max <= d_min {
+        // No pixel reaches the floor, or nothing stands out from the image's lowest decrease by
+        // the floor (a uniform offset, e.g. drift, plus a rounding-level bump): no contact, and
+        // no division by a zero range below. Otsu would otherwise split any range, however small.
+        if d_max < self.params.floor || d_max - d_min < self.params.floor {
             return Ok(());
         }
         let range = d_max - d_min;
@@ -494,8 +497,9 @@ impl Segmenter {
         // (which would cost time and merge nothing useful).
         let region_cut = if weak { (0.5 * self.params.weak_peak * d_max).max(self.params.floor) } else { cut };
         for (m, &v) in self.mask.iter_mut().zip(image) {
-            // NaN compares false: pixels outside the domain never become foreground.
-            *m = u8::from(-v >= region_cut);
+            // NaN compares false: pixels outside the domain never become foreground; nor do
+            // invalid -inf pixels (they were left out of the range and histogram above).
+            *m = u8::from(-v >= region_cut && v > f64::NEG_INFINITY);
         }
         morphology::open_then_close(&self.disk, g.width, g.height, &mut self.mask, &mut self.scratch);
         let pixel_area = g.pixel_area_mm2();

@@ -86,21 +86,8 @@ enum Cmd {
     /// Emulate the EIT board, pressure board and load cell on pseudo-terminals from a scene.
     Emulate {
         scene: PathBuf,
-        #[arg(long, default_value_t = 1)]
-        seed: u64,
-        /// Send as fast as the readers take the bytes instead of at the real rates.
-        #[arg(long)]
-        fast: bool,
-        /// Directory for the stable device links (default: a fresh temporary directory).
-        #[arg(long)]
-        dir: Option<PathBuf>,
-        /// Inject a fault: device:index:kind[=value], e.g. eit:10:crc, eit:20:unplug=0.5.
-        #[arg(long = "fault")]
-        faults: Vec<String>,
-        /// The devices to serve, comma-separated (with --fast, only those a graph reads: an
-        /// unread device never finishes).
-        #[arg(long, default_value = "eit,pressure,loadcell")]
-        devices: String,
+        #[command(flatten)]
+        options: cmd::emulate::EmulateArgs,
     },
     /// Reproduce the paper's experiments on the simulated skin and write a Markdown report.
     Reproduce {
@@ -243,8 +230,8 @@ fn dispatch(cmd: Cmd) -> Result<ExitCode> {
         Cmd::Simulate { scene, out, seed, overwrite } => {
             cmd::simulate::run(&scene, &out, seed, overwrite).map(|()| ExitCode::SUCCESS)
         }
-        Cmd::Emulate { scene, seed, fast, dir, faults, devices } => {
-            cmd::emulate::run(&scene, seed, fast, dir, &faults, &devices, interrupt_flag()?).map(|()| ExitCode::SUCCESS)
+        Cmd::Emulate { scene, options } => {
+            cmd::emulate::run(&scene, options, interrupt_flag()?).map(|()| ExitCode::SUCCESS)
         }
         Cmd::Reproduce { out, scenes, seed, fit, pipeline } => {
             cmd::reproduce::run(&scenes, &out, seed, &fit.fit, &pipeline).map(|()| ExitCode::SUCCESS)

@@ -257,6 +257,34 @@ fn calibrate_and_eval_refuse_a_recording_without_pressure_or_with_bad_times() {
     }
 }
 
+/// A session that starts under load (as a calibration resumed after a stop can) has its EIT
+/// reference and pressure tare taken from loaded frames, and one with a 1.5 s lead-in from one
+/// or two frames: eval and calibrate warn about both. The fixtures' 4 s lead-in (5 frames) is
+/// enough, and gets no warning.
+#[test]
+fn a_recording_that_starts_under_load_is_warned_about() {
+    let d = workdir("under-load");
+    let scene = std::fs::read_to_string(fixture("tiny-eval.toml")).unwrap();
+    let lead_in = "[[step]]\nrest_s = 4.0\n";
+    assert!(scene.contains(lead_in), "the fixture starts with its lead-in");
+    // The simulator refuses a scene without a lead-in; 0.2 s holds no whole frame window.
+    std::fs::write(d.join("loaded.toml"), scene.replace(lead_in, "[[step]]\nrest_s = 0.2\n")).unwrap();
+    std::fs::write(d.join("short.toml"), scene.replace(lead_in, "[[step]]\nrest_s = 1.5\n")).unwrap();
+    let calib = root().join("graphs/calib/paper.toml");
+    let mut warned = Vec::new();
+    for (scene, rec) in [("loaded.toml", "loaded.h5"), ("short.toml", "short.h5"), ("", "normal.h5")] {
+        let path = if scene.is_empty() { fixture("tiny-eval.toml") } else { d.join(scene) };
+        ok(&skinflow(&d, &["simulate", path.to_str().unwrap(), "--out", rec, "--seed", "3"]));
+        let err = stderr(&skinflow(&d, &["eval", rec, "--calib", calib.to_str().unwrap()]));
+        warned.push(err.lines().filter(|l| l.contains(rec) && l.contains("warning")).collect::<Vec<_>>().join("\n"));
+    }
+    assert!(warned[0].contains("starts under load") && warned[0].contains("off the skin"), "{}", warned[0]);
+    assert!(warned[1].contains("no-load frame(s)") && warned[1].contains("reference_frames = 10"), "{}", warned[1]);
+    assert!(!warned[2].contains("under load") && !warned[2].contains("no-load frame"), "{}", warned[2]);
+    let err = stderr(&skinflow(&d, &["calibrate", "loaded.h5", "--out", "loaded-calib.toml"]));
+    assert!(err.contains("starts under load"), "{err}");
+}
+
 #[test]
 fn eval_refuses_a_recording_without_truth() {
     let d = workdir("notruth");

@@ -12,7 +12,7 @@ use skinflow_contact::CalibSample;
 use skinflow_contact::correct::{CalibParams, Calibrated, FFit, Provenance, RecordingRef, calibrate};
 use skinflow_nodes::payload::Contacts;
 
-use super::pipeline::{PipelineArgs, Settled};
+use super::pipeline::{PipelineArgs, Settled, SettledBy};
 
 /// `sha256:<hex>` of a file's bytes.
 pub fn content_hash(path: &Path) -> Result<String> {
@@ -21,12 +21,21 @@ pub fn content_hash(path: &Path) -> Result<String> {
     Ok(format!("sha256:{}", digest.iter().map(|b| format!("{b:02x}")).collect::<String>()))
 }
 
+/// Loaded frames a calibration left out, by cause.
+#[derive(Debug, Default, Clone, Copy, PartialEq, Eq)]
+pub struct LeftOut {
+    /// Their pressure change is unknown (`SyncedFrame::has_pressure`: a pressure dropout, no
+    /// tare yet).
+    pub without_pressure: usize,
+    /// Acquired while the load changed, by the settled criterion in use.
+    pub unsettled: usize,
+}
+
 /// Calibration samples: one per settled, loaded single-contact frame with a detection and a
-/// known pressure change. Also the number of loaded frames left out because their pressure
-/// change is unknown (`SyncedFrame::has_pressure`: a pressure dropout, no tare yet).
-pub fn samples(rows: &[Vec<skinflow_core::Message>], settled: &Settled) -> (Vec<CalibSample>, usize) {
+/// known pressure change; and the loaded frames left out, by cause.
+pub fn samples(rows: &[Vec<skinflow_core::Message>], settled: &Settled) -> (Vec<CalibSample>, LeftOut) {
     let mut out = Vec::new();
-    let mut without_pressure = 0;
+    let mut left = LeftOut::default();
     for row in rows {
         let Some(m) = row.first() else { continue };
         let Some(c) = m.get::<Contacts>() else { continue };
@@ -35,10 +44,11 @@ pub fn samples(rows: &[Vec<skinflow_core::Message>], settled: &Settled) -> (Vec<
             continue;
         }
         if !synced.has_pressure() {
-            without_pressure += 1;
+            left.without_pressure += 1;
             continue;
         }
         if !settled.is_settled(m.header.t_s(), synced) {
+            left.unsettled += 1;
             continue;
         }
         let Some(truth) = synced.truth.as_ref() else { continue };
@@ -60,7 +70,7 @@ pub fn samples(rows: &[Vec<skinflow_core::Message>], settled: &Settled) -> (Vec<
             diameter_mm: t.diameter_mm,
         });
     }
-    (out, without_pressure)
+    (out, left)
 }
 
 /// The `--fit` option of `calibrate` and `reproduce`.
@@ -131,7 +141,8 @@ pub fn collect(recordings: &[PathBuf], args: &PipelineArgs) -> Result<(Vec<Calib
 /// The calibration samples of one recording (see [`samples`]); refused when there are none.
 fn collect_one(recording: &Path, args: &PipelineArgs) -> Result<Vec<CalibSample>> {
     let (rows, settled) = args.run(recording, |_| ())?;
-    let (samples, without_pressure) = samples(&rows, &settled);
+    let (samples, left) = samples(&rows, &settled);
+    let without_pressure = left.without_pressure;
     if without_pressure > 0 {
         eprintln!(
             "{}: {without_pressure} frames without pressure (no sample in their acquisition window, or before the tare) \
@@ -139,10 +150,25 @@ fn collect_one(recording: &Path, args: &PipelineArgs) -> Result<Vec<CalibSample>
             recording.display()
         );
     }
-    settled
-        .warn_unknown_noise(recording, rows.iter().filter_map(|r| r.first()?.get::<Contacts>()).map(|c| &*c.image.src));
+    let synced = || rows.iter().filter_map(|r| r.first()?.get::<Contacts>()).map(|c| &*c.image.src);
+    settled.warn_short_no_load(recording, synced());
+    settled.warn_unknown_noise(recording, synced());
     if samples.is_empty() {
-        bail!("{}: no loaded single-contact frame with a detected contact to calibrate from", recording.display());
+        // Say which filter left nothing: all frames judged unsettled points at the criterion.
+        let hint = match (left.unsettled, settled.by) {
+            (0, _) => String::new(),
+            (n, SettledBy::Truth) => format!(
+                " ({n} loaded frames were left out as acquired while the true load changed; if the truth \
+                 rows change within every frame, try --settled-by pressure or --all-frames)"
+            ),
+            (n, SettledBy::Pressure) => format!(
+                " ({n} loaded frames were left out as unsettled by pressure; try --settled-by truth or --all-frames)"
+            ),
+        };
+        bail!(
+            "{}: no loaded single-contact frame with a detected contact to calibrate from{hint}",
+            recording.display()
+        );
     }
     Ok(samples)
 }

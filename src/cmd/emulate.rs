@@ -15,6 +15,50 @@ use skinflow_serial::{
 };
 use skinflow_sim::{Scene, SimEvent, Simulator};
 
+/// The options of `skinflow emulate`.
+#[derive(Debug, Clone, clap::Args)]
+pub struct EmulateArgs {
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Send as fast as the readers take the bytes instead of at the real rates.
+    #[arg(long)]
+    pub fast: bool,
+    /// Directory for the stable device links (default: a fresh temporary directory).
+    #[arg(long)]
+    pub dir: Option<PathBuf>,
+    /// Inject a fault: device:index:kind[=value], e.g. eit:10:crc, eit:20:unplug=0.5.
+    #[arg(long = "fault")]
+    pub faults: Vec<String>,
+    /// The devices to serve, comma-separated (with --fast, only those a graph reads: an
+    /// unread device never finishes).
+    #[arg(long, default_value = "eit,pressure,loadcell")]
+    pub devices: String,
+    /// The load cell prints its reading this many times a second, as a gauge in continuous
+    /// mode does (default: one line per change of the load).
+    #[arg(long, value_name = "HZ")]
+    pub loadcell_hz: Option<f64>,
+}
+
+/// A gauge in continuous mode: the force in effect (0 N before the first change) at every
+/// multiple of `1 / hz` from 0 s through `end_s`.
+pub fn stream_at(changes: &[TimedForce], hz: f64, end_s: f64) -> Vec<TimedForce> {
+    let mut out = Vec::new();
+    let mut next = 0;
+    let mut force_n = 0.0;
+    for k in 0u64.. {
+        let t_s = k as f64 / hz;
+        if t_s > end_s {
+            break;
+        }
+        while changes.get(next).is_some_and(|c| c.t_s <= t_s) {
+            force_n = changes[next].force_n;
+            next += 1;
+        }
+        out.push(TimedForce { t_s, force_n });
+    }
+    out
+}
+
 /// The scene's streams as the boards would send them: an EIT frame at the end of its window.
 pub fn feed(scene_path: &Path, seed: u64) -> Result<(Vec<TimedFrame>, Vec<TimedPressure>, Vec<TimedForce>)> {
     let scene = Scene::from_file(scene_path).map_err(anyhow::Error::msg)?;
@@ -80,19 +124,17 @@ fn parse_devices(list: &str) -> Result<Vec<Device>> {
     Ok(devices)
 }
 
-pub fn run(
-    scene: &Path,
-    seed: u64,
-    fast: bool,
-    dir: Option<PathBuf>,
-    faults: &[String],
-    devices: &str,
-    stop: Arc<AtomicBool>,
-) -> Result<()> {
+pub fn run(scene: &Path, options: EmulateArgs, stop: Arc<AtomicBool>) -> Result<()> {
+    let EmulateArgs { seed, fast, dir, faults, devices, loadcell_hz } = options;
     // Every option is checked before the simulation, which takes seconds.
-    let devices = parse_devices(devices)?;
+    let devices = parse_devices(&devices)?;
+    if let Some(hz) = loadcell_hz
+        && !(hz.is_finite() && hz > 0.0 && hz <= 1000.0)
+    {
+        anyhow::bail!("--loadcell-hz {hz}: must be a rate in (0, 1000] Hz");
+    }
     let mut plan = FaultPlan::default();
-    for f in faults {
+    for f in &faults {
         let (device, index, fault) = parse_fault(f)?;
         if !devices.contains(&device) {
             anyhow::bail!("--fault \"{f}\": device {} is not served (see --devices)", device.name());
@@ -105,8 +147,15 @@ pub fn run(
     }
     eprintln!("simulating {} (seed {seed}) before the devices open...", scene.display());
     let t0 = std::time::Instant::now();
-    let (eit, pressure, force) = feed(scene, seed)?;
+    let (eit, pressure, mut force) = feed(scene, seed)?;
     eprintln!("simulated in {:.1} s", t0.elapsed().as_secs_f64());
+    if let Some(hz) = loadcell_hz {
+        let end_s = [eit.last().map(|e| e.t_s), pressure.last().map(|p| p.t_s), force.last().map(|f| f.t_s)]
+            .into_iter()
+            .flatten()
+            .fold(0.0f64, f64::max);
+        force = stream_at(&force, hz, end_s);
+    }
     let serves = |d: Device| devices.contains(&d);
     let last_s = [
         eit.last().filter(|_| serves(Device::Eit)).map(|e| e.t_s),
@@ -155,4 +204,18 @@ pub fn run(
     }
     emu.stop().map_err(anyhow::Error::msg)?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_continuous_gauge_repeats_the_force_in_effect() {
+        let changes = [TimedForce { t_s: 0.25, force_n: 2.0 }, TimedForce { t_s: 0.5, force_n: 0.0 }];
+        let got: Vec<(f64, f64)> = stream_at(&changes, 10.0, 0.62).iter().map(|f| (f.t_s, f.force_n)).collect();
+        let want: Vec<(f64, f64)> =
+            (0..=6).map(|k| (k as f64 / 10.0, if (3..5).contains(&k) { 2.0 } else { 0.0 })).collect();
+        assert_eq!(got, want);
+    }
 }

@@ -194,8 +194,9 @@ fn evaluate_one(
         truth_only + pressure_only + both + neither,
     );
     let synced =
-        rows.iter().filter_map(|r| r.iter().find_map(|m| m.get::<Forces>())).map(|f| &*f.split.contacts.image.src);
-    settled.warn_unknown_noise(recording, synced);
+        || rows.iter().filter_map(|r| r.iter().find_map(|m| m.get::<Forces>())).map(|f| &*f.split.contacts.image.src);
+    settled.warn_short_no_load(recording, synced());
+    settled.warn_unknown_noise(recording, synced());
     Ok(())
 }
 

@@ -46,12 +46,16 @@ pub enum SettledBy {
 /// in `--recon`, `--segment` or `--sync` is refused before any work, naming the flag (instead
 /// of a position in the generated pipeline graph).
 fn check_params<T: serde::de::DeserializeOwned>(flag: &str, text: &str) -> Result<()> {
+    parse_params::<T>(flag, text).map(|_| ())
+}
+
+/// `text`, the body of a node's params table, as `T`; errors name the flag.
+fn parse_params<T: serde::de::DeserializeOwned>(flag: &str, text: &str) -> Result<T> {
     let doc = format!("params = {{ {text} }}");
     let mut table: toml::Table =
         toml::from_str(&doc).map_err(|e| anyhow::anyhow!("{flag} '{text}': not a TOML table body: {}", e.message()))?;
     let params = table.remove("params").unwrap_or_else(|| toml::Value::Table(toml::Table::new()));
-    T::deserialize(params).map_err(|e| anyhow::anyhow!("{flag} '{text}': {}", e.message()))?;
-    Ok(())
+    T::deserialize(params).map_err(|e| anyhow::anyhow!("{flag} '{text}': {}", e.message()))
 }
 
 impl PipelineArgs {
@@ -118,13 +122,22 @@ pub fn require_truth(path: &Path) -> Result<Recording> {
     Ok(rec)
 }
 
-/// Which frames have a single true load: the truth rows' times and the EIT frame period of a
-/// recording. A frame acquired while the load changed (a truth row starts inside its
+/// Which frames have a single true load: the times the true load changed and the EIT frame
+/// period of a recording. A frame acquired while the load changed (a change inside its
 /// acquisition window) mixes two states in one image, so it has no single true force; those
 /// frames are neither calibrated on nor evaluated unless `--all-frames` is given.
+///
+/// A truth row is a change when it differs from the last change: another number of contacts, a
+/// contact moved by more than [`SAME_PLACE_MM`] or of another diameter, or a force off by more
+/// than [`SAME_FORCE_N`] plus [`SAME_FORCE_REL`] of it. A load cell that prints continuously (a
+/// row every 100 ms) repeats the load of a hold with its last digit's jitter; those rows change
+/// nothing, or no frame of such a recording would be settled. The last change, not the previous
+/// row, is the reference, so a slow drift is still a change once it adds up.
 pub struct Settled {
-    truth_t: Vec<f64>,
+    change_t: Vec<f64>,
     half_period_s: f64,
+    /// The reconstructor's `reference_frames` (see [`Settled::warn_short_no_load`]).
+    reference_frames: usize,
     pub all_frames: bool,
     pub by: SettledBy,
 }
@@ -136,8 +149,10 @@ impl Settled {
         d.sort_by(f64::total_cmp);
         let period = d.get(d.len() / 2).copied().unwrap_or(1.0 / 1.3);
         Settled {
-            truth_t: rec.truth.as_ref().map_or_else(Vec::new, |t| t.t_s.clone()),
+            change_t: rec.truth.as_ref().map_or_else(Vec::new, load_changes),
             half_period_s: 0.5 * period,
+            reference_frames: parse_params::<skinflow_nodes::reconstruct::ReconstructorParams>("--recon", &args.recon)
+                .map_or(10, |p| p.reference_frames),
             all_frames: args.all_frames,
             by: args.settled_by,
         }
@@ -165,10 +180,133 @@ impl Settled {
         }
     }
 
-    /// Whether no truth row starts within the acquisition window of a frame stamped `t_s`.
+    /// Warns when a recording's leading no-load period (the frames acquired before the first
+    /// contact) is too short for the EIT reference, which averages `reference_frames` of them,
+    /// and for the pressure tare P0 and noise, which come from the same period; and loudly when
+    /// the recording starts under load, as a calibration session resumed after a stop can:
+    /// then the reference and P0 hold that load, and every force and image is off by it.
+    pub fn warn_short_no_load<'a>(&self, recording: &Path, synced: impl IntoIterator<Item = &'a SyncedFrame>) {
+        let no_load = synced.into_iter().filter(|s| s.no_load).count();
+        let seconds = |n: usize| 2.0 * self.half_period_s * n as f64;
+        if no_load == 0 {
+            eprintln!(
+                "{}: warning: the recording starts under load (no EIT frame before the first contact): the EIT \
+                 reference and the pressure tare come from loaded frames, so forces and images are off by that \
+                 load; start each session (each part of a split one) with the indenter off the skin for at \
+                 least {:.0} s",
+                recording.display(),
+                seconds(self.reference_frames)
+            );
+        } else if no_load < MIN_NO_LOAD_FRAMES.min(self.reference_frames) {
+            eprintln!(
+                "{}: warning: only {no_load} no-load frame(s) ({:.1} s) before the first contact; the EIT reference \
+                 averages up to reference_frames = {} of them ({:.0} s), and the pressure tare and noise come from \
+                 the same period, so both are less certain (start with the indenter off the skin for longer)",
+                recording.display(),
+                seconds(no_load),
+                self.reference_frames,
+                seconds(self.reference_frames)
+            );
+        }
+    }
+
+    /// Whether the true load did not change within the acquisition window of a frame stamped
+    /// `t_s`.
     pub fn by_truth(&self, t_s: f64) -> bool {
         let (lo, hi) = (t_s - self.half_period_s, t_s + self.half_period_s);
-        let i = self.truth_t.partition_point(|&t| t <= lo);
-        self.truth_t.get(i).is_none_or(|&t| t > hi)
+        let i = self.change_t.partition_point(|&t| t <= lo);
+        self.change_t.get(i).is_none_or(|&t| t > hi)
+    }
+}
+
+/// Fewest no-load frames before [`Settled::warn_short_no_load`] stays quiet: a reference
+/// averaged over n frames leaves a difference image sqrt(1 + 1/n) times as noisy as one frame,
+/// 1.41 at n = 1 and 1.15 at 3 (1.08 with the shipped scenes' 5 s rest, 6 frames).
+pub const MIN_NO_LOAD_FRAMES: usize = 3;
+
+/// Two truth contacts this close (mm) are at the same place (the stage's repeatability is
+/// about 0.5 mm; the rig's grid steps are millimetres or more).
+pub const SAME_PLACE_MM: f64 = 0.5;
+/// Absolute part of the force tolerance of a repeated load (N): a few counts of a load cell's
+/// last digit (0.01 N).
+pub const SAME_FORCE_N: f64 = 0.05;
+/// Relative part of the force tolerance of a repeated load: a hold's creep.
+pub const SAME_FORCE_REL: f64 = 0.02;
+
+/// The times of the truth rows that change the load (see [`Settled`]); the first row always does.
+fn load_changes(truth: &skinflow_record::read::TruthStream) -> Vec<f64> {
+    let mut changes = Vec::new();
+    let mut last: Option<usize> = None;
+    for i in 0..truth.len() {
+        if last.is_none_or(|j| !same_load(truth.row(j), truth.row(i))) {
+            changes.push(truth.t_s[i]);
+            last = Some(i);
+        }
+    }
+    changes
+}
+
+/// Whether two truth rows hold the same load, contact by contact in column order.
+fn same_load(a: skinflow_record::read::TruthRow<'_>, b: skinflow_record::read::TruthRow<'_>) -> bool {
+    a.contact_count() == b.contact_count()
+        && a.contacts().zip(b.contacts()).all(|(p, q)| {
+            (p.x_mm - q.x_mm).hypot(p.y_mm - q.y_mm) <= SAME_PLACE_MM
+                && (p.diameter_mm == q.diameter_mm || (p.diameter_mm.is_nan() && q.diameter_mm.is_nan()))
+                && (p.force_n - q.force_n).abs() <= SAME_FORCE_N + SAME_FORCE_REL * p.force_n.abs()
+        })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use skinflow_record::read::TruthStream;
+
+    /// One contact per row (NaN x = no contact), at the given times.
+    fn truth(rows: &[(f64, f64, f64)]) -> TruthStream {
+        TruthStream {
+            t_s: rows.iter().map(|r| r.0).collect(),
+            max_contacts: 1,
+            x_mm: rows.iter().map(|r| r.1).collect(),
+            y_mm: rows.iter().map(|_| 0.0).collect(),
+            force_n: rows.iter().map(|r| r.2).collect(),
+            diameter_mm: rows.iter().map(|_| 15.0).collect(),
+        }
+    }
+
+    /// A load cell printing every 100 ms repeats a hold's load with jitter: only the press, the
+    /// next load level, a move and the release are changes; a slow drift is one once it adds up.
+    #[test]
+    fn repeated_rows_of_a_hold_are_not_changes() {
+        let nan = f64::NAN;
+        let t = truth(&[
+            (0.0, nan, nan),   // no contact: the first row is a change
+            (0.1, nan, nan),   // still none
+            (0.2, 10.0, 5.0),  // press
+            (0.3, 10.2, 5.02), // jitter: 0.2 mm, 0.02 N
+            (0.4, 10.0, 4.97),
+            (0.5, 10.0, 7.0),  // next level
+            (0.6, 10.0, 7.15), // within 0.05 + 2 % of 7 N (0.19 N)
+            (0.7, 10.0, 7.25), // 0.25 N from the last change: a change
+            (0.8, 12.0, 7.25), // moved 2 mm
+            (0.9, nan, nan),   // release
+        ]);
+        assert_eq!(load_changes(&t), vec![0.0, 0.2, 0.5, 0.7, 0.8, 0.9]);
+    }
+
+    /// A frame is settled when no change falls in its window, however many rows do.
+    #[test]
+    fn a_frame_is_settled_unless_a_change_falls_in_its_window() {
+        let rows: Vec<(f64, f64, f64)> =
+            (0..40).map(|i| (i as f64 * 0.1, 0.0, if i < 20 { 3.0 } else { 6.0 })).collect();
+        let settled = Settled {
+            change_t: load_changes(&truth(&rows)),
+            half_period_s: 0.5 / 1.3,
+            reference_frames: 10,
+            all_frames: false,
+            by: SettledBy::Truth,
+        };
+        assert_eq!(settled.change_t, vec![0.0, 2.0]);
+        assert!(settled.by_truth(1.0) && settled.by_truth(3.0));
+        assert!(!settled.by_truth(1.8) && !settled.by_truth(2.3));
     }
 }

@@ -90,6 +90,13 @@ pub enum RecordError {
     /// `repair` cannot give a copy that the reader accepts (or was given its input as output).
     #[error("{}: cannot be repaired: {reason}", file.display())]
     NotRepairable { file: PathBuf, reason: String },
+    /// Another process holds the file's HDF5 lock: a logger writing it without SWMR.
+    #[error(
+        "{}: being written by another process (it holds the file's HDF5 lock); a recording can be read \
+         while it is written only when its logger has `swmr = true`, otherwise once the run has ended",
+        file.display()
+    )]
+    Locked { file: PathBuf },
     /// The file is not HDF5 at all (no HDF5 signature where the format puts one).
     #[error("{}: not an HDF5 file (a skinflow recording is HDF5: CONTRACTS.md section 2)", file.display())]
     NotHdf5 { file: PathBuf },

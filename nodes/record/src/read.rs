@@ -164,7 +164,10 @@ pub(crate) fn open_file_marked(path: &Path) -> Result<(File, bool), RecordError>
     match File::open(path) {
         Ok(f) => Ok((f, false)),
         Err(first) => File::open_as(path, OpenMode::ReadSWMR).map(|f| (f, true)).map_err(|_| {
-            if has_hdf5_signature(path) {
+            // HDF5's own words for a lock held by a writer (errno EAGAIN/EWOULDBLOCK).
+            if first.to_string().contains("unable to lock file") {
+                RecordError::Locked { file: path.to_path_buf() }
+            } else if has_hdf5_signature(path) {
                 RecordError::hdf5(path, "/", first)
             } else {
                 RecordError::NotHdf5 { file: path.to_path_buf() }

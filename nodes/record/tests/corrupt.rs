@@ -60,3 +60,21 @@ fn garbage_empty_and_missing_files_are_refused() {
     assert!(matches!(Recording::open(&missing), Err(RecordError::Io { .. })));
     assert!(inspect(&missing).unwrap_err().to_string().starts_with(&missing.display().to_string()));
 }
+
+/// A file whose lock another writer holds (a logger without SWMR, here a plain exclusive lock
+/// on another descriptor, as HDF5 takes it) is refused saying so and how to read it live, not
+/// with the library's "unable to lock file, errno = 11".
+#[test]
+fn a_file_locked_by_a_writer_is_refused_saying_so() {
+    let dir = tempdir("locked");
+    valid_bytes(&dir);
+    let path = dir.join("valid.h5");
+    let holder = std::fs::File::open(&path).unwrap();
+    holder.lock().unwrap();
+    let err = Recording::open(&path).expect_err("locked");
+    assert!(matches!(err, RecordError::Locked { .. }), "{err}");
+    assert!(err.to_string().contains("swmr = true"), "{err}");
+    assert_refused(&path, "locked");
+    holder.unlock().unwrap();
+    assert!(Recording::open(&path).is_ok(), "readable once the lock is released");
+}

@@ -129,7 +129,8 @@ pub struct Image {
     /// The conductivity change per mesh element.
     pub elements: Vec<f64>,
     pub reference: ReferenceSource,
-    /// Channels excluded (NaN, saturated, dead electrode), as a count.
+    /// Channels excluded (non-finite, at the rail or at 0 V, in the frame or in the reference,
+    /// and every channel of a dead electrode), as a count.
     pub masked_channels: u32,
     /// Wall time of the reconstruction, ns (for speed-against-error reports).
     pub compute_ns: u64,

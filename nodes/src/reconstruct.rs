@@ -4,8 +4,11 @@
 //! ds = (J^T J + lambda^2 R)^-1 J^T dv in dual form, folded with the mesh-to-image map into one
 //! matrix (cached on disk), so a frame costs one matrix-vector product. The reference is the
 //! recording's `/eit/reference` (the `reference` input), else the mean of the first
-//! `reference_frames` no-load frames, else a `tare` command (the next frame). NaN, saturated
-//! and dead-electrode channels are masked with a matrix for the reduced set.
+//! `reference_frames` no-load frames (per channel, over its finite values, so a channel dead
+//! from the start does not hold it back), else a `tare` command (the next frame). Channels that
+//! are NaN, at the rail or at 0 V, in the frame or in the reference, and every channel of a
+//! dead electrode, are masked with a matrix for the reduced set; each image carries the count
+//! (`masked_channels`), and a change of the set is logged with its causes.
 //! Math: `skinflow_eit`.
 //!
 //! Hot swap: the replacement takes over the reference (tracker, the running no-load mean, a
@@ -19,7 +22,10 @@
 //! params = { lambda = 0.03, prior = { noser = { p = 0.5 } }, reference_frames = 10, mesh = { elements = 4000 } }
 //! ```
 //! Inputs: `frame` (synced_frame), `reference` (eit_frame, optional). Output: `image` (image):
-//! pixels in S/m, negative = conductivity decrease = contact, row 0 at the bottom.
+//! pixels in S/m, negative = conductivity decrease = contact, row 0 at the bottom. The values
+//! are one-step linearised estimates, not conductivities: they are not bounded by the
+//! background sigma0 (a heavy press on an electrode images a 1.86 S/m decrease on a 0.02 S/m
+//! background) and scale with lambda.
 
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -160,13 +166,10 @@ pub(crate) fn load_sensor(path: Option<&std::path::Path>, ctx: &BuildContext) ->
 pub struct Reconstructor {
     math: skinflow_eit::Reconstructor,
     sensor: Sensor,
+    /// The reference, and before it is complete the running mean of the no-load frames, which
+    /// those frames are imaged against so downstream sees the noise level of a no-load image.
     tracker: ReferenceTracker,
     tare_pending: bool,
-    /// Running sum of the no-load frames before the reference is complete: those frames are
-    /// imaged against the mean so far, so downstream sees the noise level of a no-load image.
-    noload_sum: Vec<f64>,
-    noload_mean: Vec<f64>,
-    noload_n: u32,
     elements: bool,
     mask: ChannelMask,
     mask_scratch: ChannelMask,
@@ -203,9 +206,6 @@ impl Reconstructor {
             tracker: ReferenceTracker::new(m, p.reference_frames)
                 .map_err(|e| NodeError::Param { param: "reference_frames".into(), problem: e.to_string() })?,
             tare_pending: false,
-            noload_sum: vec![0.0; m],
-            noload_mean: vec![0.0; m],
-            noload_n: 0,
             elements: p.elements,
             mask_scratch: mask.clone(),
             mask,
@@ -237,7 +237,13 @@ impl Reconstructor {
     fn report_reference(&mut self, ctx: &Context) {
         let now = self.tracker.source();
         if now != self.reported {
-            tracing::info!(node = ctx.id(), source = ?now, "EIT reference frame in use");
+            let t = &self.tracker;
+            // Channels without a finite reference value are masked on every frame.
+            tracing::info!(
+                node = ctx.id(), source = ?now, missing_channels = t.missing_channels(),
+                frames_with_missing_channels = t.partial, frames_skipped = t.skipped,
+                "EIT reference frame in use"
+            );
             self.reported = now;
         }
     }
@@ -249,9 +255,6 @@ struct ReferenceState {
     channels: usize,
     tracker: ReferenceTracker,
     tare_pending: bool,
-    noload_sum: Vec<f64>,
-    noload_mean: Vec<f64>,
-    noload_n: u32,
     reported: EitRef,
 }
 
@@ -299,14 +302,6 @@ impl Processor for Reconstructor {
             self.tracker
                 .accumulate(v)
                 .map_err(|e| NodeError::Input { port: "frame".into(), problem: e.to_string() })?;
-            if self.tracker.reference().is_none() && v.iter().all(|x| x.is_finite()) {
-                self.noload_n += 1;
-                let n = f64::from(self.noload_n);
-                for ((s, m), x) in self.noload_sum.iter_mut().zip(self.noload_mean.iter_mut()).zip(v) {
-                    *s += x;
-                    *m = *s / n;
-                }
-            }
         } else if !self.tracker.finish() {
             // The no-load period ended before any usable frame: the best remaining choice.
             tracing::warn!(
@@ -316,15 +311,25 @@ impl Processor for Reconstructor {
             self.tracker.tare(v).map_err(|e| NodeError::Input { port: "frame".into(), problem: e.to_string() })?;
         }
         self.report_reference(ctx);
-        // Channel masking: a change of the bad-channel set switches matrices (cached per set).
-        self.math.detect_mask_into(v, &mut self.mask_scratch);
+        // Channel masking, of the frame and of the reference it is differenced against: a
+        // change of the bad-channel set switches matrices (cached per set).
+        let v_ref = self.tracker.reference().or(self.tracker.running_mean());
+        let causes = self
+            .math
+            .detect_mask_into(v, v_ref, &mut self.mask_scratch)
+            .map_err(|e| NodeError::Input { port: "frame".into(), problem: e.to_string() })?;
         if self.mask_scratch != self.mask {
             std::mem::swap(&mut self.mask, &mut self.mask_scratch);
             self.math
                 .set_mask(&self.mask)
                 .map_err(|e| NodeError::Input { port: "frame".into(), problem: e.to_string() })?;
             self.spread = point_spread(&mut self.math, self.spread_mm)?;
-            tracing::warn!(node = ctx.id(), excluded = ?self.mask.excluded_channels(), dead_electrodes = ?self.mask.dead_electrodes(), "channel mask changed");
+            tracing::warn!(
+                node = ctx.id(), excluded = ?self.mask.excluded_channels(), dead_electrodes = ?self.mask.dead_electrodes(),
+                frame = ?causes.frame, reference = ?causes.reference, via_dead_electrode = causes.via_dead_electrode,
+                zero_floor_v = causes.zero_floor_v,
+                "channel mask changed"
+            );
         }
         let masked = self.mask.excluded_count() as u32;
         let (nx, ny) = (self.math.params().image_nx, self.math.params().image_ny);
@@ -334,7 +339,6 @@ impl Processor for Reconstructor {
         let (w_mm, h_mm) = (self.sensor.width_mm, self.sensor.height_mm);
         let math = &mut self.math;
         let tracker = &self.tracker;
-        let partial = (self.noload_n > 1).then_some(&self.noload_mean[..]);
         let spread = &self.spread;
         let mut result = Ok(());
         let payload = self.ring.fill(|img| {
@@ -346,7 +350,7 @@ impl Processor for Reconstructor {
             img.elements.resize(n_el, 0.0);
             img.reference = source;
             img.masked_channels = masked;
-            match tracker.reference().or(partial) {
+            match tracker.reference().or(tracker.running_mean()) {
                 Some(r) => {
                     result = math.reconstruct_image_into(v, r, &mut img.pixels);
                     if result.is_ok() && n_el > 0 {
@@ -380,9 +384,6 @@ impl Processor for Reconstructor {
             channels: m,
             tracker: self.tracker.clone(),
             tare_pending: self.tare_pending,
-            noload_sum: std::mem::take(&mut self.noload_sum),
-            noload_mean: std::mem::take(&mut self.noload_mean),
-            noload_n: self.noload_n,
             reported: self.reported,
         }))
     }
@@ -405,9 +406,6 @@ impl Processor for Reconstructor {
         self.tracker = s.tracker;
         self.tracker.set_wanted(wanted);
         self.tare_pending = s.tare_pending;
-        self.noload_sum = s.noload_sum;
-        self.noload_mean = s.noload_mean;
-        self.noload_n = s.noload_n;
         self.reported = s.reported;
         tracing::info!(node = ctx.id(), source = ?self.reported, "EIT reference state taken over (hot swap)");
         Ok(())
@@ -423,7 +421,10 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
         )
         .input(PortSpec::input::<SyncedFrame>("frame", "synced EIT frames"))
         .input(PortSpec::input::<EitFrame>("reference", "recorded no-load reference frame").optional())
-        .output(PortSpec::output::<Image>("image", "conductivity change, S/m, negative = contact"))
+        .output(PortSpec::output::<Image>(
+            "image",
+            "conductivity change, S/m (linearised estimate), negative = contact",
+        ))
         .param(ParamDoc::new("sensor", "path", "none", "sensor TOML, relative to the graph file (default paper-100mm)"))
         .param(ParamDoc::new("lambda", "f64", "0.1", "regularisation weight (dimensionless)"))
         .param(ParamDoc::new("prior", "table", "{ noser = { p = 0.5 } }", "noser {p} | identity | laplacian {epsilon}"))
@@ -434,7 +435,7 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
         .param(ParamDoc::new("precision", "string", "\"f64\"", "f64 | f32 matrix"))
         .param(ParamDoc::new("mesh", "table", "{ elements = 4000 }", "reconstruction mesh"))
         .param(ParamDoc::new("cem", "table", "none", "complete electrode model constants"))
-        .param(ParamDoc::new("mask", "table", "none", "saturation_v, dead_electrode_fraction"))
+        .param(ParamDoc::new("mask", "table", "none", "saturation_v, dead_electrode_fraction, zero_fraction"))
         .param(ParamDoc::new("elements", "bool", "false", "also output per-element values"))
         .param(ParamDoc::new(
             "point_spread_mm",

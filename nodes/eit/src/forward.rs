@@ -32,8 +32,8 @@ pub struct CemParams {
     pub contact_impedance_ohm_mm2: f64,
     /// Per-electrode contact impedances, ohm*mm^2, overriding the common value; empty = none.
     pub electrode_contact_impedance_ohm_mm2: Vec<f64>,
-    /// Drive current amplitude, uA (10 uA keeps two-terminal voltages near 0.5 V, within an
-    /// AD5940's range, for the default sensor).
+    /// Drive current amplitude, uA (10 uA gives two-terminal voltages of 0.19-0.37 V on the
+    /// default sensor, within an AD5940's range).
     pub current_ua: f64,
 }
 

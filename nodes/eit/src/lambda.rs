@@ -5,6 +5,11 @@
 //! GCV(lambda) = M |(I - A) dv|^2 / tr(I - A)^2 costs O(M) per lambda after one projection
 //! b = U^T dv per frame. Scores are summed over the frames given. The minimum over a logarithmic
 //! sweep is chosen; the whole curve is returned so the choice can be reported and plotted.
+//!
+//! GCV scores the estimator `DualSystem::matrix` builds, mode by mode from the same weights
+//! (`DualSystem::mode_weights`): a clipped mode has filter factor 0, so its share of dv stays in
+//! the residual and counts 1 in tr(I - A). Sweeps may go below `DualSystem::min_lambda`: there
+//! the scored estimator, like `matrix`, is the pseudo-inverse truncated at the clip level.
 
 use crate::error::{EitError, invalid};
 use crate::noser::DualSystem;
@@ -20,7 +25,7 @@ pub enum LambdaMethod {
 pub struct LambdaChoice {
     pub lambda: f64,
     pub method: LambdaMethod,
-    /// (lambda, score) over the sweep, ascending lambda.
+    /// (lambda, score) over the sweep, in the sweep's order.
     pub curve: Vec<(f64, f64)>,
 }
 
@@ -49,16 +54,23 @@ pub fn gcv(dual: &DualSystem, dvs: &[&[f64]], lambdas: &[f64]) -> Result<LambdaC
         let b: Vec<f64> = (0..m).map(|k| u.col(k).iter().zip(dv.iter()).map(|(a, b)| a * b).sum()).collect();
         projections.push(b);
     }
-    let s = dual.eigenvalues();
     let mut curve = Vec::with_capacity(lambdas.len());
+    let mut one_minus_filter = vec![0.0; m];
     for &lambda in lambdas {
         if !(lambda.is_finite() && lambda > 0.0) {
             return Err(invalid("lambda sweep", format!("values must be finite and > 0 (got {lambda})")));
         }
         let l2 = lambda * lambda;
-        let trace: f64 = s.iter().map(|&x| l2 / (x + l2)).sum();
-        let resid: f64 =
-            projections.iter().map(|b| b.iter().zip(s).map(|(bk, &x)| (l2 / (x + l2) * bk).powi(2)).sum::<f64>()).sum();
+        // 1 - s w = l2 w for a kept mode (written so, it does not cancel when s >> l2), and 1
+        // for a dropped one (w = 0).
+        for (r, w) in one_minus_filter.iter_mut().zip(dual.mode_weights(l2)) {
+            *r = if w == 0.0 { 1.0 } else { l2 * w };
+        }
+        let trace: f64 = one_minus_filter.iter().sum();
+        let resid: f64 = projections
+            .iter()
+            .map(|b| b.iter().zip(&one_minus_filter).map(|(bk, r)| (r * bk).powi(2)).sum::<f64>())
+            .sum();
         curve.push((lambda, m as f64 * resid / (trace * trace)));
     }
     let best = curve.iter().copied().min_by(|a, b| a.1.total_cmp(&b.1)).expect("non-empty sweep");

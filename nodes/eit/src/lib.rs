@@ -10,21 +10,28 @@
 //! - The skin is a 2-D sheet of thickness `CemParams::thickness_mm` (default 5 mm); conductivity
 //!   per element in S/m (default background 0.02 S/m = 200 uS/cm, the paper's saline); contact
 //!   impedance in ohm*mm^2 (default 5e4, i.e. 2 kohm over a 5 x 5 mm contact face); drive
-//!   current in uA (default 10 uA, about 0.2-0.5 V on the default sensor); values in volts.
+//!   current in uA (default 10 uA: 0.19-0.37 V, median 0.31 V, on the default pairwise sensor;
+//!   0.1-32 mV with the adjacent protocol); values in volts.
 //! - Protocol values: current in at drive.0, out at drive.1, value V[sense.0] - V[sense.1].
 //! - Jacobian: rows = measurements in protocol order, columns = elements, V per (S/m).
 //! - Difference data: normalized dv = (v - v_ref) / v_ref (default) or plain dv = v - v_ref.
 //! - Inverse: ds = (J^T J + lambda^2 R)^-1 J^T dv in dual form; default prior NOSER,
 //!   R = diag(J^T J)^0.5, trace-normalised so lambda is dimensionless (default 0.1); also
 //!   identity and Laplacian priors. The unknown is the relative change dsigma/sigma0; outputs
-//!   are dsigma in S/m: negative = conductivity decrease (a press on the paper's skin).
+//!   are dsigma in S/m: negative = conductivity decrease (a press on the paper's skin). They
+//!   are one-step linearised estimates, not conductivities: nothing bounds them by sigma0, and
+//!   their scale depends on lambda and on where the change is. A disc at 1 % of the 0.02 S/m
+//!   background images as -1.86 S/m on an electrode but -5.9e-3 S/m at the centre (true
+//!   change -0.0198 S/m), so sums or peaks of them are signals to calibrate, not physical
+//!   conductances.
 //! - Image: 64 x 64 pixels tiling the rectangle, index iy * nx + ix, iy = 0 at the bottom.
 //!
 //! # Per-frame API (the `reconstructor` node)
 //! `Reconstructor::new(&Sensor, &ReconParams)` (loads or precomputes; `info()` reports cache
 //! use, mesh size and minimum angle, lambda, prior). Per frame, no allocation:
 //! `reconstruct_image_into(v, v_ref, image)`, `reconstruct_elements_into(v, v_ref, elements)` or
-//! `reconstruct_into(v, v_ref, image, elements)`; `detect_mask_into(v, &mut mask)` then
+//! `reconstruct_into(v, v_ref, image, elements)`; `detect_mask_into(v, Some(v_ref), &mut mask)`
+//! (NaN, rail and 0 V channels of the frame or the reference, dead electrodes) then
 //! `set_mask(&mask)` (a new mask builds its matrix once, then it is cached in memory and on
 //! disk). Pixel geometry: `grid()` (`pixel_centre_mm`, `pixel_area_mm2`, `pixel_at`).
 //! `ReferenceTracker` picks the reference frame; `choose_lambda` + `set_lambda` tune lambda.

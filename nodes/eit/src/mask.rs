@@ -1,6 +1,11 @@
 //! Channel masking: which channels of a frame are unusable, and which electrodes are dead.
 //!
-//! A channel is bad when its value is NaN or infinite or its magnitude reaches `saturation_v`.
+//! A channel is bad when its value, in the frame or in the reference it is differenced
+//! against, is NaN or infinite, reaches `saturation_v` in magnitude (the rail), or is at or
+//! below the zero floor: `zero_fraction` x the median |v| of the reference's finite channels
+//! (of the frame's, when there is no reference yet). A 0 V reading is what an open input or a
+//! lifted electrode gives; unmasked, it is a -100 % change in normalized mode (and 0/0 when the
+//! reference reads 0 V too), which images as an edge artefact 40x a real contact.
 //! An electrode is dead when at least `dead_electrode_fraction` of the channels that use it (as
 //! drive or sense) are bad; then every channel using it is excluded, also the ones that still
 //! look valid (their drive or sense path runs through a broken contact).
@@ -14,15 +19,21 @@ use serde::Deserialize;
 #[serde(deny_unknown_fields, default)]
 pub struct MaskParams {
     /// |v| at or above this is saturated, volts (set it to the device's rail; the default 2 V
-    /// is 4x the largest value of the default sensor at the default 10 uA).
+    /// is 5.4x the largest value of the default sensor at the default 10 uA, 0.37 V).
     pub saturation_v: f64,
     /// Fraction of an electrode's channels that must be bad to call it dead, in (0, 1].
     pub dead_electrode_fraction: f64,
+    /// |v| at or below this fraction of the reference's median |v| reads as 0 V (an open
+    /// input), in [0, 1); 0 masks exact zeros only. The default 1e-3 sits 600x below the
+    /// smallest channel of the default sensor (0.19 V against a median of 0.31 V) and 40x
+    /// below the smallest of the adjacent protocol (9.5e-5 V against a median of 2.3 mV), so
+    /// no healthy channel of either is masked.
+    pub zero_fraction: f64,
 }
 
 impl Default for MaskParams {
     fn default() -> Self {
-        MaskParams { saturation_v: 2.0, dead_electrode_fraction: 0.5 }
+        MaskParams { saturation_v: 2.0, dead_electrode_fraction: 0.5, zero_fraction: 1e-3 }
     }
 }
 
@@ -32,6 +43,10 @@ impl MaskParams {
         let f = self.dead_electrode_fraction;
         if !(f > 0.0 && f <= 1.0) {
             return Err(invalid("dead_electrode_fraction", format!("must be in (0, 1] (got {f})")));
+        }
+        let z = self.zero_fraction;
+        if !(0.0..1.0).contains(&z) {
+            return Err(invalid("zero_fraction", format!("must be in [0, 1) (got {z})")));
         }
         Ok(())
     }
@@ -85,14 +100,88 @@ impl ChannelMask {
     }
 }
 
+/// Bad channels of one side (frame or reference), each counted once, by its first cause in
+/// this order.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct BadCounts {
+    pub non_finite: usize,
+    pub saturated: usize,
+    /// At or below the zero floor (0 V).
+    pub near_zero: usize,
+}
+
+impl BadCounts {
+    pub fn total(&self) -> usize {
+        self.non_finite + self.saturated + self.near_zero
+    }
+}
+
+/// Why `detect_into` excluded what it did, for logs and reports. A channel bad in both the
+/// frame and the reference counts on both sides.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct MaskCauses {
+    pub frame: BadCounts,
+    pub reference: BadCounts,
+    /// Channels that looked valid on both sides but use a dead electrode.
+    pub via_dead_electrode: usize,
+    /// The zero floor used, volts.
+    pub zero_floor_v: f64,
+}
+
 fn uses_any(m: &Measurement, dead: &[bool]) -> bool {
     dead[m.drive.0] || dead[m.drive.1] || dead[m.sense.0] || dead[m.sense.1]
 }
 
-/// Fills `out` (sized by `ChannelMask::none`) from frame `v`; allocates nothing.
-pub fn detect_into(v: &[f64], measurements: &[Measurement], params: &MaskParams, out: &mut ChannelMask) {
-    for (x, &val) in out.excluded.iter_mut().zip(v) {
-        *x = !val.is_finite() || val.abs() >= params.saturation_v;
+/// Counts `x` into `counts` when bad; returns whether it is.
+fn classify(x: f64, params: &MaskParams, zero_floor: f64, counts: &mut BadCounts) -> bool {
+    if !x.is_finite() {
+        counts.non_finite += 1;
+    } else if x.abs() >= params.saturation_v {
+        counts.saturated += 1;
+    } else if x.abs() <= zero_floor {
+        counts.near_zero += 1;
+    } else {
+        return false;
+    }
+    true
+}
+
+/// `zero_fraction` x the median |v| over the finite channels of `v` below the rail (0 when
+/// there are none). `scratch` holds at least `v.len()` values; the median is selected in place,
+/// without allocating.
+pub fn zero_floor(v: &[f64], params: &MaskParams, scratch: &mut [f64]) -> f64 {
+    let mut n = 0;
+    let usable = v.iter().filter(|x| x.is_finite() && x.abs() < params.saturation_v);
+    for (slot, x) in scratch.iter_mut().zip(usable) {
+        *slot = x.abs();
+        n += 1;
+    }
+    if n == 0 {
+        return 0.0;
+    }
+    let (_, median, _) = scratch[..n].select_nth_unstable_by(n / 2, f64::total_cmp);
+    params.zero_fraction * *median
+}
+
+/// Fills `out` (sized by `ChannelMask::none`) from frame `v` and the reference `v_ref` it is
+/// differenced against (none while there is none yet): a channel bad on either side is
+/// excluded (see the module doc). `scratch` holds at least `v.len()` values. Allocates nothing.
+pub fn detect_into(
+    v: &[f64],
+    v_ref: Option<&[f64]>,
+    measurements: &[Measurement],
+    params: &MaskParams,
+    scratch: &mut [f64],
+    out: &mut ChannelMask,
+) -> MaskCauses {
+    let floor = zero_floor(v_ref.unwrap_or(v), params, scratch);
+    let mut causes = MaskCauses { zero_floor_v: floor, ..MaskCauses::default() };
+    for (k, (x, &val)) in out.excluded.iter_mut().zip(v).enumerate() {
+        let in_frame = classify(val, params, floor, &mut causes.frame);
+        // A reference shorter than the frame has no usable value there.
+        let in_ref = v_ref
+            .is_some_and(|r| classify(r.get(k).copied().unwrap_or(f64::NAN), params, floor, &mut causes.reference));
+        *x = in_frame || in_ref;
     }
     for l in 0..out.dead.len() {
         let (mut total, mut bad) = (0usize, 0usize);
@@ -106,14 +195,26 @@ pub fn detect_into(v: &[f64], measurements: &[Measurement], params: &MaskParams,
         out.dead[l] = total > 0 && bad as f64 >= params.dead_electrode_fraction * total as f64;
     }
     for (x, meas) in out.excluded.iter_mut().zip(measurements) {
-        *x = *x || uses_any(meas, &out.dead);
+        if !*x && uses_any(meas, &out.dead) {
+            *x = true;
+            causes.via_dead_electrode += 1;
+        }
     }
+    causes
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::sensor::{Protocol, protocol_measurements};
+
+    fn detect(v: &[f64], v_ref: Option<&[f64]>) -> (ChannelMask, MaskCauses) {
+        let ms = protocol_measurements(Protocol::Pairwise, 16);
+        let mut mask = ChannelMask::none(ms.len(), 16);
+        let mut scratch = vec![0.0; ms.len()];
+        let causes = detect_into(v, v_ref, &ms, &MaskParams::default(), &mut scratch, &mut mask);
+        (mask, causes)
+    }
 
     #[test]
     fn nan_saturated_and_dead_electrode() {
@@ -128,8 +229,7 @@ mod tests {
             }
         }
         v[ms.iter().position(|m| m.drive == (0, 3)).unwrap()] = 0.4;
-        let mut mask = ChannelMask::none(ms.len(), 16);
-        detect_into(&v, &ms, &MaskParams::default(), &mut mask);
+        let (mask, causes) = detect(&v, None);
         assert_eq!(mask.dead_electrodes(), vec![3]);
         assert!(mask.excluded[20] && mask.excluded[40]);
         assert!(mask.excluded[ms.iter().position(|m| m.drive == (0, 3)).unwrap()]);
@@ -140,5 +240,44 @@ mod tests {
             m.excluded[40] = true;
             m
         });
+        assert_eq!(causes.frame, BadCounts { non_finite: 1, saturated: 1 + 14, near_zero: 0 });
+        assert_eq!((causes.reference.total(), causes.via_dead_electrode), (0, 1));
+    }
+
+    #[test]
+    fn zero_volt_and_reference_side_channels_are_bad_too() {
+        let n = 120;
+        let v_ref: Vec<f64> = (0..n).map(|k| 0.2 + 1e-3 * k as f64).collect();
+        let mut v = v_ref.clone();
+        // 0 V and two microvolts of pickup: below the floor, 1e-3 x the median (2.6e-4 V).
+        v[5] = 0.0;
+        v[6] = -2e-6;
+        // Small but above the floor: kept.
+        v[7] = 3e-4;
+        let mut r = v_ref.clone();
+        r[50] = f64::NAN;
+        r[51] = 2.5;
+        r[52] = 0.0;
+        // 0 V on both sides: one excluded channel, counted on each side.
+        r[5] = 0.0;
+        let (mask, causes) = detect(&v, Some(&r));
+        assert_eq!(mask.excluded_channels(), vec![5, 6, 50, 51, 52]);
+        assert_eq!(causes.frame, BadCounts { non_finite: 0, saturated: 0, near_zero: 2 });
+        assert_eq!(causes.reference, BadCounts { non_finite: 1, saturated: 1, near_zero: 2 });
+        // The median of the reference's 118 finite channels below the rail, two of them 0 V.
+        assert!(causes.zero_floor_v > 2.5e-4 && causes.zero_floor_v < 2.7e-4, "{}", causes.zero_floor_v);
+        // No reference: the frame's own median sets the floor.
+        let (mask, _) = detect(&v, None);
+        assert_eq!(mask.excluded_channels(), vec![5, 6]);
+    }
+
+    #[test]
+    fn zero_floor_ignores_bad_channels_and_handles_none_left() {
+        let p = MaskParams::default();
+        let mut scratch = [0.0; 4];
+        assert_eq!(zero_floor(&[f64::NAN, 9.0, f64::INFINITY, -9.0], &p, &mut scratch), 0.0);
+        assert_eq!(zero_floor(&[f64::NAN, 0.3, -0.5, 9.0], &p, &mut scratch), 1e-3 * 0.5);
+        let bad = MaskParams { zero_fraction: 1.0, ..p };
+        assert!(bad.validate().unwrap_err().to_string().contains("zero_fraction"));
     }
 }

@@ -3,7 +3,8 @@
 //!
 //! Units: the inverse works on the relative change x = dsigma / sigma0 (so J has the scale of the
 //! data and lambda stays dimensionless); the folded matrices multiply by sigma0 at the end, so
-//! images and element values are conductivity changes in S/m, negative for a decrease.
+//! images and element values are conductivity changes in S/m, negative for a decrease (linearised
+//! one-step estimates, not bounded by sigma0: see the crate doc).
 //! Normalized mode divides J's rows by the model's reference voltages v0, to match
 //! dv = (v - v_ref) / v_ref; plain mode uses J as is, to match dv = v - v_ref in volts.
 

@@ -4,6 +4,7 @@
 //! Jacobian, dual NOSER, image map; see `precompute`). Per frame, `reconstruct_image_into` forms
 //! dv (normalized or plain, zero on masked channels) in a preallocated buffer and multiplies:
 //! image (pixels, S/m, negative = conductivity decrease = contact) = F dv. No allocation per frame.
+//! The values are linearised one-step estimates, not bounded by sigma0 (see the crate doc).
 //! `set_mask` switches to a matrix for a reduced channel set (built once per mask, kept in memory
 //! and on disk).
 
@@ -12,7 +13,7 @@ use crate::error::{EitError, check_positive};
 use crate::forward::CemParams;
 use crate::image::{ImageGrid, SUBSAMPLES};
 use crate::lambda::{LambdaChoice, gcv};
-use crate::mask::{ChannelMask, MaskParams, detect_into};
+use crate::mask::{ChannelMask, MaskCauses, MaskParams, detect_into};
 use crate::mesh::MeshParams;
 use crate::noser::{DualSystem, Prior};
 use crate::precompute::{DifferenceMode, Folded, Model};
@@ -44,7 +45,10 @@ pub struct ReconParams {
     pub mesh: MeshParams,
     pub cem: CemParams,
     pub prior: Prior,
-    /// Regularisation weight, dimensionless (R is trace-normalised, see `noser`).
+    /// Regularisation weight, dimensionless (R is trace-normalised, see `noser`). Below
+    /// `DualSystem::min_lambda` (8.5e-7 on the default model) lambda^2 is under the eigenvalue
+    /// clip level and the matrix is the pseudo-inverse truncated there: accepted, bounded, but
+    /// no sharper and about twice as noisy as at that lambda.
     pub lambda: f64,
     pub mode: DifferenceMode,
     /// Image size in pixels; pixel centres cover the sensor rectangle.
@@ -126,6 +130,8 @@ pub struct Reconstructor {
     mask: ChannelMask,
     by_mask: HashMap<Vec<bool>, Arc<Folded>>,
     dv: Vec<f64>,
+    /// Scratch for the mask's zero floor (a median), so detection allocates nothing.
+    mask_scratch: Vec<f64>,
     dv32: Vec<f32>,
     image32: Vec<f32>,
     info: ReconInfo,
@@ -150,6 +156,7 @@ impl Reconstructor {
             mask: mask.clone(),
             by_mask: HashMap::new(),
             dv: vec![0.0; m],
+            mask_scratch: vec![0.0; m],
             dv32: vec![0.0; m],
             image32: vec![0.0; params.image_nx * params.image_ny],
             info: ReconInfo {
@@ -192,7 +199,9 @@ impl Reconstructor {
         let p = &self.params;
         let ex: Vec<usize> = (0..excluded.len()).filter(|&k| excluded[k]).collect();
         format!(
-            "matrix v3|{}|prior {}|lambda {:?}|image {}x{} sub {}|excluded {:?}",
+            // v4: clipped eigenmodes are dropped and the clip is at the eigensolver's noise
+            // level, so v3 matrices (which amplified clipped modes by 1/lambda^2) must miss.
+            "matrix v4|{}|prior {}|lambda {:?}|image {}x{} sub {}|excluded {:?}",
             self.model_description(),
             p.prior.describe(),
             p.lambda,
@@ -313,9 +322,30 @@ impl Reconstructor {
         &self.mask
     }
 
-    /// Detects bad channels of frame `v` into `out` (sized like `mask()`); allocates nothing.
-    pub fn detect_mask_into(&self, v: &[f64], out: &mut ChannelMask) {
-        detect_into(v, &self.measurements, &self.params.mask, out);
+    /// Detects the bad channels of frame `v` and of the reference `v_ref` it will be
+    /// differenced against (none before there is one) into `out` (sized like `mask()`), and
+    /// says why; allocates nothing. A channel bad on either side is excluded (`mask`).
+    pub fn detect_mask_into(
+        &mut self,
+        v: &[f64],
+        v_ref: Option<&[f64]>,
+        out: &mut ChannelMask,
+    ) -> Result<MaskCauses, EitError> {
+        let m = self.measurements.len();
+        if v.len() != m {
+            return Err(EitError::Length { what: "frame", expected: m, got: v.len() });
+        }
+        if let Some(r) = v_ref.filter(|r| r.len() != m) {
+            return Err(EitError::Length { what: "reference frame", expected: m, got: r.len() });
+        }
+        if out.excluded.len() != m {
+            return Err(EitError::Length { what: "channel mask", expected: m, got: out.excluded.len() });
+        }
+        if out.dead.len() != self.mask.dead.len() {
+            let expected = self.mask.dead.len();
+            return Err(EitError::Length { what: "dead electrode mask", expected, got: out.dead.len() });
+        }
+        Ok(detect_into(v, v_ref, &self.measurements, &self.params.mask, &mut self.mask_scratch, out))
     }
 
     /// Switches to the matrix for `mask` (computed or loaded once per distinct mask). Returns
@@ -347,15 +377,26 @@ impl Reconstructor {
         Ok(true)
     }
 
-    /// Changes lambda and recomputes the active matrix (drops matrices of other masks).
+    /// Changes lambda and recomputes the active matrix (drops matrices of other masks). On an
+    /// error everything stays as it was.
     pub fn set_lambda(&mut self, lambda: f64) -> Result<(), EitError> {
         check_positive("lambda", lambda)?;
-        self.params.lambda = lambda;
-        self.info.lambda = lambda;
-        self.by_mask.clear();
+        let old = std::mem::replace(&mut self.params.lambda, lambda);
+        let others = std::mem::take(&mut self.by_mask);
         let mask = self.mask.clone();
-        self.active = self.folded_for(&mask)?;
-        Ok(())
+        match self.folded_for(&mask) {
+            Ok(f) => {
+                self.info.lambda = lambda;
+                self.info.clipped_eigenvalues = f.clipped;
+                self.active = f;
+                Ok(())
+            }
+            Err(e) => {
+                self.params.lambda = old;
+                self.by_mask = others;
+                Err(e)
+            }
+        }
     }
 
     /// GCV choice of lambda for frames `frames` against `v_ref`, on the active channel set.

@@ -1,10 +1,13 @@
 //! The no-load reference frame for time-difference imaging, and where it came from.
 //!
 //! Precedence: a recorded `/eit/reference` (`from_reference`) or an explicit `tare` replaces
-//! whatever was there; otherwise the mean of the first `n` complete frames (`accumulate`), or of
-//! fewer if the no-load period ends first (`finish`). Frames
-//! with a non-finite value are not averaged (they are counted in `skipped`). Allocation happens at
-//! construction only.
+//! whatever was there; otherwise the mean of the first `n` frames (`accumulate`), or of fewer
+//! if the no-load period ends first (`finish`). The mean is taken per channel over that
+//! channel's finite values, so one dead channel (NaN in every frame) does not hold the
+//! reference back: it forms from the other channels, and the dead one is left non-finite there
+//! for the channel mask to exclude (`mask::detect_into` checks the reference too). Only a
+//! frame with no finite value at all is not averaged (counted in `skipped`). Allocation
+//! happens at construction only.
 
 use crate::error::EitError;
 
@@ -24,12 +27,17 @@ pub enum ReferenceSource {
 /// Tracks the reference frame (M values, volts).
 #[derive(Debug, Clone)]
 pub struct ReferenceTracker {
+    /// The reference once set; before that, the running per-channel mean.
     reference: Vec<f64>,
     sum: Vec<f64>,
+    /// Finite values summed per channel.
+    count: Vec<u32>,
     wanted: usize,
     seen: usize,
-    /// Frames not averaged because they held a non-finite value.
+    /// Frames not averaged because they held no finite value.
     pub skipped: usize,
+    /// Frames averaged with some channels left out (non-finite there).
+    pub partial: usize,
     source: ReferenceSource,
 }
 
@@ -40,11 +48,13 @@ impl ReferenceTracker {
             return Err(crate::error::invalid("reference_frames", "must be >= 1 (got 0)"));
         }
         Ok(ReferenceTracker {
-            reference: vec![0.0; m],
+            reference: vec![f64::NAN; m],
             sum: vec![0.0; m],
+            count: vec![0; m],
             wanted: n,
             seen: 0,
             skipped: 0,
+            partial: 0,
             source: ReferenceSource::None,
         })
     }
@@ -54,9 +64,11 @@ impl ReferenceTracker {
         ReferenceTracker {
             reference: v.to_vec(),
             sum: vec![0.0; v.len()],
+            count: vec![0; v.len()],
             wanted: 1,
             seen: 0,
             skipped: 0,
+            partial: 0,
             source: ReferenceSource::Recorded,
         }
     }
@@ -68,26 +80,30 @@ impl ReferenceTracker {
         Ok(())
     }
 
-    /// Feeds a frame: while no reference is set, adds it to the mean of the first N. Returns
-    /// whether a reference is available after this frame.
+    /// Feeds a frame: while no reference is set, adds its finite values to the per-channel
+    /// mean of the first N. Returns whether a reference is available after this frame.
     pub fn accumulate(&mut self, frame: &[f64]) -> Result<bool, EitError> {
         self.check(frame)?;
         if self.source != ReferenceSource::None {
             return Ok(true);
         }
-        if frame.iter().any(|v| !v.is_finite()) {
+        if !frame.iter().any(|v| v.is_finite()) {
             self.skipped += 1;
             return Ok(false);
         }
-        for (s, v) in self.sum.iter_mut().zip(frame) {
-            *s += v;
+        let mut left_out = false;
+        for (((s, c), r), &v) in self.sum.iter_mut().zip(&mut self.count).zip(&mut self.reference).zip(frame) {
+            if v.is_finite() {
+                *s += v;
+                *c += 1;
+                *r = *s / f64::from(*c);
+            } else {
+                left_out = true;
+            }
         }
+        self.partial += usize::from(left_out);
         self.seen += 1;
         if self.seen == self.wanted {
-            let n = self.seen as f64;
-            for (r, s) in self.reference.iter_mut().zip(&self.sum) {
-                *r = s / n;
-            }
             self.source = ReferenceSource::MeanOfFirst { frames: self.seen };
         }
         Ok(self.source != ReferenceSource::None)
@@ -97,10 +113,6 @@ impl ReferenceTracker {
     /// frames exist (the no-load period ended early). Returns whether a reference is set.
     pub fn finish(&mut self) -> bool {
         if self.source == ReferenceSource::None && self.seen > 0 {
-            let n = self.seen as f64;
-            for (r, s) in self.reference.iter_mut().zip(&self.sum) {
-                *r = s / n;
-            }
             self.source = ReferenceSource::MeanOfFirst { frames: self.seen };
         }
         self.source != ReferenceSource::None
@@ -132,9 +144,21 @@ impl ReferenceTracker {
         Ok(())
     }
 
-    /// The reference, once available.
+    /// The reference, once available. A channel with no finite value in it is NaN.
     pub fn reference(&self) -> Option<&[f64]> {
         (self.source != ReferenceSource::None).then_some(&self.reference[..])
+    }
+
+    /// While the reference is still accumulating, the per-channel mean of the frames so far,
+    /// once there are at least two (a frame differenced against itself images nothing). A
+    /// channel with no finite value yet is NaN.
+    pub fn running_mean(&self) -> Option<&[f64]> {
+        (self.source == ReferenceSource::None && self.seen > 1).then_some(&self.reference[..])
+    }
+
+    /// Channels of the reference (or of the running mean) with no finite value.
+    pub fn missing_channels(&self) -> usize {
+        self.reference.iter().filter(|v| !v.is_finite()).count()
     }
 
     pub fn source(&self) -> ReferenceSource {
@@ -150,18 +174,39 @@ mod tests {
     fn mean_of_first_n_then_tare_overrides() {
         let mut r = ReferenceTracker::new(2, 2).unwrap();
         assert!(!r.accumulate(&[1.0, 2.0]).unwrap());
-        assert!(!r.accumulate(&[f64::NAN, 2.0]).unwrap());
-        assert_eq!(r.reference(), None);
+        assert!(!r.accumulate(&[f64::NAN, f64::INFINITY]).unwrap());
+        assert_eq!((r.reference(), r.running_mean()), (None, None));
         assert!(r.accumulate(&[3.0, 4.0]).unwrap());
         assert_eq!(r.reference(), Some(&[2.0, 3.0][..]));
         assert_eq!(r.source(), ReferenceSource::MeanOfFirst { frames: 2 });
-        assert_eq!(r.skipped, 1);
+        assert_eq!((r.skipped, r.partial, r.missing_channels()), (1, 0, 0));
         // Later frames do not move it.
         r.accumulate(&[9.0, 9.0]).unwrap();
         assert_eq!(r.reference(), Some(&[2.0, 3.0][..]));
         r.tare(&[5.0, 6.0]).unwrap();
         assert_eq!((r.reference(), r.source()), (Some(&[5.0, 6.0][..]), ReferenceSource::Tare));
         assert!(r.tare(&[1.0]).is_err());
+    }
+
+    #[test]
+    fn a_channel_dead_in_every_frame_does_not_hold_the_reference_back() {
+        let mut r = ReferenceTracker::new(3, 3).unwrap();
+        assert!(!r.accumulate(&[1.0, f64::NAN, 2.0]).unwrap());
+        assert_eq!(r.running_mean(), None);
+        // Channel 2 drops out once: its mean is over its two finite values.
+        assert!(!r.accumulate(&[3.0, f64::NAN, f64::NAN]).unwrap());
+        let m = r.running_mean().unwrap();
+        assert_eq!((m[0], m[2]), (2.0, 2.0));
+        assert!(m[1].is_nan());
+        assert!(r.accumulate(&[5.0, f64::NEG_INFINITY, 8.0]).unwrap());
+        let v = r.reference().unwrap();
+        assert_eq!((v[0], v[2]), (3.0, 5.0));
+        assert!(v[1].is_nan(), "no finite value: left for the mask");
+        assert_eq!(
+            (r.source(), r.skipped, r.partial, r.missing_channels()),
+            (ReferenceSource::MeanOfFirst { frames: 3 }, 0, 3, 1)
+        );
+        assert_eq!(r.running_mean(), None, "complete: the running mean is no longer offered");
     }
 
     #[test]

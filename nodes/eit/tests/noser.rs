@@ -1,8 +1,10 @@
-//! The dual (M x M) form against the primal (E x E) form on a small mesh, for each prior, and
-//! reconstruction on meshes from 200 to 20,000 elements.
+//! The dual (M x M) form against the primal (E x E) form on a small mesh, for each prior and
+//! lambda from 1e-3 to 10; clipped eigenmodes dropped, and GCV scoring the same estimator as
+//! `DualSystem::matrix`; reconstruction on meshes from 200 to 20,000 elements.
 
 use faer::linalg::solvers::Solve;
 use faer::{Mat, Side};
+use skinflow_eit::lambda::gcv;
 use skinflow_eit::noser::{laplacian, noser_diagonal};
 use skinflow_eit::precompute::DifferenceMode;
 use skinflow_eit::{
@@ -39,23 +41,69 @@ fn dense_prior(model: &Model, prior: &Prior) -> Mat<f64> {
     }
 }
 
+/// The columns of U for the kept (not clipped) modes, as a projector U_k U_k^T.
+fn kept_projector(dual: &DualSystem) -> Mat<f64> {
+    let u = dual.eigenvectors();
+    let kept = Mat::from_fn(u.nrows(), u.ncols() - dual.clipped, |i, k| u[(i, k + dual.clipped)]);
+    &kept * kept.transpose()
+}
+
 #[test]
-fn dual_form_equals_primal_form() {
+fn dual_form_equals_primal_form_on_the_kept_modes() {
     let model = small_model();
     let j = model.jacobian.as_ref();
     for prior in [Prior::Noser { p: 0.5 }, Prior::Noser { p: 1.0 }, Prior::Identity, Prior::Laplacian { epsilon: 0.01 }]
     {
         let dual = DualSystem::new(j, &prior, &model.mesh).unwrap();
-        // lambda = 0.1 keeps the primal system's condition near 1e8, so its own rounding error
-        // (~1e-16 x 1e8) stays far below the 1e-9 bound.
-        let lambda = 0.1;
-        let d = dual.matrix(lambda).unwrap();
-        let r = dense_prior(&model, &prior);
-        let a = j.transpose() * j + r * faer::Scale(lambda * lambda * dual.prior_scale);
-        let p = a.llt(Side::Lower).unwrap().solve(j.transpose().to_owned());
-        let scale = p.norm_max();
-        let diff = (&d - &p).norm_max();
-        assert!(diff <= 1e-9 * scale, "{}: max diff {diff} vs {scale}", prior.describe());
+        // The exact identity (J^T J + l2 R)^-1 J^T = X U diag(1 / (s + l2)) U^T restricted to the
+        // kept modes is what `matrix` builds (clipped modes are dropped). The bounds follow the
+        // primal system's own rounding, ~1e-16 x its condition (27 / lambda^2 times R's):
+        // measured 2e-9, 2e-13 and 7e-15.
+        for (lambda, bound) in [(1e-3, 1e-8), (0.1, 1e-11), (10.0, 1e-13)] {
+            let d = dual.matrix(lambda).unwrap();
+            let r = dense_prior(&model, &prior);
+            let a = j.transpose() * j + r * faer::Scale(lambda * lambda * dual.prior_scale);
+            let p = a.llt(Side::Lower).unwrap().solve(j.transpose().to_owned()) * kept_projector(&dual);
+            let scale = p.norm_max();
+            let diff = (&d - &p).norm_max();
+            assert!(diff <= bound * scale, "{} lambda {lambda}: max diff {diff} vs {scale}", prior.describe());
+        }
+    }
+}
+
+#[test]
+fn clipped_modes_are_dropped_and_gcv_scores_the_matrix_estimator() {
+    let model = small_model();
+    let j = model.jacobian.as_ref();
+    let dual = DualSystem::new(j, &Prior::default(), &model.mesh).unwrap();
+    let (m, s) = (j.nrows(), dual.eigenvalues());
+    // 300 elements, 120 channels: the spectrum falls through the eigensolver's rounding level.
+    assert!(dual.clipped > 0, "the small model has clipped modes");
+    let s_max = s.iter().copied().fold(0.0, f64::max);
+    assert_eq!(dual.clip_level(), skinflow_eit::noser::clip_level(m, s_max));
+    assert_eq!(s.iter().filter(|&&x| x == 0.0).count(), dual.clipped);
+    assert!(s.iter().all(|&x| x == 0.0 || x >= dual.clip_level()));
+    // A clipped direction of the data gives (almost) nothing: what remains is rounding of
+    // U^T u_k times the kept modes' weights, measured 2e-7 of the top mode's response. The
+    // old weight 1 / lambda^2 (1e8 here) multiplied a nonzero X u_k instead.
+    let u = dual.eigenvectors();
+    let d = dual.matrix(1e-4).unwrap();
+    let top = (&d * u.col(m - 1)).norm_l2();
+    for k in 0..dual.clipped {
+        let r = (&d * u.col(k)).norm_l2();
+        assert!(r <= 1e-5 * top, "clipped mode {k}: |D u| = {r} vs {top} for the top mode");
+    }
+    // GCV's score is that of the influence matrix A = J D of the estimator `matrix` builds.
+    let dv: Vec<f64> = (0..m).map(|k| ((k * 37 % 11) as f64 - 5.0) * 1e-3).collect();
+    for lambda in [1e-4, 1e-3, 0.1] {
+        let a = j * dual.matrix(lambda).unwrap();
+        let dvm = Mat::from_fn(m, 1, |i, _| dv[i]);
+        let trace: f64 = (0..m).map(|i| 1.0 - a[(i, i)]).sum();
+        let want = m as f64 * (&dvm - &a * &dvm).squared_norm_l2() / (trace * trace);
+        let got = gcv(&dual, &[&dv], &[lambda]).unwrap().curve[0].1;
+        // Measured 3e-8 at 1e-4 (rounding of J D on the smallest kept modes); scoring clipped
+        // modes as `matrix` once weighted them would differ by ~1e-5 there.
+        assert!((got - want).abs() <= 1e-6 * want, "lambda {lambda}: gcv {got} vs J D {want}");
     }
 }
 

@@ -1,6 +1,7 @@
 //! Reconstruction checks on simulated data: inclusions at the centre, near an edge and in a
-//! corner, signs, a dead electrode, a 100x contrast, extreme lambda, noise-only frames, f32 vs
-//! f64, the disk cache and GCV. The data come from a finer, different mesh (9000 elements) than
+//! corner, signs, dead electrodes (in the frame, through the no-load period, at 0 V, at the rail
+//! or 0 V in the reference), a 100x contrast, lambda from 1e-12 to 1e2 (localisation and noise
+//! gain), noise-only frames, f32 vs f64, the disk cache and GCV (noisy and noise-free). The data come from a finer, different mesh (9000 elements) than
 //! the reconstruction's (4000), so no "inverse crime" flatters the results.
 
 use rand::SeedableRng;
@@ -8,8 +9,10 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 use skinflow_eit::lambda::log_sweep;
 use skinflow_eit::mask::ChannelMask;
+use skinflow_eit::reconstruct::DEFAULT_LAMBDA;
 use skinflow_eit::{
-    CacheStatus, CemParams, ForwardModel, Mesh, MeshParams, Precision, ReconParams, Reconstructor, Sensor,
+    CacheStatus, CemParams, DualSystem, ForwardModel, Mesh, MeshParams, Precision, Prior, ReconParams, Reconstructor,
+    ReferenceSource, ReferenceTracker, Sensor,
 };
 use std::path::PathBuf;
 use std::sync::OnceLock;
@@ -128,7 +131,7 @@ fn dead_electrode_is_masked_and_reconstruction_continues() {
     let mut img = vec![0.0; r.pixel_count()];
     assert!(r.reconstruct_image_into(&v, &truth().v_ref, &mut img).is_err());
     let mut mask = ChannelMask::none(ms.len(), 16);
-    r.detect_mask_into(&v, &mut mask);
+    r.detect_mask_into(&v, Some(&truth().v_ref), &mut mask).unwrap();
     assert_eq!(mask.dead_electrodes(), vec![6]);
     assert_eq!(mask.excluded_count(), 15);
     assert!(r.set_mask(&mask).unwrap());
@@ -137,15 +140,147 @@ fn dead_electrode_is_masked_and_reconstruction_continues() {
     assert_eq!(r.mask().excluded_channels().len(), 15);
 }
 
+/// The peak (most negative pixel) of frame `v` against `v_ref`: its centre (mm) and value.
+fn peak_against(r: &mut Reconstructor, v: &[f64], v_ref: &[f64]) -> ([f64; 2], f64) {
+    let mut img = vec![0.0; r.pixel_count()];
+    r.reconstruct_image_into(v, v_ref, &mut img).unwrap();
+    assert!(img.iter().all(|x| x.is_finite()));
+    let k = (0..img.len()).min_by(|&a, &b| img[a].total_cmp(&img[b])).unwrap();
+    (r.grid().pixel_centre_mm(k), img[k])
+}
+
+/// `v_ref` with fixed-seed relative noise of standard deviation `sd`.
+fn noisy_reference(seed: u64, sd: f64) -> Vec<f64> {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let noise = Normal::new(0.0, sd).unwrap();
+    truth().v_ref.iter().map(|x| x * (1.0 + noise.sample(&mut rng))).collect()
+}
+
 #[test]
-fn lambda_sweep_from_1e_8_to_1e2_gives_finite_images() {
+fn lambda_sweep_from_1e_12_to_1e2_localises_with_bounded_noise_gain() {
     let mut r = recon(ReconParams::default());
-    let v = frame([0.0, 0.0], 7.5, 0.5);
-    for lambda in log_sweep(1e-8, 1e2, 11) {
+    let c = [10.0, -5.0];
+    let v = frame(c, 7.5, 0.5);
+    let noise_only = noisy_reference(3, 1e-4);
+    let min_lambda = {
+        let m = r.model().unwrap();
+        DualSystem::new(m.jacobian.as_ref(), &Prior::default(), &m.mesh).unwrap().min_lambda()
+    };
+    // Tikhonov's gain is at most 1 / (2 lambda) per mode (in the prior's norm), and below
+    // `min_lambda` the truncation at the clip level caps it there: so the noise-only image
+    // times max(lambda, min_lambda) stays near its value at the default lambda (measured
+    // within 1.5x). Clipped modes weighted 1 / lambda^2 broke this by 1e5 at lambda = 1e-9.
+    let gain = |r: &mut Reconstructor| image_of(r, &noise_only, true).0.iter().fold(0.0f64, |a, x| a.max(x.abs()));
+    let at_default = gain(&mut r) * DEFAULT_LAMBDA;
+    for lambda in [1e-12, 1e-9, 1e-6, 1e-4, 1e-2, 1.0, 1e2] {
         r.set_lambda(lambda).unwrap();
-        let (img, _, _) = image_of(&mut r, &v, true);
-        assert!(img.iter().any(|x| *x != 0.0), "lambda {lambda}");
+        let (_, peak, value) = image_of(&mut r, &v, true);
+        // Measured: 6.7 mm below min_lambda (the truncated pseudo-inverse), <= 4 mm above it.
+        assert!(value < 0.0 && dist(peak, c) <= 8.0, "lambda {lambda}: peak {value} at {peak:?}");
+        let g = gain(&mut r) * lambda.max(min_lambda);
+        assert!(g <= 3.0 * at_default, "lambda {lambda}: noise gain x lambda {g} vs {at_default} at the default");
     }
+}
+
+#[test]
+fn gcv_on_noise_free_frames_with_a_sweep_to_1e_12_picks_a_lambda_that_localises() {
+    // Model error only (the data come from another mesh): GCV then prefers a small lambda.
+    // Measured: 5.6e-6, peak 2 mm off; scoring clipped modes differently from the matrix it
+    // then built once chose 5.6e-7, whose image peaked 20 mm off.
+    let mut r = recon(ReconParams::default());
+    let c = [10.0, -5.0];
+    let v = frame(c, 7.5, 0.5);
+    let sweep = log_sweep(1e-12, 1e2, 57);
+    let choice = r.choose_lambda(&[&v], &truth().v_ref, &sweep).unwrap();
+    assert_eq!(choice.curve.len(), sweep.len());
+    assert!(choice.curve.iter().all(|(_, score)| score.is_finite() && *score >= 0.0));
+    r.set_lambda(choice.lambda).unwrap();
+    let (_, peak, value) = image_of(&mut r, &v, true);
+    assert!(value < 0.0 && dist(peak, c) <= 5.0, "lambda {}: peak {value} at {peak:?}", choice.lambda);
+}
+
+#[test]
+fn an_electrode_dead_through_the_no_load_period_leaves_a_reference_of_the_others() {
+    let ms = Sensor::paper_100mm().measurements();
+    let uses_6: Vec<bool> = ms.iter().map(|m| m.drive.0 == 6 || m.drive.1 == 6).collect();
+    let kill = |mut v: Vec<f64>| {
+        for (x, &dead) in v.iter_mut().zip(&uses_6) {
+            if dead {
+                *x = f64::NAN;
+            }
+        }
+        v
+    };
+    let mut tracker = ReferenceTracker::new(ms.len(), 10).unwrap();
+    for seed in 0..10 {
+        tracker.accumulate(&kill(noisy_reference(100 + seed, 1e-5))).unwrap();
+    }
+    assert_eq!(tracker.source(), ReferenceSource::MeanOfFirst { frames: 10 });
+    assert_eq!((tracker.missing_channels(), tracker.partial, tracker.skipped), (15, 10, 0));
+    let v_ref = tracker.reference().expect("the reference forms from the other channels");
+    for ((a, b), &dead) in v_ref.iter().zip(&truth().v_ref).zip(&uses_6) {
+        assert!(if dead { a.is_nan() } else { ((a - b) / b).abs() < 1e-5 }, "{a} vs {b}");
+    }
+    let c = [5.0, 5.0];
+    let v = kill(frame(c, 7.5, 0.5));
+    let mut r = recon(ReconParams::default());
+    let mut mask = ChannelMask::none(ms.len(), 16);
+    let causes = r.detect_mask_into(&v, Some(v_ref), &mut mask).unwrap();
+    assert_eq!((mask.dead_electrodes(), mask.excluded_count()), (vec![6], 15));
+    assert_eq!((causes.frame.non_finite, causes.reference.non_finite, causes.via_dead_electrode), (15, 15, 0));
+    assert!(r.set_mask(&mask).unwrap());
+    let (peak, value) = peak_against(&mut r, &v, v_ref);
+    assert!(value < 0.0 && dist(peak, c) <= 8.0, "{peak:?}");
+}
+
+#[test]
+fn zero_volt_and_reference_side_faults_are_masked_not_errors() {
+    let ms = Sensor::paper_100mm().measurements();
+    let uses_6: Vec<bool> = ms.iter().map(|m| m.drive.0 == 6 || m.drive.1 == 6).collect();
+    let set_6 = |v: &[f64], value: f64| -> Vec<f64> {
+        v.iter().zip(&uses_6).map(|(&x, &dead)| if dead { value } else { x }).collect()
+    };
+    let c = [5.0, 5.0];
+    let v = frame(c, 7.5, 0.5);
+    let v_ref = truth().v_ref.clone();
+    let mut r = recon(ReconParams::default());
+    let mut mask = ChannelMask::none(ms.len(), 16);
+    // Electrode 6 open (0 V) in the frame; at the rail (2.5 V) or 0 V in the reference only;
+    // 0 V in both (0 / 0 in normalized mode). Unmasked, the first two imaged edge artefacts
+    // 44x and 35x the real contact, and the last failed the whole frame.
+    let cases = [
+        ("0 V in the frame", set_6(&v, 0.0), v_ref.clone()),
+        ("rail in the reference", v.clone(), set_6(&v_ref, 2.5)),
+        ("0 V in the reference", v.clone(), set_6(&v_ref, 0.0)),
+        ("0 V in both", set_6(&v, 0.0), set_6(&v_ref, 0.0)),
+    ];
+    for (what, frame_v, ref_v) in &cases {
+        let causes = r.detect_mask_into(frame_v, Some(ref_v), &mut mask).unwrap();
+        assert_eq!((mask.dead_electrodes(), mask.excluded_count()), (vec![6], 15), "{what}");
+        let (f, rf) = (causes.frame, causes.reference);
+        let counted = [f.near_zero, rf.saturated, rf.near_zero];
+        let want = match *what {
+            "0 V in the frame" => [15, 0, 0],
+            "rail in the reference" => [0, 15, 0],
+            "0 V in the reference" => [0, 0, 15],
+            _ => [15, 0, 15],
+        };
+        assert_eq!(counted, want, "{what}: {causes:?}");
+        r.set_mask(&mask).unwrap();
+        let (peak, value) = peak_against(&mut r, frame_v, ref_v);
+        assert!(value < 0.0 && dist(peak, c) <= 8.0, "{what}: peak {value} at {peak:?}");
+    }
+    // One channel at 0 V (a broken sense lead): that channel alone, no dead electrode.
+    let mut one = v.clone();
+    one[40] = 0.0;
+    let causes = r.detect_mask_into(&one, Some(&v_ref), &mut mask).unwrap();
+    assert_eq!((mask.excluded_channels(), mask.dead_electrodes(), causes.frame.near_zero), (vec![40], vec![], 1));
+    r.set_mask(&mask).unwrap();
+    let (peak, value) = peak_against(&mut r, &one, &v_ref);
+    assert!(value < 0.0 && dist(peak, c) <= 5.0, "one 0 V channel: peak {value} at {peak:?}");
+    // The healthy default sensor has no channel near the floor: nothing masked.
+    r.detect_mask_into(&v, Some(&v_ref), &mut mask).unwrap();
+    assert_eq!(mask.excluded_count(), 0);
 }
 
 #[test]
@@ -248,7 +383,6 @@ fn gcv_picks_a_moderate_lambda_for_noisy_inclusions() {
 
 #[test]
 fn identity_and_laplacian_priors_localise_too() {
-    use skinflow_eit::Prior;
     let c = [-12.0, 8.0];
     let v = frame(c, 7.5, 0.5);
     // Plain Tikhonov (identity) pulls images towards the electrodes, where the sensitivity is

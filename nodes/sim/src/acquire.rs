@@ -27,7 +27,7 @@ const CACHE_STATES: usize = 4;
 /// Minimum angle of the simulation mesh, degrees: differs from the reconstruction default (28)
 /// so the two meshes never coincide even at equal element counts.
 const SIM_MESH_MIN_ANGLE_DEG: f64 = 25.0;
-/// Electrode edge ratio of the simulation mesh (reconstruction default: 0.3).
+/// Electrode edge ratio of the simulation mesh (reconstruction default: 0.2, `MeshParams`).
 const SIM_MESH_ELECTRODE_RATIO: f64 = 0.5;
 
 /// Element count of the simulation mesh for the smallest indenter of a scene: equilateral

@@ -3,13 +3,17 @@
 //! Input: one [`CalibSample`] per EIT frame with a detected contact and ground truth. Frames
 //! of one hold are averaged ([`super::average`], the paper's 6-frame means), outliers are
 //! rejected (non-finite, C <= 0, F <= 0, centroid farther than `max_location_error_mm` from
-//! the truth), then per signal: f by least squares over all locations (the NoCal map), and
-//! g, b by ridge towards alpha0 = (1, 0, 0, 0, 0, 0), beta = 0 with (lambda_g, lambda_b) =
-//! grid x T chosen by inner k-fold CV. With `f_fit = "joint"` (the default) f is then
-//! re-estimated together with g and b on the same penalized objective ([`super::joint`]) and
-//! the weights are chosen again by CV on the final f; `"sequential"` stops after the paper's
-//! order. Degenerate data (too few samples or locations, a region narrower than
-//! `min_span_mm`) keep the prior, with a warning.
+//! the truth; then dP <= 0, and gross pressure spikes per location,
+//! [`super::quality::pressure_outliers`]; each counted and warned), then per signal: f by
+//! least squares over all locations (the NoCal map; a quadratic, or with fewer than 3 force
+//! levels a line or a line through the origin, [`FShape`]), and g, b by ridge towards
+//! alpha0 = (1, 0, 0, 0, 0, 0), beta = 0 with (lambda_g, lambda_b) = grid x T chosen by inner
+//! k-fold CV. With `f_fit = "joint"` (the default) f is then re-estimated together with g and
+//! b on the same penalized objective ([`super::joint`]), the weights are chosen again by CV
+//! on the final f, and the scale shared by f and g is fixed so that g averages 1 over the
+//! samples; `"sequential"` stops after the paper's order. Degenerate data (too few samples
+//! or locations, a region narrower than `min_span_mm`, locations that do not determine a
+//! quadratic field, a single force level) keep the prior, with a warning.
 
 use super::average::{Holds, average_holds, locations};
 use super::calibration::{
@@ -17,10 +21,13 @@ use super::calibration::{
     TrainingSummary,
 };
 use super::field::{NPHI, QuadField, Region, locaware_design, phi};
-use super::fit::{CvSearch, RidgeProblem, cross_validate, fit_quadratic, fold_of, r_squared};
+use super::fit::{CvSearch, FShape, RidgeProblem, cross_validate, fit_quadratic, fold_of, r_squared};
 use super::forward::{ForwardModel, ForwardSample};
-use super::joint::{JointProblem, fit_joint};
+use super::joint::{JointProblem, fit_joint, normalize_gain};
 use super::map::SignalMap;
+use super::quality::{
+    FLAT_MAP_RISE_REL, MIN_LAYOUT_EIGENVALUE, force_levels, layout_eigenvalue, map_rise, pressure_outliers,
+};
 use super::strategy::{Strategy, StrategyKind};
 use crate::segment::Contact;
 use crate::split::{SensitivityField, SensitivitySample};
@@ -70,7 +77,8 @@ pub struct CalibParams {
     /// Folds of whole locations in the location-held-out check (capped at the number of
     /// locations); 0 turns the check off (it repeats the whole fit once per fold).
     pub holdout_folds: usize,
-    /// Ridge weights searched, relative to the number of samples T (weight = rel x T).
+    /// Ridge weights searched, relative to the number of samples T (weight = rel x T); each
+    /// >= [`LAMBDA_REL_MIN`].
     pub lambda_grid_rel: Vec<f64>,
     /// Fewer samples than this keep the prior fields.
     pub min_samples: usize,
@@ -104,6 +112,28 @@ impl Default for CalibParams {
     }
 }
 
+/// Smallest relative ridge weight accepted in `lambda_grid_rel`.
+///
+/// Why 1e-8: a row of the field design is [f Phi, Phi] with |Phi|^2 <= 6 on [-1, 1]^2 and f up
+/// to ~10 N, so the Gram matrix's largest eigenvalue is at most ~600 T. The penalty rel x T is
+/// the smallest eigenvalue in a direction the data do not determine (collinear locations), so
+/// the system's condition number is at most ~600 / rel: at 1e-8 about 6e10, which leaves 5
+/// significant digits of a double-precision solve. At 1e-12 (6e14) about one digit is left, and
+/// the audit saw 8.7e6 N training errors. The default grid starts at 1e-4.
+pub const LAMBDA_REL_MIN: f64 = 1e-8;
+
+/// A strategy whose RMSE on its own training samples is above this many times its
+/// cross-validated RMSE (plus [`TRAIN_CV_SLACK_N`]) is warned about.
+///
+/// Why 10: a held-out error is normally the larger of the two; a stored model ten times worse
+/// on the data it was fitted to than the model the cross-validation scored is not that model
+/// (a gain floor or an envelope changed it).
+pub const TRAIN_CV_RATIO: f64 = 10.0;
+
+/// Absolute slack of the training-versus-CV check, N: far below any force sensor's resolution,
+/// so rounding on noise-free data (CV RMSE ~1e-12 N) raises nothing.
+pub const TRAIN_CV_SLACK_N: f64 = 1e-3;
+
 impl CalibParams {
     /// Checks every field; run at load.
     pub fn validate(&self) -> Result<(), CalibrateError> {
@@ -114,8 +144,13 @@ impl CalibParams {
         if self.holdout_folds == 1 {
             return bad("holdout_folds", "must be 0 (no held-out check) or >= 2");
         }
-        if self.lambda_grid_rel.is_empty() || self.lambda_grid_rel.iter().any(|l| !(l.is_finite() && *l > 0.0)) {
-            return bad("lambda_grid_rel", "must be non-empty, finite and > 0");
+        if self.lambda_grid_rel.is_empty()
+            || self.lambda_grid_rel.iter().any(|l| !(l.is_finite() && *l >= LAMBDA_REL_MIN))
+        {
+            return bad(
+                "lambda_grid_rel",
+                "must be non-empty, finite and >= 1e-8 (a smaller weight leaves the field directions the data do not determine to rounding error)",
+            );
         }
         // A zero span would let a calibration whose centroids lie on a line through: its region
         // has no height, and the fields' normalization divides by it.
@@ -142,6 +177,38 @@ pub enum CalibWarning {
         "rejected {count} of {total} samples (non-finite, C <= 0, F <= 0 or centroid > {max_error_mm} mm from truth)"
     )]
     Rejected { count: usize, total: usize, max_error_mm: f64 },
+    /// Samples with no pressure response (a pneumatic dropout, or a tare above the loaded
+    /// reading): their force cannot come from dP.
+    #[error("rejected {count} of {total} samples with dP <= 0 kPa (no pressure response)")]
+    NonPositivePressure { count: usize, total: usize },
+    /// Gross pressure spikes (see [`super::quality::pressure_outliers`]).
+    #[error(
+        "rejected {count} of {total} samples as pressure spikes (dP more than a factor of 2 and 5 robust SDs off its location's power law dP = c F^gamma) at {locations} location(s)"
+    )]
+    PressureSpikes { count: usize, total: usize, locations: usize },
+    /// Fewer than 3 force levels: f is not fitted as a quadratic.
+    #[error("{levels} distinct force level(s) (a quadratic f needs 3): {fallback}")]
+    FewForceLevels { levels: usize, fallback: &'static str },
+    /// The locations do not determine a quadratic field (a line, two rows, a circle, ...).
+    #[error(
+        "the calibration locations do not determine a quadratic field (smallest eigenvalue of Phi^T Phi / L over the {locations} locations {eigenvalue:.1e} < {min:.0e}; e.g. all on a line): location fields fall back to the prior g = 1, b = 0"
+    )]
+    UndeterminedLayout { locations: usize, eigenvalue: f64, min: f64 },
+    /// A fitted f barely rises over its signal range.
+    #[error(
+        "{what}: f rises only {rise_n:.3} N over its signal range against a {force_range_n:.3} N force range: forces will hardly depend on the signal"
+    )]
+    FlatMap { what: &'static str, rise_n: f64, force_range_n: f64 },
+    /// A strategy's training RMSE far above its cross-validated RMSE.
+    #[error(
+        "{strategy}: training RMSE {train_rmse_n:.3e} N is far above its cross-validated RMSE {cv_rmse_n:.3e} N: the stored model is not the one validated"
+    )]
+    TrainAboveCv { strategy: &'static str, train_rmse_n: f64, cv_rmse_n: f64 },
+    /// The joint fit's gain does not average to a positive value, so its scale cannot be fixed.
+    #[error(
+        "{what}: the joint fit's gain does not average to a positive value over the samples; the paper's order (pooled f, then g and b) is kept"
+    )]
+    JointGauge { what: &'static str },
     /// Frames left out of their hold's mean (the rest of the hold is still used).
     #[error("left {count} of {total} frames out of their holds' means (non-finite centroid, dP, C or area)")]
     NonFiniteFrames { count: usize, total: usize },
@@ -195,8 +262,8 @@ pub struct Calibrated {
     pub warnings: Vec<CalibWarning>,
 }
 
-fn fit_map(signal: &[f64], force: &[f64]) -> Option<SignalMap> {
-    let quadratic = fit_quadratic(signal, force)?;
+fn fit_map(signal: &[f64], force: &[f64], shape: FShape) -> Option<SignalMap> {
+    let quadratic = shape.fit(signal, force)?;
     let lo = signal.iter().copied().fold(f64::INFINITY, f64::min);
     let hi = signal.iter().copied().fold(f64::NEG_INFINITY, f64::max);
     Some(SignalMap { quadratic, signal_min: lo, signal_max: hi })
@@ -278,11 +345,18 @@ fn location_holdout(
         let fold_name = format!("fold {} of {k}", f + 1);
         let fitted = fit_once(&train, &fold_params, provenance.clone()).map_err(|e| format!("{fold_name}: {e}"))?;
         if fitted.degenerate {
-            return Err(format!(
-                "{fold_name} leaves {} samples at {} locations, too few for the fields",
-                fitted.samples.len(),
-                fitted.locations
-            ));
+            // A fold can also leave its locations on a line, or one force level.
+            let shape = fitted.calibrated.warnings.iter().find(|w| {
+                matches!(w, CalibWarning::UndeterminedLayout { .. } | CalibWarning::FewForceLevels { levels: 1, .. })
+            });
+            return Err(match shape {
+                Some(w) => format!("{fold_name}: {w}"),
+                None => format!(
+                    "{fold_name} leaves {} samples at {} locations, too few for the fields",
+                    fitted.samples.len(),
+                    fitted.locations
+                ),
+            });
         }
         if let Some(w) = fitted.calibrated.warnings.iter().find(|w| matches!(w, CalibWarning::FitFailed { .. })) {
             return Err(format!("{fold_name}: {w}"));
@@ -332,21 +406,55 @@ fn fit_once(frames: &[CalibSample], params: &CalibParams, provenance: Provenance
             && s.force_n > 0.0
             && (s.x_mm - s.true_x_mm).hypot(s.y_mm - s.true_y_mm) <= params.max_location_error_mm
     };
-    let samples: Vec<CalibSample> = holds.samples.iter().copied().filter(ok).collect();
-    if samples.len() < total {
+    let passed: Vec<CalibSample> = holds.samples.iter().copied().filter(ok).collect();
+    if passed.len() < total {
         warnings.push(CalibWarning::Rejected {
-            count: total - samples.len(),
+            count: total - passed.len(),
             total,
             max_error_mm: params.max_location_error_mm,
         });
     }
+    // No pressure response (as C <= 0 is no EIT response): such a sample would pull f and the
+    // fields towards a force at dP = 0, where every strategy reports 0 N anyway.
+    let (responding, silent): (Vec<CalibSample>, Vec<CalibSample>) = passed.into_iter().partition(|s| s.dp_kpa > 0.0);
+    if !silent.is_empty() {
+        warnings.push(CalibWarning::NonPositivePressure { count: silent.len(), total });
+    }
+    // Gross pressure spikes, judged per location against its own power law.
+    let (_, site_of) = locations(&responding, params.location_tolerance_mm);
+    let spike = pressure_outliers(
+        &responding.iter().map(|s| s.force_n).collect::<Vec<_>>(),
+        &responding.iter().map(|s| s.dp_kpa).collect::<Vec<_>>(),
+        &site_of,
+    );
+    let spikes = spike.iter().filter(|&&o| o).count();
+    if spikes > 0 {
+        let mut sites: Vec<usize> = site_of.iter().zip(&spike).filter(|(_, o)| **o).map(|(l, _)| *l).collect();
+        sites.sort_unstable();
+        sites.dedup();
+        warnings.push(CalibWarning::PressureSpikes { count: spikes, total, locations: sites.len() });
+    }
+    let samples: Vec<CalibSample> = responding.iter().zip(&spike).filter(|(_, o)| !**o).map(|(s, _)| *s).collect();
     let t = samples.len();
     let force: Vec<f64> = samples.iter().map(|s| s.force_n).collect();
     let dp: Vec<f64> = samples.iter().map(|s| s.dp_kpa).collect();
     let cond: Vec<f64> = samples.iter().map(|s| s.cond_sum).collect();
     let err = |signal| CalibrateError::SignalFit { signal, usable: t, frames: frames.len() };
-    let map_p = fit_map(&dp, &force).ok_or(err("pneumatic"))?;
-    let map_c = fit_map(&cond, &force).ok_or(err("eit"))?;
+    if t < 3 {
+        return Err(err("pneumatic"));
+    }
+    let levels = force_levels(&force);
+    let shape = FShape::for_levels(levels);
+    match shape {
+        FShape::Quadratic => {}
+        FShape::Line => warnings.push(CalibWarning::FewForceLevels { levels, fallback: "f is fitted as a straight line" }),
+        FShape::Proportional => warnings.push(CalibWarning::FewForceLevels {
+            levels,
+            fallback: "f is a line through the origin, and the location fields fall back to the prior g = 1, b = 0 (one level cannot tell gain from offset)",
+        }),
+    }
+    let map_p = fit_map(&dp, &force, shape).ok_or(err("pneumatic"))?;
+    let map_c = fit_map(&cond, &force, shape).ok_or(err("eit"))?;
 
     // Region and degeneracy.
     let raw = Region::bounding(samples.iter().map(|s| (s.x_mm, s.y_mm)), 0.0).ok_or(err("pneumatic"))?;
@@ -366,6 +474,28 @@ fn fit_once(frames: &[CalibSample], params: &CalibParams, provenance: Provenance
     if sx < params.min_span_mm || sy < params.min_span_mm {
         warnings.push(CalibWarning::NarrowRegion { span_x_mm: sx, span_y_mm: sy, min_mm: params.min_span_mm });
         degenerate = true;
+    }
+    if shape == FShape::Proportional {
+        degenerate = true;
+    }
+    // Collinear (or otherwise quadric-bound) locations span the box but not the basis; only
+    // checked when the counts passed, so one cause is named at a time.
+    if !degenerate {
+        let mut centre = vec![(0.0, 0.0, 0usize); locs.len()];
+        for (s, &l) in samples.iter().zip(&loc_of) {
+            let n = region.normalize(s.x_mm, s.y_mm);
+            centre[l] = (centre[l].0 + n.u, centre[l].1 + n.v, centre[l].2 + 1);
+        }
+        let points: Vec<(f64, f64)> = centre.iter().map(|&(u, v, k)| (u / k as f64, v / k as f64)).collect();
+        let eigenvalue = layout_eigenvalue(&points).unwrap_or(0.0);
+        if eigenvalue.is_nan() || eigenvalue < MIN_LAYOUT_EIGENVALUE {
+            warnings.push(CalibWarning::UndeterminedLayout {
+                locations: locs.len(),
+                eigenvalue,
+                min: MIN_LAYOUT_EIGENVALUE,
+            });
+            degenerate = true;
+        }
     }
 
     // R^2 table: centre = the true location nearest the origin.
@@ -408,10 +538,11 @@ fn fit_once(frames: &[CalibSample], params: &CalibParams, provenance: Provenance
         if degenerate {
             return LocAware::prior(*map);
         }
-        let Some(mut cv) = cv_fields(map, signal) else {
+        let Some(sequential) = cv_fields(map, signal) else {
             warnings.push(CalibWarning::FitFailed { what });
             return LocAware::prior(*map);
         };
+        let mut cv = sequential.clone();
         let mut f_map = *map;
         let mut f_fit = FFit::Sequential;
         if params.f_fit == FFit::Joint {
@@ -425,6 +556,7 @@ fn fit_once(frames: &[CalibSample], params: &CalibParams, provenance: Provenance
                     force: &force,
                     lambda_g: cv.lambdas[0],
                     lambda_b: cv.lambdas[1],
+                    linear: shape == FShape::Line,
                 };
                 let Some(joint) = fit_joint(&problem, f_map) else {
                     warnings.push(CalibWarning::JointFit { what, problem: "field step not solvable" });
@@ -452,6 +584,11 @@ fn fit_once(frames: &[CalibSample], params: &CalibParams, provenance: Provenance
             if !settled {
                 warnings
                     .push(CalibWarning::JointFit { what, problem: "ridge weights still changing after the last pass" });
+            }
+            // The scale f and g share: mean gain 1, so GAIN_FLOOR is a fraction of it.
+            if f_fit == FFit::Joint && normalize_gain(&mut f_map, &mut cv.coeffs[..NPHI], &phis).is_none() {
+                warnings.push(CalibWarning::JointGauge { what });
+                (f_map, cv, f_fit) = (*map, sequential, FFit::Sequential);
             }
         }
         let (gain, offset) = split_fields(&cv.coeffs);
@@ -552,10 +689,31 @@ fn fit_once(frames: &[CalibSample], params: &CalibParams, provenance: Provenance
     let mut diameters: Vec<f64> = samples.iter().map(|s| s.diameter_mm).filter(|d| d.is_finite()).collect();
     diameters.sort_by(f64::total_cmp);
     diameters.dedup();
+    // A flat f reports about one force for any press (a constant f was the joint fit's answer
+    // to one 500 kPa hold in the audit); the pooled and the location-aware f of each signal.
+    let force_range =
+        force.iter().copied().fold(f64::NEG_INFINITY, f64::max) - force.iter().copied().fold(f64::INFINITY, f64::min);
+    if levels >= 2 {
+        for (what, m, pooled) in [
+            ("pneumatic f (pooled)", &pneumatic.map, None),
+            ("pneumatic location-aware f", &pneumatic.locaware.map, Some(&pneumatic.map)),
+            ("eit f (pooled)", &eit.map, None),
+            ("eit location-aware f", &eit.locaware.map, Some(&eit.map)),
+        ] {
+            let rise = map_rise(m);
+            if Some(m) != pooled && (rise.is_nan() || rise < FLAT_MAP_RISE_REL * force_range) {
+                warnings.push(CalibWarning::FlatMap { what, rise_n: rise, force_range_n: force_range });
+            }
+        }
+    }
+
     let training = TrainingSummary {
         frames: frames.len(),
         samples: t,
         rejected: total - t,
+        rejected_non_positive_dp: silent.len(),
+        rejected_pressure_spikes: spikes,
+        force_levels: levels,
         locations: locs.len(),
         force_min_n: force.iter().copied().fold(f64::INFINITY, f64::min),
         force_max_n: force.iter().copied().fold(f64::NEG_INFINITY, f64::max),
@@ -590,6 +748,20 @@ fn fit_once(frames: &[CalibSample], params: &CalibParams, provenance: Provenance
         let sse: f64 =
             samples.iter().map(|s| (strategy.estimate(&s.contact(), s.dp_kpa).force_n - s.force_n).powi(2)).sum();
         calibration.training.train_rmse_n.insert(kind.name().to_string(), (sse / t as f64).sqrt());
+    }
+    // The strategies whose fields were cross-validated (the sensitivity-compensated one shares
+    // pneumatic-locaware's fields, and on single contacts its estimates).
+    for (kind, cv_rmse) in [
+        (StrategyKind::EitLocAware, calibration.eit.locaware.cv_rmse_n),
+        (StrategyKind::PneumaticLocAware, calibration.pneumatic.locaware.cv_rmse_n),
+        (StrategyKind::PneumaticAreaAware, calibration.area_aware.fields.cv_rmse_n),
+    ] {
+        let (Some(cv), Some(&train)) = (cv_rmse, calibration.training.train_rmse_n.get(kind.name())) else { continue };
+        if train.is_nan() || train > TRAIN_CV_RATIO * cv + TRAIN_CV_SLACK_N {
+            let w = CalibWarning::TrainAboveCv { strategy: kind.name(), train_rmse_n: train, cv_rmse_n: cv };
+            calibration.warnings.push(w.to_string());
+            warnings.push(w);
+        }
     }
     let locations = locs.len();
     Ok(FitOnce { calibrated: Calibrated { calibration, warnings }, samples, loc_of, locations, degenerate })

@@ -18,9 +18,10 @@ use std::path::Path;
 /// Value of the `format` key.
 pub const FORMAT: &str = "skinflow-calibration";
 /// Current `format_version`.
-pub const FORMAT_VERSION: u32 = 6;
+pub const FORMAT_VERSION: u32 = 7;
 /// Oldest `format_version` still read (version 3 lacks the location-held-out figures, versions
-/// 3 and 4 the `cv_groups` choice, versions 3 to 5 `provenance.more_recordings`).
+/// 3 and 4 the `cv_groups` choice, versions 3 to 5 `provenance.more_recordings`, versions 3 to
+/// 6 the breakdown of the rejected samples, read as 0).
 pub const OLDEST_FORMAT_VERSION: u32 = 3;
 
 /// Where a calibration came from (all given by the caller).
@@ -83,7 +84,8 @@ pub struct LocAware {
     pub map: SignalMap,
     /// How `map` was fitted.
     pub f_fit: FFit,
-    /// Gain field g (dimensionless), coefficients alpha.
+    /// Gain field g (dimensionless), coefficients alpha. With `f_fit = "joint"` its scale (shared
+    /// with f) is fixed so that it averages 1 over the calibration samples.
     pub gain: QuadField,
     /// Offset field b (N), coefficients beta.
     pub offset: QuadField,
@@ -177,8 +179,21 @@ pub struct TrainingSummary {
     pub frames: usize,
     /// Samples used in the fits (after averaging holds and rejection).
     pub samples: usize,
-    /// Samples rejected by the quality filter.
+    /// Samples rejected, for any reason (the quality filter, dP <= 0 and pressure spikes):
+    /// `samples + rejected` is the number of hold means (or frames, without averaging).
     pub rejected: usize,
+    /// Of `rejected`: samples with dP <= 0 kPa (no pressure response; absent in older files).
+    #[serde(default)]
+    pub rejected_non_positive_dp: usize,
+    /// Of `rejected`: gross pressure spikes, off their location's power law dP = c F^gamma
+    /// by more than a factor of 2 and 5 robust SDs ([`super::quality::pressure_outliers`];
+    /// absent in older files).
+    #[serde(default)]
+    pub rejected_pressure_spikes: usize,
+    /// Distinct force levels ([`super::quality::force_levels`]; absent, read as 0, in older
+    /// files). Fewer than 3 fit f as a line (2) or through the origin (1).
+    #[serde(default)]
+    pub force_levels: usize,
     /// Distinct true locations.
     pub locations: usize,
     /// Range of true forces, N.

@@ -33,23 +33,109 @@ impl Quadratic {
     }
 }
 
+impl Quadratic {
+    /// The quadratic in `s` equal to `c0 + c1 t + c2 t^2` with `t = (s - mid) / half`.
+    ///
+    /// Expanding into powers of `s` is exact algebra, but evaluating the result far from 0
+    /// cancels terms of size `|c2| (mid / half)^2`: [`Quadratic::at`] is then accurate to
+    /// about `eps (|a0| + |a1 s| + |a2 s^2|)`, the rounding level of this representation.
+    pub fn from_centred(c: [f64; 3], mid: f64, half: f64) -> Self {
+        let (k1, k2) = (c[1] / half, c[2] / (half * half));
+        Quadratic { a0: c[0] - k1 * mid + k2 * mid * mid, a1: k1 - 2.0 * k2 * mid, a2: k2 }
+    }
+}
+
 /// Least-squares quadratic through `(s, y)`; `None` with fewer than 3 points or fewer than
-/// 3 distinct `s` (the fit would be singular). `s` is scaled by its largest magnitude
-/// internally so kPa and conductivity sums of any size condition alike.
+/// 3 distinct `s` (the fit would be singular). See [`fit_polynomial`].
 pub fn fit_quadratic(s: &[f64], y: &[f64]) -> Option<Quadratic> {
-    let scale = s.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
-    if s.len() < 3 || s.len() != y.len() || scale == 0.0 || !scale.is_finite() {
+    fit_polynomial(s, y, 2)
+}
+
+/// Least-squares polynomial of `degree` 1 (a line, `a2 = 0`) or 2 through `(s, y)`; `None`
+/// with fewer than `degree + 1` points or distinct `s`, non-finite input, or another degree.
+///
+/// The signal is centred and scaled onto [-1, 1] (`t = (s - mid) / half`) before the normal
+/// equations are formed, and the coefficients are mapped back ([`Quadratic::from_centred`]).
+/// Scaling alone (`s / max|s|`) leaves an offset signal, e.g. `1e4 + [0, 10]`, with columns
+/// `1, t, t^2` that agree to 1e-3 and a Gram matrix whose condition number is ~1e18: the
+/// solve then loses every digit. Centred, the Gram matrix of `[1, t, t^2]` on [-1, 1] is
+/// well conditioned whatever the offset.
+pub fn fit_polynomial(s: &[f64], y: &[f64], degree: usize) -> Option<Quadratic> {
+    if !(1..=2).contains(&degree) || s.len() != y.len() || s.len() <= degree {
+        return None;
+    }
+    if !s.iter().chain(y).all(|v| v.is_finite()) {
         return None;
     }
     let mut distinct = s.to_vec();
     distinct.sort_by(f64::total_cmp);
     distinct.dedup();
-    if distinct.len() < 3 {
+    if distinct.len() <= degree {
         return None;
     }
-    let design: Vec<f64> = s.iter().flat_map(|&v| [1.0, v / scale, (v / scale).powi(2)]).collect();
-    let c = ridge(&design, y, 3, &[0.0; 3], &[0.0; 3])?;
-    Some(Quadratic { a0: c[0], a1: c[1] / scale, a2: c[2] / scale / scale })
+    let (lo, hi) = (distinct[0], distinct[distinct.len() - 1]);
+    let (mid, half) = (0.5 * (lo + hi), 0.5 * (hi - lo));
+    if !(half > 0.0 && half.is_finite()) {
+        return None;
+    }
+    let p = degree + 1;
+    let design: Vec<f64> = s
+        .iter()
+        .flat_map(|&v| {
+            let t = (v - mid) / half;
+            [1.0, t, t * t].into_iter().take(p)
+        })
+        .collect();
+    let c = ridge(&design, y, p, &[0.0; 3][..p], &[0.0; 3][..p])?;
+    Some(Quadratic::from_centred([c[0], c[1], if degree == 2 { c[2] } else { 0.0 }], mid, half))
+}
+
+/// Least-squares line through the origin, `y = a1 s`; `None` when every `s` is 0 or an input
+/// is not finite. The map used when the calibration saw one force level: the slope is then
+/// fixed by that level and by no load giving no force.
+pub fn fit_proportional(s: &[f64], y: &[f64]) -> Option<Quadratic> {
+    if s.len() != y.len() || !s.iter().chain(y).all(|v| v.is_finite()) {
+        return None;
+    }
+    let ss: f64 = s.iter().map(|v| v * v).sum();
+    let sy: f64 = s.iter().zip(y).map(|(a, b)| a * b).sum();
+    let a1 = sy / ss;
+    (ss > 0.0 && a1.is_finite()).then_some(Quadratic { a0: 0.0, a1, a2: 0.0 })
+}
+
+/// The family f is fitted in, chosen by how many force levels the calibration saw
+/// ([`super::quality::force_levels`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FShape {
+    /// `a0 + a1 s + a2 s^2` (the paper's eq. 11): three or more levels.
+    Quadratic,
+    /// `a0 + a1 s`: two levels fix a line. A quadratic through two clusters of signals takes
+    /// its curvature from how the signal varies across locations within a level, which is the
+    /// location effect the fields are for (5 N read as 6.1 N at the centre in the audit).
+    Line,
+    /// `a1 s`: one level fixes only a slope, through no load giving no force.
+    Proportional,
+}
+
+impl FShape {
+    /// The shape for `levels` distinct force levels.
+    pub fn for_levels(levels: usize) -> Self {
+        match levels {
+            0 | 1 => FShape::Proportional,
+            2 => FShape::Line,
+            _ => FShape::Quadratic,
+        }
+    }
+
+    /// Least-squares fit of this shape through `(s, y)` (see [`fit_polynomial`] and
+    /// [`fit_proportional`]).
+    pub fn fit(self, s: &[f64], y: &[f64]) -> Option<Quadratic> {
+        match self {
+            FShape::Quadratic => fit_polynomial(s, y, 2),
+            FShape::Line => fit_polynomial(s, y, 1),
+            FShape::Proportional => fit_proportional(s, y),
+        }
+    }
 }
 
 /// Coefficient of determination of predictions `pred` for observations `y`
@@ -302,6 +388,20 @@ mod tests {
         let pred: Vec<f64> = s.iter().map(|&v| q.at(v)).collect();
         assert!((r_squared(&y, &pred).unwrap() - 1.0).abs() < 1e-12);
         assert!((q.slope(1.0) - 1.8).abs() < 1e-9);
+    }
+
+    #[test]
+    fn line_and_proportional_fits() {
+        let s = [1.0, 2.0, 2.0, 4.0];
+        let y = [3.0, 5.0, 5.0, 9.0];
+        let q = fit_polynomial(&s, &y, 1).unwrap();
+        assert!((q.a0 - 1.0).abs() < 1e-12 && (q.a1 - 2.0).abs() < 1e-12 && q.a2 == 0.0, "{q:?}");
+        assert!(fit_polynomial(&[2.0, 2.0], &[1.0, 1.0], 1).is_none());
+        assert!(fit_polynomial(&s, &y, 3).is_none());
+        // Through the origin: a1 = sum(s y) / sum(s^2) = (3 + 10 + 10 + 36) / 25.
+        let p = fit_proportional(&s, &y).unwrap();
+        assert!((p.a1 - 59.0 / 25.0).abs() < 1e-12 && p.a0 == 0.0 && p.a2 == 0.0, "{p:?}");
+        assert!(fit_proportional(&[0.0, 0.0], &[1.0, 2.0]).is_none());
     }
 
     #[test]

@@ -11,11 +11,13 @@
 //!
 //! Each round holds one block fixed and solves for the other:
 //! - f step: with g_t, b_t fixed, F_t - b_t = g_t (a0 + a1 s_t + a2 s_t^2) is linear in a
-//!   (least squares on the raw quadratic);
+//!   (least squares in the centred signal; a line when the data hold two force levels);
 //! - field step: with f fixed, the paper's ridge towards alpha0 = (1, 0, ...), beta = 0 (exact);
 //! - gauge step: the data term does not change along two directions, f -> f / c with
 //!   g -> c g, and f -> f + d with b -> b - d g; both are set in closed form to minimize the
 //!   penalty, so only the priors pin the scale and the intercept of f (g stays near 1).
+//!   With a small lambda_g that pin is weak, so the caller fixes the scale afterwards
+//!   ([`normalize_gain`]: g averages 1 over the samples), which leaves g f + b unchanged.
 //!
 //! The objective is ||A theta - F||^2 + lambda_g ||alpha - alpha0||^2 + lambda_b ||beta||^2 with
 //! A built from the monotone envelope of f ([`SignalMap`]). Each round tries two f steps: one
@@ -49,6 +51,9 @@ pub struct JointProblem<'a> {
     pub lambda_g: f64,
     /// Ridge weight on ||beta||^2.
     pub lambda_b: f64,
+    /// f is a straight line (a2 = 0): the calibration saw two force levels, which fix a line
+    /// but not a curvature.
+    pub linear: bool,
 }
 
 /// Result of [`fit_joint`].
@@ -104,35 +109,43 @@ impl JointProblem<'_> {
     /// everywhere between). On the range the monotone envelope is then q itself, so this step
     /// minimizes the objective exactly. Solved by active sets: the unconstrained fit, each end
     /// constraint held with equality, or a constant; the feasible one with the least error.
+    /// With [`JointProblem::linear`] only the line and the constant are tried.
+    ///
+    /// q is solved for in the centred signal t = (s - mid) / half, mid and half those of
+    /// `range`, and mapped back ([`Quadratic::from_centred`]): in raw powers of an offset
+    /// signal the columns are nearly collinear (see [`super::fit::fit_polynomial`]).
     fn curve(&self, coeffs: &[f64], range: (f64, f64), monotone: bool) -> Option<Quadratic> {
         let (alpha, beta) = coeffs.split_at(NPHI);
-        let scale = self.signal.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
-        if !(scale > 0.0 && scale.is_finite()) {
+        let (mid, half) = (0.5 * (range.0 + range.1), 0.5 * (range.1 - range.0));
+        if !(half > 0.0 && half.is_finite() && mid.is_finite()) {
             return None;
         }
-        // Rows [g, g r, g r^2] with r = s / scale, and targets F - b.
+        // Rows [g, g t, g t^2] and targets F - b.
         let mut rows = Vec::with_capacity(self.phi.len());
         let mut y = Vec::with_capacity(self.phi.len());
         for ((p, &s), &f) in self.phi.iter().zip(self.signal).zip(self.force) {
-            let (g, r) = (field_value(p, alpha), s / scale);
+            let (g, r) = (field_value(p, alpha), (s - mid) / half);
             rows.push([g, g * r, g * r * r]);
             y.push(f - field_value(p, beta));
         }
-        let (lo, hi) = (range.0 / scale, range.1 / scale);
-        // Slope of c0 + c1 r + c2 r^2 at both ends, with a little slack for rounding.
+        // The range's ends in t.
+        let (lo, hi) = (-1.0, 1.0);
+        // Slope of c0 + c1 t + c2 t^2 at both ends, with a little slack for rounding.
         let feasible = |c: &[f64; 3]| {
             let tol = 1e-12 * (c[1].abs() + c[2].abs());
             c[1] + 2.0 * c[2] * lo >= -tol && c[1] + 2.0 * c[2] * hi >= -tol
         };
         // c = sum_k z_k basis_k: each face of the constraint set is such a subspace.
-        let faces: [&[[f64; 3]]; 4] = [
+        let quadratic_faces: [&[[f64; 3]]; 4] = [
             &[[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
             &[[1.0, 0.0, 0.0], [0.0, -2.0 * lo, 1.0]],
             &[[1.0, 0.0, 0.0], [0.0, -2.0 * hi, 1.0]],
             &[[1.0, 0.0, 0.0]],
         ];
+        let linear_faces: [&[[f64; 3]]; 2] = [&[[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]], &[[1.0, 0.0, 0.0]]];
+        let faces: &[&[[f64; 3]]] = if self.linear { &linear_faces } else { &quadratic_faces };
         let mut best: Option<(f64, [f64; 3])> = None;
-        for basis in faces {
+        for &basis in faces {
             let k = basis.len();
             let design: Vec<f64> = rows
                 .iter()
@@ -156,7 +169,7 @@ impl JointProblem<'_> {
             }
         }
         let (_, c) = best?;
-        Some(Quadratic { a0: c[0], a1: c[1] / scale, a2: c[2] / scale / scale })
+        Some(Quadratic::from_centred(c, mid, half))
     }
 }
 
@@ -179,6 +192,29 @@ fn gauge(map: &mut SignalMap, coeffs: &mut [f64]) {
         let q = &mut map.quadratic;
         (q.a0, q.a1, q.a2) = (q.a0 / c, q.a1 / c, q.a2 / c);
     }
+}
+
+/// Fixes the scale gauge the fit leaves to the prior: f -> c f, g -> g / c with c the mean of
+/// g over the samples' basis rows `phis`, so the stored gain averages 1 over the calibration
+/// samples. g f + b is unchanged at every point (b is added, it multiplies nothing).
+///
+/// The joint objective sees the scale only through lambda_g ||alpha - alpha0||^2; with a small
+/// weight the fit can end with g ~ 1e-8 and f ~ 1e8 N, a product that predicts well but makes
+/// the strategies' absolute [`super::strategy::GAIN_FLOOR`] the gain everywhere. Returns c,
+/// or `None` (nothing changed) when the mean gain is not positive and finite: then no
+/// positive scale makes the gain average 1 and f keeps its direction.
+pub fn normalize_gain(map: &mut SignalMap, alpha: &mut [f64], phis: &[[f64; NPHI]]) -> Option<f64> {
+    if phis.is_empty() {
+        return None;
+    }
+    let c = phis.iter().map(|p| field_value(p, alpha)).sum::<f64>() / phis.len() as f64;
+    if !(c > 0.0 && c.is_finite()) {
+        return None;
+    }
+    alpha.iter_mut().for_each(|a| *a /= c);
+    let q = &mut map.quadratic;
+    (q.a0, q.a1, q.a2) = (q.a0 * c, q.a1 * c, q.a2 * c);
+    Some(c)
 }
 
 /// Fits f, g and b together, starting from `start` (the pooled f). `None` when the field step
@@ -261,7 +297,7 @@ mod tests {
     #[test]
     fn joint_fit_recovers_a_separable_model_the_pooled_fit_misses() {
         let (rows, s, f) = separable();
-        let problem = JointProblem { phi: &rows, signal: &s, force: &f, lambda_g: 1e-6, lambda_b: 1e-6 };
+        let problem = JointProblem { phi: &rows, signal: &s, force: &f, lambda_g: 1e-6, lambda_b: 1e-6, linear: false };
         let start = pooled(&s, &f);
         let fit = fit_joint(&problem, start).unwrap();
         let n = f.len() as f64;
@@ -282,7 +318,8 @@ mod tests {
         // Data the pooled fit explains exactly, with g = 1 and b = 0 at their priors: the
         // start is the optimum, and the fit keeps it.
         let exact: Vec<f64> = s.iter().map(|&v| start.quadratic.at(v)).collect();
-        let problem = JointProblem { phi: &rows, signal: &s, force: &exact, lambda_g: 1.0, lambda_b: 1.0 };
+        let problem =
+            JointProblem { phi: &rows, signal: &s, force: &exact, lambda_g: 1.0, lambda_b: 1.0, linear: false };
         let fit = fit_joint(&problem, start).unwrap();
         assert!(fit.converged && fit.rounds <= 1, "{fit:?}");
         let (q, q0) = (fit.map.quadratic, start.quadratic);
@@ -303,7 +340,7 @@ mod tests {
                 f.push(5.0 * sig - 0.9 * sig * sig);
             }
         }
-        let problem = JointProblem { phi: &rows, signal: &s, force: &f, lambda_g: 1e3, lambda_b: 1e3 };
+        let problem = JointProblem { phi: &rows, signal: &s, force: &f, lambda_g: 1e3, lambda_b: 1e3, linear: false };
         let start = pooled(&s, &f);
         assert!(start.quadratic.slope(start.signal_max) < 0.0, "the start bends over: {start:?}");
         let (lo, hi) = (start.signal_min, start.signal_max);
@@ -328,10 +365,78 @@ mod tests {
         }
     }
 
+    /// The blow-up a tiny ridge weight allowed: g scaled by 1e-8 and f by 1e8, a product that
+    /// predicts as well, but under the strategies' floor g.max(GAIN_FLOOR) every force is
+    /// ~1e7 N. Normalized, the gain averages 1, the prediction is unchanged, and the floor no
+    /// longer touches it.
+    #[test]
+    fn normalizing_the_gain_fixes_the_scale_the_floor_assumes() {
+        use crate::correct::strategy::GAIN_FLOOR;
+        let (rows, s, f) = separable();
+        let problem = JointProblem { phi: &rows, signal: &s, force: &f, lambda_g: 1e-6, lambda_b: 1e-6, linear: false };
+        let fit = fit_joint(&problem, pooled(&s, &f)).unwrap();
+        let mut coeffs = problem.fields(&fit.map).unwrap();
+        let mut map = fit.map;
+        coeffs[..NPHI].iter_mut().for_each(|a| *a *= 1e-8);
+        let q = &mut map.quadratic;
+        (q.a0, q.a1, q.a2) = (q.a0 * 1e8, q.a1 * 1e8, q.a2 * 1e8);
+        let predict = |m: &SignalMap, c: &[f64], floor: f64| -> Vec<f64> {
+            rows.iter()
+                .zip(&s)
+                .map(|(p, &v)| field_value(p, &c[..NPHI]).max(floor) * m.eval(v).0 + field_value(p, &c[NPHI..]))
+                .collect()
+        };
+        let exact = predict(&map, &coeffs, f64::NEG_INFINITY);
+        let floored = predict(&map, &coeffs, GAIN_FLOOR);
+        assert!(floored.iter().zip(&f).all(|(p, t)| p - t > 1e5), "the floor blows the forces up");
+        let c = normalize_gain(&mut map, &mut coeffs[..NPHI], &rows).unwrap();
+        assert!((c - 1e-8).abs() < 0.5e-8, "{c}");
+        let mean = rows.iter().map(|p| field_value(p, &coeffs[..NPHI])).sum::<f64>() / rows.len() as f64;
+        assert!((mean - 1.0).abs() < 1e-12, "{mean}");
+        for (a, b) in predict(&map, &coeffs, GAIN_FLOOR).iter().zip(&exact) {
+            assert!((a - b).abs() < 1e-9 * (1.0 + b.abs()), "{a} vs {b}");
+        }
+        // No positive scale for a gain averaging <= 0: nothing is changed.
+        let mut negative = coeffs.clone();
+        negative[..NPHI].iter_mut().for_each(|a| *a = -*a);
+        let before = map;
+        assert!(normalize_gain(&mut map, &mut negative[..NPHI], &rows).is_none());
+        assert_eq!(map, before);
+    }
+
+    /// Two force levels: the f step keeps a line, never a bend.
+    #[test]
+    fn a_linear_problem_gets_a_linear_f() {
+        let (mut rows, mut s, mut f) = (Vec::new(), Vec::new(), Vec::new());
+        for iu in 0..5 {
+            let u = -1.0 + 0.5 * iu as f64;
+            for force in [2.0, 8.0] {
+                rows.push(phi(u, 0.0));
+                s.push(0.3 * force * (1.0 - 0.1 * u * u));
+                f.push(force);
+            }
+        }
+        let problem = JointProblem { phi: &rows, signal: &s, force: &f, lambda_g: 1e-3, lambda_b: 1e-3, linear: true };
+        // The quadratic through the two clusters bends (its curvature comes from how dP varies
+        // across locations within a level); the linear f step does not.
+        let bent = pooled(&s, &f);
+        assert!(bent.quadratic.a2.abs() > 1e-3, "{bent:?}");
+        let start = SignalMap { quadratic: crate::correct::fit::fit_polynomial(&s, &f, 1).unwrap(), ..bent };
+        let mut coeffs = vec![0.0; 2 * NPHI];
+        coeffs[0] = 1.0;
+        for monotone in [true, false] {
+            let c = problem.curve(&coeffs, (start.signal_min, start.signal_max), monotone).unwrap();
+            assert!(c.a2 == 0.0 && c.a1 > 0.0, "{c:?}");
+        }
+        let fit = fit_joint(&problem, start).unwrap();
+        assert!(fit.rounds > 0 && fit.objective < fit.objective_start, "{fit:?}");
+        assert_eq!(fit.map.quadratic.a2, 0.0, "{:?}", fit.map);
+    }
+
     #[test]
     fn the_gauge_step_keeps_the_prediction_and_lowers_the_penalty() {
         let (rows, s, f) = separable();
-        let problem = JointProblem { phi: &rows, signal: &s, force: &f, lambda_g: 3.0, lambda_b: 2.0 };
+        let problem = JointProblem { phi: &rows, signal: &s, force: &f, lambda_g: 3.0, lambda_b: 2.0, linear: false };
         let mut map = pooled(&s, &f);
         // Fields off their priors in both gauge directions.
         let mut coeffs = vec![0.0; 2 * NPHI];

@@ -14,6 +14,7 @@ pub mod forward;
 pub mod joint;
 pub mod kernel;
 pub mod map;
+pub mod quality;
 pub mod strategy;
 
 pub use average::{Holds, average_holds};

@@ -16,6 +16,10 @@ use crate::segment::Contact;
 use crate::split::Splitter;
 
 /// Smallest gain used, so F stays non-decreasing in the signal even where a fitted field dips.
+/// Absolute, so it relies on the gain's scale: the ridge prior pulls g towards 1, and the
+/// calibration fixes the scale the joint f fit leaves free so that g averages 1 over the
+/// calibration samples ([`super::joint::normalize_gain`]). The floor is then 5 % of the mean
+/// gain.
 pub const GAIN_FLOOR: f64 = 0.05;
 
 /// The strategies, in report order.

@@ -104,6 +104,24 @@ fn calibrate_then_eval_writes_the_contract_json() {
     assert_eq!(v["frames"].as_u64().unwrap(), by_truth, "{err}");
     assert_eq!(p["frames"].as_u64().unwrap(), by_pressure, "{err}");
     assert!(by_pressure > 0, "{err}");
+    assert!(!err.contains("differs from the settings"), "same settings as calibrate: {err}");
+
+    // The calibration records the settings its samples were taken with; evaluating on another
+    // image scale is warned about, naming the flag and the calibration's value, while the
+    // precision (f32 agrees to 1e-4) is not a difference.
+    assert!(calib.contains("[provenance.pipeline]"), "{calib}");
+    let eval_recon = |recon: &str| {
+        let out = skinflow(&d, &["eval", "test.h5", "--calib", "calib.toml", "--recon", recon]);
+        ok(&out);
+        stderr(&out)
+    };
+    let err = eval_recon("image_nx = 32, image_ny = 32");
+    assert!(
+        err.contains("warning: --recon 'image_nx = 32, image_ny = 32' differs") && err.contains("--recon ''"),
+        "{err}"
+    );
+    let err = eval_recon("precision = \"f32\"");
+    assert!(!err.contains("differs from the settings"), "{err}");
 }
 
 /// `calibrate A.h5 B.h5` pools the two recordings' samples (each against its own no-load

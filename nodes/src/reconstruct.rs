@@ -44,7 +44,7 @@ use skinflow_eit::{CemParams, MaskParams, Sensor};
 
 use crate::payload::{EitFrame, Image, ReferenceSource, Spread, SyncedFrame};
 
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ReconstructorParams {
     /// Sensor TOML file (CONTRACTS.md section 1); absent: the default `paper-100mm`.

@@ -42,7 +42,7 @@ const NOISE_FRAMES: usize = 64;
 /// Default multiple of the no-load noise peak.
 pub const DEFAULT_FLOOR_OVER_NOISE: f64 = 2.5;
 
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SegmenterParams {
     /// Absolute floor on the conductivity decrease, S/m (image units).

@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context as _, Result, bail};
 use sha2::{Digest, Sha256};
 use skinflow_contact::CalibSample;
-use skinflow_contact::correct::{CalibParams, Calibrated, FFit, Provenance, RecordingRef, calibrate};
+use skinflow_contact::correct::{CalibParams, Calibrated, FFit, PipelineSettings, Provenance, RecordingRef, calibrate};
 use skinflow_nodes::payload::Contacts;
 
 use super::pipeline::{PipelineArgs, Settled, SettledBy};
@@ -134,6 +134,7 @@ pub fn collect(recordings: &[PathBuf], args: &PipelineArgs) -> Result<(Vec<Calib
         recording_hash: first.recording_hash,
         software_version: concat!("skinflow ", env!("CARGO_PKG_VERSION")).to_owned(),
         more_recordings: refs.collect(),
+        pipeline: Some(PipelineSettings { recon: args.recon.clone(), segment: args.segment.clone() }),
     };
     Ok((all, provenance))
 }
@@ -184,12 +185,20 @@ pub fn run(recordings: &[PathBuf], out: &Path, fit_toml: &str, args: &PipelineAr
     let cal = &fitted.calibration;
     println!("{}", cal.r2);
     let lam = |v: Option<f64>| v.map_or_else(|| "prior".to_string(), |v| format!("{v:.3e}"));
+    let t = &cal.training;
+    let why = if t.rejected_non_positive_dp + t.rejected_pressure_spikes > 0 {
+        format!(": {} with dP <= 0, {} pressure spikes", t.rejected_non_positive_dp, t.rejected_pressure_spikes)
+    } else {
+        String::new()
+    };
     println!(
-        "samples: {} frames -> {} used ({} rejected) at {} locations; ridge lambda_g / lambda_b: pneumatic {} / {}, EIT {} / {}",
-        cal.training.frames,
-        cal.training.samples,
-        cal.training.rejected,
-        cal.training.locations,
+        "samples: {} frames -> {} used ({} rejected{why}) at {} locations, {} force levels; ridge lambda_g / lambda_b: \
+         pneumatic {} / {}, EIT {} / {}",
+        t.frames,
+        t.samples,
+        t.rejected,
+        t.locations,
+        t.force_levels,
         lam(cal.pneumatic.locaware.lambda_g),
         lam(cal.pneumatic.locaware.lambda_b),
         lam(cal.eit.locaware.lambda_g),

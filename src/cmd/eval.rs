@@ -278,8 +278,9 @@ pub fn run(
     {
         anyhow::bail!("--plots {}: is an input file, not a directory for the plots", dir.display());
     }
-    check_calibration(calib)?;
+    let cal = check_calibration(calib)?;
     args.validate()?;
+    args.warn_calibration_settings(calib, cal.provenance.pipeline.as_ref());
     if recordings.len() > 1 {
         super::calibrate::distinct(recordings, "frames")?;
     }
@@ -309,13 +310,12 @@ pub fn run(
 }
 
 /// Refuses a `--calib` that is missing or not a calibration before the pipeline runs.
-pub fn check_calibration(calib: &Path) -> Result<()> {
+pub fn check_calibration(calib: &Path) -> Result<Calibration> {
     if !calib.is_file() {
         let why = if calib.exists() { "is not a file" } else { "does not exist" };
         anyhow::bail!("--calib {}: {why} (pass a calibration from `skinflow calibrate`)", calib.display());
     }
-    Calibration::read(calib).map_err(|e| anyhow::anyhow!("--calib: {e}"))?;
-    Ok(())
+    Calibration::read(calib).map_err(|e| anyhow::anyhow!("--calib: {e}"))
 }
 
 fn write_plots(dir: &Path, calib: &Path, o: &EvalOutcome, args: &PipelineArgs) -> Result<()> {

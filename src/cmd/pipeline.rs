@@ -4,6 +4,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Result, bail};
 use clap::Args;
+use skinflow_contact::correct::PipelineSettings;
 use skinflow_core::Message;
 use skinflow_nodes::payload::SyncedFrame;
 use skinflow_nodes::pipeline::PipelineSpec;
@@ -66,6 +67,27 @@ impl PipelineArgs {
         check_params::<skinflow_nodes::segment::SegmenterParams>("--segment", &self.segment)?;
         check_params::<skinflow_nodes::sync::SyncParams>("--sync", &self.sync)?;
         Ok(())
+    }
+
+    /// Warns, one line per flag, when this run's reconstructor or segmenter settings differ
+    /// from those `calib` was fitted with in anything that scales the conductivity sums (the
+    /// matrix cache, the precision, `reference_frames` and `elements` do not). A calibration
+    /// from before format version 7 records none, and is not checked.
+    pub fn warn_calibration_settings(&self, calib: &Path, recorded: Option<&PipelineSettings>) {
+        let Some(recorded) = recorded else { return };
+        for (flag, now, then, same) in [
+            ("--recon", &self.recon, &recorded.recon, same_recon(&self.recon, &recorded.recon)),
+            ("--segment", &self.segment, &recorded.segment, same_segment(&self.segment, &recorded.segment)),
+        ] {
+            if !same {
+                eprintln!(
+                    "warning: {flag} '{now}' differs from the settings {} was fitted with ('{then}'): the EIT \
+                     strategies and the area terms read conductivity sums and areas, which scale with the image \
+                     grid, lambda and the ROI; pass {flag} '{then}' to evaluate on the calibration's scale",
+                    calib.display()
+                );
+            }
+        }
     }
 
     pub fn spec(&self, recording: PathBuf) -> PipelineSpec {
@@ -217,6 +239,31 @@ impl Settled {
         let i = self.change_t.partition_point(|&t| t <= lo);
         self.change_t.get(i).is_none_or(|&t| t > hi)
     }
+}
+
+/// Whether two `--recon` bodies give the same image scale: equal params once the matrix cache,
+/// precision (f32 agrees to 1e-4), `reference_frames` and `elements` are set aside. A body
+/// that does not parse (written by another version) counts as different.
+fn same_recon(a: &str, b: &str) -> bool {
+    use skinflow_nodes::reconstruct::ReconstructorParams;
+    let scale = |text: &str| {
+        parse_params::<ReconstructorParams>("--recon", text).ok().map(|p| ReconstructorParams {
+            cache_dir: None,
+            no_cache: false,
+            precision: None,
+            reference_frames: 0,
+            elements: false,
+            ..p
+        })
+    };
+    matches!((scale(a), scale(b)), (Some(x), Some(y)) if x == y)
+}
+
+/// Whether two `--segment` bodies give equal segmenter params (each shapes the ROIs).
+fn same_segment(a: &str, b: &str) -> bool {
+    use skinflow_nodes::segment::SegmenterParams;
+    let parse = |text: &str| parse_params::<SegmenterParams>("--segment", text).ok();
+    matches!((parse(a), parse(b)), (Some(x), Some(y)) if x == y)
 }
 
 /// Fewest no-load frames before [`Settled::warn_short_no_load`] stays quiet: a reference

@@ -17,6 +17,7 @@ fn provenance() -> Provenance {
         recording_hash: "sha256:0000".into(),
         software_version: "0.1.0".into(),
         more_recordings: Vec::new(),
+        pipeline: None,
     }
 }
 

@@ -21,7 +21,7 @@ pub const FORMAT: &str = "skinflow-calibration";
 pub const FORMAT_VERSION: u32 = 7;
 /// Oldest `format_version` still read (version 3 lacks the location-held-out figures, versions
 /// 3 and 4 the `cv_groups` choice, versions 3 to 5 `provenance.more_recordings`, versions 3 to
-/// 6 the breakdown of the rejected samples, read as 0).
+/// 6 the breakdown of the rejected samples, read as 0, and `provenance.pipeline`).
 pub const OLDEST_FORMAT_VERSION: u32 = 3;
 
 /// Where a calibration came from (all given by the caller).
@@ -38,6 +38,21 @@ pub struct Provenance {
     /// (`skinflow calibrate A.h5 B.h5 ...`); empty, and not written, for one recording.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub more_recordings: Vec<RecordingRef>,
+    /// The reconstructor and segmenter settings the samples were taken with. The conductivity
+    /// sums the EIT strategies and the area terms read scale with the image grid, lambda and
+    /// the ROI (4x from a 64 x 64 to a 128 x 128 image), so `eval` warns when its own differ.
+    /// Absent before version 7.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pipeline: Option<PipelineSettings>,
+}
+
+/// The reconstructor's and segmenter's params as the bodies of their TOML params tables
+/// (`skinflow calibrate --recon ... --segment ...`); "" is every default.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PipelineSettings {
+    pub recon: String,
+    pub segment: String,
 }
 
 /// One recording of a calibration's provenance.

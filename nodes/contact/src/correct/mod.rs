@@ -19,5 +19,7 @@ pub mod strategy;
 
 pub use average::{Holds, average_holds};
 pub use calibrate::{CalibParams, CalibSample, CalibWarning, CalibrateError, Calibrated, calibrate};
-pub use calibration::{Calibration, CalibrationFileError, CvGroups, FFit, Provenance, R2Table, RecordingRef};
+pub use calibration::{
+    Calibration, CalibrationFileError, CvGroups, FFit, PipelineSettings, Provenance, R2Table, RecordingRef,
+};
 pub use strategy::{ForceEstimate, ForceFlags, Strategy, StrategyKind};

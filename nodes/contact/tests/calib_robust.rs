@@ -19,29 +19,7 @@ fn provenance() -> Provenance {
 /// Frames of `tests/synth`'s model at the given true locations (centroid noise 1.5 mm, dP
 /// noise 0.01 kPa, C noise 2 %), location by location, force by force, 6 frames per hold.
 fn frames_at(locations: &[(f64, f64)], forces: &[f64], seed: u64) -> Vec<CalibSample> {
-    use rand::SeedableRng;
-    use rand_distr::{Distribution, Normal};
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
-    let n = Normal::new(0.0, 1.0).unwrap();
-    let mut out = Vec::new();
-    for &(tx, ty) in locations {
-        for &f in forces {
-            for _ in 0..6 {
-                out.push(CalibSample {
-                    x_mm: tx + 1.5 * n.sample(&mut rng),
-                    y_mm: ty + 1.5 * n.sample(&mut rng),
-                    true_x_mm: tx,
-                    true_y_mm: ty,
-                    force_n: f,
-                    dp_kpa: synth::dp_of(f, tx, ty) + 0.01 * n.sample(&mut rng),
-                    cond_sum: synth::cond_of(f, tx, ty) * (1.0 + 0.02 * n.sample(&mut rng)),
-                    area_mm2: 300.0 + 20.0 * f,
-                    diameter_mm: 15.0,
-                });
-            }
-        }
-    }
-    out
+    synth::frames_at(seed, locations, forces, 6, 0.01)
 }
 
 /// Pneumatic-LocAware's force for a true `force_n` press at (x, y) (noise-free dP).

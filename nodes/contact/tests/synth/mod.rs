@@ -30,28 +30,42 @@ pub fn cond_of(force_n: f64, x_mm: f64, y_mm: f64) -> f64 {
 
 /// Frames in recording order: location by location, force by force, `per_hold` frames each.
 pub fn frames(seed: u64, grid: usize, forces: &[f64], per_hold: usize, dp_noise_kpa: f64) -> Vec<CalibSample> {
+    let step = if grid > 1 { 80.0 / (grid - 1) as f64 } else { 0.0 };
+    let mut locations = Vec::with_capacity(grid * grid);
+    for i in 0..grid {
+        for j in 0..grid {
+            let (tx, ty) = (-40.0 + step * i as f64 * f64::from(u8::from(grid > 1)), -40.0 + step * j as f64);
+            locations.push(if grid == 1 { (0.0, 0.0) } else { (tx, ty) });
+        }
+    }
+    frames_at(seed, &locations, forces, per_hold, dp_noise_kpa)
+}
+
+/// [`frames`] at the given true locations (centroid noise 1.5 mm, C noise 2 %).
+pub fn frames_at(
+    seed: u64,
+    locations: &[(f64, f64)],
+    forces: &[f64],
+    per_hold: usize,
+    dp_noise_kpa: f64,
+) -> Vec<CalibSample> {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let n = Normal::new(0.0, 1.0).unwrap();
     let mut out = Vec::new();
-    for i in 0..grid {
-        for j in 0..grid {
-            let step = if grid > 1 { 80.0 / (grid - 1) as f64 } else { 0.0 };
-            let (tx, ty) = (-40.0 + step * i as f64 * f64::from(u8::from(grid > 1)), -40.0 + step * j as f64);
-            let (tx, ty) = if grid == 1 { (0.0, 0.0) } else { (tx, ty) };
-            for &f in forces {
-                for _ in 0..per_hold {
-                    out.push(CalibSample {
-                        x_mm: tx + 1.5 * n.sample(&mut rng),
-                        y_mm: ty + 1.5 * n.sample(&mut rng),
-                        true_x_mm: tx,
-                        true_y_mm: ty,
-                        force_n: f,
-                        dp_kpa: dp_of(f, tx, ty) + dp_noise_kpa * n.sample(&mut rng),
-                        cond_sum: cond_of(f, tx, ty) * (1.0 + 0.02 * n.sample(&mut rng)),
-                        area_mm2: 300.0 + 20.0 * f,
-                        diameter_mm: 15.0,
-                    });
-                }
+    for &(tx, ty) in locations {
+        for &f in forces {
+            for _ in 0..per_hold {
+                out.push(CalibSample {
+                    x_mm: tx + 1.5 * n.sample(&mut rng),
+                    y_mm: ty + 1.5 * n.sample(&mut rng),
+                    true_x_mm: tx,
+                    true_y_mm: ty,
+                    force_n: f,
+                    dp_kpa: dp_of(f, tx, ty) + dp_noise_kpa * n.sample(&mut rng),
+                    cond_sum: cond_of(f, tx, ty) * (1.0 + 0.02 * n.sample(&mut rng)),
+                    area_mm2: 300.0 + 20.0 * f,
+                    diameter_mm: 15.0,
+                });
             }
         }
     }

@@ -1,6 +1,7 @@
 //! Whole-binary tests of the hardware path and of crash safety: a full graph (serial sources ->
-//! sync -> pipeline -> logger) against `skinflow emulate` over real pseudo-terminals, and a
-//! logging `skinflow run` killed with SIGKILL.
+//! sync -> pipeline -> logger) against `skinflow emulate` over real pseudo-terminals, boards
+//! that send the wrong thing, nothing, or restart (ptys the test writes), and a logging
+//! `skinflow run` killed with SIGKILL.
 
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
@@ -37,8 +38,9 @@ fn rows(summary: &str, stream: &str) -> u64 {
 fn serial_sources_drive_the_pipeline_through_emulated_boards() {
     let d = workdir("emulate");
     let emu_dir = d.join("emu");
+    // One CRC failure: the frame is lost, and counted as the EIT node's discarded message.
     let mut emu = Command::new(bin())
-        .args(["emulate", &fixture("tiny-eval.toml"), "--dir", emu_dir.to_str().unwrap()])
+        .args(["emulate", &fixture("tiny-eval.toml"), "--dir", emu_dir.to_str().unwrap(), "--fault", "eit:5:crc"])
         .env("RUST_LOG", "warn")
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
@@ -52,9 +54,11 @@ fn serial_sources_drive_the_pipeline_through_emulated_boards() {
         let (dev, p) = l.split_once(' ').unwrap();
         paths.insert(dev.to_owned(), p.to_owned());
     }
+    // The emulator sends from its start, before the graph opens the ports: keep that backlog
+    // (the default clears it), so every frame sent can be accounted for.
     let graph = format!(
-        "[[node]]\nid = \"eit\"\nkind = \"serial_eit\"\nparams = {{ port = {:?} }}\n\
-         [[node]]\nid = \"pressure\"\nkind = \"serial_pressure\"\nparams = {{ port = {:?} }}\n\
+        "[[node]]\nid = \"eit\"\nkind = \"serial_eit\"\nparams = {{ port = {:?}, clear_input_at_open = false }}\n\
+         [[node]]\nid = \"pressure\"\nkind = \"serial_pressure\"\nparams = {{ port = {:?}, clear_input_at_open = false }}\n\
          [[node]]\nid = \"sync\"\nkind = \"sync\"\n\
          [[node]]\nid = \"recon\"\nkind = \"reconstructor\"\n\
          [[node]]\nid = \"seg\"\nkind = \"segmenter\"\n\
@@ -95,7 +99,8 @@ fn serial_sources_drive_the_pipeline_through_emulated_boards() {
     assert!(out.status.success(), "{stderr}");
     assert!(t0.elapsed() < Duration::from_secs(120));
     let summary = inspect(&d, "live.h5");
-    // Every frame the emulated board sent arrives and goes through every stage.
+    // Every frame the emulated board sent arrives and goes through every stage, but the one
+    // whose CRC failed: it shows as a gap of one frame, and as the EIT node's drop.
     let sent: u64 = emu_out
         .stderr
         .split(|&b| b == b'\n')
@@ -108,14 +113,112 @@ fn serial_sources_drive_the_pipeline_through_emulated_boards() {
                 .and_then(|n| n.parse().ok())
         })
         .expect("the emulator reports its frame count");
-    assert_eq!(rows(&summary, "/eit"), sent, "{summary}");
-    assert!(summary.contains("0 frames lost"), "{summary}");
+    assert_eq!(rows(&summary, "/eit"), sent - 1, "{summary}");
+    assert!(summary.contains("eit gaps: 1 gaps, 1 frames lost"), "{summary}");
     let stats: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(d.join("stats.json")).unwrap()).unwrap();
-    let node = |id: &str| {
-        stats["nodes"].as_array().unwrap().iter().find(|n| n["id"] == id).unwrap()["msgs_out"].as_u64().unwrap()
+    let node = |id: &str, field: &str| {
+        stats["nodes"].as_array().unwrap().iter().find(|n| n["id"] == id).unwrap()[field].as_u64().unwrap()
     };
-    assert_eq!(node("force"), sent);
+    assert_eq!(node("force", "msgs_out"), sent - 1);
+    assert_eq!((node("eit", "discarded"), node("eit", "drops")), (1, 1));
+    assert!(logged(&stderr, "eit").iter().any(|l| l.contains("crc_errors=1")), "{stderr}");
+}
+
+/// The log lines of node `id` in a run's stderr.
+fn logged<'a>(stderr: &'a str, id: &str) -> Vec<&'a str> {
+    stderr.lines().filter(|l| l.contains(&format!("node=\"{id}\""))).collect()
+}
+
+/// A pseudo-terminal the test writes as a board would: the master, and the slave, kept open
+/// so bytes written before the graph opens the port are buffered (raw, so binary passes
+/// untouched), published at `link`.
+struct Board {
+    master: std::fs::File,
+    _slave: std::fs::File,
+}
+
+impl Board {
+    fn new(link: &Path) -> Board {
+        use nix::sys::termios::{SetArg, cfmakeraw, tcgetattr, tcsetattr};
+        let pty = nix::pty::openpty(None, None).expect("openpty");
+        for fd in [&pty.master, &pty.slave] {
+            let mut t = tcgetattr(fd).unwrap();
+            cfmakeraw(&mut t);
+            tcsetattr(fd, SetArg::TCSANOW, &t).unwrap();
+        }
+        let name = nix::unistd::ttyname(&pty.slave).unwrap();
+        std::os::unix::fs::symlink(name, link).unwrap();
+        Board { master: std::fs::File::from(pty.master), _slave: std::fs::File::from(pty.slave) }
+    }
+
+    fn send(&mut self, bytes: &[u8]) {
+        use std::io::Write;
+        self.master.write_all(bytes).unwrap();
+    }
+}
+
+/// Three boards on ptys, their bytes written before the run (kept at open): pressure lines on
+/// an EIT port (a wrong device: bytes, no frame), a silent one, and an EIT board whose frame
+/// 104 fails its CRC and which then restarts (counter and clock back to 0). The run warns about
+/// each, `/eit/seq` goes on at +1 across the restart (no gap of 2^32), and the one lost frame is
+/// the EIT node's drop.
+#[test]
+fn a_wrong_device_a_silent_board_and_a_board_restart_are_reported() {
+    use skinflow_serial::encode::{encode_eit_frame, encode_pressure_line};
+    let d = workdir("boards");
+    let mut wrong = Board::new(&d.join("wrong"));
+    let _mute = Board::new(&d.join("mute"));
+    let mut eit = Board::new(&d.join("eit"));
+    let mut lines = Vec::new();
+    for k in 0..40 {
+        encode_pressure_line(&mut lines, 50 * k, 1.5);
+    }
+    wrong.send(&lines);
+    let volts = vec![0.01; 120];
+    let mut frames = Vec::new();
+    for (i, counter) in (100..110).chain(0..10).enumerate() {
+        let time_us = if counter >= 100 { 5_000_000 + 769_000 * i as u32 } else { 769_000 * counter };
+        encode_eit_frame(&mut frames, counter, time_us, &volts);
+        if counter == 104 {
+            // Its CRC's last byte: the frame fails its check.
+            let last = frames.len() - 1;
+            frames[last] ^= 0x01;
+        }
+    }
+    eit.send(&frames);
+    let keep = "clear_input_at_open = false";
+    let graph = format!(
+        "[[node]]\nid = \"wrong\"\nkind = \"serial_eit\"\nparams = {{ port = \"wrong\", {keep} }}\n\
+         [[node]]\nid = \"mute\"\nkind = \"serial_eit\"\nparams = {{ port = \"mute\", {keep} }}\n\
+         [[node]]\nid = \"eit\"\nkind = \"serial_eit\"\nparams = {{ port = \"eit\", {keep} }}\n\
+         [[node]]\nid = \"sink\"\nkind = \"null\"\n\
+         [[node]]\nid = \"log\"\nkind = \"hdf5_logger\"\nparams = {{ path = \"boards.h5\" }}\n\
+         [[edge]]\nfrom = \"wrong.eit\"\nto = \"sink.in\"\n\
+         [[edge]]\nfrom = \"mute.eit\"\nto = \"sink.in\"\n\
+         [[edge]]\nfrom = \"eit.eit\"\nto = \"log.eit\"\ncapacity = 64\n"
+    );
+    std::fs::write(d.join("g.toml"), graph).unwrap();
+    let out = skinflow(&d, &["run", "g.toml", "--for", "3", "--stats-json", "stats.json"]);
+    ok(&out);
+    let err = stderr(&out);
+    let said = |id: &str, what: &str| logged(&err, id).iter().any(|l| l.contains(what));
+    assert!(said("wrong", "bytes and no valid EIT frame"), "{err}");
+    assert!(said("wrong", "wrong device, baud rate or protocol?"), "{err}");
+    assert!(said("mute", "no byte received in"), "{err}");
+    assert!(said("eit", "the device restarted"), "{err}");
+    assert!(said("eit", "crc_errors=1 lost_frames=1 counter_resets=1"), "{err}");
+
+    let summary = inspect(&d, "boards.h5");
+    assert_eq!(rows(&summary, "/eit"), 19, "{summary}");
+    assert!(summary.contains("eit gaps: 1 gaps, 1 frames lost, largest 1\n"), "{summary}");
+    let stats: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(d.join("stats.json")).unwrap()).unwrap();
+    let node = |id: &str, field: &str| {
+        stats["nodes"].as_array().unwrap().iter().find(|n| n["id"] == id).unwrap()[field].as_u64().unwrap()
+    };
+    assert_eq!((node("eit", "msgs_out"), node("eit", "discarded")), (19, 1));
+    assert_eq!((node("wrong", "msgs_out"), node("mute", "msgs_out")), (0, 0));
 }
 
 /// The graph of the SIGKILL tests: a fast simulation logged with a 0.2 s flush interval.

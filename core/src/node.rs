@@ -313,8 +313,9 @@ impl Context {
         self.rerun = true;
     }
 
-    /// Counts `n` messages this node held and discards without emitting them (e.g. frames
-    /// still buffered in `stop` because the end-of-stream flush could not run). They appear
+    /// Counts `n` messages this node held or received and discards without emitting them
+    /// (e.g. frames still buffered in `stop` because the end-of-stream flush could not run, or
+    /// records a source's device sent that its link lost or rejected). They appear
     /// as the node's `discarded` in the run report and in its and the graph's drops: data is
     /// never lost silently. A cold path (a locked add).
     pub fn count_discarded(&self, n: u64) {

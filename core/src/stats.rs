@@ -128,8 +128,9 @@ pub struct NodeStats {
     /// Hot swaps applied.
     pub swaps: AtomicU64,
     pub deadline_misses: AtomicU64,
-    /// Messages the node held and discarded without emitting them (its own count, through
-    /// `Context::count_discarded`: e.g. frames still buffered when it was stopped unflushed).
+    /// Messages the node held or received and discarded without emitting them (its own count,
+    /// through `Context::count_discarded`: e.g. frames still buffered when it was stopped
+    /// unflushed, or records a serial source's link lost or rejected).
     pub discarded: AtomicU64,
     /// Wall time per call.
     pub latency: Histogram,
@@ -312,7 +313,7 @@ impl fmt::Display for StatsReport {
         }
         let discarding: Vec<&NodeReport> = self.nodes.iter().filter(|n| n.discarded > 0).collect();
         if !discarding.is_empty() {
-            writeln!(f, "discarded by nodes (held, never emitted):")?;
+            writeln!(f, "discarded by nodes (held or received, never emitted; sources: records lost on their link):")?;
             for n in discarding {
                 writeln!(f, "  {} ({}): {}", n.id, n.kind, n.discarded)?;
             }

@@ -222,7 +222,7 @@ fn what_a_node_cannot_emit_is_counted_as_discarded() {
     assert_eq!(r.stats.total_drops(), 50);
     assert_eq!(got.len(), 2000 - 50);
     let text = r.stats.to_string();
-    assert!(text.contains("discarded by nodes (held, never emitted):\n  a (scale): 50"), "{text}");
+    assert!(text.contains("discarded by nodes (held or received, never emitted; sources: records lost on their link):\n  a (scale): 50"), "{text}");
     // Exactly the held ones are missing: the 50 before the first message the replacement saw.
     let gap = got.windows(2).position(|w| w[1].0 != w[0].0 + 1).expect("a gap of 50");
     assert_eq!(got[gap + 1].0 - got[gap].0, 51, "{:?}", &got[gap..gap + 2]);

@@ -1,11 +1,17 @@
 //! Nodes `serial_eit`, `serial_pressure`, `serial_loadcell`: the skin's boards on serial ports
-//! (wire formats in `nodes/serial/PROTOCOLS.md`). Each runs on its own thread, stamps records
-//! with the graph clock at reception, resynchronises after garbage or torn frames, counts CRC
-//! failures and frame-counter gaps, and reconnects with backoff when the device disappears.
-//! A port missing at start stops the graph before any data flows.
+//! (wire formats in `nodes/serial/PROTOCOLS.md`). Each runs on its own thread, clears what the
+//! port buffered before the run, stamps records with the graph clock at reception (records that
+//! arrived in one read with their device time mapped onto that clock, so a burst keeps its
+//! spacing), resynchronises after garbage or torn frames, counts CRC failures and
+//! frame-counter gaps as discarded messages, warns while the run goes on when bytes do not
+//! decode, the port is silent or records are lost (`serial_link.rs`), and reconnects with
+//! backoff when the device disappears. A port missing at start stops the graph before any data
+//! flows.
 //!
 //! EIT frames are stamped at the middle of their acquisition window: reception time minus
-//! `frame_period_s / 2` (the board sends a frame when its acquisition ends). The load cell
+//! `frame_period_s / 2` (the board sends a frame when its acquisition ends). `/eit/seq` is the
+//! device counter unwrapped to 64 bits; after a device restart (the counter goes back) it goes
+//! on at +1, so it always increases and a gap in it means lost frames. The load cell
 //! becomes a truth row with one contact at the rig's position (`x_mm`, `y_mm`,
 //! `diameter_mm`), or an empty row below `contact_threshold_n`; the control command
 //! `at X_MM Y_MM [DIAMETER_MM]` moves that position while the graph runs.
@@ -38,27 +44,58 @@ use skinflow_serial::{EitDecoder, ForceDecoder, PressureDecoder, ReaderConfig};
 use crate::payload::{EitFrame, PressureSample, Truth, TruthContact};
 use crate::serial_link::{Port, PortHandover};
 
-/// The port settings every serial source takes (`port`, `baud`, `read_timeout_s`,
-/// `backoff_initial_s`, `backoff_max_s`), as the link (`serial_link.rs`) uses them.
+/// The port settings every serial source takes (`port`, `baud`, the UART framing, the read
+/// timeout, the reconnect backoff, stall detection and clearing at open), as the link
+/// (`serial_link.rs`) uses them.
 #[derive(Debug, Clone, PartialEq)]
 pub struct PortParams {
     /// Device path (e.g. /dev/ttyACM0, /dev/serial/by-id/..., or an emulator's link).
     pub port: PathBuf,
     pub baud: u32,
+    /// UART framing: 5..=8 data bits, parity, 1 or 2 stop bits, flow control.
+    pub data_bits: u8,
+    pub parity: ParityParam,
+    pub stop_bits: u8,
+    pub flow_control: FlowControlParam,
     /// Longest single blocking read, s.
     pub read_timeout_s: f64,
     /// First reconnect delay, s.
     pub backoff_initial_s: f64,
     /// Largest reconnect delay, s.
     pub backoff_max_s: f64,
+    /// Silence that counts as a stall and is warned about, s; `None`: silence is normal.
+    pub stall_after_s: Option<f64>,
+    /// Discard what the port buffered before the run at open.
+    pub clear_input_at_open: bool,
+}
+
+/// `parity` param.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ParityParam {
+    None,
+    Odd,
+    Even,
+}
+
+/// `flow_control` param.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum FlowControlParam {
+    None,
+    /// XON/XOFF.
+    Software,
+    /// RTS/CTS.
+    Hardware,
 }
 
 /// Defines one serial kind's params struct: the port settings of [`PortParams`] followed by
-/// the kind's own fields. Each kind has its own struct so `deny_unknown_fields` refuses (and
-/// its error lists) exactly that kind's parameters; serde's `flatten` would share the port
-/// fields but cannot be combined with `deny_unknown_fields`.
+/// the kind's own fields; `$stall` is the kind's default `stall_after_s`. Each kind has its own
+/// struct so `deny_unknown_fields` refuses (and its error lists) exactly that kind's parameters;
+/// serde's `flatten` would share the port fields but cannot be combined with
+/// `deny_unknown_fields`.
 macro_rules! serial_params {
-    ($(#[$meta:meta])* $name:ident { $($(#[$fmeta:meta])* $field:ident: $ty:ty,)* }) => {
+    ($(#[$meta:meta])* $name:ident ($stall:literal) { $($(#[$fmeta:meta])* $field:ident: $ty:ty,)* }) => {
         $(#[$meta])*
         #[derive(Debug, Deserialize)]
         #[serde(deny_unknown_fields)]
@@ -67,6 +104,16 @@ macro_rules! serial_params {
             pub port: PathBuf,
             #[serde(default = "default_baud")]
             pub baud: u32,
+            /// UART data bits, 5..=8.
+            #[serde(default = "default_data_bits")]
+            pub data_bits: u8,
+            #[serde(default = "default_parity")]
+            pub parity: ParityParam,
+            /// UART stop bits, 1 or 2.
+            #[serde(default = "default_stop_bits")]
+            pub stop_bits: u8,
+            #[serde(default = "default_flow_control")]
+            pub flow_control: FlowControlParam,
             /// Longest single blocking read, s.
             #[serde(default = "default_read_timeout")]
             pub read_timeout_s: f64,
@@ -76,6 +123,13 @@ macro_rules! serial_params {
             /// Largest reconnect delay, s.
             #[serde(default = "default_backoff_max")]
             pub backoff_max_s: f64,
+            /// Silence that counts as a stall and is warned about, s; 0: never (a device that
+            /// may be silent).
+            #[serde(default = $stall)]
+            pub stall_after_s: f64,
+            /// Discard what the port buffered before the run at open.
+            #[serde(default = "default_clear_input")]
+            pub clear_input_at_open: bool,
             $($(#[$fmeta])* pub $field: $ty,)*
         }
 
@@ -85,9 +139,15 @@ macro_rules! serial_params {
                 PortParams {
                     port: self.port.clone(),
                     baud: self.baud,
+                    data_bits: self.data_bits,
+                    parity: self.parity,
+                    stop_bits: self.stop_bits,
+                    flow_control: self.flow_control,
                     read_timeout_s: self.read_timeout_s,
                     backoff_initial_s: self.backoff_initial_s,
                     backoff_max_s: self.backoff_max_s,
+                    stall_after_s: (self.stall_after_s != 0.0).then_some(self.stall_after_s),
+                    clear_input_at_open: self.clear_input_at_open,
                 }
             }
         }
@@ -96,7 +156,7 @@ macro_rules! serial_params {
 
 serial_params! {
     /// Params of `serial_eit`.
-    EitParams {
+    EitParams("default_stall") {
         /// Values per frame (120 for the paper's board).
         #[serde(default = "default_measurements")]
         measurements: usize,
@@ -108,16 +168,19 @@ serial_params! {
 
 serial_params! {
     /// Params of `serial_pressure`.
-    PressureParams {
+    PressureParams("default_stall") {
         /// Nominal sample period of the board, ms (gap detection).
         #[serde(default = "default_pressure_period")]
         period_ms: u32,
+        /// Largest forward time step accepted without confirmation, ms (`PROTOCOLS.md` §2).
+        #[serde(default = "default_max_jump")]
+        max_jump_ms: u32,
     }
 }
 
 serial_params! {
     /// Params of `serial_loadcell`.
-    LoadcellParams {
+    LoadcellParams("default_no_stall") {
         /// The rig's indenter position, mm.
         #[serde(default)]
         x_mm: f64,
@@ -134,6 +197,32 @@ serial_params! {
 
 fn default_baud() -> u32 {
     115_200
+}
+fn default_data_bits() -> u8 {
+    8
+}
+fn default_parity() -> ParityParam {
+    ParityParam::None
+}
+fn default_stop_bits() -> u8 {
+    1
+}
+fn default_flow_control() -> FlowControlParam {
+    FlowControlParam::None
+}
+/// EIT and pressure boards stream steadily: 2 s is ~2.6 EIT frames, 40 pressure samples.
+fn default_stall() -> f64 {
+    2.0
+}
+/// A gauge that prints only when the load changes is silent for long stretches.
+fn default_no_stall() -> f64 {
+    0.0
+}
+fn default_clear_input() -> bool {
+    true
+}
+fn default_max_jump() -> u32 {
+    skinflow_serial::decode::DEFAULT_MAX_JUMP_MS
 }
 fn default_read_timeout() -> f64 {
     0.05
@@ -181,17 +270,52 @@ fn serial_node_error(e: skinflow_serial::ParamError) -> NodeError {
 
 impl PortParams {
     pub(crate) fn config(&self) -> ReaderConfig {
+        use skinflow_serial::{DataBits, FlowControl, Parity, StopBits};
         let mut c = ReaderConfig::new(&self.port);
         c.baud = self.baud;
+        // Out-of-range values are refused by `validate` at load; these arms are not reached.
+        c.data_bits = match self.data_bits {
+            5 => DataBits::Five,
+            6 => DataBits::Six,
+            7 => DataBits::Seven,
+            _ => DataBits::Eight,
+        };
+        c.parity = match self.parity {
+            ParityParam::None => Parity::None,
+            ParityParam::Odd => Parity::Odd,
+            ParityParam::Even => Parity::Even,
+        };
+        c.stop_bits = if self.stop_bits == 2 { StopBits::Two } else { StopBits::One };
+        c.flow_control = match self.flow_control {
+            FlowControlParam::None => FlowControl::None,
+            FlowControlParam::Software => FlowControl::Software,
+            FlowControlParam::Hardware => FlowControl::Hardware,
+        };
         c.read_timeout_s = self.read_timeout_s;
         c.backoff_initial_s = self.backoff_initial_s;
         c.backoff_max_s = self.backoff_max_s;
+        c.stall_after_s = self.stall_after_s;
+        c.clear_input_at_open = self.clear_input_at_open;
         c
     }
 
-    /// The checks every serial kind runs at load: the reader's own (baud, durations), and
-    /// the backoff growing from its first delay to its largest.
+    /// The checks every serial kind runs at load: the reader's own (baud, durations), the
+    /// framing, and the backoff growing from its first delay to its largest.
     fn validate(&self) -> Result<(), ParamError> {
+        if !(5..=8).contains(&self.data_bits) {
+            return Err(ParamError::new("data_bits", format!("must be 5, 6, 7 or 8 (got {})", self.data_bits)));
+        }
+        if !(1..=2).contains(&self.stop_bits) {
+            return Err(ParamError::new("stop_bits", format!("must be 1 or 2 (got {})", self.stop_bits)));
+        }
+        if let Some(s) = self.stall_after_s
+            && !(s.is_finite() && s > 0.0 && s < 1e9)
+        {
+            return Err(ParamError::new(
+                "stall_after_s",
+                format!("must be 0 (never) or a finite number of seconds in (0, 1e9) (got {s})"),
+            ));
+        }
         self.config().validate().map_err(serial_param_error)?;
         if self.backoff_initial_s > self.backoff_max_s {
             return Err(ParamError::new(
@@ -206,6 +330,17 @@ impl PortParams {
     }
 }
 
+/// A stall must be longer than the board's nominal period, or every period would be one.
+fn stall_beyond(p: &PortParams, period_s: f64, period_param: &str, period_shown: &str) -> Result<(), ParamError> {
+    match p.stall_after_s {
+        Some(s) if s <= period_s => Err(ParamError::new(
+            "stall_after_s",
+            format!("must be 0 (never) or longer than {period_param} (got {s} s, {period_param} = {period_shown})"),
+        )),
+        _ => Ok(()),
+    }
+}
+
 impl NodeParams for EitParams {
     fn validate(&self) -> Result<(), ParamError> {
         self.port_params().validate()?;
@@ -213,7 +348,7 @@ impl NodeParams for EitParams {
         if self.measurements == 0 || self.measurements > 65_535 {
             return Err(ParamError::new("measurements", format!("must be in 1..=65535 (got {})", self.measurements)));
         }
-        Ok(())
+        stall_beyond(&self.port_params(), self.frame_period_s, "frame_period_s", &format!("{} s", self.frame_period_s))
     }
 }
 
@@ -223,7 +358,18 @@ impl NodeParams for PressureParams {
         if self.period_ms == 0 {
             return Err(ParamError::new("period_ms", "must be >= 1 ms (got 0)"));
         }
-        Ok(())
+        // A step of two periods (one lost sample) must be taken as such, not held as corrupt.
+        if u64::from(self.max_jump_ms) < 2 * u64::from(self.period_ms) {
+            return Err(ParamError::new(
+                "max_jump_ms",
+                format!(
+                    "must be at least 2 * period_ms (got max_jump_ms = {}, period_ms = {})",
+                    self.max_jump_ms, self.period_ms
+                ),
+            ));
+        }
+        let period_s = f64::from(self.period_ms) * 1e-3;
+        stall_beyond(&self.port_params(), period_s, "period_ms", &format!("{} ms", self.period_ms))
     }
 }
 
@@ -283,17 +429,14 @@ impl Source for SerialEit {
     fn poll(&mut self, ctx: &mut Context, out: &mut Outputs) -> Result<SourcePoll, NodeError> {
         let Some(r) = self.port.next(&self.p, ctx)? else { return Ok(SourcePoll::Idle) };
         let c = r.record.counter;
-        self.seq = match self.last_counter {
-            Some(prev) => self.seq + u64::from(c.wrapping_sub(prev)),
-            None => u64::from(c),
-        };
+        self.seq = next_seq(self.last_counter.map(|prev| (prev, self.seq)), c, r.record.restarted);
         self.last_counter = Some(c);
         let volts = r.record.volts;
         let payload = self.frames.fill(|f| {
             f.v.clear();
             f.v.extend_from_slice(volts);
         });
-        let t = r.host_t_s - 0.5 * self.frame_period_s;
+        let t = r.t_s - 0.5 * self.frame_period_s;
         out.send(0, Message::from_arc(Header { seq: self.seq, t_ns: ns(t), origin: ctx.index() }, payload))?;
         Ok(SourcePoll::Emitted)
     }
@@ -316,6 +459,20 @@ impl Source for SerialEit {
     }
 }
 
+/// `/eit/seq` of a frame with device counter `counter`, given the last frame's counter and seq:
+/// the counter unwrapped to 64 bits (a u32 wrap goes on past 2^32; a jump is the lost frames).
+/// The first frame starts at its counter. A frame after a device restart (`restarted`: its
+/// counter or clock went back, `skinflow_serial::is_restart`) goes on at +1, so seq keeps
+/// increasing and a gap in it still means lost frames (those lost around a restart cannot be
+/// counted; the restart is in the link's `counter_resets`).
+fn next_seq(last: Option<(u32, u64)>, counter: u32, restarted: bool) -> u64 {
+    match last {
+        None => u64::from(counter),
+        Some((_, seq)) if restarted => seq + 1,
+        Some((prev, seq)) => seq + u64::from(counter.wrapping_sub(prev)),
+    }
+}
+
 pub struct SerialPressure {
     p: PortParams,
     port: Port<PressureDecoder>,
@@ -330,9 +487,12 @@ struct PressureHandover {
 
 impl SerialPressure {
     fn new(params: PressureParams) -> Result<SerialPressure, NodeError> {
-        let dec = PressureDecoder::try_new(Some(params.period_ms)).map_err(serial_node_error)?;
+        let dec =
+            PressureDecoder::with_max_jump(Some(params.period_ms), params.max_jump_ms).map_err(serial_node_error)?;
         let p = params.port_params();
-        let port = Port::new(&p, dec, u64::from(params.period_ms));
+        // Both decoder params tell two pressure decoders apart (a hot swap takes a link over
+        // only with the same decoder).
+        let port = Port::new(&p, dec, u64::from(params.period_ms) | u64::from(params.max_jump_ms) << 32);
         Ok(SerialPressure { p, port, seq: 0 })
     }
 }
@@ -348,7 +508,7 @@ impl Source for SerialPressure {
         out.send(
             0,
             Message::new(
-                Header { seq: self.seq, t_ns: ns(r.host_t_s), origin: ctx.index() },
+                Header { seq: self.seq, t_ns: ns(r.t_s), origin: ctx.index() },
                 PressureSample { kpa: r.record.kpa },
             ),
         )?;
@@ -445,10 +605,7 @@ impl Source for SerialLoadcell {
         } else {
             Vec::new()
         };
-        out.send(
-            0,
-            Message::new(Header { seq: self.seq, t_ns: ns(r.host_t_s), origin: ctx.index() }, Truth { contacts }),
-        )?;
+        out.send(0, Message::new(Header { seq: self.seq, t_ns: ns(r.t_s), origin: ctx.index() }, Truth { contacts }))?;
         Ok(SourcePoll::Emitted)
     }
 
@@ -519,38 +676,68 @@ fn parse_at(cmd: &str, diameter_mm: f64) -> Result<(f64, f64, f64), NodeError> {
     }
 }
 
-fn port_docs(k: KindInfo) -> KindInfo {
+/// The port params' docs; `stall` is the kind's `stall_after_s` default and what it means.
+fn port_docs(k: KindInfo, stall: (&'static str, &'static str)) -> KindInfo {
     k.param(ParamDoc::new("port", "path", "", "device path"))
-        .param(ParamDoc::new("baud", "u32", "115200", "bit/s (ignored by USB CDC and ptys)"))
+        .param(ParamDoc::new("baud", "u32", "115200", "bit/s of a UART link (USB CDC boards and ptys ignore it)"))
+        .param(ParamDoc::new("data_bits", "u8", "8", "UART data bits: 5 | 6 | 7 | 8 (default framing 8N1)"))
+        .param(ParamDoc::new("parity", "string", "\"none\"", "UART parity: none | odd | even"))
+        .param(ParamDoc::new("stop_bits", "u8", "1", "UART stop bits: 1 | 2"))
+        .param(ParamDoc::new("flow_control", "string", "\"none\"", "none | software (XON/XOFF) | hardware (RTS/CTS)"))
         .param(ParamDoc::new("read_timeout_s", "f64", "0.05", "longest blocking read, s"))
         .param(ParamDoc::new("backoff_initial_s", "f64", "0.05", "first reconnect delay, s (<= backoff_max_s)"))
         .param(ParamDoc::new("backoff_max_s", "f64", "1.0", "largest reconnect delay, s"))
+        .param(ParamDoc::new("stall_after_s", "f64", stall.0, stall.1))
+        .param(ParamDoc::new(
+            "clear_input_at_open",
+            "bool",
+            "true",
+            "discard what the port buffered before the run (false: keep it, e.g. an emulator started earlier in a test)",
+        ))
 }
+
+const STALL_STREAMING: (&str, &str) =
+    ("2.0", "silence that counts as a stall and is warned about, s (> the board's period; 0: never)");
+const STALL_GAUGE: (&str, &str) = (
+    "0",
+    "silence that counts as a stall and is warned about, s (0: never, for a gauge that prints only when the load changes)",
+);
 
 pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::DuplicateKind> {
     r.register(typed(
-        port_docs(KindInfo::new("serial_eit", Role::Source, "EIT board on a serial port (binary frames, CRC-16)"))
-            .output(PortSpec::output::<EitFrame>("eit", "EIT frames, volts"))
-            .param(ParamDoc::new("measurements", "usize", "120", "values per frame"))
-            .param(ParamDoc::new("frame_period_s", "f64", "0.769", "acquisition window, s")),
+        port_docs(
+            KindInfo::new("serial_eit", Role::Source, "EIT board on a serial port (binary frames, CRC-16)"),
+            STALL_STREAMING,
+        )
+        .output(PortSpec::output::<EitFrame>("eit", "EIT frames, volts"))
+        .param(ParamDoc::new("measurements", "usize", "120", "values per frame, as the board sends them (1..=65535)"))
+        .param(ParamDoc::new("frame_period_s", "f64", "0.769", "acquisition window, s")),
         |p: EitParams, _| Ok(NodeImpl::Source(Box::new(SerialEit::new(p)?))),
     ))?;
     r.register(typed(
-        port_docs(KindInfo::new(
-            "serial_pressure",
-            Role::Source,
-            "pressure board on a serial port (ASCII t_ms,kPa lines)",
-        ))
+        port_docs(
+            KindInfo::new("serial_pressure", Role::Source, "pressure board on a serial port (ASCII t_ms,kPa lines)"),
+            STALL_STREAMING,
+        )
         .output(PortSpec::output::<PressureSample>("pressure", "gauge pressure, kPa"))
-        .param(ParamDoc::new("period_ms", "u32", "50", "nominal sample period, ms, >= 1 (gap detection)")),
+        .param(ParamDoc::new("period_ms", "u32", "50", "nominal sample period, ms, >= 1 (gap detection)"))
+        .param(ParamDoc::new(
+            "max_jump_ms",
+            "u32",
+            "10000",
+            "largest device-time step taken without confirmation, ms (>= 2 period_ms); longer ones are held as corrupt until the next line confirms a restart",
+        )),
         |p: PressureParams, _| Ok(NodeImpl::Source(Box::new(SerialPressure::new(p)?))),
     ))?;
     r.register(typed(
-        port_docs(KindInfo::new(
-            "serial_loadcell",
-            Role::Source,
-            "load cell on a serial port (ASCII force lines, N) as truth; control `at X_MM Y_MM [DIAMETER_MM]` moves the rig position",
-        ))
+        port_docs(
+            KindInfo::new(
+                "serial_loadcell",
+                Role::Source,
+                "load cell on a serial port (ASCII force lines, N) as truth; control `at X_MM Y_MM [DIAMETER_MM]` moves the rig position",
+            ),
+            STALL_GAUGE,
+        )
         .output(PortSpec::output::<Truth>("truth", "one contact at the rig position, or none below the threshold"))
         .param(ParamDoc::new("x_mm", "f64", "0", "indenter position"))
         .param(ParamDoc::new("y_mm", "f64", "0", "indenter position"))
@@ -678,10 +865,11 @@ mod tests {
 
     #[test]
     fn each_serial_kind_takes_only_its_own_params_and_lists_only_those() {
-        let port = "`port`, `baud`, `read_timeout_s`, `backoff_initial_s`, `backoff_max_s`";
+        let port = "`port`, `baud`, `data_bits`, `parity`, `stop_bits`, `flow_control`, `read_timeout_s`, \
+                    `backoff_initial_s`, `backoff_max_s`, `stall_after_s`, `clear_input_at_open`";
         let kinds: [(&str, &[&str], &str); 3] = [
             ("serial_eit", &["measurements = 7", "frame_period_s = 0.5"], "`measurements`, `frame_period_s`"),
-            ("serial_pressure", &["period_ms = 10"], "`period_ms`"),
+            ("serial_pressure", &["period_ms = 10", "max_jump_ms = 500"], "`period_ms`, `max_jump_ms`"),
             (
                 "serial_loadcell",
                 &["x_mm = 1.0", "y_mm = -2.0", "diameter_mm = 99.0", "contact_threshold_n = 3.0"],
@@ -689,7 +877,9 @@ mod tests {
             ),
         ];
         for (kind, _, own) in kinds {
-            let shared = "baud = 9600\nread_timeout_s = 0.1\nbackoff_initial_s = 0.5\nbackoff_max_s = 2.0";
+            let shared = "baud = 9600\ndata_bits = 7\nparity = \"even\"\nstop_bits = 2\nflow_control = \"hardware\"\n\
+                          read_timeout_s = 0.1\nbackoff_initial_s = 0.5\nbackoff_max_s = 2.0\nstall_after_s = 3.0\n\
+                          clear_input_at_open = false";
             assert_eq!(check(kind, shared), Ok(()), "{kind}: the port settings");
             for (other, params, _) in kinds {
                 for p in params {
@@ -729,6 +919,67 @@ mod tests {
         assert_eq!(e, "param \"measurements\": must be in 1..=65535 (got 0)");
         let e = check("serial_loadcell", "x_mm = nan").unwrap_err();
         assert_eq!(e, "param \"x_mm\": must be finite (got NaN)");
+    }
+
+    #[test]
+    fn framing_stall_and_jump_params_are_checked_at_load_naming_the_param() {
+        for kind in ["serial_eit", "serial_pressure", "serial_loadcell"] {
+            assert_eq!(check(kind, "data_bits = 9").unwrap_err(), "param \"data_bits\": must be 5, 6, 7 or 8 (got 9)");
+            assert_eq!(check(kind, "stop_bits = 0").unwrap_err(), "param \"stop_bits\": must be 1 or 2 (got 0)");
+            let e = check(kind, "parity = \"mark\"").unwrap_err();
+            assert!(e.contains("unknown variant `mark`, expected one of `none`, `odd`, `even`"), "{kind}: {e}");
+            let e = check(kind, "flow_control = \"rts\"").unwrap_err();
+            assert!(e.contains("expected one of `none`, `software`, `hardware`"), "{kind}: {e}");
+            let e = check(kind, "stall_after_s = -1.0").unwrap_err();
+            assert_eq!(
+                e, "param \"stall_after_s\": must be 0 (never) or a finite number of seconds in (0, 1e9) (got -1)",
+                "{kind}"
+            );
+            assert_eq!(check(kind, "stall_after_s = 0.0"), Ok(()), "{kind}: 0 turns stall detection off");
+        }
+        // A stall shorter than the board's period would fire every period.
+        let e = check("serial_eit", "stall_after_s = 0.5").unwrap_err();
+        assert_eq!(
+            e,
+            "param \"stall_after_s\": must be 0 (never) or longer than frame_period_s (got 0.5 s, frame_period_s = \
+             0.7692307692307692 s)"
+        );
+        let e = check("serial_pressure", "stall_after_s = 0.05").unwrap_err();
+        assert!(e.contains("longer than period_ms (got 0.05 s, period_ms = 50 ms)"), "{e}");
+        assert_eq!(check("serial_loadcell", "stall_after_s = 0.05"), Ok(()), "no period to compare with");
+        let e = check("serial_pressure", "max_jump_ms = 99").unwrap_err();
+        assert_eq!(e, "param \"max_jump_ms\": must be at least 2 * period_ms (got max_jump_ms = 99, period_ms = 50)");
+        assert_eq!(check("serial_pressure", "max_jump_ms = 100"), Ok(()));
+    }
+
+    /// `/eit/seq` of each frame of `frames` (counter, device time µs) as `SerialEit` numbers them.
+    fn seqs(frames: &[(u32, u32)]) -> Vec<u64> {
+        let mut bytes = Vec::new();
+        for &(counter, time_us) in frames {
+            skinflow_serial::encode::encode_eit_frame(&mut bytes, counter, time_us, &[0.0; 2]);
+        }
+        let mut d = skinflow_serial::EitDecoder::new(2);
+        let mut last: Option<(u32, u64)> = None;
+        let mut out = Vec::new();
+        skinflow_serial::decode_all(&mut d, &bytes, |f| {
+            let seq = super::next_seq(last, f.counter, f.restarted);
+            last = Some((f.counter, seq));
+            out.push(seq);
+        });
+        out
+    }
+
+    #[test]
+    fn eit_seq_goes_on_across_a_wrap_and_a_restart_and_keeps_real_gaps() {
+        // A board restart (counter back to 0, its clock too): +1, not +2^32.
+        let restart: Vec<(u32, u32)> =
+            (100..106).chain(0..3).enumerate().map(|(i, c)| (c, 1_000_000 + 769_000 * i as u32)).collect();
+        assert_eq!(seqs(&restart), vec![100, 101, 102, 103, 104, 105, 106, 107, 108]);
+        // A genuine u32 wrap with frames lost across it: 0xFFFFFFFD -> 2 leaves a gap of 4.
+        let wrap = [(0xFFFF_FFFC, 10), (0xFFFF_FFFD, 20), (2, 60), (3, 70)];
+        assert_eq!(seqs(&wrap), vec![0xFFFF_FFFC, 0xFFFF_FFFD, 0x1_0000_0002, 0x1_0000_0003]);
+        // A board restarted early (counter ahead of the last seen, clock back): still +1.
+        assert_eq!(seqs(&[(1, 900_000_000), (2, 900_769_000), (5, 1_000)]), vec![1, 2, 3]);
     }
 
     #[test]

@@ -9,6 +9,15 @@
 //! counters (no byte lost, no reconnect), when the link's settings are its own; otherwise the
 //! replaced link is closed at the switch and the replacement opens the device itself on its
 //! first poll. A device held by another node is refused at start, naming that node.
+//!
+//! While the link runs it reports what its counters show (`skinflow_serial::LinkMonitor`): a
+//! warning a few seconds after the start when bytes arrive but no record decodes (wrong device,
+//! baud rate or protocol) or nothing arrives at all, when the port goes and returns, and when
+//! frames are lost or rejected. Records the device sent that never became messages (sequence
+//! gaps, CRC failures, bad lines; `Decode::records_lost`) are counted as the node's discarded
+//! messages as soon as they are known, so they show in the run's `drops`, in `--stats-json` and
+//! in the control socket's `stats`; the records still pending at close are added then. The
+//! summary at close lists every nonzero counter.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -16,7 +25,7 @@ use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
 use skinflow_core::{Context, NodeError};
-use skinflow_serial::{Decode, Reading, SerialReader};
+use skinflow_serial::{Alert, Counters, Decode, LinkMonitor, Reading, SerialError, SerialReader};
 
 use crate::serial::PortParams;
 
@@ -49,10 +58,105 @@ impl Drop for Claim {
     }
 }
 
+/// Window for "bytes but no record" when the node has no stall detection (a load cell that may
+/// be silent): a gauge streaming at 10 Hz sends 20 lines in it.
+const NO_RECORD_WINDOW_S: f64 = 2.0;
+
 /// An open port and its claim. Field order matters: the reader (and the port) drop first.
-struct Link<D: Decode> {
+struct Link<D: Decode + Clone> {
     reader: SerialReader<D>,
+    watch: Watch,
     _claim: Claim,
+}
+
+/// What the link has told the user so far; travels with the link in a hot swap.
+struct Watch {
+    monitor: LinkMonitor,
+    opened: Instant,
+    /// `Decode::records_lost` already counted as the node's discarded messages.
+    counted_lost: u64,
+    /// The link was closed (pending records counted, summary logged): a second close is a no-op.
+    closed: bool,
+}
+
+impl<D: Decode + Clone> Link<D> {
+    /// Counts newly known lost records as discarded and logs what the monitor raises. Cold
+    /// unless something changed: a few counter loads per poll.
+    fn observe(&mut self, ctx: &Context) {
+        let Link { reader, watch, .. } = self;
+        let lost = reader.decoder().records_lost();
+        if lost > watch.counted_lost {
+            ctx.count_discarded(lost - watch.counted_lost);
+            watch.counted_lost = lost;
+        }
+        let (d, l) = (reader.decode_stats(), reader.link_stats());
+        let port = reader.path();
+        let now_s = watch.opened.elapsed().as_secs_f64();
+        watch.monitor.observe(now_s, d, &l, |alert| log_alert::<D>(ctx, port, alert, Counters { decode: d, link: &l }));
+    }
+
+    /// The link ends (stop, or closed at a hot swap): a last look, the records still pending
+    /// counted as discarded, and the summary.
+    fn close(&mut self, ctx: &Context) {
+        if std::mem::replace(&mut self.watch.closed, true) {
+            return;
+        }
+        self.observe(ctx);
+        let pending = self.reader.decoder().rejected_pending();
+        if pending > 0 {
+            ctx.count_discarded(pending);
+        }
+        report(ctx, &self.reader, self.watch.opened.elapsed().as_secs_f64());
+    }
+}
+
+fn log_alert<D: Decode>(ctx: &Context, port: &Path, alert: Alert, counters: Counters<'_>) {
+    let (node, port) = (ctx.id(), port.display());
+    let record = D::RECORD_NAME;
+    match alert {
+        Alert::NoRecord { bytes, discarded, for_s, since_open } => {
+            let when = if since_open { "since the port opened" } else { "since the last one" };
+            tracing::warn!(
+                node,
+                "{port}: {bytes} bytes ({discarded} discarded) and no valid {record} in {for_s:.1} s {when}: \
+                 wrong device, baud rate or protocol? ({counters})"
+            );
+        }
+        Alert::Silent { for_s, since_open: true, .. } => tracing::warn!(
+            node,
+            "{port}: no byte in {for_s:.1} s since the port opened: is the board powered, sending, and on this port? \
+             (param stall_after_s sets this delay; 0 turns it off for a device that may be silent)"
+        ),
+        Alert::Silent { for_s, stalls, .. } => {
+            tracing::warn!(node, "{port}: silent for {for_s:.1} s with the port open (stall {stalls})");
+        }
+        Alert::Disconnected => tracing::warn!(
+            node,
+            "{port}: the device went away (read error or hang-up); reopening it with backoff ({record}s sent \
+             meanwhile count as lost when it returns, unless it restarted)"
+        ),
+        Alert::Reconnected { after_s } => tracing::info!(node, "{port}: reopened {after_s:.1} s after it went away"),
+        Alert::Restarted { restarts } => tracing::warn!(
+            node,
+            "{port}: the device restarted (its counter or clock went back; restart {restarts}): {record}s it sent \
+             around the restart cannot be counted ({counters})"
+        ),
+        Alert::Problems => tracing::warn!(node, "{port}: {record}s lost or rejected so far: {counters}"),
+    }
+}
+
+/// A reader error as a node error: the port is the error's path, so the problem must not
+/// repeat it (`SerialError`'s own message names the port for library users).
+fn port_error(e: SerialError) -> NodeError {
+    let (path, problem) = match e {
+        SerialError::PortNotFound { path } => {
+            (path, "does not exist (hint: is the board plugged in? ls /dev/serial/by-id)".to_owned())
+        }
+        SerialError::Open { path, source } => (path, format!("cannot open: {source}")),
+        SerialError::Mismatch { path, mismatch } => (path, mismatch.to_string()),
+        SerialError::Param { path, source } => (path, source.to_string()),
+    };
+    NodeError::Path { path, problem }
 }
 
 /// What a link must match to be taken over: the replacement's port settings and decoder.
@@ -65,7 +169,7 @@ pub(crate) struct Settings {
 }
 
 /// A serial source's port: open, or waiting for the replaced instance's link (hot swap).
-pub(crate) struct Port<D: Decode> {
+pub(crate) struct Port<D: Decode + Clone> {
     link: Option<Link<D>>,
     /// The decoder, until the port is opened or a link is taken over.
     pending: Option<D>,
@@ -73,12 +177,12 @@ pub(crate) struct Port<D: Decode> {
 }
 
 /// The port part of a serial source's hot-swap state.
-pub(crate) struct PortHandover<D: Decode> {
+pub(crate) struct PortHandover<D: Decode + Clone> {
     settings: Settings,
     link: Option<Link<D>>,
 }
 
-impl<D: Decode> Port<D> {
+impl<D: Decode + Clone> Port<D> {
     /// A port to be opened with `decoder`; `decoder_param` is what tells two decoders of the
     /// kind apart (see [`Settings`]).
     pub(crate) fn new(p: &PortParams, decoder: D, decoder_param: u64) -> Self {
@@ -112,11 +216,24 @@ impl<D: Decode> Port<D> {
         }
         // The lock is held while opening, so two starts cannot both claim the device.
         let origin = Instant::now() - Duration::from_nanos(ctx.now_ns());
-        let reader = SerialReader::open(p.config(), decoder, origin)
-            .map_err(|e| NodeError::Path { path: p.port.clone(), problem: e.to_string() })?;
+        let mut config = p.config();
+        // At start the port's backlog is older than the run; a reopen at a hot swap's first poll
+        // (the replaced link was just closed) holds bytes of this run, which must not be lost.
+        config.clear_input_at_open &= defer_to_own;
+        let reader = SerialReader::open(config, decoder, origin).map_err(port_error)?;
         map.insert(self.settings.device.clone(), ctx.id().to_owned());
         drop(map);
-        self.link = Some(Link { reader, _claim: Claim { device: self.settings.device.clone() } });
+        let cleared = reader.link_stats().cleared_bytes;
+        if cleared > 0 {
+            tracing::info!(node = ctx.id(), port = %p.port.display(), cleared, "bytes buffered before the run cleared at open");
+        }
+        let watch = Watch {
+            monitor: LinkMonitor::new(p.stall_after_s.unwrap_or(NO_RECORD_WINDOW_S)),
+            opened: Instant::now(),
+            counted_lost: 0,
+            closed: false,
+        };
+        self.link = Some(Link { reader, watch, _claim: Claim { device: self.settings.device.clone() } });
         Ok(())
     }
 
@@ -128,9 +245,10 @@ impl<D: Decode> Port<D> {
             self.open(p, ctx, false).map_err(NodeError::fatal)?;
         }
         let link = self.link.as_mut().ok_or_else(|| NodeError::msg("polled before start"))?;
-        link.reader
-            .poll_next(Instant::now() + POLL_SLICE)
-            .map_err(|e| NodeError::Path { path: p.port.clone(), problem: e.to_string() }.fatal())
+        // Before the poll: its record borrows the reader. The counters are those of the last
+        // poll, at most one record or `POLL_SLICE` old.
+        link.observe(ctx);
+        link.reader.poll_next(Instant::now() + POLL_SLICE).map_err(|e| port_error(e).fatal())
     }
 
     /// Hot swap, replaced side: the open link (if any) and its settings.
@@ -148,7 +266,8 @@ impl<D: Decode> Port<D> {
             self.pending = None;
             true
         } else {
-            report(ctx, Some(&link.reader));
+            let mut link = link;
+            link.close(ctx);
             tracing::info!(
                 node = ctx.id(),
                 port = %self.settings.config.path.display(),
@@ -158,44 +277,47 @@ impl<D: Decode> Port<D> {
         }
     }
 
-    /// Logs the link's counters (at stop): a warning when anything was lost.
-    pub(crate) fn report(&self, ctx: &Context) {
-        report(ctx, self.link.as_ref().map(|l| &l.reader));
+    /// At stop: counts the records still pending as discarded and logs the link's counters (a
+    /// warning when anything was lost or nothing decoded).
+    pub(crate) fn report(&mut self, ctx: &Context) {
+        if let Some(link) = self.link.as_mut() {
+            link.close(ctx);
+        }
     }
 }
 
-fn report<D: Decode>(ctx: &Context, r: Option<&SerialReader<D>>) {
-    let Some(r) = r else { return };
-    let d = r.decode_stats();
-    let l = r.link_stats();
-    let lossy = d.crc_errors + d.lost_frames + d.torn_frames + d.bad_lines + l.disconnects > 0;
-    let msg = "serial link closed";
-    if lossy {
+/// The summary at close: every nonzero counter, as a warning when anything was lost, went wrong
+/// on the link, or no record decoded at all.
+fn report<D: Decode + Clone>(ctx: &Context, r: &SerialReader<D>, open_s: f64) {
+    let (d, l) = (r.decode_stats(), r.link_stats());
+    let counters = Counters { decode: d, link: &l };
+    let (node, port, record) = (ctx.id(), r.path().display(), D::RECORD_NAME);
+    if d.frames == 0 && l.bytes > 0 {
         tracing::warn!(
-            node = ctx.id(),
-            frames = d.frames,
-            crc_errors = d.crc_errors,
-            lost = d.lost_frames,
-            torn = d.torn_frames,
-            bad_lines = d.bad_lines,
-            discarded_bytes = d.discarded_bytes,
-            disconnects = l.disconnects,
-            reconnects = l.reconnects,
-            stalls = l.stalls,
-            "{msg}"
+            node,
+            "{port}: serial link closed: {} bytes and no valid {record} in {open_s:.1} s: wrong device, baud rate \
+             or protocol? ({counters})",
+            l.bytes
         );
+    } else if d.frames == 0 {
+        tracing::warn!(node, "{port}: serial link closed: no byte received in {open_s:.1} s ({counters})");
+    } else if counters.lossy() {
+        tracing::warn!(node, "{port}: serial link closed: {counters}");
     } else {
-        tracing::info!(node = ctx.id(), frames = d.frames, bytes = l.bytes, "{msg}");
+        tracing::info!(node, "{port}: serial link closed: {counters}");
     }
 }
 
 #[cfg(test)]
 mod tests {
     use skinflow_core::{Context, Mode};
-    use skinflow_serial::{Device, Emulator, EmulatorConfig, EmulatorFeed, FaultPlan, ForceDecoder, TimedForce};
+    use skinflow_serial::{
+        Device, EitDecoder, Emulator, EmulatorConfig, EmulatorFeed, Fault, FaultPlan, ForceDecoder, Pacing, TimedForce,
+        TimedFrame,
+    };
 
     use super::{Port, held};
-    use crate::serial::{LoadcellParams, PortParams};
+    use crate::serial::{EitParams, LoadcellParams, PortParams};
 
     fn params(toml_text: &str) -> PortParams {
         toml::from_str::<LoadcellParams>(toml_text).unwrap().port_params()
@@ -245,6 +367,49 @@ mod tests {
         assert_eq!(holder().as_deref(), Some("lc"));
         drop(third);
         assert!(holder().is_none(), "released when the port is dropped");
+        emulator.stop().unwrap();
+    }
+
+    /// Frames lost on the wire reach the engine's stats as the node's discarded messages: a
+    /// sequence gap as soon as the frame after it arrives, a CRC failure after the last frame
+    /// (no gap will ever include it) when the link closes.
+    #[test]
+    fn lost_and_rejected_frames_are_counted_as_discarded_while_running_and_at_close() {
+        let m = 4;
+        let frames: Vec<TimedFrame> =
+            (0..20).map(|i| TimedFrame { t_s: 0.01 * i as f64, volts: vec![1.0 + (i % 4) as f64; m] }).collect();
+        let faults = FaultPlan {
+            eit: vec![(5, Fault::CorruptCrc), (9, Fault::Skip), (19, Fault::CorruptCrc)],
+            ..FaultPlan::default()
+        };
+        let config = EmulatorConfig { pacing: Pacing::AsFastAsPossible, ..EmulatorConfig::default() };
+        let emulator = Emulator::spawn(config, EmulatorFeed::default().with_eit(frames), faults).expect("emulator");
+        let path = emulator.path(Device::Eit).expect("eit pty");
+        // The emulator sends from its spawn: keep what the port buffered before the open.
+        let p =
+            toml::from_str::<EitParams>(&format!("port = {path:?}\nmeasurements = {m}\nclear_input_at_open = false"))
+                .unwrap()
+                .port_params();
+        let ctx = Context::detached("eit", Mode::Realtime);
+        let mut port = Port::new(&p, EitDecoder::new(m), m as u64);
+        port.start(&p, &ctx).unwrap();
+        let until = std::time::Instant::now() + std::time::Duration::from_secs(30);
+        let mut counters = Vec::new();
+        let crc_errors = |port: &Port<EitDecoder>| port.link.as_ref().unwrap().reader.decode_stats().crc_errors;
+        while counters.len() < 17 || crc_errors(&port) < 2 {
+            assert!(std::time::Instant::now() < until, "only {counters:?} arrived");
+            if let Some(r) = port.next(&p, &ctx).unwrap() {
+                counters.push(r.record.counter);
+            }
+        }
+        assert_eq!(counters, (0..19).filter(|c| *c != 5 && *c != 9).collect::<Vec<u32>>());
+        // The next poll looks at the counters first: the gaps at 5 and 9 are known.
+        port.next(&p, &ctx).unwrap();
+        assert_eq!(ctx.discarded(), 2);
+        port.report(&ctx);
+        assert_eq!(ctx.discarded(), 3, "frame 19 failed its CRC after the last frame");
+        port.report(&ctx);
+        assert_eq!(ctx.discarded(), 3, "closing twice counts nothing twice");
         emulator.stop().unwrap();
     }
 }

@@ -9,7 +9,9 @@
 //! truth at the `at` position; with params that move the position, at the params'. A swap on
 //! the same port takes the open port over (no reading lost), or, with other port settings,
 //! reopens it; two nodes on one port are refused. Deterministic: rows are told apart by their
-//! force, and every wait is for a condition.
+//! force, and every wait is for a condition. Every load cell here keeps what its port buffered
+//! before it opened (`clear_input_at_open = false`, [`KEEP`]): the emulator starts sending
+//! when it is spawned, and the tests count every reading from the first.
 
 use std::sync::atomic::{AtomicBool, Ordering::SeqCst};
 use std::sync::{Arc, Mutex};
@@ -27,6 +29,8 @@ const FIRST: usize = 10;
 const PAUSE: usize = 30;
 const SECOND: usize = 10;
 const LIMIT: Duration = Duration::from_secs(30);
+/// The param every load cell of these tests takes (see the module docs).
+const KEEP: &str = "clear_input_at_open = false";
 
 fn readings() -> Vec<TimedForce> {
     (0..FIRST + PAUSE + SECOND)
@@ -68,7 +72,7 @@ impl Rig {
         let captured: Captured = Arc::new(Mutex::new(Vec::new()));
         let reg = registry_with_capture(captured.clone());
         let graph = format!(
-            "[[node]]\nid = \"lc\"\nkind = \"serial_loadcell\"\nparams = {{ port = {port}, x_mm = -10.0, y_mm = 5.0 }}\n\
+            "[[node]]\nid = \"lc\"\nkind = \"serial_loadcell\"\nparams = {{ port = {port}, x_mm = -10.0, y_mm = 5.0, {KEEP} }}\n\
              [[node]]\nid = \"cap\"\nkind = \"capture\"\n\
              [[edge]]\nfrom = \"lc.truth\"\nto = \"cap.in\"\n"
         );
@@ -85,7 +89,7 @@ impl Rig {
     /// 3 N press, and finishes the run.
     fn at_then_swap(self, params: &str) -> RunReport {
         self.handle.control_wait("lc", "at 12.5 -25 20", Duration::from_secs(5)).unwrap();
-        let params = Params::from_toml(params).unwrap();
+        let params = Params::from_toml(&format!("{params}\n{KEEP}")).unwrap();
         self.handle.swap("lc", self.reg.get("serial_loadcell").unwrap().clone(), params).unwrap();
         wait_for_pressed(&self.captured, 3.0, SECOND);
         self.finish()

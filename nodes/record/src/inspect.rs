@@ -1,8 +1,10 @@
 //! `skinflow inspect REC.h5`: a `Summary` of a recording (streams, row counts, time span,
-//! rates, EIT frame gaps from `/eit/seq`, truth coverage, and from the logger's derived
-//! streams the frames judged settled and the forces each guard touched) and its plain-text
-//! `Display`.
-//! Rates are rows per second over the stream's span; periods are medians of time steps.
+//! rates, EIT frame gaps from `/eit/seq`, pressure time gaps, truth coverage, and from the
+//! logger's derived streams the frames judged settled and the forces each guard touched) and its
+//! plain-text `Display`.
+//! Rates are rows per second over the stream's span; periods are medians of time steps. Rows
+//! that repeat the previous row's time stamp are flagged: records a source stamped at one read
+//! (a backlog), not at their own times.
 
 use std::fmt;
 use std::path::{Path, PathBuf};
@@ -24,6 +26,10 @@ pub struct StreamSummary {
     pub median_period_s: Option<f64>,
     /// Steps where time goes backwards.
     pub backward_steps: usize,
+    /// Rows whose time stamp equals the previous row's.
+    pub repeated_steps: usize,
+    /// Most consecutive rows sharing one time stamp (1 when none do, 0 without rows).
+    pub longest_repeat: usize,
 }
 
 impl StreamSummary {
@@ -32,6 +38,12 @@ impl StreamSummary {
         let span = last.zip(first).map(|(l, f)| l - f);
         let mut steps: Vec<f64> = t_s.windows(2).map(|w| w[1] - w[0]).collect();
         let backward_steps = steps.iter().filter(|d| **d < 0.0).count();
+        let repeated_steps = steps.iter().filter(|d| **d == 0.0).count();
+        let (mut longest_repeat, mut run) = (usize::from(!t_s.is_empty()), 1);
+        for d in &steps {
+            run = if *d == 0.0 { run + 1 } else { 1 };
+            longest_repeat = longest_repeat.max(run);
+        }
         steps.sort_by(f64::total_cmp);
         let median_period_s = match steps.len() {
             0 => None,
@@ -46,7 +58,37 @@ impl StreamSummary {
             mean_rate_hz: span.filter(|s| *s > 0.0).map(|s| (t_s.len() - 1) as f64 / s),
             median_period_s,
             backward_steps,
+            repeated_steps,
+            longest_repeat,
         }
+    }
+}
+
+/// Time gaps of a stream sampled at a fixed rate (the pressure board): steps longer than 1.5
+/// median periods, as `FrameGaps` are for the EIT counter. A board outage shows here even
+/// when its clock restarted (the source's `counter_resets` then says why).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TimeGaps {
+    /// Steps longer than 1.5 median periods.
+    pub gaps: usize,
+    /// Samples missing in those steps at the median period: sum of round(step / period) - 1.
+    pub missing: u64,
+    pub largest_s: f64,
+    pub median_period_s: f64,
+}
+
+impl TimeGaps {
+    /// `None` with fewer than 3 rows, or when the median step is not positive (a stream stamped
+    /// in bursts has no period to judge gaps by; `StreamSummary` flags it).
+    pub fn of(t_s: &[f64], median_period_s: Option<f64>) -> Option<TimeGaps> {
+        let period = median_period_s.filter(|p| *p > 0.0 && t_s.len() >= 3)?;
+        let mut g = TimeGaps { gaps: 0, missing: 0, largest_s: 0.0, median_period_s: period };
+        for d in t_s.windows(2).map(|w| w[1] - w[0]).filter(|d| *d > 1.5 * period) {
+            g.gaps += 1;
+            g.missing += ((d / period).round() as u64).saturating_sub(1);
+            g.largest_s = g.largest_s.max(d);
+        }
+        Some(g)
     }
 }
 
@@ -140,6 +182,8 @@ pub struct Summary {
     /// From the earliest to the latest time of any stream.
     pub duration_s: f64,
     pub eit_gaps: Option<FrameGaps>,
+    /// Time gaps of `/pressure` (a fixed-rate stream with no counter).
+    pub pressure_gaps: Option<TimeGaps>,
     pub truth: Option<TruthCoverage>,
     pub has_reference: bool,
     pub sync: Option<SyncCounts>,
@@ -188,6 +232,10 @@ impl Summary {
                 eit_frames: eit_t.len(),
             }
         });
+        let pressure_gaps = rec.pressure.as_ref().and_then(|p| {
+            let median = streams.iter().find(|s| s.path == "/pressure").and_then(|s| s.median_period_s);
+            TimeGaps::of(&p.t_s, median)
+        });
         Summary {
             path: rec.path.clone(),
             format_version: rec.format_version,
@@ -200,6 +248,7 @@ impl Summary {
             streams,
             duration_s: if last >= first { last - first } else { 0.0 },
             eit_gaps: rec.eit.as_ref().map(|e| FrameGaps::of(&e.seq)),
+            pressure_gaps,
             truth,
             has_reference: rec.reference.is_some(),
             sync: rec.derived.sync.as_ref().map(|s| SyncCounts {
@@ -258,6 +307,13 @@ impl fmt::Display for Summary {
             if s.backward_steps > 0 {
                 write!(f, "  ({} backward time steps)", s.backward_steps)?;
             }
+            if s.repeated_steps > 0 {
+                write!(
+                    f,
+                    "  ({} rows repeat the previous time stamp, up to {} at one time: stamped in bursts, not at their own times)",
+                    s.repeated_steps, s.longest_repeat
+                )?;
+            }
             writeln!(f)?;
         }
         if let Some(g) = &self.eit_gaps {
@@ -267,6 +323,19 @@ impl fmt::Display for Summary {
             }
             if g.non_increasing > 0 {
                 write!(f, ", {} repeated or backward counters", g.non_increasing)?;
+            }
+            writeln!(f)?;
+        }
+        if let Some(g) = &self.pressure_gaps {
+            write!(
+                f,
+                "pressure gaps: {} gaps over 1.5 periods ({:.1} ms), ~{} samples missing",
+                g.gaps,
+                g.median_period_s * 1e3,
+                g.missing
+            )?;
+            if g.gaps > 0 {
+                write!(f, ", largest {:.3} s", g.largest_s)?;
             }
             writeln!(f)?;
         }
@@ -305,5 +374,70 @@ impl fmt::Display for Summary {
             writeln!(f, "guards:   {}: {} forces; {touched}", g.strategy, g.forces)?;
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A summary with only `streams` and the pressure gaps, for the text.
+    fn summary(streams: Vec<StreamSummary>, pressure_gaps: Option<TimeGaps>) -> Summary {
+        Summary {
+            path: PathBuf::from("rec.h5"),
+            format_version: 1,
+            sensor_name: "s".into(),
+            protocol: "pairwise",
+            eit_width: 120,
+            created: None,
+            software_version: None,
+            part: None,
+            streams,
+            duration_s: 0.0,
+            eit_gaps: None,
+            pressure_gaps,
+            truth: None,
+            has_reference: false,
+            sync: None,
+            guards: Vec::new(),
+        }
+    }
+
+    #[test]
+    fn rows_stamped_in_one_burst_are_flagged() {
+        let s = StreamSummary::of("/pressure", &[0.0, 0.05, 0.3, 0.3, 0.3, 0.3, 0.35, 0.4, 0.4]);
+        assert_eq!((s.repeated_steps, s.longest_repeat, s.backward_steps), (4, 4, 0));
+        let clean = StreamSummary::of("/eit", &[0.0, 0.769, 1.538]);
+        assert_eq!((clean.repeated_steps, clean.longest_repeat), (0, 1));
+        assert_eq!(StreamSummary::of("/truth", &[]).longest_repeat, 0);
+        let text = summary(vec![s, clean], None).to_string();
+        let flagged: Vec<&str> = text.lines().filter(|l| l.contains("repeat the previous time stamp")).collect();
+        assert_eq!(flagged.len(), 1, "{text}");
+        assert!(
+            flagged[0].starts_with("/pressure")
+                && flagged[0].contains("(4 rows repeat the previous time stamp, up to 4 at one time"),
+            "{text}"
+        );
+    }
+
+    #[test]
+    fn a_pressure_outage_is_a_time_gap_with_its_missing_samples() {
+        // 20 Hz for 3 s, the board away 5 s (its clock restarted: the stamps are the host's),
+        // then 20 Hz again; and one sample lost early on.
+        let mut t: Vec<f64> = (0..60).filter(|&k| k != 10).map(|k| 0.05 * k as f64).collect();
+        t.extend((0..40).map(|k| 8.0 + 0.05 * k as f64));
+        let s = StreamSummary::of("/pressure", &t);
+        let g = TimeGaps::of(&t, s.median_period_s).unwrap();
+        assert_eq!((g.gaps, g.missing), (2, 1 + 100));
+        assert!((g.largest_s - 5.05).abs() < 1e-9 && (g.median_period_s - 0.05).abs() < 1e-12, "{g:?}");
+        let text = summary(vec![s], Some(g)).to_string();
+        assert!(
+            text.contains("pressure gaps: 2 gaps over 1.5 periods (50.0 ms), ~101 samples missing, largest 5.050 s"),
+            "{text}"
+        );
+        // No gap: the line says so; a stream stamped all at once has no period to judge by.
+        let even: Vec<f64> = (0..10).map(|k| 0.05 * k as f64).collect();
+        assert_eq!(TimeGaps::of(&even, Some(0.05)).map(|g| (g.gaps, g.missing)), Some((0, 0)));
+        assert_eq!(TimeGaps::of(&[1.0; 5], Some(0.0)), None);
     }
 }

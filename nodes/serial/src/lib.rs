@@ -1,7 +1,8 @@
 //! skinflow-serial: the skin's boards on serial ports, and emulators that stand in for them.
 //!
 //! Data flows bytes -> [`decode`] (pure incremental decoders with exact drop counters) ->
-//! [`read::SerialReader`] (a port with host time stamps, reconnect and backoff) -> records.
+//! [`read::SerialReader`] (a port with host time stamps, reconnect and backoff) -> records;
+//! [`read::LinkMonitor`] says when the counters show a wrong device, a silent board or losses.
 //! [`emulate::Emulator`] speaks the same protocols on pseudo-terminals, with fault injection,
 //! so everything above can be tested without hardware. Wire formats: `PROTOCOLS.md`.
 
@@ -14,7 +15,7 @@ pub mod read;
 
 pub use decode::{
     Decode, DecodeStats, EitDecoder, EitFrame, ForceDecoder, ForceReading, PressureDecoder, PressureReading, Step,
-    StreamMismatch, decode_all,
+    StreamMismatch, decode_all, is_restart,
 };
 pub use emulate::{
     Device, DeviceStats, EmulateError, Emulator, EmulatorConfig, EmulatorFeed, Fault, FaultPlan, Pacing, TimedForce,
@@ -22,5 +23,6 @@ pub use emulate::{
 };
 pub use error::ParamError;
 pub use read::{
-    EitReader, LinkStats, LoadcellReader, PressureReader, ReaderConfig, Reading, SerialError, SerialReader,
+    Alert, ClockMap, Counters, DataBits, EitReader, FlowControl, LinkMonitor, LinkStats, LoadcellReader, Parity,
+    PressureReader, ReaderConfig, Reading, SerialError, SerialReader, StopBits,
 };

@@ -7,7 +7,7 @@ use std::time::{Duration, Instant};
 
 use skinflow_serial::decode::{Decode, EitDecoder, ForceDecoder, PressureDecoder, decode_all};
 use skinflow_serial::encode::{encode_eit_frame, encode_force_line, encode_pressure_line};
-use skinflow_serial::read::{ReaderConfig, SerialReader};
+use skinflow_serial::read::SerialReader;
 use skinflow_serial::{Device, Emulator, EmulatorConfig, EmulatorFeed, FaultPlan, Pacing};
 
 use skinflow_core::alloc_count::{CountingAlloc, allocations_in as allocations};
@@ -61,7 +61,7 @@ fn decoders_and_reader_do_not_allocate_per_record() {
         FaultPlan::default(),
     )
     .unwrap();
-    let mut config = ReaderConfig::new(emulator.path(Device::Eit).unwrap());
+    let mut config = feeds::config(emulator.path(Device::Eit).unwrap());
     config.read_timeout_s = 10.0;
     let mut reader = SerialReader::open(config, EitDecoder::new(120), Instant::now()).unwrap();
     let until = Instant::now() + Duration::from_secs(30);
@@ -80,4 +80,32 @@ fn decoders_and_reader_do_not_allocate_per_record() {
     });
     assert_eq!(counters, (0..110).collect::<Vec<u32>>());
     assert_eq!(n, 0, "reader allocated {n} times over 100 frames");
+
+    // The same for pressure lines, several per read: the reader decodes each read ahead with a
+    // copy of its decoder (for the time stamps), which must reuse its buffers.
+    let feed = EmulatorFeed::default().with_pressure(feeds::pressures(400, 0.05));
+    let emulator = Emulator::spawn(
+        EmulatorConfig { pacing: Pacing::AsFastAsPossible, ..Default::default() },
+        feed,
+        FaultPlan::default(),
+    )
+    .unwrap();
+    let mut config = feeds::config(emulator.path(Device::Pressure).unwrap());
+    config.read_timeout_s = 10.0;
+    let mut reader = SerialReader::open(config, PressureDecoder::try_new(Some(50)).unwrap(), Instant::now()).unwrap();
+    let mut times = Vec::with_capacity(400);
+    while times.len() < 10 {
+        if let Some(r) = reader.poll_next(until).unwrap() {
+            times.push(r.t_s);
+        }
+    }
+    let n = allocations(|| {
+        while times.len() < 310 {
+            if let Some(r) = reader.poll_next(until).unwrap() {
+                times.push(r.t_s);
+            }
+        }
+    });
+    assert_eq!(n, 0, "pressure reader allocated {n} times over 300 lines");
+    assert!(times.windows(2).all(|w| w[1] >= w[0]), "stamps never decrease");
 }

@@ -6,7 +6,7 @@ mod feeds;
 use std::time::{Duration, Instant};
 
 use skinflow_serial::encode::eit_frame_len;
-use skinflow_serial::read::{ReaderConfig, SerialReader};
+use skinflow_serial::read::SerialReader;
 use skinflow_serial::{
     Device, EitDecoder, Emulator, EmulatorConfig, EmulatorFeed, Fault, FaultPlan, ForceDecoder, Pacing,
     PressureDecoder, SerialError, StreamMismatch,
@@ -52,7 +52,7 @@ fn eit_byte_faults_give_exact_counters() {
     let feed = EmulatorFeed::default().with_eit(feeds::plain_frames(M, n));
     let emulator = Emulator::spawn(fast(), feed, faults).unwrap();
     let path = emulator.path(Device::Eit).unwrap();
-    let mut reader = SerialReader::open(ReaderConfig::new(path), EitDecoder::new(M), Instant::now()).unwrap();
+    let mut reader = SerialReader::open(feeds::config(path), EitDecoder::new(M), Instant::now()).unwrap();
     let counters = drain_eit(&mut reader, &emulator, M);
 
     let lost = [10, 15, 20, 25, 30, 35, 40];
@@ -92,7 +92,7 @@ fn unplug_and_replug_recovers_and_counts_the_torn_frame() {
     let emulator = Emulator::spawn(fast(), feed, faults).unwrap();
     let path = emulator.path(Device::Eit).unwrap().to_path_buf();
     let origin = Instant::now();
-    let mut reader = SerialReader::open(ReaderConfig::new(&path), EitDecoder::new(M), origin).unwrap();
+    let mut reader = SerialReader::open(feeds::config(&path), EitDecoder::new(M), origin).unwrap();
 
     let mut counters = Vec::new();
     let mut host_t_s = Vec::new();
@@ -124,8 +124,8 @@ fn stalled_device_counts_a_stall_and_loses_nothing() {
     let faults = FaultPlan { pressure: vec![(10, Fault::Stall { silent_s: 1.5 })], ..Default::default() };
     let feed = EmulatorFeed::default().with_pressure(feeds::pressures(n, 0.01));
     let emulator = Emulator::spawn(EmulatorConfig::default(), feed, faults).unwrap();
-    let mut config = ReaderConfig::new(emulator.path(Device::Pressure).unwrap());
-    config.stall_after_s = 0.2;
+    let mut config = feeds::config(emulator.path(Device::Pressure).unwrap());
+    config.stall_after_s = Some(0.2);
     let mut reader = SerialReader::open(config, PressureDecoder::try_new(Some(10)).unwrap(), Instant::now()).unwrap();
     let mut times = Vec::new();
     let got = feeds::read_n(&mut reader, n, LIMIT, |r| times.push(r.record.device_time_ms));
@@ -155,7 +155,7 @@ fn line_faults_are_counted_and_resynced() {
     let origin = Instant::now();
 
     let mut p = SerialReader::open(
-        ReaderConfig::new(emulator.path(Device::Pressure).unwrap()),
+        feeds::config(emulator.path(Device::Pressure).unwrap()),
         PressureDecoder::try_new(Some(50)).unwrap(),
         origin,
     )
@@ -170,7 +170,7 @@ fn line_faults_are_counted_and_resynced() {
     assert_eq!((s.bad_lines, s.lost_frames), (3, 4));
 
     let mut f =
-        SerialReader::open(ReaderConfig::new(emulator.path(Device::Loadcell).unwrap()), ForceDecoder::new(), origin)
+        SerialReader::open(feeds::config(emulator.path(Device::Loadcell).unwrap()), ForceDecoder::new(), origin)
             .unwrap();
     let forces = feeds::forces(n, 0.05);
     let mut got = Vec::new();
@@ -190,7 +190,7 @@ fn wrong_measurement_count_is_an_error_naming_both_counts() {
     let feed = EmulatorFeed::default().with_eit(feeds::plain_frames(M, 10));
     let emulator = Emulator::spawn(fast(), feed, FaultPlan::default()).unwrap();
     let path = emulator.path(Device::Eit).unwrap();
-    let mut reader = SerialReader::open(ReaderConfig::new(path), EitDecoder::new(120), Instant::now()).unwrap();
+    let mut reader = SerialReader::open(feeds::config(path), EitDecoder::new(120), Instant::now()).unwrap();
     let until = Instant::now() + LIMIT;
     let err = match reader.poll_next(until) {
         Err(e) => e,

@@ -4,6 +4,10 @@
 //! CRC) is not thrown away whole: its first byte is discarded and the rest is searched again for
 //! a sync, so a valid frame that starts inside a torn or garbage candidate is still recovered.
 //! Values are f32 volts on the wire, widened to f64; counters and device time are u32 that wrap.
+//!
+//! A wrap is told from a device restart by [`is_restart`]: both the counter and the clock must
+//! step forward by less than half their range (2^31 frames; 2^31 µs, 35.8 min) for the frame to
+//! continue the same run.
 
 use super::{Decode, DecodeStats, DiscardRun, Step, StreamMismatch};
 use crate::crc16::crc16;
@@ -25,10 +29,29 @@ pub struct EitFrame<'a> {
     pub device_t_s: f64,
     /// Measurements in protocol order, volts (f32 on the wire).
     pub volts: &'a [f64],
+    /// This frame is the first after a device restart ([`is_restart`]): its counter does not
+    /// continue the previous frame's, so frames cannot be counted across it.
+    pub restarted: bool,
+}
+
+/// Half the range of the u32 counter and clock: a forward step at least this long is a step back.
+const HALF_U32: u32 = 1 << 31;
+
+/// Whether a frame comes from a restarted device rather than continuing the last accepted
+/// frame's run, given its counter step `d` and device-time step `dt_us` from that frame (both
+/// wrapping u32 differences). A restart: the counter repeats or goes back (`d == 0` or
+/// `d >= 2^31`), or the clock goes back (`dt_us >= 2^31` µs) while the counter advances (a
+/// board that restarted early in a session can come back with a counter above the last one
+/// seen, but its clock restarts from zero). A genuine wrap (counter 0xFFFFFFFD -> 2, clock
+/// 0xFFFFFF00 -> 0x100) is a small forward step of both. Cost of the rule: an outage longer than
+/// 35.8 min with the board running is taken for a restart (reported as one, not as lost frames).
+#[must_use]
+pub fn is_restart(d: u32, dt_us: u32) -> bool {
+    d == 0 || d >= HALF_U32 || dt_us >= HALF_U32
 }
 
 /// Incremental decoder of EIT frames with a fixed measurement count.
-#[derive(Debug, Clone)]
+#[derive(Debug)]
 pub struct EitDecoder {
     // Configuration
     measurements: usize,
@@ -45,10 +68,31 @@ pub struct EitDecoder {
     last_time_us: Option<u32>,
     /// Multiples of 2^32 µs added to the device time by unwrapping.
     time_epoch_us: u64,
+    /// The last accepted frame followed a device restart.
+    restarted: bool,
+    /// CRC-failed and torn candidates since the last accepted frame (see
+    /// [`Decode::rejected_pending`]).
+    rejected: u64,
     /// Last wrong measurement count seen and how many headers in a row carried it.
     wrong_count: Option<(u16, u32)>,
     run: DiscardRun,
     stats: DecodeStats,
+}
+
+/// `clone_from` reuses the buffers (a reader copies its decoder to decode a read ahead, per
+/// read, without allocating); every other field is `Copy`, so a new non-`Copy` field fails to
+/// compile here instead of being missed.
+impl Clone for EitDecoder {
+    fn clone(&self) -> Self {
+        Self { buf: self.buf.clone(), volts: self.volts.clone(), ..*self }
+    }
+
+    fn clone_from(&mut self, source: &Self) {
+        let (mut buf, mut volts) = (std::mem::take(&mut self.buf), std::mem::take(&mut self.volts));
+        buf.clone_from(&source.buf);
+        volts.clone_from(&source.volts);
+        *self = Self { buf, volts, ..*source };
+    }
 }
 
 impl EitDecoder {
@@ -72,6 +116,8 @@ impl EitDecoder {
             last_counter: None,
             last_time_us: None,
             time_epoch_us: 0,
+            restarted: false,
+            rejected: 0,
             wrong_count: None,
             run: DiscardRun::default(),
             stats: DecodeStats::default(),
@@ -152,6 +198,7 @@ impl EitDecoder {
                 } else {
                     self.stats.crc_errors += 1;
                 }
+                self.rejected += 1;
                 self.rescan();
                 continue;
             }
@@ -167,17 +214,23 @@ impl EitDecoder {
         for (v, c) in self.volts.iter_mut().zip(payload.chunks_exact(4)) {
             *v = f64::from(f32::from_le_bytes([c[0], c[1], c[2], c[3]]));
         }
-        if let Some(last) = self.last_counter {
+        self.restarted = false;
+        if let (Some(last), Some(last_time)) = (self.last_counter, self.last_time_us) {
             let d = counter.wrapping_sub(last);
-            if d == 0 || d > i32::MAX as u32 {
-                // Repeated or backwards: the device restarted; its clock restarted too.
+            if is_restart(d, time_us.wrapping_sub(last_time)) {
+                // Its clock restarted too. The candidates rejected since the last frame belong
+                // to the old run, whose gaps can no longer be counted: they are lost as such.
+                self.restarted = true;
                 self.stats.counter_resets += 1;
+                self.stats.lost_frames += self.rejected;
                 self.time_epoch_us = 0;
                 self.last_time_us = None;
             } else {
+                // The gap includes the rejected candidates (they were frames of this run).
                 self.stats.lost_frames += u64::from(d - 1);
             }
         }
+        self.rejected = 0;
         if let Some(last) = self.last_time_us
             && time_us < last
         {
@@ -197,6 +250,9 @@ impl EitDecoder {
 
 impl Decode for EitDecoder {
     type Record<'a> = EitFrame<'a>;
+
+    const RECORD_NAME: &'static str = "EIT frame";
+    const TIMED: bool = true;
 
     fn step(&mut self, bytes: &[u8]) -> Step {
         let mut i = 0;
@@ -246,6 +302,7 @@ impl Decode for EitDecoder {
             device_time_us: self.device_time_us,
             device_t_s: self.device_t_s,
             volts: &self.volts,
+            restarted: self.restarted,
         }
     }
 
@@ -253,6 +310,7 @@ impl Decode for EitDecoder {
         let len = self.buf.len();
         if len >= EIT_SYNC.len() {
             self.stats.torn_frames += 1;
+            self.rejected += 1;
         }
         self.discard(len);
         self.buf.clear();
@@ -269,6 +327,14 @@ impl Decode for EitDecoder {
             }
             _ => None,
         }
+    }
+
+    fn device_time_s(&self) -> Option<f64> {
+        Some(self.device_t_s)
+    }
+
+    fn rejected_pending(&self) -> u64 {
+        self.rejected
     }
 }
 
@@ -361,6 +427,60 @@ mod tests {
         assert_eq!(decode(&mut d, &stream).len(), 4);
         let s = d.stats();
         assert_eq!((s.lost_frames, s.counter_resets), (2, 1));
+    }
+
+    /// Counter and device time of each frame, and whether it followed a restart.
+    fn steps(d: &mut EitDecoder, frames: &[(u32, u32)]) -> Vec<(u32, bool)> {
+        let mut stream = Vec::new();
+        for &(counter, time_us) in frames {
+            encode_eit_frame(&mut stream, counter, time_us, &[0.0; M]);
+        }
+        let mut got = Vec::new();
+        decode_all(d, &stream, |f| got.push((f.counter, f.restarted)));
+        got
+    }
+
+    #[test]
+    fn a_wrap_of_counter_and_clock_continues_and_a_step_back_of_either_is_a_restart() {
+        // Genuine wrap: 0xFFFFFFFD -> 2 (frames ...FE, ...FF, 0, 1 lost), clock wrapping too.
+        let mut d = EitDecoder::new(M);
+        let got = steps(&mut d, &[(0xFFFF_FFFD, 0xFFFF_FF00), (2, 0x0010_0000)]);
+        assert_eq!(got, vec![(0xFFFF_FFFD, false), (2, false)]);
+        assert_eq!((d.stats().lost_frames, d.stats().counter_resets), (4, 0));
+
+        // Counter back (unplug, power cycle): a restart, no loss counted.
+        let mut d = EitDecoder::new(M);
+        let got = steps(&mut d, &[(100, 77_000_000), (101, 77_769_000), (0, 1_000), (1, 770_000)]);
+        assert_eq!(got.iter().map(|g| g.1).collect::<Vec<_>>(), vec![false, false, true, false]);
+        assert_eq!((d.stats().lost_frames, d.stats().counter_resets), (0, 1));
+
+        // A board restarted early in a session comes back with a counter above the last one
+        // seen, but its clock restarted: a restart, not 3 lost frames.
+        let mut d = EitDecoder::new(M);
+        let got = steps(&mut d, &[(1, 900_000_000), (5, 3_000_000)]);
+        assert_eq!(got, vec![(1, false), (5, true)]);
+        assert_eq!((d.stats().lost_frames, d.stats().counter_resets), (0, 1));
+        assert!(is_restart(0, 10) && is_restart(u32::MAX, 10) && !is_restart(1 << 30, (1 << 31) - 1));
+    }
+
+    #[test]
+    fn frames_rejected_before_a_restart_are_lost_and_pending_ones_are_reported() {
+        let mut d = EitDecoder::new(M);
+        let mut bad = frame(11, 1.0);
+        let n = bad.len();
+        bad[n - 1] ^= 0x01;
+        // 10, a CRC-failed 11, then the board restarts at 0: 11 can be placed in no gap.
+        let stream: Vec<u8> = [frame(10, 0.0), bad.clone(), frame(0, 0.0)].concat();
+        assert_eq!(decode(&mut d, &stream).len(), 2);
+        let s = *d.stats();
+        assert_eq!((s.crc_errors, s.lost_frames, s.counter_resets), (1, 1, 1));
+        assert_eq!((d.records_lost(), d.rejected_pending()), (1, 0));
+        // A CRC failure after the last frame is pending: the next frame's gap will count it.
+        decode(&mut d, &bad);
+        assert_eq!((d.records_lost(), d.rejected_pending()), (1, 1));
+        decode(&mut d, &frame(2, 0.0));
+        assert_eq!((d.records_lost(), d.rejected_pending()), (2, 0));
+        assert_eq!(d.device_time_s(), Some(2e-3));
     }
 
     #[test]

@@ -46,6 +46,8 @@ fn parse_line(line: &[u8]) -> Option<f64> {
 impl Decode for ForceDecoder {
     type Record<'a> = ForceReading;
 
+    const RECORD_NAME: &'static str = "force line";
+
     fn step(&mut self, bytes: &[u8]) -> Step {
         let Self { lines, reading } = self;
         lines.step(bytes, |line, _: &mut DecodeStats| match parse_line(line) {
@@ -67,6 +69,11 @@ impl Decode for ForceDecoder {
 
     fn stats(&self) -> &DecodeStats {
         &self.lines.stats
+    }
+
+    /// Every bad line: force lines carry no sequence, so each rejected line is a lost reading.
+    fn records_lost(&self) -> u64 {
+        self.lines.stats.bad_lines
     }
 }
 

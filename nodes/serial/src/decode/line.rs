@@ -9,7 +9,7 @@ use super::{DecodeStats, DiscardRun, Step};
 /// Longest accepted line in bytes, without the line end (a pressure line is about 20 bytes).
 pub(super) const MAX_LINE_LEN: usize = 64;
 
-#[derive(Debug, Clone)]
+#[derive(Debug)]
 pub(super) struct LineSplitter {
     /// Bytes of the current line; capacity `MAX_LINE_LEN`.
     buf: Vec<u8>,
@@ -17,6 +17,19 @@ pub(super) struct LineSplitter {
     overflow: bool,
     run: DiscardRun,
     pub(super) stats: DecodeStats,
+}
+
+/// `clone_from` reuses the line buffer (see `EitDecoder`'s `Clone`).
+impl Clone for LineSplitter {
+    fn clone(&self) -> Self {
+        Self { buf: self.buf.clone(), ..*self }
+    }
+
+    fn clone_from(&mut self, source: &Self) {
+        let mut buf = std::mem::take(&mut self.buf);
+        buf.clone_from(&source.buf);
+        *self = Self { buf, ..*source };
+    }
 }
 
 impl LineSplitter {

@@ -11,7 +11,7 @@ mod force;
 mod line;
 mod pressure;
 
-pub use eit::{EitDecoder, EitFrame};
+pub use eit::{EitDecoder, EitFrame, is_restart};
 pub use force::{ForceDecoder, ForceReading};
 pub use pressure::{DEFAULT_MAX_JUMP_MS, PressureDecoder, PressureReading};
 
@@ -38,10 +38,14 @@ pub struct DecodeStats {
     /// EIT: candidates cut short, either a new frame header starts inside a CRC-failed candidate
     /// (bytes were dropped) or a partial frame was discarded by [`Decode::reset`] (disconnect).
     pub torn_frames: u64,
-    /// Records missing according to the device's own sequence: EIT frame-counter gaps
-    /// (wrapping u32), pressure time-stamp gaps larger than 1.5 expected periods.
+    /// Records the device sent that never arrived or were rejected, according to its own
+    /// sequence: EIT frame-counter gaps (wrapping u32), pressure time-stamp gaps larger than 1.5
+    /// expected periods; plus, at a device restart, the records rejected since the last accepted
+    /// one (no later record of the same run places them in a gap).
     pub lost_frames: u64,
-    /// Times the device sequence went backwards or repeated (device restart); not counted as lost.
+    /// Times the device restarted (its sequence or clock went back, see `PROTOCOLS.md`). What it
+    /// sent between the last record before and the first after the restart is unknowable and
+    /// not counted as lost.
     pub counter_resets: u64,
     /// EIT: headers whose measurement count differs from the configured one.
     pub length_mismatches: u64,
@@ -63,6 +67,13 @@ pub trait Decode {
     where
         Self: 'a;
 
+    /// What one record is called in messages to the user ("EIT frame", "pressure line").
+    const RECORD_NAME: &'static str;
+
+    /// Whether records carry a device time ([`Decode::device_time_s`]); a reader then decodes
+    /// each read ahead to time-stamp the records that arrived together. Default: no.
+    const TIMED: bool = false;
+
     /// Consumes bytes from the front of `bytes` until a record completes or the input ends.
     fn step(&mut self, bytes: &[u8]) -> Step;
 
@@ -80,6 +91,27 @@ pub trait Decode {
     /// A configuration mismatch the stream has proven, if any (default: none detectable).
     fn mismatch(&self) -> Option<StreamMismatch> {
         None
+    }
+
+    /// The device time of the record completed by the last `step`, seconds on the device's
+    /// clock (unwrapped), for protocols whose records carry one (default: none). The reader maps
+    /// it onto the host clock to time-stamp records that arrived together (`read::ClockMap`).
+    fn device_time_s(&self) -> Option<f64> {
+        None
+    }
+
+    /// Records the device sent that this decoder could not deliver, as far as the stream proves
+    /// it so far; never decreases. Default: `lost_frames` (protocols with a sequence, whose gaps
+    /// include the records rejected between two delivered ones).
+    fn records_lost(&self) -> u64 {
+        self.stats().lost_frames
+    }
+
+    /// Records rejected (CRC, torn, unparseable) since the last accepted one and not yet in
+    /// [`Decode::records_lost`]: the next record's sequence gap will include them, so they are
+    /// lost for good only if the stream ends (or the device restarts) first. Default: none.
+    fn rejected_pending(&self) -> u64 {
+        0
     }
 }
 

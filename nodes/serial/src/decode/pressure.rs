@@ -5,8 +5,9 @@
 //! does not advance by 1..=`max_jump_ms` from the last accepted one (two lines merged by a lost
 //! line end, a repeat, a restart) is held back as a bad line; the next line is judged against it
 //! too, and a stream continuing from it is a device restart (`counter_resets`). With a period,
-//! gaps over 1.5 periods count round(gap / period) - 1 lost samples. A wrong digit that keeps the
-//! time plausible is undetectable.
+//! gaps over 1.5 periods count round(gap / period) - 1 lost samples, and at a restart the lines
+//! rejected since the last accepted one (among them the held first line of the new run) count as
+//! lost too. A wrong digit that keeps the time plausible is undetectable.
 
 use super::line::{LineSplitter, parse_finite};
 use super::{Decode, DecodeStats, Step};
@@ -27,7 +28,7 @@ pub struct PressureReading {
 }
 
 /// Incremental decoder of pressure lines.
-#[derive(Debug, Clone)]
+#[derive(Debug)]
 pub struct PressureDecoder {
     // Configuration
     period_ms: Option<u32>,
@@ -42,6 +43,21 @@ pub struct PressureDecoder {
     /// The stream was interrupted: the next line is accepted whatever its time.
     rebase: bool,
     epoch_ms: u64,
+    /// `bad_lines` when the last line was accepted (the lines rejected since are pending).
+    bad_at_accept: u64,
+}
+
+/// `clone_from` reuses the line buffer (see `EitDecoder`'s `Clone`).
+impl Clone for PressureDecoder {
+    fn clone(&self) -> Self {
+        Self { lines: self.lines.clone(), ..*self }
+    }
+
+    fn clone_from(&mut self, source: &Self) {
+        let mut lines = std::mem::replace(&mut self.lines, LineSplitter::empty());
+        lines.clone_from(&source.lines);
+        *self = Self { lines, ..*source };
+    }
 }
 
 impl PressureDecoder {
@@ -75,6 +91,7 @@ impl PressureDecoder {
             held_ms: None,
             rebase: false,
             epoch_ms: 0,
+            bad_at_accept: 0,
         })
     }
 }
@@ -111,21 +128,18 @@ impl PressureDecoder {
                     stats.lost_frames += periods - 1;
                 }
             }
-            Some(_) if self.rebase => {
-                stats.counter_resets += 1;
-                self.epoch_ms = 0;
-            }
+            Some(_) if self.rebase => self.restarted(stats),
             Some(_) => {
                 let confirmed = self.held_ms.is_some_and(|h| follows(h, t_ms, self.max_jump_ms));
                 if !confirmed {
                     self.held_ms = Some(t_ms);
                     return false;
                 }
-                stats.counter_resets += 1;
-                self.epoch_ms = 0;
+                self.restarted(stats);
             }
             None => {}
         }
+        self.bad_at_accept = stats.bad_lines;
         self.last_ms = Some(t_ms);
         self.held_ms = None;
         self.rebase = false;
@@ -135,8 +149,23 @@ impl PressureDecoder {
     }
 }
 
+impl PressureDecoder {
+    /// The device restarted: its clock starts again, and the lines rejected since the last
+    /// accepted one (with a period) are lost, as no gap of the new run can include them.
+    fn restarted(&mut self, stats: &mut DecodeStats) {
+        stats.counter_resets += 1;
+        self.epoch_ms = 0;
+        if self.period_ms.is_some() {
+            stats.lost_frames += stats.bad_lines - self.bad_at_accept;
+        }
+    }
+}
+
 impl Decode for PressureDecoder {
     type Record<'a> = PressureReading;
+
+    const RECORD_NAME: &'static str = "pressure line";
+    const TIMED: bool = true;
 
     fn step(&mut self, bytes: &[u8]) -> Step {
         // The splitter is moved out for the call so `judge` can borrow the rest of `self`.
@@ -160,6 +189,20 @@ impl Decode for PressureDecoder {
 
     fn stats(&self) -> &DecodeStats {
         &self.lines.stats
+    }
+
+    fn device_time_s(&self) -> Option<f64> {
+        Some(self.reading.device_t_s)
+    }
+
+    /// With a period, the gaps (`lost_frames`); without, every bad line (no gap to place it in).
+    fn records_lost(&self) -> u64 {
+        let s = &self.lines.stats;
+        if self.period_ms.is_some() { s.lost_frames } else { s.bad_lines }
+    }
+
+    fn rejected_pending(&self) -> u64 {
+        if self.period_ms.is_some() { self.lines.stats.bad_lines - self.bad_at_accept } else { 0 }
     }
 }
 
@@ -206,10 +249,12 @@ mod tests {
     fn gaps_count_lost_samples_and_backwards_time_is_a_restart() {
         let mut d = PressureDecoder::try_new(Some(50)).unwrap();
         let got = decode(&mut d, b"0,1\n50,1\n200,1\n260,1\n10,1\n60,1\n110,1\n");
-        // 10 goes back: held as a bad line until 60 confirms the restart.
+        // 10 goes back: held as a bad line until 60 confirms the restart; then it is lost (2 in
+        // the gap 50 -> 200, and the held line).
         assert_eq!(got.iter().map(|g| g.0).collect::<Vec<_>>(), vec![0, 50, 200, 260, 60, 110]);
         let s = d.stats();
-        assert_eq!((s.lost_frames, s.counter_resets, s.bad_lines), (2, 1, 1));
+        assert_eq!((s.lost_frames, s.counter_resets, s.bad_lines), (3, 1, 1));
+        assert_eq!((d.records_lost(), d.rejected_pending()), (3, 0));
     }
 
     #[test]
@@ -220,6 +265,20 @@ mod tests {
         assert_eq!(got, vec![(950, 1.0), (1100, 3.0), (1150, 4.0)]);
         let s = d.stats();
         assert_eq!((s.bad_lines, s.lost_frames, s.counter_resets), (1, 2, 0));
+    }
+
+    #[test]
+    fn a_bad_line_is_pending_until_a_gap_counts_it_and_without_a_period_every_bad_line_is_lost() {
+        let mut d = PressureDecoder::try_new(Some(50)).unwrap();
+        decode(&mut d, b"0,1\n50,1\n100,x\n");
+        assert_eq!((d.records_lost(), d.rejected_pending()), (0, 1));
+        decode(&mut d, b"150,1\n");
+        assert_eq!((d.records_lost(), d.rejected_pending()), (1, 0));
+        assert_eq!(d.device_time_s(), Some(0.15));
+
+        let mut d = PressureDecoder::try_new(None).unwrap();
+        decode(&mut d, b"0,1\n50,1\n100,x\n150,1\n");
+        assert_eq!((d.records_lost(), d.rejected_pending(), d.stats().lost_frames), (1, 0, 0));
     }
 
     #[test]

@@ -1,19 +1,27 @@
 //! Serial sources: a port, a decoder, host time stamps, and reconnection when the device goes.
 //!
 //! [`SerialReader::open`] fails with [`SerialError::PortNotFound`] when the path is missing at
-//! start. Afterwards a read error, end of file or hang-up drops the port, resets the decoder
-//! (a partial record counts as torn) and reopens the same path on the [`Backoff`] schedule.
-//! [`SerialReader::poll_next`] blocks until a record or the deadline; each [`Reading`] carries
-//! `host_t_s`, seconds since the caller's `origin` at the read that completed the record.
+//! start, and (by default) clears what the port buffered before it was opened: that is older
+//! than the run. Afterwards a read error, end of file or hang-up drops the port, resets the
+//! decoder (a partial record counts as torn) and reopens the same path on the [`Backoff`]
+//! schedule, keeping what the device sent meanwhile. [`SerialReader::poll_next`] blocks until a
+//! record or the deadline; each [`Reading`] carries `host_t_s`, seconds since the caller's
+//! `origin` at the read that completed the record, and `t_s`, the time the record was sent as
+//! far as its device time tells ([`ClockMap`]). [`LinkMonitor`] turns the counters into alerts.
 
 mod backoff;
+mod monitor;
+mod stamp;
 
 use std::io::{ErrorKind, Read};
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 pub use backoff::Backoff;
-use serialport::SerialPort;
+pub use monitor::{Alert, Counters, LinkMonitor, NO_RECORD_MIN_BYTES, REPORT_EVERY_S};
+use serialport::{ClearBuffer, SerialPort};
+pub use serialport::{DataBits, FlowControl, Parity, StopBits};
+pub use stamp::{ClockMap, MAX_BACKLOG_S, MAX_DRIFT};
 
 use crate::decode::{Decode, DecodeStats, EitDecoder, ForceDecoder, PressureDecoder, StreamMismatch};
 use crate::error::ParamError;
@@ -28,27 +36,45 @@ pub struct ReaderConfig {
     pub path: PathBuf,
     /// Baud rate (USB CDC boards and pseudo-terminals ignore it), bit/s.
     pub baud: u32,
+    /// Character framing of a UART link (USB CDC boards ignore it): data bits, parity, stop
+    /// bits, flow control. Default 8N1 without flow control.
+    pub data_bits: DataBits,
+    pub parity: Parity,
+    pub stop_bits: StopBits,
+    pub flow_control: FlowControl,
     /// Longest single blocking read, s; bounds how late a deadline is noticed.
     pub read_timeout_s: f64,
     /// First reconnect delay after a failed attempt, s.
     pub backoff_initial_s: f64,
     /// Largest reconnect delay, s: a returning device is reopened at most this long after it returns.
     pub backoff_max_s: f64,
-    /// Silence after which the link counts one stall (the port is still there), s.
-    pub stall_after_s: f64,
+    /// Silence after which the link counts one stall (the port is still there), s; `None`: the
+    /// device may be silent (a gauge that prints only when the load changes).
+    pub stall_after_s: Option<f64>,
+    /// Discard what the port buffered before [`SerialReader::open`] (its count goes to
+    /// [`LinkStats::cleared_bytes`]): records older than the run, which would all get the
+    /// time of the first read. Off for a reader that must see every byte an already running
+    /// emulator sent (tests). Reopening after a disconnect never clears.
+    pub clear_input_at_open: bool,
 }
 
 impl ReaderConfig {
-    /// Defaults for `path`: 115200 baud, 50 ms reads, backoff 50 ms doubling to 1 s, stall after 2 s.
+    /// Defaults for `path`: 115200 baud 8N1, 50 ms reads, backoff 50 ms doubling to 1 s, stall
+    /// after 2 s, input cleared at open.
     #[must_use]
     pub fn new(path: impl Into<PathBuf>) -> Self {
         Self {
             path: path.into(),
             baud: 115_200,
+            data_bits: DataBits::Eight,
+            parity: Parity::None,
+            stop_bits: StopBits::One,
+            flow_control: FlowControl::None,
             read_timeout_s: 0.05,
             backoff_initial_s: 0.05,
             backoff_max_s: 1.0,
-            stall_after_s: 2.0,
+            stall_after_s: Some(2.0),
+            clear_input_at_open: true,
         }
     }
 
@@ -60,12 +86,15 @@ impl ReaderConfig {
         if self.baud == 0 {
             return Err(ParamError::Positive { param: "baud", got: 0 });
         }
+        let stall = self.stall_after_s.map(|s| ("stall_after_s", s));
         for (param, got) in [
             ("read_timeout_s", self.read_timeout_s),
             ("backoff_initial_s", self.backoff_initial_s),
             ("backoff_max_s", self.backoff_max_s),
-            ("stall_after_s", self.stall_after_s),
-        ] {
+        ]
+        .into_iter()
+        .chain(stall)
+        {
             // Also bounds the value so Duration::from_secs_f64 cannot panic.
             if !(got.is_finite() && got > 0.0 && got < 1e9) {
                 return Err(ParamError::Seconds { param, rule: "in (0, 1e9)", got });
@@ -97,7 +126,8 @@ impl std::fmt::Display for StreamMismatch {
         match self {
             Self::MeasurementCount { expected, got } => write!(
                 f,
-                "eit frames carry {got} measurements, configured for {expected} (hint: check the sensor's protocol)"
+                "eit frames carry {got} measurements, configured for {expected} (hint: set param `measurements` \
+                 to {got} if the board is right, or check the board's protocol and firmware)"
             ),
         }
     }
@@ -116,6 +146,8 @@ pub struct LinkStats {
     pub failed_attempts: u64,
     /// Silences longer than `stall_after_s` while the port stayed open.
     pub stalls: u64,
+    /// Bytes the port held at open, cleared unread (`clear_input_at_open`): older than the run.
+    pub cleared_bytes: u64,
 }
 
 /// One decoded record with the host time of its reception.
@@ -123,17 +155,21 @@ pub struct LinkStats {
 pub struct Reading<R> {
     /// Seconds since the reader's origin when the read that completed the record returned.
     pub host_t_s: f64,
+    /// When the device sent the record, seconds since the reader's origin: its device time on
+    /// the host clock ([`ClockMap`]) for records that carry one, else `host_t_s`. At most
+    /// `host_t_s`; records that arrived in one read keep their device spacing.
+    pub t_s: f64,
     /// The decoded record.
     pub record: R,
 }
 
 /// A device on a serial port, decoded by `D`, reconnecting when the device disappears.
-pub struct SerialReader<D: Decode> {
+pub struct SerialReader<D: Decode + Clone> {
     // Configuration
     config: ReaderConfig,
     origin: Instant,
     read_timeout: Duration,
-    stall_after: Duration,
+    stall_after: Option<Duration>,
     // Internal state
     decoder: D,
     port: Option<Box<dyn SerialPort>>,
@@ -145,6 +181,15 @@ pub struct SerialReader<D: Decode> {
     last_rx: Instant,
     stalled: bool,
     backoff: Backoff,
+    clock: ClockMap,
+    /// For timed decoders: a copy of the decoder that decodes each read ahead (buffers reused).
+    shadow: Option<D>,
+    /// Per record the current read completes, in order: the device time of the last record of
+    /// the read in its device run (see `look_ahead`); `ahead_len` filled, `ahead_next` the next
+    /// record's. Capacity: every record takes at least 2 bytes.
+    ahead: Box<[f64]>,
+    ahead_len: usize,
+    ahead_next: usize,
     link: LinkStats,
 }
 
@@ -156,10 +201,16 @@ pub type PressureReader = SerialReader<PressureDecoder>;
 pub type LoadcellReader = SerialReader<ForceDecoder>;
 
 fn open_port(config: &ReaderConfig, timeout: Duration) -> serialport::Result<Box<dyn SerialPort>> {
-    serialport::new(config.path.to_string_lossy(), config.baud).timeout(timeout).open()
+    serialport::new(config.path.to_string_lossy(), config.baud)
+        .data_bits(config.data_bits)
+        .parity(config.parity)
+        .stop_bits(config.stop_bits)
+        .flow_control(config.flow_control)
+        .timeout(timeout)
+        .open()
 }
 
-impl<D: Decode> SerialReader<D> {
+impl<D: Decode + Clone> SerialReader<D> {
     /// Opens `config.path`; host time stamps count from `origin`.
     ///
     /// # Errors
@@ -176,10 +227,17 @@ impl<D: Decode> SerialReader<D> {
             serialport::ErrorKind::Io(ErrorKind::NotFound) => SerialError::PortNotFound { path: path.clone() },
             _ => SerialError::Open { path: path.clone(), source },
         })?;
+        let mut link = LinkStats::default();
+        if config.clear_input_at_open {
+            // What is queued now is counted; bytes landing between the count and the clear are
+            // cleared uncounted (at most what one USB packet or pty write adds meanwhile).
+            link.cleared_bytes = port.bytes_to_read().map_or(0, u64::from);
+            port.clear(ClearBuffer::Input).map_err(|source| SerialError::Open { path: path.clone(), source })?;
+        }
         let now = Instant::now();
         Ok(Self {
             read_timeout,
-            stall_after: Duration::from_secs_f64(config.stall_after_s),
+            stall_after: config.stall_after_s.map(Duration::from_secs_f64),
             backoff: Backoff::new(
                 Duration::from_secs_f64(config.backoff_initial_s),
                 Duration::from_secs_f64(config.backoff_max_s),
@@ -187,7 +245,6 @@ impl<D: Decode> SerialReader<D> {
             ),
             config,
             origin,
-            decoder,
             port: Some(port),
             rx: vec![0; RX_BUF_LEN].into_boxed_slice(),
             rx_start: 0,
@@ -195,7 +252,13 @@ impl<D: Decode> SerialReader<D> {
             rx_t_s: 0.0,
             last_rx: now,
             stalled: false,
-            link: LinkStats::default(),
+            clock: ClockMap::new(),
+            shadow: D::TIMED.then(|| decoder.clone()),
+            ahead: vec![0.0; if D::TIMED { RX_BUF_LEN / 2 } else { 0 }].into_boxed_slice(),
+            ahead_len: 0,
+            ahead_next: 0,
+            decoder,
+            link,
         })
     }
 
@@ -227,6 +290,19 @@ impl<D: Decode> SerialReader<D> {
     #[must_use]
     pub fn decoder(&self) -> &D {
         &self.decoder
+    }
+
+    /// Decodes the read just stored in `rx` with a copy of the decoder (the real pass will find
+    /// the same records: decoding is deterministic) and notes, for each record it completes, the
+    /// device time of the last record of the read that is in the same device run (device time
+    /// not going back). That record was sent before the read returned, so each record's stamp
+    /// is bounded by it (`ClockMap::stamp`). Allocation-free: the copy reuses its buffers.
+    fn look_ahead(&mut self) {
+        self.ahead_len = 0;
+        self.ahead_next = 0;
+        let Some(shadow) = self.shadow.as_mut() else { return };
+        shadow.clone_from(&self.decoder);
+        self.ahead_len = run_tails(shadow, &self.rx[self.rx_start..self.rx_end], &mut self.ahead);
     }
 
     fn disconnect(&mut self, now: Instant) {
@@ -267,6 +343,9 @@ impl<D: Decode> SerialReader<D> {
                 }
                 match open_port(&self.config, self.read_timeout) {
                     Ok(port) => {
+                        // Not cleared: what the device sent since it came back is part of the
+                        // run (at most `backoff_max_s` old), and its records get their times
+                        // from device time; frames cleared here would be lost.
                         self.port = Some(port);
                         self.link.reconnects += 1;
                         self.last_rx = Instant::now();
@@ -295,10 +374,11 @@ impl<D: Decode> SerialReader<D> {
                     self.last_rx = at;
                     self.stalled = false;
                     self.link.bytes += n as u64;
+                    self.look_ahead();
                 }
                 Err(e) if matches!(e.kind(), ErrorKind::TimedOut | ErrorKind::Interrupted | ErrorKind::WouldBlock) => {
                     let at = Instant::now();
-                    if !self.stalled && at.duration_since(self.last_rx) >= self.stall_after {
+                    if !self.stalled && self.stall_after.is_some_and(|s| at.duration_since(self.last_rx) >= s) {
                         self.stalled = true;
                         self.link.stalls += 1;
                     }
@@ -306,11 +386,48 @@ impl<D: Decode> SerialReader<D> {
                 Err(_) => self.disconnect(Instant::now()),
             }
         }
-        Ok(Some(Reading { host_t_s: self.rx_t_s, record: self.decoder.record() }))
+        // Records that arrived in one read get their device spacing back (see `stamp`).
+        let t_s = match self.decoder.device_time_s() {
+            Some(device_s) => {
+                let tail_s = self.ahead.get(self.ahead_next).filter(|_| self.ahead_next < self.ahead_len);
+                self.ahead_next += 1;
+                self.clock.stamp(self.rx_t_s, device_s, tail_s.copied().unwrap_or(device_s))
+            }
+            None => self.rx_t_s,
+        };
+        Ok(Some(Reading { host_t_s: self.rx_t_s, t_s, record: self.decoder.record() }))
     }
 }
 
-impl<D: Decode + std::fmt::Debug> std::fmt::Debug for SerialReader<D> {
+/// Decodes `bytes` with `decoder` and writes to `tails`, for each record completed (up to
+/// `tails.len()`), the device time of the last record of `bytes` in the same device run (the run
+/// ends where device time goes back: a restart). Returns how many were written.
+fn run_tails<D: Decode>(decoder: &mut D, mut bytes: &[u8], tails: &mut [f64]) -> usize {
+    let mut len = 0;
+    while !bytes.is_empty() {
+        let step = decoder.step(bytes);
+        bytes = &bytes[step.consumed..];
+        if step.complete
+            && let Some(t) = decoder.device_time_s()
+            && len < tails.len()
+        {
+            tails[len] = t;
+            len += 1;
+        }
+    }
+    // Backwards: each entry becomes the device time its run ends at.
+    let (mut next, mut next_tail) = (f64::NAN, f64::NAN);
+    for t in tails[..len].iter_mut().rev() {
+        let own = *t;
+        if next >= own {
+            *t = next_tail;
+        }
+        (next, next_tail) = (own, *t);
+    }
+    len
+}
+
+impl<D: Decode + Clone + std::fmt::Debug> std::fmt::Debug for SerialReader<D> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("SerialReader")
             .field("path", &self.config.path)
@@ -318,5 +435,41 @@ impl<D: Decode + std::fmt::Debug> std::fmt::Debug for SerialReader<D> {
             .field("decoder", &self.decoder)
             .field("link", &self.link)
             .finish_non_exhaustive()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::run_tails;
+    use crate::decode::{EitDecoder, PressureDecoder};
+    use crate::encode::encode_eit_frame;
+
+    #[test]
+    fn each_record_of_a_read_is_bounded_by_the_last_one_of_its_device_run() {
+        // The reader's decoder holds a partial line ("10") from the last read; the copy starts
+        // from its state. The read: that line's end, two more lines, the board's restart (time
+        // back to 20 ms) and two lines of the new run.
+        let mut reader = PressureDecoder::try_new(Some(50)).unwrap();
+        crate::decode::decode_all(&mut reader, b"1000,0.5\n10", |_| {});
+        let mut copy = PressureDecoder::try_new(Some(50)).unwrap();
+        copy.clone_from(&reader);
+        let mut tails = [0.0; 8];
+        let n = run_tails(&mut copy, b"50,0.5\n1100,0.5\n1150,0.5\n20,0.1\n70,0.1\n120,0.1\n", &mut tails);
+        // 1050, 1100, 1150; 20 is held (a restart must be confirmed), 70 confirms it, then 120.
+        assert_eq!(n, 5);
+        let (old_run, new_run) = (1150.0 * 1e-3, 120.0 * 1e-3);
+        assert_eq!(tails[..n], [old_run, old_run, old_run, new_run, new_run]);
+    }
+
+    #[test]
+    fn more_records_than_room_are_left_out_and_eit_frames_count_too() {
+        let mut bytes = Vec::new();
+        for c in 0..4u32 {
+            encode_eit_frame(&mut bytes, c, 1000 * c, &[0.25; 3]);
+        }
+        let mut tails = [0.0; 3];
+        assert_eq!(run_tails(&mut EitDecoder::new(3), &bytes, &mut tails), 3);
+        // The fourth frame did not fit; the three noted end their run at the third.
+        assert_eq!(tails, [2e-3, 2e-3, 2e-3]);
     }
 }

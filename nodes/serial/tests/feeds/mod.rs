@@ -9,8 +9,14 @@
 use std::time::{Duration, Instant};
 
 use skinflow_serial::decode::Decode;
-use skinflow_serial::read::{Reading, SerialReader};
+use skinflow_serial::read::{ReaderConfig, Reading, SerialReader};
 use skinflow_serial::{Emulator, TimedForce, TimedFrame, TimedPressure};
+
+/// A reader config for `path` that keeps what the port buffered before the reader opened: the
+/// emulator starts sending at spawn, and these tests check every record it sent.
+pub fn config(path: impl Into<std::path::PathBuf>) -> ReaderConfig {
+    ReaderConfig { clear_input_at_open: false, ..ReaderConfig::new(path) }
+}
 
 /// Frame `i` of `plain_frames(m, _)`.
 pub fn plain_values(i: usize, m: usize) -> Vec<f64> {
@@ -41,7 +47,7 @@ pub fn forces(n: usize, period_s: f64) -> Vec<TimedForce> {
 
 /// Polls `reader` until `want` records were taken by `take` or `limit` passed (a hang guard,
 /// not a timing assertion: tests check what arrived, not when).
-pub fn read_n<D: Decode>(
+pub fn read_n<D: Decode + Clone>(
     reader: &mut SerialReader<D>,
     want: usize,
     limit: Duration,
@@ -61,7 +67,7 @@ pub fn read_n<D: Decode>(
 
 /// Polls `reader` until the emulator has sent everything and 300 ms pass without a record (or
 /// `limit` passes, a hang guard); returns how many records `take` got.
-pub fn read_until_idle<D: Decode>(
+pub fn read_until_idle<D: Decode + Clone>(
     reader: &mut SerialReader<D>,
     emulator: &Emulator,
     limit: Duration,

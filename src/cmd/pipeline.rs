@@ -149,12 +149,14 @@ pub fn require_truth(path: &Path) -> Result<Recording> {
 /// acquisition window) mixes two states in one image, so it has no single true force; those
 /// frames are neither calibrated on nor evaluated unless `--all-frames` is given.
 ///
-/// A truth row is a change when it differs from the last change: another number of contacts, a
-/// contact moved by more than [`SAME_PLACE_MM`] or of another diameter, or a force off by more
-/// than [`SAME_FORCE_N`] plus [`SAME_FORCE_REL`] of it. A load cell that prints continuously (a
-/// row every 100 ms) repeats the load of a hold with its last digit's jitter; those rows change
-/// nothing, or no frame of such a recording would be settled. The last change, not the previous
-/// row, is the reference, so a slow drift is still a change once it adds up.
+/// A truth source that writes a row only when the load changes (the simulator, a rig's
+/// script) is taken exactly: every row is a change. A load cell that prints continuously (a row
+/// every 100 ms) repeats the load of a hold, and would leave no frame settled; it is recognized
+/// by rows identical to the one before, and then a row is a change only when it differs from
+/// the last change: another number of contacts, a contact moved by more than [`SAME_PLACE_MM`]
+/// or of another diameter, or a force off by more than [`SAME_FORCE_N`] plus [`SAME_FORCE_REL`]
+/// of it (its last digit's jitter). The last change, not the previous row, is the reference,
+/// so a slow drift is still a change once it adds up.
 pub struct Settled {
     change_t: Vec<f64>,
     half_period_s: f64,
@@ -282,10 +284,11 @@ pub const SAME_FORCE_REL: f64 = 0.02;
 
 /// The times of the truth rows that change the load (see [`Settled`]); the first row always does.
 fn load_changes(truth: &skinflow_record::read::TruthStream) -> Vec<f64> {
+    let repeats = (1..truth.len()).any(|i| same_load(truth.row(i - 1), truth.row(i), false));
     let mut changes = Vec::new();
     let mut last: Option<usize> = None;
     for i in 0..truth.len() {
-        if last.is_none_or(|j| !same_load(truth.row(j), truth.row(i))) {
+        if last.is_none_or(|j| !same_load(truth.row(j), truth.row(i), repeats)) {
             changes.push(truth.t_s[i]);
             last = Some(i);
         }
@@ -293,13 +296,17 @@ fn load_changes(truth: &skinflow_record::read::TruthStream) -> Vec<f64> {
     changes
 }
 
-/// Whether two truth rows hold the same load, contact by contact in column order.
-fn same_load(a: skinflow_record::read::TruthRow<'_>, b: skinflow_record::read::TruthRow<'_>) -> bool {
+/// Whether two truth rows hold the same load, contact by contact in column order: exactly, or
+/// within a load cell's jitter (`tolerant`).
+fn same_load(a: skinflow_record::read::TruthRow<'_>, b: skinflow_record::read::TruthRow<'_>, tolerant: bool) -> bool {
+    let (place_mm, force_n, force_rel) =
+        if tolerant { (SAME_PLACE_MM, SAME_FORCE_N, SAME_FORCE_REL) } else { (0.0, 0.0, 0.0) };
+    let same = |p: f64, q: f64, tol: f64| (p - q).abs() <= tol || (p.is_nan() && q.is_nan());
     a.contact_count() == b.contact_count()
         && a.contacts().zip(b.contacts()).all(|(p, q)| {
-            (p.x_mm - q.x_mm).hypot(p.y_mm - q.y_mm) <= SAME_PLACE_MM
-                && (p.diameter_mm == q.diameter_mm || (p.diameter_mm.is_nan() && q.diameter_mm.is_nan()))
-                && (p.force_n - q.force_n).abs() <= SAME_FORCE_N + SAME_FORCE_REL * p.force_n.abs()
+            (p.x_mm - q.x_mm).hypot(p.y_mm - q.y_mm) <= place_mm
+                && same(p.diameter_mm, q.diameter_mm, 0.0)
+                && same(p.force_n, q.force_n, force_n + force_rel * p.force_n.abs())
         })
 }
 
@@ -338,6 +345,18 @@ mod tests {
             (0.9, nan, nan),   // release
         ]);
         assert_eq!(load_changes(&t), vec![0.0, 0.2, 0.5, 0.7, 0.8, 0.9]);
+    }
+
+    /// A source that writes a row only on a change (no row repeats the one before, as the
+    /// simulator's) is taken exactly: a 0.03 N ramp step is a change.
+    #[test]
+    fn without_repeated_rows_every_row_is_a_change() {
+        let t = truth(&[(0.0, 10.0, 1.0), (0.05, 10.0, 1.03), (0.1, 10.0, 1.06), (0.15, 10.0, 1.08)]);
+        assert_eq!(load_changes(&t), vec![0.0, 0.05, 0.1, 0.15]);
+        let mut repeated = truth(&[(0.0, 10.0, 1.0), (0.05, 10.0, 1.0), (0.1, 10.0, 1.03), (0.15, 10.0, 1.08)]);
+        assert_eq!(load_changes(&repeated), vec![0.0, 0.15], "with a repeat, the gauge's jitter is tolerated");
+        repeated.force_n[1] = 1.01;
+        assert_eq!(load_changes(&repeated), vec![0.0, 0.05, 0.1, 0.15]);
     }
 
     /// A frame is settled when no change falls in its window, however many rows do.

@@ -256,7 +256,9 @@ fn serial_param_error(e: skinflow_serial::ParamError) -> ParamError {
     match e {
         E::MeasurementCount { got } => ParamError::new("measurements", format!("must be in 1..=65535 (got {got})")),
         E::Seconds { param, rule, got } => {
-            ParamError::new(param, format!("must be a finite number of seconds {rule} (got {got})"))
+            // The node's 0 is the reader's None (no stall detection).
+            let never = if param == "stall_after_s" { "0 (never) or " } else { "" };
+            ParamError::new(param, format!("must be {never}a finite number of seconds {rule} (got {got})"))
         }
         E::Positive { param, got } => ParamError::new(param, format!("must be > 0 (got {got})")),
     }
@@ -273,19 +275,14 @@ impl PortParams {
         use skinflow_serial::{DataBits, FlowControl, Parity, StopBits};
         let mut c = ReaderConfig::new(&self.port);
         c.baud = self.baud;
-        // Out-of-range values are refused by `validate` at load; these arms are not reached.
-        c.data_bits = match self.data_bits {
-            5 => DataBits::Five,
-            6 => DataBits::Six,
-            7 => DataBits::Seven,
-            _ => DataBits::Eight,
-        };
+        // Out-of-range values are refused by `validate` at load; the defaults are not reached.
+        c.data_bits = DataBits::try_from(self.data_bits).unwrap_or(DataBits::Eight);
         c.parity = match self.parity {
             ParityParam::None => Parity::None,
             ParityParam::Odd => Parity::Odd,
             ParityParam::Even => Parity::Even,
         };
-        c.stop_bits = if self.stop_bits == 2 { StopBits::Two } else { StopBits::One };
+        c.stop_bits = StopBits::try_from(self.stop_bits).unwrap_or(StopBits::One);
         c.flow_control = match self.flow_control {
             FlowControlParam::None => FlowControl::None,
             FlowControlParam::Software => FlowControl::Software,
@@ -302,20 +299,14 @@ impl PortParams {
     /// The checks every serial kind runs at load: the reader's own (baud, durations), the
     /// framing, and the backoff growing from its first delay to its largest.
     fn validate(&self) -> Result<(), ParamError> {
-        if !(5..=8).contains(&self.data_bits) {
+        use skinflow_serial::{DataBits, StopBits};
+        if DataBits::try_from(self.data_bits).is_err() {
             return Err(ParamError::new("data_bits", format!("must be 5, 6, 7 or 8 (got {})", self.data_bits)));
         }
-        if !(1..=2).contains(&self.stop_bits) {
+        if StopBits::try_from(self.stop_bits).is_err() {
             return Err(ParamError::new("stop_bits", format!("must be 1 or 2 (got {})", self.stop_bits)));
         }
-        if let Some(s) = self.stall_after_s
-            && !(s.is_finite() && s > 0.0 && s < 1e9)
-        {
-            return Err(ParamError::new(
-                "stall_after_s",
-                format!("must be 0 (never) or a finite number of seconds in (0, 1e9) (got {s})"),
-            ));
-        }
+        // The durations, `stall_after_s` among them, are the reader's own checks.
         self.config().validate().map_err(serial_param_error)?;
         if self.backoff_initial_s > self.backoff_max_s {
             return Err(ParamError::new(
@@ -462,7 +453,7 @@ impl Source for SerialEit {
 /// `/eit/seq` of a frame with device counter `counter`, given the last frame's counter and seq:
 /// the counter unwrapped to 64 bits (a u32 wrap goes on past 2^32; a jump is the lost frames).
 /// The first frame starts at its counter. A frame after a device restart (`restarted`: its
-/// counter or clock went back, `skinflow_serial::is_restart`) goes on at +1, so seq keeps
+/// counter or clock went back, see PROTOCOLS.md section 1.4) goes on at +1, so seq keeps
 /// increasing and a gap in it still means lost frames (those lost around a restart cannot be
 /// counted; the restart is in the link's `counter_resets`).
 fn next_seq(last: Option<(u32, u64)>, counter: u32, restarted: bool) -> u64 {

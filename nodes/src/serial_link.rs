@@ -63,7 +63,7 @@ impl Drop for Claim {
 const NO_RECORD_WINDOW_S: f64 = 2.0;
 
 /// An open port and its claim. Field order matters: the reader (and the port) drop first.
-struct Link<D: Decode + Clone> {
+struct Link<D: Decode> {
     reader: SerialReader<D>,
     watch: Watch,
     _claim: Claim,
@@ -79,7 +79,7 @@ struct Watch {
     closed: bool,
 }
 
-impl<D: Decode + Clone> Link<D> {
+impl<D: Decode> Link<D> {
     /// Counts newly known lost records as discarded and logs what the monitor raises. Cold
     /// unless something changed: a few counter loads per poll.
     fn observe(&mut self, ctx: &Context) {
@@ -169,7 +169,7 @@ pub(crate) struct Settings {
 }
 
 /// A serial source's port: open, or waiting for the replaced instance's link (hot swap).
-pub(crate) struct Port<D: Decode + Clone> {
+pub(crate) struct Port<D: Decode> {
     link: Option<Link<D>>,
     /// The decoder, until the port is opened or a link is taken over.
     pending: Option<D>,
@@ -177,12 +177,12 @@ pub(crate) struct Port<D: Decode + Clone> {
 }
 
 /// The port part of a serial source's hot-swap state.
-pub(crate) struct PortHandover<D: Decode + Clone> {
+pub(crate) struct PortHandover<D: Decode> {
     settings: Settings,
     link: Option<Link<D>>,
 }
 
-impl<D: Decode + Clone> Port<D> {
+impl<D: Decode> Port<D> {
     /// A port to be opened with `decoder`; `decoder_param` is what tells two decoders of the
     /// kind apart (see [`Settings`]).
     pub(crate) fn new(p: &PortParams, decoder: D, decoder_param: u64) -> Self {
@@ -288,7 +288,7 @@ impl<D: Decode + Clone> Port<D> {
 
 /// The summary at close: every nonzero counter, as a warning when anything was lost, went wrong
 /// on the link, or no record decoded at all.
-fn report<D: Decode + Clone>(ctx: &Context, r: &SerialReader<D>, open_s: f64) {
+fn report<D: Decode>(ctx: &Context, r: &SerialReader<D>, open_s: f64) {
     let (d, l) = (r.decode_stats(), r.link_stats());
     let counters = Counters { decode: d, link: &l };
     let (node, port, record) = (ctx.id(), r.path().display(), D::RECORD_NAME);

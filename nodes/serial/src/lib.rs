@@ -15,7 +15,7 @@ pub mod read;
 
 pub use decode::{
     Decode, DecodeStats, EitDecoder, EitFrame, ForceDecoder, ForceReading, PressureDecoder, PressureReading, Step,
-    StreamMismatch, decode_all, is_restart,
+    StreamMismatch, decode_all,
 };
 pub use emulate::{
     Device, DeviceStats, EmulateError, Emulator, EmulatorConfig, EmulatorFeed, Fault, FaultPlan, Pacing, TimedForce,
@@ -23,6 +23,6 @@ pub use emulate::{
 };
 pub use error::ParamError;
 pub use read::{
-    Alert, ClockMap, Counters, DataBits, EitReader, FlowControl, LinkMonitor, LinkStats, LoadcellReader, Parity,
-    PressureReader, ReaderConfig, Reading, SerialError, SerialReader, StopBits,
+    Alert, Counters, DataBits, EitReader, FlowControl, LinkMonitor, LinkStats, LoadcellReader, Parity, PressureReader,
+    ReaderConfig, Reading, SerialError, SerialReader, StopBits,
 };

@@ -46,7 +46,7 @@ const HALF_U32: u32 = 1 << 31;
 /// 0xFFFFFF00 -> 0x100) is a small forward step of both. Cost of the rule: an outage longer than
 /// 35.8 min with the board running is taken for a restart (reported as one, not as lost frames).
 #[must_use]
-pub fn is_restart(d: u32, dt_us: u32) -> bool {
+pub(crate) fn is_restart(d: u32, dt_us: u32) -> bool {
     d == 0 || d >= HALF_U32 || dt_us >= HALF_U32
 }
 

@@ -63,6 +63,10 @@ impl Decode for ForceDecoder {
         self.reading
     }
 
+    fn skip_to_record_start(&mut self) {
+        self.lines.skip_partial_line();
+    }
+
     fn reset(&mut self) {
         self.lines.reset();
     }
@@ -102,5 +106,20 @@ mod tests {
         assert_eq!(got, vec![1.25, 8.0, 4.0]);
         // The reset dropped " 9.9"; "8 N" is then a line of its own.
         assert_eq!(d.stats().discarded_bytes, 4);
+    }
+
+    /// After the port's input was cleared under a line, its tail ("345 N" of "12.345 N") is
+    /// dropped, not read as 345 N, and not counted as a bad line (nor, through it, as a lost
+    /// reading); the next line is read whole, even split across reads.
+    #[test]
+    fn the_tail_of_a_cleared_line_is_skipped() {
+        let mut d = ForceDecoder::new();
+        let mut got = Vec::new();
+        d.skip_to_record_start();
+        decode_all(&mut d, b"345", |r| got.push(r.force_n));
+        decode_all(&mut d, b" N\r\n 6.", |r| got.push(r.force_n));
+        decode_all(&mut d, b"5 N\n", |r| got.push(r.force_n));
+        assert_eq!(got, vec![6.5]);
+        assert_eq!((d.stats().bad_lines, d.records_lost(), d.stats().discarded_bytes), (0, 0, 7));
     }
 }

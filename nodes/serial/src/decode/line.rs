@@ -15,6 +15,9 @@ pub(super) struct LineSplitter {
     buf: Vec<u8>,
     /// The current line overflowed: skip to its end.
     overflow: bool,
+    /// The stream was cut at an arbitrary byte ([`LineSplitter::skip_partial_line`]): what
+    /// comes before the next `\n` is a line's tail, discarded without counting a bad line.
+    partial: bool,
     run: DiscardRun,
     pub(super) stats: DecodeStats,
 }
@@ -37,6 +40,7 @@ impl LineSplitter {
         Self {
             buf: Vec::with_capacity(MAX_LINE_LEN),
             overflow: false,
+            partial: false,
             run: DiscardRun::default(),
             stats: DecodeStats::default(),
         }
@@ -44,7 +48,13 @@ impl LineSplitter {
 
     /// A placeholder without capacity, for moving a splitter out of its owner for a call.
     pub(super) fn empty() -> Self {
-        Self { buf: Vec::new(), overflow: false, run: DiscardRun::default(), stats: DecodeStats::default() }
+        Self {
+            buf: Vec::new(),
+            overflow: false,
+            partial: false,
+            run: DiscardRun::default(),
+            stats: DecodeStats::default(),
+        }
     }
 
     /// Consumes bytes until a line is accepted by `parse` (which stores the record and returns
@@ -54,9 +64,21 @@ impl LineSplitter {
         while i < bytes.len() {
             let rest = &bytes[i..];
             let Some(nl) = rest.iter().position(|&b| b == b'\n') else {
-                self.append(rest);
+                if self.partial {
+                    self.run.discard(&mut self.stats, rest.len());
+                } else {
+                    self.append(rest);
+                }
                 return Step { consumed: bytes.len(), complete: false };
             };
+            if self.partial {
+                // The tail of a line whose start was cleared: its digits would parse as
+                // another number ("345 N" of "12.345 N").
+                self.run.discard(&mut self.stats, nl + 1);
+                i += nl + 1;
+                self.partial = false;
+                continue;
+            }
             self.append(&rest[..nl]);
             i += nl + 1;
             let line_bytes = self.buf.len() + 1;
@@ -96,6 +118,13 @@ impl LineSplitter {
         } else {
             self.buf.extend_from_slice(bytes);
         }
+    }
+
+    /// The bytes before the next line end are a line's tail (the input was cleared at an
+    /// arbitrary byte): drop them, counted as discarded bytes but not as a bad line.
+    pub(super) fn skip_partial_line(&mut self) {
+        self.reset();
+        self.partial = true;
     }
 
     /// Drops a partial line (stream interrupted).

@@ -11,7 +11,7 @@ mod force;
 mod line;
 mod pressure;
 
-pub use eit::{EitDecoder, EitFrame, is_restart};
+pub use eit::{EitDecoder, EitFrame};
 pub use force::{ForceDecoder, ForceReading};
 pub use pressure::{DEFAULT_MAX_JUMP_MS, PressureDecoder, PressureReading};
 
@@ -60,8 +60,9 @@ pub enum StreamMismatch {
     MeasurementCount { expected: usize, got: usize },
 }
 
-/// An incremental decoder of one wire protocol.
-pub trait Decode {
+/// An incremental decoder of one wire protocol. `Clone` so a reader can decode a read ahead
+/// with a copy (`clone_from` reuses the copy's buffers).
+pub trait Decode: Clone {
     /// The decoded record, borrowed from the decoder's buffers.
     type Record<'a>
     where
@@ -84,6 +85,12 @@ pub trait Decode {
     /// disconnect); a partial EIT frame counts as torn. Sequence tracking is kept, so records
     /// lost during the interruption are counted when the stream resumes.
     fn reset(&mut self);
+
+    /// The stream resumes at an arbitrary byte (the port's input was cleared under a record):
+    /// skip to the next record boundary the protocol can recognise. Line protocols drop bytes
+    /// up to the next `\n`; framed ones need nothing, their sync bytes and CRC resynchronise
+    /// (the default).
+    fn skip_to_record_start(&mut self) {}
 
     /// Counters since construction.
     fn stats(&self) -> &DecodeStats;

@@ -182,6 +182,10 @@ impl Decode for PressureDecoder {
         self.reading
     }
 
+    fn skip_to_record_start(&mut self) {
+        self.lines.skip_partial_line();
+    }
+
     fn reset(&mut self) {
         self.lines.reset();
         self.rebase = true;
@@ -223,6 +227,18 @@ mod tests {
         let got = decode(&mut d, b"0,0.5\r\n50,-1.25\n100,  2\r\n");
         assert_eq!(got, vec![(0, 0.5), (50, -1.25), (100, 2.0)]);
         assert_eq!(*d.stats(), DecodeStats { frames: 3, ..DecodeStats::default() });
+    }
+
+    /// After the input was cleared under "600050,101.3", the tail "050,101.3" would read as a
+    /// line at 50 ms and the next one as a restart; it is skipped, uncounted as bad or lost.
+    #[test]
+    fn the_tail_of_a_cleared_line_is_skipped() {
+        let mut d = PressureDecoder::try_new(Some(50)).unwrap();
+        d.skip_to_record_start();
+        let got = decode(&mut d, b"050,101.3\r\n600100,101.4\r\n600150,101.5\r\n");
+        assert_eq!(got, vec![(600100, 101.4), (600150, 101.5)]);
+        let s = d.stats();
+        assert_eq!((s.bad_lines, s.counter_resets, d.records_lost(), s.discarded_bytes), (0, 0, 0, 11));
     }
 
     #[test]

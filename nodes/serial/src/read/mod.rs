@@ -18,10 +18,11 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 pub use backoff::Backoff;
-pub use monitor::{Alert, Counters, LinkMonitor, NO_RECORD_MIN_BYTES, REPORT_EVERY_S};
+pub use monitor::{Alert, Counters, LinkMonitor};
 use serialport::{ClearBuffer, SerialPort};
 pub use serialport::{DataBits, FlowControl, Parity, StopBits};
-pub use stamp::{ClockMap, MAX_BACKLOG_S, MAX_DRIFT};
+use stamp::ClockMap;
+pub use stamp::MAX_DRIFT;
 
 use crate::decode::{Decode, DecodeStats, EitDecoder, ForceDecoder, PressureDecoder, StreamMismatch};
 use crate::error::ParamError;
@@ -164,7 +165,7 @@ pub struct Reading<R> {
 }
 
 /// A device on a serial port, decoded by `D`, reconnecting when the device disappears.
-pub struct SerialReader<D: Decode + Clone> {
+pub struct SerialReader<D: Decode> {
     // Configuration
     config: ReaderConfig,
     origin: Instant,
@@ -210,13 +211,13 @@ fn open_port(config: &ReaderConfig, timeout: Duration) -> serialport::Result<Box
         .open()
 }
 
-impl<D: Decode + Clone> SerialReader<D> {
+impl<D: Decode> SerialReader<D> {
     /// Opens `config.path`; host time stamps count from `origin`.
     ///
     /// # Errors
     /// [`SerialError::Param`] for a bad config, [`SerialError::PortNotFound`] when the path
     /// does not exist, [`SerialError::Open`] when it exists but cannot be opened.
-    pub fn open(config: ReaderConfig, decoder: D, origin: Instant) -> Result<Self, SerialError> {
+    pub fn open(config: ReaderConfig, mut decoder: D, origin: Instant) -> Result<Self, SerialError> {
         let path = config.path.clone();
         config.validate().map_err(|source| SerialError::Param { path: path.clone(), source })?;
         if !config.path.exists() {
@@ -233,6 +234,10 @@ impl<D: Decode + Clone> SerialReader<D> {
             // cleared uncounted (at most what one USB packet or pty write adds meanwhile).
             link.cleared_bytes = port.bytes_to_read().map_or(0, u64::from);
             port.clear(ClearBuffer::Input).map_err(|source| SerialError::Open { path: path.clone(), source })?;
+            if link.cleared_bytes > 0 {
+                // The clear cut the stream at an arbitrary byte, maybe inside a record.
+                decoder.skip_to_record_start();
+            }
         }
         let now = Instant::now();
         Ok(Self {
@@ -427,7 +432,7 @@ fn run_tails<D: Decode>(decoder: &mut D, mut bytes: &[u8], tails: &mut [f64]) ->
     len
 }
 
-impl<D: Decode + Clone + std::fmt::Debug> std::fmt::Debug for SerialReader<D> {
+impl<D: Decode + std::fmt::Debug> std::fmt::Debug for SerialReader<D> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("SerialReader")
             .field("path", &self.config.path)

@@ -86,8 +86,8 @@ impl ClockMap {
     }
 
     /// Times the map was anchored on a record's read time (the first record included).
-    #[must_use]
-    pub fn anchors(&self) -> u64 {
+    #[cfg(test)]
+    fn anchors(&self) -> u64 {
         self.anchors
     }
 }

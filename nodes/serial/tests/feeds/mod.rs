@@ -47,7 +47,7 @@ pub fn forces(n: usize, period_s: f64) -> Vec<TimedForce> {
 
 /// Polls `reader` until `want` records were taken by `take` or `limit` passed (a hang guard,
 /// not a timing assertion: tests check what arrived, not when).
-pub fn read_n<D: Decode + Clone>(
+pub fn read_n<D: Decode>(
     reader: &mut SerialReader<D>,
     want: usize,
     limit: Duration,
@@ -67,7 +67,7 @@ pub fn read_n<D: Decode + Clone>(
 
 /// Polls `reader` until the emulator has sent everything and 300 ms pass without a record (or
 /// `limit` passes, a hang guard); returns how many records `take` got.
-pub fn read_until_idle<D: Decode + Clone>(
+pub fn read_until_idle<D: Decode>(
     reader: &mut SerialReader<D>,
     emulator: &Emulator,
     limit: Duration,

@@ -17,7 +17,6 @@ pub mod reconstruct;
 pub mod replay;
 pub mod segment;
 pub mod serial;
-mod serial_link;
 pub mod sim;
 pub mod split;
 pub mod sync;

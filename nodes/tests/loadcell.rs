@@ -233,7 +233,7 @@ fn swap_in_place(swap_params: &str) -> (Vec<(u64, Arc<Truth>)>, u64) {
 /// A swap that keeps the port and its settings: no reading lost or repeated (the seq goes on
 /// 1, 2, 3, ... across the switch), and the second press is truth at the `at` position. (That
 /// the open link is taken over rather than reopened is checked on the port itself, in
-/// `serial_link`'s unit test: a reopen in the pause loses nothing here either.)
+/// `serial::link`'s unit test: a reopen in the pause loses nothing here either.)
 #[test]
 fn a_hot_swap_on_the_same_port_takes_the_open_port_over_and_loses_no_reading() {
     let (rows, swaps) = swap_in_place("port = {port}\nx_mm = -10.0\ny_mm = 5.0\ncontact_threshold_n = 0.1");

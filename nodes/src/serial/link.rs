@@ -27,7 +27,7 @@ use std::time::{Duration, Instant};
 use skinflow_core::{Context, NodeError};
 use skinflow_serial::{Alert, Counters, Decode, LinkMonitor, Reading, SerialError, SerialReader};
 
-use crate::serial::PortParams;
+use super::PortParams;
 
 /// Longest a poll blocks, so a stop request is seen promptly.
 const POLL_SLICE: Duration = Duration::from_millis(100);

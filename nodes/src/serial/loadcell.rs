@@ -1,0 +1,246 @@
+//! `serial_loadcell`: a load cell's force lines as truth rows at the rig's indenter position,
+//! which the control command `at X_MM Y_MM [DIAMETER_MM]` moves.
+
+use skinflow_core::{Context, Header, Message, NodeError, NodeState, Outputs, Source, SourcePoll, StateRefused};
+use skinflow_serial::ForceDecoder;
+
+use super::link::{Port, PortHandover};
+use super::ns;
+use super::params::{LoadcellParams, PortParams};
+use crate::payload::{Truth, TruthContact};
+
+/// The rig's indenter: where (and how wide) a load-cell reading is truth.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Position {
+    x_mm: f64,
+    y_mm: f64,
+    diameter_mm: f64,
+}
+
+impl Position {
+    fn of(p: &LoadcellParams) -> Position {
+        Position { x_mm: p.x_mm, y_mm: p.y_mm, diameter_mm: p.diameter_mm }
+    }
+}
+
+/// What a load cell hands over in a hot swap: where the indenter is now (the last `at`) and
+/// where its params put it, so the replacement can tell whether its own params move it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct LoadcellState {
+    current: Position,
+    from_params: Position,
+}
+
+/// What a load cell hands over in a hot swap: its port, its reading count and its position.
+struct LoadcellHandover {
+    port: PortHandover<ForceDecoder>,
+    seq: u64,
+    position: LoadcellState,
+}
+
+pub struct SerialLoadcell {
+    p: PortParams,
+    /// Below this force a reading is "no contact", N.
+    contact_threshold_n: f64,
+    port: Port<ForceDecoder>,
+    seq: u64,
+    /// The position the params give.
+    from_params: Position,
+    /// The position readings are truth at: the params', then the last `at`'s.
+    at: Position,
+}
+
+impl SerialLoadcell {
+    pub(super) fn new(params: LoadcellParams) -> SerialLoadcell {
+        let from_params = Position::of(&params);
+        let p = params.port_params();
+        let port = Port::new(&p, ForceDecoder::new(), 0);
+        SerialLoadcell {
+            p,
+            contact_threshold_n: params.contact_threshold_n,
+            port,
+            seq: 0,
+            from_params,
+            at: from_params,
+        }
+    }
+}
+
+impl Source for SerialLoadcell {
+    fn start(&mut self, ctx: &mut Context) -> Result<(), NodeError> {
+        self.port.start(&self.p, ctx)
+    }
+
+    fn poll(&mut self, ctx: &mut Context, out: &mut Outputs) -> Result<SourcePoll, NodeError> {
+        let Some(r) = self.port.next(&self.p, ctx)? else { return Ok(SourcePoll::Idle) };
+        self.seq += 1;
+        let f = r.record.force_n;
+        let Position { x_mm, y_mm, diameter_mm } = self.at;
+        let contacts = if f >= self.contact_threshold_n {
+            vec![TruthContact { x_mm, y_mm, force_n: f, diameter_mm }]
+        } else {
+            Vec::new()
+        };
+        out.send(0, Message::new(Header { seq: self.seq, t_ns: ns(r.t_s), origin: ctx.index() }, Truth { contacts }))?;
+        Ok(SourcePoll::Emitted)
+    }
+
+    fn stop(&mut self, ctx: &mut Context) -> Result<(), NodeError> {
+        self.port.report(ctx);
+        Ok(())
+    }
+
+    /// `at X_MM Y_MM [DIAMETER_MM]`: the rig moved the indenter; readings from now on are truth
+    /// at this position (and diameter). A calibration session over a grid sends one per point.
+    fn control(&mut self, ctx: &mut Context, cmd: &str) -> Result<(), NodeError> {
+        let (x_mm, y_mm, diameter_mm) = parse_at(cmd, self.at.diameter_mm)?;
+        self.at = Position { x_mm, y_mm, diameter_mm };
+        tracing::info!(node = ctx.id(), x_mm, y_mm, diameter_mm, "indenter moved");
+        Ok(())
+    }
+
+    /// The port, the reading count, and the indenter position now and the one the params gave.
+    fn export_state(&mut self, _ctx: &mut Context) -> Option<NodeState> {
+        let position = LoadcellState { current: self.at, from_params: self.from_params };
+        Some(Box::new(LoadcellHandover { port: self.port.hand_over(), seq: self.seq, position }))
+    }
+
+    /// Takes the port over (see `link.rs`) and goes on at the replaced instance's
+    /// position unless this instance's params give another one than the replaced instance's
+    /// did (the user moved it): then the params win.
+    fn import_state(&mut self, ctx: &mut Context, state: NodeState) -> Result<(), StateRefused> {
+        let h = state.downcast::<LoadcellHandover>().map_err(|s| StateRefused::new(s, "not a load cell's state"))?;
+        self.port.take_over(ctx, h.port);
+        self.seq = h.seq;
+        let s = h.position;
+        let Position { x_mm, y_mm, diameter_mm } = s.current;
+        if s.from_params == self.from_params {
+            self.at = s.current;
+            tracing::info!(node = ctx.id(), x_mm, y_mm, diameter_mm, "indenter position taken over (hot swap)");
+        } else {
+            let Position { x_mm: params_x_mm, y_mm: params_y_mm, diameter_mm: params_diameter_mm } = self.at;
+            tracing::info!(
+                node = ctx.id(),
+                x_mm = params_x_mm,
+                y_mm = params_y_mm,
+                diameter_mm = params_diameter_mm,
+                replaced_x_mm = x_mm,
+                replaced_y_mm = y_mm,
+                replaced_diameter_mm = diameter_mm,
+                "indenter position from the new params (hot swap): they changed it, the replaced instance's is dropped"
+            );
+        }
+        Ok(())
+    }
+}
+
+const AT_USAGE: &str = "at X_MM Y_MM [DIAMETER_MM]";
+
+/// Parses the load cell's `at` command; the diameter stays `diameter_mm` when not given.
+fn parse_at(cmd: &str, diameter_mm: f64) -> Result<(f64, f64, f64), NodeError> {
+    let mut words = cmd.split_whitespace();
+    if words.next() != Some("at") {
+        return Err(NodeError::msg(format!("unknown control command \"{cmd}\" (known: {AT_USAGE})")));
+    }
+    let numbers: Vec<Option<f64>> = words.map(|w| w.parse::<f64>().ok().filter(|v| v.is_finite())).collect();
+    let bad =
+        || NodeError::msg(format!("control command \"{cmd}\": expected {AT_USAGE}, finite numbers, diameter > 0"));
+    match numbers[..] {
+        [Some(x), Some(y)] => Ok((x, y, diameter_mm)),
+        [Some(x), Some(y), Some(d)] if d > 0.0 => Ok((x, y, d)),
+        _ => Err(bad()),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use skinflow_core::{Context, Mode, Source};
+
+    use super::super::tests::build;
+    use super::{LoadcellHandover, LoadcellState, Position, parse_at};
+
+    fn loadcell(params: &str) -> Box<dyn Source> {
+        build("serial_loadcell", params)
+    }
+
+    fn pos(x_mm: f64, y_mm: f64, diameter_mm: f64) -> Position {
+        Position { x_mm, y_mm, diameter_mm }
+    }
+
+    /// A load cell's exported state, as a value.
+    fn exported(n: &mut dyn Source, ctx: &mut Context) -> LoadcellState {
+        n.export_state(ctx).expect("a load cell exports its position").downcast::<LoadcellHandover>().unwrap().position
+    }
+
+    /// Hot swap as the engine does it: `old`'s state into `new`.
+    fn hand_over(old: &mut dyn Source, new: &mut dyn Source, ctx: &mut Context) {
+        let state = old.export_state(ctx).unwrap();
+        new.import_state(ctx, state).unwrap();
+    }
+
+    #[test]
+    fn a_swap_keeps_the_at_position_unless_the_new_params_move_it() {
+        let ctx = &mut Context::detached("lc", Mode::Lockstep);
+        let mut old = loadcell("x_mm = -10.0\ny_mm = 5.0");
+        assert_eq!(
+            exported(old.as_mut(), ctx),
+            LoadcellState { current: pos(-10.0, 5.0, 15.0), from_params: pos(-10.0, 5.0, 15.0) }
+        );
+        old.control(ctx, "at 12.5 -25 20").unwrap();
+        let at = pos(12.5, -25.0, 20.0);
+        assert_eq!(exported(old.as_mut(), ctx), LoadcellState { current: at, from_params: pos(-10.0, 5.0, 15.0) });
+
+        // Same position in the params, another threshold: the `at` position goes on.
+        let mut same = loadcell("x_mm = -10.0\ny_mm = 5.0\ndiameter_mm = 15.0\ncontact_threshold_n = 0.2");
+        hand_over(old.as_mut(), same.as_mut(), ctx);
+        assert_eq!(exported(same.as_mut(), ctx), LoadcellState { current: at, from_params: pos(-10.0, 5.0, 15.0) });
+        // ... and a later `at` without a diameter keeps the taken-over one.
+        same.control(ctx, "at 1 2").unwrap();
+        assert_eq!(exported(same.as_mut(), ctx).current, pos(1.0, 2.0, 20.0));
+
+        // Swapped again, same params: still taken over (the params are compared with the replaced
+        // instance's params, not with its position).
+        let mut again = loadcell("x_mm = -10.0\ny_mm = 5.0\ncontact_threshold_n = 0.3");
+        hand_over(same.as_mut(), again.as_mut(), ctx);
+        assert_eq!(exported(again.as_mut(), ctx).current, pos(1.0, 2.0, 20.0));
+
+        // The new params give another position (any of x, y, diameter): they win.
+        for (params, expected) in [
+            ("x_mm = 30.0\ny_mm = 5.0", pos(30.0, 5.0, 15.0)),
+            ("x_mm = -10.0\ny_mm = 40.0", pos(-10.0, 40.0, 15.0)),
+            ("x_mm = -10.0\ny_mm = 5.0\ndiameter_mm = 8.0", pos(-10.0, 5.0, 8.0)),
+            // Where the `at` was, but the params changed: the params' position, which is the same.
+            ("x_mm = 1.0\ny_mm = 2.0\ndiameter_mm = 20.0", pos(1.0, 2.0, 20.0)),
+        ] {
+            let mut moved = loadcell(params);
+            hand_over(again.as_mut(), moved.as_mut(), ctx);
+            assert_eq!(
+                exported(moved.as_mut(), ctx),
+                LoadcellState { current: expected, from_params: expected },
+                "{params}"
+            );
+        }
+    }
+
+    #[test]
+    fn a_load_cell_refuses_another_kinds_state_and_keeps_its_position() {
+        let ctx = &mut Context::detached("lc", Mode::Lockstep);
+        let mut lc = loadcell("x_mm = 3.0");
+        let refused = lc.import_state(ctx, Box::new(7_u32)).unwrap_err();
+        assert_eq!(refused.reason, "not a load cell's state");
+        assert_eq!(*refused.state.downcast::<u32>().unwrap(), 7, "the state goes back unchanged");
+        assert_eq!(exported(lc.as_mut(), ctx).current, pos(3.0, 0.0, 15.0), "the params' position stays");
+    }
+
+    #[test]
+    fn at_takes_a_position_and_an_optional_diameter() {
+        assert_eq!(parse_at("at 12.5 -25", 15.0).unwrap(), (12.5, -25.0, 15.0));
+        assert_eq!(parse_at("  at  -37.5 0 20 ", 15.0).unwrap(), (-37.5, 0.0, 20.0));
+        for bad in ["at", "at 1", "at 1 x", "at 1 2 0", "at 1 2 -3", "at 1 2 3 4", "at NaN 0", "at 1 inf"] {
+            let e = parse_at(bad, 15.0).unwrap_err().to_string();
+            assert!(e.contains(&format!("\"{bad}\": expected at X_MM Y_MM [DIAMETER_MM]")), "{bad}: {e}");
+        }
+        let e = parse_at("move 1 2", 15.0).unwrap_err().to_string();
+        assert!(e.contains("unknown control command \"move 1 2\" (known: at X_MM Y_MM [DIAMETER_MM])"), "{e}");
+    }
+}

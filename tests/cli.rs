@@ -25,6 +25,50 @@ fn simulate_then_inspect_reports_streams_and_truth_coverage() {
         assert!(text.contains(stream), "{stream} missing:\n{text}");
     }
     assert!(text.contains("0 frames lost"), "{text}");
+    // Every EIT frame of the scene has a truth row over its window.
+    let coverage = text.lines().find(|l| l.starts_with("truth:")).expect("a truth summary line");
+    let covers = coverage.split("covers ").nth(1).and_then(|r| r.split(" EIT frames").next()).unwrap();
+    let (covered, frames) = covers.split_once('/').unwrap();
+    assert!(frames.parse::<u32>().unwrap() > 0 && covered == frames, "{coverage}");
+    assert!(coverage.ends_with("(100.0 %)"), "{coverage}");
+    // The recording was built under a hidden name and renamed when complete: nothing else stays.
+    let names: Vec<String> =
+        std::fs::read_dir(&d).unwrap().map(|e| e.unwrap().file_name().into_string().unwrap()).collect();
+    assert!(names.iter().all(|n| !n.contains(".simulating") && !n.contains(".partial")), "{names:?}");
+}
+
+#[test]
+fn an_interrupted_simulate_leaves_no_file_under_the_requested_name() {
+    let d = workdir("simulate-killed");
+    // A long ramp sampled at 2 kHz: many seconds to write, so it is still running when killed.
+    let scene = "[scene]\nname = \"long\"\nprofile = \"paper\"\n\n[rates]\npressure_hz = 2000.0\n\n\
+                 [[step]]\nrest_s = 2.0\n\n[[step]]\nat_mm = [[0.0, 0.0]]\ndiameter_mm = 15.0\nforces_n = [5.0]\nramp_s = 300.0\n\
+                 hold_s = 1.0\nrest_s = 1.0\n";
+    std::fs::write(d.join("long.toml"), scene).unwrap();
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_skinflow"))
+        .current_dir(&d)
+        .args(["simulate", "long.toml", "--out", "rec.h5"])
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Killed once its hidden build file exists (the scene has been prepared and writing began).
+    let building = |d: &Path| {
+        std::fs::read_dir(d).unwrap().any(|e| e.unwrap().file_name().to_string_lossy().ends_with(".simulating"))
+    };
+    let started = std::time::Instant::now();
+    while !building(&d) && child.try_wait().unwrap().is_none() && started.elapsed().as_secs() < 120 {
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    assert!(child.try_wait().unwrap().is_none(), "simulate ended before it could be interrupted");
+    child.kill().unwrap();
+    child.wait().unwrap();
+    assert!(!d.join("rec.h5").exists(), "a cut-short recording under the requested name");
+    // An existing output is refused without --overwrite and kept as it was.
+    simulate(&d, "tiny-eval.toml", "rec.h5");
+    let before = std::fs::read(d.join("rec.h5")).unwrap();
+    let again = skinflow(&d, &["simulate", fixture("tiny-eval.toml").to_str().unwrap(), "--out", "rec.h5"]);
+    assert!(!again.status.success() && stderr(&again).contains("exists"), "{}", stderr(&again));
+    assert_eq!(std::fs::read(d.join("rec.h5")).unwrap(), before);
 }
 
 #[test]

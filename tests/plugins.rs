@@ -186,10 +186,14 @@ fn bad_plugin_params_are_reported_by_check() {
 fn a_plugin_error_is_counted_and_the_graph_goes_on() {
     let d = workdir("error");
     let g = toy_graph(&d, &[plugin("skinflow-plugin-fixture-faulty")], "error_at = 3", "never");
-    ok(&skinflow(&d, &["run", g.to_str().unwrap()]));
+    let json = d.join("stats.json");
+    ok(&skinflow(&d, &["run", g.to_str().unwrap(), "--stats-json", json.to_str().unwrap()]));
     let got = collected(&d);
     assert_eq!(got.len(), 19, "the erring call's message is dropped: {got:?}");
     assert!(!got.contains(&3));
+    let report = stats(&json);
+    let counts = ["errors", "panics", "restarts", "msgs_in", "msgs_out"].map(|what| count(&report, "scale", what));
+    assert_eq!(counts, [1, 0, 0, 20, 19], "errors, panics, restarts, in, out");
 }
 
 #[test]
@@ -210,10 +214,14 @@ fn a_plugin_panic_stops_the_graph_without_restart() {
 fn a_plugin_panic_with_restart_always_rebuilds_the_node() {
     let d = workdir("panic-always");
     let g = toy_graph(&d, &[plugin("skinflow-plugin-fixture-faulty")], "panic_at = 5", "always");
-    let text = ok(&skinflow(&d, &["run", g.to_str().unwrap()]));
+    let json = d.join("stats.json");
+    let text = ok(&skinflow(&d, &["run", g.to_str().unwrap(), "--stats-json", json.to_str().unwrap()]));
     let got = collected(&d);
     // The fresh instance counts calls from 1 again and panics on its 5th call too.
     assert_eq!(got, vec![1, 2, 3, 4, 6, 7, 8, 9, 11, 12, 13, 14, 16, 17, 18, 19], "{text}");
+    let report = stats(&json);
+    let counts = ["panics", "restarts", "errors"].map(|what| count(&report, "scale", what));
+    assert_eq!(counts, [4, 4, 0], "a panic at calls 5, 10, 15 and 20, each followed by a rebuild: {text}");
 }
 
 /// graphs/plugin-ab.toml on the tiny fixture scene, with this build's libraries.
@@ -232,7 +240,8 @@ fn example_plugins_run_as_ab_lanes_and_compare_reports_each() {
         .replace("\"../out/plugin-ab.json\"", &quoted(&json));
     let g = d.join("plugin-ab.toml");
     std::fs::write(&g, text).unwrap();
-    let table = ok(&skinflow(&d, &["run", g.to_str().unwrap()]));
+    let stats_json = d.join("stats.json");
+    let table = ok(&skinflow(&d, &["run", g.to_str().unwrap(), "--stats-json", stats_json.to_str().unwrap()]));
     assert!(table.contains("| peak-weighted (plugin) |"), "{table}");
     let report: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
     let lanes = report["lanes"].as_array().unwrap();
@@ -247,6 +256,18 @@ fn example_plugins_run_as_ab_lanes_and_compare_reports_each() {
     // Same contacts in every lane (one segmentation): identical localization.
     let loc: Vec<f64> = lanes.iter().map(|l| l["localization_mean_mm"].as_f64().unwrap()).collect();
     assert!(loc.iter().all(|&x| x == loc[0]), "{loc:?}");
+    // Every lane timed and scored the same frames: their figures compare like with like.
+    let frames: Vec<(u64, u64)> =
+        lanes.iter().map(|l| (l["frames"].as_u64().unwrap(), l["unsettled_frames"].as_u64().unwrap())).collect();
+    assert!(frames.iter().all(|&f| f == frames[0]), "timed and unsettled frames per lane: {frames:?}");
+    // No node erred and no edge lost a message on the way.
+    let report = stats(&stats_json);
+    for n in report["nodes"].as_array().unwrap() {
+        assert_eq!((n["errors"].as_u64(), n["drops"].as_u64()), (Some(0), Some(0)), "{n}");
+    }
+    for e in report["edges"].as_array().unwrap() {
+        assert_eq!(e["drops"].as_u64(), Some(0), "{e}");
+    }
 }
 
 /// Three `fused-corrector` lanes and a built-in corrector after a plugin splitter, into one
@@ -352,25 +373,180 @@ fn bench_names_file_line_and_column_of_a_broken_graph() {
     assert!(!d.join("b").exists(), "nothing written for an invalid variant");
 }
 
-#[test]
-fn bench_varies_a_param_over_a_recording_and_writes_table_and_plot() {
-    let d = workdir("bench");
+/// One `skinflow bench` of graphs/ab-replay.toml on `rec.h5` in `dir`, into `dir/out`, with
+/// these `--vary` arguments.
+fn bench(dir: &Path, vary: &[&str]) -> std::process::Output {
+    let graph = root().join("graphs/ab-replay.toml");
+    let mut args = vec!["bench", graph.to_str().unwrap(), "--replay", "rec.h5", "--out", "out"];
+    for v in vary {
+        args.extend(["--vary", v]);
+    }
+    skinflow(dir, &args)
+}
+
+/// A fresh work directory with the tiny fixture scene simulated into `rec.h5`.
+fn bench_workdir(test: &str) -> PathBuf {
+    let d = workdir(test);
     let fixture = root().join("tests/fixtures/tiny-eval.toml");
     ok(&skinflow(&d, &["simulate", fixture.to_str().unwrap(), "--out", "rec.h5", "--seed", "3"]));
-    let graph = root().join("graphs/ab-replay.toml");
-    let o = skinflow(
-        &d,
-        &["bench", graph.to_str().unwrap(), "--replay", "rec.h5", "--vary", "recon.lambda=0.02,0.2", "--out", "bench"],
-    );
+    d
+}
+
+fn json_file(path: &Path) -> serde_json::Value {
+    let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    serde_json::from_str(&text).unwrap()
+}
+
+#[test]
+fn bench_varies_a_param_over_a_recording_and_writes_table_and_plot() {
+    let d = bench_workdir("bench");
+    let o = bench(&d, &["recon.lambda=0.02,0.2"]);
     let md = ok(&o);
+    assert!(stderr(&o).contains("bench: warm-up pass (variant 0"), "{}", stderr(&o));
     let rows: Vec<&str> = md.lines().filter(|l| l.starts_with("| recon.lambda=")).collect();
     assert_eq!(rows.len(), 4, "2 variants x 2 lanes:\n{md}");
-    assert!(rows.iter().any(|r| r.ends_with("| yes |")), "a Pareto point:\n{md}");
-    for f in ["bench.md", "bench.json", "pareto.png"] {
-        assert!(d.join("bench").join(f).is_file(), "{f} missing");
+    for f in ["bench.md", "bench.json", "pareto.png", "variant-0.json", "variant-1.json"] {
+        assert!(d.join("out").join(f).is_file(), "{f} missing");
     }
-    let png = std::fs::read(d.join("bench/pareto.png")).unwrap();
+    let png = std::fs::read(d.join("out/pareto.png")).unwrap();
     assert_eq!(&png[..4], b"\x89PNG");
+
+    // bench.json holds each variant's compare report, lane by lane.
+    let bench_json = json_file(&d.join("out/bench.json"));
+    let points = bench_json["points"].as_array().unwrap();
+    assert_eq!(points.len(), 4);
+    let variants = bench_json["variants"].as_array().unwrap();
+    assert_eq!(variants.len(), 2);
+    for (k, v) in variants.iter().enumerate() {
+        assert_eq!(v["compare_json"], format!("variant-{k}.json"), "{v}");
+        assert!(v["error"].is_null() && v["node_errors"] == serde_json::json!([]), "{v}");
+        assert_eq!(v["edge_drops"], serde_json::json!([]), "{v}");
+        let lanes = json_file(&d.join("out").join(format!("variant-{k}.json")));
+        let lanes = lanes["lanes"].as_array().unwrap();
+        assert_eq!(lanes.len(), 2, "two lanes in variant {k}");
+        for l in lanes {
+            let p = points
+                .iter()
+                .find(|p| p["variant_index"] == k && p["lane"] == l["name"])
+                .unwrap_or_else(|| panic!("variant {k}, lane {}: no point", l["name"]));
+            assert_eq!(p["variant"], v["label"]);
+            for key in ["frames", "unsettled_frames", "matched", "latency_us_p50", "latency_us_p99", "rmse_n"] {
+                assert_eq!(p[key], l[key], "variant {k}, lane {}: {key}", l["name"]);
+            }
+            let (frames, unsettled) = (l["frames"].as_u64().unwrap(), l["unsettled_frames"].as_u64().unwrap());
+            assert!(frames > 10 && unsettled > 0, "{l}");
+            assert_eq!(p["scored_frames"].as_u64(), Some(frames - unsettled));
+        }
+    }
+    assert_eq!(variants[0]["overrides"], serde_json::json!({ "recon.lambda": 0.02 }));
+    assert_eq!(variants[1]["overrides"], serde_json::json!({ "recon.lambda": 0.2 }));
+    // The override took: each lane's RMSE differs between the two lambdas.
+    for lane in ["proportional", "sensitivity-compensated"] {
+        let rmse: Vec<f64> =
+            points.iter().filter(|p| p["lane"] == lane).map(|p| p["rmse_n"].as_f64().unwrap()).collect();
+        assert_eq!(rmse.len(), 2, "{lane}");
+        assert!((rmse[0] - rmse[1]).abs() > 1e-6, "{lane}: the same RMSE at both lambdas: {rmse:?}");
+    }
+    // Every point covers the same frames: no warning.
+    assert_eq!(bench_json["warnings"], serde_json::json!([]));
+    assert!(!md.contains("## Warnings"), "{md}");
+    // The Pareto marks are the points no other point beats on both p50 and RMSE.
+    let xy: Vec<(f64, f64)> =
+        points.iter().map(|p| (p["latency_us_p50"].as_f64().unwrap(), p["rmse_n"].as_f64().unwrap())).collect();
+    for (i, p) in points.iter().enumerate() {
+        let (x, y) = xy[i];
+        let beaten = xy.iter().any(|&(ox, oy)| ox <= x && oy <= y && (ox < x || oy < y));
+        assert_eq!(p["pareto"].as_bool(), Some(!beaten), "{p}");
+        let row = rows
+            .iter()
+            .find(|r| {
+                r.contains(&format!("| {} |", p["lane"].as_str().unwrap()))
+                    && r.starts_with(&format!("| {} |", p["variant"].as_str().unwrap()))
+            })
+            .unwrap();
+        assert_eq!(row.ends_with("| yes |"), !beaten, "{row}");
+    }
+    // The table's counts are the JSON's.
+    assert!(md.contains("| variant | lane | frames | scored | unsettled | matched |"), "{md}");
+    let p0 = &points[0];
+    let row = format!(
+        "| {} | {} | {} | {} | {} | {} |",
+        p0["variant"].as_str().unwrap(),
+        p0["lane"].as_str().unwrap(),
+        p0["frames"],
+        p0["scored_frames"],
+        p0["unsettled_frames"],
+        p0["matched"]
+    );
+    assert!(md.contains(&row), "{row} not in\n{md}");
+    assert!(md.contains("about 10 %"), "the timing noise is stated:\n{md}");
+
+    // Run again into the same directory with one variant: no report of the first run is left.
+    ok(&bench(&d, &["recon.lambda=0.2"]));
+    assert!(!d.join("out/variant-1.json").exists(), "the earlier run's variant-1.json is left");
+    let again = json_file(&d.join("out/bench.json"));
+    assert_eq!(again["points"].as_array().unwrap().len(), 2);
+    // What bench sets itself cannot be varied: before, the variant read the first run's report.
+    let o = bench(&d, &["compare.json=\"/tmp/x.json\""]);
+    assert!(!o.status.success(), "a --vary of compare.json is refused");
+    assert!(stderr(&o).contains("--vary \"compare.json\": bench sets param \"json\""), "{}", stderr(&o));
+    for key in ["replay.path=\"rec.h5\"", "replay.speed=1", "compare.print=true"] {
+        let o = bench(&d, &[key]);
+        assert!(!o.status.success(), "{key} refused");
+        let name = key.split('=').next().unwrap();
+        assert!(stderr(&o).contains(&format!("--vary \"{name}\": bench sets param")), "{}", stderr(&o));
+    }
+}
+
+/// A variant whose reconstructor errs on every frame (a sensor with other channels than the
+/// recording's) is reported with its node errors, and the points' different frame counts are
+/// warned about; a variant that cannot start (a missing calibration) does not lose the
+/// variants that ran: they are written, then bench fails naming the variant and its cause.
+#[test]
+fn bench_reports_node_errors_and_a_failed_variant_after_the_others() {
+    let d = bench_workdir("bench-health");
+    std::fs::write(
+        d.join("paper.toml"),
+        "[sensor]\nname = \"paper-100mm\"\nwidth_mm = 100.0\nheight_mm = 100.0\nelectrodes_per_side = 4\n\
+         electrode_length_mm = 5.0\nprotocol = \"pairwise\"\n",
+    )
+    .unwrap();
+    std::fs::write(d.join("twelve.toml"), "[sensor]\nname = \"twelve\"\nelectrodes_per_side = 3\n").unwrap();
+    let (good, bad) = (quoted(&d.join("paper.toml")), quoted(&d.join("twelve.toml")));
+    let o = bench(&d, &[&format!("recon.sensor={good},{bad}")]);
+    let md = ok(&o);
+    let err = stderr(&o);
+    let bench_json = json_file(&d.join("out/bench.json"));
+    let variants = bench_json["variants"].as_array().unwrap();
+    assert_eq!(variants[0]["node_errors"], serde_json::json!([]), "{}", variants[0]);
+    let recon = variants[1]["node_errors"].as_array().unwrap().iter().find(|n| n["node"] == "recon");
+    let recon = recon.unwrap_or_else(|| panic!("no recon errors: {}", variants[1]));
+    let frames = bench_json["points"][0]["frames"].as_u64().unwrap();
+    assert!(frames > 10, "{bench_json}");
+    assert!(recon["errors"].as_u64().unwrap() >= frames, "every frame erred: {recon}");
+    assert!(md.contains(&format!("- variant 1 `recon.sensor={bad}`: node \"recon\": ")), "{md}");
+    assert!(err.contains("bench: warning: variant \"recon.sensor="), "{err}");
+    assert!(err.contains("\" gave no point: its compare node received no forces"), "{err}");
+    assert!(md.contains("## Warnings") && md.contains(&format!("node \"recon\": {} errors", recon["errors"])), "{md}");
+    assert_eq!(bench_json["warnings"].as_array().unwrap().len(), 2, "{}", bench_json["warnings"]);
+
+    let o = bench(&d, &["split-sens.calibration=calib/paper.toml,calib/missing.toml"]);
+    assert!(!o.status.success(), "a variant that cannot start fails the bench");
+    let err = stderr(&o);
+    let last = err.trim().lines().last().unwrap();
+    assert!(last.starts_with(r#"error: variant "split-sens.calibration="calib/missing.toml"": "#), "{err}");
+    assert!(last.contains("missing.toml") && last.contains("1 of 2 variants failed"), "{last}");
+    let bench_json = json_file(&d.join("out/bench.json"));
+    let points = bench_json["points"].as_array().unwrap();
+    assert_eq!(points.len(), 2, "the variant that ran: {bench_json}");
+    assert!(points.iter().all(|p| p["variant_index"] == 0 && p["rmse_n"].as_f64().is_some()), "{bench_json}");
+    let failed = &bench_json["variants"][1];
+    assert!(failed["error"].as_str().unwrap().contains("missing.toml"), "{failed}");
+    assert!(failed["compare_json"].is_null(), "{failed}");
+    let md = std::fs::read_to_string(d.join("out/bench.md")).unwrap();
+    assert!(md.contains(r#"| split-sens.calibration="calib/paper.toml" | proportional |"#), "{md}");
+    assert!(md.contains(r#"- variant 1 `split-sens.calibration="calib/missing.toml"`: FAILED: "#), "{md}");
+    assert!(d.join("out/pareto.png").is_file(), "the variants that ran are plotted");
 }
 
 /// The run report of `--stats-json F`.

@@ -7,15 +7,33 @@
 //! (variant, lane). Each variant is the graph's TOML with the params overridden, so relative
 //! paths and `[[plugin]]` entries resolve as in the original file. Thread placement
 //! (`[graph] workers`, a node's `cpu`, `rt_priority`, `thread`) is dropped: a lockstep run is one
-//! thread, and lockstep graphs refuse those options.
+//! thread, and lockstep graphs refuse those options. The params bench sets itself
+//! ([`OWNED`]) cannot be varied.
+//!
+//! Variant `k`'s `compare` report goes to `DIR/variant-k.json`; bench removes it before the run
+//! and reads only what the run wrote. Each variant's node errors and edge drops go into the
+//! outputs, with a warning when the points do not cover the same frames. The first variant runs
+//! once, unmeasured (for at most [`WARM_UP`]), before the measured passes, so that none of them
+//! runs cold. A variant that fails does not stop the others: the outputs show what ran, then
+//! bench fails with the first cause.
 
-use std::fmt::Write as _;
-use std::path::Path;
+mod report;
+
+use std::path::{Path, PathBuf};
+use std::time::Duration;
 
 use anyhow::{Context as _, Result, anyhow, bail};
-use plotters::prelude::*;
 use skinflow_core::graph::{GraphErrors, SourceFile, plugin_paths};
 use skinflow_core::{GraphSpec, Registry, RunOptions};
+
+use report::{Health, Point, Variant};
+
+/// The params bench sets itself, by node kind: refused by `--vary`.
+const OWNED: [(&str, &[&str]); 2] =
+    [("replay", &["path", "speed", "loop"]), ("compare", &["json", "report_s", "print"])];
+
+/// The longest the unmeasured warm-up pass runs (the first variant, from the recording's start).
+const WARM_UP: Duration = Duration::from_secs(3);
 
 /// One `--vary node.param=v1,v2,...`.
 #[derive(Debug, Clone, PartialEq)]
@@ -48,21 +66,8 @@ impl std::str::FromStr for Vary {
     }
 }
 
-/// One point of the table: a lane of a variant.
-#[derive(Debug, Clone)]
-pub struct Point {
-    pub variant: String,
-    pub lane: String,
-    pub frames: u64,
-    pub latency_us_p50: Option<f64>,
-    pub latency_us_p99: Option<f64>,
-    pub rmse_n: Option<f64>,
-    pub localization_mean_mm: Option<f64>,
-    pub pareto: bool,
-}
-
 /// The overrides of one variant: (node id, param, value).
-type Overrides = Vec<(String, String, toml::Value)>;
+pub type Overrides = Vec<(String, String, toml::Value)>;
 
 /// Every combination of the varied values, as (label, overrides).
 fn combinations(vary: &[Vary]) -> Vec<(String, Overrides)> {
@@ -102,7 +107,36 @@ fn field<'a>(node: &'a toml::Value, key: &str) -> Option<&'a str> {
     node.get(key).and_then(toml::Value::as_str)
 }
 
-/// The graph text of one variant.
+/// Refuses a `--vary` of a node the graph does not have, of a param bench sets itself
+/// ([`OWNED`]: the variant would not be what the table says, or its report would not be
+/// where bench reads it), and of one param given twice.
+fn check_vary(base: &toml::Table, vary: &[Vary]) -> Result<()> {
+    let nodes = match base.get("node") {
+        Some(toml::Value::Array(a)) => a.as_slice(),
+        _ => &[],
+    };
+    for (i, v) in vary.iter().enumerate() {
+        let key = format!("{}.{}", v.node, v.param);
+        let node = nodes
+            .iter()
+            .find(|n| field(n, "id") == Some(v.node.as_str()))
+            .ok_or_else(|| anyhow!("--vary \"{key}\": no node \"{}\" in the graph", v.node))?;
+        let kind = field(node, "kind").unwrap_or_default();
+        if let Some((_, owned)) = OWNED.iter().find(|(k, params)| *k == kind && params.contains(&v.param.as_str())) {
+            bail!(
+                "--vary \"{key}\": bench sets param \"{}\" of the {kind} node itself ({} of a {kind} node), so it cannot be varied",
+                v.param,
+                owned.join(", ")
+            );
+        }
+        if vary[..i].iter().any(|w| w.node == v.node && w.param == v.param) {
+            bail!("--vary \"{key}\": given twice (list every value in one --vary)");
+        }
+    }
+    Ok(())
+}
+
+/// The graph text of one variant: the overrides applied, then what bench sets itself.
 fn variant_text(
     base: &toml::Table,
     replay: &Path,
@@ -116,6 +150,13 @@ fn variant_text(
     // Thread placement means nothing in lockstep (validation refuses it there).
     graph.remove("workers");
     let nodes = nodes_mut(&mut doc)?;
+    for (node, param, v) in set {
+        let n = nodes
+            .iter_mut()
+            .find(|n| field(n, "id") == Some(node.as_str()))
+            .ok_or_else(|| anyhow!("--vary: no node \"{node}\" in the graph"))?;
+        params_of(n)?.insert(param.clone(), v.clone());
+    }
     let (mut replays, mut compares) = (0, 0);
     for n in nodes.iter_mut() {
         if let Some(table) = n.as_table_mut() {
@@ -123,12 +164,14 @@ fn variant_text(
                 table.remove(placement);
             }
         }
+        // The params of OWNED.
         match field(n, "kind") {
             Some("replay") => {
                 replays += 1;
                 let p = params_of(n)?;
                 p.insert("path".into(), replay.to_string_lossy().into_owned().into());
                 p.insert("speed".into(), 0.0.into());
+                p.insert("loop".into(), false.into()); // a looping replay would never end
             }
             Some("compare") => {
                 compares += 1;
@@ -146,13 +189,6 @@ fn variant_text(
     if compares != 1 {
         bail!("the graph needs exactly one \"compare\" node (found {compares})");
     }
-    for (node, param, v) in set {
-        let n = nodes
-            .iter_mut()
-            .find(|n| field(n, "id") == Some(node.as_str()))
-            .ok_or_else(|| anyhow!("--vary: no node \"{node}\" in the graph"))?;
-        params_of(n)?.insert(param.clone(), v.clone());
-    }
     Ok(toml::to_string(&doc)?)
 }
 
@@ -162,110 +198,6 @@ fn registry_for(src: &SourceFile) -> Result<Registry> {
     skinflow_nodes::codec::load_plugins(&plugins, &mut reg)
         .map_err(|e| anyhow::Error::new(super::InvalidGraph(format!("{}: {e}", src.path.display()))))?;
     Ok(reg)
-}
-
-fn num(v: &serde_json::Value, key: &str) -> Option<f64> {
-    v.get(key).and_then(serde_json::Value::as_f64)
-}
-
-/// Marks the points no other point beats on both latency p50 and RMSE.
-fn mark_pareto(points: &mut [Point]) {
-    let xy: Vec<Option<(f64, f64)>> = points.iter().map(|p| p.latency_us_p50.zip(p.rmse_n)).collect();
-    for (i, p) in points.iter_mut().enumerate() {
-        let Some((x, y)) = xy[i] else { continue };
-        p.pareto = !xy
-            .iter()
-            .enumerate()
-            .any(|(j, o)| j != i && o.is_some_and(|(ox, oy)| ox <= x && oy <= y && (ox < x || oy < y)));
-    }
-}
-
-fn points_json(points: &[Point]) -> serde_json::Value {
-    let rows: Vec<serde_json::Value> = points
-        .iter()
-        .map(|p| {
-            serde_json::json!({
-                "variant": p.variant, "lane": p.lane, "frames": p.frames,
-                "latency_us_p50": p.latency_us_p50, "latency_us_p99": p.latency_us_p99,
-                "rmse_n": p.rmse_n, "localization_mean_mm": p.localization_mean_mm, "pareto": p.pareto,
-            })
-        })
-        .collect();
-    serde_json::json!({ "points": rows })
-}
-
-fn opt(v: Option<f64>, digits: usize) -> String {
-    v.map_or_else(|| "-".into(), |x| format!("{x:.digits$}"))
-}
-
-fn markdown(graph: &Path, replay: &Path, points: &[Point]) -> String {
-    let mut s = format!("# skinflow bench\n\ngraph `{}`, recording `{}`\n\n", graph.display(), replay.display());
-    s.push_str("| variant | lane | frames | p50 us | p99 us | RMSE N | loc. mm | Pareto |\n|---|---|---|---|---|---|---|---|\n");
-    for p in points {
-        let _ = writeln!(
-            s,
-            "| {} | {} | {} | {} | {} | {} | {} | {} |",
-            p.variant,
-            p.lane,
-            p.frames,
-            opt(p.latency_us_p50, 1),
-            opt(p.latency_us_p99, 1),
-            opt(p.rmse_n, 3),
-            opt(p.localization_mean_mm, 2),
-            if p.pareto { "yes" } else { "" }
-        );
-    }
-    s
-}
-
-fn plot(path: &Path, points: &[Point]) -> Result<()> {
-    let xy: Vec<(f64, f64, bool, String)> = points
-        .iter()
-        .filter_map(|p| {
-            p.latency_us_p50.zip(p.rmse_n).map(|(x, y)| (x, y, p.pareto, format!("{} / {}", p.variant, p.lane)))
-        })
-        .collect();
-    if xy.is_empty() {
-        bail!("no point has both a latency and an RMSE (does the recording have truth?)");
-    }
-    // Room on the right for the point labels.
-    let pad = |lo: f64, hi: f64, right: f64| {
-        let d = (hi - lo).abs().max(hi.abs() * 0.05).max(1e-9);
-        (lo - 0.1 * d, hi + right * d)
-    };
-    let (x0, x1) = pad(
-        xy.iter().map(|p| p.0).fold(f64::INFINITY, f64::min),
-        xy.iter().map(|p| p.0).fold(f64::NEG_INFINITY, f64::max),
-        0.6,
-    );
-    let (y0, y1) = pad(
-        xy.iter().map(|p| p.1).fold(f64::INFINITY, f64::min),
-        xy.iter().map(|p| p.1).fold(f64::NEG_INFINITY, f64::max),
-        0.1,
-    );
-    let root = BitMapBackend::new(path, (900, 600)).into_drawing_area();
-    let err = |e: &dyn std::fmt::Display| anyhow!("{}: {e}", path.display());
-    root.fill(&WHITE).map_err(|e| err(&e))?;
-    let mut chart = ChartBuilder::on(&root)
-        .caption("speed against error", ("sans-serif", 22))
-        .margin(16)
-        .x_label_area_size(40)
-        .y_label_area_size(60)
-        .build_cartesian_2d(x0.max(0.0)..x1, y0.max(0.0)..y1)
-        .map_err(|e| err(&e))?;
-    chart.configure_mesh().x_desc("latency p50, us").y_desc("force RMSE, N").draw().map_err(|e| err(&e))?;
-    let mut front: Vec<(f64, f64)> = xy.iter().filter(|p| p.2).map(|p| (p.0, p.1)).collect();
-    front.sort_by(|a, b| a.0.total_cmp(&b.0));
-    chart.draw_series(LineSeries::new(front, RED.stroke_width(2))).map_err(|e| err(&e))?;
-    for (x, y, pareto, label) in &xy {
-        let color = if *pareto { RED } else { BLUE };
-        chart.draw_series(std::iter::once(Circle::new((*x, *y), 5, color.filled()))).map_err(|e| err(&e))?;
-        chart
-            .draw_series(std::iter::once(Text::new(label.clone(), (*x, *y), ("sans-serif", 12))))
-            .map_err(|e| err(&e))?;
-    }
-    root.present().map_err(|e| err(&e))?;
-    Ok(())
 }
 
 /// The error for a variant that does not validate. A variant is regenerated TOML, so its line
@@ -289,60 +221,131 @@ fn invalid_variant(graph: &Path, text: &str, reg: &Registry, label: &str, errs: 
     anyhow::Error::new(super::InvalidGraph(lines.join("\n")))
 }
 
+/// Removes `path` if it exists.
+fn remove(path: &Path) -> Result<()> {
+    match std::fs::remove_file(path) {
+        Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
+            Err(e).with_context(|| format!("{}: cannot remove", path.display()))
+        }
+        _ => Ok(()),
+    }
+}
+
+/// Removes what an earlier bench left in `dir` (`bench.md`, `bench.json`, `pareto.png`,
+/// `variant-<k>.json`), so every output there is this run's.
+fn clear_outputs(dir: &Path) -> Result<()> {
+    let listing = std::fs::read_dir(dir).with_context(|| format!("{}: cannot list", dir.display()))?;
+    for entry in listing {
+        let path = entry.with_context(|| format!("{}: cannot list", dir.display()))?.path();
+        let name = path.file_name().and_then(|n| n.to_str()).unwrap_or_default();
+        let variant = name
+            .strip_prefix("variant-")
+            .and_then(|r| r.strip_suffix(".json"))
+            .is_some_and(|k| !k.is_empty() && k.bytes().all(|b| b.is_ascii_digit()));
+        if (variant || ["bench.md", "bench.json", "pareto.png"].contains(&name)) && path.is_file() {
+            remove(&path)?;
+        }
+    }
+    Ok(())
+}
+
+/// Runs one variant and reads the report its `compare` node wrote to `json` (removed first, so
+/// a report is never an earlier run's). `health` gets the run's node errors and drops, also
+/// when a node then failed.
+fn run_variant(spec: &GraphSpec, json: &Path, label: &str, index: usize, health: &mut Health) -> Result<Vec<Point>> {
+    remove(json)?;
+    let report = skinflow_core::run(spec, &RunOptions::default()).map_err(|e| anyhow!("{e}"))?;
+    *health = Health::of(&report.stats);
+    if let Some(f) = report.failures.first() {
+        match report.failures.len() {
+            1 => bail!("{f}"),
+            n => bail!("{f} (and {} more failures)", n - 1),
+        }
+    }
+    let text = std::fs::read_to_string(json)
+        .with_context(|| format!("its compare node wrote no report to {}", json.display()))?;
+    let doc: serde_json::Value =
+        serde_json::from_str(&text).with_context(|| format!("{}: not a compare report", json.display()))?;
+    report::points_of(label, index, &doc).with_context(|| format!("{}: not a compare report", json.display()))
+}
+
 /// Runs the variants and writes `bench.md`, `bench.json` and `pareto.png` into `out_dir`.
 pub fn run(graph: &Path, replay: &Path, vary: &[String], out_dir: &Path) -> Result<()> {
     let vary: Vec<Vary> = vary.iter().map(|s| s.parse()).collect::<Result<_>>()?;
     let text = std::fs::read_to_string(graph).with_context(|| format!("{}: cannot read", graph.display()))?;
     let reg = registry_for(&SourceFile::new(graph, text.clone()))?;
     let base: toml::Table = toml::from_str(&text).map_err(|e| anyhow!("{}: {}", graph.display(), e.message()))?;
+    check_vary(&base, &vary)?;
     let replay = std::path::absolute(replay).with_context(|| format!("{}: bad path", replay.display()))?;
     if !replay.is_file() {
         bail!("{}: recording not found", replay.display());
     }
     let out_abs = std::path::absolute(out_dir)?;
     // Every variant validates before any runs or anything is written.
-    let mut variants = Vec::new();
+    let mut specs: Vec<(String, Overrides, GraphSpec, PathBuf)> = Vec::new();
     for (k, (label, set)) in combinations(&vary).into_iter().enumerate() {
         let json = out_abs.join(format!("variant-{k}.json"));
         let src = SourceFile::new(graph, variant_text(&base, &replay, &set, &json)?);
         let spec = GraphSpec::parse(src, &reg).map_err(|e| invalid_variant(graph, &text, &reg, &label, e))?;
-        variants.push((label, spec, json));
+        specs.push((label, set, spec, json));
     }
     std::fs::create_dir_all(out_dir).with_context(|| format!("{}: cannot create", out_dir.display()))?;
-    let mut points = Vec::new();
-    for (k, (label, spec, json)) in variants.into_iter().enumerate() {
-        eprintln!("bench: variant {k}: {label}");
-        let report =
-            skinflow_core::run(&spec, &RunOptions::default()).map_err(|e| anyhow!("variant \"{label}\": {e}"))?;
-        if let Some(f) = report.failures.first() {
-            bail!("variant \"{label}\": {f}");
-        }
-        let lanes: serde_json::Value = serde_json::from_str(
-            &std::fs::read_to_string(&json).with_context(|| format!("{}: cannot read", json.display()))?,
-        )?;
-        for l in lanes["lanes"].as_array().into_iter().flatten() {
-            points.push(Point {
-                variant: label.clone(),
-                lane: l["name"].as_str().unwrap_or("?").to_owned(),
-                frames: l["frames"].as_u64().unwrap_or(0),
-                latency_us_p50: num(l, "latency_us_p50"),
-                latency_us_p99: num(l, "latency_us_p99"),
-                rmse_n: num(l, "rmse_n"),
-                localization_mean_mm: num(l, "localization_mean_mm"),
-                pareto: false,
-            });
-        }
+    clear_outputs(out_dir)?;
+    // The first variant once, unmeasured: the measured passes all start warm (caches, page
+    // faults, allocator, lazily built tables). Its outcome is the measured pass's to report.
+    if let Some((label, _, spec, json)) = specs.first() {
+        eprintln!("bench: warm-up pass (variant 0, {label}; not measured)");
+        let _ = skinflow_core::run(spec, &RunOptions { duration: Some(WARM_UP), ..RunOptions::default() });
+        remove(json)?;
     }
-    mark_pareto(&mut points);
-    let md = markdown(graph, &replay, &points);
+    let mut points = Vec::new();
+    let mut variants = Vec::new();
+    for (index, (label, overrides, spec, json)) in specs.into_iter().enumerate() {
+        eprintln!("bench: variant {index}: {label}");
+        let mut health = Health::default();
+        let error = match run_variant(&spec, &json, &label, index, &mut health) {
+            Ok(p) => {
+                points.extend(p);
+                None
+            }
+            Err(e) => {
+                eprintln!("bench: variant {index} failed: {e:#}");
+                Some(format!("{e:#}"))
+            }
+        };
+        variants.push(Variant { index, label, overrides, json, health, error });
+    }
+    report::mark_pareto(&mut points);
+    let warnings = report::warnings(&variants, &points);
+    for w in &warnings {
+        eprintln!("bench: warning: {w}");
+    }
+    let md = report::markdown(graph, &replay, &variants, &points, &warnings);
     print!("{md}");
     let write = |name: &str, body: &str| {
         std::fs::write(out_dir.join(name), body)
             .with_context(|| format!("{}: cannot write", out_dir.join(name).display()))
     };
     write("bench.md", &md)?;
-    write("bench.json", &serde_json::to_string_pretty(&points_json(&points))?)?;
-    plot(&out_dir.join("pareto.png"), &points)?;
+    let json = report::json(graph, &replay, &variants, &points, &warnings);
+    write("bench.json", &(serde_json::to_string_pretty(&json)? + "\n"))?;
+    let failed: Vec<&Variant> = variants.iter().filter(|v| v.error.is_some()).collect();
+    if let Some(first) = failed.first() {
+        if report::plottable(&points)
+            && let Err(e) = report::plot(&out_dir.join("pareto.png"), &points)
+        {
+            eprintln!("bench: {e:#}");
+        }
+        bail!(
+            "variant \"{}\": {} ({} of {} variants failed; {} shows the variants that ran)",
+            first.label,
+            first.error.as_deref().unwrap_or_default(),
+            failed.len(),
+            variants.len(),
+            out_dir.join("bench.md").display()
+        );
+    }
+    report::plot(&out_dir.join("pareto.png"), &points)?;
     eprintln!("bench: wrote bench.md, bench.json and pareto.png to {}", out_dir.display());
     Ok(())
 }
@@ -374,24 +377,6 @@ mod tests {
     }
 
     #[test]
-    fn pareto_keeps_undominated_points() {
-        let p = |x: f64, y: f64| Point {
-            variant: String::new(),
-            lane: String::new(),
-            frames: 1,
-            latency_us_p50: Some(x),
-            latency_us_p99: None,
-            rmse_n: Some(y),
-            localization_mean_mm: None,
-            pareto: false,
-        };
-        let mut pts = vec![p(1.0, 5.0), p(2.0, 2.0), p(3.0, 3.0), p(4.0, 1.0), p(2.0, 2.0)];
-        mark_pareto(&mut pts);
-        let marks: Vec<bool> = pts.iter().map(|p| p.pareto).collect();
-        assert_eq!(marks, vec![true, true, false, true, true], "(3, 3) is beaten by (2, 2); equal points both stay");
-    }
-
-    #[test]
     fn a_variant_runs_in_lockstep_without_thread_placement() {
         let base: toml::Table = toml::from_str(
             r#"
@@ -420,5 +405,80 @@ mod tests {
                 assert!(n.get(key).is_none(), "{key} left in {n:?}");
             }
         }
+    }
+
+    const TWO_NODES: &str = r#"
+        [[node]]
+        id = "replay"
+        kind = "replay"
+        params = { path = "x.h5", loop = true }
+        [[node]]
+        id = "cmp"
+        kind = "compare"
+        params = { json = "mine.json" }
+        [[node]]
+        id = "recon"
+        kind = "reconstructor"
+    "#;
+
+    #[test]
+    fn params_bench_sets_itself_cannot_be_varied() {
+        let base: toml::Table = toml::from_str(TWO_NODES).unwrap();
+        let check = |arg: &str| check_vary(&base, &[arg.parse().unwrap()]).map_err(|e| e.to_string());
+        assert_eq!(check("recon.lambda=0.1"), Ok(()));
+        assert_eq!(check("cmp.frames=\"all\""), Ok(()), "compare's other params can be varied");
+        assert_eq!(
+            check("cmp.json=\"/tmp/x.json\""),
+            Err("--vary \"cmp.json\": bench sets param \"json\" of the compare node itself (json, report_s, print \
+                 of a compare node), so it cannot be varied"
+                .into())
+        );
+        for arg in ["cmp.report_s=1", "cmp.print=true", "replay.path=\"a.h5\"", "replay.speed=1", "replay.loop=true"] {
+            let e = check(arg).unwrap_err();
+            let key = arg.split('=').next().unwrap();
+            assert!(e.starts_with(&format!("--vary \"{key}\": bench sets param")), "{arg}: {e}");
+        }
+        assert_eq!(check("nope.x=1"), Err("--vary \"nope.x\": no node \"nope\" in the graph".into()));
+        let twice = check_vary(&base, &["recon.lambda=0.1".parse().unwrap(), "recon.lambda=0.2".parse().unwrap()]);
+        assert!(twice.unwrap_err().to_string().contains("given twice"));
+    }
+
+    #[test]
+    fn what_bench_sets_wins_over_the_graph_and_the_overrides() {
+        let base: toml::Table = toml::from_str(TWO_NODES).unwrap();
+        // check_vary refuses these; were one to get through, the variant still reports where
+        // bench reads it.
+        let set = vec![
+            ("cmp".to_owned(), "json".to_owned(), toml::Value::from("/tmp/elsewhere.json")),
+            ("recon".to_owned(), "lambda".to_owned(), toml::Value::from(0.5)),
+        ];
+        let text = variant_text(&base, Path::new("/r.h5"), &set, Path::new("/out/variant-0.json")).unwrap();
+        let doc: toml::Table = toml::from_str(&text).unwrap();
+        let params = |i: usize| doc["node"][i]["params"].as_table().unwrap().clone();
+        assert_eq!(params(0)["path"].as_str(), Some("/r.h5"));
+        assert_eq!((params(0)["speed"].as_float(), params(0)["loop"].as_bool()), (Some(0.0), Some(false)));
+        assert_eq!(params(1)["json"].as_str(), Some("/out/variant-0.json"));
+        assert_eq!((params(1)["report_s"].as_float(), params(1)["print"].as_bool()), (Some(0.0), Some(false)));
+        assert_eq!(params(2)["lambda"].as_float(), Some(0.5));
+    }
+
+    #[test]
+    fn an_earlier_runs_outputs_are_cleared_and_nothing_else() {
+        let dir = std::env::temp_dir().join(format!("skinflow-bench-clear-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        let ours = ["bench.md", "bench.json", "pareto.png", "variant-0.json", "variant-12.json"];
+        let theirs = ["variant-.json", "variant-x.json", "notes.md", "variant-1.json.bak"];
+        for f in ours.iter().chain(&theirs) {
+            std::fs::write(dir.join(f), "x").unwrap();
+        }
+        clear_outputs(&dir).unwrap();
+        let mut left: Vec<String> =
+            std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
+        left.sort();
+        let mut want: Vec<String> = theirs.iter().map(|s| s.to_string()).collect();
+        want.sort();
+        assert_eq!(left, want);
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -329,8 +329,11 @@ fn a_recording_that_starts_under_load_is_warned_about() {
     let scene = std::fs::read_to_string(fixture("tiny-eval.toml")).unwrap();
     let lead_in = "[[step]]\nrest_s = 4.0\n";
     assert!(scene.contains(lead_in), "the fixture starts with its lead-in");
-    // The simulator refuses a scene without a lead-in; 0.2 s holds no whole frame window.
-    std::fs::write(d.join("loaded.toml"), scene.replace(lead_in, "[[step]]\nrest_s = 0.2\n")).unwrap();
+    // The simulator refuses a scene without a no-load frame unless it says it starts under
+    // load; 0.2 s holds no whole frame window.
+    let loaded =
+        scene.replace(lead_in, "[[step]]\nrest_s = 0.2\n").replace("[scene]\n", "[scene]\nstart_under_load = true\n");
+    std::fs::write(d.join("loaded.toml"), loaded).unwrap();
     std::fs::write(d.join("short.toml"), scene.replace(lead_in, "[[step]]\nrest_s = 1.5\n")).unwrap();
     let calib = root().join("graphs/calib/paper.toml");
     let mut warned = Vec::new();

@@ -7,6 +7,12 @@
 
 use serde::{Deserialize, Serialize};
 
+/// Fewest elements of the simulation mesh (a coarser one would not resolve an indenter).
+pub const MIN_MESH_ELEMENTS: usize = 100;
+/// Most elements of the simulation mesh: the largest mesh skinflow-eit generates
+/// (`MeshParams::elements`); the simulator clamps to `[mesh_min_elements, mesh_max_elements]`.
+pub const MAX_MESH_ELEMENTS: usize = 2_000_000;
+
 /// Every constant of the model. Field docs are the `[model]` TOML reference.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -221,11 +227,20 @@ impl Profile {
         pos("eit_drift_tau_s", self.eit_drift_tau_s)?;
         pos("current_ua", self.current_ua)?;
         pos("mesh_edge_per_diameter", self.mesh_edge_per_diameter)?;
-        if self.mesh_min_elements < 100 || self.mesh_max_elements < self.mesh_min_elements {
+        if !(MIN_MESH_ELEMENTS..=MAX_MESH_ELEMENTS).contains(&self.mesh_min_elements) {
             return Err((
                 "mesh_min_elements",
                 format!(
-                    "must be >= 100 and <= mesh_max_elements (got {} and {})",
+                    "must be in [{MIN_MESH_ELEMENTS}, {MAX_MESH_ELEMENTS}] (the forward solver's mesh limit) (got {})",
+                    self.mesh_min_elements
+                ),
+            ));
+        }
+        if !(self.mesh_min_elements..=MAX_MESH_ELEMENTS).contains(&self.mesh_max_elements) {
+            return Err((
+                "mesh_max_elements",
+                format!(
+                    "must be in [mesh_min_elements = {}, {MAX_MESH_ELEMENTS}] (the forward solver's mesh limit) (got {})",
                     self.mesh_min_elements, self.mesh_max_elements
                 ),
             ));
@@ -272,5 +287,20 @@ mod tests {
     fn validate_names_the_field() {
         let p = Profile { strain_max: 1.5, ..Profile::paper() };
         assert_eq!(p.validate().unwrap_err().0, "strain_max");
+    }
+
+    #[test]
+    fn mesh_bounds_are_capped_at_the_solver_limit() {
+        let huge = Profile { mesh_min_elements: 100_000_000, mesh_max_elements: 100_000_000, ..Profile::paper() };
+        let (field, msg) = huge.validate().unwrap_err();
+        assert_eq!(field, "mesh_min_elements");
+        assert!(msg.contains("2000000") && msg.contains("got 100000000"), "{msg}");
+        let too_fine = Profile { mesh_max_elements: MAX_MESH_ELEMENTS + 1, ..Profile::paper() };
+        assert_eq!(too_fine.validate().unwrap_err().0, "mesh_max_elements");
+        let inverted = Profile { mesh_min_elements: 6000, mesh_max_elements: 5000, ..Profile::paper() };
+        assert_eq!(inverted.validate().unwrap_err().0, "mesh_max_elements");
+        let at_limit =
+            Profile { mesh_min_elements: MAX_MESH_ELEMENTS, mesh_max_elements: MAX_MESH_ELEMENTS, ..Profile::paper() };
+        at_limit.validate().unwrap();
     }
 }

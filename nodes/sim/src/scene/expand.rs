@@ -1,9 +1,14 @@
 //! Expands one validated step into timeline segments: grids and lists become positions, force
 //! lists become holds joined by ramps (one indentation per force, or one staircase indentation
 //! per position), repetitions repeat, and each step may end with a rest.
+//!
+//! Before a step is expanded its length and segment count are worked out arithmetically, and a
+//! step that would take the timeline past `MAX_DURATION_S` or `MAX_SEGMENTS` is refused before
+//! anything is built (a `grid` of 1000 x 1000 with 10,000 forces and 100,000 repeats would
+//! otherwise exhaust the memory first).
 
 use super::SceneError;
-use super::parse::{RawContact, RawForces, RawStep};
+use super::parse::{RawContact, RawGrid, RawStep};
 use super::validate::{ErrFn, MAX_FORCE_N, at_most, non_negative, positive};
 use crate::timeline::{Segment, SegmentContact};
 use skinflow_eit::Sensor;
@@ -11,6 +16,16 @@ use toml::Spanned;
 
 /// Default ramp and release times, s: a quasi-static indentation by an XYZ stage.
 const DEFAULT_RAMP_S: f64 = 0.5;
+/// Longest timeline, s (11.6 days: a typing slip such as `rest_s = 5e9` is refused instead of
+/// simulating for ever).
+pub(super) const MAX_DURATION_S: f64 = 1e6;
+/// Most segments (rests, ramps, holds) a timeline may have: about one per second of the
+/// longest timeline. At the cap, `skinflow simulate` of a pressure-only scene peaks at 174 MB
+/// (segments and their truth rows).
+pub(super) const MAX_SEGMENTS: usize = 1_000_000;
+/// The accepted forms of `forces_n`, for its errors.
+const FORCES_FORMS: &str = "give a list of forces in N (`forces_n = [1.0, 2.5]`) or n evenly spaced \
+     forces (`forces_n = { from = 1.0, to = 10.0, n = 9 }`)";
 
 pub(super) fn has_contacts(s: &RawStep) -> bool {
     s.contacts.is_some() || s.grid.is_some() || s.at_mm.is_some() || s.forces_n.is_some() || s.force_profile.is_some()
@@ -62,16 +77,67 @@ impl Builder {
     fn rest(&mut self, len_s: f64) {
         self.push(len_s, &[], &[], &[]);
     }
+
+    /// Refuses step `step` (1-based) before it is expanded if it would take the timeline past
+    /// `MAX_DURATION_S` or `MAX_SEGMENTS`.
+    fn admit(&self, step: &StepRef<'_>, extent: Extent, err: &ErrFn<'_>) -> Result<(), SceneError> {
+        let Extent { duration_s, segments, how } = extent;
+        let total_s = self.t_s + duration_s;
+        if total_s > MAX_DURATION_S || total_s.is_nan() {
+            return Err(err(
+                step.span.clone(),
+                format!(
+                    "[[step]] {}: this step lasts {duration_s:.4e} s ({how}), which makes the scene \
+                     {total_s:.4e} s long, more than the {MAX_DURATION_S:e} s (11.6 days) a scene may last",
+                    step.number
+                ),
+            ));
+        }
+        let total = self.segments.len() as f64 + segments;
+        if total > MAX_SEGMENTS as f64 || total.is_nan() {
+            return Err(err(
+                step.span.clone(),
+                format!(
+                    "[[step]] {}: this step makes {segments:.0} rests, ramps and holds ({how}), \
+                     {total:.0} in the scene, more than the {MAX_SEGMENTS} a scene may have",
+                    step.number
+                ),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// The step being expanded, for errors: its 1-based number and its span.
+pub(super) struct StepRef<'a> {
+    pub(super) number: usize,
+    pub(super) span: std::ops::Range<usize>,
+    pub(super) raw: &'a RawStep,
+}
+
+/// What a step adds to the timeline: its length, s, and its segments of non-zero length
+/// (counted as floats: the product of the step's counts may exceed any integer type).
+struct Extent {
+    duration_s: f64,
+    segments: f64,
+    /// How the figures come about, for the error.
+    how: String,
+}
+
+/// 1 for a segment of this length that is kept, 0 for one that is dropped.
+fn kept(len_s: f64) -> f64 {
+    if len_s > 0.0 { 1.0 } else { 0.0 }
 }
 
 pub(super) fn expand_step(
-    s: &RawStep,
-    step_span: std::ops::Range<usize>,
+    step: &StepRef<'_>,
     sensor: &Sensor,
     eit_fps: f64,
     b: &mut Builder,
     err: &ErrFn<'_>,
 ) -> Result<(), SceneError> {
+    let s = step.raw;
+    let step_span = step.span.clone();
     let rest_s = s.rest_s.as_ref().map(|v| non_negative("rest_s", v, err)).transpose()?.unwrap_or(0.0);
     if !has_contacts(s) {
         for (key, present) in [
@@ -92,6 +158,7 @@ pub(super) fn expand_step(
         if s.rest_s.is_none() {
             return Err(err(step_span, "empty [[step]]: give `rest_s` or contacts".into()));
         }
+        b.admit(step, Extent { duration_s: rest_s, segments: kept(rest_s), how: format!("rest_s = {rest_s}") }, err)?;
         b.rest(rest_s);
         return Ok(());
     }
@@ -152,6 +219,12 @@ pub(super) fn expand_step(
         }
         let hold_s = hold(s, eit_fps, err)?
             .ok_or_else(|| err(step_span.clone(), "a contact step needs `hold_s` or `hold_frames`".into()))?;
+        never_touching(ramp_s + hold_s + release_s, "hold_s, ramp_s and release_s are", step_span.clone(), err)?;
+        let per_s = ramp_s + hold_s + release_s + rest_s;
+        let per = kept(ramp_s) + kept(hold_s) + kept(release_s) + kept(rest_s);
+        let r = repeat as f64;
+        let how = format!("{repeat} repeat(s) x {per_s} s");
+        b.admit(step, Extent { duration_s: r * per_s, segments: r * per, how }, err)?;
         let zeros = vec![0.0; spots.len()];
         for _ in 0..repeat {
             b.level += 1;
@@ -171,10 +244,10 @@ pub(super) fn expand_step(
             return Err(err(step_span, "a contact step needs \"diameter_mm\"".into()));
         }
     };
-    let positions = positions(s, step_span.clone(), err)?;
-    for (x, y, span) in &positions {
-        inside(*x, *y, span.clone())?;
-    }
+    let at = places(s, step_span.clone(), err)?;
+    let n_positions = at.count();
+    let counted = format!("{n_positions} position(s) x {repeat} repeat(s)");
+    let pr = n_positions as f64 * repeat as f64;
     if let Some(profile) = &s.force_profile {
         for (key, present) in [
             ("forces_n", s.forces_n.is_some()),
@@ -211,8 +284,23 @@ pub(super) fn expand_step(
                 ));
             }
         }
-        for (x, y, _) in &positions {
-            let spot = [Spot { x_mm: *x, y_mm: *y, diameter_mm: diameter }];
+        let (t0, t_last) = (pts[0][0], pts[pts.len() - 1][0]);
+        never_touching(
+            ramp_s + (t_last - t0) + release_s,
+            "ramp_s, release_s and the profile's length are",
+            profile.span(),
+            err,
+        )?;
+        let per_s = t_last + ramp_s + release_s + rest_s;
+        let per = kept(t0)
+            + kept(ramp_s)
+            + pts.windows(2).map(|w| kept(w[1][0] - w[0][0])).sum::<f64>()
+            + kept(release_s)
+            + kept(rest_s);
+        let how = format!("{counted} x {per_s} s");
+        b.admit(step, Extent { duration_s: pr * per_s, segments: pr * per, how }, err)?;
+        for (x, y) in at.positions(&inside)? {
+            let spot = [Spot { x_mm: x, y_mm: y, diameter_mm: diameter }];
             for _ in 0..repeat {
                 b.level += 1;
                 b.push(pts[0][0], &spot, &[0.0], &[0.0]);
@@ -236,6 +324,7 @@ pub(super) fn expand_step(
     };
     let hold_s = hold(s, eit_fps, err)?
         .ok_or_else(|| err(step_span.clone(), "a contact step needs `hold_s` or `hold_frames`".into()))?;
+    never_touching(ramp_s + hold_s + release_s, "hold_s, ramp_s and release_s are", step_span.clone(), err)?;
     let staircase = match &s.loading {
         None => false,
         Some(l) => match l.get_ref().as_str() {
@@ -249,8 +338,20 @@ pub(super) fn expand_step(
             }
         },
     };
-    for (x, y, _) in &positions {
-        let spot = [Spot { x_mm: *x, y_mm: *y, diameter_mm: diameter }];
+    let nf = forces.len() as f64;
+    let extent = if staircase {
+        let per_s = nf * (ramp_s + hold_s) + release_s + rest_s;
+        let per = nf * (kept(ramp_s) + kept(hold_s)) + kept(release_s) + kept(rest_s);
+        Extent { duration_s: pr * per_s, segments: pr * per, how: format!("{counted} x {per_s} s") }
+    } else {
+        let per_s = ramp_s + hold_s + release_s + rest_s;
+        let per = kept(ramp_s) + kept(hold_s) + kept(release_s) + kept(rest_s);
+        let how = format!("{counted} x {} force(s) x {per_s} s", forces.len());
+        Extent { duration_s: pr * nf * per_s, segments: pr * nf * per, how }
+    };
+    b.admit(step, extent, err)?;
+    for (x, y) in at.positions(&inside)? {
+        let spot = [Spot { x_mm: x, y_mm: y, diameter_mm: diameter }];
         for _ in 0..repeat {
             if staircase {
                 let mut prev = 0.0;
@@ -282,21 +383,87 @@ fn hold(s: &RawStep, eit_fps: f64, err: &ErrFn<'_>) -> Result<Option<f64>, Scene
     match (&s.hold_s, &s.hold_frames) {
         (Some(a), Some(_)) => Err(err(a.span(), "give either \"hold_s\" or \"hold_frames\", not both".into())),
         (Some(a), None) => Ok(Some(non_negative("hold_s", a, err)?)),
-        (None, Some(f)) => Ok(Some(non_negative("hold_frames", f, err)? / eit_fps)),
+        (None, Some(f)) => {
+            let n = non_negative("hold_frames", f, err)?;
+            if n.fract() != 0.0 {
+                return Err(err(
+                    f.span(),
+                    format!(
+                        "\"hold_frames\": must be a whole number of EIT frame periods (got {n}; \
+                         for a hold of another length give hold_s)"
+                    ),
+                ));
+            }
+            Ok(Some(n / eit_fps))
+        }
         (None, None) => Ok(None),
     }
 }
 
-fn forces(f: &Spanned<RawForces>, err: &ErrFn<'_>) -> Result<Vec<f64>, SceneError> {
+/// Refuses a contact step whose contacts would be on the skin for no time at all (the
+/// timeline keeps no zero-length segment, so they would silently vanish).
+fn never_touching(on_skin_s: f64, what: &str, span: std::ops::Range<usize>, err: &ErrFn<'_>) -> Result<(), SceneError> {
+    if on_skin_s > 0.0 {
+        Ok(())
+    } else {
+        Err(err(
+            span,
+            format!("{what} all 0: the contacts would never be on the skin (give hold_s or hold_frames > 0)"),
+        ))
+    }
+}
+
+/// A TOML value as a number, if it is one.
+fn number(v: &toml::Value) -> Option<f64> {
+    match v {
+        toml::Value::Float(x) => Some(*x),
+        toml::Value::Integer(i) => Some(*i as f64),
+        _ => None,
+    }
+}
+
+/// A TOML value as an error shows it.
+pub(super) fn describe(v: &toml::Value) -> String {
+    match v {
+        toml::Value::String(s) => format!("the string {s:?}"),
+        toml::Value::Integer(i) => format!("the integer {i}"),
+        toml::Value::Float(x) => format!("the number {x}"),
+        toml::Value::Boolean(b) => format!("the boolean {b}"),
+        toml::Value::Datetime(d) => format!("the date-time {d}"),
+        toml::Value::Array(_) => "an array".into(),
+        toml::Value::Table(_) => "a table".into(),
+    }
+}
+
+fn forces(f: &Spanned<toml::Value>, err: &ErrFn<'_>) -> Result<Vec<f64>, SceneError> {
+    let bad = |why: String| err(f.span(), format!("\"forces_n\": {why}; {FORCES_FORMS}"));
     let list = match f.get_ref() {
-        RawForces::List(v) => v.clone(),
-        RawForces::Range { from, to, n } => {
-            if *n < 1 || *n > 10_000 {
+        toml::Value::Array(items) => items
+            .iter()
+            .enumerate()
+            .map(|(i, v)| number(v).ok_or_else(|| bad(format!("element {i} is {}, not a force", describe(v)))))
+            .collect::<Result<Vec<f64>, _>>()?,
+        toml::Value::Table(t) => {
+            if let Some(k) = t.keys().find(|k| !["from", "to", "n"].contains(&k.as_str())) {
+                return Err(bad(format!("unknown key \"{k}\" in the range")));
+            }
+            let get = |k: &str| t.get(k).ok_or_else(|| bad(format!("the range has no \"{k}\"")));
+            let end = |k: &str| {
+                let v = get(k)?;
+                number(v).ok_or_else(|| bad(format!("\"{k}\" is {}, not a force", describe(v))))
+            };
+            let (from, to) = (end("from")?, end("to")?);
+            let n = match get("n")? {
+                toml::Value::Integer(n) => *n,
+                v => return Err(bad(format!("\"n\" is {}, not a whole number", describe(v)))),
+            };
+            if !(1..=10_000).contains(&n) {
                 return Err(err(f.span(), format!("\"forces_n\": n must be in [1, 10000] (got {n})")));
             }
-            let n = *n as usize;
-            (0..n).map(|i| if n == 1 { *from } else { from + (to - from) * i as f64 / (n - 1) as f64 }).collect()
+            let n = n as usize;
+            (0..n).map(|i| if n == 1 { from } else { from + (to - from) * i as f64 / (n - 1) as f64 }).collect()
         }
+        v => return Err(bad(format!("{} is not a list of forces", describe(v)))),
     };
     if list.is_empty() {
         return Err(err(f.span(), "\"forces_n\": empty list".into()));
@@ -310,26 +477,29 @@ fn forces(f: &Spanned<RawForces>, err: &ErrFn<'_>) -> Result<Vec<f64>, SceneErro
     Ok(list)
 }
 
-type Positions = Vec<(f64, f64, std::ops::Range<usize>)>;
+/// Where a single-contact step presses: a `grid` or an `at_mm` list, checked but not yet
+/// generated (a grid may hold a million positions).
+enum Places<'a> {
+    Grid(&'a Spanned<RawGrid>),
+    List(&'a Spanned<Vec<[f64; 2]>>),
+}
 
-fn positions(s: &RawStep, step_span: std::ops::Range<usize>, err: &ErrFn<'_>) -> Result<Positions, SceneError> {
-    match (&s.grid, &s.at_mm) {
-        (Some(g), Some(_)) => Err(err(g.span(), "give either \"grid\" or \"at_mm\", not both".into())),
-        (None, None) => Err(err(step_span, "a contact step needs \"grid\", \"at_mm\" or \"contacts\"".into())),
-        (None, Some(list)) => {
-            if list.get_ref().is_empty() {
-                return Err(err(list.span(), "\"at_mm\": empty list".into()));
-            }
-            Ok(list.get_ref().iter().map(|p| (p[0], p[1], list.span())).collect())
+impl Places<'_> {
+    fn count(&self) -> usize {
+        match self {
+            Places::Grid(g) => g.get_ref().n.iter().map(|&n| n as usize).product(),
+            Places::List(l) => l.get_ref().len(),
         }
-        (Some(g), None) => {
-            let grid = g.get_ref();
-            let [nx, ny] = grid.n;
-            if !(1..=1000).contains(&nx) || !(1..=1000).contains(&ny) {
-                return Err(err(g.span(), format!("\"grid\": n must be two integers in [1, 1000] (got [{nx}, {ny}])")));
-            }
-            let axis =
-                |r: [f64; 2], n: i64| -> Vec<f64> {
+    }
+
+    /// The positions, each checked with `inside` (which gets the span of the `grid` or
+    /// `at_mm` that gave it).
+    fn positions(&self, inside: &InsideFn<'_>) -> Result<Vec<(f64, f64)>, SceneError> {
+        let (list, span) = match self {
+            Places::List(l) => (l.get_ref().iter().map(|p| (p[0], p[1])).collect::<Vec<_>>(), l.span()),
+            Places::Grid(g) => {
+                let grid = g.get_ref();
+                let axis = |r: [f64; 2], n: i64| -> Vec<f64> {
                     let n = n as usize;
                     (0..n)
                         .map(|i| {
@@ -337,10 +507,37 @@ fn positions(s: &RawStep, step_span: std::ops::Range<usize>, err: &ErrFn<'_>) ->
                         })
                         .collect()
                 };
-            let xs = axis(grid.x_mm, nx);
-            let ys = axis(grid.y_mm, ny);
-            // row by row from the bottom, left to right (a raster scan of the stage)
-            Ok(ys.iter().flat_map(|&y| xs.iter().map(move |&x| (x, y, g.span()))).collect())
+                let xs = axis(grid.x_mm, grid.n[0]);
+                let ys = axis(grid.y_mm, grid.n[1]);
+                // row by row from the bottom, left to right (a raster scan of the stage)
+                (ys.iter().flat_map(|&y| xs.iter().map(move |&x| (x, y))).collect(), g.span())
+            }
+        };
+        for &(x, y) in &list {
+            inside(x, y, span.clone())?;
+        }
+        Ok(list)
+    }
+}
+
+type InsideFn<'a> = dyn Fn(f64, f64, std::ops::Range<usize>) -> Result<(), SceneError> + 'a;
+
+fn places<'a>(s: &'a RawStep, step_span: std::ops::Range<usize>, err: &ErrFn<'_>) -> Result<Places<'a>, SceneError> {
+    match (&s.grid, &s.at_mm) {
+        (Some(g), Some(_)) => Err(err(g.span(), "give either \"grid\" or \"at_mm\", not both".into())),
+        (None, None) => Err(err(step_span, "a contact step needs \"grid\", \"at_mm\" or \"contacts\"".into())),
+        (None, Some(list)) => {
+            if list.get_ref().is_empty() {
+                return Err(err(list.span(), "\"at_mm\": empty list".into()));
+            }
+            Ok(Places::List(list))
+        }
+        (Some(g), None) => {
+            let [nx, ny] = g.get_ref().n;
+            if !(1..=1000).contains(&nx) || !(1..=1000).contains(&ny) {
+                return Err(err(g.span(), format!("\"grid\": n must be two integers in [1, 1000] (got [{nx}, {ny}])")));
+            }
+            Ok(Places::Grid(g))
         }
     }
 }

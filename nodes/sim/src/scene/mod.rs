@@ -3,10 +3,13 @@
 //! `expand` turns into a `Timeline`. Every error names the file, line and column.
 //!
 //! Units: mm, N, s, frames/s, Hz (CONTRACTS.md section 1). `hold_frames` converts to seconds
-//! with the scene's EIT frame rate. The format is documented in MODEL.md, "Scene files".
+//! with the scene's EIT frame rate: a hold of N frame periods, which holds N - 1 whole frames
+//! in most cases (holds do not start on frame boundaries). The format is documented in
+//! MODEL.md, "Scene files".
 
 mod expand;
 mod parse;
+mod spans;
 mod validate;
 
 use crate::profile::Profile;

@@ -38,6 +38,9 @@ pub(crate) struct RawHeader {
     #[allow(dead_code)] // free text for readers of the file
     pub description: Option<String>,
     pub profile: Option<Spanned<String>>,
+    /// The scene deliberately starts under load (a test of how the pipeline copes with a
+    /// session resumed under load): lifts the rule that it opens with a no-load rest.
+    pub start_under_load: Option<Spanned<bool>>,
     pub channels: Option<Spanned<Vec<Spanned<String>>>>,
 }
 
@@ -61,7 +64,9 @@ pub(crate) struct RawStep {
     /// Single-contact positions listed as [x_mm, y_mm].
     pub at_mm: Option<Spanned<Vec<[f64; 2]>>>,
     pub diameter_mm: Option<Spanned<f64>>,
-    pub forces_n: Option<Spanned<RawForces>>,
+    /// A list of forces or a range `{ from, to, n }`; kept as TOML so that `expand` can say
+    /// which forms are accepted when it is neither.
+    pub forces_n: Option<Spanned<toml::Value>>,
     /// Piecewise-linear force profile [[t_s, force_n], ...] (instead of forces_n and holds).
     pub force_profile: Option<Spanned<Vec<[f64; 2]>>>,
     pub loading: Option<Spanned<String>>,
@@ -87,11 +92,4 @@ pub(crate) struct RawGrid {
     pub x_mm: [f64; 2],
     pub y_mm: [f64; 2],
     pub n: [i64; 2],
-}
-
-#[derive(Debug, Deserialize)]
-#[serde(untagged)]
-pub(crate) enum RawForces {
-    List(Vec<f64>),
-    Range { from: f64, to: f64, n: i64 },
 }

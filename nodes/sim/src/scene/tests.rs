@@ -127,8 +127,9 @@ fn absurd_forces_diameters_durations_and_rates_are_rejected_at_their_line() {
         assert_eq!(l, line, "{what}: {msg}");
     }
     // The timeline as a whole: 5e9 s of rest is a slip, not an experiment.
-    let (_, _, msg) = fails(&format!("{HEAD}[[step]]\nrest_s = 5e9\n"));
-    assert!(msg.contains("add up to") && msg.contains("11.6 days"), "{msg}");
+    let (line, _, msg) = fails(&format!("{HEAD}[[step]]\nrest_s = 5e9\n"));
+    assert_eq!(line, 8, "{msg}");
+    assert!(msg.contains("[[step]] 2: this step lasts 5.0000e9 s") && msg.contains("11.6 days"), "{msg}");
     // The limits themselves are accepted.
     parse(&step("diameter_mm = 100.0\nforces_n = [200.0]\nhold_s = 1.0\n")).unwrap();
 }
@@ -172,7 +173,7 @@ fn model_overrides_and_rates() {
     assert_eq!(s.rates.pressure_hz, 50.0);
     assert_eq!(s.channels, Channels { eit: false, pressure: true });
     let (line, _, msg) = fails("[scene]\n[model]\nbogus = 1.0\n[[step]]\nrest_s = 1.0\n");
-    assert_eq!(line, 2);
+    assert_eq!(line, 3, "the key's line");
     assert!(msg.contains("bogus"), "{msg}");
     let (_, _, msg) = fails("[scene]\n[model]\nstrain_max = 2.0\n[[step]]\nrest_s = 1.0\n");
     assert!(msg.contains("strain_max"), "{msg}");

@@ -209,3 +209,129 @@ fn a_rebuilt_plugin_is_reloaded_and_its_nodes_swapped() {
     let rows = std::fs::read_to_string(d.join("out.csv")).unwrap();
     assert_eq!(rows.lines().count(), 2000, "nothing lost across the swap");
 }
+
+/// `skinflow run G --watch --control SOCK` with `--stats-json stats.json`, once the socket
+/// answers.
+fn run_watched_with_stats(d: &Path, g: &Path, sock: &Path) -> Child {
+    let child = Command::new(bin())
+        .args(["run", g.to_str().unwrap(), "--watch", "--control", sock.to_str().unwrap(), "--stats-json"])
+        .arg(d.join("stats.json"))
+        .env("RUST_LOG", "warn")
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let t0 = Instant::now();
+    while !sock.exists() {
+        assert!(t0.elapsed() < Duration::from_secs(20), "no control socket");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    child
+}
+
+/// Waits until node `id` has sent `n` messages (asked through the control socket).
+fn wait_for_out(sock: &Path, id: &str, n: u64) {
+    let t0 = Instant::now();
+    loop {
+        let one = ask(sock, &format!(r#"{{"cmd": "stats", "node": "{id}"}}"#));
+        if one["node"]["msgs_out"].as_u64().is_some_and(|k| k >= n) {
+            return;
+        }
+        assert!(t0.elapsed() < Duration::from_secs(60), "node {id} never sent {n} messages: {one}");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+/// A recording replayed at `speed` into a logger writing `rec.h5`.
+fn replay_graph(speed: &str, log_params: &str) -> String {
+    format!(
+        "[[node]]\nid = \"replay\"\nkind = \"replay\"\nparams = {{ path = \"in.h5\", speed = {speed} }}\n\
+         [[node]]\nid = \"log\"\nkind = \"hdf5_logger\"\nparams = {{ path = \"rec.h5\"{log_params} }}\n\
+         [[edge]]\nfrom = \"replay.eit\"\nto = \"log.eit\"\n\
+         [[edge]]\nfrom = \"replay.pressure\"\nto = \"log.pressure\"\n\
+         [[edge]]\nfrom = \"replay.truth\"\nto = \"log.truth\"\n"
+    )
+}
+
+/// The audit's case: a replay sped up mid-run goes on where it was (it used to start again
+/// at frame 0, and the recording downstream stepped back in time), and a logger swap onto the
+/// file the running logger writes is refused (with `overwrite = true` it used to truncate
+/// the session's recording to the rows after the swap).
+#[test]
+fn a_sped_up_replay_goes_on_and_a_logger_swap_onto_its_own_file_is_refused() {
+    let d = workdir("live", "replay-speed");
+    super::support::ok(&skinflow(
+        &d,
+        &["simulate", super::support::fixture("tiny-eval.toml").to_str().unwrap(), "--out", "in.h5", "--seed", "3"],
+    ));
+    let g = d.join("g.toml");
+    let sock = d.join("ctl.sock");
+    std::fs::write(&g, replay_graph("2.0", "")).unwrap();
+    let child = run_watched_with_stats(&d, &g, &sock);
+    wait_for_out(&sock, "replay", 100);
+    std::fs::write(&g, replay_graph("4.0", "")).unwrap();
+    std::thread::sleep(Duration::from_millis(700));
+    std::fs::write(&g, replay_graph("4.0", ", overwrite = true, flush_interval_s = 0.5")).unwrap();
+    let out = child.wait_with_output().unwrap();
+    let stderr = stderr(&out);
+    assert!(out.status.success(), "{stderr}");
+    assert!(stderr.contains("edit applied: swapped replay\n"), "{stderr}");
+    let refused = format!(
+        "edit rejected: node \"log\": swap refused: start failed: {}: the recording a running logger of this run is \
+         writing",
+        d.join("rec.h5").display()
+    );
+    assert!(stderr.contains(&refused), "{stderr}");
+    // Every row once, in order: the logged streams equal the replayed recording's (times to
+    // the nanosecond of the messages' headers).
+    let open = |f: &str| skinflow_record::Recording::open(d.join(f)).unwrap();
+    let (src, rec) = (open("in.h5"), open("rec.h5"));
+    let ns = |t: &[f64]| t.iter().map(|t| (t * 1e9).round() as u64).collect::<Vec<_>>();
+    let (a, b) = (src.eit.as_ref().unwrap(), rec.eit.as_ref().unwrap());
+    assert_eq!((&b.seq, ns(&b.t_s)), (&a.seq, ns(&a.t_s)));
+    let (a, b) = (src.pressure.as_ref().unwrap(), rec.pressure.as_ref().unwrap());
+    assert_eq!((ns(&b.t_s), &b.kpa), (ns(&a.t_s), &a.kpa));
+    assert_eq!(ns(&rec.truth.as_ref().unwrap().t_s), ns(&src.truth.as_ref().unwrap().t_s));
+    let stats: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(d.join("stats.json")).unwrap()).unwrap();
+    let swaps: Vec<(&str, u64)> = stats["nodes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|n| (n["id"].as_str().unwrap(), n["swaps"].as_u64().unwrap()))
+        .collect();
+    assert_eq!(swaps, [("replay", 1), ("log", 0)]);
+}
+
+/// `deadline_us` and `restart` edits are applied to the running node; `[graph]` keys and a
+/// node's trigger or thread placement need a restart, and the edit says so.
+#[test]
+fn deadline_and_restart_edits_apply_and_graph_keys_need_a_restart() {
+    let d = workdir("live", "policy");
+    let g = d.join("g.toml");
+    let sock = d.join("ctl.sock");
+    let base = graph("factor = 2", "out.csv");
+    std::fs::write(&g, &base).unwrap();
+    let child = run_watched_with_stats(&d, &g, &sock);
+    wait_for_out(&sock, "f", 100);
+    std::fs::write(&g, format!("[graph]\nname = \"renamed\"\n{base}")).unwrap();
+    std::thread::sleep(Duration::from_millis(600));
+    std::fs::write(&g, base.replace("kind = \"scale\"", "kind = \"scale\"\ntrigger = \"periodic\"\nperiod_ms = 5"))
+        .unwrap();
+    std::thread::sleep(Duration::from_millis(600));
+    // A 1 ns budget: every call overruns it from the edit on.
+    std::fs::write(&g, base.replace("kind = \"scale\"", "kind = \"scale\"\ndeadline_us = 0.001\nrestart = \"always\""))
+        .unwrap();
+    let out = child.wait_with_output().unwrap();
+    let stderr = stderr(&out);
+    assert!(out.status.success(), "{stderr}");
+    assert!(stderr.contains("edit rejected: needs a restart: [graph] name changed"), "{stderr}");
+    assert!(stderr.contains("edit rejected: needs a restart: trigger of node \"f\" changed"), "{stderr}");
+    assert!(stderr.contains("edit applied: set deadline_us of node \"f\", restart of node \"f\"\n"), "{stderr}");
+    let stats: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(d.join("stats.json")).unwrap()).unwrap();
+    let f = stats["nodes"].as_array().unwrap().iter().find(|n| n["id"] == "f").unwrap();
+    assert!(f["deadline_misses"].as_u64().unwrap() > 0, "{f}");
+    assert_eq!(f["swaps"], 0, "{f}");
+    assert_eq!(rows(&d.join("out.csv")).len(), 1500);
+}

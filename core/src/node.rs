@@ -17,7 +17,12 @@
 //! buffered input), offers it to the replacement ([`Processor::import_state`]), and then stops
 //! the old instance. A replacement that does not recognize the state (another kind, another
 //! channel count) returns it; the engine logs why and gives it back to the old instance before
-//! its `stop`, so nothing it buffered is silently dropped. The same hooks exist on every role.
+//! its `stop`, so nothing it buffered is silently dropped. A replacement that cannot go on
+//! from the state at all (a source asked to continue another recording or scene, a logger
+//! asked to write the file the running instance is writing) refuses the swap instead
+//! ([`StateRefused::refuse_swap`]): the old instance takes its state back and keeps running,
+//! the replacement is stopped, and the swap is answered with the reason. The same hooks exist
+//! on every role.
 
 use std::any::Any;
 use std::sync::Arc;
@@ -59,17 +64,34 @@ pub struct StateRefused {
     pub state: NodeState,
     /// Why (e.g. "state of another kind", "the sensor has 208 channels, the state 192").
     pub reason: String,
+    /// The replacement cannot take the node over at all ([`StateRefused::refuse_swap`]): the
+    /// swap is refused and the replaced instance goes on. `false`: the replacement starts
+    /// afresh ([`StateRefused::new`]).
+    pub swap_refused: bool,
 }
 
 impl StateRefused {
+    /// The replacement does not take this state over and starts afresh; the swap goes on.
     pub fn new(state: NodeState, reason: impl Into<String>) -> StateRefused {
-        StateRefused { state, reason: reason.into() }
+        StateRefused { state, reason: reason.into(), swap_refused: false }
+    }
+
+    /// The replacement cannot go on from this state, and starting afresh would break what
+    /// the node already emitted (a source's time and sequence numbers would go back, a
+    /// recording would be replaced): the swap is refused with `reason`. The engine gives the
+    /// state back to the running instance ([`Source::import_state`] and the like, which must
+    /// take its own state back), which keeps running; the replacement is stopped.
+    pub fn refuse_swap(state: NodeState, reason: impl Into<String>) -> StateRefused {
+        StateRefused { state, reason: reason.into(), swap_refused: true }
     }
 }
 
 impl std::fmt::Debug for StateRefused {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("StateRefused").field("reason", &self.reason).finish_non_exhaustive()
+        f.debug_struct("StateRefused")
+            .field("reason", &self.reason)
+            .field("swap_refused", &self.swap_refused)
+            .finish_non_exhaustive()
     }
 }
 
@@ -96,13 +118,16 @@ pub trait Source: Send {
     }
     /// Hot swap: this instance is being replaced. Returns what it learned from the stream
     /// (references, tares, noise estimates, buffered input) for the replacement; called after
-    /// its last call and before its `stop`. Default: nothing to hand over.
+    /// its last call and before its `stop` (when the replacement refuses the swap, the state
+    /// comes back through `import_state` and this instance goes on). Default: nothing.
     fn export_state(&mut self, _ctx: &mut Context) -> Option<NodeState> {
         None
     }
     /// Hot swap: takes over the state exported by the replaced instance, before this
     /// instance's first call. Returns it (with the reason) when it is not of a type this node
-    /// knows or does not fit; it then goes back to the replaced instance. Default: refuse.
+    /// knows or does not fit; it then goes back to the replaced instance. Returned with
+    /// [`StateRefused::refuse_swap`], the swap is refused and the replaced instance goes on,
+    /// so an instance must take its own exported state back. Default: refuse (start afresh).
     fn import_state(&mut self, _ctx: &mut Context, state: NodeState) -> Result<(), StateRefused> {
         refuse(state)
     }
@@ -139,13 +164,16 @@ pub trait Processor: Send {
     }
     /// Hot swap: this instance is being replaced. Returns what it learned from the stream
     /// (references, tares, noise estimates, buffered input) for the replacement; called after
-    /// its last call and before its `stop`. Default: nothing to hand over.
+    /// its last call and before its `stop` (when the replacement refuses the swap, the state
+    /// comes back through `import_state` and this instance goes on). Default: nothing.
     fn export_state(&mut self, _ctx: &mut Context) -> Option<NodeState> {
         None
     }
     /// Hot swap: takes over the state exported by the replaced instance, before this
     /// instance's first call. Returns it (with the reason) when it is not of a type this node
-    /// knows or does not fit; it then goes back to the replaced instance. Default: refuse.
+    /// knows or does not fit; it then goes back to the replaced instance. Returned with
+    /// [`StateRefused::refuse_swap`], the swap is refused and the replaced instance goes on,
+    /// so an instance must take its own exported state back. Default: refuse (start afresh).
     fn import_state(&mut self, _ctx: &mut Context, state: NodeState) -> Result<(), StateRefused> {
         refuse(state)
     }
@@ -166,13 +194,16 @@ pub trait Sink: Send {
     }
     /// Hot swap: this instance is being replaced. Returns what it learned from the stream
     /// (references, tares, noise estimates, buffered input) for the replacement; called after
-    /// its last call and before its `stop`. Default: nothing to hand over.
+    /// its last call and before its `stop` (when the replacement refuses the swap, the state
+    /// comes back through `import_state` and this instance goes on). Default: nothing.
     fn export_state(&mut self, _ctx: &mut Context) -> Option<NodeState> {
         None
     }
     /// Hot swap: takes over the state exported by the replaced instance, before this
     /// instance's first call. Returns it (with the reason) when it is not of a type this node
-    /// knows or does not fit; it then goes back to the replaced instance. Default: refuse.
+    /// knows or does not fit; it then goes back to the replaced instance. Returned with
+    /// [`StateRefused::refuse_swap`], the swap is refused and the replaced instance goes on,
+    /// so an instance must take its own exported state back. Default: refuse (start afresh).
     fn import_state(&mut self, _ctx: &mut Context, state: NodeState) -> Result<(), StateRefused> {
         refuse(state)
     }

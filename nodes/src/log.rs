@@ -27,6 +27,13 @@
 //! input: forces of one name from two `forces` edges (two correctors with the same `name`)
 //! stop the graph at the first clash, with the rows recorded so far kept.
 //!
+//! Nothing recorded is replaced by the run itself: a logger does not start on the file another
+//! logger of this process is writing (a hot swap's replacement, or a restart after a panic,
+//! with the same `path` and `overwrite = true` would truncate the session's recording), and a
+//! hot swap onto the file the running logger writes is refused at the switch, with the reason;
+//! a replacement with another `path` starts a new file from the swap on, the replaced one
+//! closes its own with every row it received.
+//!
 //! Images are logged at the size of the first image (the reconstructor's `image_nx` x
 //! `image_ny`); one recording holds one size. The logger's own `image_nx` / `image_ny` are
 //! optional: given, they must match the images (a mismatch stops the graph naming them), and
@@ -34,13 +41,15 @@
 //! since a SWMR file cannot get the image dataset after it is created.
 
 use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicU64, Ordering};
 
 use serde::Deserialize;
 use skinflow_contact::correct::ForceFlags;
 use skinflow_core::params::positive;
 use skinflow_core::{
-    BuildContext, Context, Inputs, KindInfo, NodeError, NodeImpl, NodeParams, ParamDoc, ParamError, PortSpec, Registry,
-    Role, Sink, Wiring, typed,
+    BuildContext, Context, Inputs, KindInfo, NodeError, NodeImpl, NodeParams, NodeState, ParamDoc, ParamError,
+    PortSpec, Registry, Role, Sink, StateRefused, Wiring, typed,
 };
 use skinflow_record::error::RecordError;
 use skinflow_record::layout::force_flags;
@@ -135,6 +144,8 @@ const SYNC: usize = 6;
 
 pub struct Logger {
     path: PathBuf,
+    /// This instance among the process's loggers ([`OPEN`], hot-swap hand-over).
+    id: u64,
     opts: Option<WriterOptions>,
     /// `image_nx`, `image_ny` as given.
     image_size: (Option<usize>, Option<usize>),
@@ -145,6 +156,31 @@ pub struct Logger {
     unlisted: Vec<(String, u64)>,
     /// Per `forces` edge (lane): the logged strategy (its writer index) it delivered last.
     lane_strategy: Vec<Option<usize>>,
+}
+
+/// The recordings this process's loggers are writing: (absolute path, logger id).
+static OPEN: Mutex<Vec<(PathBuf, u64)>> = Mutex::new(Vec::new());
+
+fn open_files() -> std::sync::MutexGuard<'static, Vec<(PathBuf, u64)>> {
+    OPEN.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
+}
+
+/// `path` made absolute (not resolving links), as [`OPEN`] keys it.
+fn key(path: &Path) -> PathBuf {
+    std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf())
+}
+
+/// Why a logger may not write a file while the recording there is being written (follows the
+/// file's name).
+const BEING_WRITTEN: &str = "the recording a running logger of this run is writing: writing it again would \
+     replace what it recorded; give this logger another path (a swapped-in logger records from the swap on), or \
+     restart the graph";
+
+/// What a logger hands over in a hot swap: which file it writes, if it has started it.
+struct LoggerState {
+    id: u64,
+    path: PathBuf,
+    writing: bool,
 }
 
 fn io(path: &Path, e: impl std::fmt::Display) -> NodeError {
@@ -201,8 +237,10 @@ impl Logger {
             sync: false,
             force_strategies: p.strategies,
         };
+        static IDS: AtomicU64 = AtomicU64::new(0);
         Ok(Logger {
             path,
+            id: IDS.fetch_add(1, Ordering::Relaxed),
             opts: Some(o),
             image_size: (p.image_nx, p.image_ny),
             writer: None,
@@ -233,7 +271,14 @@ impl Logger {
             } else if o.streams.force_strategies.is_empty() {
                 return Err(missing_strategies(inputs).fatal());
             }
+            let mut open = open_files();
+            let k = key(&self.path);
+            if open.iter().any(|(p, id)| *p == k && *id != self.id) {
+                return Err(io(&self.path, BEING_WRITTEN).fatal());
+            }
             let w = RecordingWriter::create(&self.path, &o).map_err(|e| record_error(&self.path, e).fatal())?;
+            open.push((k, self.id));
+            drop(open);
             self.lane_strategy = vec![None; inputs.lanes(FORCES)];
             tracing::info!(path = %self.path.display(), "recording");
             self.writer = Some(w);
@@ -247,6 +292,10 @@ impl Sink for Logger {
         // Fail before any data flows when the file cannot be created.
         if let Some(why) = crate::output::unwritable(&self.path) {
             return Err(io(&self.path, why));
+        }
+        let k = key(&self.path);
+        if open_files().iter().any(|(p, id)| *p == k && *id != self.id) {
+            return Err(io(&self.path, BEING_WRITTEN));
         }
         let overwrite = self.opts.as_ref().is_some_and(|o| o.overwrite);
         if self.path.exists() && !overwrite {
@@ -365,7 +414,9 @@ impl Sink for Logger {
             );
         }
         if let Some(w) = self.writer.take() {
-            let s = w.close().map_err(|e| record_error(&self.path, e))?;
+            let closed = w.close();
+            self.release();
+            let s = closed.map_err(|e| record_error(&self.path, e))?;
             tracing::info!(
                 node = ctx.id(), path = %self.path.display(), eit = s.eit_rows, pressure = s.pressure_rows, truth = s.truth_rows,
                 images = s.image_rows, contacts = s.contacts_rows, sync = s.sync_rows, forces = s.force_rows,
@@ -373,6 +424,34 @@ impl Sink for Logger {
             );
         }
         Ok(())
+    }
+
+    fn export_state(&mut self, _ctx: &mut Context) -> Option<NodeState> {
+        Some(Box::new(LoggerState { id: self.id, path: key(&self.path), writing: self.writer.is_some() }))
+    }
+
+    /// Refuses the swap when the running logger writes the file this one would write;
+    /// otherwise there is nothing to take over (each logger writes its own file).
+    fn import_state(&mut self, _ctx: &mut Context, state: NodeState) -> Result<(), StateRefused> {
+        let s = state.downcast::<LoggerState>().map_err(|s| StateRefused::new(s, "not a logger's state"))?;
+        if s.id != self.id && s.writing && s.path == key(&self.path) {
+            let why = format!("{}: {BEING_WRITTEN}", self.path.display());
+            return Err(StateRefused::refuse_swap(s, why));
+        }
+        Ok(())
+    }
+}
+
+impl Logger {
+    /// Takes this logger's file off the list of recordings being written.
+    fn release(&self) {
+        open_files().retain(|(_, id)| *id != self.id);
+    }
+}
+
+impl Drop for Logger {
+    fn drop(&mut self) {
+        self.release();
     }
 }
 
@@ -501,7 +580,58 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
 
 #[cfg(test)]
 mod tests {
+    use skinflow_core::Mode;
+
     use super::*;
+
+    /// A logger of `params` (TOML) in a graph of directory `dir`.
+    fn logger(dir: &Path, params: &str) -> Logger {
+        let ctx = BuildContext { base_dir: dir.to_path_buf(), mode: Mode::Lockstep, node_id: "log".into() };
+        Logger::new(toml::from_str(params).unwrap(), &ctx).unwrap()
+    }
+
+    fn temp_dir(name: &str) -> PathBuf {
+        let d = std::env::temp_dir().join(format!("skinflow-log-{}-{name}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        std::fs::create_dir_all(&d).unwrap();
+        d
+    }
+
+    #[test]
+    fn a_swap_onto_the_file_the_running_logger_writes_is_refused() {
+        let d = temp_dir("swap");
+        let ctx = &mut Context::detached("log", Mode::Lockstep);
+        let old = logger(&d, "path = \"rec.h5\"");
+        let mut same = logger(&d, "path = \"rec.h5\"\noverwrite = true\nflush_interval_s = 0.5");
+        // Writing: the replacement would truncate it.
+        let writing = LoggerState { id: old.id, path: key(&d.join("rec.h5")), writing: true };
+        let refused = same.import_state(ctx, Box::new(writing)).unwrap_err();
+        assert!(refused.swap_refused);
+        assert_eq!(refused.reason, format!("{}: {BEING_WRITTEN}", d.join("rec.h5").display()));
+        // Its own state back, a file not started yet, or another file: nothing to refuse.
+        let mut old = old;
+        old.import_state(ctx, refused.state).unwrap();
+        let idle = LoggerState { id: old.id, path: key(&d.join("rec.h5")), writing: false };
+        same.import_state(ctx, Box::new(idle)).unwrap();
+        let other = LoggerState { id: old.id, path: key(&d.join("other.h5")), writing: true };
+        same.import_state(ctx, Box::new(other)).unwrap();
+    }
+
+    #[test]
+    fn a_logger_does_not_start_on_a_file_another_logger_is_writing() {
+        let d = temp_dir("start");
+        let ctx = &mut Context::detached("log", Mode::Lockstep);
+        let path = d.join("rec.h5");
+        let mut first = logger(&d, "path = \"rec.h5\"\noverwrite = true");
+        let mut second = logger(&d, "path = \"rec.h5\"\noverwrite = true");
+        first.start(ctx).unwrap();
+        open_files().push((key(&path), first.id)); // as its first message does
+        let e = second.start(ctx).unwrap_err().to_string();
+        assert_eq!(e, format!("{}: {BEING_WRITTEN}", path.display()));
+        drop(first);
+        second.start(ctx).expect("free once the first logger is gone");
+        assert!(!open_files().iter().any(|(p, _)| *p == key(&path)));
+    }
 
     #[test]
     fn a_logged_strategy_name_belongs_to_one_forces_edge_at_a_time() {

@@ -4,6 +4,13 @@
 //! when present, goes out first on `reference`. With `loop = true` the recording repeats,
 //! its times shifted so the clock keeps increasing.
 //!
+//! Hot swap: a replacement reading the same recording goes on where the running instance
+//! stopped (its read position, loop offset and sequence numbers), at its own `speed` from the
+//! last message sent, and with its own `loop`. A replacement reading another file (or the same
+//! path rewritten since the running one opened it) refuses the swap: it would start at the
+//! recording's first row, and the times and sequence numbers it sends would go back, which
+//! `sync`, `compare` and a recording made downstream cannot take.
+//!
 //! ```toml
 //! params = { path = "../out/single-contact.h5", speed = 1.0, loop = false }
 //! ```
@@ -15,8 +22,8 @@ use std::sync::Arc;
 use serde::Deserialize;
 use skinflow_core::params::non_negative;
 use skinflow_core::{
-    Context, Header, KindInfo, Message, NodeError, NodeImpl, NodeParams, Outputs, ParamDoc, ParamError, PortSpec,
-    Recycler, Registry, Role, Source, SourcePoll, typed,
+    Context, Header, KindInfo, Message, NodeError, NodeImpl, NodeParams, NodeState, Outputs, ParamDoc, ParamError,
+    PortSpec, Recycler, Registry, Role, Source, SourcePoll, StateRefused, typed,
 };
 use skinflow_record::read::Recording;
 
@@ -58,6 +65,8 @@ const TRUTH: usize = 2;
 const REFERENCE: usize = 3;
 
 pub struct Replay {
+    /// The recording's file, as resolved (a swap goes on only from the same file).
+    path: PathBuf,
     rec: Arc<Recording>,
     /// (availability time, item), in delivery order.
     order: Vec<(f64, Item)>,
@@ -71,7 +80,29 @@ pub struct Replay {
     sent_reference: bool,
     pressure_seq: u64,
     truth_seq: u64,
+    /// Pacing: the recording time (availability time + offset) that is sent at graph time
+    /// `anchor.0` ns; later ones follow at `speed`. `(0, t_first)` from the start, moved by a
+    /// hot swap to the last message the replaced instance sent.
+    anchor: (u64, f64),
+    /// Graph time (ns) and recording time of the last message sent.
+    last: Option<(u64, f64)>,
     frames: Recycler<EitFrame>,
+}
+
+/// Where a replay is, handed to its replacement in a hot swap.
+struct ReplayState {
+    path: PathBuf,
+    /// The recording's delivery order, to tell a file rewritten since it was opened.
+    events: usize,
+    t_first: f64,
+    span_s: f64,
+    next: usize,
+    offset_s: f64,
+    sent_reference: bool,
+    pressure_seq: u64,
+    truth_seq: u64,
+    anchor: (u64, f64),
+    last: Option<(u64, f64)>,
 }
 
 /// Median interval of a time series (s), or `fallback` with fewer than two times.
@@ -85,7 +116,8 @@ pub(crate) fn median_period(t: &[f64], fallback: f64) -> f64 {
 }
 
 impl Replay {
-    pub fn new(rec: Recording, speed: f64, repeat: bool) -> Replay {
+    /// `path`: the file `rec` was read from (a hot swap goes on only from the same file).
+    pub fn new(path: PathBuf, rec: Recording, speed: f64, repeat: bool) -> Replay {
         let mut order: Vec<(f64, u8, Item)> = Vec::new();
         if let Some(e) = &rec.eit {
             let half = 0.5 * median_period(&e.t_s, 1.0 / 1.3);
@@ -102,6 +134,7 @@ impl Replay {
         let t_first = order.first().map_or(0.0, |o| o.0);
         let span_s = order.last().map_or(0.0, |o| o.0) - t_first;
         Replay {
+            path,
             order: order.into_iter().map(|(t, _, i)| (t, i)).collect(),
             rec: Arc::new(rec),
             next: 0,
@@ -113,8 +146,40 @@ impl Replay {
             sent_reference: false,
             pressure_seq: 0,
             truth_seq: 0,
+            anchor: (0, t_first),
+            last: None,
             frames: Recycler::new(64, EitFrame::default),
         }
+    }
+
+    /// The graph time (ns) at which recording time `r` (availability time + offset) is sent.
+    fn due_ns(&self, r: f64) -> u64 {
+        self.anchor.0 + ns((r - self.anchor.1) / self.speed)
+    }
+
+    /// Why this instance cannot go on from `s`, if it cannot.
+    fn cannot_continue(&self, s: &ReplayState) -> Option<String> {
+        let tail = "it would start again at the recording's first row, and the times and sequence numbers it \
+                    sends would go back; a swap may change `speed` and `loop` only: restart the graph to replay \
+                    another recording";
+        if s.path != self.path {
+            return Some(format!(
+                "the replacement replays {}, the running replay {}: {tail}",
+                self.path.display(),
+                s.path.display()
+            ));
+        }
+        if (s.events, s.t_first, s.span_s) != (self.order.len(), self.t_first, self.span_s) {
+            return Some(format!(
+                "{} changed since the running replay opened it ({} events over {:.3} s, now {} over {:.3} s): {tail}",
+                self.path.display(),
+                s.events,
+                s.span_s,
+                self.order.len(),
+                self.span_s
+            ));
+        }
+        None
     }
 }
 
@@ -142,9 +207,17 @@ impl Source for Replay {
         }
         let (avail, item) = self.order[self.next];
         self.next += 1;
-        if self.speed > 0.0 && !ctx.sleep_until_ns(ns((avail + self.offset_s - self.t_first) / self.speed)) {
-            return Ok(SourcePoll::Finished);
-        }
+        let r = avail + self.offset_s;
+        let sent_ns = if self.speed > 0.0 {
+            let due = self.due_ns(r);
+            if !ctx.sleep_until_ns(due) {
+                return Ok(SourcePoll::Finished);
+            }
+            due
+        } else {
+            ctx.now_ns()
+        };
+        self.last = Some((sent_ns, r));
         let rec = &self.rec;
         let off = self.offset_s;
         match item {
@@ -189,6 +262,38 @@ impl Source for Replay {
         }
         Ok(SourcePoll::Emitted)
     }
+
+    fn export_state(&mut self, _ctx: &mut Context) -> Option<NodeState> {
+        Some(Box::new(ReplayState {
+            path: self.path.clone(),
+            events: self.order.len(),
+            t_first: self.t_first,
+            span_s: self.span_s,
+            next: self.next,
+            offset_s: self.offset_s,
+            sent_reference: self.sent_reference,
+            pressure_seq: self.pressure_seq,
+            truth_seq: self.truth_seq,
+            anchor: self.anchor,
+            last: self.last,
+        }))
+    }
+
+    fn import_state(&mut self, _ctx: &mut Context, state: NodeState) -> Result<(), StateRefused> {
+        let s = state.downcast::<ReplayState>().map_err(|s| StateRefused::new(s, "not a replay's state"))?;
+        if let Some(why) = self.cannot_continue(&s) {
+            return Err(StateRefused::refuse_swap(s, why));
+        }
+        self.next = s.next;
+        self.offset_s = s.offset_s;
+        self.sent_reference = s.sent_reference;
+        self.pressure_seq = s.pressure_seq;
+        self.truth_seq = s.truth_seq;
+        // Paced from the last message sent: the next one follows it at this instance's speed.
+        self.anchor = s.last.map_or(s.anchor, |(sent_ns, r)| (sent_ns, r));
+        self.last = s.last;
+        Ok(())
+    }
 }
 
 pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::DuplicateKind> {
@@ -208,7 +313,250 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
         |p: ReplayParams, ctx| {
             let path = ctx.resolve(&p.path);
             let rec = Recording::open(&path).map_err(NodeError::other)?; // names the file
-            Ok(NodeImpl::Source(Box::new(Replay::new(rec, p.speed, p.repeat))))
+            Ok(NodeImpl::Source(Box::new(Replay::new(
+                std::path::absolute(&path).unwrap_or(path),
+                rec,
+                p.speed,
+                p.repeat,
+            ))))
         },
     ))
+}
+
+/// Hot swap of a source mid-stream, deterministically: the graph runs in lockstep behind a
+/// gate that holds the source after some messages; the swap is queued while it is held, then
+/// the gate opens. Shared by the `replay` and `sim` tests.
+#[cfg(test)]
+pub(crate) mod swap_test {
+    use std::sync::atomic::{AtomicBool, AtomicU64, Ordering::SeqCst};
+    use std::sync::{Arc, Mutex};
+    use std::time::{Duration, Instant};
+
+    use serde::Deserialize;
+    use skinflow_core::graph::SourceFile;
+    use skinflow_core::{
+        BuildContext, Context, GraphSpec, NodeError, NodeImpl, NodeParams, NodeState, Outputs, Params, RunOptions,
+        RunReport, RunningGraph, Source, SourcePoll, StateRefused, typed,
+    };
+
+    use crate::payload::{EitFrame, PressureSample, Truth};
+    use crate::pipeline::{Captured, registry_with_capture};
+
+    #[derive(Default)]
+    struct Gate {
+        /// Messages let through before holding.
+        limit: AtomicU64,
+        open: AtomicBool,
+        sent: AtomicU64,
+        /// Polls answered while held.
+        held: AtomicU64,
+    }
+
+    /// A source behind the gate; hands its inner source's state over in a swap.
+    struct Gated {
+        inner: Box<dyn Source>,
+        gate: Arc<Gate>,
+    }
+
+    impl Source for Gated {
+        fn start(&mut self, ctx: &mut Context) -> Result<(), NodeError> {
+            self.inner.start(ctx)
+        }
+        fn poll(&mut self, ctx: &mut Context, out: &mut Outputs) -> Result<SourcePoll, NodeError> {
+            let g = &self.gate;
+            if !g.open.load(SeqCst) && g.sent.load(SeqCst) >= g.limit.load(SeqCst) {
+                g.held.fetch_add(1, SeqCst);
+                std::thread::yield_now();
+                return Ok(SourcePoll::Idle);
+            }
+            let r = self.inner.poll(ctx, out)?;
+            if r == SourcePoll::Emitted {
+                g.sent.fetch_add(1, SeqCst);
+            }
+            Ok(r)
+        }
+        fn stop(&mut self, ctx: &mut Context) -> Result<(), NodeError> {
+            self.inner.stop(ctx)
+        }
+        fn export_state(&mut self, ctx: &mut Context) -> Option<NodeState> {
+            self.inner.export_state(ctx)
+        }
+        fn import_state(&mut self, ctx: &mut Context, state: NodeState) -> Result<(), StateRefused> {
+            self.inner.import_state(ctx, state)
+        }
+    }
+
+    /// The params of the kind behind the gate, as they are.
+    #[derive(Deserialize)]
+    struct Pass {
+        #[serde(flatten)]
+        table: toml::Table,
+    }
+    impl NodeParams for Pass {}
+
+    /// What a captured message was: its stream, `seq` and `t_ns`.
+    pub type Sent = (&'static str, u64, u64);
+
+    /// Runs source kind `kind` (`params`, an inline-table body) in lockstep into a capture
+    /// sink, every output connected. With `swap` (after this many messages, to these params),
+    /// holds the source there, queues a swap to the same kind and opens the gate. Returns
+    /// what was captured, in order, and the report.
+    pub fn run(kind: &str, params: &str, swap: Option<(u64, &str)>) -> (Vec<Sent>, RunReport) {
+        let gate = Arc::new(Gate::default());
+        gate.limit.store(swap.map_or(u64::MAX, |s| s.0), SeqCst);
+        let captured: Captured = Arc::new(Mutex::new(Vec::new()));
+        let mut reg = registry_with_capture(captured.clone());
+        let inner = reg.get(kind).unwrap().clone();
+        let mut info = inner.info().clone();
+        info.name = "gated".into();
+        let outputs: Vec<String> = info.outputs.iter().map(|p| p.name.to_string()).collect();
+        let g = gate.clone();
+        reg.register(typed(info, move |p: Pass, ctx: &BuildContext| {
+            match inner.build(&Params::from_table(p.table), ctx)? {
+                NodeImpl::Source(inner) => Ok(NodeImpl::Source(Box::new(Gated { inner, gate: g.clone() }))),
+                _ => unreachable!("a source kind"),
+            }
+        }))
+        .unwrap();
+        let edges: String = outputs
+            .iter()
+            .map(|o| format!("[[edge]]\nfrom = \"src.{o}\"\nto = \"cap.in\"\ncapacity = 4096\n"))
+            .collect();
+        let graph = format!(
+            "[graph]\nmode = \"lockstep\"\n[[node]]\nid = \"src\"\nkind = \"gated\"\nparams = {{ {params} }}\n\
+             [[node]]\nid = \"cap\"\nkind = \"capture\"\n{edges}"
+        );
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+        let spec = GraphSpec::parse(SourceFile::new(dir.join("swap-test.toml"), graph), &reg).unwrap();
+        let running = RunningGraph::start(&spec).unwrap();
+        let handle = running.handle();
+        let runner = std::thread::spawn(move || running.wait(&RunOptions::default()));
+        if let Some((_, to)) = swap {
+            // Held twice: everything before the gate has run through (a lockstep pass drains).
+            let t0 = Instant::now();
+            while gate.held.load(SeqCst) < 2 {
+                assert!(t0.elapsed() < Duration::from_secs(300), "the source was never held");
+                std::thread::sleep(Duration::from_millis(5));
+            }
+            let table: toml::Table = format!("p = {{ {to} }}").parse().unwrap();
+            let params = Params::from_table(table["p"].as_table().unwrap().clone());
+            handle.swap("src", reg.get("gated").unwrap().clone(), params).unwrap();
+            gate.open.store(true, SeqCst);
+        }
+        let report = runner.join().unwrap();
+        assert!(report.failures.is_empty(), "{:?}", report.failures);
+        let rows = captured.lock().unwrap();
+        let sent = rows
+            .iter()
+            .flatten()
+            .map(|m| {
+                let stream = if m.get::<EitFrame>().is_some() {
+                    "eit"
+                } else if m.get::<PressureSample>().is_some() {
+                    "pressure"
+                } else if m.get::<Truth>().is_some() {
+                    "truth"
+                } else {
+                    "other"
+                };
+                (stream, m.header.seq, m.header.t_ns)
+            })
+            .collect();
+        (sent, report)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::path::{Path, PathBuf};
+
+    use skinflow_core::{Context, Mode, Source};
+    use skinflow_eit::Sensor;
+    use skinflow_record::read::Recording;
+    use skinflow_record::write::{RecordingWriter, Streams, WriterOptions};
+
+    use super::swap_test::run;
+    use super::{Replay, ReplayState};
+
+    /// A recording of `frames` EIT frames at 10 Hz and pressure at 50 Hz over the same time,
+    /// in a fresh directory; returns its path.
+    fn recording(name: &str, frames: u64) -> PathBuf {
+        let dir = std::env::temp_dir().join(format!("skinflow-replay-{}-{name}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("rec.h5");
+        let sensor = Sensor::paper_100mm();
+        let mut o = WriterOptions::new(sensor.toml.clone());
+        o.streams = Streams { eit: true, pressure: true, ..Streams::default() };
+        let mut w = RecordingWriter::create(&path, &o).unwrap();
+        let v = vec![0.5; sensor.measurement_count()];
+        for k in 0..frames {
+            w.append_eit(0.05 + 0.1 * k as f64, k, &v).unwrap();
+        }
+        for k in 0..frames * 5 {
+            w.append_pressure(0.02 * k as f64, 0.01 * k as f64).unwrap();
+        }
+        w.close().unwrap();
+        path
+    }
+
+    fn params(path: &Path, rest: &str) -> String {
+        format!("path = {:?}{rest}", path.to_str().unwrap())
+    }
+
+    #[test]
+    fn a_swapped_replay_goes_on_where_the_replaced_one_stopped() {
+        let rec = recording("continue", 20);
+        let (plain, _) = run("replay", &params(&rec, ", speed = 0.0"), None);
+        assert_eq!(plain.len(), 120, "20 frames and 100 samples");
+        // Another speed (and loop off, as before): the stream goes on from message 37, once.
+        let (swapped, r) = run("replay", &params(&rec, ", speed = 0.0"), Some((37, &params(&rec, ", speed = 4.0"))));
+        assert_eq!(r.stats.node("src").unwrap().swaps, 1);
+        assert_eq!(swapped, plain);
+    }
+
+    #[test]
+    fn a_replay_of_another_recording_refuses_the_swap_and_the_running_one_goes_on() {
+        let (a, b) = (recording("refuse-a", 20), recording("refuse-b", 20));
+        let (plain, _) = run("replay", &params(&a, ", speed = 0.0"), None);
+        let (refused, r) = run("replay", &params(&a, ", speed = 0.0"), Some((37, &params(&b, ", speed = 0.0"))));
+        assert_eq!(r.stats.node("src").unwrap().swaps, 0);
+        assert_eq!(refused, plain);
+
+        // The refusal, as the engine gets it.
+        let ctx = &mut Context::detached("replay", Mode::Lockstep);
+        let open = |p: &Path| Replay::new(p.to_path_buf(), Recording::open(p).unwrap(), 0.0, false);
+        let (mut old, mut new) = (open(&a), open(&b));
+        let state = old.export_state(ctx).unwrap();
+        let refused = new.import_state(ctx, state).unwrap_err();
+        assert!(refused.swap_refused);
+        assert_eq!(
+            refused.reason,
+            format!(
+                "the replacement replays {}, the running replay {}: it would start again at the recording's first row, \
+                 and the times and sequence numbers it sends would go back; a swap may change `speed` and `loop` \
+                 only: restart the graph to replay another recording",
+                b.display(),
+                a.display()
+            )
+        );
+        old.import_state(ctx, refused.state).expect("the running replay takes its own state back");
+    }
+
+    #[test]
+    fn the_replacement_paces_from_the_last_message_sent_at_its_own_speed() {
+        let rec = recording("pace", 20);
+        let ctx = &mut Context::detached("replay", Mode::Realtime);
+        let mut old = Replay::new(rec.clone(), Recording::open(&rec).unwrap(), 2.0, false);
+        // As if it had sent the message of recording time 1.2 s at graph time 3 s.
+        old.next = 30;
+        old.last = Some((3_000_000_000, 1.2));
+        let mut new = Replay::new(rec.clone(), Recording::open(&rec).unwrap(), 4.0, false);
+        let state = old.export_state(ctx).unwrap();
+        assert_eq!(state.downcast_ref::<ReplayState>().unwrap().last, Some((3_000_000_000, 1.2)));
+        new.import_state(ctx, state).unwrap();
+        assert_eq!(new.next, 30);
+        // 0.4 s of recording later, at speed 4: 0.1 s after it.
+        assert_eq!(new.due_ns(1.6), 3_100_000_000);
+    }
 }

@@ -7,14 +7,19 @@
 //! params = { scene = "scenes/single-contact.toml", seed = 1 }
 //! ```
 //! Outputs: `eit` (eit_frame), `pressure` (pressure), `truth` (truth).
+//!
+//! Hot swap: a replacement of the same scene file (unchanged since the running instance read
+//! it) and seed takes the running simulation over and goes on where it stopped, paced from the
+//! last event sent by its own `pacing`. Another scene or seed refuses the swap: the simulation
+//! would start again at time 0, and the times and sequence numbers it sends would go back.
 
 use std::path::PathBuf;
 use std::sync::Arc;
 
 use serde::Deserialize;
 use skinflow_core::{
-    Context, Header, KindInfo, Message, NodeError, NodeImpl, NodeParams, Outputs, ParamDoc, PortSpec, Registry, Role,
-    Source, SourcePoll, typed,
+    Context, Header, KindInfo, Message, NodeError, NodeImpl, NodeParams, NodeState, Outputs, ParamDoc, PortSpec,
+    Registry, Role, Source, SourcePoll, StateRefused, typed,
 };
 use skinflow_sim::{Pacing, Scene, SimEvent, Simulator};
 
@@ -53,23 +58,77 @@ const PRESSURE: usize = 1;
 const TRUTH: usize = 2;
 
 pub struct Sim {
+    /// What the simulation is: a swap goes on only from the same.
+    identity: Identity,
+    paced: bool,
+    /// `None` only once handed over to a replacement (the engine then stops this instance).
+    stream: Option<Stream>,
+}
+
+/// The scene file (as resolved), its text when read, and the seed.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Identity {
+    pub scene: PathBuf,
+    pub text: String,
+    pub seed: u64,
+}
+
+/// The running simulation and where it is: what a hot swap hands over.
+struct Stream {
     sim: Simulator,
     order: AvailabilityOrder<SimEvent>,
-    paced: bool,
     pressure_seq: u64,
     truth_seq: u64,
+    /// Pacing: simulated time `anchor.1` is sent at graph time `anchor.0` ns, later ones in
+    /// real time after it. `(0, 0.0)` from the start, moved by a hot swap to the last event
+    /// the replaced instance sent.
+    anchor: (u64, f64),
+    /// Graph time (ns) and simulated availability time of the last event sent.
+    last: Option<(u64, f64)>,
+}
+
+/// A sim's hand-over.
+struct SimState {
+    identity: Identity,
+    stream: Stream,
 }
 
 impl Sim {
-    pub fn new(scene: &Scene, seed: u64, pacing: Option<&str>) -> Result<Sim, NodeError> {
-        let sim = Simulator::new(scene, seed).map_err(|e| NodeError::msg(format!("simulator: {e}")))?;
+    pub fn new(scene: &Scene, identity: Identity, pacing: Option<&str>) -> Result<Sim, NodeError> {
+        let sim = Simulator::new(scene, identity.seed).map_err(|e| NodeError::msg(format!("simulator: {e}")))?;
         let rates = sim.rates();
         let paced = match pacing {
             Some("fast") => false,
             Some(_) => true,
             None => rates.pacing == Pacing::Realtime,
         };
-        Ok(Sim { order: AvailabilityOrder::new(1.0 / rates.eit_fps), sim, paced, pressure_seq: 0, truth_seq: 0 })
+        let stream = Stream {
+            order: AvailabilityOrder::new(1.0 / rates.eit_fps),
+            sim,
+            pressure_seq: 0,
+            truth_seq: 0,
+            anchor: (0, 0.0),
+            last: None,
+        };
+        Ok(Sim { identity, paced, stream: Some(stream) })
+    }
+
+    /// Why this instance cannot go on from a simulation of `other`, if it cannot.
+    fn cannot_continue(&self, other: &Identity) -> Option<String> {
+        let me = &self.identity;
+        let what = if me.scene != other.scene {
+            format!("the replacement simulates {}, the running sim {}", me.scene.display(), other.scene.display())
+        } else if me.text != other.text {
+            format!("{} changed since the running sim read it", me.scene.display())
+        } else if me.seed != other.seed {
+            format!("the replacement's seed is {}, the running sim's {}", me.seed, other.seed)
+        } else {
+            return None;
+        };
+        Some(format!(
+            "{what}: the simulation would start again at time 0, and the times and sequence numbers it sends would \
+             go back; a swap may change `pacing` only: restart the graph to simulate another scene or seed"
+        ))
     }
 }
 
@@ -79,8 +138,10 @@ fn ns(t_s: f64) -> u64 {
 
 impl Source for Sim {
     fn poll(&mut self, ctx: &mut Context, out: &mut Outputs) -> Result<SourcePoll, NodeError> {
-        let sim = &mut self.sim;
-        let next = self.order.next(|| {
+        let st =
+            self.stream.as_mut().ok_or_else(|| NodeError::msg("polled after handing its simulation over").fatal())?;
+        let sim = &mut st.sim;
+        let next = st.order.next(|| {
             sim.next_event().map(|e| {
                 e.map(|e| match &e {
                     SimEvent::Eit { t_s, .. } => (*t_s, true, e),
@@ -91,23 +152,30 @@ impl Source for Sim {
         let Some((avail_s, event)) = next.map_err(|e| NodeError::msg(format!("simulator: {e}")).fatal())? else {
             return Ok(SourcePoll::Finished);
         };
-        if self.paced && !ctx.sleep_until_ns(ns(avail_s)) {
-            return Ok(SourcePoll::Finished);
-        }
+        let sent_ns = if self.paced {
+            let due = st.anchor.0 + ns(avail_s - st.anchor.1);
+            if !ctx.sleep_until_ns(due) {
+                return Ok(SourcePoll::Finished);
+            }
+            due
+        } else {
+            ctx.now_ns()
+        };
+        st.last = Some((sent_ns, avail_s));
         let origin = ctx.index();
         match event {
             SimEvent::Eit { t_s, seq, v } => {
                 out.send(EIT, Message::new(Header { seq, t_ns: ns(t_s), origin }, EitFrame { v }))?;
             }
             SimEvent::Pressure { t_s, kpa } => {
-                self.pressure_seq += 1;
+                st.pressure_seq += 1;
                 out.send(
                     PRESSURE,
-                    Message::new(Header { seq: self.pressure_seq, t_ns: ns(t_s), origin }, PressureSample { kpa }),
+                    Message::new(Header { seq: st.pressure_seq, t_ns: ns(t_s), origin }, PressureSample { kpa }),
                 )?;
             }
             SimEvent::Truth { t_s, contacts } => {
-                self.truth_seq += 1;
+                st.truth_seq += 1;
                 let contacts = contacts
                     .iter()
                     .map(|c| TruthContact {
@@ -118,10 +186,29 @@ impl Source for Sim {
                     })
                     .collect();
                 let payload = Arc::new(Truth { contacts });
-                out.send(TRUTH, Message::from_arc(Header { seq: self.truth_seq, t_ns: ns(t_s), origin }, payload))?;
+                out.send(TRUTH, Message::from_arc(Header { seq: st.truth_seq, t_ns: ns(t_s), origin }, payload))?;
             }
         }
         Ok(SourcePoll::Emitted)
+    }
+
+    fn export_state(&mut self, _ctx: &mut Context) -> Option<NodeState> {
+        let stream = self.stream.take()?;
+        Some(Box::new(SimState { identity: self.identity.clone(), stream }))
+    }
+
+    fn import_state(&mut self, _ctx: &mut Context, state: NodeState) -> Result<(), StateRefused> {
+        let s = state.downcast::<SimState>().map_err(|s| StateRefused::new(s, "not a sim's state"))?;
+        if let Some(why) = self.cannot_continue(&s.identity) {
+            return Err(StateRefused::refuse_swap(s, why));
+        }
+        let SimState { mut stream, .. } = *s;
+        // Paced from the last event sent: the next one follows it in real time.
+        if let Some(last) = stream.last {
+            stream.anchor = last;
+        }
+        self.stream = Some(stream);
+        Ok(())
     }
 }
 
@@ -137,7 +224,77 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
         |p: SimParams, ctx| {
             let path = ctx.resolve(&p.scene);
             let scene = Scene::from_file(&path).map_err(NodeError::other)?; // names the file
-            Ok(NodeImpl::Source(Box::new(Sim::new(&scene, p.seed, p.pacing.as_deref())?)))
+            let text = std::fs::read_to_string(&path)
+                .map_err(|e| NodeError::Path { path: path.clone(), problem: format!("cannot read: {e}") })?;
+            let identity = Identity { scene: std::path::absolute(&path).unwrap_or(path), text, seed: p.seed };
+            Ok(NodeImpl::Source(Box::new(Sim::new(&scene, identity, p.pacing.as_deref())?)))
         },
     ))
+}
+
+#[cfg(test)]
+mod tests {
+    use std::path::{Path, PathBuf};
+
+    use skinflow_core::{Context, Mode, Source};
+    use skinflow_sim::Scene;
+
+    use super::{Identity, Sim};
+    use crate::replay::swap_test::run;
+
+    fn press() -> PathBuf {
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/press.toml")
+    }
+
+    fn params(scene: &Path, rest: &str) -> String {
+        format!("scene = {:?}{rest}", scene.to_str().unwrap())
+    }
+
+    fn sim(scene: &Path, text: &str, seed: u64) -> Sim {
+        let parsed = Scene::from_file(scene).unwrap();
+        let identity = Identity { scene: scene.to_path_buf(), text: text.to_owned(), seed };
+        Sim::new(&parsed, identity, Some("fast")).unwrap()
+    }
+
+    #[test]
+    fn a_swapped_sim_goes_on_where_the_replaced_one_stopped() {
+        let scene = press();
+        let (plain, _) = run("sim", &params(&scene, ""), None);
+        assert!(plain.iter().filter(|s| s.0 == "eit").count() >= 6, "{plain:?}");
+        // Another pacing: the simulation goes on from message 40, once.
+        let (swapped, r) = run("sim", &params(&scene, ""), Some((40, &params(&scene, ", pacing = \"fast\""))));
+        assert_eq!(r.stats.node("src").unwrap().swaps, 1);
+        assert_eq!(swapped, plain);
+    }
+
+    #[test]
+    fn another_seed_or_scene_refuses_the_swap_and_the_running_sim_goes_on() {
+        let scene = press();
+        let (plain, _) = run("sim", &params(&scene, ""), None);
+        let (refused, r) = run("sim", &params(&scene, ""), Some((40, &params(&scene, ", seed = 2"))));
+        assert_eq!(r.stats.node("src").unwrap().swaps, 0);
+        assert_eq!(refused, plain);
+
+        // The refusals, as the engine gets them.
+        let text = std::fs::read_to_string(&scene).unwrap();
+        let ctx = &mut Context::detached("sim", Mode::Lockstep);
+        let mut old = sim(&scene, &text, 1);
+        let tail = "the simulation would start again at time 0, and the times and sequence numbers it sends would go \
+                    back; a swap may change `pacing` only: restart the graph to simulate another scene or seed";
+        let mut refuse = |new: &mut Sim, why: String| {
+            let state = old.export_state(ctx).unwrap();
+            let refused = new.import_state(ctx, state).unwrap_err();
+            assert!(refused.swap_refused);
+            assert_eq!(refused.reason, format!("{why}: {tail}"));
+            old.import_state(ctx, refused.state).expect("the running sim takes its own state back");
+        };
+        refuse(&mut sim(&scene, &text, 2), "the replacement's seed is 2, the running sim's 1".into());
+        let edited = format!("{text}\n# edited\n");
+        refuse(&mut sim(&scene, &edited, 1), format!("{} changed since the running sim read it", scene.display()));
+        let other = scene.with_file_name("two-presses-paper.toml");
+        refuse(
+            &mut sim(&other, &text, 1),
+            format!("the replacement simulates {}, the running sim {}", other.display(), scene.display()),
+        );
+    }
 }

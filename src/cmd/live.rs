@@ -4,8 +4,14 @@
 //! Watch: an edit that changes nodes' kinds or parameters swaps those nodes (unchanged nodes
 //! keep running with their state; queues are kept, so `block` edges lose nothing; a swapped
 //! node's replacement takes over its learned state, e.g. the EIT reference, P0 and noise
-//! estimates, see `skinflow_core::runtime::GraphHandle`). An invalid edit, or one that adds,
-//! removes or rewires nodes and edges, is rejected with its error and the running graph goes on.
+//! estimates, see `skinflow_core::runtime::GraphHandle`); a node's `deadline_us` and `restart`
+//! are applied to the running node. An invalid edit, or one that adds, removes or rewires nodes
+//! and edges, or changes what only a restart can (`[graph]` keys, a node's `trigger`, `thread`,
+//! `cpu`, `rt_priority`: `needs a restart: <key> of node "x" changed`), is rejected with its
+//! error and the running graph goes on. A swap is reported applied (by the socket's `ok` too)
+//! only once the node runs its replacement; one the replacement refuses (a source asked to
+//! continue another recording or scene, a logger asked to write the file it is writing) or that
+//! its node never gets to within 10 s is reported with the reason, and the node runs as before.
 //! An edit is compared with what runs now (swaps made through the socket included), and when one
 //! of its swaps fails (a node that cannot build), the swaps before it stay and the message names
 //! them. A plugin library whose file changes (rebuilt) is loaded again as a fresh copy, and every
@@ -29,15 +35,73 @@ use std::time::{Duration, SystemTime};
 
 use anyhow::{Context as _, Result, bail};
 use serde_json::{Value, json};
-use skinflow_core::graph::{EdgeSpec, SourceFile};
+use skinflow_core::graph::{EdgeSpec, NodeSpec, Restart, SourceFile};
 use skinflow_core::registry::NodeFactory;
 use skinflow_core::{GraphHandle, GraphSpec, Params, Registry};
 
 /// What a node runs: (id, kind, params).
 type NodeNow = (String, String, Params);
 
+/// A node's per-call deadline (`deadline_us`) and restart policy, as running.
+type Policy = (Option<f64>, Restart);
+
+/// Longest a swap waits for its node to install it (a source paced to its next message, the
+/// graph ending); after that it is cancelled and reported, and the node runs as before.
+const SWAP_TIMEOUT: Duration = Duration::from_secs(10);
+
 fn node_key(spec: &GraphSpec) -> Vec<NodeNow> {
     spec.nodes.iter().map(|n| (n.id.clone(), n.kind.clone(), n.params.clone())).collect()
+}
+
+fn policy(n: &NodeSpec) -> Policy {
+    (n.deadline_us, n.restart)
+}
+
+/// The first key of an edit that only a restart can apply: `[graph]` keys, then per node the
+/// placement and trigger (the nodes' ids and edges are compared apart).
+fn needs_restart(old: &GraphSpec, new: &GraphSpec) -> Option<String> {
+    let graph =
+        [("name", old.name != new.name), ("mode", old.mode != new.mode), ("workers", old.workers != new.workers)];
+    if let Some((key, _)) = graph.iter().find(|(_, changed)| *changed) {
+        return Some(format!("needs a restart: [graph] {key} changed"));
+    }
+    for (o, n) in old.nodes.iter().zip(&new.nodes) {
+        let keys = [
+            ("trigger", o.trigger != n.trigger),
+            ("thread", o.thread != n.thread),
+            ("cpu", o.cpu != n.cpu),
+            ("rt_priority", o.rt_priority != n.rt_priority),
+        ];
+        if let Some((key, _)) = keys.iter().find(|(_, changed)| *changed) {
+            return Some(format!("needs a restart: {key} of node \"{}\" changed", n.id));
+        }
+    }
+    None
+}
+
+/// What an edit changed in the running graph.
+#[derive(Debug, Default)]
+pub struct Applied {
+    /// Nodes whose deadline or restart policy changed, as `deadline_us of node "x"` etc.
+    pub policies: Vec<String>,
+    /// Nodes swapped.
+    pub swapped: Vec<String>,
+}
+
+impl std::fmt::Display for Applied {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let mut parts = Vec::new();
+        if !self.policies.is_empty() {
+            parts.push(format!("set {}", self.policies.join(", ")));
+        }
+        if !self.swapped.is_empty() {
+            parts.push(format!("swapped {}", self.swapped.join(", ")));
+        }
+        if parts.is_empty() {
+            return write!(f, "no node changed");
+        }
+        write!(f, "{}", parts.join("; "))
+    }
 }
 
 fn edge_key(e: &EdgeSpec) -> (String, String, usize, String) {
@@ -88,20 +152,23 @@ pub struct Live {
     handle: GraphHandle,
     started: GraphSpec,
     nodes: Mutex<Vec<NodeNow>>,
+    policies: Mutex<Vec<Policy>>,
     kinds: Mutex<Kinds>,
 }
 
-/// An edit that could not be applied whole: the nodes swapped before the failure keep their
-/// new kind and params (the running graph now differs from the file in the failed node only).
+/// An edit that could not be applied whole: the deadlines and restart policies it changed are
+/// set, and the nodes swapped before the failure keep their new kind and params (the running
+/// graph now differs from the file in the failed node only).
 #[derive(Debug)]
 pub struct EditError {
+    pub policies: Vec<String>,
     pub swapped: Vec<String>,
     pub error: String,
 }
 
 impl std::fmt::Display for EditError {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        if self.swapped.is_empty() {
+        if self.swapped.is_empty() && self.policies.is_empty() {
             write!(f, "edit rejected: {}", self.error)
         } else {
             write!(f, "edit partly applied: {} (that node runs as before the edit)", self.partly())
@@ -110,12 +177,18 @@ impl std::fmt::Display for EditError {
 }
 
 impl EditError {
-    /// `swapped a, b; then <error>`, or the error alone when nothing was swapped.
+    fn rejected(error: String) -> EditError {
+        EditError { policies: Vec::new(), swapped: Vec::new(), error }
+    }
+
+    /// `set deadline_us of node "x"; swapped a, b; then <error>`, or the error alone when
+    /// nothing was applied.
     fn partly(&self) -> String {
-        if self.swapped.is_empty() {
+        let done = Applied { policies: self.policies.clone(), swapped: self.swapped.clone() };
+        if self.swapped.is_empty() && self.policies.is_empty() {
             self.error.clone()
         } else {
-            format!("swapped {}; then {}", self.swapped.join(", "), self.error)
+            format!("{done}; then {}", self.error)
         }
     }
 }
@@ -123,7 +196,13 @@ impl EditError {
 impl Live {
     /// `spec` is the graph as started, `kinds` its plugins loaded for swaps (`Kinds::load`).
     pub fn new(spec: &GraphSpec, kinds: Kinds, handle: GraphHandle) -> Arc<Live> {
-        Arc::new(Live { handle, started: spec.clone(), nodes: Mutex::new(node_key(spec)), kinds: Mutex::new(kinds) })
+        Arc::new(Live {
+            handle,
+            started: spec.clone(),
+            nodes: Mutex::new(node_key(spec)),
+            policies: Mutex::new(spec.nodes.iter().map(policy).collect()),
+            kinds: Mutex::new(kinds),
+        })
     }
 
     fn lock_nodes(&self) -> std::sync::MutexGuard<'_, Vec<NodeNow>> {
@@ -134,19 +213,20 @@ impl Live {
         self.kinds.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
     }
 
-    /// Swaps `node` to `kind` with `params` and records it.
+    /// Swaps `node` to `kind` with `params`, once the node runs the replacement, and records it.
     fn swap(&self, node: &str, factory: Arc<dyn NodeFactory>, kind: &str, params: Params) -> Result<(), String> {
-        self.handle.swap(node, factory, params.clone()).map_err(|e| e.to_string())?;
+        self.handle.swap_wait(node, factory, params.clone(), SWAP_TIMEOUT).map_err(|e| e.to_string())?;
         if let Some(n) = self.lock_nodes().iter_mut().find(|n| n.0 == node) {
             (n.1, n.2) = (kind.to_owned(), params);
         }
         Ok(())
     }
 
-    /// Applies one validated edit: checks the structure is unchanged, swaps the nodes whose kind
-    /// or params differ from what runs now. Returns the ids swapped.
-    pub fn apply_edit(&self, new: &GraphSpec) -> Result<Vec<String>, EditError> {
-        let rejected = |error: String| EditError { swapped: Vec::new(), error };
+    /// Applies one validated edit: checks the structure and what only a restart can change are
+    /// unchanged, sets the deadlines and restart policies that changed, and swaps the nodes
+    /// whose kind or params differ from what runs now.
+    pub fn apply_edit(&self, new: &GraphSpec) -> Result<Applied, EditError> {
+        let rejected = EditError::rejected;
         let old = &self.started;
         let ids = |s: &GraphSpec| s.nodes.iter().map(|n| n.id.clone()).collect::<Vec<_>>();
         let (was, now) = (ids(old), ids(new));
@@ -166,26 +246,40 @@ impl Live {
         if ea != eb {
             return Err(rejected("edges were added, removed or changed: that needs a restart".into()));
         }
-        for (o, n) in old.nodes.iter().zip(&new.nodes) {
-            if o.trigger != n.trigger || o.thread != n.thread || o.cpu != n.cpu || o.rt_priority != n.rt_priority {
-                return Err(rejected(format!(
-                    "node \"{}\": trigger or thread options changed: that needs a restart",
-                    n.id
-                )));
+        if let Some(why) = needs_restart(old, new) {
+            return Err(rejected(why));
+        }
+        let mut applied = Applied::default();
+        {
+            let mut policies = self.policies.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+            for (running, n) in policies.iter_mut().zip(&new.nodes) {
+                let want = policy(n);
+                if *running == want {
+                    continue;
+                }
+                if let Err(e) = self.handle.set_policy(&n.id, want.0, want.1) {
+                    return Err(rejected(e.to_string()));
+                }
+                if running.0 != want.0 {
+                    applied.policies.push(format!("deadline_us of node \"{}\"", n.id));
+                }
+                if running.1 != want.1 {
+                    applied.policies.push(format!("restart of node \"{}\"", n.id));
+                }
+                *running = want;
             }
         }
         let now = self.lock_nodes().clone();
-        let mut swapped = Vec::new();
         for (running, new_n) in now.iter().zip(&new.nodes) {
             if (&running.1, running.2.table()) != (&new_n.kind, new_n.params.table()) {
-                if let Err(e) = self.swap(&new_n.id, new_n.factory.clone(), &new_n.kind, new_n.params.clone()) {
-                    return Err(EditError { swapped, error: e });
+                if let Err(error) = self.swap(&new_n.id, new_n.factory.clone(), &new_n.kind, new_n.params.clone()) {
+                    return Err(EditError { policies: applied.policies, swapped: applied.swapped, error });
                 }
                 tracing::info!(node = %new_n.id, from = %running.1, to = %new_n.kind, "node replaced after an edit");
-                swapped.push(new_n.id.clone());
+                applied.swapped.push(new_n.id.clone());
             }
         }
-        Ok(swapped)
+        Ok(applied)
     }
 
     /// Loads the plugin libraries again when one of their files changed, and swaps every node of
@@ -216,7 +310,7 @@ impl Live {
         let now = self.lock_nodes().clone();
         let mut swapped: Vec<String> = Vec::new();
         let failed = |swapped: Vec<String>, error: String| {
-            let e = EditError { swapped, error };
+            let e = EditError { policies: Vec::new(), swapped, error };
             Some(Err(format!("plugin {names} reloaded: {} (that node runs its previous code)", e.partly())))
         };
         for (id, kind, params) in now.iter().filter(|n| stale.contains(&&n.1)) {
@@ -294,8 +388,7 @@ pub fn watch(path: PathBuf, live: Arc<Live>, done: Arc<AtomicBool>) {
                 }
             }
             Ok(new) => match live.apply_edit(&new) {
-                Ok(swapped) if swapped.is_empty() => eprintln!("{}: edit applied: no node changed", path.display()),
-                Ok(swapped) => eprintln!("{}: edit applied: swapped {}", path.display(), swapped.join(", ")),
+                Ok(applied) => eprintln!("{}: edit applied: {applied}", path.display()),
                 Err(e) => eprintln!("{}: {e}", path.display()),
             },
         }

@@ -5,6 +5,7 @@
 
 use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::sync::Arc;
+use std::sync::atomic::Ordering::SeqCst;
 use std::time::Instant;
 
 use crate::edge::{EdgeRx, EdgeTx};
@@ -15,6 +16,8 @@ use crate::node::{Context, NodeImpl, SourcePoll};
 use crate::params::Params;
 use crate::registry::{BuildContext, NodeFactory};
 use crate::stats::{NodeStats, bump};
+
+use super::pool::{Control, SWAP_PENDING, SWAP_TAKEN, Shared, Swap};
 
 /// Wakes nodes made runnable by a push (consumers) or a pop (waiting producers).
 pub(crate) trait Notify {
@@ -66,7 +69,7 @@ pub(crate) struct Cell {
     pub tick: bool,
 }
 
-fn panic_message(p: Box<dyn std::any::Any + Send>) -> String {
+pub(crate) fn panic_message(p: Box<dyn std::any::Any + Send>) -> String {
     if let Some(s) = p.downcast_ref::<&str>() {
         (*s).to_owned()
     } else if let Some(s) = p.downcast_ref::<String>() {
@@ -263,6 +266,12 @@ impl Cell {
     }
 
     /// Restart policy: rebuild and start again, or stop for good.
+    ///
+    /// The panicked instance is stopped before it is dropped, so what it held is counted as
+    /// discarded (its `stop` counts it: a plugin reports what it held even after the panic;
+    /// a built-in node whose state the panic left inconsistent may count less, never
+    /// silently more). Without a restart, or when the rebuild fails, it stays as the node's
+    /// dead instance and is stopped, and counts, at the end of the run.
     fn after_panic(&mut self, msg: String) -> Fired {
         for slot in &mut self.out_io.slots {
             *slot = None; // outputs of a panicked call are not trusted
@@ -274,7 +283,8 @@ impl Cell {
                 Ok(imp)
             }) {
                 Ok(imp) => {
-                    self.imp = imp;
+                    let mut old = std::mem::replace(&mut self.imp, imp);
+                    self.stop_replaced(&mut old, "the panicked instance");
                     bump(&self.stats.restarts, 1);
                     tracing::warn!(node = %self.ctx.id, "restarted after panic");
                     return Fired::Ok;
@@ -287,6 +297,17 @@ impl Cell {
         }
         self.dead = true;
         Fired::Fatal(NodeError::Panic(msg))
+    }
+
+    /// Stops an instance taken out of the node (replaced by a swap or a restart, or a
+    /// replacement never installed) under `catch_unwind`: its `stop` counts what it held; an
+    /// error or a panic there is logged, the node goes on.
+    fn stop_replaced(&mut self, imp: &mut NodeImpl, what: &str) {
+        match catch_unwind(AssertUnwindSafe(|| imp.stop(&mut self.ctx))) {
+            Ok(Ok(())) => {}
+            Ok(Err(e)) => tracing::warn!(node = %self.ctx.id, "{what} failed to stop: {e}"),
+            Err(p) => tracing::error!(node = %self.ctx.id, "{what} panicked in its stop: {}", panic_message(p)),
+        }
     }
 
     /// Moves the output slots onto their edges and wakes the consumers. Fan-out clones the
@@ -307,10 +328,11 @@ impl Cell {
         }
     }
 
-    /// Runs a control command, or installs a hot-swapped instance, between calls.
-    pub fn control(&mut self, c: super::pool::Control) {
+    /// Runs a control command, installs (or refuses) a hot-swapped instance, or applies a
+    /// new deadline and restart policy, between calls.
+    pub fn control(&mut self, c: Control, shared: &Shared) {
         match c {
-            super::pool::Control::Command(cmd, reply) => {
+            Control::Command(cmd, reply) => {
                 let result = self.imp.control(&mut self.ctx, &cmd);
                 match &result {
                     Ok(()) => tracing::info!(node = %self.ctx.id, "control \"{cmd}\" applied"),
@@ -320,39 +342,133 @@ impl Cell {
                     let _ = tx.try_send(result); // the asker may have given up waiting
                 }
             }
-            super::pool::Control::Swap(s) => {
-                let s = *s;
-                let mut old = std::mem::replace(&mut self.imp, s.imp);
-                self.recipe = s.recipe;
-                // A dead instance (panicked, failed) hands nothing over: its state is not trusted.
-                if !self.dead {
-                    self.hand_over(&mut old);
+            Control::Swap(s) => {
+                let mut s = *s;
+                if s.claim.compare_exchange(SWAP_PENDING, SWAP_TAKEN, SeqCst, SeqCst).is_err() {
+                    // The asker was told it was not installed (it waited too long).
+                    self.stop_replaced(&mut s.imp, "a cancelled swap's replacement");
+                    tracing::warn!(node = %self.ctx.id, kind = %s.kind, "hot swap cancelled before it was installed");
+                    return;
                 }
-                self.dead = false;
-                if let Err(e) = old.stop(&mut self.ctx) {
-                    tracing::warn!(node = %self.ctx.id, "replaced instance failed to stop: {e}");
+                let reply = s.reply.take();
+                let result = self.install(s, shared);
+                if let Err(why) = &result {
+                    tracing::warn!(node = %self.ctx.id, "hot swap refused: {why}");
                 }
-                bump(&self.stats.swaps, 1);
-                tracing::info!(node = %self.ctx.id, kind = %s.kind, "hot swap applied");
+                if let Some(tx) = reply {
+                    let _ = tx.try_send(result);
+                }
+            }
+            Control::Policy { deadline_ns, restart } => {
+                self.deadline_ns = deadline_ns;
+                self.restart = restart;
+                tracing::info!(node = %self.ctx.id, ?deadline_ns, ?restart, "deadline and restart policy applied");
             }
         }
     }
 
-    /// Moves the replaced instance's state into the installed one; a refused state goes back
-    /// to the replaced instance (its `stop` then reports what it held).
-    fn hand_over(&mut self, old: &mut NodeImpl) {
-        let Some(state) = old.export_state(&mut self.ctx) else { return };
-        match self.imp.import_state(&mut self.ctx, state) {
-            Ok(()) => tracing::info!(node = %self.ctx.id, "hot swap: the replacement took over the node's state"),
-            Err(refused) => {
-                tracing::warn!(
-                    node = %self.ctx.id,
-                    "hot swap: the replacement starts afresh, it did not take over the node's state: {}",
-                    refused.reason
-                );
-                if let Err(back) = old.import_state(&mut self.ctx, refused.state) {
-                    tracing::warn!(node = %self.ctx.id, "the replaced instance did not take its state back: {}", back.reason);
+    /// Installs a swap's replacement, after handing it the running instance's state; or, when
+    /// the replacement refuses the swap, stops the replacement and leaves the running instance
+    /// in place. `Err`: why the swap was refused.
+    fn install(&mut self, s: Swap, shared: &Shared) -> Result<(), String> {
+        let Swap { mut imp, recipe, kind, .. } = s;
+        // A dead instance (panicked, failed) hands nothing over: its state is not trusted.
+        if !self.dead
+            && let Err(why) = self.hand_over(&mut imp)
+        {
+            self.stop_replaced(&mut imp, "a refused swap's replacement");
+            return Err(why);
+        }
+        let mut old = std::mem::replace(&mut self.imp, imp);
+        self.recipe = recipe;
+        self.dead = false;
+        self.stop_replaced(&mut old, "the replaced instance");
+        bump(&self.stats.swaps, 1);
+        if let Some(k) = shared.kinds.lock().unwrap_or_else(|p| p.into_inner()).get_mut(self.ctx.index as usize) {
+            k.clone_from(&kind);
+        }
+        tracing::info!(node = %self.ctx.id, kind = %kind, "hot swap applied");
+        Ok(())
+    }
+
+    /// Moves the running instance's state into the replacement `new`. A state the replacement
+    /// refuses goes back to the running instance (whose `stop` then reports what it held);
+    /// `Err` when the replacement refuses the swap itself, or panics taking the state over:
+    /// the running instance then has its state back (if it takes it) and stays.
+    fn hand_over(&mut self, new: &mut NodeImpl) -> Result<(), String> {
+        let id = self.ctx.id.clone();
+        let exported = catch_unwind(AssertUnwindSafe(|| self.imp.export_state(&mut self.ctx)));
+        let state = match exported {
+            Ok(Some(state)) => state,
+            Ok(None) => return Ok(()),
+            Err(p) => {
+                tracing::error!(node = %id, "hot swap: exporting the state panicked ({}); the replacement starts afresh", panic_message(p));
+                return Ok(());
+            }
+        };
+        let refused = match catch_unwind(AssertUnwindSafe(|| new.import_state(&mut self.ctx, state))) {
+            Ok(Ok(())) => {
+                tracing::info!(node = %id, "hot swap: the replacement took over the node's state");
+                return Ok(());
+            }
+            Ok(Err(refused)) => refused,
+            Err(p) => {
+                return Err(format!(
+                    "the replacement panicked taking over the node's state ({}); the running instance goes on without it",
+                    panic_message(p)
+                ));
+            }
+        };
+        if !refused.swap_refused {
+            tracing::warn!(
+                node = %id,
+                "hot swap: the replacement starts afresh, it did not take over the node's state: {}",
+                refused.reason
+            );
+        }
+        let back = catch_unwind(AssertUnwindSafe(|| self.imp.import_state(&mut self.ctx, refused.state)));
+        let lost = match back {
+            Ok(Ok(())) => None,
+            Ok(Err(back)) => Some(back.reason),
+            Err(p) => Some(format!("panicked: {}", panic_message(p))),
+        };
+        if let Some(why) = &lost {
+            tracing::error!(node = %id, "the running instance did not take its state back: {why}");
+        }
+        if refused.swap_refused {
+            return Err(match lost {
+                None => refused.reason,
+                Some(why) => {
+                    format!("{} (and the running instance did not take its state back: {why})", refused.reason)
                 }
+            });
+        }
+        Ok(())
+    }
+
+    /// Answers the control work still queued for a node that runs no more: a swap is not
+    /// installed (its replacement is stopped, its asker told why), a command not run.
+    pub fn refuse_controls(&mut self, queue: &crossbeam::queue::SegQueue<Control>, why: &str) {
+        while let Some(c) = queue.pop() {
+            match c {
+                Control::Command(cmd, reply) => {
+                    tracing::warn!(node = %self.ctx.id, "control \"{cmd}\" not run: {why}");
+                    if let Some(tx) = reply {
+                        let _ = tx.try_send(Err(NodeError::msg(format!("not run: {why}"))));
+                    }
+                }
+                Control::Swap(s) => {
+                    let mut s = *s;
+                    let taken = s.claim.compare_exchange(SWAP_PENDING, SWAP_TAKEN, SeqCst, SeqCst).is_ok();
+                    self.stop_replaced(&mut s.imp, "a swap's replacement never installed");
+                    if taken {
+                        tracing::warn!(node = %self.ctx.id, kind = %s.kind, "hot swap not installed: {why}");
+                        if let Some(tx) = s.reply {
+                            let _ = tx.try_send(Err(format!("not installed: {why}; the node kept its kind")));
+                        }
+                    }
+                }
+                Control::Policy { .. } => {}
             }
         }
     }

@@ -5,6 +5,10 @@
 //! executor as a control message: it takes effect between two calls, the node's queues (and
 //! every message in them) stay where they are, and the old instance is stopped. Only a
 //! replacement with the same ports (names and types, in order) is accepted: edges index ports.
+//! A swap counts (`swaps`, and the kind the statistics show) once it is installed, not when it
+//! is asked: [`GraphHandle::swap_wait`] answers with the outcome, and a swap its node never
+//! gets to (a source whose stream ended, the end of the run) has its replacement stopped
+//! unused and its asker told so.
 //!
 //! State hand-over: at the switch the old instance exports what it learned from the stream
 //! ([`crate::Processor::export_state`]) and the replacement imports it
@@ -12,19 +16,25 @@
 //! EIT reference frame, tare and noise estimates instead of re-learning them from data that is
 //! no longer no-load. Every swap goes through here (`skinflow run --watch` edits and control
 //! socket swaps alike). A replacement that refuses the state (another kind, another channel
-//! count) starts afresh with a warning naming the reason. No hand-over after a panic: a restart
+//! count) starts afresh with a warning naming the reason; one that cannot go on from it at all
+//! (a source asked to continue another recording or scene, a logger asked to write the file
+//! the running instance writes) refuses the swap ([`crate::StateRefused::refuse_swap`]): the
+//! running instance takes its state back and goes on. No hand-over after a panic: a restart
 //! or a swap of a dead instance starts from scratch.
 
 use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::AtomicU8;
 use std::sync::atomic::Ordering::SeqCst;
-use std::sync::{Arc, Mutex};
+use std::sync::mpsc::{RecvTimeoutError, SyncSender};
 use std::time::{Duration, Instant};
 
 use super::RunError;
 use super::cell::Recipe;
-use super::pool::{Control, Shared, Swap};
+use super::pool::{Control, SWAP_CANCELLED, SWAP_PENDING, Shared, Swap};
 use crate::edge::EdgeShared;
 use crate::error::NodeError;
+use crate::graph::Restart;
 use crate::node::{Context, Mode};
 use crate::params::Params;
 use crate::registry::{BuildContext, KindInfo, NodeFactory, Wiring};
@@ -44,7 +54,6 @@ fn signature(k: &KindInfo) -> Signature {
 pub(crate) struct Inner {
     pub shared: Arc<Shared>,
     pub ids: Vec<String>,
-    pub kinds: Mutex<Vec<String>>,
     pub signatures: Vec<Signature>,
     /// Per node, the names of its inputs with an edge (a replacement's params are checked
     /// against them, as at load).
@@ -109,10 +118,76 @@ impl GraphHandle {
 
     /// Replaces a node by one built from `factory` and `params`. The replacement is built and
     /// started here (the running node keeps working meanwhile) and installed between two of
-    /// the node's calls; its queues are kept, so a `block` edge loses nothing.
+    /// the node's calls; its queues are kept, so a `block` edge loses nothing. Does not wait
+    /// for the install: `Ok` means queued. A swap the replacement refuses at the install (see
+    /// [`crate::StateRefused::refuse_swap`]) is only logged, and one the node never gets to
+    /// (the run ends first) is stopped unused; neither counts as a swap or changes the kind
+    /// the statistics show. [`GraphHandle::swap_wait`] answers with the outcome.
     pub fn swap(&self, node: &str, factory: Arc<dyn NodeFactory>, params: Params) -> Result<(), RunError> {
+        self.queue_swap(node, factory, params, None).map(|_| ())
+    }
+
+    /// [`GraphHandle::swap`], then waits at most `timeout` for the node to install it: `Ok`
+    /// once the replacement runs, the refusal's reason when it refused to take the node over
+    /// (the node then runs as before). A swap not installed within `timeout` (the node is not
+    /// called: a source waiting for its next message, the graph ending) or whose node ends
+    /// first is cancelled, the replacement stopped unused, and an error returned.
+    pub fn swap_wait(
+        &self,
+        node: &str,
+        factory: Arc<dyn NodeFactory>,
+        params: Params,
+        timeout: Duration,
+    ) -> Result<(), RunError> {
+        let (tx, rx) = std::sync::mpsc::sync_channel(1);
+        let (i, claim) = self.queue_swap(node, factory, params, Some(tx))?;
+        let refused = |problem: String| RunError::Swap { node: node.to_owned(), problem };
+        let deadline = Instant::now() + timeout;
+        let slot = &self.inner.shared.slots[i];
+        loop {
+            match rx.recv_timeout(Duration::from_millis(20)) {
+                Ok(result) => return result.map_err(refused),
+                Err(RecvTimeoutError::Disconnected) => {
+                    return Err(refused("the graph ended before the swap was installed".into()));
+                }
+                Err(RecvTimeoutError::Timeout) => {}
+            }
+            let ended = slot.ended.load(SeqCst);
+            if !ended && Instant::now() < deadline {
+                continue;
+            }
+            if claim.compare_exchange(SWAP_PENDING, SWAP_CANCELLED, SeqCst, SeqCst).is_ok() {
+                return Err(if ended {
+                    refused("the node runs no more (a source whose stream ended, or the run is over)".into())
+                } else {
+                    RunError::SwapTimeout { node: node.to_owned(), timeout }
+                });
+            }
+            // The node took it: the install (or refusal) is under way, and always answered.
+            return match rx.recv() {
+                Ok(result) => result.map_err(refused),
+                Err(_) => Err(refused("the graph ended before the swap was installed".into())),
+            };
+        }
+    }
+
+    /// Checks, builds and starts a replacement and queues it for node `node`. Returns the
+    /// node's index and the swap's claim (see [`Swap::claim`]).
+    fn queue_swap(
+        &self,
+        node: &str,
+        factory: Arc<dyn NodeFactory>,
+        params: Params,
+        reply: Option<SyncSender<Result<(), String>>>,
+    ) -> Result<(usize, Arc<AtomicU8>), RunError> {
         let i = self.index(node)?;
         let swap_err = |problem: String| RunError::Swap { node: node.to_owned(), problem };
+        let ended = || {
+            swap_err("the node runs no more (a source whose stream ended, or the run is over): nothing to swap".into())
+        };
+        if self.inner.shared.slots[i].ended.load(SeqCst) {
+            return Err(ended());
+        }
         let info = factory.info();
         if signature(info) != self.inner.signatures[i] {
             return Err(swap_err(format!(
@@ -139,19 +214,40 @@ impl GraphHandle {
             shared.slots[i].stats.clone(),
         );
         imp.start(&mut ctx).map_err(|e: NodeError| swap_err(format!("start failed: {e}")))?;
+        if shared.slots[i].ended.load(SeqCst) {
+            // Ended while the replacement was built: it is stopped unused.
+            if let Err(e) = imp.stop(&mut ctx) {
+                tracing::warn!(node, "an unused swap replacement failed to stop: {e}");
+            }
+            return Err(ended());
+        }
+        let claim = Arc::new(AtomicU8::new(SWAP_PENDING));
         let kind = info.name.to_string();
         self.push(
             i,
-            Control::Swap(Box::new(Swap { imp, recipe: Recipe { factory, params, build }, kind: kind.clone() })),
+            Control::Swap(Box::new(Swap {
+                imp,
+                recipe: Recipe { factory, params, build },
+                kind,
+                claim: claim.clone(),
+                reply,
+            })),
         );
-        self.inner.kinds.lock().unwrap_or_else(|p| p.into_inner())[i] = kind;
+        Ok((i, claim))
+    }
+
+    /// Sets a node's per-call deadline (`deadline_us`, `None`: none) and restart policy, from
+    /// its next call on (what a `--watch` edit of those keys applies without a swap).
+    pub fn set_policy(&self, node: &str, deadline_us: Option<f64>, restart: Restart) -> Result<(), RunError> {
+        let i = self.index(node)?;
+        self.push(i, Control::Policy { deadline_ns: deadline_us.map(|us| (us * 1e3) as u64), restart });
         Ok(())
     }
 
     /// A live snapshot of the statistics.
     pub fn stats(&self) -> StatsReport {
         let inner = &self.inner;
-        let kinds = inner.kinds.lock().unwrap_or_else(|p| p.into_inner()).clone();
+        let kinds = inner.shared.kinds.lock().unwrap_or_else(|p| p.into_inner()).clone();
         let nodes = (0..inner.ids.len())
             .map(|i| {
                 let inputs: Vec<&crate::stats::EdgeStats> =

@@ -39,7 +39,7 @@ pub(crate) fn run_controls(shared: &Shared, i: usize, cell: &mut Cell) {
     let slot = &shared.slots[i];
     if take_flag(&slot.has_control) {
         while let Some(c) = slot.control.pop() {
-            cell.control(c);
+            cell.control(c, shared);
         }
     }
 }
@@ -74,6 +74,9 @@ pub(crate) fn run(shared: &Shared, topo: &[usize], external_stop: &AtomicBool, u
                     shared.fail(s, e);
                 }
             }
+            if finished[s] {
+                shared.slots[s].ended.store(true, SeqCst);
+            }
         }
         for &i in &others {
             if matches!(cells[i].trigger, Trigger::Periodic { .. }) {
@@ -102,6 +105,8 @@ pub(crate) fn run(shared: &Shared, topo: &[usize], external_stop: &AtomicBool, u
             shared.fail(s, NodeError::msg(format!("stop failed: {e}")));
         }
         cell.dead = true;
+        shared.slots[s].ended.store(true, SeqCst);
+        cell.refuse_controls(&shared.slots[s].control, "its stream has ended (a source that finished or was stopped)");
     }
     // End of stream: what processors still buffer goes downstream before anything stops.
     super::flush::flush_all(shared, &mut cells, topo, Instant::now() + DRAIN_TIMEOUT);

@@ -9,6 +9,8 @@ mod handle;
 mod lockstep;
 mod pool;
 mod rt;
+#[cfg(test)]
+mod tests;
 
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
@@ -52,6 +54,10 @@ pub enum RunError {
     UnknownNode(String),
     #[error("node \"{node}\": swap refused: {problem}")]
     Swap { node: String, problem: String },
+    #[error(
+        "node \"{node}\": swap not installed within {timeout:?} (the node was not called: a source waiting for its next message, or the graph ending); cancelled: the node runs as before"
+    )]
+    SwapTimeout { node: String, timeout: Duration },
     #[error("node \"{node}\": control \"{command}\" rejected: {error}")]
     Control { node: String, command: String, error: NodeError },
     #[error(
@@ -205,6 +211,7 @@ impl RunningGraph {
                     tick: AtomicBool::new(false),
                     periodic: matches!(ns.trigger, Trigger::Periodic { .. }),
                     stats: st,
+                    ended: AtomicBool::new(false),
                 }
             })
             .collect();
@@ -221,12 +228,12 @@ impl RunningGraph {
             shutdown: AtomicBool::new(false),
             failures: std::sync::Mutex::new(Vec::new()),
             faulted: AtomicBool::new(false),
+            kinds: std::sync::Mutex::new(spec.nodes.iter().map(|n| n.kind.clone()).collect()),
         });
 
         let handle = GraphHandle::new(handle::Inner {
             shared: shared.clone(),
             ids: spec.nodes.iter().map(|n| n.id.clone()).collect(),
-            kinds: std::sync::Mutex::new(spec.nodes.iter().map(|n| n.kind.clone()).collect()),
             signatures: spec.nodes.iter().map(|n| GraphHandle::signature_of(n.factory.info())).collect(),
             wired: (0..spec.nodes.len()).map(|i| spec.connected_inputs(i)).collect(),
             edges,
@@ -439,17 +446,29 @@ impl RunningGraph {
 
     fn finish(self) -> RunReport {
         let mut stop_failures = Vec::new();
+        for slot in &self.shared.slots {
+            slot.ended.store(true, SeqCst);
+        }
         for &i in &self.topo {
             let slot = &self.shared.slots[i];
             let Some(mut cell) = slot.cell.take() else { continue };
+            // Swaps and commands that came too late to run: a replacement never installed is
+            // stopped, and its asker told so; the node's kind stays what ran.
+            cell.refuse_controls(&slot.control, "the run ended first");
             for rx in &cell.inputs {
                 let left = rx.pending() as u64;
                 rx.shared.stats.undelivered.fetch_add(left, std::sync::atomic::Ordering::Relaxed);
             }
-            if slot.exec != Exec::Source
-                && let Err(error) = cell.imp.stop(&mut cell.ctx)
-            {
-                stop_failures.push(RunError::Stop { node: self.handle.node_ids()[i].clone(), error });
+            if slot.exec != Exec::Source {
+                let stopped = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| cell.imp.stop(&mut cell.ctx)));
+                let error = match stopped {
+                    Ok(Ok(())) => None,
+                    Ok(Err(error)) => Some(error),
+                    Err(p) => Some(NodeError::Panic(cell::panic_message(p))),
+                };
+                if let Some(error) = error {
+                    stop_failures.push(RunError::Stop { node: self.handle.node_ids()[i].clone(), error });
+                }
             }
             slot.cell.store(Some(cell));
         }

@@ -50,6 +50,9 @@ pub(crate) struct Slot {
     pub tick: AtomicBool,
     pub periodic: bool,
     pub stats: Arc<NodeStats>,
+    /// The node runs no more (a source whose stream ended or that was stopped, or the run is
+    /// over): control work queued for it is refused, never left waiting.
+    pub ended: AtomicBool,
 }
 
 /// Clears a flag and says whether it was set. Checks with a plain load first, so the common
@@ -65,13 +68,28 @@ pub(crate) enum Control {
     Command(String, Option<std::sync::mpsc::SyncSender<Result<(), crate::error::NodeError>>>),
     /// Replace the node's instance (hot swap).
     Swap(Box<Swap>),
+    /// New per-call deadline and restart policy (a `--watch` edit of `deadline_us`, `restart`).
+    Policy { deadline_ns: Option<u64>, restart: crate::graph::Restart },
 }
+
+/// A swap not yet looked at by the node's executor ([`Swap::claim`]).
+pub(crate) const SWAP_PENDING: u8 = 0;
+/// The executor took the swap: it is being installed or refused, and answered.
+pub(crate) const SWAP_TAKEN: u8 = 1;
+/// The asker gave up waiting: the executor stops the replacement without installing it.
+pub(crate) const SWAP_CANCELLED: u8 = 2;
 
 /// A started replacement and how to rebuild it.
 pub(crate) struct Swap {
     pub imp: crate::node::NodeImpl,
     pub recipe: super::cell::Recipe,
     pub kind: String,
+    /// [`SWAP_PENDING`] until the executor takes the swap or the asker cancels it (whoever
+    /// moves it first decides: a swap is installed at most once, and never after its asker
+    /// was told it was not).
+    pub claim: Arc<AtomicU8>,
+    /// Where the outcome goes: `Ok` once installed, or why it was not.
+    pub reply: Option<std::sync::mpsc::SyncSender<Result<(), String>>>,
 }
 
 pub(crate) struct Sleeper {
@@ -95,6 +113,8 @@ pub(crate) struct Shared {
     pub shutdown: AtomicBool,
     pub failures: std::sync::Mutex<Vec<(usize, NodeError)>>,
     pub faulted: AtomicBool,
+    /// The kind each node runs now, updated when a swap is installed (not when it is asked).
+    pub kinds: std::sync::Mutex<Vec<String>>,
 }
 
 impl Shared {
@@ -176,7 +196,7 @@ impl Shared {
         loop {
             if take_flag(&slot.has_control) {
                 while let Some(c) = slot.control.pop() {
-                    cell.control(c);
+                    cell.control(c, self);
                 }
             }
             if take_flag(&slot.tick) {
@@ -311,7 +331,7 @@ pub(crate) fn source_loop(shared: &Shared, node: usize) {
         }
         if take_flag(&slot.has_control) {
             while let Some(c) = slot.control.pop() {
-                cell.control(c);
+                cell.control(c, shared);
             }
         }
         if !cell.outputs_have_space() {
@@ -331,5 +351,8 @@ pub(crate) fn source_loop(shared: &Shared, node: usize) {
         shared.fail(node, NodeError::msg(format!("stop failed: {e}")));
     }
     cell.dead = true; // stopped: never run again
+    slot.ended.store(true, SeqCst);
+    // Queued before `ended` was set: answered now rather than left waiting for the run's end.
+    cell.refuse_controls(&slot.control, "its stream has ended (a source that finished or was stopped)");
     slot.cell.store(Some(cell));
 }

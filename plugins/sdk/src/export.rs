@@ -176,12 +176,15 @@ pub trait PluginNode: Send + Sized + 'static {
     /// Asked once at the end of the run, just before `stop`: what is still held then (its
     /// flush failed, the shutdown deadline passed, nothing downstream could take more, or a
     /// hot swap replaced the node) is counted as the node's `discarded` in the run report, so
-    /// nothing is lost silently. Default: 0.
+    /// nothing is lost silently. Also asked after the node panicked (when `stop` is not
+    /// called): what it held goes with it, restarted or not, and is counted the same way, so
+    /// keep it a plain read of the node's fields. Default: 0.
     fn held(&self) -> u64 {
         0
     }
 
-    /// End of the run (called once; not after a panic). Default: nothing to do.
+    /// End of the run, or of this instance (replaced by a hot swap); called once, not after
+    /// this instance panicked. Default: nothing to do.
     fn stop(&mut self) -> Result<(), String> {
         Ok(())
     }
@@ -617,16 +620,35 @@ unsafe extern "C" fn poll<T: PluginSource>(
 unsafe extern "C" fn stop<A: Author>(node: *mut c_void, discarded: *mut u64, err: SfErrorSink) -> SfStatus {
     // SAFETY: `node` came from `create::<A>`; one call at a time per node.
     let inst = unsafe { instance::<A>(node) };
-    if inst.poisoned.is_some() {
-        // The author's state is not trusted after a panic: nothing to stop (its Drop still runs).
-        return SfStatus::OK;
-    }
-    guarded(inst, err, |inst| {
-        let held = inst.node.held();
+    let report_held = |held: u64| {
         if held > 0 && !discarded.is_null() {
             // SAFETY: non-null; the host passes a counter it owns, writable for the call.
             unsafe { *discarded = held };
         }
+    };
+    if let Some(why) = &inst.poisoned {
+        // After a panic the author's `stop` is not called (its state is not trusted; its Drop
+        // still runs), but what it held is lost with it and must be counted: `held` only
+        // reads, so it is asked (under `catch_unwind`) and trusted as the best count there is.
+        return match catch_unwind(AssertUnwindSafe(|| inst.node.held())) {
+            Ok(held) => {
+                report_held(held);
+                SfStatus::OK
+            }
+            Err(p) => {
+                report(
+                    err,
+                    &format!(
+                        "after an earlier panic ({why}), `held` {}: the messages it held are lost uncounted",
+                        panic_text(&*p)
+                    ),
+                );
+                SfStatus::PANIC
+            }
+        };
+    }
+    guarded(inst, err, |inst| {
+        report_held(inst.node.held());
         inst.node.stop()
     })
 }
@@ -814,4 +836,125 @@ macro_rules! export_plugin {
             })
         }
     };
+}
+
+#[cfg(all(test, feature = "host"))]
+mod tests {
+    //! A plugin processor that panics while it holds messages, through the engine: what it
+    //! held is counted as discarded, restarted or not.
+
+    use std::path::Path;
+    use std::sync::OnceLock;
+
+    use serde::Deserialize;
+    use skinflow_core::graph::SourceFile;
+    use skinflow_core::stats::NodeReport;
+    use skinflow_core::{GraphSpec, Registry, RunOptions, RunReport};
+
+    use super::{Table, entry, kind};
+    use crate::host::{Codecs, read_table, register_kinds};
+    use crate::{Columns, KindSpec, Outputs, PluginNode};
+
+    #[derive(Deserialize)]
+    #[serde(deny_unknown_fields)]
+    struct LagParams {
+        /// Messages held back.
+        by: usize,
+        /// Call (1-based, per instance) that panics, before it takes its input.
+        panic_at: u64,
+    }
+
+    /// Holds its last `by` inputs (emits each once `by` newer ones arrived); panics on call
+    /// `panic_at`, holding `by`.
+    struct PanickyLag {
+        p: LagParams,
+        held: std::collections::VecDeque<(u64, u64, f64)>,
+        calls: u64,
+    }
+
+    impl PluginNode for PanickyLag {
+        type Params = LagParams;
+
+        fn spec() -> KindSpec {
+            KindSpec::new("t-panicky-lag", "holds its last `by` inputs; panics on call `panic_at`")
+                .input("in", "count", "values")
+                .output("out", "count", "the values, `by` calls late")
+        }
+
+        fn new(p: LagParams, _: &Path) -> Result<Self, String> {
+            Ok(PanickyLag { p, held: std::collections::VecDeque::new(), calls: 0 })
+        }
+
+        fn process(&mut self, inputs: &[Columns<'_>], out: &mut Outputs) -> Result<(), String> {
+            self.calls += 1;
+            if self.calls == self.p.panic_at {
+                panic!("panicky lag: call {}", self.calls);
+            }
+            let c = &inputs[0];
+            self.held.push_back((c.seq(), c.t_ns(), c.scalar("value")?));
+            if self.held.len() > self.p.by
+                && let Some((seq, t_ns, v)) = self.held.pop_front()
+            {
+                out.port(0).header(seq, t_ns);
+                out.port(0).scalar("value", v);
+            }
+            Ok(())
+        }
+
+        fn held(&self) -> u64 {
+            self.held.len() as u64
+        }
+    }
+
+    fn registry() -> Registry {
+        static TABLE: OnceLock<Table> = OnceLock::new();
+        let table = entry(&TABLE, "panicky", "0", || vec![kind::<PanickyLag>()]);
+        // SAFETY: `entry` returned a pointer into `TABLE`, which lives for the program
+        // (non-null: building the table did not panic).
+        let table = unsafe { &*table };
+        let path = Path::new("libpanicky.so");
+        let kinds = read_table(path, table, &Codecs::new()).expect("valid table");
+        let mut reg = Registry::new();
+        skinflow_core::toy::register(&mut reg).expect("toy kinds");
+        register_kinds(path, kinds, &mut reg).expect("no duplicates");
+        reg
+    }
+
+    /// counter (20) -> t-panicky-lag (holds 5, panics on call 10) -> null, lockstep.
+    fn run(restart: &str) -> RunReport {
+        let text = format!(
+            "[graph]\nmode = \"lockstep\"\n\
+             [[node]]\nid = \"src\"\nkind = \"counter\"\nparams = {{ count = 20 }}\n\
+             [[node]]\nid = \"lag\"\nkind = \"t-panicky-lag\"\nrestart = \"{restart}\"\nparams = {{ by = 5, panic_at = 10 }}\n\
+             [[node]]\nid = \"out\"\nkind = \"null\"\n\
+             [[edge]]\nfrom = \"src.out\"\nto = \"lag.in\"\n\
+             [[edge]]\nfrom = \"lag.out\"\nto = \"out.in\"\n"
+        );
+        let spec = GraphSpec::parse(SourceFile::new("<panicky>", text), &registry()).expect("valid graph");
+        skinflow_core::run(&spec, &RunOptions::default()).expect("starts")
+    }
+
+    fn lag(r: &RunReport) -> &NodeReport {
+        r.stats.nodes.iter().find(|n| n.id == "lag").unwrap()
+    }
+
+    #[test]
+    fn what_a_restarted_plugin_held_when_it_panicked_is_counted_as_discarded() {
+        let r = run("always");
+        assert!(r.failures.is_empty(), "{:?}", r.failures);
+        let n = lag(&r);
+        // Each instance emits 4 of its 9 good calls' inputs and holds 5 when its 10th panics;
+        // the third instance gets no input. The 2 inputs of the panicking calls are the panics.
+        assert_eq!((n.msgs_in, n.msgs_out, n.panics, n.restarts), (20, 8, 2, 2));
+        assert_eq!(n.discarded, 10, "the 5 messages each panicked instance held");
+    }
+
+    #[test]
+    fn what_a_dead_plugin_held_is_counted_at_the_end_of_the_run() {
+        let r = run("never");
+        assert_eq!(r.failures.len(), 1, "{:?}", r.failures);
+        let n = lag(&r);
+        assert_eq!((n.msgs_in, n.msgs_out, n.panics, n.restarts), (10, 4, 1, 0));
+        assert_eq!(n.discarded, 5, "the 5 messages the panicked instance held");
+    }
 }

@@ -1,0 +1,405 @@
+//! The runtime's own tests: what a panicking instance held is counted; a swap counts (and
+//! shows its kind) only once installed, is answered with a replacement's refusal, and never
+//! runs when its node does not; deadline and restart policy change while the graph runs.
+//!
+//! No assertion depends on timing: waits only give the graph time to reach a state.
+
+use std::collections::VecDeque;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering::SeqCst};
+use std::time::{Duration, Instant};
+
+use serde::Deserialize;
+
+use crate::graph::{GraphSpec, Restart, SourceFile};
+use crate::io::{Inputs, Outputs};
+use crate::message::{Header, Message};
+use crate::node::{Context, NodeImpl, NodeState, Processor, Source, SourcePoll, StateRefused};
+use crate::registry::{KindInfo, NodeParams, Registry, Role, typed};
+use crate::runtime::{GraphHandle, RunError, RunOptions, RunReport, RunningGraph};
+use crate::stats::NodeReport;
+use crate::toy::Count;
+use crate::{NodeError, Params, PortSpec};
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct HoldParams {
+    /// Messages held back.
+    by: usize,
+    /// Call (1-based, per instance) that panics, before it takes its input; 0 = never.
+    #[serde(default)]
+    panic_at: u64,
+}
+
+impl NodeParams for HoldParams {}
+
+/// Emits each input once `by` newer ones arrived (holds its last `by`), flushes them at end
+/// of stream, counts what it still holds at stop, and panics on call `panic_at`.
+struct Hold {
+    p: HoldParams,
+    held: VecDeque<Message>,
+    calls: u64,
+}
+
+impl Processor for Hold {
+    fn process(&mut self, _ctx: &mut Context, inputs: &Inputs, out: &mut Outputs) -> Result<(), NodeError> {
+        self.calls += 1;
+        if self.calls == self.p.panic_at {
+            panic!("hold: call {}", self.calls);
+        }
+        if let Some(m) = inputs.get(0) {
+            self.held.push_back(m.clone());
+        }
+        if self.held.len() > self.p.by
+            && let Some(m) = self.held.pop_front()
+        {
+            out.send(0, m)?;
+        }
+        Ok(())
+    }
+
+    fn flush(&mut self, ctx: &mut Context, out: &mut Outputs) -> Result<(), NodeError> {
+        if let Some(m) = self.held.pop_front() {
+            out.send(0, m)?;
+        }
+        if !self.held.is_empty() {
+            ctx.request_rerun();
+        }
+        Ok(())
+    }
+
+    fn stop(&mut self, ctx: &mut Context) -> Result<(), NodeError> {
+        ctx.count_discarded(self.held.len() as u64);
+        Ok(())
+    }
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct TotalParams {
+    /// Which stream this total belongs to: a replacement of another group refuses the swap.
+    group: u64,
+    #[serde(default)]
+    add: u64,
+}
+
+impl NodeParams for TotalParams {}
+
+/// `out = running total of the inputs + add`; hands its total over to a replacement of its
+/// group, and refuses the swap to one of another group.
+struct Total {
+    p: TotalParams,
+    total: u64,
+}
+
+struct TotalState {
+    group: u64,
+    total: u64,
+}
+
+impl Processor for Total {
+    fn process(&mut self, _ctx: &mut Context, inputs: &Inputs, out: &mut Outputs) -> Result<(), NodeError> {
+        let Some(m) = inputs.get(0) else { return Ok(()) };
+        self.total += m.get::<Count>().expect("a count").0;
+        out.send(0, Message::new(m.header, Count(self.total + self.p.add)))
+    }
+
+    fn export_state(&mut self, _ctx: &mut Context) -> Option<NodeState> {
+        Some(Box::new(TotalState { group: self.p.group, total: std::mem::take(&mut self.total) }))
+    }
+
+    fn import_state(&mut self, _ctx: &mut Context, state: NodeState) -> Result<(), StateRefused> {
+        let s = state.downcast::<TotalState>().map_err(|s| StateRefused::new(s, "not a total"))?;
+        if s.group != self.p.group {
+            let reason = format!("group {} cannot go on from group {}'s total", self.p.group, s.group);
+            return Err(StateRefused::refuse_swap(s, reason));
+        }
+        self.total = s.total;
+        Ok(())
+    }
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SlowParams {
+    /// Messages emitted at graph time k * `every_s`.
+    every_s: f64,
+}
+
+impl NodeParams for SlowParams {}
+
+/// A paced source that counts its instances' stops in the shared counter.
+struct Slow {
+    every_s: f64,
+    next: u64,
+    stops: Arc<AtomicU64>,
+}
+
+impl Source for Slow {
+    fn poll(&mut self, ctx: &mut Context, out: &mut Outputs) -> Result<SourcePoll, NodeError> {
+        if !ctx.sleep_until_ns((self.next as f64 * self.every_s * 1e9) as u64) {
+            return Ok(SourcePoll::Finished);
+        }
+        out.send(
+            0,
+            Message::new(Header { seq: self.next, t_ns: ctx.now_ns(), origin: ctx.index() }, Count(self.next)),
+        )?;
+        self.next += 1;
+        Ok(SourcePoll::Emitted)
+    }
+
+    fn stop(&mut self, _ctx: &mut Context) -> Result<(), NodeError> {
+        self.stops.fetch_add(1, SeqCst);
+        Ok(())
+    }
+}
+
+/// The toy kinds, `hold`, `total`, and `slow` / `slow2` (two kinds, one behaviour) counting
+/// their stops in `stops`.
+fn registry(stops: &Arc<AtomicU64>) -> Registry {
+    let mut r = Registry::new();
+    crate::toy::register(&mut r).unwrap();
+    let count = || PortSpec::output::<Count>("out", "the value");
+    r.register(typed(
+        KindInfo::new("hold", Role::Processor, "test: holds its last `by` inputs, panics on call `panic_at`")
+            .input(PortSpec::input::<Count>("in", "the value"))
+            .output(count()),
+        |p: HoldParams, _| Ok(NodeImpl::Processor(Box::new(Hold { p, held: VecDeque::new(), calls: 0 }))),
+    ))
+    .unwrap();
+    r.register(typed(
+        KindInfo::new("total", Role::Processor, "test: running total + add, per group")
+            .input(PortSpec::input::<Count>("in", "the value"))
+            .output(count()),
+        |p: TotalParams, _| Ok(NodeImpl::Processor(Box::new(Total { p, total: 0 }))),
+    ))
+    .unwrap();
+    for name in ["slow", "slow2"] {
+        let stops = stops.clone();
+        r.register(typed(
+            KindInfo::new(name, Role::Source, "test: a paced source").output(count()),
+            move |p: SlowParams, _| {
+                Ok(NodeImpl::Source(Box::new(Slow { every_s: p.every_s, next: 0, stops: stops.clone() })))
+            },
+        ))
+        .unwrap();
+    }
+    r
+}
+
+fn spec(reg: &Registry, text: &str) -> GraphSpec {
+    GraphSpec::parse(SourceFile::new("<runtime-test>", text), reg).expect("valid graph")
+}
+
+fn node<'a>(r: &'a RunReport, id: &str) -> &'a NodeReport {
+    r.stats.node(id).unwrap()
+}
+
+fn wait_for(what: &str, mut cond: impl FnMut() -> bool) {
+    let t0 = Instant::now();
+    while !cond() {
+        assert!(t0.elapsed() < Duration::from_secs(60), "waited a minute for {what}");
+        std::thread::sleep(Duration::from_millis(5));
+    }
+}
+
+/// counter (12) -> hold (by 3, panics on call 5) -> null, lockstep, `restart`.
+fn held_at_panic(restart: &str) -> RunReport {
+    let reg = registry(&Arc::default());
+    let g = spec(
+        &reg,
+        &format!(
+            "[graph]\nmode = \"lockstep\"\n\
+             [[node]]\nid = \"src\"\nkind = \"counter\"\nparams = {{ count = 12 }}\n\
+             [[node]]\nid = \"h\"\nkind = \"hold\"\nrestart = \"{restart}\"\nparams = {{ by = 3, panic_at = 5 }}\n\
+             [[node]]\nid = \"out\"\nkind = \"null\"\n\
+             [[edge]]\nfrom = \"src.out\"\nto = \"h.in\"\n\
+             [[edge]]\nfrom = \"h.out\"\nto = \"out.in\"\n"
+        ),
+    );
+    crate::runtime::run(&g, &RunOptions::default()).unwrap()
+}
+
+#[test]
+fn what_a_restarted_instance_held_when_it_panicked_is_counted_as_discarded() {
+    let r = held_at_panic("always");
+    assert!(r.failures.is_empty(), "{:?}", r.failures);
+    let h = node(&r, "h");
+    // Two instances each emit 1 and hold 3 when their 5th call panics (that call's input is
+    // the panic's); the third takes the last 2 inputs and flushes them.
+    assert_eq!((h.msgs_in, h.msgs_out, h.panics, h.restarts), (12, 4, 2, 2));
+    assert_eq!(h.discarded, 6, "the 3 messages each panicked instance held");
+}
+
+#[test]
+fn what_a_dead_instance_held_is_counted_at_the_end_of_the_run() {
+    let r = held_at_panic("never");
+    assert_eq!(r.failures.len(), 1, "{:?}", r.failures);
+    let h = node(&r, "h");
+    assert_eq!((h.msgs_in, h.msgs_out, h.panics, h.restarts), (5, 1, 1, 0));
+    assert_eq!(h.discarded, 3, "the 3 messages the panicked instance held");
+}
+
+/// The rows `collect` wrote.
+fn rows(path: &std::path::Path) -> Vec<(u64, u64)> {
+    std::fs::read_to_string(path)
+        .unwrap()
+        .lines()
+        .map(|l| {
+            let (a, b) = l.split_once(',').unwrap();
+            (a.parse().unwrap(), b.parse().unwrap())
+        })
+        .collect()
+}
+
+fn temp_dir(name: &str) -> std::path::PathBuf {
+    let d = std::env::temp_dir().join(format!("skinflow-runtime-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+#[test]
+fn a_swap_the_replacement_refuses_is_answered_and_the_node_goes_on_with_its_state() {
+    let stops = Arc::default();
+    let reg = registry(&stops);
+    let dir = temp_dir("refused");
+    let out = dir.join("rows.csv");
+    let g = spec(
+        &reg,
+        &format!(
+            "[[node]]\nid = \"src\"\nkind = \"counter\"\nparams = {{ count = 600, rate_hz = 300.0 }}\n\
+             [[node]]\nid = \"t\"\nkind = \"total\"\nparams = {{ group = 1 }}\n\
+             [[node]]\nid = \"out\"\nkind = \"collect\"\nparams = {{ path = {out:?} }}\n\
+             [[edge]]\nfrom = \"src.out\"\nto = \"t.in\"\ncapacity = 8\n\
+             [[edge]]\nfrom = \"t.out\"\nto = \"out.in\"\ncapacity = 8\n"
+        ),
+    );
+    let running = RunningGraph::start(&g).unwrap();
+    let h = running.handle();
+    let total = reg.get("total").unwrap().clone();
+    let wait = Duration::from_secs(30);
+    wait_for("100 messages", || h.stats().node("t").unwrap().msgs_out >= 100);
+    let group = |g: &str| Params::from_toml(g).unwrap();
+    match h.swap_wait("t", total.clone(), group("group = 2\nadd = 5"), wait) {
+        Err(RunError::Swap { node, problem }) => {
+            assert_eq!(node, "t");
+            assert_eq!(problem, "group 2 cannot go on from group 1's total");
+        }
+        other => panic!("expected the replacement's refusal, got {other:?}"),
+    }
+    assert_eq!(h.stats().node("t").unwrap().swaps, 0);
+    wait_for("200 messages", || h.stats().node("t").unwrap().msgs_out >= 200);
+    h.swap_wait("t", total, group("group = 1\nadd = 1000000000"), wait).unwrap();
+    assert_eq!(h.stats().node("t").unwrap().swaps, 1, "counted when installed, before the answer");
+    let r = running.wait(&RunOptions::default());
+    assert!(r.failures.is_empty(), "{:?}", r.failures);
+    let rows = rows(&out);
+    assert_eq!(rows.len(), 600);
+    // One running total throughout: kept across the refused swap, handed over by the other.
+    let switch = rows.iter().position(|&(_, y)| y >= 1_000_000_000).expect("the second swap took effect");
+    let mut sum = 0;
+    for (i, &(seq, y)) in rows.iter().enumerate() {
+        sum += seq;
+        assert_eq!(y, if i < switch { sum } else { sum + 1_000_000_000 }, "row {i}");
+    }
+}
+
+/// `slow` (one message every `every_s`) -> null, real time.
+fn slow_graph(reg: &Registry, every_s: f64) -> RunningGraph {
+    let g = spec(
+        reg,
+        &format!(
+            "[[node]]\nid = \"s\"\nkind = \"slow\"\nparams = {{ every_s = {every_s} }}\n\
+             [[node]]\nid = \"out\"\nkind = \"null\"\n\
+             [[edge]]\nfrom = \"s.out\"\nto = \"out.in\"\n"
+        ),
+    );
+    RunningGraph::start(&g).unwrap()
+}
+
+fn kind_of(h: &GraphHandle, id: &str) -> String {
+    h.stats().node(id).unwrap().kind.clone()
+}
+
+#[test]
+fn a_swap_its_node_never_gets_to_is_not_installed_and_its_replacement_is_stopped() {
+    let stops = Arc::new(AtomicU64::new(0));
+    let reg = registry(&stops);
+    // The source emits its first message at once and then waits 1000 s for the next: it is
+    // not called again before the run is stopped.
+    let running = slow_graph(&reg, 1000.0);
+    let h = running.handle();
+    wait_for("the first message", || h.stats().node("s").unwrap().msgs_out == 1);
+    let slow2 = reg.get("slow2").unwrap().clone();
+    let params = || Params::from_toml("every_s = 0.001").unwrap();
+    let timeout = Duration::from_millis(300);
+    match h.swap_wait("s", slow2.clone(), params(), timeout) {
+        Err(RunError::SwapTimeout { node, timeout: t }) => assert_eq!((node.as_str(), t), ("s", timeout)),
+        other => panic!("expected a timeout, got {other:?}"),
+    }
+    // Queued without waiting: the run ends before the node is called again.
+    h.swap("s", slow2.clone(), params()).unwrap();
+    assert_eq!(kind_of(&h, "s"), "slow", "a queued swap does not change the kind");
+    let stop = Arc::new(AtomicBool::new(true));
+    let r = running.wait(&RunOptions { stop: Some(stop), ..RunOptions::default() });
+    assert!(r.failures.is_empty(), "{:?}", r.failures);
+    let s = node(&r, "s");
+    assert_eq!((s.kind.as_str(), s.swaps, s.msgs_out), ("slow", 0, 1), "nothing swapped in ran");
+    assert_eq!(stops.load(SeqCst), 3, "the running instance and both replacements were stopped");
+    // After the run nothing runs: a swap is refused at once, and the kind stays.
+    let e = h.swap("s", slow2.clone(), params()).unwrap_err().to_string();
+    assert!(e.contains("node \"s\": swap refused: the node runs no more"), "{e}");
+    assert!(h.swap_wait("s", slow2, params(), timeout).is_err());
+    assert_eq!(kind_of(&h, "s"), "slow");
+}
+
+#[test]
+fn a_finished_source_is_not_swapped() {
+    let stops = Arc::new(AtomicU64::new(0));
+    let reg = registry(&stops);
+    let g = spec(
+        &reg,
+        "[[node]]\nid = \"src\"\nkind = \"counter\"\nparams = { count = 5 }\n\
+         [[node]]\nid = \"out\"\nkind = \"null\"\n\
+         [[edge]]\nfrom = \"src.out\"\nto = \"out.in\"\n",
+    );
+    let running = RunningGraph::start(&g).unwrap();
+    let h = running.handle();
+    let r = running.wait(&RunOptions::default());
+    assert_eq!(node(&r, "src").msgs_out, 5);
+    let counter = reg.get("counter").unwrap().clone();
+    let e = h.swap("src", counter, Params::from_toml("count = 7").unwrap()).unwrap_err();
+    assert!(matches!(e, RunError::Swap { .. }), "{e}");
+    assert_eq!(h.stats().node("src").unwrap().swaps, 0);
+}
+
+#[test]
+fn deadline_and_restart_policy_change_while_the_graph_runs() {
+    let reg = registry(&Arc::default());
+    let g = spec(
+        &reg,
+        "[graph]\nmode = \"lockstep\"\n\
+         [[node]]\nid = \"src\"\nkind = \"counter\"\nparams = { count = 20 }\n\
+         [[node]]\nid = \"d\"\nkind = \"delay\"\nparams = { delay_us = 20.0 }\n\
+         [[node]]\nid = \"p\"\nkind = \"panicker\"\nparams = { at = 3 }\n\
+         [[node]]\nid = \"out\"\nkind = \"null\"\n\
+         [[edge]]\nfrom = \"src.out\"\nto = \"d.in\"\n\
+         [[edge]]\nfrom = \"d.out\"\nto = \"p.in\"\n\
+         [[edge]]\nfrom = \"p.out\"\nto = \"out.in\"\n",
+    );
+    let running = RunningGraph::start(&g).unwrap();
+    let h = running.handle();
+    // Applied before the first call: every call of `d` busy-waits 20 us, past a 1 us deadline;
+    // `p` is rebuilt after its panic instead of stopping the graph.
+    h.set_policy("d", Some(1.0), Restart::Never).unwrap();
+    h.set_policy("p", None, Restart::Always).unwrap();
+    assert!(matches!(h.set_policy("nope", None, Restart::Never), Err(RunError::UnknownNode(_))));
+    let r = running.wait(&RunOptions::default());
+    assert!(r.failures.is_empty(), "{:?}", r.failures);
+    let d = node(&r, "d");
+    assert_eq!((d.calls, d.deadline_misses), (20, 20));
+    let p = node(&r, "p");
+    // Each instance panics on its 3rd message: 6 panics in 20 messages, each rebuilt.
+    assert_eq!((p.panics, p.restarts, p.msgs_out), (6, 6, 14));
+}

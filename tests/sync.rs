@@ -75,3 +75,64 @@ fn every_recorded_frame_is_synced_and_a_frame_without_pressure_is_flagged() {
     let err = stderr(&out);
     assert!(err.contains("cut.h5: 3 frames without pressure") && err.contains("were not evaluated"), "{err}");
 }
+
+/// A copy of recording `src` without its truth: EIT frames, their no-load reference and the
+/// pressure only (a session recorded without a load cell).
+fn copy_without_truth(src: &Path, dst: &Path) {
+    use skinflow_record::{Recording, RecordingWriter, Streams, WriterOptions};
+    let rec = Recording::open(src).unwrap();
+    let mut opts = WriterOptions::new(rec.sensor_toml.clone());
+    opts.streams = Streams { eit: true, pressure: true, truth: false, ..Streams::default() };
+    let mut w = RecordingWriter::create(dst, &opts).unwrap();
+    let eit = rec.eit.as_ref().unwrap();
+    for i in 0..eit.len() {
+        w.append_eit(eit.t_s[i], eit.seq[i], eit.frame(i)).unwrap();
+    }
+    if let Some(reference) = &rec.reference {
+        w.set_reference(reference).unwrap();
+    }
+    let p = rec.pressure.as_ref().unwrap();
+    for i in 0..p.len() {
+        w.append_pressure(p.t_s[i], p.kpa[i]).unwrap();
+    }
+    w.close().unwrap();
+}
+
+/// `graphs/ab-replay.toml` on a recording without truth (its truth edge wired, nothing on
+/// it): the sync node tares on the first `tare_s` seconds and says so, and `compare` times and
+/// scores the frames after them, the second lane by its disagreement with the first, and
+/// counts the no-load frames it left out.
+#[test]
+fn a_recording_without_truth_is_tared_by_time_and_its_lanes_compared() {
+    let d = super::support::workdir("sync", "notruth");
+    ok(&skinflow(&d, &["simulate", fixture("tiny-eval.toml").to_str().unwrap(), "--out", "rec.h5", "--seed", "3"]));
+    copy_without_truth(&d.join("rec.h5"), &d.join("notruth.h5"));
+    assert!(skinflow_record::Recording::open(d.join("notruth.h5")).unwrap().truth.is_none());
+    let root = super::support::root();
+    let graph = std::fs::read_to_string(root.join("graphs/ab-replay.toml"))
+        .unwrap()
+        .replace("\"../out/multi.h5\"", "\"notruth.h5\"")
+        .replace("\"../out/ab-replay.json\"", "\"ab.json\"")
+        .replace("\"calib/paper.toml\"", &format!("{:?}", root.join("graphs/calib/paper.toml")));
+    std::fs::write(d.join("ab.toml"), graph).unwrap();
+    let out = skinflow(&d, &["run", "ab.toml"]);
+    let table = ok(&out);
+    let err = stderr(&out);
+    assert!(err.contains("no truth row arrived in the first tare_s seconds"), "{err}");
+    assert!(!err.contains("the lane scored no frame"), "{err}");
+    let report: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(d.join("ab.json")).unwrap()).unwrap();
+    let lanes = report["lanes"].as_array().unwrap();
+    assert_eq!(lanes.len(), 2, "{report}");
+    let frames = skinflow_record::Recording::open(d.join("notruth.h5")).unwrap().eit.unwrap().len() as u64;
+    for l in lanes {
+        let count = |k: &str| l[k].as_u64().unwrap();
+        // 2 s of 4 s rest at 1.3 frames/s: two or three no-load frames.
+        assert!((2..=3).contains(&count("no_load_frames")), "{l}");
+        assert_eq!(count("no_load_frames") + count("frames") + count("no_pressure_frames"), frames, "{l}");
+        assert!(count("scored_frames") > 0 && count("matched") == 0, "{l}");
+    }
+    // The reference lane has no disagreement with itself; the other lane has one.
+    assert!(lanes[0]["disagreement_rmse_n"].is_null(), "{report}");
+    assert!(lanes[1]["disagreement_rmse_n"].as_f64().is_some_and(|x| x.is_finite() && x > 0.0), "{report}");
+    assert!(table.contains("| sensitivity-compensated |"), "{table}");
+}

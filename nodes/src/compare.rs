@@ -7,8 +7,17 @@
 //! each lane's disagreement with the reference lane (force RMS difference over matched
 //! contacts). Live: a `tracing` info line per lane every `report_s`; at stop: a table on stdout
 //! and, with `json`, the same as JSON. No-load reference frames are not evaluated, nor a lane's
-//! forces of a frame without pressure (placeholders flagged `no_pressure`): those are counted
-//! per lane (`no_pressure_frames`) and reported at stop.
+//! forces of a frame without pressure (placeholders flagged `no_pressure`): both are counted per
+//! lane (`no_load_frames`, `no_pressure_frames`) and reported at stop, with each lane's
+//! `scored_frames` (the frames behind its error figures); a lane that scored no frame is warned
+//! about, naming what its frames were left out for.
+//!
+//! The lanes' forces of one frame must arrive in one call: `trigger = "aligned"`. Without it
+//! (`any` hands over one message per call, `periodic` coalesces) no lane is ever compared with
+//! the reference lane, so the first call that holds the forces of only some lanes, or of
+//! different frames, stops the graph with an error saying so; so does a `reference` that is not
+//! one of the lanes (0 to lanes - 1). Neither the trigger nor the number of lanes is known to a
+//! kind before data flows, so these are checked on the first forces, not by `skinflow check`.
 //!
 //! Errors are scored on settled frames only (`frames = "settled"`, the default): a frame
 //! acquired while the load changed mixes two states in one image and has no single true force
@@ -29,6 +38,11 @@
 //! told apart here: no message says which instance or params made it, so such a lane's figures
 //! span both settings.
 //!
+//! Hot swap of the node itself (e.g. a new `report_s`): the replacement takes over every lane
+//! with its figures and names, closed lanes included, so its report at stop covers the whole
+//! run; the replaced instance writes no report. Its own params apply from the swap on: `names`
+//! to lanes that start after it, `reference` and `frames` to the frames after it.
+//!
 //! ```toml
 //! params = { names = ["proportional", "peak-weighted"], report_s = 2.0, json = "../out/ab.json", print = true }
 //! ```
@@ -41,8 +55,8 @@ use skinflow_contact::eval::match_contacts;
 use skinflow_contact::eval::metrics::{MATCH_RADIUS_MM, percentile};
 use skinflow_core::params::non_negative;
 use skinflow_core::{
-    BuildContext, Context, Inputs, KindInfo, NodeError, NodeImpl, NodeParams, ParamDoc, ParamError, PortSpec, Registry,
-    Role, Sink, typed,
+    BuildContext, Context, Inputs, KindInfo, NodeError, NodeImpl, NodeParams, NodeState, ParamDoc, ParamError,
+    PortSpec, Registry, Role, Sink, StateRefused, typed,
 };
 
 use crate::payload::Forces;
@@ -59,7 +73,8 @@ pub struct CompareParams {
     pub report_s: f64,
     /// Write the final report as JSON here (relative to the graph file).
     pub json: Option<PathBuf>,
-    /// The lane others are compared with when a frame has no truth.
+    /// The lane others are compared with when a frame has no truth (0 to lanes - 1, checked
+    /// on the first forces: the number of lanes is the number of `forces` edges).
     #[serde(default)]
     pub reference: usize,
     /// Print the table on stdout at stop.
@@ -128,6 +143,13 @@ struct Lane {
     no_pressure_frames: u64,
     /// Frames acquired while the load changed (not `settled`): timed, not scored.
     unsettled_frames: u64,
+    /// No-load frames (sync's leading no-load period, EIT reference candidates): not timed, not
+    /// scored.
+    no_load_frames: u64,
+    /// Frames behind the lane's error figures: scored against the truth, or without truth
+    /// compared with the reference lane (the reference lane: frames another lane was compared
+    /// with it on).
+    scored_frames: u64,
 }
 
 /// One lane's figures (what the table and the JSON show).
@@ -152,6 +174,13 @@ pub struct LaneReport {
     /// Frames in `frames` (timed) whose errors were not scored because the load changed while
     /// they were acquired (`frames = "settled"`); 0 with `frames = "all"`.
     pub unsettled_frames: u64,
+    /// Frames left out as no-load frames (the `sync` node's leading no-load period); not in
+    /// `frames`.
+    pub no_load_frames: u64,
+    /// Frames behind the error figures: scored against the truth, or without truth compared
+    /// with the reference lane (for the reference lane: frames another lane was compared with
+    /// it on). 0 means the lane has no RMSE and no disagreement.
+    pub scored_frames: u64,
     /// The `forces` edge (graph file order) of the lane; several lanes share one when its
     /// strategy changed during the run (hot swap), in order of `segment`.
     pub input: usize,
@@ -202,6 +231,8 @@ impl Lane {
             disagreement_rmse_n: ratio(self.disagree_sq_n2, self.disagree_matched).sqrt(),
             no_pressure_frames: self.no_pressure_frames,
             unsettled_frames: self.unsettled_frames,
+            no_load_frames: self.no_load_frames,
+            scored_frames: self.scored_frames,
             input: self.input,
             segment: self.segment,
             strategy: self.strategy.clone(),
@@ -224,40 +255,51 @@ pub struct Compare {
     print: bool,
     scored: ScoredFrames,
     // Internal state
+    /// The lanes and their figures (handed to a replacement at a hot swap).
+    st: CompareState,
+    /// Number of lanes (`forces` edges) `reference` was checked against.
+    checked_lanes: Option<usize>,
+    /// The state went to a replacement (hot swap): this instance reports nothing at stop.
+    handed_over: bool,
+    next_report_ns: u64,
+    pred_xy: Vec<(f64, f64)>,
+    truth_xy: Vec<(f64, f64)>,
+}
+
+/// What a `compare` node accumulated: moved whole to its replacement at a hot swap.
+#[derive(Default)]
+struct CompareState {
     /// The current lane of each input edge.
     lanes: Vec<Lane>,
     /// Lanes closed by a change of strategy on their edge, in the order they were closed.
     closed: Vec<Lane>,
     /// Sequence number of the frame being accounted.
     frame: u64,
-    next_report_ns: u64,
-    pred_xy: Vec<(f64, f64)>,
-    truth_xy: Vec<(f64, f64)>,
 }
 
 impl Compare {
-    /// The current lane of input `i` for forces `f` (of frame `self.frame`): a new one when
+    /// The current lane of input `i` for forces `f` (of frame `self.st.frame`): a new one when
     /// the strategy changed.
     fn lane(&mut self, i: usize, f: &Forces) -> &mut Lane {
-        while self.lanes.len() <= i {
-            let k = self.lanes.len();
+        while self.st.lanes.len() <= i {
+            let k = self.st.lanes.len();
             let name = self.names.get(k).cloned().unwrap_or_default();
-            self.lanes.push(Lane::new(k, name));
+            self.st.lanes.push(Lane::new(k, name));
         }
-        let lane = &self.lanes[i];
+        let lane = &self.st.lanes[i];
         if lane.first_frame.is_none() {
-            let lane = &mut self.lanes[i];
+            let lane = &mut self.st.lanes[i];
             if lane.name.is_empty() {
                 lane.name = if f.strategy.is_empty() { format!("lane{i}") } else { f.strategy.clone() };
             }
             lane.strategy.clone_from(&f.strategy);
             lane.split = f.split.strategy;
-            lane.first_frame = Some(self.frame);
+            lane.first_frame = Some(self.st.frame);
         } else if lane.strategy != f.strategy || lane.split != f.split.strategy {
             self.next_segment(i, f);
         }
-        let lane = &mut self.lanes[i];
-        lane.last_frame = Some(self.frame);
+        let lane = &mut self.st.lanes[i];
+        lane.last_frame = Some(self.st.frame);
         lane
     }
 
@@ -265,7 +307,7 @@ impl Compare {
     /// the next one, named after what changed.
     #[cold]
     fn next_segment(&mut self, i: usize, f: &Forces) {
-        let old = &self.lanes[i];
+        let old = &self.st.lanes[i];
         let changed = if old.strategy != f.strategy { f.strategy.as_str() } else { f.split.strategy };
         let changed = if changed.is_empty() { format!("lane{i}") } else { changed.to_owned() };
         let name = match self.names.get(i).filter(|n| !n.is_empty()) {
@@ -276,18 +318,18 @@ impl Compare {
         new.segment = old.segment + 1;
         new.strategy.clone_from(&f.strategy);
         new.split = f.split.strategy;
-        new.first_frame = Some(self.frame);
-        let mut old = std::mem::replace(&mut self.lanes[i], new);
+        new.first_frame = Some(self.st.frame);
+        let mut old = std::mem::replace(&mut self.st.lanes[i], new);
         old.superseded = true;
         tracing::info!(
             node = %self.id,
             lane = %old.display_name(),
-            next = %self.lanes[i].display_name(),
+            next = %self.st.lanes[i].display_name(),
             strategy = %f.strategy,
             split = f.split.strategy,
             "compare: the lane's strategy changed; its figures are closed and a new lane starts"
         );
-        self.closed.push(old);
+        self.st.closed.push(old);
     }
 
     /// Scores one lane's forces against the frame's truth.
@@ -300,7 +342,7 @@ impl Compare {
         let t = truth.as_deref().map_or(&[][..], |t| &t.contacts[..]);
         self.truth_xy.extend(t.iter().map(|c| (c.x_mm, c.y_mm)));
         let pairs = match_contacts(&self.pred_xy, &self.truth_xy, MATCH_RADIUS_MM);
-        let lane = &mut self.lanes[i];
+        let lane = &mut self.st.lanes[i];
         lane.truth_frames += 1;
         lane.missed += (t.len() - pairs.len()) as u64;
         lane.spurious += (contacts.len() - pairs.len()) as u64;
@@ -322,7 +364,7 @@ impl Compare {
         self.truth_xy.clear();
         self.truth_xy.extend(reference.split.contacts.contacts.iter().map(|c| (c.x_mm, c.y_mm)));
         let pairs = match_contacts(&self.pred_xy, &self.truth_xy, MATCH_RADIUS_MM);
-        let lane = &mut self.lanes[i];
+        let lane = &mut self.st.lanes[i];
         for p in &pairs {
             lane.disagree_sq_n2 += (f.forces[p.pred].force_n - reference.forces[p.truth].force_n).powi(2);
             lane.disagree_matched += 1;
@@ -331,37 +373,104 @@ impl Compare {
 
     /// Accounts lane `i`'s forces of one frame: scored against the truth, or without truth
     /// against the reference lane's forces of the frame (`reference`; placeholders are no
-    /// reference). No-load frames are skipped, placeholders for a frame without pressure
-    /// counted and skipped.
-    fn account(&mut self, i: usize, f: &Forces, reference: Option<&Forces>) {
+    /// reference). No-load frames and placeholders for a frame without pressure are counted
+    /// and skipped. Returns whether the lane was compared with the reference lane.
+    fn account(&mut self, i: usize, f: &Forces, reference: Option<&Forces>) -> bool {
         let synced = &f.split.contacts.image.src;
         let unscored = self.scored == ScoredFrames::Settled && !synced.settled;
+        let reference = reference.filter(|r| i != self.reference && !r.without_pressure());
         let lane = self.lane(i, f);
         if synced.no_load {
-            return;
+            lane.no_load_frames += 1;
+            return false;
         }
         if f.without_pressure() {
             lane.no_pressure_frames += 1;
-            return;
+            return false;
         }
         lane.frames += 1;
         lane.latency_us.push(f.pipeline_ns() as f64 / 1e3);
         if unscored {
             lane.unsettled_frames += 1;
-            return;
+            return false;
         }
         if synced.truth.is_some() {
+            lane.scored_frames += 1;
             self.score_truth(i, f);
-        } else if let Some(r) = reference.filter(|r| i != self.reference && !r.without_pressure()) {
+        } else if let Some(r) = reference {
+            lane.scored_frames += 1;
             self.score_disagreement(i, f, r);
+            return true;
         }
+        false
+    }
+
+    /// Accounts one call's forces, one per lane of one frame (`(lane, sequence number,
+    /// forces)`): each lane as [`Compare::account`]; the reference lane's frame counts as scored
+    /// when another lane was compared with it.
+    fn account_frame<'a, I>(&mut self, forces: impl Fn() -> I)
+    where
+        I: Iterator<Item = (usize, u64, &'a Forces)>,
+    {
+        let reference = forces().find(|&(lane, _, _)| lane == self.reference).map(|(_, _, f)| f);
+        let mut compared = false;
+        for (i, seq, f) in forces() {
+            self.st.frame = seq;
+            compared |= self.account(i, f, reference);
+        }
+        if compared && let Some(lane) = self.st.lanes.get_mut(self.reference) {
+            lane.scored_frames += 1;
+        }
+    }
+
+    /// Checks one call's forces against what the node needs: `reference` names one of the
+    /// lanes, and the call holds the forces of every lane for one frame (`trigger =
+    /// "aligned"`). Neither the lane count nor the trigger is known before the first call.
+    /// Both errors stop the graph: the run would report no disagreement for any lane.
+    fn check_call(&mut self, inputs: &Inputs) -> Result<(), NodeError> {
+        let lanes = inputs.lanes(0);
+        if self.checked_lanes != Some(lanes) {
+            if self.reference >= lanes {
+                let problem = format!(
+                    "{} is not a lane: the node has {lanes} lane{} (one per `forces` edge, numbered from 0 in graph \
+                     file order), so without truth no lane could be compared with the reference lane",
+                    self.reference,
+                    if lanes == 1 { "" } else { "s" }
+                );
+                return Err(NodeError::Param { param: "reference".into(), problem }.fatal());
+            }
+            self.checked_lanes = Some(lanes);
+        }
+        if lanes < 2 {
+            return Ok(());
+        }
+        let (mut n, mut lo, mut hi) = (0, u64::MAX, 0);
+        for (_, m) in inputs.iter_port(0) {
+            n += 1;
+            lo = lo.min(m.header.seq);
+            hi = hi.max(m.header.seq);
+        }
+        if n == lanes && lo == hi {
+            return Ok(());
+        }
+        let got = if n == lanes {
+            format!("the forces of frames {lo} to {hi}")
+        } else {
+            format!("the forces of {n} of its {lanes} lanes")
+        };
+        Err(NodeError::msg(format!(
+            "trigger: compare needs trigger = \"aligned\" (by frame, align = \"seq\"): one call got {got}, so \
+             the lanes' forces of one frame never meet and without truth no lane is compared with the \
+             reference lane"
+        ))
+        .fatal())
     }
 
     /// Every lane's figures so far: by input edge, each edge's lanes in order.
     pub fn reports(&self) -> Vec<LaneReport> {
-        let mut out = Vec::with_capacity(self.lanes.len() + self.closed.len());
-        for (i, lane) in self.lanes.iter().enumerate() {
-            out.extend(self.closed.iter().filter(|l| l.input == i).map(Lane::report));
+        let mut out = Vec::with_capacity(self.st.lanes.len() + self.st.closed.len());
+        for (i, lane) in self.st.lanes.iter().enumerate() {
+            out.extend(self.st.closed.iter().filter(|l| l.input == i).map(Lane::report));
             out.push(lane.report());
         }
         out
@@ -386,14 +495,11 @@ impl Sink for Compare {
     }
 
     fn consume(&mut self, ctx: &mut Context, inputs: &Inputs) -> Result<(), NodeError> {
-        let reference =
-            inputs.iter_port(0).find(|(lane, _)| *lane == self.reference).and_then(|(_, m)| m.arc::<Forces>());
-        for (i, m) in inputs.iter_port(0) {
-            let f =
-                m.get::<Forces>().ok_or(NodeError::Input { port: "forces".into(), problem: "not forces".into() })?;
-            self.frame = m.header.seq;
-            self.account(i, f, reference.as_deref());
+        self.check_call(inputs)?;
+        if inputs.iter_port(0).any(|(_, m)| m.get::<Forces>().is_none()) {
+            return Err(NodeError::Input { port: "forces".into(), problem: "not forces".into() });
         }
+        self.account_frame(|| inputs.iter_port(0).filter_map(|(i, m)| Some((i, m.header.seq, m.get::<Forces>()?))));
         if self.report_ns > 0 && self.next_report_ns == 0 {
             self.next_report_ns = ctx.now_ns() + self.report_ns; // first line after one period
         }
@@ -401,8 +507,9 @@ impl Sink for Compare {
             self.next_report_ns = ctx.now_ns() + self.report_ns;
             for r in self.reports() {
                 tracing::info!(
-                    node = %ctx.id(), lane = %r.name, frames = r.frames, p50_us = r.latency_us_p50, p99_us = r.latency_us_p99,
-                    rmse_n = r.rmse_n, loc_mm = r.localization_mean_mm, disagreement_n = r.disagreement_rmse_n, "compare"
+                    node = %ctx.id(), lane = %r.name, frames = r.frames, scored = r.scored_frames, p50_us = r.latency_us_p50,
+                    p99_us = r.latency_us_p99, rmse_n = r.rmse_n, loc_mm = r.localization_mean_mm,
+                    disagreement_n = r.disagreement_rmse_n, "compare"
                 );
             }
         }
@@ -410,6 +517,10 @@ impl Sink for Compare {
     }
 
     fn stop(&mut self, ctx: &mut Context) -> Result<(), NodeError> {
+        if self.handed_over {
+            tracing::debug!(node = ctx.id(), "replaced (hot swap): the replacement reports the lanes");
+            return Ok(());
+        }
         let reports = self.reports();
         for r in reports.iter().filter(|r| r.no_pressure_frames > 0) {
             tracing::warn!(
@@ -417,6 +528,19 @@ impl Sink for Compare {
                 lane = %r.name,
                 frames = r.no_pressure_frames,
                 "frames without pressure were not scored (forces flagged no_pressure)"
+            );
+        }
+        for r in reports.iter().filter(|r| r.scored_frames == 0) {
+            tracing::warn!(
+                node = ctx.id(),
+                lane = %r.name,
+                timed_frames = r.frames,
+                no_load = r.no_load_frames,
+                no_pressure = r.no_pressure_frames,
+                unsettled = r.unsettled_frames,
+                reference = self.reference,
+                "the lane scored no frame: no error against truth and no disagreement (without truth a frame is \
+                 compared with the reference lane; no-load, unsettled and no-pressure frames are not scored)"
             );
         }
         if self.print {
@@ -430,6 +554,26 @@ impl Sink for Compare {
         }
         Ok(())
     }
+
+    /// Hot swap: every lane with its figures goes to the replacement, which reports them at
+    /// stop; this instance then reports nothing.
+    fn export_state(&mut self, _ctx: &mut Context) -> Option<NodeState> {
+        self.handed_over = true;
+        Some(Box::new(std::mem::take(&mut self.st)))
+    }
+
+    fn import_state(&mut self, ctx: &mut Context, state: NodeState) -> Result<(), StateRefused> {
+        let s = state.downcast::<CompareState>().map_err(|s| StateRefused::new(s, "not a compare node's state"))?;
+        self.st = *s;
+        self.handed_over = false;
+        tracing::info!(
+            node = ctx.id(),
+            lanes = self.st.lanes.len() + self.st.closed.len(),
+            last_frame = self.st.frame,
+            "lanes and their figures taken over (hot swap)"
+        );
+        Ok(())
+    }
 }
 
 fn num(x: f64, digits: usize) -> String {
@@ -439,15 +583,17 @@ fn num(x: f64, digits: usize) -> String {
 /// The end-of-run table (Markdown).
 pub fn table(reports: &[LaneReport]) -> String {
     let mut s = String::from(
-        "| lane | frames | unsettled | p50 us | p99 us | RMSE N | rel. err % | loc. mm | matched | missed | spurious | disagreement N |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n",
+        "| lane | frames | no-load | unsettled | scored | p50 us | p99 us | RMSE N | rel. err % | loc. mm | matched | missed | spurious | disagreement N |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for r in reports {
         let _ = writeln!(
             s,
-            "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
+            "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
             r.name,
             r.frames,
+            r.no_load_frames,
             r.unsettled_frames,
+            r.scored_frames,
             num(r.latency_us_p50, 1),
             num(r.latency_us_p99, 1),
             num(r.rmse_n, 3),
@@ -487,9 +633,9 @@ fn build(p: CompareParams, ctx: &BuildContext) -> Result<NodeImpl, NodeError> {
         reference: p.reference,
         print: p.print,
         scored: p.frames,
-        lanes: Vec::new(),
-        closed: Vec::new(),
-        frame: 0,
+        st: CompareState::default(),
+        checked_lanes: None,
+        handed_over: false,
         next_report_ns: 0,
         pred_xy: Vec::with_capacity(16),
         truth_xy: Vec::with_capacity(16),
@@ -499,7 +645,7 @@ fn build(p: CompareParams, ctx: &BuildContext) -> Result<NodeImpl, NodeError> {
 pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::DuplicateKind> {
     r.register(typed(
         KindInfo::new("compare", Role::Sink, "A/B lanes: per-lane latency and error against truth (or disagreement)")
-            .input(PortSpec::input::<Forces>("forces", "one edge per lane; use trigger = \"aligned\"").multi())
+            .input(PortSpec::input::<Forces>("forces", "one edge per lane; needs trigger = \"aligned\"").multi())
             .param(ParamDoc::new(
                 "names",
                 "array of strings",
@@ -513,7 +659,12 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
                 "none",
                 "write the final report as JSON here (relative to the graph file; its directory must exist)",
             ))
-            .param(ParamDoc::new("reference", "integer", "0", "lane compared against when a frame has no truth"))
+            .param(ParamDoc::new(
+                "reference",
+                "integer",
+                "0",
+                "lane compared against when a frame has no truth (0 to lanes - 1, checked on the first forces)",
+            ))
             .param(ParamDoc::new("print", "bool", "true", "print the table on stdout at stop"))
             .param(ParamDoc::new(
                 "frames",
@@ -574,9 +725,9 @@ mod tests {
             reference: 0,
             print: false,
             scored: ScoredFrames::Settled,
-            lanes: Vec::new(),
-            closed: Vec::new(),
-            frame: 0,
+            st: CompareState::default(),
+            checked_lanes: None,
+            handed_over: false,
             next_report_ns: 0,
             pred_xy: Vec::new(),
             truth_xy: Vec::new(),
@@ -623,7 +774,7 @@ mod tests {
 
     fn feed(c: &mut Compare, i: usize, f: &Forces) {
         c.lane(i, f).frames += 1;
-        c.lanes[i].latency_us.push(f.pipeline_ns() as f64 / 1e3);
+        c.st.lanes[i].latency_us.push(f.pipeline_ns() as f64 / 1e3);
         c.score_truth(i, f);
     }
 
@@ -732,7 +883,7 @@ mod tests {
 
     /// Accounts `f` as frame `seq` of input `i`.
     fn at(c: &mut Compare, seq: u64, i: usize, f: &Forces) {
-        c.frame = seq;
+        c.st.frame = seq;
         c.account(i, f, None);
     }
 
@@ -822,6 +973,125 @@ mod tests {
         assert_eq!((r[1].name.as_str(), r[1].frames, r[1].no_pressure_frames), ("eit-force (from frame 3)", 0, 1));
     }
 
+    /// `f` with its synced frame changed by `edit`.
+    fn with_src(mut f: Forces, edit: impl FnOnce(&mut SyncedFrame)) -> Forces {
+        let split = Arc::make_mut(&mut f.split);
+        let contacts = Arc::make_mut(&mut split.contacts);
+        let image = Arc::make_mut(&mut contacts.image);
+        edit(Arc::make_mut(&mut image.src));
+        f
+    }
+
+    /// Frame `seq` of a two-lane run: no-load frames 0 and 1, then truth on even frames and
+    /// none on odd ones, frame 4 taken while the load changed, frame 5 without pressure on
+    /// lane 0; lane 0's splitter changes strategy at frame 6 (a closed lane), and the forces
+    /// move with the frame, so every frame adds its own figures.
+    fn two_lanes(seq: u64) -> [Forces; 2] {
+        let x = seq as f64;
+        let truth = [(0.0, 0.0, 2.0), (30.0, 0.0, 4.0)];
+        let truth = seq.is_multiple_of(2).then_some(&truth[..]);
+        let split = if seq < 6 { "proportional" } else { "eit-force" };
+        let a = split_by(forces("a", &[(1.0, 0.0, 2.0 + 0.1 * x), (30.0, 2.0, 4.5)], truth), split);
+        let b = forces("b", &[(0.0, 1.0, 2.5), (31.0, 0.0, 4.0 - 0.05 * x)], truth);
+        let edit = |f: Forces| {
+            with_src(f, |s| {
+                s.no_load = seq < 2;
+                s.settled = seq != 4;
+            })
+        };
+        let [mut a, b] = [edit(a), edit(b)];
+        if seq == 5 {
+            a.forces[0] = placeholder();
+        }
+        [a, b]
+    }
+
+    /// Accounts frames `seqs` of [`two_lanes`] as `consume` does.
+    fn run(c: &mut Compare, seqs: std::ops::Range<u64>) {
+        for seq in seqs {
+            let frame = two_lanes(seq);
+            c.account_frame(|| frame.iter().enumerate().map(|(i, f)| (i, seq, f)));
+        }
+    }
+
+    #[test]
+    fn a_replacement_takes_over_every_lane_and_ends_with_an_unswapped_runs_report() {
+        let ctx = &mut Context::detached("compare", skinflow_core::Mode::Lockstep);
+        let dir = std::env::temp_dir().join(format!("skinflow-compare-swap-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let json = dir.join("ab.json");
+        let _ = std::fs::remove_file(&json);
+        let mut whole = compare();
+        run(&mut whole, 0..12);
+        let want = to_json(&whole.reports());
+        assert_eq!(whole.reports().len(), 3, "the closed lane is part of what is handed over: {want}");
+
+        let mut old = Compare { json: Some(json.clone()), ..compare() };
+        run(&mut old, 0..8);
+        let state = old.export_state(ctx).expect("compare hands its lanes over");
+        old.stop(ctx).unwrap();
+        assert!(!json.exists(), "the replaced instance writes no report of part of the run");
+        // The replacement differs in report_s only, as a swap from the control socket.
+        let mut new = Compare { json: Some(json.clone()), report_ns: 5_000_000_000, ..compare() };
+        new.import_state(ctx, state).unwrap();
+        run(&mut new, 8..12);
+        assert_eq!(to_json(&new.reports()), want);
+        new.stop(ctx).unwrap();
+        assert_eq!(std::fs::read_to_string(&json).unwrap(), want);
+        let r = new.reports();
+        assert_eq!((r[0].first_frame, r[2].last_frame, r[2].frames), (Some(0), Some(11), 10));
+        std::fs::remove_dir_all(&dir).unwrap();
+
+        // A state that is not a compare node's is refused, unchanged; a refused state goes back
+        // to the replaced instance, which then reports it.
+        let refused = compare().import_state(ctx, Box::new(7_u32)).unwrap_err();
+        assert_eq!(refused.reason, "not a compare node's state");
+        assert_eq!(*refused.state.downcast::<u32>().unwrap(), 7);
+        let mut old = compare();
+        run(&mut old, 0..12);
+        let state = old.export_state(ctx).unwrap();
+        assert!(old.reports().is_empty() && old.handed_over);
+        old.import_state(ctx, state).unwrap();
+        assert!(!old.handed_over);
+        assert_eq!(to_json(&old.reports()), want);
+    }
+
+    #[test]
+    fn no_load_and_unscored_frames_are_counted_and_lanes_without_truth_are_compared() {
+        let mut c = compare();
+        run(&mut c, 0..6);
+        let r = c.reports();
+        let counts: Vec<_> = r
+            .iter()
+            .map(|l| (l.no_load_frames, l.frames, l.unsettled_frames, l.no_pressure_frames, l.scored_frames))
+            .collect();
+        // Frames 2-5: 2 truth, 3 disagreement, 4 unsettled, 5 without pressure on lane 0 (so
+        // lane 1 is not compared on it: its reference is a placeholder).
+        assert_eq!(counts, [(2, 3, 1, 1, 2), (2, 4, 1, 0, 2)]);
+        assert!(r[1].disagreement_rmse_n.is_finite() && r[0].disagreement_rmse_n.is_nan(), "{r:?}");
+        // Frame 3 alone: lane 1's contacts against the reference lane's, 0.2 and 0.65 N apart.
+        let want = ((0.2f64.powi(2) + 0.65f64.powi(2)) / 2.0).sqrt();
+        assert!((r[1].disagreement_rmse_n - want).abs() < 1e-12, "{}", r[1].disagreement_rmse_n);
+        let t = table(&r);
+        assert!(t.contains("| lane | frames | no-load | unsettled | scored |"), "{t}");
+        assert!(t.contains("| b | 4 | 2 | 1 | 2 |"), "{t}");
+
+        // A recording without truth whose frames were all no-load (a sync that never ends the
+        // no-load period): nothing timed, nothing scored, and each frame counted.
+        let mut c = compare();
+        for seq in 0..5 {
+            let frame = two_lanes(seq).map(|f| with_src(f, |s| (s.no_load, s.truth) = (true, None)));
+            c.account_frame(|| frame.iter().enumerate().map(|(i, f)| (i, seq, f)));
+        }
+        let r = c.reports();
+        assert!(r.iter().all(|l| (l.no_load_frames, l.frames, l.scored_frames) == (5, 0, 0)), "{r:?}");
+        // One lane without truth has nothing to be compared with.
+        let mut c = compare();
+        let f = forces("a", &[(0.0, 0.0, 1.0)], None);
+        c.account_frame(|| std::iter::once((0, 0, &f)));
+        assert_eq!((c.reports()[0].frames, c.reports()[0].scored_frames), (1, 0));
+    }
+
     #[test]
     fn table_and_json_show_missing_values_plainly() {
         let r = LaneReport {
@@ -838,6 +1108,8 @@ mod tests {
             disagreement_rmse_n: 0.5,
             no_pressure_frames: 2,
             unsettled_frames: 1,
+            no_load_frames: 4,
+            scored_frames: 0,
             input: 0,
             segment: 0,
             strategy: "a".into(),
@@ -847,7 +1119,7 @@ mod tests {
             superseded: false,
         };
         let t = table(std::slice::from_ref(&r));
-        assert!(t.contains("| a \"quoted\" lane | 3 | 1 | 12.2 | 20.0 | - |"), "{t}");
+        assert!(t.contains("| a \"quoted\" lane | 3 | 4 | 1 | 0 | 12.2 | 20.0 | - |"), "{t}");
         let j: serde_json::Value = serde_json::from_str(&to_json(&[r])).unwrap();
         let lane = &j["lanes"][0];
         assert_eq!(lane["name"], "a \"quoted\" lane");
@@ -856,6 +1128,7 @@ mod tests {
         assert_eq!(lane["disagreement_rmse_n"], 0.5);
         assert_eq!(lane["no_pressure_frames"], 2);
         assert_eq!(lane["unsettled_frames"], 1);
-        assert_eq!(lane.as_object().unwrap().len(), 20, "{j}");
+        assert_eq!((&lane["no_load_frames"], &lane["scored_frames"]), (&4.into(), &0.into()));
+        assert_eq!(lane.as_object().unwrap().len(), 22, "{j}");
     }
 }

@@ -13,6 +13,14 @@
 //! no-load frame (an EIT reference candidate) only when its whole window lies in that period; a `tare`
 //! control command re-tares from the last `tare_window_s` seconds of pressure.
 //!
+//! A connected truth input that delivers nothing (a recording without truth replayed through a
+//! graph that wires it): when no truth row at all has arrived by the end of those first `tare_s`
+//! seconds (some input shows a later time, or the stream ends), the no-load period is the
+//! time-based one, as without truth, and the node says so once (a warning). Truth rows that
+//! arrive later are still attached to frames, and their first contact still ends the no-load
+//! period if it comes earlier. Without this, every frame would wait for a first contact that never
+//! comes: all no-load, none scored downstream.
+//!
 //! Settled frames: a frame acquired while the load changed mixes two states in one image (the
 //! board scans its channels in sequence) and has no single force. Without truth, the pressure
 //! tells: the frame is `settled` when the standard deviation of its window's samples is at most
@@ -153,6 +161,11 @@ struct SyncState {
     /// Earliest time seen on the pressure or EIT input: without truth, the no-load period is
     /// the first `tare_s` seconds after it (a recording's clock need not start at 0).
     start_s: Option<f64>,
+    /// A truth row (with or without contacts) has arrived.
+    truth_seen: bool,
+    /// The truth input is connected but no row arrived by the end of the first `tare_s`
+    /// seconds: the no-load period is the time-based one (set once, never cleared).
+    truth_absent: bool,
     /// No-load pressure accumulation for P0 and the noise SD: sums of (kPa - p0_shift) and
     /// of its square (shifted by the first sample, so the variance does not cancel).
     p0_sum: f64,
@@ -220,14 +233,17 @@ impl Sync {
         p.into_iter().chain(t).reduce(f64::max)
     }
 
+    /// Whether the first truth contact ends the no-load period: the truth input is connected
+    /// and delivered a row in time (else the period is the first `tare_s` seconds).
+    fn truth_ends_no_load(&self) -> bool {
+        self.truth_connected && !self.st.truth_absent
+    }
+
     /// Whether a frame window ending (exclusive) at `end_s` lies wholly in the leading
     /// no-load period.
     fn window_in_no_load(&self, end_s: f64) -> bool {
-        if self.truth_connected {
-            self.st.first_contact_s.is_none_or(|t0| end_s <= t0)
-        } else {
-            end_s <= self.tare_end_s()
-        }
+        let before_contact = self.st.first_contact_s.is_none_or(|t0| end_s <= t0);
+        before_contact && (self.truth_ends_no_load() || end_s <= self.tare_end_s())
     }
 
     /// Without truth: the end of the first `tare_s` seconds after the earliest time seen.
@@ -235,15 +251,37 @@ impl Sync {
         self.st.start_s.unwrap_or(0.0) + self.p.tare_s
     }
 
+    /// Notes an input's time: the earliest one starts the clock of the time-based no-load
+    /// period, and a time past its end without any truth row makes that period the one in use
+    /// (before the sample or frame at `t_s` is accounted).
     fn saw(&mut self, t_s: f64) {
-        if t_s.is_finite() {
-            self.st.start_s = Some(self.st.start_s.map_or(t_s, |s| s.min(t_s)));
+        if !t_s.is_finite() {
+            return;
+        }
+        self.st.start_s = Some(self.st.start_s.map_or(t_s, |s| s.min(t_s)));
+        if self.truth_connected && !self.st.truth_seen && t_s >= self.tare_end_s() {
+            self.st.truth_absent = true;
         }
     }
 
     /// Whether the sample at `t_s` lies in the leading no-load period.
     fn in_no_load(&self, t_s: f64) -> bool {
-        if self.truth_connected { self.st.first_contact_s.is_none_or(|t0| t_s < t0) } else { t_s < self.tare_end_s() }
+        let before_contact = self.st.first_contact_s.is_none_or(|t0| t_s < t0);
+        before_contact && (self.truth_ends_no_load() || t_s < self.tare_end_s())
+    }
+
+    /// Logs, once per run, the fall-back to the time-based no-load period (`was_absent`: the
+    /// state before the call that may have made it).
+    fn log_truth_absent(&self, ctx: &Context, was_absent: bool) {
+        if self.st.truth_absent && !was_absent {
+            tracing::warn!(
+                node = ctx.id(),
+                tare_s = self.p.tare_s,
+                until_s = self.tare_end_s(),
+                "truth input connected but no truth row arrived in the first tare_s seconds: the no-load period \
+                 (P0, noise, no-load frames) is those seconds, as without truth"
+            );
+        }
     }
 
     /// The no-load offset, kPa; NaN while no no-load sample has been seen (P0 is never
@@ -293,6 +331,7 @@ impl Sync {
     }
 
     fn on_truth(&mut self, t_s: f64, row: Arc<Truth>) {
+        self.st.truth_seen = true;
         if self.st.first_contact_s.is_none() && !row.contacts.is_empty() {
             self.st.first_contact_s = Some(t_s);
             // Samples at or after the first contact are loaded: out of P0.
@@ -340,7 +379,7 @@ impl Sync {
         // Before the first contact, a frame is a no-load (reference) candidate: it waits until
         // some input (or a newer frame) shows time past its window's end, so a first contact
         // row stamped inside the window cannot arrive after the frame was judged.
-        if self.truth_connected
+        if self.truth_ends_no_load()
             && self.st.first_contact_s.is_none()
             && self.st.pending.len() < 2
             && self.latest_input_s().is_none_or(|t| t < end)
@@ -440,6 +479,7 @@ impl Processor for Sync {
     fn process(&mut self, ctx: &mut Context, inputs: &Inputs, out: &mut Outputs) -> Result<(), NodeError> {
         self.pressure_connected = inputs.lanes(PRESSURE) > 0;
         self.truth_connected = inputs.lanes(TRUTH) > 0;
+        let was_absent = self.st.truth_absent;
         if let Some(m) = inputs.get(PRESSURE) {
             let s = m
                 .get::<PressureSample>()
@@ -457,6 +497,7 @@ impl Processor for Sync {
                 .ok_or(NodeError::Input { port: "eit".into(), problem: "not an EIT frame".into() })?;
             self.on_frame(m.header, f);
         }
+        self.log_truth_absent(ctx, was_absent);
         if self.oldest_complete() {
             self.emit_oldest(ctx, out)?;
             if self.oldest_complete() {
@@ -498,6 +539,11 @@ impl Processor for Sync {
         if self.st.pending.is_empty() {
             return Ok(());
         }
+        // No truth row can come any more: a stream that ended before the first `tare_s`
+        // seconds were over without one had none.
+        let was_absent = self.st.truth_absent;
+        self.st.truth_absent |= self.truth_connected && !self.st.truth_seen;
+        self.log_truth_absent(ctx, was_absent);
         self.emit_oldest(ctx, out)?;
         if !self.st.pending.is_empty() {
             ctx.request_rerun();
@@ -652,6 +698,49 @@ mod tests {
         s.on_frame(Header { seq: 0, t_ns: 500_000_000_000, origin: 0 }, Arc::new(EitFrame { v: vec![1.0] }));
         s.on_pressure(501.0, 0.3);
         assert!((s.tare_end_s() - 502.0).abs() < 1e-9, "{}", s.tare_end_s());
+    }
+
+    fn contact_row() -> Arc<Truth> {
+        Arc::new(Truth { contacts: vec![TruthContact { x_mm: 0.0, y_mm: 0.0, force_n: 1.0, diameter_mm: 15.0 }] })
+    }
+
+    /// 0.3 kPa for 2 s from t = 10 s, then 0.8 kPa (a press), at 20 Hz.
+    fn press_from_12_s(s: &mut Sync) {
+        for i in 0..60 {
+            s.on_pressure(10.0 + 0.05 * f64::from(i), if i < 40 { 0.3 } else { 0.8 });
+        }
+    }
+
+    #[test]
+    fn a_connected_truth_input_without_rows_falls_back_to_the_time_based_no_load_period() {
+        // The truth edge exists (a recording without truth replayed), but no row ever comes.
+        let mut s = sync();
+        s.truth_connected = true;
+        press_from_12_s(&mut s);
+        assert!(s.st.truth_absent);
+        assert!((s.p0() - 0.3).abs() < 1e-12, "P0 from the first tare_s = 2 s only, not the press: {}", s.p0());
+        assert!(s.window_in_no_load(11.5) && !s.window_in_no_load(12.5));
+        // Frames do not wait for a first contact that never comes.
+        s.on_frame(Header { seq: 0, t_ns: 12_500_000_000, origin: 0 }, Arc::new(EitFrame { v: vec![1.0] }));
+        s.on_pressure(13.0, 0.8);
+        assert!(s.oldest_complete());
+        // A row that comes later is still a contact: it ends the no-load period if earlier.
+        s.on_truth(11.0, contact_row());
+        assert!(s.st.truth_absent, "the period stays time-based");
+        assert!(s.window_in_no_load(11.0) && !s.window_in_no_load(11.5));
+
+        // A truth row in time (an empty one, at the start): the first contact ends the
+        // no-load period, however late, as documented.
+        let mut s = sync();
+        s.truth_connected = true;
+        s.on_truth(10.0, Arc::new(Truth { contacts: vec![] }));
+        press_from_12_s(&mut s);
+        assert!(!s.st.truth_absent);
+        assert!((s.p0() - 0.3 * 40.0 / 60.0 - 0.8 * 20.0 / 60.0).abs() < 1e-12, "no contact yet: {}", s.p0());
+        assert!(s.window_in_no_load(12.5));
+        s.on_truth(12.0, contact_row());
+        assert!((s.p0() - 0.3).abs() < 1e-12, "the loaded samples are taken out again: {}", s.p0());
+        assert!(s.window_in_no_load(12.0) && !s.window_in_no_load(12.5));
     }
 
     #[test]

@@ -122,28 +122,28 @@ fn split_params(strategy: &str) -> String {
     format!("strategy = \"{strategy}\", calibration = {:?}", calibration())
 }
 
-/// Runs frames `from..to` through two splitter + corrector lanes into `compare` (lane 0:
-/// splitter `split`, corrector named "proportional"; lane 1: proportional, "reference"); with
-/// `swap`, lane 0's splitter is swapped to that strategy after `GATE` frames. Returns the JSON
-/// report's lanes.
-fn run(test: &str, (from, to): (u64, u64), split: &str, swap: Option<&str>) -> Vec<Value> {
-    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("compare").join(test);
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    let json = dir.join("ab.json");
-    let gate = Arc::new(Gate::default());
-    gate.limit.store(if swap.is_some() { GATE } else { u64::MAX }, SeqCst);
-    let reg = registry(gate.clone());
+/// What is hot-swapped after `GATE` frames.
+#[derive(Clone, Copy)]
+enum Swap<'a> {
+    /// Lane 0's splitter, to this strategy.
+    Splitter(&'a str),
+    /// The compare node itself, to a new `report_s`.
+    Compare,
+}
+
+/// The test graph: frames `from..to` through two splitter + corrector lanes into `compare`
+/// (lane 0: splitter `split`, corrector named "proportional"; lane 1: proportional,
+/// "reference"), whose node table ends with `compare` (its trigger and params lines).
+fn graph((from, to): (u64, u64), split: &str, compare: &str) -> String {
     let cal = calibration();
-    let graph = format!(
+    format!(
         "[graph]\nmode = \"lockstep\"\n\
          [[node]]\nid = \"src\"\nkind = \"contacts_script\"\nparams = {{ from = {from}, to = {to} }}\n\
          [[node]]\nid = \"split-a\"\nkind = \"splitter\"\nparams = {{ {} }}\n\
          [[node]]\nid = \"split-b\"\nkind = \"splitter\"\n\
          [[node]]\nid = \"force-a\"\nkind = \"corrector\"\nparams = {{ calibration = {cal:?}, name = \"proportional\" }}\n\
          [[node]]\nid = \"force-b\"\nkind = \"corrector\"\nparams = {{ calibration = {cal:?}, name = \"reference\" }}\n\
-         [[node]]\nid = \"cmp\"\nkind = \"compare\"\ntrigger = \"aligned\"\n\
-         params = {{ json = {json:?}, print = false, report_s = 0.0 }}\n\
+         [[node]]\nid = \"cmp\"\nkind = \"compare\"\n{compare}\n\
          [[edge]]\nfrom = \"src.contacts\"\nto = \"split-a.contacts\"\n\
          [[edge]]\nfrom = \"src.contacts\"\nto = \"split-b.contacts\"\n\
          [[edge]]\nfrom = \"split-a.split\"\nto = \"force-a.split\"\n\
@@ -151,30 +151,77 @@ fn run(test: &str, (from, to): (u64, u64), split: &str, swap: Option<&str>) -> V
          [[edge]]\nfrom = \"force-a.forces\"\nto = \"cmp.forces\"\n\
          [[edge]]\nfrom = \"force-b.forces\"\nto = \"cmp.forces\"\n",
         split_params(split)
-    );
-    let spec = GraphSpec::parse(SourceFile::new(dir.join("ab.toml"), graph), &reg).unwrap();
+    )
+}
+
+/// A fresh directory for one test run.
+fn test_dir(test: &str) -> PathBuf {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("compare").join(test);
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// Params of an inline table body, as in the graph file.
+fn inline_params(body: &str) -> Params {
+    let table: toml::Table = format!("p = {{ {body} }}").parse().unwrap();
+    Params::from_table(table["p"].as_table().unwrap().clone())
+}
+
+/// Runs [`graph`] with an aligned `compare` writing JSON; with `swap`, that node is swapped
+/// after `GATE` frames. Returns the JSON report's lanes.
+fn run(test: &str, frames: (u64, u64), split: &str, swap: Option<Swap>) -> Vec<Value> {
+    let dir = test_dir(test);
+    let json = dir.join("ab.json");
+    let gate = Arc::new(Gate::default());
+    gate.limit.store(if swap.is_some() { GATE } else { u64::MAX }, SeqCst);
+    let reg = registry(gate.clone());
+    let compare = format!("trigger = \"aligned\"\nparams = {{ json = {json:?}, print = false, report_s = 0.0 }}");
+    let spec = GraphSpec::parse(SourceFile::new(dir.join("ab.toml"), graph(frames, split, &compare)), &reg).unwrap();
     let running = RunningGraph::start(&spec).unwrap();
     let handle = running.handle();
     let runner = std::thread::spawn(move || running.wait(&RunOptions::default()));
-    if let Some(strategy) = swap {
+    if let Some(swap) = swap {
         // Held twice: everything before the gate has run through (a lockstep pass drains).
         let t0 = Instant::now();
         while gate.held.load(SeqCst) < 2 {
             assert!(t0.elapsed() < Duration::from_secs(300), "the source was never held");
             std::thread::sleep(Duration::from_millis(5));
         }
-        // An inline-table body, as in the graph file.
-        let table: toml::Table = format!("p = {{ {} }}", split_params(strategy)).parse().unwrap();
-        let params = Params::from_table(table["p"].as_table().unwrap().clone());
-        handle.swap("split-a", reg.get("splitter").unwrap().clone(), params).unwrap();
+        match swap {
+            Swap::Splitter(strategy) => {
+                let params = inline_params(&split_params(strategy));
+                handle.swap("split-a", reg.get("splitter").unwrap().clone(), params).unwrap();
+            }
+            Swap::Compare => {
+                let params = inline_params(&format!("json = {json:?}, print = false, report_s = 1.0"));
+                handle.swap("cmp", reg.get("compare").unwrap().clone(), params).unwrap();
+            }
+        }
         gate.open.store(true, SeqCst);
     }
     let report = runner.join().unwrap();
     assert!(report.failures.is_empty(), "{:?}", report.failures);
     assert_eq!(report.stats.total_drops(), 0);
-    assert_eq!(report.stats.node("split-a").unwrap().swaps, u64::from(swap.is_some()));
+    let swapped = |node: &str| report.stats.node(node).unwrap().swaps;
+    assert_eq!(swapped("split-a"), u64::from(matches!(swap, Some(Swap::Splitter(_)))));
+    assert_eq!(swapped("cmp"), u64::from(matches!(swap, Some(Swap::Compare))));
     let doc: Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
     doc["lanes"].as_array().unwrap().clone()
+}
+
+/// Runs [`graph`] over every frame with `compare` as given (trigger and params lines): the
+/// run's failures, as the engine reports them.
+fn failures(test: &str, compare: &str) -> Vec<String> {
+    let dir = test_dir(test);
+    let gate = Arc::new(Gate::default());
+    gate.limit.store(u64::MAX, SeqCst);
+    let reg = registry(gate);
+    let spec =
+        GraphSpec::parse(SourceFile::new(dir.join("ab.toml"), graph((0, FRAMES), "proportional", compare)), &reg)
+            .unwrap();
+    let report = skinflow_core::run(&spec, &RunOptions::default()).unwrap();
+    report.failures.iter().map(ToString::to_string).collect()
 }
 
 /// The scored figures of a lane (not its wall-clock latency).
@@ -184,7 +231,7 @@ fn scores(l: &Value) -> [&Value; 6] {
 
 #[test]
 fn a_swap_that_changes_a_lanes_strategy_closes_it_and_starts_a_new_lane_with_its_own_figures() {
-    let lanes = run("swap", (0, FRAMES), "proportional", Some("eit-force"));
+    let lanes = run("swap", (0, FRAMES), "proportional", Some(Swap::Splitter("eit-force")));
     let row = |l: &Value| {
         (
             l["name"].as_str().unwrap().to_owned(),
@@ -223,4 +270,39 @@ fn a_swap_that_changes_a_lanes_strategy_closes_it_and_starts_a_new_lane_with_its
     assert_eq!(whole.len(), 2);
     assert_eq!(scores(&lanes[2]), scores(&whole[1]));
     assert_eq!((whole[0]["name"].as_str(), whole[0]["superseded"].as_bool()), (Some("proportional"), Some(false)));
+}
+
+/// The compare node swapped mid-run (a new `report_s`): the replacement takes over every lane
+/// with its figures, so the report at the end covers the whole run, as an unswapped one does,
+/// and the replaced instance does not leave a report of its own.
+#[test]
+fn a_swap_of_the_compare_node_keeps_every_lanes_figures() {
+    let swapped = run("swap-compare", (0, FRAMES), "proportional", Some(Swap::Compare));
+    let whole = run("unswapped", (0, FRAMES), "proportional", None);
+    assert_eq!(swapped.len(), 2);
+    for (s, w) in swapped.iter().zip(&whole) {
+        assert_eq!(scores(s), scores(w));
+        for k in ["name", "frames", "scored_frames", "no_load_frames", "first_frame", "last_frame", "superseded"] {
+            assert_eq!(s[k], w[k], "{k}: {s} vs {w}");
+        }
+    }
+    assert_eq!((swapped[0]["frames"].as_u64(), swapped[0]["first_frame"].as_u64()), (Some(FRAMES), Some(0)));
+}
+
+/// Settings that would leave every lane without a disagreement stop the graph with a cause:
+/// a `reference` that is not a lane, and a trigger that does not hand the lanes' forces of
+/// one frame over together.
+#[test]
+fn a_reference_past_the_lanes_or_a_trigger_that_is_not_aligned_stops_the_run() {
+    let f = failures("reference", "trigger = \"aligned\"\nparams = { print = false, reference = 5 }");
+    assert_eq!(f.len(), 1, "{f:?}");
+    assert!(f[0].starts_with("node \"cmp\": param \"reference\": 5 is not a lane: the node has 2 lanes"), "{f:?}");
+    // The last lane is fine.
+    let f = failures("reference-1", "trigger = \"aligned\"\nparams = { print = false, reference = 1 }");
+    assert!(f.is_empty(), "{f:?}");
+    for (test, trigger) in [("any", ""), ("periodic", "trigger = \"periodic\"\nperiod_ms = 1")] {
+        let f = failures(test, &format!("{trigger}\nparams = {{ print = false }}"));
+        assert_eq!(f.len(), 1, "{test}: {f:?}");
+        assert!(f[0].starts_with("node \"cmp\": trigger: compare needs trigger = \"aligned\""), "{test}: {f:?}");
+    }
 }

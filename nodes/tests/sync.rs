@@ -174,19 +174,27 @@ fn cut_pressure() -> Vec<(f64, f64)> {
 /// A recording of [`FRAMES`] frames with the pressure of [`cut_pressure`] and a first contact
 /// at 3 s.
 fn write_cut_recording(path: &Path) {
+    write_recording(path, FRAMES, &cut_pressure(), true);
+}
+
+/// A recording of `frames` frames (the first at `T`) with `pressure`, and with `truth` a first
+/// contact at 3 s (without: no `/truth` at all).
+fn write_recording(path: &Path, frames: u64, pressure: &[(f64, f64)], truth: bool) {
     use skinflow_record::{RecordingWriter, Streams, TruthContact, WriterOptions};
     let mut opts = WriterOptions::new(skinflow_eit::sensor::PAPER_100MM_TOML);
-    opts.streams = Streams { eit: true, pressure: true, truth: true, ..Streams::default() };
+    opts.streams = Streams { eit: true, pressure: true, truth, ..Streams::default() };
     opts.overwrite = true;
     let mut w = RecordingWriter::create(path, &opts).unwrap();
-    for (t, kpa) in cut_pressure() {
+    for &(t, kpa) in pressure {
         w.append_pressure(t, kpa).unwrap();
     }
-    for k in 0..FRAMES {
+    for k in 0..frames {
         w.append_eit(frame_t(k), k, &[1.0 + 1e-3 * k as f64; 120]).unwrap();
     }
-    w.append_truth(0.0, &[]).unwrap();
-    w.append_truth(3.0, &[TruthContact { x_mm: 0.0, y_mm: 0.0, force_n: 4.0, diameter_mm: 15.0 }]).unwrap();
+    if truth {
+        w.append_truth(0.0, &[]).unwrap();
+        w.append_truth(3.0, &[TruthContact { x_mm: 0.0, y_mm: 0.0, force_n: 4.0, diameter_mm: 15.0 }]).unwrap();
+    }
     w.close().unwrap();
 }
 
@@ -249,4 +257,46 @@ fn a_cut_recording_keeps_every_frame_and_its_pressure_dropouts() {
         let second_last = &frames[FRAMES as usize - 2].1;
         assert!(second_last.pressure_samples < 10, "{mode}: a partial window: {second_last:?}");
     }
+}
+
+/// A recording without truth replayed through a graph that wires the truth edge (as
+/// `graphs/ab-replay.toml` does): no truth row ever comes, so the no-load period is the first
+/// `tare_s` (2) seconds after the earliest time seen (the first pressure sample, 0.01 s), as
+/// without truth, not the whole recording; the same in both executors. The same recording
+/// with truth keeps its no-load period up to the first contact (3 s).
+#[test]
+fn without_truth_rows_the_no_load_period_is_the_first_tare_s_seconds() {
+    let dir = std::env::temp_dir().join(format!("skinflow-nodes-sync-notruth-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let pressure = cut_pressure();
+    for (name, truth, no_load_end) in [("notruth.h5", false, 0.01 + 2.0), ("truth.h5", true, 3.0)] {
+        let path = dir.join(name);
+        write_recording(&path, FRAMES, &pressure, truth);
+        for mode in ["lockstep", "realtime"] {
+            let frames = replay_sync(&path, mode);
+            assert_eq!(frames.len() as u64, FRAMES, "{name} {mode}");
+            for (h, f) in &frames {
+                let hi = frame_t(h.seq) + 0.5 * T;
+                assert_eq!(f.no_load, hi <= no_load_end, "{name} {mode}: frame {}", h.seq);
+                assert_eq!(f.truth.is_some(), truth, "{name} {mode}: frame {}", h.seq);
+                // P0 from the 1 kPa rest either way: the press (2 kPa from 3 s) reads 1 kPa.
+                if f.has_pressure() {
+                    assert!((f.p0_kpa - 1.0).abs() < 1e-12, "{name} {mode}: frame {}: {f:?}", h.seq);
+                }
+            }
+            let no_load = frames.iter().filter(|(_, f)| f.no_load).count();
+            assert_eq!(no_load, if truth { 5 } else { 3 }, "{name} {mode}");
+        }
+    }
+
+    // A recording that ends within those 2 s: the last frame's window reaches past them with
+    // no later input to say so; the end of stream does (no truth row can come any more).
+    let path = dir.join("short.h5");
+    let short: Vec<(f64, f64)> = pressure.iter().copied().filter(|&(t, _)| t < 1.9).collect();
+    write_recording(&path, 4, &short, false);
+    for mode in ["lockstep", "realtime"] {
+        let no_load: Vec<bool> = replay_sync(&path, mode).iter().map(|(_, f)| f.no_load).collect();
+        assert_eq!(no_load, [true, true, true, false], "{mode}: the last window ends at 2.25 s");
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
 }

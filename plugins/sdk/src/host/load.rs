@@ -302,6 +302,39 @@ pub fn register_kinds(
     Ok(names)
 }
 
+/// The table an entry point returned, as a reference once its two leading fields say it has
+/// this host's layout: the ABI version (`head[0]`) and its own size (`head[1]`, the plugin's
+/// `size_of::<SfPlugin>()`). Those two fields never move between ABI versions; nothing else of
+/// the table is read before both match, and a table of the same version but another size (a
+/// smaller one would end before the reference's last byte) is refused, not read.
+///
+/// # Safety
+/// `table` must be non-null and point at an entry point's table (at least its two leading
+/// `u32`s readable, all of the `plugin_size` bytes it declares readable) that stays valid for
+/// `'a`.
+unsafe fn table_ref<'a>(path: &Path, table: *const SfPlugin) -> Result<&'a SfPlugin, PluginError> {
+    if !table.is_aligned() {
+        return Err(PluginError::Invalid {
+            path: path.to_path_buf(),
+            problem: format!("its table at {table:p} is not aligned to {} bytes", align_of::<SfPlugin>()),
+        });
+    }
+    // SAFETY: non-null and aligned (so aligned for `u32`), and the caller guarantees the two
+    // leading fields are readable.
+    let head = unsafe { std::ptr::read(table.cast::<[u32; 2]>()) };
+    if head[0] != ABI_VERSION {
+        return Err(PluginError::AbiVersion { path: path.to_path_buf(), found: head[0], expected: ABI_VERSION });
+    }
+    let (what, expected) = sizes()[0];
+    if head[1] != expected {
+        return Err(PluginError::StructSize { path: path.to_path_buf(), what, found: head[1], expected });
+    }
+    // SAFETY: aligned, and the plugin declares `size_of::<SfPlugin>()` readable bytes, laid out
+    // as this version's `SfPlugin` (its other sizes and fields are checked by `read_table`),
+    // valid for `'a` (the caller's guarantee).
+    Ok(unsafe { &*table })
+}
+
 /// Loads the plugin at `path` and registers its kinds (all or none).
 pub fn load(path: &Path, registry: &mut Registry, codecs: &Codecs) -> Result<Loaded, PluginError> {
     if !path.is_file() {
@@ -323,14 +356,10 @@ pub fn load(path: &Path, registry: &mut Registry, codecs: &Codecs) -> Result<Loa
     if table.is_null() {
         return Err(PluginError::Entry { path: path.to_path_buf() });
     }
-    // SAFETY: non-null and static in the library. Only the two leading fields, which never
-    // move between ABI versions, are read until the version is known to match.
-    let head = unsafe { std::ptr::read(table.cast::<[u32; 2]>()) };
-    if head[0] != ABI_VERSION {
-        return Err(PluginError::AbiVersion { path: path.to_path_buf(), found: head[0], expected: ABI_VERSION });
-    }
-    // SAFETY: same version, so the table has this layout (sizes are checked by read_table).
-    let t: &SfPlugin = unsafe { &*table };
+    // SAFETY: non-null (checked above), and the entry point's result is a table static in
+    // the library (all the bytes its `plugin_size` declares: the export macro writes it), which
+    // stays mapped while `lib` lives (all of this function).
+    let t = unsafe { table_ref(path, table) }?;
     let mut kinds = read_table(path, t, codecs)?;
     let library = Arc::new(PluginLibrary {
         path: path.to_path_buf(),
@@ -349,4 +378,76 @@ pub fn load(path: &Path, registry: &mut Registry, codecs: &Codecs) -> Result<Loa
 /// Loads every plugin in order; stops at the first failure.
 pub fn load_all(paths: &[PathBuf], registry: &mut Registry, codecs: &Codecs) -> Result<Vec<Loaded>, PluginError> {
     paths.iter().map(|p| load(p, registry, codecs)).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The two leading fields alone, aligned as a table: what a same-version plugin with a
+    /// smaller table would return.
+    #[repr(C)]
+    struct Head {
+        _align: [SfPlugin; 0],
+        abi_version: u32,
+        plugin_size: u32,
+    }
+
+    fn table(abi_version: u32, plugin_size: u32) -> SfPlugin {
+        let [_, kind_size, port_size, param_size, message_size, column_size, poll_size] = sizes().map(|(_, n)| n);
+        SfPlugin {
+            abi_version,
+            plugin_size,
+            kind_size,
+            port_size,
+            param_size,
+            message_size,
+            column_size,
+            poll_size,
+            name: SfStr::new("test"),
+            version: SfStr::new("0"),
+            kinds: std::ptr::null(),
+            n_kinds: 0,
+        }
+    }
+
+    #[test]
+    fn a_table_smaller_than_this_versions_is_refused_before_a_reference_to_it_is_formed() {
+        let path = Path::new("short.so");
+        let head = Head { _align: [], abi_version: ABI_VERSION, plugin_size: size_of::<Head>() as u32 };
+        assert_eq!(size_of::<Head>(), 8);
+        // SAFETY: the two leading fields are readable and nothing past them is read when the
+        // declared size differs from this host's (what this test checks).
+        let e = unsafe { table_ref(path, std::ptr::from_ref(&head).cast()) }.unwrap_err();
+        let expected = size_of::<SfPlugin>() as u32;
+        assert!(
+            matches!(e, PluginError::StructSize { what: "SfPlugin", found: 8, expected: x, .. } if x == expected),
+            "{e:?}"
+        );
+        assert!(
+            e.to_string().contains(&format!("struct SfPlugin is 8 bytes in the plugin but {expected} in the host"))
+        );
+
+        // The version is checked first: a table of another version is never measured.
+        let old = Head { _align: [], abi_version: ABI_VERSION - 1, plugin_size: 8 };
+        // SAFETY: as above.
+        let e = unsafe { table_ref(path, std::ptr::from_ref(&old).cast()) }.unwrap_err();
+        assert!(matches!(e, PluginError::AbiVersion { found, .. } if found == ABI_VERSION - 1), "{e:?}");
+
+        // A whole table of this version and size is read.
+        let whole = table(ABI_VERSION, expected);
+        // SAFETY: a whole table, alive for the call.
+        let t = unsafe { table_ref(path, &raw const whole) }.unwrap();
+        assert_eq!((t.abi_version, t.plugin_size, t.n_kinds), (ABI_VERSION, expected, 0));
+    }
+
+    #[test]
+    fn a_misaligned_table_is_refused_unread() {
+        let whole = [table(ABI_VERSION, size_of::<SfPlugin>() as u32), table(ABI_VERSION, 0)];
+        // Four bytes into the first table: readable, but not where a table can start.
+        let p = std::ptr::from_ref(&whole).cast::<u8>().wrapping_add(4).cast::<SfPlugin>();
+        // SAFETY: more than a table's bytes are readable from `p`; it is refused before any read.
+        let e = unsafe { table_ref(Path::new("odd.so"), p) }.unwrap_err();
+        assert!(e.to_string().contains("is not aligned"), "{e}");
+    }
 }

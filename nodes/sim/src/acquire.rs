@@ -4,8 +4,9 @@
 //! (finer than, and generated differently from, any reconstruction mesh: no inverse crime).
 //!
 //! The window is split into `EIT_BLOCKS` blocks acquired at their mid-times; a block whose
-//! contact state equals a recently solved one reuses it, so a static hold costs one solve and
-//! afterwards only fresh noise. Drift scales all values by 1 / (1 + d(t)) (liquid conductivity
+//! contact state (placed positions, diameters, forces and seating draws: all the solve depends
+//! on) equals a recently solved one reuses it, so a static hold costs one solve and afterwards
+//! only fresh noise, and no value depends on what the cache held. Drift scales all values by 1 / (1 + d(t)) (liquid conductivity
 //! and electrode impedance drift together with temperature); noise is Gaussian with standard
 //! deviation rel * |v| + abs. Volts, protocol order (CONTRACTS.md section 1). A dead electrode
 //! (scene `[[fault]]`) pins every channel that uses it to the rail voltage while it lasts.
@@ -42,12 +43,18 @@ pub fn sim_mesh_elements(profile: &Profile, sensor: &Sensor, smallest_diameter_m
     n.clamp(profile.mesh_min_elements, profile.mesh_max_elements)
 }
 
-/// Whether two contact sets load the foam identically (indentation and level ids aside).
-fn same_state(a: &[Load], b: &[Load]) -> bool {
-    a.len() == b.len()
-        && a.iter().zip(b).all(|(p, q)| {
-            p.x_mm == q.x_mm && p.y_mm == q.y_mm && p.diameter_mm == q.diameter_mm && p.force_n == q.force_n
-        })
+/// What the solved values of one contact depend on: its placed position and diameter (mm),
+/// its force (N) and its load level's seating factor (`Compressor::seating`). Two contact sets
+/// with equal keys give the same conductivity, so the cached values can stand in for a solve;
+/// ids (press, level) are left out, so equal states of different levels share a solve when the
+/// seating factors are equal (always without jitter).
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct LoadKey {
+    x_mm: f64,
+    y_mm: f64,
+    diameter_mm: f64,
+    force_n: f64,
+    seating: f64,
 }
 
 /// Largest displacement of an electrode, in standard deviations (keeps it on its side).
@@ -97,7 +104,7 @@ struct DeadChannels {
 
 #[derive(Debug, Clone)]
 struct CachedState {
-    loads: Vec<Load>,
+    key: Vec<LoadKey>,
     values: Vec<f64>,
     last_used: u64,
 }
@@ -121,6 +128,7 @@ pub struct EitChannel {
     // Scratch
     sigma: Vec<f64>,
     block_loads: Vec<Load>,
+    block_key: Vec<LoadKey>,
 }
 
 impl EitChannel {
@@ -196,6 +204,7 @@ impl EitChannel {
             solves: 0,
             sigma: vec![0.0; n],
             block_loads: Vec::with_capacity(max_contacts),
+            block_key: Vec::with_capacity(max_contacts),
         })
     }
 
@@ -253,7 +262,16 @@ impl EitChannel {
     /// Cache slot holding the noiseless values of `self.block_loads`, solving on a miss.
     fn solved(&mut self) -> Result<usize, EitError> {
         self.clock += 1;
-        if let Some(i) = self.cache.iter().position(|c| same_state(&c.loads, &self.block_loads)) {
+        self.block_key.clear();
+        let compressor = &self.compressor;
+        self.block_key.extend(self.block_loads.iter().map(|l| LoadKey {
+            x_mm: l.x_mm,
+            y_mm: l.y_mm,
+            diameter_mm: l.diameter_mm,
+            force_n: l.force_n,
+            seating: compressor.seating(l.level),
+        }));
+        if let Some(i) = self.cache.iter().position(|c| c.key == self.block_key) {
             self.cache[i].last_used = self.clock;
             return Ok(i);
         }
@@ -262,7 +280,7 @@ impl EitChannel {
         self.solves += 1;
         let slot = if self.cache.len() < CACHE_STATES {
             self.cache.push(CachedState {
-                loads: Vec::with_capacity(self.block_loads.capacity()),
+                key: Vec::with_capacity(self.block_key.capacity()),
                 values: vec![0.0; self.measurements.len()],
                 last_used: 0,
             });
@@ -271,8 +289,8 @@ impl EitChannel {
             (0..self.cache.len()).min_by_key(|&i| self.cache[i].last_used).expect("cache is not empty")
         };
         let entry = &mut self.cache[slot];
-        entry.loads.clear();
-        entry.loads.extend_from_slice(&self.block_loads);
+        entry.key.clear();
+        entry.key.extend_from_slice(&self.block_key);
         entry.last_used = self.clock;
         solution.measurements_into(&self.measurements, &mut entry.values);
         Ok(slot)

@@ -139,18 +139,24 @@ impl Compressor {
         self.sigma0_s_per_m
     }
 
+    /// Seating factor g of a load level (1 + `foam_seating_jitter` N(0, 1), at least 0): a pure
+    /// function of (seed, level); 1 without jitter. The conductivity under a load depends on its
+    /// position, diameter, force and this factor, and on nothing else.
+    pub fn seating(&self, level: u32) -> f64 {
+        if self.seating_jitter > 0.0 {
+            (1.0 + self.seating_jitter * indexed_normal(self.seed, Stream::FoamSeating, u64::from(level))).max(0.0)
+        } else {
+            1.0
+        }
+    }
+
     /// Writes the conductivity (S/m) of every element under `loads` into `sigma`. A load whose
     /// diameter was not announced to `new` panics (the simulator announces all of them).
     pub fn conductivity_into(&mut self, loads: &[Load], sigma: &mut [f64]) {
         self.pressure_kpa.fill(0.0);
         self.seated_kpa.fill(0.0);
         for load in loads {
-            let seating = if self.seating_jitter > 0.0 {
-                (1.0 + self.seating_jitter * indexed_normal(self.seed, Stream::FoamSeating, u64::from(load.level)))
-                    .max(0.0)
-            } else {
-                1.0
-            };
+            let seating = self.seating(load.level);
             let k = self
                 .kernels
                 .iter()

@@ -9,6 +9,11 @@
 //! and sensor noise are added.
 //!
 //! Units: kPa (gauge), N, mm, s. Samples must be requested in non-decreasing time.
+//!
+//! Cost follows the scene: what a contact's response depends on besides its force (footprint
+//! sensitivity, seating gain, saturation force) is kept per contact slot and recomputed only
+//! when the placed contact changes, so a static hold or a ramp of one indentation averages its
+//! footprint once (`footprint_evaluations`), not on every sample.
 
 use crate::profile::Profile;
 use crate::randomness::{Drift, SmoothField, Stream, indexed_normal, normal, stream};
@@ -19,6 +24,34 @@ use skinflow_eit::Sensor;
 /// Footprint quadrature: rings of points at these fractions of the radius, with these counts
 /// (equal-area rings, so the points carry equal weight together with the centre).
 const FOOTPRINT_RINGS: [(f64, usize); 3] = [(0.408, 6), (0.707, 12), (0.913, 18)];
+
+/// What one placed contact contributes per newton: everything of
+/// `S_fp * g_level * F / (1 + F / F_nl(d))` except the force, with the placement it is for.
+#[derive(Debug, Clone, Copy)]
+struct PlacedContact {
+    x_mm: f64,
+    y_mm: f64,
+    diameter_mm: f64,
+    level: u32,
+    /// Footprint sensitivity S_fp, kPa/N.
+    sensitivity_kpa_per_n: f64,
+    /// Seating gain g_level of `level`.
+    gain: f64,
+    /// Saturation force F_nl(d), N.
+    saturation_n: f64,
+}
+
+impl PlacedContact {
+    /// Whether the footprint (position and diameter) is this load's.
+    fn has_footprint_of(&self, l: &Load) -> bool {
+        self.x_mm == l.x_mm && self.y_mm == l.y_mm && self.diameter_mm == l.diameter_mm
+    }
+
+    /// Pressure change under `force_n`, kPa.
+    fn dp_kpa(&self, force_n: f64) -> f64 {
+        self.sensitivity_kpa_per_n * self.gain * force_n / (1.0 + force_n / self.saturation_n)
+    }
+}
 
 /// The pressure channel.
 #[derive(Debug, Clone)]
@@ -45,6 +78,10 @@ pub struct Pneumatic {
     last_t_s: f64,
     drift: Drift,
     noise: ChaCha8Rng,
+    /// Per contact slot (index in the loads of a sample): the last placed contact seen there.
+    placed: Vec<PlacedContact>,
+    /// Footprint averages computed by `sample` (cache misses).
+    footprint_evaluations: u64,
 }
 
 impl Pneumatic {
@@ -78,7 +115,15 @@ impl Pneumatic {
                 profile.pressure_drift_tau_s,
             ),
             noise: stream(seed, Stream::PressureNoise),
+            placed: Vec::new(),
+            footprint_evaluations: 0,
         }
+    }
+
+    /// Footprint averages `sample` has computed so far: one per change of a contact's placed
+    /// position or diameter, none for samples of a hold or a ramp of the same indentation.
+    pub fn footprint_evaluations(&self) -> u64 {
+        self.footprint_evaluations
     }
 
     /// Local sensitivity at a point, kPa/N (0 outside the sensor).
@@ -119,22 +164,60 @@ impl Pneumatic {
         (1.0 + self.seating_jitter * indexed_normal(self.seed, Stream::Seating, u64::from(level))).max(0.0)
     }
 
+    /// Saturation force F_nl(d) of an indenter of `diameter_mm`, N.
+    fn saturation_n(&self, diameter_mm: f64) -> f64 {
+        let area = (self.reference_diameter_mm / diameter_mm).powf(self.area_exponent).min(1.0);
+        self.nonlinearity_force_n * area
+    }
+
+    /// The force-independent part of a load's response (evaluates its footprint).
+    fn place(&self, l: &Load) -> PlacedContact {
+        PlacedContact {
+            x_mm: l.x_mm,
+            y_mm: l.y_mm,
+            diameter_mm: l.diameter_mm,
+            level: l.level,
+            sensitivity_kpa_per_n: self.footprint_sensitivity_kpa_per_n(l.x_mm, l.y_mm, l.diameter_mm),
+            gain: self.seating_gain(l.level),
+            saturation_n: self.saturation_n(l.diameter_mm),
+        }
+    }
+
     /// Pressure change of the loads with no history (quasi-static, noiseless), kPa.
     pub fn static_dp_kpa(&self, loads: &[Load]) -> f64 {
-        loads
-            .iter()
-            .map(|l| {
-                let s = self.footprint_sensitivity_kpa_per_n(l.x_mm, l.y_mm, l.diameter_mm);
-                let area = (self.reference_diameter_mm / l.diameter_mm).powf(self.area_exponent).min(1.0);
-                let f_nl = self.nonlinearity_force_n * area;
-                s * self.seating_gain(l.level) * l.force_n / (1.0 + l.force_n / f_nl)
-            })
-            .sum()
+        loads.iter().map(|l| self.place(l).dp_kpa(l.force_n)).sum()
+    }
+
+    /// `static_dp_kpa` through the per-slot cache: equal to it bit for bit, but a contact whose
+    /// placed footprint is the one last seen in its slot is not evaluated again.
+    fn cached_dp_kpa(&mut self, loads: &[Load]) -> f64 {
+        for (i, l) in loads.iter().enumerate() {
+            match self.placed.get(i) {
+                Some(p) if p.has_footprint_of(l) => {
+                    if p.level != l.level {
+                        let gain = self.seating_gain(l.level);
+                        let p = &mut self.placed[i];
+                        p.level = l.level;
+                        p.gain = gain;
+                    }
+                }
+                _ => {
+                    let fresh = self.place(l);
+                    self.footprint_evaluations += 1;
+                    if i < self.placed.len() {
+                        self.placed[i] = fresh;
+                    } else {
+                        self.placed.push(fresh);
+                    }
+                }
+            }
+        }
+        self.placed.iter().zip(loads).map(|(p, l)| p.dp_kpa(l.force_n)).sum()
     }
 
     /// One gauge-pressure sample at `t_s` under `loads`, kPa: advances hysteresis and drift.
     pub fn sample(&mut self, t_s: f64, loads: &[Load]) -> f64 {
-        let x = self.static_dp_kpa(loads);
+        let x = self.cached_dp_kpa(loads);
         let dt = (t_s - self.last_t_s).max(0.0);
         self.last_t_s = t_s;
         let h = self.hysteresis_kpa;
@@ -203,6 +286,44 @@ mod tests {
         // unloading leaves a residual that then relaxes
         let after = pn.sample(20.05, &[]) - p.p0_kpa;
         assert!(after > 0.0 && after < 0.05 + 1e-12);
+    }
+
+    #[test]
+    fn the_footprint_cache_gives_the_uncached_response_bit_for_bit() {
+        // paper profile: heterogeneity and seating jitter make every footprint and level differ
+        let mut pn = Pneumatic::new(&Profile::paper(), &Sensor::paper_100mm(), 3);
+        let at = |x: f64, d: f64, f: f64, level: u32| Load {
+            x_mm: x,
+            y_mm: -4.0,
+            diameter_mm: d,
+            force_n: f,
+            press: 0,
+            level,
+        };
+        // (loads of a sample, footprints it evaluates)
+        let steps: Vec<(Vec<Load>, u64)> = vec![
+            (vec![], 0),
+            (vec![at(10.0, 15.0, 0.5, 1)], 1),                          // a ramp begins
+            (vec![at(10.0, 15.0, 1.0, 1)], 0),                          // ... goes on
+            (vec![at(10.0, 15.0, 1.0, 1)], 0),                          // a hold
+            (vec![at(10.0, 15.0, 2.0, 2)], 0),                          // the next level of the staircase: gain only
+            (vec![at(10.0, 15.0, 2.0, 2), at(-30.0, 10.0, 1.0, 3)], 1), // a second contact
+            (vec![at(10.0, 15.0, 2.0, 2), at(-30.0, 10.0, 1.5, 3)], 0),
+            (vec![at(-30.0, 10.0, 1.5, 3)], 1), // the first leaves: the second moves to slot 0
+            (vec![], 0),
+            (vec![at(10.5, 15.0, 1.0, 4)], 1), // another press, placed elsewhere
+            (vec![at(10.5, 20.0, 1.0, 4)], 1), // another diameter
+        ];
+        let mut expected = 0;
+        for (i, (loads, evaluations)) in steps.iter().enumerate() {
+            let got = pn.cached_dp_kpa(loads);
+            assert_eq!(got.to_bits(), pn.static_dp_kpa(loads).to_bits(), "step {i}: {got}");
+            expected += evaluations;
+            assert_eq!(pn.footprint_evaluations(), expected, "step {i}");
+        }
+        // a level's gain is its own: 2 N at level 2 and at level 1 differ
+        let mut other = Pneumatic::new(&Profile::paper(), &Sensor::paper_100mm(), 3);
+        assert_ne!(other.cached_dp_kpa(&[at(10.0, 15.0, 2.0, 1)]), pn.static_dp_kpa(&[at(10.0, 15.0, 2.0, 2)]));
     }
 
     #[test]

@@ -13,7 +13,7 @@ use crate::pneumatic::Pneumatic;
 use crate::scene::{Rates, Scene};
 use crate::stage::Stage;
 use crate::timeline::{Load, Timeline};
-use crate::truth::{TruthContact, TruthRow, truth_rows};
+use crate::truth::{TruthContact, TruthCursor};
 use skinflow_eit::{EitError, Sensor};
 use thiserror::Error;
 
@@ -57,11 +57,14 @@ pub struct Simulator {
     scene: String,
     eit: Option<EitChannel>,
     pneumatic: Option<Pneumatic>,
-    truth: Vec<TruthRow>,
     // Internal state
     next_frame: u64,
     next_sample: u64,
-    next_truth: usize,
+    /// Truth rows, generated as the stream reaches them (never all at once).
+    truth: TruthCursor,
+    /// Time of the next truth row (its contacts in `truth_pending`); None after the last one.
+    next_truth_t: Option<f64>,
+    truth_pending: Vec<TruthContact>,
     hint: usize,
     loads: Vec<Load>,
 }
@@ -78,19 +81,23 @@ impl Simulator {
             None
         };
         let pneumatic = scene.channels.pressure.then(|| Pneumatic::new(&scene.profile, &scene.sensor, seed));
+        let mut truth = TruthCursor::new(&scene.timeline, scene.rates.pressure_hz);
+        let mut truth_pending = Vec::with_capacity(scene.timeline.max_contacts());
+        let next_truth_t = truth.next_into(&scene.timeline, &mut truth_pending);
         Ok(Simulator {
             sensor: scene.sensor.clone(),
             rates: scene.rates,
-            truth: truth_rows(&scene.timeline, scene.rates.pressure_hz),
+            truth,
+            next_truth_t,
+            truth_pending,
             timeline: scene.timeline.clone(),
-            stage: Stage::new(&scene.profile, seed),
+            stage: Stage::new(&scene.profile, &scene.sensor, seed),
             duration_s: scene.duration_s(),
             scene: scene.name.clone(),
             eit,
             pneumatic,
             next_frame: 0,
             next_sample: 0,
-            next_truth: 0,
             hint: 0,
             loads: Vec::with_capacity(scene.timeline.max_contacts()),
         })
@@ -129,6 +136,12 @@ impl Simulator {
         self.eit.as_ref().map_or(0, |e| e.solve_count())
     }
 
+    /// Footprint averages the pressure channel has computed so far (0 without it): one per
+    /// change of a contact's placed position or diameter.
+    pub fn footprint_evaluations(&self) -> u64 {
+        self.pneumatic.as_ref().map_or(0, |p| p.footprint_evaluations())
+    }
+
     fn frame_period_s(&self) -> f64 {
         1.0 / self.rates.eit_fps
     }
@@ -145,7 +158,7 @@ impl Simulator {
     }
 
     fn next_truth_t(&self) -> Option<f64> {
-        self.truth.get(self.next_truth).map(|r| r.t_s).filter(|&t| t < self.duration_s)
+        self.next_truth_t.filter(|&t| t < self.duration_s)
     }
 
     /// The next event; an EIT frame's values go into `eit_v` (length M), a truth row's
@@ -160,8 +173,8 @@ impl Simulator {
         let Some(t) = first else { return Ok(None) };
         if tt == Some(t) {
             truth.clear();
-            truth.extend_from_slice(&self.truth[self.next_truth].contacts);
-            self.next_truth += 1;
+            truth.extend_from_slice(&self.truth_pending);
+            self.next_truth_t = self.truth.next_into(&self.timeline, &mut self.truth_pending);
             return Ok(Some(EventKind::Truth { t_s: t }));
         }
         if tp == Some(t) {

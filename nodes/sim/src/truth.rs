@@ -23,37 +23,99 @@ pub struct TruthRow {
     pub contacts: Vec<TruthContact>,
 }
 
-/// All truth rows of a timeline, with rows sampled every `1 / sample_hz` s during ramps.
-pub fn truth_rows(timeline: &Timeline, sample_hz: f64) -> Vec<TruthRow> {
-    let mut rows: Vec<TruthRow> = Vec::new();
-    let mut loads: Vec<Load> = Vec::new();
-    let push = |t_s: f64, loads: &[Load], rows: &mut Vec<TruthRow>| {
-        let contacts: Vec<TruthContact> = loads
-            .iter()
-            .map(|l| TruthContact { x_mm: l.x_mm, y_mm: l.y_mm, force_n: l.force_n, diameter_mm: l.diameter_mm })
-            .collect();
-        if rows.last().is_none_or(|r| r.contacts != contacts) {
-            rows.push(TruthRow { t_s, contacts });
+/// The truth rows of a timeline, generated one at a time in time order: rows are a pure
+/// function of the timeline and the sample rate, so none is held beyond the current one (a
+/// 1,000 s ramp at 2 kHz has 2 million). Buffers are reused: after the widest row, producing a
+/// row allocates nothing.
+#[derive(Debug, Clone)]
+pub struct TruthCursor {
+    sample_hz: f64,
+    /// Segment being walked.
+    segment: usize,
+    /// Next pressure-grid index inside the segment's ramp; None: its start comes next.
+    sample: Option<u64>,
+    /// Contacts of the last row produced (`started`: there is one).
+    last: Vec<TruthContact>,
+    started: bool,
+    // Scratch
+    loads: Vec<Load>,
+    candidate: Vec<TruthContact>,
+}
+
+impl TruthCursor {
+    /// Before the first row of a timeline with rows every `1 / sample_hz` s during ramps.
+    pub fn new(timeline: &Timeline, sample_hz: f64) -> TruthCursor {
+        let width = timeline.max_contacts();
+        TruthCursor {
+            sample_hz,
+            segment: 0,
+            sample: None,
+            last: Vec::with_capacity(width),
+            started: false,
+            loads: Vec::with_capacity(width),
+            candidate: Vec::with_capacity(width),
         }
-    };
-    for (i, seg) in timeline.segments.iter().enumerate() {
-        timeline.loads_into(seg.start_s, i, &mut loads);
-        push(seg.start_s, &loads, &mut rows);
-        if !seg.is_static() {
-            // pressure-grid times strictly inside the ramp
-            let mut j = (seg.start_s * sample_hz).floor() as u64 + 1;
-            loop {
-                let t = j as f64 / sample_hz;
-                if t >= seg.end_s {
-                    break;
+    }
+
+    /// The next row of `timeline` (the one given to `new`): its contacts into `out` (cleared
+    /// first) and its time, s; None after the last row.
+    pub fn next_into(&mut self, timeline: &Timeline, out: &mut Vec<TruthContact>) -> Option<f64> {
+        loop {
+            let i = self.segment;
+            let seg = timeline.segments.get(i)?;
+            let t_s = match self.sample {
+                None => {
+                    if seg.is_static() {
+                        self.segment += 1;
+                    } else {
+                        // pressure-grid times strictly inside the ramp come next
+                        self.sample = Some((seg.start_s * self.sample_hz).floor() as u64 + 1);
+                    }
+                    seg.start_s
                 }
-                if t > seg.start_s {
-                    timeline.loads_into(t, i, &mut loads);
-                    push(t, &loads, &mut rows);
+                Some(j) => {
+                    let t = j as f64 / self.sample_hz;
+                    if t >= seg.end_s {
+                        self.segment += 1;
+                        self.sample = None;
+                        continue;
+                    }
+                    self.sample = Some(j + 1);
+                    if t <= seg.start_s {
+                        continue;
+                    }
+                    t
                 }
-                j += 1;
+            };
+            timeline.loads_into(t_s, i, &mut self.loads);
+            self.candidate.clear();
+            self.candidate.extend(self.loads.iter().map(|l| TruthContact {
+                x_mm: l.x_mm,
+                y_mm: l.y_mm,
+                force_n: l.force_n,
+                diameter_mm: l.diameter_mm,
+            }));
+            // a row only where the contacts change
+            if self.started && self.candidate == self.last {
+                continue;
             }
+            self.started = true;
+            std::mem::swap(&mut self.last, &mut self.candidate);
+            out.clear();
+            out.extend_from_slice(&self.last);
+            return Some(t_s);
         }
+    }
+}
+
+/// All truth rows of a timeline, with rows sampled every `1 / sample_hz` s during ramps (the
+/// rows of `TruthCursor`, collected).
+pub fn truth_rows(timeline: &Timeline, sample_hz: f64) -> Vec<TruthRow> {
+    let mut cursor = TruthCursor::new(timeline, sample_hz);
+    let mut rows = Vec::new();
+    let mut contacts = Vec::new();
+    while let Some(t_s) = cursor.next_into(timeline, &mut contacts) {
+        rows.push(TruthRow { t_s, contacts: contacts.clone() });
     }
     rows
 }
@@ -62,6 +124,58 @@ pub fn truth_rows(timeline: &Timeline, sample_hz: f64) -> Vec<TruthRow> {
 mod tests {
     use super::*;
     use crate::timeline::{Segment, SegmentContact};
+
+    /// The rows as they were computed before the cursor (all at once): the oracle.
+    fn eager_rows(timeline: &Timeline, sample_hz: f64) -> Vec<TruthRow> {
+        let mut rows: Vec<TruthRow> = Vec::new();
+        let mut loads: Vec<Load> = Vec::new();
+        let push = |t_s: f64, loads: &[Load], rows: &mut Vec<TruthRow>| {
+            let contacts: Vec<TruthContact> = loads
+                .iter()
+                .map(|l| TruthContact { x_mm: l.x_mm, y_mm: l.y_mm, force_n: l.force_n, diameter_mm: l.diameter_mm })
+                .collect();
+            if rows.last().is_none_or(|r| r.contacts != contacts) {
+                rows.push(TruthRow { t_s, contacts });
+            }
+        };
+        for (i, seg) in timeline.segments.iter().enumerate() {
+            timeline.loads_into(seg.start_s, i, &mut loads);
+            push(seg.start_s, &loads, &mut rows);
+            if !seg.is_static() {
+                let mut j = (seg.start_s * sample_hz).floor() as u64 + 1;
+                loop {
+                    let t = j as f64 / sample_hz;
+                    if t >= seg.end_s {
+                        break;
+                    }
+                    if t > seg.start_s {
+                        timeline.loads_into(t, i, &mut loads);
+                        push(t, &loads, &mut rows);
+                    }
+                    j += 1;
+                }
+            }
+        }
+        rows
+    }
+
+    #[test]
+    fn the_cursor_gives_the_rows_of_the_whole_timeline() {
+        let text = "[scene]\nprofile = \"ideal\"\n[[step]]\nrest_s = 1.0\n[[step]]\n\
+                    grid = { x_mm = [-20.0, 20.0], y_mm = [0.0, 0.0], n = [3, 1] }\ndiameter_mm = 15.0\n\
+                    forces_n = [1.0, 2.5, 4.0]\nloading = \"staircase\"\nhold_s = 0.7\nramp_s = 0.45\n\
+                    release_s = 0.3\nrest_s = 0.2\n[[step]]\n\
+                    contacts = [ { x_mm = -20.0, y_mm = 0.0, diameter_mm = 10.0, force_n = 2.0 },\n\
+                    { x_mm = 20.0, y_mm = 0.0, diameter_mm = 10.0, force_n = 1.0 } ]\nhold_s = 1.0\nramp_s = 0.0\n\
+                    [[step]]\nat_mm = [[5.0, 5.0]]\ndiameter_mm = 15.0\n\
+                    force_profile = [[0.0, 0.0], [1.0, 2.0], [1.5, 2.0], [2.0, 0.0]]\n";
+        let scene = crate::Scene::from_str(text, "t.toml").unwrap();
+        for hz in [20.0, 7.3, 1000.0, 0.5] {
+            let rows = truth_rows(&scene.timeline, hz);
+            assert_eq!(rows, eager_rows(&scene.timeline, hz), "{hz} Hz");
+            assert!(rows.len() > 8, "{hz} Hz: {} rows", rows.len());
+        }
+    }
 
     #[test]
     fn rows_at_changes_and_through_ramps() {

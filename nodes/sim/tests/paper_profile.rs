@@ -1,7 +1,12 @@
 //! Pins the pneumatic side of the `paper` profile to the paper's baselines (Table II: force vs
 //! pressure quadratic fit R^2 0.996 at the centre, 0.923 over all calibration positions;
-//! Table III: Pneumatic-NoCal RMSE 0.91 N on the cross-diameter test), so no later change can
-//! quietly make the simulated skin easier. Bands: R^2 +- 0.03, RMSE +- 25 %.
+//! Table III: Pneumatic-NoCal RMSE 0.91 N on the cross-diameter test, Pneumatic-LocAware
+//! 0.59 N and 0.47 / 0.43 / 0.80 N for the 10 / 20 / 25 mm indenters), so no later change can
+//! quietly make the simulated skin easier. Bands: R^2 +- 0.03, RMSE +- 25 %; per diameter
+//! +- 40 %, because the 20 mm figure reads 17-37 % above the paper's on seeds 1-3 (the others
+//! are within 16 %), and the 25 mm indenter must stay the hardest of the three, as in the paper.
+//! LocAware here uses the true (commanded) positions where the pipeline uses EIT centroids, so
+//! it bounds the pipeline's figure from below.
 //!
 //! The pressure of a frame follows CONTRACTS.md section 2 (mean of the samples in its window,
 //! tared by the leading no-load mean); a calibration data point is the mean of a hold's frames
@@ -121,6 +126,7 @@ struct Figures {
     r2_all: f64,
     nocal_rmse_n: f64,
     locaware_rmse_n: f64,
+    /// (diameter mm, LocAware RMSE N) for 10, 20 and 25 mm.
     locaware_per_diameter: Vec<(f64, f64)>,
 }
 
@@ -191,5 +197,18 @@ fn paper_profile_pneumatic_baselines_are_pinned() {
         assert!((f.r2_centre - 0.996).abs() <= 0.03, "seed {seed}: centre R^2 {}", f.r2_centre);
         assert!((f.r2_all - 0.923).abs() <= 0.03, "seed {seed}: all-positions R^2 {}", f.r2_all);
         assert!((f.nocal_rmse_n / 0.91 - 1.0).abs() <= 0.25, "seed {seed}: Pneumatic-NoCal RMSE {} N", f.nocal_rmse_n);
+        assert!(
+            (f.locaware_rmse_n / 0.59 - 1.0).abs() <= 0.25,
+            "seed {seed}: Pneumatic-LocAware RMSE {} N",
+            f.locaware_rmse_n
+        );
+        for (&(d, rmse), paper) in f.locaware_per_diameter.iter().zip([0.47, 0.43, 0.80]) {
+            assert!(
+                (rmse / paper - 1.0).abs() <= 0.40,
+                "seed {seed}: LocAware RMSE at {d} mm {rmse} N (paper {paper})"
+            );
+        }
+        let [(_, d10), (_, d20), (_, d25)] = f.locaware_per_diameter[..] else { unreachable!("three diameters") };
+        assert!(d25 > 1.2 * d10.max(d20), "seed {seed}: 25 mm {d25} N is not the hardest ({d10}, {d20})");
     }
 }

@@ -33,13 +33,33 @@ fn ideal_centred_contact_raises_pairwise_values_and_pressure_rises_with_force() 
     let loaded = frames.iter().find(|(t, _)| t - period / 2.0 >= 9.0 && t + period / 2.0 <= 12.5).unwrap().1;
     let dv: Vec<f64> = loaded.iter().zip(reference).map(|(a, b)| a - b).collect();
     // conductivity falls under the contact, so no two-terminal resistance falls (Rayleigh
-    // monotonicity) and the pairs across the centre rise the most
+    // monotonicity) and the pairs across the centre rise the most: each of the 8 pairs of
+    // opposite electrodes (their line passes through the centre) rises more than every pair
+    // whose line passes more than 10 mm from it (outside the 7.5 mm contact and most of its
+    // 3 mm blur), and far more than neighbours at a corner
     let scale = reference.iter().cloned().fold(0.0, f64::max);
     assert!(dv.iter().all(|&d| d > -1e-9 * scale), "{dv:?}");
+    let electrodes = &s.sensor.electrodes;
+    let miss_mm = |a: usize, b: usize| {
+        // distance from the centre to the line through the two electrodes' centres
+        let (p, q) = (electrodes[a].centre_mm(), electrodes[b].centre_mm());
+        (p[0] * q[1] - q[0] * p[1]).abs() / (q[0] - p[0]).hypot(q[1] - p[1])
+    };
+    let measurements = s.sensor.measurements();
+    let (mut across, mut apart) = (f64::INFINITY, f64::NEG_INFINITY);
+    for (m, &d) in measurements.iter().zip(&dv) {
+        let (a, b) = m.drive;
+        if b == a + 8 {
+            across = across.min(d);
+        } else if miss_mm(a, b) > 10.0 {
+            apart = apart.max(d);
+        }
+    }
+    assert!(across > apart && apart > 0.0, "least across the centre {across}, most of the others {apart}");
     let pair = |i: usize, j: usize| i * 16 - i * (i + 1) / 2 + (j - i - 1);
-    let across = dv[pair(1, 9)]; // bottom (-12.5, -50) to top (12.5, 50)
     let corner = dv[pair(0, 15)]; // neighbours at the bottom-left corner
-    assert!(across > 0.0 && across > 5.0 * corner.max(0.0), "across {across} corner {corner}");
+    assert_eq!(measurements[pair(0, 15)].drive, (0, 15));
+    assert!(across > 5.0 * corner.max(0.0), "across {across} corner {corner}");
     // pressure: mean over each hold rises with force, and equals P0 before the contact
     let p: Vec<(f64, f64)> = events
         .iter()
@@ -182,10 +202,13 @@ fn hard_cases_light_touch_heavy_press_corners() {
     // 12 N reads more than the paper's full calibration range would at the centre
     let heavy = single(0.0, 0.0, 12.0);
     assert!(heavy > 30.0 * touch, "{heavy} vs {touch}");
-    // corners are stiffer: 5 N there reads less than half of 12 N at the centre * 5/12
+    // corners are stiffer: 5 N there reads 50-66 % (seed 11) of what 12 N at the centre reads,
+    // scaled to 5 N; the edge stiffening alone gives ~71 % (saturation included), less where
+    // the stage's offset pushes part of the footprint over the edge
     for (x, y) in [(-42.0, -42.0), (42.0, -42.0), (42.0, 42.0), (-42.0, 42.0)] {
         let corner = single(x, y, 5.0);
-        assert!(corner > 0.0 && corner < 0.8 * heavy * 5.0 / 12.0, "corner ({x}, {y}): {corner}");
+        let relative = corner / (heavy * 5.0 / 12.0);
+        assert!(relative > 0.4 && relative < 0.75, "corner ({x}, {y}): {corner} kPa, {relative} of the centre's");
     }
     // two contacts 14 mm apart: both count
     let pair = h.iter().find(|(c, _)| c.len() == 2 && c[0].force_n == 3.0).unwrap().1;

@@ -20,8 +20,8 @@ const DEFAULT_RAMP_S: f64 = 0.5;
 /// simulating for ever).
 pub(super) const MAX_DURATION_S: f64 = 1e6;
 /// Most segments (rests, ramps, holds) a timeline may have: about one per second of the
-/// longest timeline. At the cap, `skinflow simulate` of a pressure-only scene peaks at 174 MB
-/// (segments and their truth rows).
+/// longest timeline. The timeline is held in memory; truth rows are generated as the stream
+/// reaches them (`truth::TruthCursor`), not stored.
 pub(super) const MAX_SEGMENTS: usize = 1_000_000;
 /// The accepted forms of `forces_n`, for its errors.
 const FORCES_FORMS: &str = "give a list of forces in N (`forces_n = [1.0, 2.5]`) or n evenly spaced \

@@ -19,6 +19,8 @@ pub mod segment;
 pub mod serial;
 pub mod sim;
 pub mod split;
+#[cfg(test)]
+mod swap_test;
 pub mod sync;
 
 use skinflow_core::Registry;

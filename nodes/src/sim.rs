@@ -240,7 +240,7 @@ mod tests {
     use skinflow_sim::Scene;
 
     use super::{Identity, Sim};
-    use crate::replay::swap_test::run;
+    use crate::swap_test::run;
 
     fn press() -> PathBuf {
         Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/press.toml")

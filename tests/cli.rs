@@ -51,9 +51,9 @@ fn an_interrupted_simulate_leaves_no_file_under_the_requested_name() {
         .stderr(std::process::Stdio::piped())
         .spawn()
         .unwrap();
-    // Killed once its hidden build file exists (the scene has been prepared and writing began).
+    // Killed once its hidden staging file exists (the scene has been prepared and writing began).
     let building = |d: &Path| {
-        std::fs::read_dir(d).unwrap().any(|e| e.unwrap().file_name().to_string_lossy().ends_with(".simulating"))
+        std::fs::read_dir(d).unwrap().any(|e| e.unwrap().file_name().to_string_lossy().ends_with(".partial"))
     };
     let started = std::time::Instant::now();
     while !building(&d) && child.try_wait().unwrap().is_none() && started.elapsed().as_secs() < 120 {

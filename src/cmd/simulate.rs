@@ -1,12 +1,12 @@
 //! `skinflow simulate SCENE.toml --out REC.h5`: a scene's simulated streams written as a
 //! recording (CONTRACTS.md section 2), as fast as they compute.
 //!
-//! The recording is built under a hidden name beside `--out` (`.NAME.PID.simulating`) and
-//! given its name only when the whole scene is written, so an interrupted or failed run never
-//! leaves a shorter recording that looks complete under the requested name (a run killed by
-//! Ctrl-C leaves the hidden file; a failed one removes it).
+//! The recording is built under the writer's hidden staging name beside `--out`
+//! (`.NAME.PID.partial`) and given its name only when the whole scene is written
+//! (`WriterOptions::name_at_close`), so an interrupted or failed run never leaves a shorter
+//! recording that looks complete under the requested name, only the hidden file.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::time::Instant;
 
 use anyhow::{Context as _, Result};
@@ -29,16 +29,8 @@ pub fn run(scene_path: &Path, out: &Path, seed: u64, overwrite: bool) -> Result<
     o.streams =
         Streams { eit: scene.channels.eit, pressure: scene.channels.pressure, truth: true, ..Streams::default() };
     o.graph_toml = Some(format!("# skinflow simulate {} --seed {seed}\n", scene_path.display()));
-    let staging = staging_path(out);
-    let written = write(&mut sim, &staging, &o);
-    let counts = match written.and_then(|counts| publish(&staging, out, overwrite).map(|()| counts)) {
-        Ok(counts) => counts,
-        Err(e) => {
-            let _ = std::fs::remove_file(&staging);
-            return Err(e);
-        }
-    };
-    let (frames, samples, rows) = counts;
+    o.name_at_close = true;
+    let (frames, samples, rows) = write(&mut sim, out, &o)?;
     eprintln!(
         "{}: {frames} EIT frames, {samples} pressure samples, {rows} truth rows ({:.1} s simulated) in {:.2} s -> {}",
         scene_path.display(),
@@ -46,23 +38,6 @@ pub fn run(scene_path: &Path, out: &Path, seed: u64, overwrite: bool) -> Result<
         t0.elapsed().as_secs_f64(),
         out.display()
     );
-    Ok(())
-}
-
-/// The hidden name the recording of `out` is built under.
-fn staging_path(out: &Path) -> PathBuf {
-    let name = out.file_name().map_or_else(|| "recording".into(), |n| n.to_string_lossy().into_owned());
-    out.with_file_name(format!(".{name}.{}.simulating", std::process::id()))
-}
-
-/// Gives the finished recording at `staging` the name `out`: a rename when replacing is
-/// allowed, else a hard link, which refuses a file that appeared at `out` meanwhile.
-fn publish(staging: &Path, out: &Path, overwrite: bool) -> Result<()> {
-    let named = if overwrite { std::fs::rename(staging, out) } else { std::fs::hard_link(staging, out) };
-    named.with_context(|| format!("--out {}: naming the finished recording", out.display()))?;
-    if !overwrite {
-        std::fs::remove_file(staging).with_context(|| format!("removing {}", staging.display()))?;
-    }
     Ok(())
 }
 

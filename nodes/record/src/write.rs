@@ -350,7 +350,13 @@ impl RecordingWriter {
     pub fn close(mut self) -> Result<WriterStats, RecordError> {
         self.flush()?;
         self.close_file()?;
+        self.name_completed_part()?;
         Ok(self.stats())
+    }
+
+    /// With `name_at_close`, gives the part just closed its name (see `publish`).
+    fn name_completed_part(&self) -> Result<(), RecordError> {
+        if self.opts.name_at_close { publish(&self.path, self.opts.overwrite) } else { Ok(()) }
     }
 
     fn table_mut(&mut self, slot: Slot) -> Option<&mut Table> {
@@ -491,9 +497,10 @@ impl RecordingWriter {
         self.part_start_t_s = None;
         self.rotate_due = false;
         self.stats.parts += 1;
-        // Built under a hidden name; named once its structure is on disk (see `publish`).
+        // Built under a hidden name; named once its structure is on disk (see `publish`), or
+        // once complete with `name_at_close`.
         self.flush_file()?;
-        publish(&self.path, self.opts.overwrite)
+        if self.opts.name_at_close { Ok(()) } else { publish(&self.path, self.opts.overwrite) }
     }
 
     fn close_file(&mut self) -> Result<(), RecordError> {
@@ -509,6 +516,7 @@ impl RecordingWriter {
     fn rotate(&mut self) -> Result<(), RecordError> {
         self.flush()?;
         self.close_file()?;
+        self.name_completed_part()?;
         let next = self.part.map_or(1, |p| p + 1);
         self.part = Some(next);
         self.path = part_path(&self.base, next);

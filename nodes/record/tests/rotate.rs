@@ -139,3 +139,31 @@ fn rotation_by_size_keeps_every_row_once() {
     }
     check_concatenation(&parts, 1500);
 }
+
+#[test]
+fn name_at_close_names_each_part_only_when_complete() {
+    let dir = tempdir("name-at-close");
+    let base = dir.join("rec.h5");
+    let mut opts = WriterOptions::new(PAPER_100MM_TOML);
+    opts.streams = Streams { truth: true, ..Streams::default() };
+    opts.name_at_close = true;
+    // Unrotated: the name appears at close, not before; a writer dropped without closing
+    // leaves no file under its name.
+    let mut w = RecordingWriter::create(&base, &opts).unwrap();
+    w.append_eit(0.0, 0, &frame(0, 120)).unwrap();
+    w.flush().unwrap();
+    assert!(!base.exists(), "named before it was complete");
+    w.close().unwrap();
+    assert_eq!(Recording::open(&base).unwrap().eit.unwrap().t_s, [0.0]);
+    let dropped = dir.join("dropped.h5");
+    let mut w = RecordingWriter::create(&dropped, &opts).unwrap();
+    w.append_eit(0.0, 0, &frame(0, 120)).unwrap();
+    drop(w);
+    assert!(!dropped.exists(), "a writer that never closed named its file");
+    // Rotated: every part is named once the writer moves past it, the last at close.
+    let rotated = dir.join("rot.h5");
+    opts.rotate_s = Some(1.0);
+    let parts = write(&rotated, &opts, 350);
+    assert_eq!(parts, (1..=4).map(|i| part_path(&rotated, i)).collect::<Vec<_>>());
+    check_concatenation(&parts, 350);
+}

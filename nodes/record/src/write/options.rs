@@ -121,6 +121,12 @@ pub struct WriterOptions {
     pub derived_max_contacts: usize,
     /// Replace existing files instead of refusing to write. Default false.
     pub overwrite: bool,
+    /// Give each part its name only when it is complete (closed, or rotated away from) instead
+    /// of as soon as its structure is on disk: a writer that never closes (an error, a killed
+    /// process) leaves only its hidden staging file, never a shorter recording under the name.
+    /// For recordings made in one go (`skinflow simulate`), not for live logging, whose file
+    /// should be readable while it grows. Default false.
+    pub name_at_close: bool,
 }
 
 impl WriterOptions {
@@ -140,6 +146,7 @@ impl WriterOptions {
             truth_max_contacts: 8,
             derived_max_contacts: 16,
             overwrite: false,
+            name_at_close: false,
         }
     }
 

@@ -60,7 +60,6 @@ pub fn points_of(label: &str, index: usize, report: &serde_json::Value) -> Resul
     lanes
         .iter()
         .map(|l| {
-            let (frames, unsettled) = (count(l, "frames")?, count(l, "unsettled_frames")?);
             Ok(Point {
                 variant: label.to_owned(),
                 variant_index: index,
@@ -69,9 +68,10 @@ pub fn points_of(label: &str, index: usize, report: &serde_json::Value) -> Resul
                     .and_then(serde_json::Value::as_str)
                     .ok_or_else(|| anyhow!("a lane without \"name\""))?
                     .to_owned(),
-                frames,
-                scored_frames: frames.saturating_sub(unsettled),
-                unsettled_frames: unsettled,
+                frames: count(l, "frames")?,
+                unsettled_frames: count(l, "unsettled_frames")?,
+                // Compare's own count: frames with truth or a reference lane to score against.
+                scored_frames: count(l, "scored_frames")?,
                 no_pressure_frames: count(l, "no_pressure_frames")?,
                 matched: count(l, "matched")?,
                 missed: count(l, "missed")?,
@@ -479,7 +479,7 @@ mod tests {
     #[test]
     fn points_read_every_count_of_a_compare_report() {
         let report = serde_json::json!({ "lanes": [{
-            "name": "p", "frames": 79, "unsettled_frames": 24, "no_pressure_frames": 1, "matched": 90,
+            "name": "p", "frames": 79, "unsettled_frames": 24, "scored_frames": 55, "no_pressure_frames": 1, "matched": 90,
             "missed": 2, "spurious": 3, "latency_us_p50": 200.0, "latency_us_p99": null, "rmse_n": 0.5,
             "relative_error_pct": 10.0, "localization_mean_mm": 2.0,
         }]});

@@ -223,9 +223,7 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
             .param(ParamDoc::new("pacing", "string", "none", "override the scene: realtime | fast")),
         |p: SimParams, ctx| {
             let path = ctx.resolve(&p.scene);
-            let scene = Scene::from_file(&path).map_err(NodeError::other)?; // names the file
-            let text = std::fs::read_to_string(&path)
-                .map_err(|e| NodeError::Path { path: path.clone(), problem: format!("cannot read: {e}") })?;
+            let (scene, text) = Scene::read(&path).map_err(NodeError::other)?; // names the file
             let identity = Identity { scene: std::path::absolute(&path).unwrap_or(path), text, seed: p.seed };
             Ok(NodeImpl::Source(Box::new(Sim::new(&scene, identity, p.pacing.as_deref())?)))
         },

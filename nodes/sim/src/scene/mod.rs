@@ -95,6 +95,12 @@ pub struct Scene {
 impl Scene {
     /// Reads and validates a scene file.
     pub fn from_file(path: impl AsRef<Path>) -> Result<Scene, SceneError> {
+        Scene::read(path).map(|(scene, _)| scene)
+    }
+
+    /// [`Scene::from_file`], with the text the scene was parsed from (one read of the file, so
+    /// the two always agree).
+    pub fn read(path: impl AsRef<Path>) -> Result<(Scene, String), SceneError> {
         let path = path.as_ref();
         let file = path.display().to_string();
         let text =
@@ -103,7 +109,7 @@ impl Scene {
         if scene.name.is_empty() {
             scene.name = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
         }
-        Ok(scene)
+        Ok((scene, text))
     }
 
     /// Parses and validates scene text; `file` names it in errors.

@@ -217,6 +217,12 @@ fn image_size_mismatch((nx, ny): (Option<usize>, Option<usize>), width: usize, h
 }
 
 impl Logger {
+    /// Whether another logger of this process is writing this logger's file (`open`: [`OPEN`],
+    /// `k`: the file's [`key`]).
+    fn other_writer(&self, open: &[(PathBuf, u64)], k: &Path) -> bool {
+        open.iter().any(|(p, id)| p == k && *id != self.id)
+    }
+
     pub fn new(p: LoggerParams, ctx: &BuildContext) -> Result<Logger, NodeError> {
         let sensor = load_sensor(p.sensor.as_deref(), ctx)?;
         let path = ctx.resolve(&p.path);
@@ -273,7 +279,7 @@ impl Logger {
             }
             let mut open = open_files();
             let k = key(&self.path);
-            if open.iter().any(|(p, id)| *p == k && *id != self.id) {
+            if self.other_writer(&open, &k) {
                 return Err(io(&self.path, BEING_WRITTEN).fatal());
             }
             let w = RecordingWriter::create(&self.path, &o).map_err(|e| record_error(&self.path, e).fatal())?;
@@ -293,8 +299,7 @@ impl Sink for Logger {
         if let Some(why) = crate::output::unwritable(&self.path) {
             return Err(io(&self.path, why));
         }
-        let k = key(&self.path);
-        if open_files().iter().any(|(p, id)| *p == k && *id != self.id) {
+        if self.other_writer(&open_files(), &key(&self.path)) {
             return Err(io(&self.path, BEING_WRITTEN));
         }
         let overwrite = self.opts.as_ref().is_some_and(|o| o.overwrite);

@@ -108,13 +108,14 @@ pub fn pressure_outliers(force_n: &[f64], dp_kpa: &[f64], loc_of: &[usize]) -> V
                     .filter(|&j| (x[j] - x[i]).abs() > same_level)
                     .map(|j| (y[j] - y[i]) / (x[j] - x[i]))
                     .collect();
-                median(slopes)
+                median(&slopes)
             })
             .collect();
-        let slope = median(per_sample).unwrap_or(0.0);
-        let Some(intercept) = median(x.iter().zip(&y).map(|(a, b)| b - slope * a).collect()) else { continue };
+        let slope = median(&per_sample).unwrap_or(0.0);
+        let offsets: Vec<f64> = x.iter().zip(&y).map(|(a, b)| b - slope * a).collect();
+        let Some(intercept) = median(&offsets) else { continue };
         let resid: Vec<f64> = x.iter().zip(&y).map(|(a, b)| b - slope * a - intercept).collect();
-        let Some(mad) = median(resid.iter().map(|r| r.abs()).collect()) else { continue };
+        let Some(mad) = median(&resid.iter().map(|r| r.abs()).collect::<Vec<_>>()) else { continue };
         let cut = (SPIKE_ROBUST_SDS * 1.4826 * mad).max(SPIKE_MIN_FACTOR.ln());
         for (&t, r) in idx.iter().zip(&resid) {
             out[t] = r.abs() > cut;
@@ -123,13 +124,8 @@ pub fn pressure_outliers(force_n: &[f64], dp_kpa: &[f64], loc_of: &[usize]) -> V
     out
 }
 
-fn median(mut v: Vec<f64>) -> Option<f64> {
-    if v.is_empty() {
-        return None;
-    }
-    v.sort_by(f64::total_cmp);
-    let m = v.len() / 2;
-    Some(if v.len() % 2 == 1 { v[m] } else { 0.5 * (v[m - 1] + v[m]) })
+fn median(v: &[f64]) -> Option<f64> {
+    crate::eval::metrics::percentile(v, 50.0)
 }
 
 /// An f whose rise over its signal range is under this fraction of the calibration's force

@@ -88,6 +88,13 @@ pub struct Applied {
     pub swapped: Vec<String>,
 }
 
+impl Applied {
+    /// Nothing changed.
+    pub fn is_empty(&self) -> bool {
+        self.policies.is_empty() && self.swapped.is_empty()
+    }
+}
+
 impl std::fmt::Display for Applied {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         let mut parts = Vec::new();
@@ -97,7 +104,7 @@ impl std::fmt::Display for Applied {
         if !self.swapped.is_empty() {
             parts.push(format!("swapped {}", self.swapped.join(", ")));
         }
-        if parts.is_empty() {
+        if self.is_empty() {
             return write!(f, "no node changed");
         }
         write!(f, "{}", parts.join("; "))
@@ -161,14 +168,14 @@ pub struct Live {
 /// graph now differs from the file in the failed node only).
 #[derive(Debug)]
 pub struct EditError {
-    pub policies: Vec<String>,
-    pub swapped: Vec<String>,
+    /// What the edit changed before it failed.
+    pub done: Applied,
     pub error: String,
 }
 
 impl std::fmt::Display for EditError {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        if self.swapped.is_empty() && self.policies.is_empty() {
+        if self.done.is_empty() {
             write!(f, "edit rejected: {}", self.error)
         } else {
             write!(f, "edit partly applied: {} (that node runs as before the edit)", self.partly())
@@ -178,18 +185,13 @@ impl std::fmt::Display for EditError {
 
 impl EditError {
     fn rejected(error: String) -> EditError {
-        EditError { policies: Vec::new(), swapped: Vec::new(), error }
+        EditError { done: Applied::default(), error }
     }
 
     /// `set deadline_us of node "x"; swapped a, b; then <error>`, or the error alone when
     /// nothing was applied.
     fn partly(&self) -> String {
-        let done = Applied { policies: self.policies.clone(), swapped: self.swapped.clone() };
-        if self.swapped.is_empty() && self.policies.is_empty() {
-            self.error.clone()
-        } else {
-            format!("{done}; then {}", self.error)
-        }
+        if self.done.is_empty() { self.error.clone() } else { format!("{}; then {}", self.done, self.error) }
     }
 }
 
@@ -273,7 +275,7 @@ impl Live {
         for (running, new_n) in now.iter().zip(&new.nodes) {
             if (&running.1, running.2.table()) != (&new_n.kind, new_n.params.table()) {
                 if let Err(error) = self.swap(&new_n.id, new_n.factory.clone(), &new_n.kind, new_n.params.clone()) {
-                    return Err(EditError { policies: applied.policies, swapped: applied.swapped, error });
+                    return Err(EditError { done: applied, error });
                 }
                 tracing::info!(node = %new_n.id, from = %running.1, to = %new_n.kind, "node replaced after an edit");
                 applied.swapped.push(new_n.id.clone());
@@ -310,7 +312,7 @@ impl Live {
         let now = self.lock_nodes().clone();
         let mut swapped: Vec<String> = Vec::new();
         let failed = |swapped: Vec<String>, error: String| {
-            let e = EditError { policies: Vec::new(), swapped, error };
+            let e = EditError { done: Applied { policies: Vec::new(), swapped }, error };
             Some(Err(format!("plugin {names} reloaded: {} (that node runs its previous code)", e.partly())))
         };
         for (id, kind, params) in now.iter().filter(|n| stale.contains(&&n.1)) {

@@ -8,6 +8,7 @@
 pub mod codec;
 pub mod compare;
 pub mod correct;
+pub mod gate;
 pub mod log;
 pub mod order;
 pub mod output;

@@ -8,90 +8,20 @@
 //! its first `GATE_FRAMES` EIT frames; the swaps are queued while it is held, then it opens.
 
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering::SeqCst};
 use std::sync::{Arc, Mutex};
-use std::time::{Duration, Instant};
 
-use serde::Deserialize;
 use skinflow_core::graph::SourceFile;
-use skinflow_core::{
-    BuildContext, Context, GraphSpec, KindInfo, NodeError, NodeImpl, NodeParams, Outputs, Params, PortSpec, Registry,
-    Role, RunOptions, RunningGraph, Source, SourcePoll, typed,
-};
-use skinflow_nodes::payload::{Contacts, EitFrame, PressureSample, ReferenceSource, Truth};
+use skinflow_core::{GraphSpec, Params, RunOptions, RunningGraph};
+use skinflow_nodes::gate::{self, Gate};
+use skinflow_nodes::payload::{Contacts, ReferenceSource};
 use skinflow_nodes::pipeline::{Captured, registry_with_capture};
 
 /// EIT frames let through before the swap: the 3 s rest is 4 frames at 1.3 frames/s, so the
 /// swap comes during the first press.
 const GATE_FRAMES: u64 = 7;
 
-#[derive(Default)]
-struct Gate {
-    /// Frames let through before holding (u64::MAX: never hold).
-    limit: AtomicU64,
-    open: AtomicBool,
-    frames: AtomicU64,
-    /// Polls answered while held.
-    held: AtomicU64,
-}
-
-/// The `sim` source behind a gate.
-struct Gated {
-    inner: Box<dyn Source>,
-    gate: Arc<Gate>,
-}
-
-impl Source for Gated {
-    fn start(&mut self, ctx: &mut Context) -> Result<(), NodeError> {
-        self.inner.start(ctx)
-    }
-    fn poll(&mut self, ctx: &mut Context, out: &mut Outputs) -> Result<SourcePoll, NodeError> {
-        let g = &self.gate;
-        if !g.open.load(SeqCst) && g.frames.load(SeqCst) >= g.limit.load(SeqCst) {
-            g.held.fetch_add(1, SeqCst);
-            std::thread::yield_now();
-            return Ok(SourcePoll::Idle);
-        }
-        let r = self.inner.poll(ctx, out)?;
-        if out.is_taken(0) {
-            g.frames.fetch_add(1, SeqCst);
-        }
-        Ok(r)
-    }
-    fn stop(&mut self, ctx: &mut Context) -> Result<(), NodeError> {
-        self.inner.stop(ctx)
-    }
-}
-
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-struct GatedParams {
-    scene: PathBuf,
-}
-impl NodeParams for GatedParams {}
-
 fn fixture(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures").join(name)
-}
-
-fn registry(captured: Captured, gate: Arc<Gate>) -> Registry {
-    let mut r = registry_with_capture(captured);
-    let sim = r.get("sim").unwrap().clone();
-    r.register(typed(
-        KindInfo::new("gated_sim", Role::Source, "test: the sim source, held after some EIT frames")
-            .output(PortSpec::output::<EitFrame>("eit", "EIT frames"))
-            .output(PortSpec::output::<PressureSample>("pressure", "pressure"))
-            .output(PortSpec::output::<Truth>("truth", "truth")),
-        move |p: GatedParams, ctx: &BuildContext| {
-            let params = Params::from_toml(&format!("scene = {:?}", p.scene)).unwrap();
-            match sim.build(&params, ctx)? {
-                NodeImpl::Source(inner) => Ok(NodeImpl::Source(Box::new(Gated { inner, gate: gate.clone() }))),
-                _ => unreachable!("sim is a source"),
-            }
-        },
-    ))
-    .unwrap();
-    r
 }
 
 fn cache_dir() -> PathBuf {
@@ -110,10 +40,11 @@ fn run(swaps: &[(&str, String)]) -> Vec<Arc<Contacts>> {
 
 /// As [`run`], with the reconstructor's params `recon` and the swaps after `gate_frames`.
 fn run_gated(recon: &str, gate_frames: u64, swaps: &[(&str, String)]) -> Vec<Arc<Contacts>> {
-    let gate = Arc::new(Gate::default());
-    gate.limit.store(if swaps.is_empty() { u64::MAX } else { gate_frames }, SeqCst);
+    // Counts EIT frames (output 0) only.
+    let gate = Gate::new((!swaps.is_empty()).then_some(gate_frames), Some(0));
     let captured: Captured = Arc::new(Mutex::new(Vec::new()));
-    let reg = registry(captured.clone(), gate.clone());
+    let mut reg = registry_with_capture(captured.clone());
+    gate::register(&mut reg, "sim", "gated_sim", gate.clone());
     let graph = format!(
         "[graph]\nmode = \"lockstep\"\n\
          [[node]]\nid = \"skin\"\nkind = \"gated_sim\"\nparams = {{ scene = {:?} }}\n\
@@ -135,20 +66,15 @@ fn run_gated(recon: &str, gate_frames: u64, swaps: &[(&str, String)]) -> Vec<Arc
     let handle = running.handle();
     let runner = std::thread::spawn(move || running.wait(&RunOptions::default()));
     if !swaps.is_empty() {
-        // Held twice: everything before the gate has run through (a lockstep pass drains).
-        let t0 = Instant::now();
-        while gate.held.load(SeqCst) < 2 {
-            assert!(t0.elapsed() < Duration::from_secs(300), "the source was never held");
-            std::thread::sleep(Duration::from_millis(5));
-        }
-        for (node, params) in swaps {
-            let kind = spec.nodes.iter().find(|n| n.id == *node).unwrap().kind.clone();
-            // An inline-table body, as in the graph file.
-            let table: toml::Table = format!("p = {{ {params} }}").parse().unwrap();
-            let params = Params::from_table(table["p"].as_table().unwrap().clone());
-            handle.swap(node, reg.get(&kind).unwrap().clone(), params).unwrap();
-        }
-        gate.open.store(true, SeqCst);
+        gate.open_after(|| {
+            for (node, params) in swaps {
+                let kind = spec.nodes.iter().find(|n| n.id == *node).unwrap().kind.clone();
+                // An inline-table body, as in the graph file.
+                let table: toml::Table = format!("p = {{ {params} }}").parse().unwrap();
+                let params = Params::from_table(table["p"].as_table().unwrap().clone());
+                handle.swap(node, reg.get(&kind).unwrap().clone(), params).unwrap();
+            }
+        });
     }
     let report = runner.join().unwrap();
     assert!(report.failures.is_empty(), "{:?}", report.failures);

@@ -41,7 +41,8 @@ enum Cmd {
         #[arg(long, value_name = "SOCKET")]
         control: Option<PathBuf>,
     },
-    /// Validate a graph without running it; errors name file, line and column.
+    /// Validate a graph and open the input files its params name (read-only), without running
+    /// it; errors name file, line and column.
     Check { graph: PathBuf },
     /// List every node kind with its ports, parameters and docs.
     Nodes {
@@ -209,7 +210,7 @@ fn dispatch(cmd: Cmd) -> Result<ExitCode> {
             run(&graph, for_s, stats_json.as_deref(), watch, control.as_deref())
         }
         Cmd::Check { graph } => {
-            let spec = load(&graph)?;
+            let spec = load(&graph, InputFiles::Check)?;
             match spec {
                 Ok(spec) => {
                     println!("{}: ok ({} nodes, {} edges)", graph.display(), spec.nodes.len(), spec.edges.len());
@@ -248,7 +249,8 @@ fn dispatch(cmd: Cmd) -> Result<ExitCode> {
             cmd::eval::run(&recordings, &calib, json.as_deref(), plots.as_deref(), contacts_csv.as_deref(), &pipeline)
                 .map(|()| ExitCode::SUCCESS)
         }
-        Cmd::Dot { graph } => match load(&graph)? {
+        // Drawing needs the graph only, not the files it reads.
+        Cmd::Dot { graph } => match load(&graph, InputFiles::Skip)? {
             Ok(spec) => {
                 print!("{}", skinflow_core::graph::dot::to_dot(&spec));
                 Ok(ExitCode::SUCCESS)
@@ -293,13 +295,28 @@ fn registry_for(path: &Path) -> Result<Result<Registry, ExitCode>> {
     Ok(Ok(reg))
 }
 
-/// Loads and validates; validation errors are printed one per line and give exit code 2.
-fn load(path: &Path) -> Result<Result<GraphSpec, ExitCode>> {
+/// Whether [`load`] also opens the input files the graph's params name.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum InputFiles {
+    /// Read-only, as their nodes read them when built (`GraphSpec::check_files`): `check` and
+    /// `run` report a missing or invalid scene, calibration or recording the same way, and
+    /// `run` before any node starts.
+    Check,
+    Skip,
+}
+
+/// Loads and validates (and with [`InputFiles::Check`] checks the input files once the graph is
+/// valid); errors are printed one per line and give exit code 2.
+fn load(path: &Path, inputs: InputFiles) -> Result<Result<GraphSpec, ExitCode>> {
     let reg = match registry_for(path)? {
         Ok(r) => r,
         Err(code) => return Ok(Err(code)),
     };
-    match GraphSpec::load(path, &reg) {
+    let checked = GraphSpec::load(path, &reg).and_then(|spec| match inputs {
+        InputFiles::Check => spec.check_files().map(|()| spec),
+        InputFiles::Skip => Ok(spec),
+    });
+    match checked {
         Ok(spec) => Ok(Ok(spec)),
         Err(errs) => {
             for e in &errs.0 {
@@ -317,7 +334,7 @@ fn run(
     watch: bool,
     control: Option<&Path>,
 ) -> Result<ExitCode> {
-    let spec = match load(path)? {
+    let spec = match load(path, InputFiles::Check)? {
         Ok(s) => s,
         Err(code) => return Ok(code),
     };

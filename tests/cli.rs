@@ -829,3 +829,146 @@ fn repair_salvages_a_recording_whose_last_flush_was_cut_short() {
     assert_eq!(again.status.code(), Some(1));
     assert!(stderr(&again).contains("--out fixed.h5: exists (pass --overwrite to replace it)"), "{}", stderr(&again));
 }
+
+/// A graph simulating `scene` through the pipeline to a corrector reading `calibration`: the
+/// scene param is on line 4, the calibration param on line 20, both at column 12.
+fn sim_graph(scene: &str, calibration: &str) -> String {
+    format!(
+        "[[node]]\nid = \"sim\"\nkind = \"sim\"\nparams = {{ scene = {scene:?} }}\n\
+        [[node]]\nid = \"sync\"\nkind = \"sync\"\n\
+        [[node]]\nid = \"recon\"\nkind = \"reconstructor\"\n\
+        [[node]]\nid = \"seg\"\nkind = \"segmenter\"\n\
+        [[node]]\nid = \"split\"\nkind = \"splitter\"\n\
+        [[node]]\nid = \"force\"\nkind = \"corrector\"\nparams = {{ calibration = {calibration:?} }}\n\
+        [[node]]\nid = \"sink\"\nkind = \"null\"\n\
+        [[edge]]\nfrom = \"sim.eit\"\nto = \"sync.eit\"\n\
+        [[edge]]\nfrom = \"sim.pressure\"\nto = \"sync.pressure\"\n\
+        [[edge]]\nfrom = \"sim.truth\"\nto = \"sync.truth\"\n\
+        [[edge]]\nfrom = \"sync.frame\"\nto = \"recon.frame\"\n\
+        [[edge]]\nfrom = \"recon.image\"\nto = \"seg.image\"\n\
+        [[edge]]\nfrom = \"seg.contacts\"\nto = \"split.contacts\"\n\
+        [[edge]]\nfrom = \"split.split\"\nto = \"force.split\"\n\
+        [[edge]]\nfrom = \"force.forces\"\nto = \"sink.in\"\n"
+    )
+}
+
+/// The names in directory `d`, sorted.
+fn listing(d: &Path) -> Vec<String> {
+    let mut names: Vec<String> =
+        std::fs::read_dir(d).unwrap().map(|e| e.unwrap().file_name().into_string().unwrap()).collect();
+    names.sort();
+    names
+}
+
+/// `check` opens the input files the params name, read-only, as their nodes read them when
+/// built: a missing or invalid scene, calibration or recording makes the graph invalid (exit 2),
+/// with the graph's line and column of the param, the node, the param, the file and the cause.
+#[test]
+fn check_reports_missing_and_invalid_input_files() {
+    let d = workdir("check-files");
+    let scene = fixture("tiny-eval.toml");
+    let scene = scene.to_str().unwrap();
+    let calib = fixture("../../graphs/calib/paper.toml");
+    let calib = calib.to_str().unwrap();
+    std::fs::write(
+        d.join("bad-scene.toml"),
+        "[scene]\nname = \"bad\"\nprofile = \"papier\"\n\n[[step]]\nrest_s = 1.0\n",
+    )
+    .unwrap();
+    std::fs::write(d.join("bad-calib.toml"), "x = 1\n").unwrap();
+    std::fs::write(d.join("text.h5"), "recording bytes").unwrap();
+    hdf5::File::create(d.join("plain.h5")).unwrap().create_group("eit").unwrap();
+    let cases: [(String, &str, &str); 7] = [
+        (
+            sim_graph("missing-scene.toml", calib),
+            "g.toml:4:12: node \"sim\": param \"scene\": missing-scene.toml: ",
+            "No such file or directory",
+        ),
+        (
+            sim_graph("bad-scene.toml", calib),
+            "g.toml:4:12: node \"sim\": param \"scene\": bad-scene.toml:3:11: ",
+            "unknown profile \"papier\"",
+        ),
+        (
+            sim_graph(scene, "missing-calib.toml"),
+            "g.toml:20:12: node \"force\": param \"calibration\": missing-calib.toml: ",
+            "No such file or directory",
+        ),
+        (
+            sim_graph(scene, "bad-calib.toml"),
+            "g.toml:20:12: node \"force\": param \"calibration\": bad-calib.toml: ",
+            "missing field `format`",
+        ),
+        (
+            std::fs::read_to_string(d.join(pipeline_graph(&d, "missing.h5", "x"))).unwrap(),
+            "g.toml:6:12: node \"replay\": param \"path\": missing.h5: ",
+            "No such file or directory",
+        ),
+        (
+            std::fs::read_to_string(d.join(pipeline_graph(&d, "text.h5", "x"))).unwrap(),
+            "g.toml:6:12: node \"replay\": param \"path\": text.h5: ",
+            "not an HDF5 file",
+        ),
+        (
+            std::fs::read_to_string(d.join(pipeline_graph(&d, "plain.h5", "x"))).unwrap(),
+            "g.toml:6:12: node \"replay\": param \"path\": plain.h5: ",
+            "an HDF5 file, but not a skinflow recording",
+        ),
+    ];
+    for (graph, at, cause) in cases {
+        std::fs::write(d.join("g.toml"), &graph).unwrap();
+        let before = listing(&d);
+        let out = skinflow(&d, &["check", "g.toml"]);
+        let err = stderr(&out);
+        assert_eq!(out.status.code(), Some(2), "{at}: {err}");
+        assert_eq!(err.lines().count(), 1, "one error: {err}");
+        assert!(err.starts_with(at) && err.contains(cause), "want {at:?} ... {cause:?} in:\n{err}");
+        assert!(out.stdout.is_empty(), "no \"ok\" line");
+        // `run` stops on the same error, before any node starts (no statistics).
+        let run = skinflow(&d, &["run", "g.toml"]);
+        assert_eq!(run.status.code(), Some(2), "{at}: {}", stderr(&run));
+        assert_eq!(stderr(&run), err);
+        assert!(run.stdout.is_empty(), "nothing ran");
+        assert_eq!(listing(&d), before, "{at}: no file created");
+    }
+}
+
+/// Every bad input of a graph is reported at once, in file order; the same graph with good
+/// inputs checks ok, and so do shipped graphs whose inputs are in the repository.
+#[test]
+fn check_reports_every_bad_input_and_passes_good_ones() {
+    let d = workdir("check-files-all");
+    let scene = fixture("tiny-eval.toml");
+    let calib = fixture("../../graphs/calib/paper.toml");
+    let (scene, calib) = (scene.to_str().unwrap(), calib.to_str().unwrap());
+    let sensor = "kind = \"reconstructor\"\nparams = { sensor = \"no-sensor.toml\" }\n";
+    let split = "kind = \"splitter\"\nparams = { strategy = \"eit-force\", calibration = \"no-calib.toml\" }\n";
+    let graph = sim_graph("no-scene.toml", "missing-calib.toml")
+        .replace("kind = \"reconstructor\"\n", sensor)
+        .replace("kind = \"splitter\"\n", split);
+    std::fs::write(d.join("g.toml"), graph).unwrap();
+    let out = skinflow(&d, &["check", "g.toml"]);
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    let lines: Vec<&str> = err.lines().collect();
+    let want = [
+        "node \"sim\": param \"scene\": no-scene.toml: ",
+        "node \"recon\": param \"sensor\": no-sensor.toml: cannot read sensor: ",
+        "node \"split\": param \"calibration\": no-calib.toml: ",
+        "node \"force\": param \"calibration\": missing-calib.toml: ",
+    ];
+    assert_eq!(lines.len(), want.len(), "{err}");
+    for (line, want) in lines.iter().zip(want) {
+        assert!(line.starts_with("g.toml:") && line.contains(want), "want {want:?} in {line:?}");
+        assert!(line.ends_with("No such file or directory (os error 2)"), "{line}");
+    }
+
+    std::fs::write(d.join("g.toml"), sim_graph(scene, calib)).unwrap();
+    let text = ok(&skinflow(&d, &["check", "g.toml"]));
+    assert_eq!(text.trim(), "g.toml: ok (7 nodes, 8 edges)");
+    for shipped in ["graphs/ab-splitters.toml", "graphs/demo.toml"] {
+        let g = root().join(shipped);
+        let text = ok(&skinflow(&d, &["check", g.to_str().unwrap()]));
+        assert!(text.contains(": ok ("), "{shipped}: {text}");
+    }
+}

@@ -1,7 +1,8 @@
 //! Node kinds: what `kind = "..."` in a graph file can name.
 //!
 //! A [`NodeFactory`] describes a kind ([`KindInfo`]: role, ports, parameters, docs), checks
-//! parameters without side effects (for `skinflow check`) and builds nodes. [`typed`] makes a
+//! parameters without side effects (for `skinflow check`), checks the input files they name
+//! (read-only) and builds nodes. [`typed`] makes a
 //! factory from a `#[derive(Deserialize)] #[serde(deny_unknown_fields)]` params struct and a
 //! constructor. The [`Registry`] maps kind names to factories; plugins add to it at load.
 
@@ -123,6 +124,15 @@ pub trait NodeFactory: Send + Sync {
     fn check_wiring(&self, _params: &Params, _wiring: &Wiring<'_>) -> Result<(), ParamError> {
         Ok(())
     }
+
+    /// Opens the input files the params name (read-only) and checks they are what
+    /// [`NodeFactory::build`] needs, so `skinflow check` reports a missing or invalid one;
+    /// run at load ([`crate::GraphSpec::check_files`]) once the graph validated, with the
+    /// context the node would be built with. Never creates, writes or truncates a file, and
+    /// opens no device. Default: nothing to check.
+    fn check_files(&self, _params: &Params, _ctx: &BuildContext) -> Result<(), ParamError> {
+        Ok(())
+    }
 }
 
 /// Which of a node's inputs have at least one edge in the graph.
@@ -152,6 +162,16 @@ pub trait NodeParams: DeserializeOwned + Send + Sync + 'static {
     /// Checks against the graph's wiring (e.g. a param required when an input is connected),
     /// run at load after [`NodeParams::validate`], so `skinflow check` reports it too.
     fn validate_wiring(&self, _wiring: &Wiring<'_>) -> Result<(), ParamError> {
+        Ok(())
+    }
+
+    /// Opens the input files these params name, read-only, and checks them the way the node
+    /// reads them when built (the same function, so the same errors), each error naming the
+    /// param and the file; run at load after the other checks passed, so `skinflow check`
+    /// reports a missing or invalid scene, calibration or recording. Paths resolve with
+    /// [`BuildContext::resolve`], as at build. Output files and devices are not for this hook:
+    /// never create, write or truncate a file here. Default: nothing to check.
+    fn check_files(&self, _ctx: &BuildContext) -> Result<(), ParamError> {
         Ok(())
     }
 }
@@ -188,6 +208,11 @@ where
     fn check_wiring(&self, params: &Params, wiring: &Wiring<'_>) -> Result<(), ParamError> {
         let p = params.parse::<P>()?;
         params.locate(p.validate_wiring(wiring))
+    }
+
+    fn check_files(&self, params: &Params, ctx: &BuildContext) -> Result<(), ParamError> {
+        let p = params.parse::<P>()?;
+        params.locate(p.check_files(ctx))
     }
 
     fn build(&self, params: &Params, ctx: &BuildContext) -> Result<NodeImpl, NodeError> {
@@ -243,5 +268,71 @@ impl Registry {
 
     pub fn iter(&self) -> impl Iterator<Item = &Arc<dyn NodeFactory>> {
         self.kinds.values()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::path::PathBuf;
+
+    use serde::Deserialize;
+
+    use super::*;
+    use crate::node::{Context, Sink};
+
+    #[derive(Deserialize)]
+    #[serde(deny_unknown_fields)]
+    struct FileParams {
+        input: PathBuf,
+    }
+
+    impl NodeParams for FileParams {
+        fn check_files(&self, ctx: &BuildContext) -> Result<(), ParamError> {
+            let p = ctx.resolve(&self.input);
+            std::fs::metadata(&p).map(drop).map_err(|e| ParamError::new("input", format!("{}: {e}", p.display())))
+        }
+    }
+
+    struct Nop;
+
+    impl Sink for Nop {
+        fn consume(&mut self, _ctx: &mut Context, _inputs: &crate::io::Inputs) -> Result<(), NodeError> {
+            Ok(())
+        }
+    }
+
+    fn factory() -> Arc<dyn NodeFactory> {
+        typed(KindInfo::new("file", Role::Sink, "checks its input"), |_: FileParams, _| {
+            Ok(NodeImpl::Sink(Box::new(Nop)))
+        })
+    }
+
+    fn ctx(base_dir: &str) -> BuildContext {
+        BuildContext { base_dir: base_dir.into(), mode: Mode::Lockstep, node_id: "f".into() }
+    }
+
+    #[test]
+    fn a_typed_factory_forwards_check_files_with_the_build_contexts_resolution() {
+        let f = factory();
+        let dir = env!("CARGO_MANIFEST_DIR");
+        // Relative to the context's directory, as `BuildContext::resolve` at build.
+        f.check_files(&Params::from_toml("input = \"Cargo.toml\"").unwrap(), &ctx(dir)).unwrap();
+        let e = f.check_files(&Params::from_toml("input = \"nope.toml\"").unwrap(), &ctx(dir)).unwrap_err();
+        assert_eq!(e.param.as_deref(), Some("input"));
+        assert!(e.to_string().starts_with(&format!("param \"input\": {dir}/nope.toml: ")), "{e}");
+        // Params that do not parse give their own error; no file is looked at.
+        let e = f.check_files(&Params::from_toml("inputs = \"x\"").unwrap(), &ctx(dir)).unwrap_err();
+        assert!(e.problem.contains("unknown field `inputs`"), "{e}");
+    }
+
+    #[test]
+    fn a_kind_checks_no_files_unless_it_says_so() {
+        let mut r = Registry::new();
+        crate::toy::register(&mut r).unwrap();
+        let collect = r.get("collect").unwrap();
+        // An output path is not an input: nothing is checked, nothing created.
+        let params = Params::from_toml("path = \"no-such-dir/out.csv\"").unwrap();
+        collect.check_files(&params, &ctx(env!("CARGO_MANIFEST_DIR"))).unwrap();
+        assert!(!std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("no-such-dir").exists());
     }
 }

@@ -25,12 +25,12 @@ use std::time::Instant;
 use serde::Deserialize;
 use skinflow_contact::{ForceEstimate, Strategy, StrategyKind};
 use skinflow_core::{
-    Context, Inputs, KindInfo, Message, NodeError, NodeImpl, NodeParams, Outputs, ParamDoc, ParamError, PortSpec,
-    Processor, Recycler, Registry, Role, typed,
+    BuildContext, Context, Inputs, KindInfo, Message, NodeError, NodeImpl, NodeParams, Outputs, ParamDoc, ParamError,
+    PortSpec, Processor, Recycler, Registry, Role, typed,
 };
 
 use crate::payload::{Forces, Split};
-use crate::split::load_calibration;
+use crate::split::{check_calibration, load_calibration};
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -59,6 +59,11 @@ fn kind_of(name: &str) -> Result<StrategyKind, ParamError> {
 impl NodeParams for CorrectorParams {
     fn validate(&self) -> Result<(), ParamError> {
         kind_of(&self.strategy).map(|_| ())
+    }
+
+    /// The calibration is read and checked by the loader the node uses when built.
+    fn check_files(&self, ctx: &BuildContext) -> Result<(), ParamError> {
+        check_calibration("calibration", &self.calibration, ctx)
     }
 }
 

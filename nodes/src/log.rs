@@ -58,7 +58,7 @@ use skinflow_record::write::{
 };
 
 use crate::payload::{Contacts, EitFrame, Forces, Image, PressureSample, SyncedFrame, Truth};
-use crate::reconstruct::load_sensor;
+use crate::reconstruct::{check_sensor, load_sensor};
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -128,6 +128,12 @@ impl NodeParams for LoggerParams {
             return Err(ParamError::new(param, SWMR_NEEDS_IMAGE_SIZE));
         }
         Ok(())
+    }
+
+    /// The sensor file, read as the node reads it when built. The output `path` is not
+    /// touched here: the logger checks it when it starts.
+    fn check_files(&self, ctx: &BuildContext) -> Result<(), ParamError> {
+        self.sensor.as_deref().map_or(Ok(()), |p| check_sensor("sensor", p, ctx).map(drop))
     }
 }
 

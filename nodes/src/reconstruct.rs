@@ -138,7 +138,8 @@ impl NodeParams for ReconstructorParams {
             return Err(ParamError::new("reference_frames", "must be >= 1 (got 0)"));
         }
         skinflow_core::params::non_negative("point_spread_mm", self.point_spread_mm)?;
-        // The sensor file is read when the node is built; check against the default here.
+        // A sensor file is read by `check_files` (and when the node is built); check against
+        // the default here.
         if self.sensor.is_none() {
             self.recon().validate(&Sensor::paper_100mm()).map_err(|e| ParamError {
                 param: None,
@@ -147,6 +148,14 @@ impl NodeParams for ReconstructorParams {
             })?;
         }
         Ok(())
+    }
+
+    /// The sensor file, read as the node reads it when built, and the reconstruction params
+    /// checked against that sensor (as `validate` checks them against the default).
+    fn check_files(&self, ctx: &BuildContext) -> Result<(), ParamError> {
+        let Some(path) = &self.sensor else { return Ok(()) };
+        let sensor = check_sensor("sensor", path, ctx)?;
+        self.recon().validate(&sensor).map_err(|e| ParamError { param: None, problem: e.to_string(), span: None })
     }
 }
 
@@ -161,6 +170,12 @@ pub(crate) fn load_sensor(path: Option<&std::path::Path>, ctx: &BuildContext) ->
             Sensor::from_toml(&text).map_err(|e| NodeError::Path { path: p, problem: e.to_string() })
         }
     }
+}
+
+/// [`load_sensor`] of the file named by param `param`, for `skinflow check`: its error as one
+/// of that param.
+pub(crate) fn check_sensor(param: &str, path: &std::path::Path, ctx: &BuildContext) -> Result<Sensor, ParamError> {
+    load_sensor(Some(path), ctx).map_err(|e| ParamError::new(param, e.to_string()))
 }
 
 pub struct Reconstructor {

@@ -22,8 +22,8 @@ use std::sync::Arc;
 use serde::Deserialize;
 use skinflow_core::params::non_negative;
 use skinflow_core::{
-    Context, Header, KindInfo, Message, NodeError, NodeImpl, NodeParams, NodeState, Outputs, ParamDoc, ParamError,
-    PortSpec, Recycler, Registry, Role, Source, SourcePoll, StateRefused, typed,
+    BuildContext, Context, Header, KindInfo, Message, NodeError, NodeImpl, NodeParams, NodeState, Outputs, ParamDoc,
+    ParamError, PortSpec, Recycler, Registry, Role, Source, SourcePoll, StateRefused, typed,
 };
 use skinflow_record::read::Recording;
 
@@ -49,6 +49,14 @@ fn default_speed() -> f64 {
 impl NodeParams for ReplayParams {
     fn validate(&self) -> Result<(), ParamError> {
         non_negative("speed", self.speed)
+    }
+
+    /// The recording is a skinflow recording ([`Recording::check_header`]: its errors name the
+    /// file and say whether it is missing, not HDF5, or not a skinflow recording). Its streams
+    /// are validated when the node opens it: reading them here would read a long recording
+    /// twice at every `run`.
+    fn check_files(&self, ctx: &BuildContext) -> Result<(), ParamError> {
+        Recording::check_header(ctx.resolve(&self.path)).map_err(|e| ParamError::new("path", e.to_string()))
     }
 }
 

@@ -18,8 +18,8 @@ use std::sync::Arc;
 
 use serde::Deserialize;
 use skinflow_core::{
-    Context, Header, KindInfo, Message, NodeError, NodeImpl, NodeParams, NodeState, Outputs, ParamDoc, PortSpec,
-    Registry, Role, Source, SourcePoll, StateRefused, typed,
+    BuildContext, Context, Header, KindInfo, Message, NodeError, NodeImpl, NodeParams, NodeState, Outputs, ParamDoc,
+    PortSpec, Registry, Role, Source, SourcePoll, StateRefused, typed,
 };
 use skinflow_sim::{Pacing, Scene, SimEvent, Simulator};
 
@@ -50,6 +50,14 @@ impl NodeParams for SimParams {
                 Err(skinflow_core::ParamError::new("pacing", format!("must be \"realtime\" or \"fast\" (got \"{p}\")")))
             }
         }
+    }
+
+    /// The scene is read, parsed and validated as the node does when built ([`Scene::read`]:
+    /// its errors name the file, and the line and column of a bad value).
+    fn check_files(&self, ctx: &BuildContext) -> Result<(), skinflow_core::ParamError> {
+        Scene::read(ctx.resolve(&self.scene))
+            .map(drop)
+            .map_err(|e| skinflow_core::ParamError::new("scene", e.to_string()))
     }
 }
 

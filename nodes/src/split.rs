@@ -62,6 +62,14 @@ impl NodeParams for SplitterParams {
         }
         Ok(())
     }
+
+    /// The calibration, when the strategy uses it (the node reads it only then).
+    fn check_files(&self, ctx: &BuildContext) -> Result<(), ParamError> {
+        match &self.calibration {
+            Some(path) if self.strategy != SplitStrategy::Proportional => check_calibration("calibration", path, ctx),
+            _ => Ok(()),
+        }
+    }
 }
 
 /// Reads a calibration file named by a node parameter.
@@ -69,6 +77,11 @@ pub(crate) fn load_calibration(path: &std::path::Path, ctx: &BuildContext) -> Re
     let p = ctx.resolve(path);
     // The file's error names the path already.
     Calibration::read(&p).map_err(NodeError::other)
+}
+
+/// [`load_calibration`] for `skinflow check`: its error as one of param `param`.
+pub(crate) fn check_calibration(param: &str, path: &std::path::Path, ctx: &BuildContext) -> Result<(), ParamError> {
+    load_calibration(path, ctx).map(drop).map_err(|e| ParamError::new(param, e.to_string()))
 }
 
 /// How weights are computed.

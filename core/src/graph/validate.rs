@@ -1,6 +1,7 @@
 //! Static checks of a graph file: syntax and schema, kinds and params, wiring, types, cycles.
 //! Every error found is reported, each located in the file. Nothing here touches files or
-//! devices named in params: that happens when nodes are built.
+//! devices named in params: input files are opened by [`GraphSpec::check_files`] and when
+//! nodes are built, devices only when nodes are built.
 
 use std::collections::{BTreeMap, HashMap};
 use std::ops::Range;
@@ -110,6 +111,11 @@ fn node_name(table: &LooseNode) -> Result<String, String> {
         Some(toml::Value::String(id)) => Err(format!("with an invalid id \"{id}\"")),
         Some(other) => Err(format!("with an id that is not a string ({other})")),
     }
+}
+
+/// The byte span of each `[[node]]` table, in file order (empty if the file is not TOML).
+pub(super) fn node_spans(src: &SourceFile) -> Vec<Range<usize>> {
+    toml::from_str::<LooseFile>(&src.text).map_or_else(|_| Vec::new(), |f| f.node.iter().map(Spanned::span).collect())
 }
 
 pub(super) fn plugin_paths(src: &SourceFile) -> Result<Vec<PathBuf>, GraphErrors> {

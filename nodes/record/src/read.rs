@@ -224,19 +224,39 @@ pub(crate) fn check_format(file: &File, fpath: &Path) -> Result<i64, RecordError
     Ok(format_version)
 }
 
+/// What identifies a recording: its open file, format version and sensor (as text and parsed).
+struct Head {
+    file: File,
+    format_version: i64,
+    sensor_toml: String,
+    sensor: Sensor,
+}
+
+/// Opens `fpath` and validates its root attributes `format`, `format_version` and `sensor`,
+/// reading no stream.
+fn open_head(fpath: &Path) -> Result<Head, RecordError> {
+    let file = open_file(fpath)?;
+    let format_version = check_format(&file, fpath)?;
+    let sensor_path = format!("/ attr {}", layout::ATTR_SENSOR);
+    let sensor_toml = attr::read_string(&file, fpath, layout::ATTR_SENSOR)?
+        .ok_or_else(|| RecordError::schema(fpath, &sensor_path, SchemaProblem::Missing))?;
+    let sensor = Sensor::from_toml(&sensor_toml)
+        .map_err(|e| RecordError::schema(fpath, &sensor_path, SchemaProblem::BadSensor { reason: e.to_string() }))?;
+    Ok(Head { file, format_version, sensor_toml, sensor })
+}
+
 impl Recording {
+    /// Checks that `path` is a skinflow recording this version reads (it exists, is HDF5, and
+    /// its format, version and sensor attributes are valid) without reading its streams: the
+    /// cheap check of `skinflow check`. [`Recording::open`] validates the streams too.
+    pub fn check_header(path: impl AsRef<Path>) -> Result<(), RecordError> {
+        open_head(path.as_ref()).map(drop)
+    }
+
     /// Opens and validates `path` (CONTRACTS.md section 2), then reads every stream.
     pub fn open(path: impl AsRef<Path>) -> Result<Recording, RecordError> {
         let fpath = path.as_ref();
-        let file = open_file(fpath)?;
-        let format_version = check_format(&file, fpath)?;
-        let root = |name: &str| format!("/ attr {name}");
-        let sensor_path = root(layout::ATTR_SENSOR);
-        let sensor_toml = attr::read_string(&file, fpath, layout::ATTR_SENSOR)?
-            .ok_or_else(|| RecordError::schema(fpath, &sensor_path, SchemaProblem::Missing))?;
-        let sensor = Sensor::from_toml(&sensor_toml).map_err(|e| {
-            RecordError::schema(fpath, &sensor_path, SchemaProblem::BadSensor { reason: e.to_string() })
-        })?;
+        let Head { file, format_version, sensor_toml, sensor } = open_head(fpath)?;
         let eit = read_eit(&file, fpath, &sensor)?;
         let reference = match eit.as_ref() {
             Some(eit) if file.link_exists(layout::EIT_REFERENCE) => {

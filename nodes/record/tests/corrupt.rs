@@ -55,9 +55,13 @@ fn garbage_empty_and_missing_files_are_refused() {
         assert_refused(&path, name);
         // Not HDF5 at all: said so, not as the library's "file signature not found".
         assert!(matches!(Recording::open(&path), Err(RecordError::NotHdf5 { .. })), "{name}");
+        // The header-only check (`skinflow check`) refuses it the same way.
+        assert!(matches!(Recording::check_header(&path), Err(RecordError::NotHdf5 { .. })), "{name}");
     }
+    Recording::check_header(dir.join("valid.h5")).unwrap();
     let missing = dir.join("missing.h5");
     assert!(matches!(Recording::open(&missing), Err(RecordError::Io { .. })));
+    assert!(matches!(Recording::check_header(&missing), Err(RecordError::Io { .. })));
     assert!(inspect(&missing).unwrap_err().to_string().starts_with(&missing.display().to_string()));
 }
 

@@ -172,6 +172,12 @@ fn every_violation_is_refused_with_file_path_and_problem() {
         let err = Recording::open(&file).expect_err(what);
         let msg = err.to_string();
         assert!(msg.starts_with(&format!("{}: {path}: ", file.display())), "{what}: {msg}");
+        // The header-only check sees the root attributes (format, version, sensor) the same
+        // way, and leaves the streams to `open`.
+        match Recording::check_header(&file) {
+            Err(e) => assert_eq!((path.starts_with("/ attr"), e.to_string()), (true, msg.clone()), "{what}"),
+            Ok(()) => assert!(!path.starts_with("/ attr"), "{what}: the header check passed"),
+        }
         match err {
             RecordError::Schema { path: p, problem: got, file: f } => {
                 assert_eq!((f, p.as_str(), got), (file.clone(), path, problem), "{what}");

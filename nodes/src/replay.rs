@@ -27,6 +27,7 @@ use skinflow_core::{
 };
 use skinflow_record::read::Recording;
 
+use crate::pace::{Pacer, ns};
 use crate::payload::{EitFrame, PressureSample, Truth, TruthContact};
 
 #[derive(Debug, Deserialize)]
@@ -78,23 +79,25 @@ pub struct Replay {
     rec: Arc<Recording>,
     /// (availability time, item), in delivery order.
     order: Vec<(f64, Item)>,
-    next: usize,
-    speed: f64,
     repeat: bool,
-    /// Added to recorded times on the current pass.
-    offset_s: f64,
     t_first: f64,
     span_s: f64,
+    pos: Position,
+    /// Paces recording times (availability time + offset) at `speed`, from `t_first`.
+    pacer: Pacer,
+    frames: Recycler<EitFrame>,
+}
+
+/// How far a replay has got: what a hot swap hands over, with the pacing.
+#[derive(Debug, Clone, Copy, Default)]
+struct Position {
+    /// The next event in delivery order.
+    next: usize,
+    /// Added to recorded times on the current pass.
+    offset_s: f64,
     sent_reference: bool,
     pressure_seq: u64,
     truth_seq: u64,
-    /// Pacing: the recording time (availability time + offset) that is sent at graph time
-    /// `anchor.0` ns; later ones follow at `speed`. `(0, t_first)` from the start, moved by a
-    /// hot swap to the last message the replaced instance sent.
-    anchor: (u64, f64),
-    /// Graph time (ns) and recording time of the last message sent.
-    last: Option<(u64, f64)>,
-    frames: Recycler<EitFrame>,
 }
 
 /// Where a replay is, handed to its replacement in a hot swap.
@@ -104,13 +107,8 @@ struct ReplayState {
     events: usize,
     t_first: f64,
     span_s: f64,
-    next: usize,
-    offset_s: f64,
-    sent_reference: bool,
-    pressure_seq: u64,
-    truth_seq: u64,
-    anchor: (u64, f64),
-    last: Option<(u64, f64)>,
+    pos: Position,
+    pacer: Pacer,
 }
 
 /// Median interval of a time series (s), or `fallback` with fewer than two times.
@@ -145,24 +143,13 @@ impl Replay {
             path,
             order: order.into_iter().map(|(t, _, i)| (t, i)).collect(),
             rec: Arc::new(rec),
-            next: 0,
-            speed,
             repeat,
-            offset_s: 0.0,
             t_first,
             span_s,
-            sent_reference: false,
-            pressure_seq: 0,
-            truth_seq: 0,
-            anchor: (0, t_first),
-            last: None,
+            pos: Position::default(),
+            pacer: Pacer::new(speed, t_first),
             frames: Recycler::new(64, EitFrame::default),
         }
-    }
-
-    /// The graph time (ns) at which recording time `r` (availability time + offset) is sent.
-    fn due_ns(&self, r: f64) -> u64 {
-        self.anchor.0 + ns((r - self.anchor.1) / self.speed)
     }
 
     /// Why this instance cannot go on from `s`, if it cannot.
@@ -191,43 +178,32 @@ impl Replay {
     }
 }
 
-fn ns(t_s: f64) -> u64 {
-    (t_s.max(0.0) * 1e9).round() as u64
-}
-
 impl Source for Replay {
     fn poll(&mut self, ctx: &mut Context, out: &mut Outputs) -> Result<SourcePoll, NodeError> {
         let origin = ctx.index();
-        if !self.sent_reference {
-            self.sent_reference = true;
+        if !self.pos.sent_reference {
+            self.pos.sent_reference = true;
             if let Some(r) = &self.rec.reference {
                 out.send(REFERENCE, Message::new(Header { seq: 0, t_ns: 0, origin }, EitFrame { v: r.clone() }))?;
                 return Ok(SourcePoll::Emitted);
             }
         }
-        if self.next >= self.order.len() {
+        if self.pos.next >= self.order.len() {
             if !self.repeat || self.order.is_empty() {
                 return Ok(SourcePoll::Finished);
             }
-            self.next = 0;
+            self.pos.next = 0;
             // The next pass starts one mean event interval after this one ended.
-            self.offset_s += self.span_s + self.span_s / self.order.len() as f64;
+            self.pos.offset_s += self.span_s + self.span_s / self.order.len() as f64;
         }
-        let (avail, item) = self.order[self.next];
-        self.next += 1;
-        let r = avail + self.offset_s;
-        let sent_ns = if self.speed > 0.0 {
-            let due = self.due_ns(r);
-            if !ctx.sleep_until_ns(due) {
-                return Ok(SourcePoll::Finished);
-            }
-            due
-        } else {
-            ctx.now_ns()
-        };
-        self.last = Some((sent_ns, r));
+        let (avail, item) = self.order[self.pos.next];
+        self.pos.next += 1;
+        let r = avail + self.pos.offset_s;
+        if self.pacer.send_at(ctx, r).is_none() {
+            return Ok(SourcePoll::Finished);
+        }
         let rec = &self.rec;
-        let off = self.offset_s;
+        let off = self.pos.offset_s;
         match item {
             Item::Eit(i) => {
                 let e = rec.eit.as_ref().expect("indexed from the EIT stream");
@@ -240,18 +216,18 @@ impl Source for Replay {
             }
             Item::Pressure(i) => {
                 let p = rec.pressure.as_ref().expect("indexed from the pressure stream");
-                self.pressure_seq += 1;
+                self.pos.pressure_seq += 1;
                 out.send(
                     PRESSURE,
                     Message::new(
-                        Header { seq: self.pressure_seq, t_ns: ns(p.t_s[i] + off), origin },
+                        Header { seq: self.pos.pressure_seq, t_ns: ns(p.t_s[i] + off), origin },
                         PressureSample { kpa: p.kpa[i] },
                     ),
                 )?;
             }
             Item::Truth(i) => {
                 let tr = rec.truth.as_ref().expect("indexed from the truth stream");
-                self.truth_seq += 1;
+                self.pos.truth_seq += 1;
                 let contacts = tr
                     .row(i)
                     .contacts()
@@ -264,7 +240,10 @@ impl Source for Replay {
                     .collect();
                 out.send(
                     TRUTH,
-                    Message::new(Header { seq: self.truth_seq, t_ns: ns(tr.t_s[i] + off), origin }, Truth { contacts }),
+                    Message::new(
+                        Header { seq: self.pos.truth_seq, t_ns: ns(tr.t_s[i] + off), origin },
+                        Truth { contacts },
+                    ),
                 )?;
             }
         }
@@ -277,13 +256,8 @@ impl Source for Replay {
             events: self.order.len(),
             t_first: self.t_first,
             span_s: self.span_s,
-            next: self.next,
-            offset_s: self.offset_s,
-            sent_reference: self.sent_reference,
-            pressure_seq: self.pressure_seq,
-            truth_seq: self.truth_seq,
-            anchor: self.anchor,
-            last: self.last,
+            pos: self.pos,
+            pacer: self.pacer,
         }))
     }
 
@@ -292,14 +266,9 @@ impl Source for Replay {
         if let Some(why) = self.cannot_continue(&s) {
             return Err(StateRefused::refuse_swap(s, why));
         }
-        self.next = s.next;
-        self.offset_s = s.offset_s;
-        self.sent_reference = s.sent_reference;
-        self.pressure_seq = s.pressure_seq;
-        self.truth_seq = s.truth_seq;
+        self.pos = s.pos;
         // Paced from the last message sent: the next one follows it at this instance's speed.
-        self.anchor = s.last.map_or(s.anchor, |(sent_ns, r)| (sent_ns, r));
-        self.last = s.last;
+        self.pacer.continue_from(&s.pacer);
         Ok(())
     }
 }
@@ -413,15 +382,16 @@ mod tests {
         let rec = recording("pace", 20);
         let ctx = &mut Context::detached("replay", Mode::Realtime);
         let mut old = Replay::new(rec.clone(), Recording::open(&rec).unwrap(), 2.0, false);
-        // As if it had sent the message of recording time 1.2 s at graph time 3 s.
-        old.next = 30;
-        old.last = Some((3_000_000_000, 1.2));
+        // As if it had sent the message of recording time 1.2 s (lockstep: without waiting).
+        old.pos.next = 30;
+        let sent_ns = old.pacer.send_at(&Context::detached("replay", Mode::Lockstep), 1.2).unwrap();
+        assert_eq!(sent_ns, old.pacer.due_ns(1.2));
         let mut new = Replay::new(rec.clone(), Recording::open(&rec).unwrap(), 4.0, false);
         let state = old.export_state(ctx).unwrap();
-        assert_eq!(state.downcast_ref::<ReplayState>().unwrap().last, Some((3_000_000_000, 1.2)));
+        assert_eq!(state.downcast_ref::<ReplayState>().unwrap().pacer.last(), Some((sent_ns, 1.2)));
         new.import_state(ctx, state).unwrap();
-        assert_eq!(new.next, 30);
+        assert_eq!(new.pos.next, 30);
         // 0.4 s of recording later, at speed 4: 0.1 s after it.
-        assert_eq!(new.due_ns(1.6), 3_100_000_000);
+        assert_eq!(new.pacer.due_ns(1.6), sent_ns + 100_000_000);
     }
 }

@@ -24,6 +24,7 @@ use skinflow_core::{
 use skinflow_sim::{Pacing, Scene, SimEvent, Simulator};
 
 use crate::order::AvailabilityOrder;
+use crate::pace::{Pacer, ns};
 use crate::payload::{EitFrame, PressureSample, Truth, TruthContact};
 
 #[derive(Debug, Deserialize)]
@@ -68,7 +69,8 @@ const TRUTH: usize = 2;
 pub struct Sim {
     /// What the simulation is: a swap goes on only from the same.
     identity: Identity,
-    paced: bool,
+    /// Paces simulated availability times in real time (speed 1), or not at all (`fast`).
+    pacer: Pacer,
     /// `None` only once handed over to a replacement (the engine then stops this instance).
     stream: Option<Stream>,
 }
@@ -87,18 +89,13 @@ struct Stream {
     order: AvailabilityOrder<SimEvent>,
     pressure_seq: u64,
     truth_seq: u64,
-    /// Pacing: simulated time `anchor.1` is sent at graph time `anchor.0` ns, later ones in
-    /// real time after it. `(0, 0.0)` from the start, moved by a hot swap to the last event
-    /// the replaced instance sent.
-    anchor: (u64, f64),
-    /// Graph time (ns) and simulated availability time of the last event sent.
-    last: Option<(u64, f64)>,
 }
 
 /// A sim's hand-over.
 struct SimState {
     identity: Identity,
     stream: Stream,
+    pacer: Pacer,
 }
 
 impl Sim {
@@ -110,15 +107,8 @@ impl Sim {
             Some(_) => true,
             None => rates.pacing == Pacing::Realtime,
         };
-        let stream = Stream {
-            order: AvailabilityOrder::new(1.0 / rates.eit_fps),
-            sim,
-            pressure_seq: 0,
-            truth_seq: 0,
-            anchor: (0, 0.0),
-            last: None,
-        };
-        Ok(Sim { identity, paced, stream: Some(stream) })
+        let stream = Stream { order: AvailabilityOrder::new(1.0 / rates.eit_fps), sim, pressure_seq: 0, truth_seq: 0 };
+        Ok(Sim { identity, pacer: Pacer::new(if paced { 1.0 } else { 0.0 }, 0.0), stream: Some(stream) })
     }
 
     /// Why this instance cannot go on from a simulation of `other`, if it cannot.
@@ -140,10 +130,6 @@ impl Sim {
     }
 }
 
-fn ns(t_s: f64) -> u64 {
-    (t_s.max(0.0) * 1e9).round() as u64
-}
-
 impl Source for Sim {
     fn poll(&mut self, ctx: &mut Context, out: &mut Outputs) -> Result<SourcePoll, NodeError> {
         let st =
@@ -160,16 +146,9 @@ impl Source for Sim {
         let Some((avail_s, event)) = next.map_err(|e| NodeError::msg(format!("simulator: {e}")).fatal())? else {
             return Ok(SourcePoll::Finished);
         };
-        let sent_ns = if self.paced {
-            let due = st.anchor.0 + ns(avail_s - st.anchor.1);
-            if !ctx.sleep_until_ns(due) {
-                return Ok(SourcePoll::Finished);
-            }
-            due
-        } else {
-            ctx.now_ns()
-        };
-        st.last = Some((sent_ns, avail_s));
+        if self.pacer.send_at(ctx, avail_s).is_none() {
+            return Ok(SourcePoll::Finished);
+        }
         let origin = ctx.index();
         match event {
             SimEvent::Eit { t_s, seq, v } => {
@@ -202,7 +181,7 @@ impl Source for Sim {
 
     fn export_state(&mut self, _ctx: &mut Context) -> Option<NodeState> {
         let stream = self.stream.take()?;
-        Some(Box::new(SimState { identity: self.identity.clone(), stream }))
+        Some(Box::new(SimState { identity: self.identity.clone(), stream, pacer: self.pacer }))
     }
 
     fn import_state(&mut self, _ctx: &mut Context, state: NodeState) -> Result<(), StateRefused> {
@@ -210,11 +189,9 @@ impl Source for Sim {
         if let Some(why) = self.cannot_continue(&s.identity) {
             return Err(StateRefused::refuse_swap(s, why));
         }
-        let SimState { mut stream, .. } = *s;
-        // Paced from the last event sent: the next one follows it in real time.
-        if let Some(last) = stream.last {
-            stream.anchor = last;
-        }
+        let SimState { stream, pacer, .. } = *s;
+        // Paced from the last event sent: the next one follows it at this instance's pacing.
+        self.pacer.continue_from(&pacer);
         self.stream = Some(stream);
         Ok(())
     }

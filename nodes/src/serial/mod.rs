@@ -39,16 +39,12 @@ mod pressure;
 
 use skinflow_core::{KindInfo, NodeImpl, ParamDoc, PortSpec, Registry, Role, typed};
 
+use crate::pace::ns;
 use crate::payload::{EitFrame, PressureSample, Truth};
 pub use eit::SerialEit;
 pub use loadcell::SerialLoadcell;
 pub use params::{EitParams, FlowControlParam, LoadcellParams, ParityParam, PortParams, PressureParams};
 pub use pressure::SerialPressure;
-
-/// A graph-clock time, s, as a header's ns (negative times clamp to 0).
-fn ns(t_s: f64) -> u64 {
-    (t_s.max(0.0) * 1e9).round() as u64
-}
 
 /// The port params' docs; `stall` is the kind's `stall_after_s` default and what it means.
 fn port_docs(k: KindInfo, stall: (&'static str, &'static str)) -> KindInfo {

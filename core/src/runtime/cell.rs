@@ -79,6 +79,36 @@ pub(crate) fn panic_message(p: Box<dyn std::any::Any + Send>) -> String {
     }
 }
 
+/// How an instance's `stop`, called under `catch_unwind` ([`stop_caught`]), went wrong.
+pub(crate) enum StopFailure {
+    /// `stop` returned an error.
+    Error(NodeError),
+    /// `stop` panicked; the payload's message.
+    Panic(String),
+}
+
+impl StopFailure {
+    /// As a node error: a panic becomes [`NodeError::Panic`].
+    pub fn into_error(self) -> NodeError {
+        match self {
+            StopFailure::Error(e) => e,
+            StopFailure::Panic(msg) => NodeError::Panic(msg),
+        }
+    }
+}
+
+/// The panic-safe stop of an instance, with the node's context: its `stop` counts what it
+/// held; an error or a panic there is returned, never propagated. Used for a node's own
+/// instance at the end of the run ([`Cell::stop_at_end`]) and for an instance taken out of
+/// the node ([`Cell::stop_replaced`]).
+fn stop_caught(imp: &mut NodeImpl, ctx: &mut Context) -> Result<(), StopFailure> {
+    match catch_unwind(AssertUnwindSafe(|| imp.stop(ctx))) {
+        Ok(Ok(())) => Ok(()),
+        Ok(Err(e)) => Err(StopFailure::Error(e)),
+        Err(p) => Err(StopFailure::Panic(panic_message(p))),
+    }
+}
+
 impl Cell {
     /// Room on every lossless output (registers for a wake-up when not).
     pub fn outputs_have_space(&self) -> bool {
@@ -303,11 +333,38 @@ impl Cell {
     /// replacement never installed) under `catch_unwind`: its `stop` counts what it held; an
     /// error or a panic there is logged, the node goes on.
     fn stop_replaced(&mut self, imp: &mut NodeImpl, what: &str) {
-        match catch_unwind(AssertUnwindSafe(|| imp.stop(&mut self.ctx))) {
-            Ok(Ok(())) => {}
-            Ok(Err(e)) => tracing::warn!(node = %self.ctx.id, "{what} failed to stop: {e}"),
-            Err(p) => tracing::error!(node = %self.ctx.id, "{what} panicked in its stop: {}", panic_message(p)),
+        match stop_caught(imp, &mut self.ctx) {
+            Ok(()) => {}
+            Err(StopFailure::Error(e)) => tracing::warn!(node = %self.ctx.id, "{what} failed to stop: {e}"),
+            Err(StopFailure::Panic(msg)) => tracing::error!(node = %self.ctx.id, "{what} panicked in its stop: {msg}"),
         }
+    }
+
+    /// Stops the node's own instance at the end of the run, under `catch_unwind`: its `stop`
+    /// counts what it holds; an error there, or a panic (as [`NodeError::Panic`]), is
+    /// returned for the run's report. Not for sources: they were stopped when their stream
+    /// ended ([`Cell::end_source`]).
+    pub fn stop_at_end(&mut self) -> Result<(), NodeError> {
+        stop_caught(&mut self.imp, &mut self.ctx).map_err(StopFailure::into_error)
+    }
+
+    /// The end of source `node`'s stream, for both executors (the pool's source thread when
+    /// its loop ends; lockstep after its last pass, before the end-of-stream flush): the
+    /// source is stopped under `catch_unwind` (an error or a panic in its `stop` fails the
+    /// graph as "stop failed: ..." or "stop panicked: ..."), never called again, its slot
+    /// marked ended, and the control work queued for it refused. The caller puts the cell back
+    /// in its slot.
+    pub fn end_source(&mut self, shared: &Shared, node: usize) {
+        match stop_caught(&mut self.imp, &mut self.ctx) {
+            Ok(()) => {}
+            Err(StopFailure::Error(e)) => shared.fail(node, NodeError::msg(format!("stop failed: {e}"))),
+            Err(StopFailure::Panic(msg)) => shared.fail(node, NodeError::msg(format!("stop panicked: {msg}"))),
+        }
+        self.dead = true; // stopped: never run again
+        let slot = &shared.slots[node];
+        slot.ended.store(true, SeqCst);
+        // Queued before `ended` was set: answered now rather than left waiting for the run's end.
+        self.refuse_controls(&slot.control, "its stream has ended (a source that finished or was stopped)");
     }
 
     /// Moves the output slots onto their edges and wakes the consumers. Fan-out clones the

@@ -100,13 +100,7 @@ pub(crate) fn run(shared: &Shared, topo: &[usize], external_stop: &AtomicBool, u
     // Final pass: whatever is queued and can run, runs (also after a stop request).
     drain(shared, &mut cells, &others, &n);
     for &s in &sources {
-        let cell = &mut cells[s];
-        if let Err(e) = cell.imp.stop(&mut cell.ctx) {
-            shared.fail(s, NodeError::msg(format!("stop failed: {e}")));
-        }
-        cell.dead = true;
-        shared.slots[s].ended.store(true, SeqCst);
-        cell.refuse_controls(&shared.slots[s].control, "its stream has ended (a source that finished or was stopped)");
+        cells[s].end_source(shared, s);
     }
     // End of stream: what processors still buffer goes downstream before anything stops.
     super::flush::flush_all(shared, &mut cells, topo, Instant::now() + DRAIN_TIMEOUT);

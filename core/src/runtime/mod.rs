@@ -227,7 +227,6 @@ impl RunningGraph {
             stop,
             shutdown: AtomicBool::new(false),
             failures: std::sync::Mutex::new(Vec::new()),
-            faulted: AtomicBool::new(false),
             kinds: std::sync::Mutex::new(spec.nodes.iter().map(|n| n.kind.clone()).collect()),
         });
 
@@ -459,16 +458,11 @@ impl RunningGraph {
                 let left = rx.pending() as u64;
                 rx.shared.stats.undelivered.fetch_add(left, std::sync::atomic::Ordering::Relaxed);
             }
-            if slot.exec != Exec::Source {
-                let stopped = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| cell.imp.stop(&mut cell.ctx)));
-                let error = match stopped {
-                    Ok(Ok(())) => None,
-                    Ok(Err(error)) => Some(error),
-                    Err(p) => Some(NodeError::Panic(cell::panic_message(p))),
-                };
-                if let Some(error) = error {
-                    stop_failures.push(RunError::Stop { node: self.handle.node_ids()[i].clone(), error });
-                }
+            // Sources were stopped when their stream ended (`Cell::end_source`).
+            if slot.exec != Exec::Source
+                && let Err(error) = cell.stop_at_end()
+            {
+                stop_failures.push(RunError::Stop { node: self.handle.node_ids()[i].clone(), error });
             }
             slot.cell.store(Some(cell));
         }

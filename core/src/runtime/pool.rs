@@ -112,7 +112,6 @@ pub(crate) struct Shared {
     /// Workers and dedicated threads exit.
     pub shutdown: AtomicBool,
     pub failures: std::sync::Mutex<Vec<(usize, NodeError)>>,
-    pub faulted: AtomicBool,
     /// The kind each node runs now, updated when a swap is installed (not when it is asked).
     pub kinds: std::sync::Mutex<Vec<String>>,
 }
@@ -121,7 +120,6 @@ impl Shared {
     /// Records a fatal node error and asks the graph to stop (cold path).
     pub fn fail(&self, node: usize, e: NodeError) {
         self.failures.lock().unwrap_or_else(|p| p.into_inner()).push((node, e));
-        self.faulted.store(true, SeqCst);
         self.stop.store(true, SeqCst);
     }
 
@@ -319,8 +317,8 @@ pub(crate) fn dedicated_loop(shared: &Shared, node: usize) {
     }
 }
 
-/// A source's thread: poll while there is room downstream, until finished or stopped.
-/// Returns the cell so the runtime can report and stop it.
+/// A source's thread: poll while there is room downstream, until finished or stopped; then
+/// ends the source ([`Cell::end_source`]) and puts its cell back in its slot for the report.
 pub(crate) fn source_loop(shared: &Shared, node: usize) {
     let slot = &shared.slots[node];
     let mut cell = slot.cell.take().expect("a source's cell is in its slot at start");
@@ -347,12 +345,6 @@ pub(crate) fn source_loop(shared: &Shared, node: usize) {
             }
         }
     }
-    if let Err(e) = cell.imp.stop(&mut cell.ctx) {
-        shared.fail(node, NodeError::msg(format!("stop failed: {e}")));
-    }
-    cell.dead = true; // stopped: never run again
-    slot.ended.store(true, SeqCst);
-    // Queued before `ended` was set: answered now rather than left waiting for the run's end.
-    cell.refuse_controls(&slot.control, "its stream has ended (a source that finished or was stopped)");
+    cell.end_source(shared, node);
     slot.cell.store(Some(cell));
 }

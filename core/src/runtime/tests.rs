@@ -1,6 +1,8 @@
 //! The runtime's own tests: what a panicking instance held is counted; a swap counts (and
 //! shows its kind) only once installed, is answered with a replacement's refusal, and never
-//! runs when its node does not; deadline and restart policy change while the graph runs.
+//! runs when its node does not; deadline and restart policy change while the graph runs; a
+//! source's end (its stop, what is queued for it) and a stop that fails or panics go the same
+//! way under both executors.
 //!
 //! No assertion depends on timing: waits only give the graph time to reach a state.
 
@@ -29,12 +31,16 @@ struct HoldParams {
     /// Call (1-based, per instance) that panics, before it takes its input; 0 = never.
     #[serde(default)]
     panic_at: u64,
+    /// `stop` panics, after counting what the instance holds.
+    #[serde(default)]
+    stop_panics: bool,
 }
 
 impl NodeParams for HoldParams {}
 
 /// Emits each input once `by` newer ones arrived (holds its last `by`), flushes them at end
-/// of stream, counts what it still holds at stop, and panics on call `panic_at`.
+/// of stream, counts what it still holds at stop, panics on call `panic_at` (and in `stop`
+/// with `stop_panics`).
 struct Hold {
     p: HoldParams,
     held: VecDeque<Message>,
@@ -70,6 +76,9 @@ impl Processor for Hold {
 
     fn stop(&mut self, ctx: &mut Context) -> Result<(), NodeError> {
         ctx.count_discarded(self.held.len() as u64);
+        if self.p.stop_panics {
+            panic!("hold: stop");
+        }
         Ok(())
     }
 }
@@ -154,8 +163,53 @@ impl Source for Slow {
     }
 }
 
-/// The toy kinds, `hold`, `total`, and `slow` / `slow2` (two kinds, one behaviour) counting
-/// their stops in `stops`.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct EndsParams {
+    /// Messages emitted before the stream ends.
+    count: u64,
+    /// `stop` returns an error.
+    #[serde(default)]
+    fail_stop: bool,
+    /// `stop` panics.
+    #[serde(default)]
+    panic_stop: bool,
+}
+
+impl NodeParams for EndsParams {}
+
+/// A source whose stream ends after `count` messages; counts its instances' stops in the
+/// shared counter, and fails its stop with `fail_stop`, panics there with `panic_stop`.
+struct Ends {
+    p: EndsParams,
+    next: u64,
+    stops: Arc<AtomicU64>,
+}
+
+impl Source for Ends {
+    fn poll(&mut self, ctx: &mut Context, out: &mut Outputs) -> Result<SourcePoll, NodeError> {
+        if self.next == self.p.count {
+            return Ok(SourcePoll::Finished);
+        }
+        out.send(0, Message::new(Header { seq: self.next, t_ns: self.next, origin: ctx.index() }, Count(self.next)))?;
+        self.next += 1;
+        Ok(SourcePoll::Emitted)
+    }
+
+    fn stop(&mut self, _ctx: &mut Context) -> Result<(), NodeError> {
+        self.stops.fetch_add(1, SeqCst);
+        if self.p.panic_stop {
+            panic!("ends: stop panics");
+        }
+        if self.p.fail_stop {
+            return Err(NodeError::msg("ends: stop refused"));
+        }
+        Ok(())
+    }
+}
+
+/// The toy kinds, `hold`, `total`, `slow` / `slow2` (two kinds, one behaviour) and `ends`
+/// counting their stops in `stops`.
 fn registry(stops: &Arc<AtomicU64>) -> Registry {
     let mut r = Registry::new();
     crate::toy::register(&mut r).unwrap();
@@ -184,6 +238,12 @@ fn registry(stops: &Arc<AtomicU64>) -> Registry {
         ))
         .unwrap();
     }
+    let stops = stops.clone();
+    r.register(typed(
+        KindInfo::new("ends", Role::Source, "test: a stream of `count` messages").output(count()),
+        move |p: EndsParams, _| Ok(NodeImpl::Source(Box::new(Ends { p, next: 0, stops: stops.clone() }))),
+    ))
+    .unwrap();
     r
 }
 
@@ -402,4 +462,97 @@ fn deadline_and_restart_policy_change_while_the_graph_runs() {
     let p = node(&r, "p");
     // Each instance panics on its 3rd message: 6 panics in 20 messages, each rebuilt.
     assert_eq!((p.panics, p.restarts, p.msgs_out), (6, 6, 14));
+}
+
+#[test]
+fn a_source_s_end_is_the_same_under_both_executors() {
+    let cases = [("fail_stop", "stop failed: ends: stop refused"), ("panic_stop", "stop panicked: ends: stop panics")];
+    for (mode, (how, want)) in ["lockstep", "realtime"].into_iter().flat_map(|m| cases.map(|c| (m, c))) {
+        let stops = Arc::new(AtomicU64::new(0));
+        let reg = registry(&stops);
+        let g = spec(
+            &reg,
+            &format!(
+                "[graph]\nmode = \"{mode}\"\n\
+                 [[node]]\nid = \"src\"\nkind = \"ends\"\nparams = {{ count = 5, {how} = true }}\n\
+                 [[node]]\nid = \"h\"\nkind = \"hold\"\nparams = {{ by = 2 }}\n\
+                 [[node]]\nid = \"out\"\nkind = \"null\"\n\
+                 [[edge]]\nfrom = \"src.out\"\nto = \"h.in\"\n\
+                 [[edge]]\nfrom = \"h.out\"\nto = \"out.in\"\n"
+            ),
+        );
+        let r = crate::runtime::run(&g, &RunOptions::default()).unwrap();
+        // The failed or panicking stop fails the graph (as the source's error, not an
+        // end-of-run stop failure), in either executor; what was sent still goes through and
+        // is flushed.
+        match r.failures.as_slice() {
+            [RunError::Node { node, error }] => {
+                assert_eq!((node.as_str(), error.to_string().as_str()), ("src", want), "{mode}");
+            }
+            other => panic!("{mode} {how}: expected the source's stop failure, got {other:?}"),
+        }
+        assert_eq!(stops.load(SeqCst), 1, "{mode}: the source is stopped once");
+        assert_eq!(node(&r, "src").msgs_out, 5, "{mode}");
+        let h = node(&r, "h");
+        assert_eq!((h.msgs_in, h.msgs_out, h.discarded), (5, 5, 0), "{mode}: everything flushed");
+        assert_eq!(node(&r, "out").msgs_in, 5, "{mode}");
+    }
+}
+
+#[test]
+fn a_swap_queued_for_a_lockstep_source_that_never_polls_again_is_not_installed() {
+    let stops = Arc::new(AtomicU64::new(0));
+    let reg = registry(&stops);
+    let g = spec(
+        &reg,
+        "[graph]\nmode = \"lockstep\"\n\
+         [[node]]\nid = \"s\"\nkind = \"slow\"\nparams = { every_s = 0.001 }\n\
+         [[node]]\nid = \"out\"\nkind = \"null\"\n\
+         [[edge]]\nfrom = \"s.out\"\nto = \"out.in\"\n",
+    );
+    let running = RunningGraph::start(&g).unwrap();
+    let h = running.handle();
+    // Queued before the run, which is stopped before its first step: the source is never
+    // polled (nor its control work run) again, so the swap ends with the source's stream.
+    h.swap("s", reg.get("slow2").unwrap().clone(), Params::from_toml("every_s = 0.002").unwrap()).unwrap();
+    h.control("s", "tare").unwrap();
+    let stop = Arc::new(AtomicBool::new(true));
+    let r = running.wait(&RunOptions { stop: Some(stop), ..RunOptions::default() });
+    assert!(r.failures.is_empty(), "{:?}", r.failures);
+    let s = node(&r, "s");
+    assert_eq!((s.kind.as_str(), s.swaps, s.msgs_out), ("slow", 0, 0), "nothing swapped in ran");
+    assert_eq!(stops.load(SeqCst), 2, "the running instance and the replacement were stopped");
+    let e = h.swap("s", reg.get("slow2").unwrap().clone(), Params::from_toml("every_s = 0.002").unwrap());
+    assert!(e.unwrap_err().to_string().contains("the node runs no more"));
+}
+
+#[test]
+fn a_stop_that_panics_is_logged_for_a_replaced_instance_and_reported_at_the_end_of_the_run() {
+    for mode in ["lockstep", "realtime"] {
+        let reg = registry(&Arc::default());
+        let g = spec(
+            &reg,
+            &format!(
+                "[graph]\nmode = \"{mode}\"\n\
+                 [[node]]\nid = \"src\"\nkind = \"counter\"\nparams = {{ count = 12 }}\n\
+                 [[node]]\nid = \"h\"\nkind = \"hold\"\nrestart = \"always\"\n\
+                 params = {{ by = 3, panic_at = 5, stop_panics = true }}\n\
+                 [[node]]\nid = \"out\"\nkind = \"null\"\n\
+                 [[edge]]\nfrom = \"src.out\"\nto = \"h.in\"\n\
+                 [[edge]]\nfrom = \"h.out\"\nto = \"out.in\"\n"
+            ),
+        );
+        let r = crate::runtime::run(&g, &RunOptions::default()).unwrap();
+        // The two panicked instances' stops panic too (logged, the node goes on); the last
+        // instance's, at the end of the run, is reported.
+        match r.failures.as_slice() {
+            [RunError::Stop { node, error: NodeError::Panic(msg) }] => {
+                assert_eq!((node.as_str(), msg.as_str()), ("h", "hold: stop"), "{mode}");
+            }
+            other => panic!("{mode}: expected the end-of-run stop's panic, got {other:?}"),
+        }
+        let h = node(&r, "h");
+        assert_eq!((h.msgs_in, h.msgs_out, h.panics, h.restarts), (12, 4, 2, 2), "{mode}");
+        assert_eq!(h.discarded, 6, "{mode}: counted before the stops panicked");
+    }
 }

@@ -4,13 +4,30 @@
 //! the node's restart policy (processors and sources), plugin sources and sinks in the shipped
 //! CSV graphs checked end to end, a paced plugin source stopped by `run --for`, the example
 //! plugins in A/B lanes (each plugin lane named after its node, so `compare` and
-//! `hdf5_logger` tell them apart), and `skinflow bench`.
+//! `hdf5_logger` tell them apart), and `skinflow bench`. The run-time hooks, on built
+//! libraries loaded into a graph run in this process: a control command applied, a bad one and
+//! one to a kind without commands refused naming the node; a `csv-pressure` source hot-swapped
+//! to the same plugin loaded again from another file goes on without a duplicate sample or
+//! time going back (and one reading another file is refused); another kind's state is not
+//! taken over.
 //!
 //! The libraries are the workspace's cdylib members, found next to the binary
 //! (target/<profile>/lib<name>.so); a missing one is built with `cargo build -p`.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
+use std::sync::atomic::{AtomicU64, Ordering::SeqCst};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use serde::Deserialize;
+use skinflow_core::graph::SourceFile;
+use skinflow_core::{
+    BuildContext, Context, GraphHandle, GraphSpec, NodeError, NodeImpl, NodeParams, NodeState, Outputs, Params,
+    Registry, RunOptions, RunReport, RunningGraph, Source, SourcePoll, StateRefused, typed,
+};
+use skinflow_nodes::payload::PressureSample;
+use skinflow_nodes::pipeline::{Captured, registry_with_capture};
 
 use super::support::{bin, ok, root, skinflow, stderr};
 
@@ -133,7 +150,7 @@ fn a_library_without_the_entry_point_is_not_a_plugin() {
 }
 
 #[test]
-fn a_plugin_of_abi_version_2_is_refused_with_one_line() {
+fn a_plugin_of_abi_version_3_is_refused_with_one_line() {
     let d = workdir("bad-abi");
     let lib = plugin("skinflow-plugin-fixture-bad-abi");
     let graph = toy_graph(&d, std::slice::from_ref(&lib), "", "never");
@@ -141,12 +158,12 @@ fn a_plugin_of_abi_version_2_is_refused_with_one_line() {
     // The graph cannot be validated: exit 2, as for an invalid graph, naming the graph.
     assert_eq!(o.status.code(), Some(2));
     let e = stderr(&o);
-    // The fixture is a version-2 table (roles, no end-of-stream flush), as a plugin built
-    // before processors could flush looks to this host.
+    // The fixture is a version-3 table (no control or state hooks), as a plugin built before
+    // the run-time hooks looks to this host.
     assert_eq!(
         e.trim(),
         format!(
-            "{}: plugin {}: built for plugin ABI version 2, this skinflow loads version 3 (rebuild it against this skinflow-plugin-sdk)",
+            "{}: plugin {}: built for plugin ABI version 3, this skinflow loads version 4 (rebuild it against this skinflow-plugin-sdk)",
             graph.display(),
             lib.display()
         )
@@ -798,4 +815,281 @@ fn shipped_csv_graphs_write_and_replay_the_pipeline_exactly() {
         std::fs::read_to_string(d.join("plugin-forces.csv")).unwrap(),
         "the replayed pressure gives the same forces"
     );
+}
+
+// The run-time hooks: graphs run in this process (lockstep), with built libraries loaded into
+// the registry, a source held behind a gate while commands and swaps are sent.
+
+/// Holds a source once it has sent `limit` messages: it answers its polls idle until the limit
+/// is raised.
+#[derive(Default)]
+struct Gate {
+    limit: AtomicU64,
+    sent: AtomicU64,
+    /// The limit the source was last held at, and the polls it answered there.
+    held: Mutex<(u64, u64)>,
+}
+
+impl Gate {
+    fn new(limit: u64) -> Arc<Gate> {
+        Arc::new(Gate { limit: AtomicU64::new(limit), ..Gate::default() })
+    }
+
+    /// Waits until the source is held at the current limit and was polled there twice: what
+    /// it sent before has gone through the graph (a lockstep pass drains between two polls).
+    fn wait_held(&self) {
+        let limit = self.limit.load(SeqCst);
+        let t0 = Instant::now();
+        loop {
+            let (at, polls) = *self.held.lock().unwrap();
+            if at == limit && polls >= 2 {
+                return;
+            }
+            // A guard against a hang, not a timing assertion.
+            assert!(t0.elapsed() < Duration::from_secs(300), "the source was never held at {limit}");
+            std::thread::sleep(Duration::from_millis(5));
+        }
+    }
+
+    fn raise(&self, limit: u64) {
+        self.limit.store(limit, SeqCst);
+    }
+}
+
+/// A source behind a gate; the hooks go to the source it wraps.
+struct Gated {
+    inner: Box<dyn Source>,
+    gate: Arc<Gate>,
+}
+
+impl Source for Gated {
+    fn start(&mut self, ctx: &mut Context) -> Result<(), NodeError> {
+        self.inner.start(ctx)
+    }
+    fn poll(&mut self, ctx: &mut Context, out: &mut Outputs) -> Result<SourcePoll, NodeError> {
+        let g = &self.gate;
+        let limit = g.limit.load(SeqCst);
+        if g.sent.load(SeqCst) >= limit {
+            let mut held = g.held.lock().unwrap();
+            *held = if held.0 == limit { (limit, held.1 + 1) } else { (limit, 1) };
+            drop(held);
+            std::thread::yield_now();
+            return Ok(SourcePoll::Idle);
+        }
+        let r = self.inner.poll(ctx, out)?;
+        if r == SourcePoll::Emitted {
+            g.sent.fetch_add(1, SeqCst);
+        }
+        Ok(r)
+    }
+    fn stop(&mut self, ctx: &mut Context) -> Result<(), NodeError> {
+        self.inner.stop(ctx)
+    }
+    fn control(&mut self, ctx: &mut Context, cmd: &str) -> Result<(), NodeError> {
+        self.inner.control(ctx, cmd)
+    }
+    fn export_state(&mut self, ctx: &mut Context) -> Option<NodeState> {
+        self.inner.export_state(ctx)
+    }
+    fn import_state(&mut self, ctx: &mut Context, state: NodeState) -> Result<(), StateRefused> {
+        self.inner.import_state(ctx, state)
+    }
+}
+
+/// The params of the kind behind the gate, as they are.
+#[derive(Deserialize)]
+struct Pass {
+    #[serde(flatten)]
+    table: toml::Table,
+}
+impl NodeParams for Pass {}
+
+/// The built-in kinds, `capture` (into `captured`), the plugins `libs`, and `gated`: source
+/// kind `kind` behind `gate`.
+fn gated_registry(libs: &[PathBuf], captured: Captured, kind: &str, gate: &Arc<Gate>) -> Registry {
+    let mut reg = registry_with_capture(captured);
+    skinflow_nodes::codec::load_plugins(libs, &mut reg).expect("the plugins load");
+    let inner = reg.get(kind).unwrap_or_else(|| panic!("no kind {kind}")).clone();
+    let mut info = inner.info().clone();
+    info.name = "gated".into();
+    let gate = gate.clone();
+    reg.register(typed(info, move |p: Pass, ctx: &BuildContext| {
+        match inner.build(&Params::from_table(p.table), ctx)? {
+            NodeImpl::Source(inner) => Ok(NodeImpl::Source(Box::new(Gated { inner, gate: gate.clone() }))),
+            _ => unreachable!("a source kind"),
+        }
+    }))
+    .unwrap();
+    reg
+}
+
+/// Plugin `lib` loaded again, from a copy in `dir/rebuilt/` (as a rebuilt library is another
+/// file), into a registry of its own.
+fn loaded_again(lib: &Path, dir: &Path) -> Registry {
+    let rebuilt = dir.join("rebuilt");
+    std::fs::create_dir_all(&rebuilt).unwrap();
+    let copy = rebuilt.join(lib.file_name().unwrap());
+    std::fs::copy(lib, &copy).unwrap();
+    let mut reg = Registry::new();
+    skinflow_nodes::codec::load_plugins(&[copy], &mut reg).expect("the copy loads");
+    reg
+}
+
+/// Runs `graph` (a lockstep graph file's text, in `dir`) on `reg`; `at_gate` drives the
+/// running graph (the gate is its business); returns the report.
+fn run_in_process(dir: &Path, reg: &Registry, graph: &str, at_gate: impl FnOnce(&GraphHandle)) -> RunReport {
+    let spec = GraphSpec::parse(SourceFile::new(dir.join("graph.toml"), graph.to_owned()), reg).unwrap();
+    let running = RunningGraph::start(&spec).unwrap();
+    let handle = running.handle();
+    let runner = std::thread::spawn(move || running.wait(&RunOptions::default()));
+    at_gate(&handle);
+    let report = runner.join().unwrap();
+    assert!(report.failures.is_empty(), "{:?}", report.failures);
+    report
+}
+
+const WAIT: Duration = Duration::from_secs(300);
+
+/// The captured messages as (seq, t_ns, value) of a `count` or `pressure` payload.
+fn captured_values(captured: &Captured) -> Vec<(u64, u64, f64)> {
+    let rows = captured.lock().unwrap();
+    rows.iter()
+        .flatten()
+        .map(|m| {
+            let v = m
+                .get::<skinflow_core::toy::Count>()
+                .map(|c| c.0 as f64)
+                .or_else(|| m.get::<PressureSample>().map(|p| p.kpa))
+                .expect("a count or a pressure sample");
+            (m.header.seq, m.header.t_ns, v)
+        })
+        .collect()
+}
+
+/// gated fixture-count (20 values, held after 10) -> scale (fixture-scale) -> capture.
+#[test]
+fn a_command_to_a_plugin_node_is_applied_and_a_bad_one_is_refused_naming_the_node() {
+    let d = workdir("control");
+    let lib = plugin("skinflow-plugin-fixture-faulty");
+    let captured: Captured = Arc::new(Mutex::new(Vec::new()));
+    let gate = Gate::new(10);
+    let reg = gated_registry(std::slice::from_ref(&lib), captured.clone(), "fixture-count", &gate);
+    let graph = "[graph]\nmode = \"lockstep\"\n\
+        [[node]]\nid = \"src\"\nkind = \"gated\"\nparams = { count = 20 }\n\
+        [[node]]\nid = \"scale\"\nkind = \"fixture-scale\"\nparams = { factor = 1 }\n\
+        [[node]]\nid = \"cap\"\nkind = \"capture\"\n\
+        [[edge]]\nfrom = \"src.out\"\nto = \"scale.in\"\n[[edge]]\nfrom = \"scale.out\"\nto = \"cap.in\"\n";
+    let kind = |k: &str| format!("plugin kind \"{k}\" ({})", lib.display());
+    run_in_process(&d, &reg, graph, |h| {
+        gate.wait_held();
+        h.control_wait("scale", "factor 3", WAIT).expect("applied");
+        let e = h.control_wait("scale", "factor x", WAIT).unwrap_err().to_string();
+        assert!(e.contains("node \"scale\""), "{e}");
+        assert!(
+            e.contains(&format!(
+                "{}: node \"scale\": factor: \"x\" is not a non-negative integer",
+                kind("fixture-scale")
+            )),
+            "{e}"
+        );
+        // fixture-count has no control command (the SDK's default): refused, clearly.
+        let e = h.control_wait("src", "tare", WAIT).unwrap_err().to_string();
+        assert!(
+            e.contains(&format!(
+                "{}: node \"src\": control command \"tare\" is not supported: this kind takes no control commands",
+                kind("fixture-count")
+            )),
+            "{e}"
+        );
+        gate.raise(u64::MAX);
+    });
+    let values: Vec<f64> = captured_values(&captured).into_iter().map(|(_, _, v)| v).collect();
+    let want: Vec<f64> = (1..=20).map(|v| if v <= 10 { v } else { 3 * v } as f64).collect();
+    assert_eq!(values, want, "factor 1 before the command, 3 after; the bad command changed nothing");
+}
+
+/// gated csv-pressure (held after 12 of 30 samples) -> capture; swapped to csv-pressure of
+/// the library loaded again from another file.
+#[test]
+fn a_csv_pressure_source_swapped_to_a_rebuilt_library_goes_on_without_duplicates() {
+    let d = workdir("swap-csv");
+    let lib = plugin("skinflow-plugin-csv-pressure");
+    let rows: Vec<(f64, f64)> = (0..30).map(|i| (0.01 * f64::from(i), 100.0 + f64::from(i) / 4.0)).collect();
+    let text: String = rows.iter().map(|(t, kpa)| format!("{t},{kpa}\n")).collect();
+    std::fs::write(d.join("p.csv"), format!("t_s,kpa\n{text}")).unwrap();
+    std::fs::write(d.join("other.csv"), format!("t_s,kpa\n{text}")).unwrap();
+    let captured: Captured = Arc::new(Mutex::new(Vec::new()));
+    let gate = Gate::new(12);
+    let reg = gated_registry(std::slice::from_ref(&lib), captured.clone(), "csv-pressure", &gate);
+    let again = loaded_again(&lib, &d);
+    let rebuilt = again.get("csv-pressure").unwrap().clone();
+    let graph = "[graph]\nmode = \"lockstep\"\n\
+        [[node]]\nid = \"src\"\nkind = \"gated\"\nparams = { path = \"p.csv\", speed = 0.0 }\n\
+        [[node]]\nid = \"cap\"\nkind = \"capture\"\n\
+        [[edge]]\nfrom = \"src.pressure\"\nto = \"cap.in\"\ncapacity = 64\n";
+    let params = |path: &str| Params::from_toml(&format!("path = \"{path}\"\nspeed = 0.0")).unwrap();
+    let report = run_in_process(&d, &reg, graph, |h| {
+        gate.wait_held();
+        // The plugin's command; a bad value is refused, naming the node.
+        h.control_wait("src", "speed 2", WAIT).expect("applied");
+        let e = h.control_wait("src", "speed -1", WAIT).unwrap_err().to_string();
+        assert!(e.contains("node \"src\": ") && e.contains("speed: must be a finite number >= 0 (got -1)"), "{e}");
+        // Another file: it would start at its first sample, so the swap is refused.
+        let e = h.swap_wait("src", rebuilt.clone(), params("other.csv"), WAIT).unwrap_err().to_string();
+        assert!(e.contains("node \"src\": swap refused: "), "{e}");
+        assert!(
+            e.contains(&format!(
+                "the replacement reads {}, the running csv-pressure {}: it would start again",
+                d.join("other.csv").display(),
+                d.join("p.csv").display()
+            )),
+            "{e}"
+        );
+        // The same file, from the rebuilt library: it takes the running source's position and
+        // runs to the end of the file (it is not behind the gate).
+        h.swap_wait("src", rebuilt.clone(), params("p.csv"), WAIT).expect("installed");
+    });
+    let got = captured_values(&captured);
+    let want: Vec<(u64, u64, f64)> =
+        rows.iter().enumerate().map(|(i, &(t, kpa))| (i as u64 + 1, (t * 1e9).round() as u64, kpa)).collect();
+    assert_eq!(got, want, "every sample once, in order: no duplicate, no time going back");
+    let src = report.stats.nodes.iter().find(|n| n.id == "src").unwrap();
+    assert_eq!((src.swaps, src.errors, src.msgs_out), (1, 0, 30), "{src:?}");
+}
+
+/// gated fixture-count (30 values) -> x -> capture: x starts as fixture-scale (its state: its
+/// call count, one u64), is swapped after 10 values to fixture-sum (whose state is one u64
+/// too) of the library loaded again, then after 20 to fixture-sum of the first load.
+#[test]
+fn a_plugin_node_takes_over_its_own_kinds_state_and_not_another_kinds() {
+    let d = workdir("swap-kinds");
+    let lib = plugin("skinflow-plugin-fixture-faulty");
+    let captured: Captured = Arc::new(Mutex::new(Vec::new()));
+    let gate = Gate::new(10);
+    let reg = gated_registry(std::slice::from_ref(&lib), captured.clone(), "fixture-count", &gate);
+    let again = loaded_again(&lib, &d);
+    let graph = "[graph]\nmode = \"lockstep\"\n\
+        [[node]]\nid = \"src\"\nkind = \"gated\"\nparams = { count = 30 }\n\
+        [[node]]\nid = \"x\"\nkind = \"fixture-scale\"\n\
+        [[node]]\nid = \"cap\"\nkind = \"capture\"\n\
+        [[edge]]\nfrom = \"src.out\"\nto = \"x.in\"\n[[edge]]\nfrom = \"x.out\"\nto = \"cap.in\"\n";
+    let report = run_in_process(&d, &reg, graph, |h| {
+        gate.wait_held();
+        // fixture-scale's state (10 calls) is not a sum: fixture-sum starts afresh.
+        h.swap_wait("x", again.get("fixture-sum").unwrap().clone(), Params::empty(), WAIT).expect("installed");
+        gate.raise(20);
+        gate.wait_held();
+        // fixture-sum to fixture-sum (another load of the library): the sum goes on.
+        h.swap_wait("x", reg.get("fixture-sum").unwrap().clone(), Params::empty(), WAIT).expect("installed");
+        gate.raise(u64::MAX);
+    });
+    let values: Vec<u64> = captured_values(&captured).into_iter().map(|(_, _, v)| v as u64).collect();
+    let sums = (11..=30u64).scan(0, |sum, v| {
+        *sum += v;
+        Some(*sum)
+    });
+    let want: Vec<u64> = (1..=10).chain(sums).collect();
+    assert_eq!(values, want, "values, then their sum from 11 on, unbroken across the second swap");
+    let x = report.stats.nodes.iter().find(|n| n.id == "x").unwrap();
+    assert_eq!((x.swaps, x.errors), (2, 0), "{x:?}");
 }

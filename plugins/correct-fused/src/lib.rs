@@ -11,6 +11,9 @@
 //! Input `split` (columns `dp_kpa`, `sum`), output `forces` (column `force_n`). The forces are
 //! named after the node (its id, or `name`: the host reads that param), so several fused lanes
 //! in one graph are told apart by `compare` and `hdf5_logger`.
+//!
+//! Control: `weight_pneumatic W` sets w while the graph runs (in [0, 1]; from the next frame),
+//! e.g. `skinflow send SOCKET '{"cmd":"control","node":"fused","command":"weight_pneumatic 0.5"}'`.
 
 use std::path::{Path, PathBuf};
 
@@ -85,6 +88,11 @@ fn default_weight() -> f64 {
     0.8
 }
 
+/// A weight of the pneumatic estimate, in [0, 1].
+fn weight(w: f64) -> Result<f64, String> {
+    if (0.0..=1.0).contains(&w) { Ok(w) } else { Err(format!("must be in [0, 1] (got {w})")) }
+}
+
 /// `fused-corrector`.
 pub struct Fused {
     pneumatic: SignalMap,
@@ -121,11 +129,7 @@ impl PluginNode for Fused {
     }
 
     fn validate(p: &FusedParams) -> Result<(), String> {
-        if (0.0..=1.0).contains(&p.weight_pneumatic) {
-            Ok(())
-        } else {
-            Err(format!("param \"weight_pneumatic\": must be in [0, 1] (got {})", p.weight_pneumatic))
-        }
+        weight(p.weight_pneumatic).map(drop).map_err(|e| format!("param \"weight_pneumatic\": {e}"))
     }
 
     fn new(p: FusedParams, base_dir: &Path) -> Result<Self, String> {
@@ -147,6 +151,18 @@ impl PluginNode for Fused {
         let force = out.port(0).column("force_n");
         force.extend(dp.iter().zip(sum).map(|(&d, &c)| self.force(d, c)));
         Ok(())
+    }
+
+    /// `weight_pneumatic W`: the fusion weight from the next frame on.
+    fn control(&mut self, cmd: &str) -> Result<(), String> {
+        match cmd.split_whitespace().collect::<Vec<_>>()[..] {
+            ["weight_pneumatic", w] => {
+                let parsed: f64 = w.parse().map_err(|_| format!("weight_pneumatic: \"{w}\" is not a number"))?;
+                self.w = weight(parsed).map_err(|e| format!("weight_pneumatic: {e}"))?;
+                Ok(())
+            }
+            _ => Err(format!("unknown command \"{cmd}\" (fused-corrector takes: weight_pneumatic W)")),
+        }
     }
 }
 
@@ -178,5 +194,20 @@ mod tests {
         assert_eq!(f.force(f64::NAN, 1.0), 0.0);
         let neg = Fused { pneumatic: map(-5.0, 0.0, 0.0), eit: map(-5.0, 0.0, 0.0), w: 0.5 };
         assert_eq!(neg.force(1.0, 1.0), 0.0, "negative forces clamp to 0");
+    }
+
+    #[test]
+    fn the_weight_is_set_at_run_time_and_a_bad_one_is_refused() {
+        let mut f = Fused { pneumatic: map(0.0, 1.0, 0.0), eit: map(0.0, 3.0, 0.0), w: 0.25 };
+        f.control("weight_pneumatic 1").unwrap();
+        assert!((f.force(1.0, 1.0) - 1.0).abs() < 1e-12, "the pneumatic map alone");
+        assert_eq!(f.control("weight_pneumatic 1.5").unwrap_err(), "weight_pneumatic: must be in [0, 1] (got 1.5)");
+        assert_eq!(f.control("weight_pneumatic NaN").unwrap_err(), "weight_pneumatic: must be in [0, 1] (got NaN)");
+        assert_eq!(f.control("weight_pneumatic heavy").unwrap_err(), "weight_pneumatic: \"heavy\" is not a number");
+        assert_eq!(
+            f.control("weight 0.5").unwrap_err(),
+            "unknown command \"weight 0.5\" (fused-corrector takes: weight_pneumatic W)"
+        );
+        assert_eq!(f.w, 1.0, "a refused command changes nothing");
     }
 }

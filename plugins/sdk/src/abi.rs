@@ -17,16 +17,27 @@
 //! ends the wait). No call may block for long: a source that waits for a device reads with a
 //! timeout (at most ~100 ms) or returns idle, so a stop request is seen promptly.
 //!
+//! Run-time hooks, on every role, each optional (a null pointer: not supported): `control`
+//! ([`ControlFn`]) runs a command sent while the graph runs (`skinflow send`, the control
+//! socket); `export_state` ([`ExportStateFn`]) and `import_state` ([`ImportStateFn`]) hand what
+//! an instance learned to its replacement in a hot swap, as bytes whose encoding the plugin
+//! chooses, tagged with a format number it controls ([`SfState`]). The host hands a state only
+//! to a node of the same plugin and kind (the library's path and build may differ: a rebuilt
+//! plugin takes its predecessor's state); the replacement accepts it, starts afresh, or
+//! refuses the swap ([`SfImport`]). A kind that exports state also imports it: when a swap is
+//! refused, the running instance takes its own state back.
+//!
 //! Version history: 1, processors only; 2, roles (sources, sinks), `poll`, `stop`, [`SfPoll`];
 //! 3, a processor's end-of-stream `flush` ([`FlushFn`], [`SfFlushState`]) and the messages a
-//! node discards reported by `stop`.
+//! node discards reported by `stop`; 4, the run-time hooks `control`, `export_state` and
+//! `import_state` ([`SfState`], [`SfImport`]; [`SfKind`] and [`SfPlugin`] grew: `state_size`).
 
 use std::ffi::c_void;
 
 /// Bumped on any change of the structs or functions in this module. The host loads exactly
 /// this version: the table is not designed for backward-compatible extension (struct sizes
 /// must match exactly, and the kinds array is read with the host's stride).
-pub const ABI_VERSION: u32 = 3;
+pub const ABI_VERSION: u32 = 4;
 
 /// The exported entry point (NUL-terminated for `dlsym`).
 pub const ENTRY_SYMBOL: &[u8] = b"skinflow_plugin_entry\0";
@@ -180,6 +191,30 @@ pub type FlushFn = unsafe extern "C" fn(
 pub type StopFn = unsafe extern "C" fn(node: *mut c_void, discarded: *mut u64, err: SfErrorSink) -> SfStatus;
 /// Frees a node built by `create`.
 pub type DestroyFn = unsafe extern "C" fn(node: *mut c_void);
+/// A control command (`cmd`, host-owned, valid for the call), between two of the node's calls.
+/// [`SfStatus::OK`]: applied; [`SfStatus::ERROR`]: refused (an unknown command, a bad value),
+/// the reason written to `err`, the node goes on unchanged. A panic poisons the instance like
+/// any other call's. Null in the table: the kind takes no commands (the host refuses them).
+pub type ControlFn = unsafe extern "C" fn(node: *mut c_void, cmd: SfStr, err: SfErrorSink) -> SfStatus;
+/// Hot swap: this instance is being replaced (called after its last data call, before `stop`).
+/// The plugin writes into the host's `state` (host-owned, valid for the call; the host sets
+/// [`SfState::ABSENT`] before it) either nothing, or `present = 1`, its `format` tag and the
+/// bytes (plugin-owned memory, valid until the next call on this node or its destruction).
+/// Null in the table: the kind exports nothing.
+pub type ExportStateFn = unsafe extern "C" fn(node: *mut c_void, state: *mut SfState, err: SfErrorSink) -> SfStatus;
+/// Hot swap: offers this instance (before its first data call; or the running instance, when
+/// its replacement refused the state or the swap) a state another instance of the same plugin
+/// and kind exported. `state` and its bytes are host-owned, valid for the call. The plugin
+/// writes its answer into `outcome` (host-owned, valid for the call; the host sets
+/// [`SfImport::START_AFRESH`] before it) and, unless it accepted, its reason into `err`, and
+/// returns [`SfStatus::OK`]. Null in the table: the kind takes over no state (it starts
+/// afresh); a kind with `export_state` must have it.
+pub type ImportStateFn = unsafe extern "C" fn(
+    node: *mut c_void,
+    state: *const SfState,
+    outcome: *mut SfImport,
+    err: SfErrorSink,
+) -> SfStatus;
 
 /// The role of a kind.
 #[repr(transparent)]
@@ -219,6 +254,43 @@ impl SfFlushState {
     pub const DONE: SfFlushState = SfFlushState(0);
     /// Holds more: call again once these outputs are sent and there is room downstream.
     pub const MORE: SfFlushState = SfFlushState(1);
+}
+
+/// A node's state for a hot swap: what `export_state` writes (the bytes plugin-owned) and what
+/// `import_state` reads (the bytes host-owned). Opaque to the host, which only carries it with
+/// the plugin and kind it came from.
+#[repr(C)]
+#[derive(Debug, Clone, Copy)]
+pub struct SfState {
+    /// 1: a state; 0: none (the other fields are not read).
+    pub present: u32,
+    /// The plugin's tag for the encoding of `data` (e.g. 1, then 2 once the layout changes):
+    /// handed back with the bytes, so an importer can tell an encoding it does not read.
+    pub format: u32,
+    pub data: *const u8,
+    pub len: usize,
+}
+
+impl SfState {
+    pub const ABSENT: SfState = SfState { present: 0, format: 0, data: std::ptr::null(), len: 0 };
+}
+
+/// What `import_state` did with the state it was offered (written by the plugin into the
+/// host's outcome).
+#[repr(transparent)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct SfImport(pub u32);
+
+impl SfImport {
+    /// Took it over: the node goes on where the exporting instance stopped.
+    pub const ACCEPTED: SfImport = SfImport(0);
+    /// Did not take it (another encoding, another configuration): starts afresh, the swap goes
+    /// on, the state goes back to the replaced instance before its stop.
+    pub const START_AFRESH: SfImport = SfImport(1);
+    /// Cannot go on from it, and starting afresh would break what the node already emitted
+    /// (e.g. a source's sequence numbers and times would go back): the swap is refused, the
+    /// running instance takes its state back and goes on.
+    pub const REFUSE_SWAP: SfImport = SfImport(2);
 }
 
 /// The host's side of one poll (host-owned, valid for the call): the clock in, the outcome out.
@@ -269,6 +341,12 @@ pub struct SfKind {
     pub flush: Option<FlushFn>,
     pub stop: StopFn,
     pub destroy: DestroyFn,
+    /// Any role; `None`: the kind takes no control commands.
+    pub control: Option<ControlFn>,
+    /// Any role; `None`: the kind hands nothing over in a hot swap.
+    pub export_state: Option<ExportStateFn>,
+    /// Any role; `None`: the kind takes over no state (required with `export_state`).
+    pub import_state: Option<ImportStateFn>,
 }
 
 /// What the entry point returns. Static for the life of the library.
@@ -285,7 +363,9 @@ pub struct SfPlugin {
     pub message_size: u32,
     pub column_size: u32,
     pub poll_size: u32,
-    /// The plugin's name and version, for messages.
+    pub state_size: u32,
+    /// The plugin's name and version, for messages. The name is also part of a hot-swap state's
+    /// identity: a state goes only to a node of a plugin of the same name and the same kind.
     pub name: SfStr,
     pub version: SfStr,
     pub kinds: *const SfKind,
@@ -296,7 +376,7 @@ pub struct SfPlugin {
 pub type EntryFn = unsafe extern "C" fn() -> *const SfPlugin;
 
 /// The struct sizes a peer must agree on, in [`SfPlugin`] order.
-pub const fn sizes() -> [(&'static str, u32); 7] {
+pub const fn sizes() -> [(&'static str, u32); 8] {
     [
         ("SfPlugin", size_of::<SfPlugin>() as u32),
         ("SfKind", size_of::<SfKind>() as u32),
@@ -305,12 +385,13 @@ pub const fn sizes() -> [(&'static str, u32); 7] {
         ("SfMessage", size_of::<SfMessage>() as u32),
         ("SfColumn", size_of::<SfColumn>() as u32),
         ("SfPoll", size_of::<SfPoll>() as u32),
+        ("SfState", size_of::<SfState>() as u32),
     ]
 }
 
 impl SfPlugin {
     /// The sizes this table declares, in [`sizes`] order.
-    pub fn declared_sizes(&self) -> [u32; 7] {
+    pub fn declared_sizes(&self) -> [u32; 8] {
         [
             self.plugin_size,
             self.kind_size,
@@ -319,6 +400,7 @@ impl SfPlugin {
             self.message_size,
             self.column_size,
             self.poll_size,
+            self.state_size,
         ]
     }
 }

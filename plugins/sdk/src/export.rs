@@ -5,6 +5,12 @@
 //! processor's end-of-stream [`PluginNode::flush`]) under
 //! `catch_unwind`, so a panic never unwinds into the host: it comes back as
 //! [`SfStatus::PANIC`] with its message, and the instance refuses further calls.
+//!
+//! Every role also has the run-time hooks, with defaults, so a kind implements only those it
+//! needs: `control` (a command sent while the graph runs; default: refused), `export_state` /
+//! `import_state` (a hot swap hands what the instance learned to its replacement, as bytes the
+//! plugin encodes, tagged with the kind's `STATE_FORMAT`; default: nothing handed over, the
+//! replacement starts afresh). See [`PluginNode::control`] and [`PluginNode::export_state`].
 
 use std::ffi::c_void;
 use std::panic::{AssertUnwindSafe, catch_unwind};
@@ -14,10 +20,12 @@ use std::sync::OnceLock;
 use serde::de::DeserializeOwned;
 
 use crate::abi::{
-    ABI_VERSION, CheckFn, CreateFn, DestroyFn, FlushFn, PollFn, ProcessFn, SfErrorSink, SfFlushState, SfKind,
-    SfMessage, SfParam, SfPlugin, SfPoll, SfPollState, SfPort, SfRole, SfStatus, SfStr, StopFn,
+    ABI_VERSION, CheckFn, ControlFn, CreateFn, DestroyFn, ExportStateFn, FlushFn, ImportStateFn, PollFn, ProcessFn,
+    SfErrorSink, SfFlushState, SfImport, SfKind, SfMessage, SfParam, SfPlugin, SfPoll, SfPollState, SfPort, SfRole,
+    SfState, SfStatus, SfStr, StopFn,
 };
 use crate::columns::{ColumnBuf, Columns};
+use crate::state::ImportOutcome;
 
 /// A declared port.
 #[derive(Debug, Clone, Copy)]
@@ -188,6 +196,53 @@ pub trait PluginNode: Send + Sized + 'static {
     fn stop(&mut self) -> Result<(), String> {
         Ok(())
     }
+
+    /// A control command sent while the graph runs (`skinflow send SOCKET
+    /// '{"cmd":"control","node":"ID","command":"..."}'`, or `GraphHandle::control`), run
+    /// between two calls: e.g. a parameter changed at run time (`"gain 1.5"`). Parse and
+    /// validate it; `Err` refuses it with the reason (the sender gets it, with the node and the
+    /// kind named) and must leave the node as it was. A panic poisons the instance as in
+    /// `process` (its next call is the node's panic: the restart policy applies). Default:
+    /// every command refused.
+    fn control(&mut self, cmd: &str) -> Result<(), String> {
+        Err(no_commands(cmd))
+    }
+
+    /// The tag of the encoding [`PluginNode::export_state`] writes, carried with the bytes.
+    /// Change it when the layout changes: a replacement whose tag differs is offered the state
+    /// through [`PluginNode::import_other_format`] instead (default: it starts afresh).
+    const STATE_FORMAT: u32 = 1;
+
+    /// Hot swap: this instance is being replaced (a rebuilt library, new params); called after
+    /// its last call and before its `stop`. Returns what it learned from the stream (a tare, a
+    /// position, sequence numbers, held messages) as bytes in an encoding of the plugin's
+    /// choosing (e.g. [`StateWriter`](crate::StateWriter)), tagged with
+    /// [`PluginNode::STATE_FORMAT`]. Move out what it hands over (what it still holds is
+    /// counted by [`PluginNode::held`] at its stop); should the replacement not take it, the
+    /// bytes come back through [`PluginNode::import_state`], which must accept the instance's
+    /// own state. The host hands it only to a node of the same plugin (by name) and kind; the
+    /// library's path and build may differ. Held messages of a derived payload can be emitted
+    /// by the replacement: the host hands over the inputs they came from too. Default: nothing.
+    fn export_state(&mut self) -> Option<Vec<u8>> {
+        None
+    }
+
+    /// Hot swap: takes over a state exported by an instance of this kind (in this encoding:
+    /// the tags are equal), before this instance's first call; or, on the running instance,
+    /// takes back its own state when the replacement did not take it. Decode it defensively
+    /// (an old build's state, a truncated one) and answer [`ImportOutcome::StartAfresh`] with
+    /// the reason when it does not fit, or [`ImportOutcome::RefuseSwap`] when going on afresh
+    /// would break what the node already emitted. A panic refuses the swap. Default: start
+    /// afresh.
+    fn import_state(&mut self, _bytes: &[u8]) -> ImportOutcome {
+        no_state()
+    }
+
+    /// Hot swap: a state whose tag `format` is not this build's [`PluginNode::STATE_FORMAT`]
+    /// (an older build's, to migrate). Default: start afresh, saying both tags.
+    fn import_other_format(&mut self, format: u32, _bytes: &[u8]) -> ImportOutcome {
+        other_format(format, Self::STATE_FORMAT)
+    }
 }
 
 /// What a processor's [`PluginNode::flush`] did.
@@ -274,6 +329,33 @@ pub trait PluginSource: Send + Sized + 'static {
     fn stop(&mut self) -> Result<(), String> {
         Ok(())
     }
+
+    /// A control command sent while the graph runs, e.g. a parameter changed at run time; as
+    /// [`PluginNode::control`]. Default: every command refused.
+    fn control(&mut self, cmd: &str) -> Result<(), String> {
+        Err(no_commands(cmd))
+    }
+
+    /// The tag of the encoding `export_state` writes; as [`PluginNode::STATE_FORMAT`].
+    const STATE_FORMAT: u32 = 1;
+
+    /// Hot swap: what this instance hands to its replacement, as [`PluginNode::export_state`].
+    /// Default: nothing.
+    fn export_state(&mut self) -> Option<Vec<u8>> {
+        None
+    }
+
+    /// Hot swap: takes over a state of this kind and encoding, as [`PluginNode::import_state`].
+    /// Default: start afresh.
+    fn import_state(&mut self, _bytes: &[u8]) -> ImportOutcome {
+        no_state()
+    }
+
+    /// Hot swap: a state in another encoding, as [`PluginNode::import_other_format`]. Default:
+    /// start afresh, saying both tags.
+    fn import_other_format(&mut self, format: u32, _bytes: &[u8]) -> ImportOutcome {
+        other_format(format, Self::STATE_FORMAT)
+    }
 }
 
 /// A sink kind implemented in a plugin: inputs only.
@@ -302,6 +384,48 @@ pub trait PluginSink: Send + Sized + 'static {
     fn stop(&mut self) -> Result<(), String> {
         Ok(())
     }
+
+    /// A control command sent while the graph runs, e.g. a parameter changed at run time; as
+    /// [`PluginNode::control`]. Default: every command refused.
+    fn control(&mut self, cmd: &str) -> Result<(), String> {
+        Err(no_commands(cmd))
+    }
+
+    /// The tag of the encoding `export_state` writes; as [`PluginNode::STATE_FORMAT`].
+    const STATE_FORMAT: u32 = 1;
+
+    /// Hot swap: what this instance hands to its replacement, as [`PluginNode::export_state`].
+    /// Default: nothing.
+    fn export_state(&mut self) -> Option<Vec<u8>> {
+        None
+    }
+
+    /// Hot swap: takes over a state of this kind and encoding, as [`PluginNode::import_state`].
+    /// Default: start afresh.
+    fn import_state(&mut self, _bytes: &[u8]) -> ImportOutcome {
+        no_state()
+    }
+
+    /// Hot swap: a state in another encoding, as [`PluginNode::import_other_format`]. Default:
+    /// start afresh, saying both tags.
+    fn import_other_format(&mut self, format: u32, _bytes: &[u8]) -> ImportOutcome {
+        other_format(format, Self::STATE_FORMAT)
+    }
+}
+
+/// The default `control`: the kind takes no commands.
+fn no_commands(cmd: &str) -> String {
+    format!("control command \"{cmd}\" is not supported: this kind takes no control commands")
+}
+
+/// The default `import_state`.
+fn no_state() -> ImportOutcome {
+    ImportOutcome::StartAfresh("this kind takes over no state".into())
+}
+
+/// The default `import_other_format`.
+fn other_format(format: u32, own: u32) -> ImportOutcome {
+    ImportOutcome::StartAfresh(format!("the state is in format {format}, this build of the kind reads format {own}"))
 }
 
 /// What the shims need of any role (implemented by the wrappers below, one per author trait).
@@ -313,6 +437,11 @@ trait Author: Send + Sized + 'static {
     /// Messages held and not emitted (asked before `stop`; only processors hold any).
     fn held(&self) -> u64;
     fn stop(&mut self) -> Result<(), String>;
+    const STATE_FORMAT: u32;
+    fn control(&mut self, cmd: &str) -> Result<(), String>;
+    fn export_state(&mut self) -> Option<Vec<u8>>;
+    fn import_state(&mut self, bytes: &[u8]) -> ImportOutcome;
+    fn import_other_format(&mut self, format: u32, bytes: &[u8]) -> ImportOutcome;
 }
 
 struct AsNode<T>(T);
@@ -337,6 +466,19 @@ macro_rules! author {
             }
             fn stop(&mut self) -> Result<(), String> {
                 self.0.stop()
+            }
+            const STATE_FORMAT: u32 = T::STATE_FORMAT;
+            fn control(&mut self, cmd: &str) -> Result<(), String> {
+                self.0.control(cmd)
+            }
+            fn export_state(&mut self) -> Option<Vec<u8>> {
+                self.0.export_state()
+            }
+            fn import_state(&mut self, bytes: &[u8]) -> ImportOutcome {
+                self.0.import_state(bytes)
+            }
+            fn import_other_format(&mut self, format: u32, bytes: &[u8]) -> ImportOutcome {
+                self.0.import_other_format(format, bytes)
             }
         }
     };
@@ -386,6 +528,8 @@ struct Instance<A> {
     sent: Vec<u64>,
     /// Header of the last input a processor received (its flush's default header).
     last_header: (u64, u64),
+    /// The bytes of the last `export_state` (the host reads them until the next call).
+    exported: Vec<u8>,
     poisoned: Option<String>,
 }
 
@@ -490,6 +634,7 @@ unsafe extern "C" fn create<A: Author>(params: SfStr, base_dir: SfStr, err: SfEr
             out_types: spec.outputs.iter().map(|o| o.type_name).collect(),
             sent: vec![0; spec.outputs.len()],
             last_header: (0, 0),
+            exported: Vec::new(),
             poisoned: None,
         };
         Ok(Box::into_raw(Box::new(inst)).cast())
@@ -653,6 +798,83 @@ unsafe extern "C" fn stop<A: Author>(node: *mut c_void, discarded: *mut u64, err
     })
 }
 
+unsafe extern "C" fn control<A: Author>(node: *mut c_void, cmd: SfStr, err: SfErrorSink) -> SfStatus {
+    // SAFETY: `node` came from `create::<A>`; one call at a time per node.
+    let inst = unsafe { instance::<A>(node) };
+    // SAFETY: the host passes a command valid for the call.
+    let Ok(cmd) = (unsafe { cmd.to_str() }) else {
+        report(err, "the control command is not UTF-8");
+        return SfStatus::ERROR;
+    };
+    guarded(inst, err, |inst| inst.node.control(cmd))
+}
+
+unsafe extern "C" fn export_state<A: Author>(node: *mut c_void, state: *mut SfState, err: SfErrorSink) -> SfStatus {
+    // SAFETY: `node` came from `create::<A>`; one call at a time per node.
+    let inst = unsafe { instance::<A>(node) };
+    if state.is_null() {
+        report(err, "export_state called without its SfState");
+        return SfStatus::ERROR;
+    }
+    // SAFETY: non-null; the host passes a state it owns, valid and unaliased for the call.
+    let state = unsafe { &mut *state };
+    guarded(inst, err, |inst| {
+        *state = match inst.node.export_state() {
+            Some(bytes) => {
+                // Kept in the instance: the host copies them before its next call on this node.
+                inst.exported = bytes;
+                SfState { present: 1, format: A::STATE_FORMAT, data: inst.exported.as_ptr(), len: inst.exported.len() }
+            }
+            None => SfState::ABSENT,
+        };
+        Ok(())
+    })
+}
+
+unsafe extern "C" fn import_state<A: Author>(
+    node: *mut c_void,
+    state: *const SfState,
+    outcome: *mut SfImport,
+    err: SfErrorSink,
+) -> SfStatus {
+    // SAFETY: `node` came from `create::<A>`; one call at a time per node.
+    let inst = unsafe { instance::<A>(node) };
+    if state.is_null() || outcome.is_null() {
+        report(err, "import_state called without its SfState or outcome");
+        return SfStatus::ERROR;
+    }
+    // SAFETY: non-null; the host passes a state and an outcome it owns, valid for the call
+    // (the outcome unaliased).
+    let (state, outcome) = unsafe { (&*state, &mut *outcome) };
+    let bytes: &[u8] = if state.present == 0 || state.len == 0 || state.data.is_null() {
+        &[]
+    } else {
+        // SAFETY: the host passes `len` readable bytes at `data`, valid for the call.
+        unsafe { std::slice::from_raw_parts(state.data, state.len) }
+    };
+    guarded(inst, err, |inst| {
+        let r = if state.present == 0 {
+            ImportOutcome::StartAfresh("no state was offered".into())
+        } else if state.format == A::STATE_FORMAT {
+            inst.node.import_state(bytes)
+        } else {
+            inst.node.import_other_format(state.format, bytes)
+        };
+        *outcome = match r {
+            ImportOutcome::Accepted => SfImport::ACCEPTED,
+            ImportOutcome::StartAfresh(why) => {
+                report(err, &why);
+                SfImport::START_AFRESH
+            }
+            ImportOutcome::RefuseSwap(why) => {
+                report(err, &why);
+                SfImport::REFUSE_SWAP
+            }
+        };
+        Ok(())
+    })
+}
+
 unsafe extern "C" fn destroy<A: Author>(node: *mut c_void) {
     if node.is_null() {
         return;
@@ -672,6 +894,17 @@ pub struct KindEntry {
     flush: Option<FlushFn>,
     stop: StopFn,
     destroy: DestroyFn,
+    control: Option<ControlFn>,
+    export_state: Option<ExportStateFn>,
+    import_state: Option<ImportStateFn>,
+}
+
+impl KindEntry {
+    /// This entry without its run-time hooks (`control`, `export_state`, `import_state`), as a
+    /// hand-written library that does not support them declares it (for tests of the host).
+    pub fn without_hooks(self) -> KindEntry {
+        KindEntry { control: None, export_state: None, import_state: None, ..self }
+    }
 }
 
 fn entry_of<A: Author>(
@@ -690,6 +923,9 @@ fn entry_of<A: Author>(
         flush,
         stop: stop::<A>,
         destroy: destroy::<A>,
+        control: Some(control::<A>),
+        export_state: Some(export_state::<A>),
+        import_state: Some(import_state::<A>),
     }
 }
 
@@ -767,6 +1003,9 @@ impl Table {
                 flush: e.flush,
                 stop: e.stop,
                 destroy: e.destroy,
+                control: e.control,
+                export_state: e.export_state,
+                import_state: e.import_state,
             });
             // Moving a Vec keeps its heap buffer, so the pointers above stay valid.
             ports.push(ins);
@@ -783,6 +1022,7 @@ impl Table {
             message_size: s[4].1,
             column_size: s[5].1,
             poll_size: s[6].1,
+            state_size: s[7].1,
             name: SfStr::new(name),
             version: SfStr::new(version),
             kinds: kinds.as_ptr(),

@@ -9,6 +9,11 @@
 //!   `skinflow_plugin_sdk::export_plugin!(name = "my-plugin", kinds = [MyNode], sources = [MyBoard], sinks = [MyOut]);`.
 //!   Panics are caught in the plugin and reported as errors; they never cross the boundary.
 //! - [`columns`]: reading ([`Columns`]) and writing ([`ColumnBuf`]) messages as columns.
+//! - Run-time hooks of every role, with defaults: a control command ([`PluginNode::control`])
+//!   and a hot swap's hand-over ([`PluginNode::export_state`]: bytes the plugin encodes, e.g.
+//!   with [`StateWriter`]; [`PluginNode::import_state`] answers an [`ImportOutcome`]; both in
+//!   [`state`]), so a swapped instance, e.g. of a rebuilt library, goes on where the running
+//!   one stopped.
 //! - `host` (feature `host`): loading libraries, checking ABI version and struct sizes, and
 //!   wrapping plugin kinds as engine processors, sources and sinks through payload codecs.
 //!
@@ -42,6 +47,8 @@ pub mod columns;
 pub mod export;
 #[cfg(feature = "host")]
 pub mod host;
+pub mod state;
 
 pub use columns::{ColumnBuf, Columns};
 pub use export::{Flush, KindSpec, Outputs, PluginNode, PluginSink, PluginSource, Poll, SourceCtx};
+pub use state::{ImportOutcome, StateReader, StateWriter};

@@ -163,11 +163,16 @@ fn role(path: &Path, name: &str, k: &SfKind) -> Result<Role, PluginError> {
     if role == Role::Sink && k.n_inputs == 0 {
         return Err(bad("a sink needs at least one input".into()));
     }
+    if k.export_state.is_some() && k.import_state.is_none() {
+        return Err(bad(format!(
+            "a {word} with an export_state function needs an import_state function (when a hot swap is refused, the running instance takes its own state back)"
+        )));
+    }
     Ok(role)
 }
 
-/// Reads one kind's description and finds codecs for its ports.
-fn read_kind(path: &Path, origin: &str, k: &SfKind, codecs: &Codecs) -> Result<PluginKind, PluginError> {
+/// Reads one kind's description and finds codecs for its ports; `plugin` is the library's name.
+fn read_kind(path: &Path, origin: &str, plugin: &str, k: &SfKind, codecs: &Codecs) -> Result<PluginKind, PluginError> {
     let name = text(path, "a kind name", k.name)?;
     let role = role(path, &name, k)?;
     let mut info = KindInfo {
@@ -246,8 +251,11 @@ fn read_kind(path: &Path, origin: &str, k: &SfKind, codecs: &Codecs) -> Result<P
         flush: k.flush,
         stop: k.stop,
         destroy: k.destroy,
+        control: k.control,
+        export_state: k.export_state,
+        import_state: k.import_state,
     };
-    Ok(PluginKind { info, fns, in_codecs, out_codecs, library: None })
+    Ok(PluginKind { info, fns, in_codecs, out_codecs, plugin: plugin.to_owned(), library: None })
 }
 
 /// Reads a table into kinds: checks the ABI, copies the descriptions, finds the codecs.
@@ -255,6 +263,7 @@ fn read_kind(path: &Path, origin: &str, k: &SfKind, codecs: &Codecs) -> Result<P
 pub fn read_table(path: &Path, table: &SfPlugin, codecs: &Codecs) -> Result<Vec<PluginKind>, PluginError> {
     check_abi(path, table)?;
     let origin = path.display().to_string();
+    let plugin = text(path, "the plugin name", table.name)?;
     // SAFETY: the kinds array of the checked table.
     let raw_kinds = unsafe { items(table.kinds, table.n_kinds) };
     if raw_kinds.is_empty() {
@@ -262,7 +271,7 @@ pub fn read_table(path: &Path, table: &SfPlugin, codecs: &Codecs) -> Result<Vec<
     }
     let mut kinds: Vec<PluginKind> = Vec::with_capacity(raw_kinds.len());
     for k in raw_kinds {
-        let kind = read_kind(path, &origin, k, codecs)?;
+        let kind = read_kind(path, &origin, &plugin, k, codecs)?;
         if kinds.iter().any(|o| o.info.name == kind.info.name) {
             return Err(PluginError::DuplicateKind {
                 path: path.to_path_buf(),
@@ -394,7 +403,8 @@ mod tests {
     }
 
     fn table(abi_version: u32, plugin_size: u32) -> SfPlugin {
-        let [_, kind_size, port_size, param_size, message_size, column_size, poll_size] = sizes().map(|(_, n)| n);
+        let [_, kind_size, port_size, param_size, message_size, column_size, poll_size, state_size] =
+            sizes().map(|(_, n)| n);
         SfPlugin {
             abi_version,
             plugin_size,
@@ -404,6 +414,7 @@ mod tests {
             message_size,
             column_size,
             poll_size,
+            state_size,
             name: SfStr::new("test"),
             version: SfStr::new("0"),
             kinds: std::ptr::null(),

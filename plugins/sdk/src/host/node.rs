@@ -26,6 +26,18 @@
 //!
 //! Names: a derived payload's strategy name ([`Decode::name`]) is the node id, or the node's
 //! `name` param when the kind declares a param `name` and the graph gives a string.
+//!
+//! Run-time hooks (every role): `control` calls the plugin's control function (a kind without
+//! one refuses every command, naming the node and the kind). A hot swap's `export_state` copies
+//! the bytes the plugin exports into a [`PluginState`], with the plugin's name, the kind and
+//! the plugin's format tag (and, for a processor, its retained inputs, the provenance of the
+//! messages it hands over); `import_state` offers them to the plugin only when the state is of
+//! the same plugin and kind (another kind's, or a built-in node's, is refused: the replacement
+//! starts afresh), and maps the plugin's answer to the engine's: accepted, start afresh
+//! ([`StateRefused::new`]) or refuse the swap ([`StateRefused::refuse_swap`]), with the
+//! plugin's reason. A panic in `export_state` or `import_state` is re-raised (the engine catches
+//! it there); one in `control` is the command's error, and the node's next call raises it, so
+//! the restart policy applies as for any panic.
 
 use std::collections::BTreeSet;
 use std::ffi::c_void;
@@ -34,15 +46,15 @@ use std::sync::{Arc, Mutex, PoisonError};
 use std::time::Instant;
 
 use skinflow_core::{
-    BuildContext, Context, Header, Inputs, KindInfo, Message, NodeError, NodeFactory, NodeImpl, Outputs, ParamError,
-    Params, Processor, Role, Sink, Source, SourcePoll,
+    BuildContext, Context, Header, Inputs, KindInfo, Message, NodeError, NodeFactory, NodeImpl, NodeState, Outputs,
+    ParamError, Params, Processor, Role, Sink, Source, SourcePoll, StateRefused,
 };
 
 use super::codec::{Codec, Decode, MakeCodec, RETAINED_INPUTS};
 use super::load::PluginLibrary;
 use crate::abi::{
-    CheckFn, CreateFn, DestroyFn, FlushFn, PollFn, ProcessFn, SfErrorSink, SfFlushState, SfMessage, SfPoll,
-    SfPollState, SfStatus, SfStr, StopFn,
+    CheckFn, ControlFn, CreateFn, DestroyFn, ExportStateFn, FlushFn, ImportStateFn, PollFn, ProcessFn, SfErrorSink,
+    SfFlushState, SfImport, SfMessage, SfPoll, SfPollState, SfState, SfStatus, SfStr, StopFn,
 };
 use crate::columns::{ColumnBuf, Columns};
 
@@ -59,6 +71,12 @@ pub struct KindFns {
     pub flush: Option<FlushFn>,
     pub stop: StopFn,
     pub destroy: DestroyFn,
+    /// `None`: the kind takes no control commands.
+    pub control: Option<ControlFn>,
+    /// `None`: the kind hands nothing over in a hot swap.
+    pub export_state: Option<ExportStateFn>,
+    /// `None`: the kind takes over no state.
+    pub import_state: Option<ImportStateFn>,
 }
 
 /// A kind read from a plugin.
@@ -67,6 +85,9 @@ pub struct PluginKind {
     pub fns: KindFns,
     pub in_codecs: Vec<MakeCodec>,
     pub out_codecs: Vec<MakeCodec>,
+    /// The plugin's name (its table's `name`): with the kind's name, what a hot-swap state must
+    /// match to be taken over ([`PluginState`]).
+    pub plugin: String,
     /// Keeps the library mapped while this kind (and every node holding it) lives. `None` only
     /// for a table that is part of the host binary (tests, benchmarks).
     pub library: Option<Arc<PluginLibrary>>,
@@ -160,7 +181,7 @@ impl NodeFactory for PluginFactory {
         let Some(raw) = NonNull::new(raw) else {
             return Err(NodeError::msg(k.fail("cannot build: ", &err)));
         };
-        let live = Live { raw, err: String::with_capacity(256), kind: k.clone() };
+        let live = Live::new(raw, k.clone());
         let name = output_name(&k.info, params, &ctx.node_id);
         let missing = |f: &str| NodeError::msg(k.fail("", &format!("its table has no {f} function")));
         let outs = || k.out_codecs.iter().map(|m| m()).collect::<Vec<_>>();
@@ -198,23 +219,225 @@ impl NodeFactory for PluginFactory {
     }
 }
 
+/// A plugin node's state in a hot swap (the engine's [`NodeState`]): the bytes the plugin's
+/// `export_state` wrote, its tag for their encoding, and the plugin and kind they came from. A
+/// node takes it over only when it is of the same plugin (by name) and kind: the library's
+/// path and build may differ, so a rebuilt plugin takes its predecessor's state, and the
+/// plugin decides from the tag and the bytes. A processor's state also carries the inputs it
+/// retained (the provenance of the messages it may hand over and its replacement emit).
+pub struct PluginState {
+    plugin: String,
+    kind: String,
+    /// The exporting library (the kind's origin), for messages.
+    origin: String,
+    format: u32,
+    bytes: Vec<u8>,
+    earlier: Vec<Message>,
+}
+
+impl PluginState {
+    /// The name of the plugin whose node exported it.
+    pub fn plugin(&self) -> &str {
+        &self.plugin
+    }
+
+    /// The kind of the node that exported it.
+    pub fn kind(&self) -> &str {
+        &self.kind
+    }
+
+    /// The library the exporting node's kind came from.
+    pub fn origin(&self) -> &str {
+        &self.origin
+    }
+
+    /// The plugin's tag for the encoding of [`PluginState::bytes`].
+    pub fn format(&self) -> u32 {
+        self.format
+    }
+
+    pub fn bytes(&self) -> &[u8] {
+        &self.bytes
+    }
+}
+
+impl std::fmt::Debug for PluginState {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("PluginState")
+            .field("plugin", &self.plugin)
+            .field("kind", &self.kind)
+            .field("origin", &self.origin)
+            .field("format", &self.format)
+            .field("bytes", &self.bytes.len())
+            .field("earlier", &self.earlier.len())
+            .finish()
+    }
+}
+
 /// A live plugin instance: destroyed exactly once, when this is dropped.
 struct Live {
     raw: NonNull<c_void>,
     err: String,
+    /// Why the instance is unusable: a call panicked (the plugin poisoned the instance). A
+    /// panic of a data call is re-raised at once; one of a hook (`control`) by the next data
+    /// call, so the engine applies the node's restart policy either way.
+    poisoned: Option<String>,
     // Last: the library must outlive `Drop::drop`'s call to destroy (fields drop after it).
     kind: Arc<PluginKind>,
 }
 
 impl Live {
+    fn new(raw: NonNull<c_void>, kind: Arc<PluginKind>) -> Live {
+        Live { raw, err: String::with_capacity(256), poisoned: None, kind }
+    }
+
     /// The host's answer to a plugin call's status: a panic is re-raised as the node's panic.
     /// `what` prefixes the plugin's message (e.g. "flush: ").
-    fn status(&self, what: &str, status: SfStatus) -> Result<(), NodeError> {
+    fn status(&mut self, what: &str, status: SfStatus) -> Result<(), NodeError> {
         match status {
             SfStatus::OK => Ok(()),
-            SfStatus::PANIC => std::panic::resume_unwind(Box::new(self.kind.fail(what, &self.err))),
+            SfStatus::PANIC => self.panicked(what),
             SfStatus::ERROR => Err(NodeError::msg(self.kind.fail(what, &self.err))),
             SfStatus(s) => Err(NodeError::msg(self.kind.fail(what, &format!("unknown status {s}")))),
+        }
+    }
+
+    /// A call panicked (caught in the plugin, which poisoned the instance): re-raised here as
+    /// the node's panic (without the panic hook).
+    fn panicked(&mut self, what: &str) -> ! {
+        let msg = self.kind.fail(what, &self.err);
+        self.poisoned = Some(msg.clone());
+        std::panic::resume_unwind(Box::new(msg))
+    }
+
+    /// Before a data call: an instance poisoned by a hook's panic fails it as the node's panic.
+    fn alive(&self) {
+        if let Some(why) = &self.poisoned {
+            std::panic::resume_unwind(Box::new(format!("{why} (an earlier call panicked: the instance is unusable)")));
+        }
+    }
+
+    /// A control command (the engine's `control`). Errors name the node and the kind.
+    fn control(&mut self, ctx: &Context, cmd: &str) -> Result<(), NodeError> {
+        let node = format!("node \"{}\": ", ctx.id());
+        let Some(control) = self.kind.fns.control else {
+            return Err(NodeError::msg(self.kind.fail(
+                &node,
+                &format!("control command \"{cmd}\" is not supported: the kind has no control function (it takes no commands)"),
+            )));
+        };
+        if let Some(why) = &self.poisoned {
+            return Err(NodeError::msg(format!("{why} (an earlier call panicked: the instance is unusable)")));
+        }
+        let err = sink(&mut self.err);
+        // SAFETY: `raw` is a live instance of this kind; `cmd` and the error sink outlive the
+        // call; the shim catches panics.
+        let status = unsafe { control(self.raw.as_ptr(), SfStr::new(cmd), err) };
+        match status {
+            SfStatus::OK => Ok(()),
+            SfStatus::PANIC => {
+                let msg = self.kind.fail(&format!("{node}control: "), &self.err);
+                self.poisoned = Some(msg.clone());
+                Err(NodeError::msg(format!(
+                    "{msg} (the instance is unusable: its next call fails as the node's panic)"
+                )))
+            }
+            SfStatus::ERROR => Err(NodeError::msg(self.kind.fail(&node, &self.err))),
+            SfStatus(s) => Err(NodeError::msg(self.kind.fail(&node, &format!("control: unknown status {s}")))),
+        }
+    }
+
+    /// Hot swap: the plugin's state, copied out of the plugin's memory. `None`: the kind
+    /// exports nothing, exported nothing, or failed (logged).
+    fn export_state(&mut self, ctx: &Context) -> Option<PluginState> {
+        let export = self.kind.fns.export_state?;
+        if self.poisoned.is_some() {
+            return None; // the state of a panicked instance is not trusted
+        }
+        let err = sink(&mut self.err);
+        let mut state = SfState::ABSENT;
+        // SAFETY: `raw` is a live instance of this kind; `state` and the error sink are
+        // writable for the call; the shim catches panics.
+        let status = unsafe { export(self.raw.as_ptr(), &mut state, err) };
+        let failed = |live: &Live, msg: &str| {
+            tracing::warn!(node = %ctx.id(), "{}; nothing handed over", live.kind.fail("export_state: ", msg));
+            None
+        };
+        match status {
+            SfStatus::OK => {}
+            SfStatus::PANIC => self.panicked("export_state: "),
+            _ => return failed(self, &self.err),
+        }
+        if state.present == 0 {
+            return None;
+        }
+        let bytes = if state.len == 0 {
+            Vec::new()
+        } else if state.data.is_null() {
+            return failed(self, &format!("{} bytes at a null pointer", state.len));
+        } else {
+            // SAFETY: the plugin's exported bytes, `len` readable at `data` until its next call
+            // on this instance; copied before any.
+            unsafe { std::slice::from_raw_parts(state.data, state.len) }.to_vec()
+        };
+        Some(PluginState {
+            plugin: self.kind.plugin.clone(),
+            kind: self.kind.info.name.to_string(),
+            origin: self.kind.origin().to_owned(),
+            format: state.format,
+            bytes,
+            earlier: Vec::new(),
+        })
+    }
+
+    /// Hot swap: offers `state` to the plugin when it is of this plugin and kind. `Ok`: taken
+    /// over (the state is returned for what the host keeps of it); refused: with the reason,
+    /// to start afresh or to refuse the swap, as the plugin says.
+    fn import_state(&mut self, state: NodeState) -> Result<Box<PluginState>, StateRefused> {
+        let k = self.kind.clone();
+        let s = match state.downcast::<PluginState>() {
+            Ok(s) => s,
+            Err(state) => {
+                return Err(StateRefused::new(
+                    state,
+                    k.fail("", "the state is not a plugin node's (a built-in kind's)"),
+                ));
+            }
+        };
+        if s.plugin != k.plugin || s.kind != *k.info.name {
+            let why = format!(
+                "the state is of kind \"{}\" of plugin \"{}\" ({}), this node is of kind \"{}\" of plugin \"{}\": a node takes over only its own kind's state",
+                s.kind, s.plugin, s.origin, k.info.name, k.plugin
+            );
+            return Err(StateRefused::new(s, k.fail("", &why)));
+        }
+        let Some(import) = k.fns.import_state else {
+            return Err(StateRefused::new(
+                s,
+                k.fail("", "the kind has no import_state function (it takes over no state)"),
+            ));
+        };
+        if let Some(why) = &self.poisoned {
+            let why = format!("{why} (an earlier call panicked: the instance is unusable)");
+            return Err(StateRefused::new(s, why));
+        }
+        let raw = SfState { present: 1, format: s.format, data: s.bytes.as_ptr(), len: s.bytes.len() };
+        let mut outcome = SfImport::START_AFRESH;
+        let err = sink(&mut self.err);
+        // SAFETY: `raw` is a live instance of this kind; `raw` points at `s.bytes`, which
+        // outlives the call; `outcome` and the error sink are writable for the call; the shim
+        // catches panics.
+        let status = unsafe { import(self.raw.as_ptr(), &raw, &mut outcome, err) };
+        match status {
+            SfStatus::OK => {}
+            SfStatus::PANIC => self.panicked("import_state: "),
+            _ => return Err(StateRefused::new(s, k.fail("import_state: ", &self.err))),
+        }
+        match outcome {
+            SfImport::ACCEPTED => Ok(s),
+            SfImport::START_AFRESH => Err(StateRefused::new(s, k.fail("", &self.err))),
+            SfImport::REFUSE_SWAP => Err(StateRefused::refuse_swap(s, k.fail("", &self.err))),
+            SfImport(o) => Err(StateRefused::new(s, k.fail("import_state: ", &format!("unknown outcome {o}")))),
         }
     }
 
@@ -334,12 +557,35 @@ impl Retained {
             return;
         }
         for (_, m) in (0..n_inputs).flat_map(|p| inputs.iter_port(p)) {
-            if self.msgs.len() < self.capacity {
-                self.msgs.push(m.clone());
-            } else {
-                self.msgs[self.next] = m.clone();
-                self.next = (self.next + 1) % self.capacity;
-            }
+            self.push(m.clone());
+        }
+    }
+
+    fn push(&mut self, m: Message) {
+        if self.msgs.len() < self.capacity {
+            self.msgs.push(m);
+        } else {
+            self.msgs[self.next] = m;
+            self.next = (self.next + 1) % self.capacity;
+        }
+    }
+
+    /// The retained messages, oldest first (a hot swap hands them over).
+    fn in_order(&self) -> Vec<Message> {
+        let (newer, older) = self.msgs.split_at(self.next);
+        older.iter().chain(newer).cloned().collect()
+    }
+
+    /// Replaces the retained messages by `msgs` (oldest first; the newest kept).
+    fn restore(&mut self, msgs: Vec<Message>) {
+        self.msgs.clear();
+        self.next = 0;
+        if self.capacity == 0 {
+            return;
+        }
+        let skip = msgs.len().saturating_sub(self.capacity);
+        for m in msgs.into_iter().skip(skip) {
+            self.push(m);
         }
     }
 }
@@ -432,6 +678,7 @@ unsafe impl Send for HostedNode {}
 
 impl Processor for HostedNode {
     fn process(&mut self, ctx: &mut Context, inputs: &Inputs, out: &mut Outputs) -> Result<(), NodeError> {
+        self.live.alive();
         let t0 = Instant::now();
         let r = self.call(ctx, inputs, t0, out);
         // Whatever the call's outcome, the plugin may have kept these inputs.
@@ -441,6 +688,7 @@ impl Processor for HostedNode {
 
     fn flush(&mut self, ctx: &mut Context, out: &mut Outputs) -> Result<(), NodeError> {
         let Some(flush) = self.flush else { return Ok(()) };
+        self.live.alive();
         let t0 = Instant::now();
         self.out_raw.fill(SfMessage::ABSENT);
         let more = self.live.flush(flush, &mut self.out_raw)?;
@@ -454,6 +702,23 @@ impl Processor for HostedNode {
 
     fn stop(&mut self, ctx: &mut Context) -> Result<(), NodeError> {
         self.live.stop(ctx)
+    }
+
+    fn control(&mut self, ctx: &mut Context, cmd: &str) -> Result<(), NodeError> {
+        self.live.control(ctx, cmd)
+    }
+
+    fn export_state(&mut self, ctx: &mut Context) -> Option<NodeState> {
+        let mut s = self.live.export_state(ctx)?;
+        // Shared, not moved: should the replacement not take the state, this node goes on.
+        s.earlier = self.earlier.in_order();
+        Some(Box::new(s))
+    }
+
+    fn import_state(&mut self, _ctx: &mut Context, state: NodeState) -> Result<(), StateRefused> {
+        let s = self.live.import_state(state)?;
+        self.earlier.restore(s.earlier);
+        Ok(())
     }
 }
 
@@ -480,12 +745,25 @@ unsafe impl Send for HostedSink {}
 
 impl Sink for HostedSink {
     fn consume(&mut self, _ctx: &mut Context, inputs: &Inputs) -> Result<(), NodeError> {
+        self.live.alive();
         self.ins.encode(&self.live.kind, inputs)?;
         self.live.process(self.process, &self.ins, &mut []) // a sink has no outputs
     }
 
     fn stop(&mut self, ctx: &mut Context) -> Result<(), NodeError> {
         self.live.stop(ctx)
+    }
+
+    fn control(&mut self, ctx: &mut Context, cmd: &str) -> Result<(), NodeError> {
+        self.live.control(ctx, cmd)
+    }
+
+    fn export_state(&mut self, ctx: &mut Context) -> Option<NodeState> {
+        self.live.export_state(ctx).map(|s| Box::new(s) as NodeState)
+    }
+
+    fn import_state(&mut self, _ctx: &mut Context, state: NodeState) -> Result<(), StateRefused> {
+        self.live.import_state(state).map(drop)
     }
 }
 
@@ -526,6 +804,7 @@ impl Source for HostedSource {
         {
             return Ok(SourcePoll::Idle);
         }
+        self.live.alive();
         let t0 = Instant::now();
         self.out_raw.fill(SfMessage::ABSENT);
         let now_ns = ctx.now_ns();
@@ -558,6 +837,18 @@ impl Source for HostedSource {
 
     fn stop(&mut self, ctx: &mut Context) -> Result<(), NodeError> {
         self.live.stop(ctx)
+    }
+
+    fn control(&mut self, ctx: &mut Context, cmd: &str) -> Result<(), NodeError> {
+        self.live.control(ctx, cmd)
+    }
+
+    fn export_state(&mut self, ctx: &mut Context) -> Option<NodeState> {
+        self.live.export_state(ctx).map(|s| Box::new(s) as NodeState)
+    }
+
+    fn import_state(&mut self, _ctx: &mut Context, state: NodeState) -> Result<(), StateRefused> {
+        self.live.import_state(state).map(drop)
     }
 }
 

@@ -390,7 +390,20 @@ impl Cell {
     pub fn control(&mut self, c: Control, shared: &Shared) {
         match c {
             Control::Command(cmd, reply) => {
-                let result = self.imp.control(&mut self.ctx, &cmd);
+                let result = match catch_unwind(AssertUnwindSafe(|| self.imp.control(&mut self.ctx, &cmd))) {
+                    Ok(result) => result,
+                    // As a panic in a call: counted, and the restart policy applies (or the
+                    // graph fails, as for a panic in `process`).
+                    Err(p) => {
+                        bump(&self.stats.panics, 1);
+                        let msg = panic_message(p);
+                        tracing::error!(node = %self.ctx.id, "panicked in control \"{cmd}\": {msg}");
+                        if let Fired::Fatal(e) = self.after_panic(msg.clone()) {
+                            shared.fail(self.ctx.index as usize, e);
+                        }
+                        Err(NodeError::Panic(msg))
+                    }
+                };
                 match &result {
                     Ok(()) => tracing::info!(node = %self.ctx.id, "control \"{cmd}\" applied"),
                     Err(e) => tracing::warn!(node = %self.ctx.id, "control \"{cmd}\": {e}"),

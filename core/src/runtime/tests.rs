@@ -74,6 +74,14 @@ impl Processor for Hold {
         Ok(())
     }
 
+    /// `panic` panics; anything else is applied.
+    fn control(&mut self, _ctx: &mut Context, cmd: &str) -> Result<(), NodeError> {
+        if cmd == "panic" {
+            panic!("hold: control");
+        }
+        Ok(())
+    }
+
     fn stop(&mut self, ctx: &mut Context) -> Result<(), NodeError> {
         ctx.count_discarded(self.held.len() as u64);
         if self.p.stop_panics {
@@ -554,5 +562,51 @@ fn a_stop_that_panics_is_logged_for_a_replaced_instance_and_reported_at_the_end_
         let h = node(&r, "h");
         assert_eq!((h.msgs_in, h.msgs_out, h.panics, h.restarts), (12, 4, 2, 2), "{mode}");
         assert_eq!(h.discarded, 6, "{mode}: counted before the stops panicked");
+    }
+}
+
+#[test]
+fn a_control_command_that_panics_is_counted_and_the_restart_policy_applies() {
+    for restart in ["always", "never"] {
+        let reg = registry(&Arc::default());
+        let g = spec(
+            &reg,
+            &format!(
+                "[[node]]\nid = \"src\"\nkind = \"counter\"\nparams = {{ count = 1000000, rate_hz = 1000.0 }}\n\
+                 [[node]]\nid = \"h\"\nkind = \"hold\"\nrestart = \"{restart}\"\nparams = {{ by = 2 }}\n\
+                 [[node]]\nid = \"out\"\nkind = \"null\"\n\
+                 [[edge]]\nfrom = \"src.out\"\nto = \"h.in\"\n\
+                 [[edge]]\nfrom = \"h.out\"\nto = \"out.in\"\n"
+            ),
+        );
+        let running = RunningGraph::start(&g).unwrap();
+        let wait = Duration::from_secs(60);
+        match running.control_wait("h", "panic", wait) {
+            Err(RunError::Control { error: NodeError::Panic(msg), .. }) => {
+                assert_eq!(msg, "hold: control", "{restart}")
+            }
+            other => panic!("{restart}: expected the panic as the answer, got {other:?}"),
+        }
+        if restart == "always" {
+            // The rebuilt instance answers the next command; the run goes on.
+            running.control_wait("h", "tare", wait).unwrap();
+        }
+        let stop = Arc::new(AtomicBool::new(true));
+        let r = running.wait(&RunOptions { stop: Some(stop), ..RunOptions::default() });
+        let h = node(&r, "h");
+        match restart {
+            "always" => {
+                assert!(r.failures.is_empty(), "{:?}", r.failures);
+                assert_eq!((h.panics, h.restarts), (1, 1));
+            }
+            _ => {
+                assert_eq!((h.panics, h.restarts), (1, 0));
+                assert!(
+                    matches!(r.failures.as_slice(), [RunError::Node { node, error: NodeError::Panic(m) }] if node == "h" && m == "hold: control"),
+                    "{:?}",
+                    r.failures
+                );
+            }
+        }
     }
 }

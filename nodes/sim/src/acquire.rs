@@ -13,7 +13,7 @@
 
 use crate::compress::Compressor;
 use crate::profile::Profile;
-use crate::randomness::{Drift, Stream, normal, stream};
+use crate::randomness::{Drift, SlotMemo, Stream, normal, stream};
 use crate::scene::Fault;
 use crate::stage::Stage;
 use crate::timeline::{Load, Timeline};
@@ -125,6 +125,11 @@ pub struct EitChannel {
     cache: Vec<CachedState>,
     clock: u64,
     solves: u64,
+    /// Per contact slot: the last press's placement error and the last level's seating factor
+    /// (pure functions of press and level, each an `indexed_normal` away: drawn once per slot
+    /// and press or level, not in every block of every frame).
+    placement: SlotMemo<[f64; 2]>,
+    seating: SlotMemo<f64>,
     // Scratch
     sigma: Vec<f64>,
     block_loads: Vec<Load>,
@@ -202,6 +207,8 @@ impl EitChannel {
             cache: Vec::with_capacity(CACHE_STATES),
             clock: 0,
             solves: 0,
+            placement: SlotMemo::with_capacity(max_contacts),
+            seating: SlotMemo::with_capacity(max_contacts),
             sigma: vec![0.0; n],
             block_loads: Vec::with_capacity(max_contacts),
             block_key: Vec::with_capacity(max_contacts),
@@ -242,7 +249,7 @@ impl EitChannel {
         for b in 0..EIT_BLOCKS {
             let tb = start + (b as f64 + 0.5) * period_s / EIT_BLOCKS as f64;
             hint = timeline.loads_into(tb, hint, &mut self.block_loads);
-            stage.place(&mut self.block_loads);
+            stage.place_cached(&mut self.block_loads, &mut self.placement);
             let slot = self.solved()?;
             let (lo, hi) = (b * m / EIT_BLOCKS, (b + 1) * m / EIT_BLOCKS);
             out[lo..hi].copy_from_slice(&self.cache[slot].values[lo..hi]);
@@ -263,13 +270,13 @@ impl EitChannel {
     fn solved(&mut self) -> Result<usize, EitError> {
         self.clock += 1;
         self.block_key.clear();
-        let compressor = &self.compressor;
-        self.block_key.extend(self.block_loads.iter().map(|l| LoadKey {
+        let (compressor, seating) = (&self.compressor, &mut self.seating);
+        self.block_key.extend(self.block_loads.iter().enumerate().map(|(slot, l)| LoadKey {
             x_mm: l.x_mm,
             y_mm: l.y_mm,
             diameter_mm: l.diameter_mm,
             force_n: l.force_n,
-            seating: compressor.seating(l.level),
+            seating: seating.get(slot, l.level, |level| compressor.seating(level)),
         }));
         if let Some(i) = self.cache.iter().position(|c| c.key == self.block_key) {
             self.cache[i].last_used = self.clock;

@@ -10,7 +10,7 @@
 //! `Compressor` precomputes the radial footprint kernel of every diameter a scene uses.
 
 use crate::profile::Profile;
-use crate::randomness::{SmoothField, Stream, indexed_normal};
+use crate::randomness::{Seating, SmoothField, Stream};
 use crate::timeline::Load;
 
 /// Samples of each radial kernel table.
@@ -84,8 +84,8 @@ pub struct Compressor {
     strain_max: f64,
     pressure_sat_kpa: f64,
     archie_exponent: f64,
-    seating_jitter: f64,
-    seed: u64,
+    /// Per-level seating factor g (`foam_seating_jitter`).
+    seating: Seating,
     kernels: Vec<RadialKernel>,
     // Per element: centroid (mm) and compliance factor (1 + heterogeneity field)
     centroids_mm: Vec<[f64; 2]>,
@@ -120,8 +120,7 @@ impl Compressor {
             strain_max: profile.strain_max,
             pressure_sat_kpa: profile.pressure_sat_kpa,
             archie_exponent: profile.archie_exponent,
-            seating_jitter: profile.foam_seating_jitter,
-            seed,
+            seating: Seating::new(seed, Stream::FoamSeating, profile.foam_seating_jitter),
             kernels,
             centroids_mm,
             compliance,
@@ -143,11 +142,7 @@ impl Compressor {
     /// function of (seed, level); 1 without jitter. The conductivity under a load depends on its
     /// position, diameter, force and this factor, and on nothing else.
     pub fn seating(&self, level: u32) -> f64 {
-        if self.seating_jitter > 0.0 {
-            (1.0 + self.seating_jitter * indexed_normal(self.seed, Stream::FoamSeating, u64::from(level))).max(0.0)
-        } else {
-            1.0
-        }
+        self.seating.factor(level)
     }
 
     /// Writes the conductivity (S/m) of every element under `loads` into `sigma`. A load whose

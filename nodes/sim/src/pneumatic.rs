@@ -16,7 +16,7 @@
 //! footprint once (`footprint_evaluations`), not on every sample.
 
 use crate::profile::Profile;
-use crate::randomness::{Drift, SmoothField, Stream, indexed_normal, normal, stream};
+use crate::randomness::{Drift, Seating, SmoothField, Stream, normal, stream};
 use crate::timeline::Load;
 use rand_chacha::ChaCha8Rng;
 use skinflow_eit::Sensor;
@@ -66,12 +66,12 @@ pub struct Pneumatic {
     area_exponent: f64,
     hysteresis_kpa: f64,
     hysteresis_tau_s: f64,
-    seating_jitter: f64,
+    /// Per-level seating gain g_level (`seating_jitter`).
+    seating: Seating,
     noise_kpa: f64,
     ramp_kpa_per_s: f64,
     half_extents_mm: (f64, f64),
     heterogeneity: SmoothField,
-    seed: u64,
     // Internal state
     /// Output of the play operator (hysteresis), kPa above P0.
     play_kpa: f64,
@@ -101,12 +101,11 @@ impl Pneumatic {
             area_exponent: profile.area_exponent,
             hysteresis_kpa: profile.hysteresis_kpa,
             hysteresis_tau_s: profile.hysteresis_tau_s,
-            seating_jitter: profile.seating_jitter,
+            seating: Seating::new(seed, Stream::Seating, profile.seating_jitter),
             noise_kpa: profile.pressure_noise_kpa,
             ramp_kpa_per_s: profile.pressure_ramp_kpa_per_s,
             half_extents_mm: sensor.half_extents_mm(),
             heterogeneity,
-            seed,
             play_kpa: 0.0,
             last_t_s: 0.0,
             drift: Drift::new(
@@ -156,14 +155,6 @@ impl Pneumatic {
         sum / count as f64
     }
 
-    /// Seating gain of a load level: 1 + jitter * N(0, 1), a pure function of (seed, level).
-    fn seating_gain(&self, level: u32) -> f64 {
-        if self.seating_jitter == 0.0 {
-            return 1.0;
-        }
-        (1.0 + self.seating_jitter * indexed_normal(self.seed, Stream::Seating, u64::from(level))).max(0.0)
-    }
-
     /// Saturation force F_nl(d) of an indenter of `diameter_mm`, N.
     fn saturation_n(&self, diameter_mm: f64) -> f64 {
         let area = (self.reference_diameter_mm / diameter_mm).powf(self.area_exponent).min(1.0);
@@ -178,7 +169,7 @@ impl Pneumatic {
             diameter_mm: l.diameter_mm,
             level: l.level,
             sensitivity_kpa_per_n: self.footprint_sensitivity_kpa_per_n(l.x_mm, l.y_mm, l.diameter_mm),
-            gain: self.seating_gain(l.level),
+            gain: self.seating.factor(l.level),
             saturation_n: self.saturation_n(l.diameter_mm),
         }
     }
@@ -195,7 +186,7 @@ impl Pneumatic {
             match self.placed.get(i) {
                 Some(p) if p.has_footprint_of(l) => {
                     if p.level != l.level {
-                        let gain = self.seating_gain(l.level);
+                        let gain = self.seating.factor(l.level);
                         let p = &mut self.placed[i];
                         p.level = l.level;
                         p.gain = gain;

@@ -49,6 +49,70 @@ pub fn normal(rng: &mut ChaCha8Rng) -> f64 {
     rng.sample(StandardNormal)
 }
 
+/// Press-to-press variability of a load level (how the indenter seats): level `level` scales
+/// its response by g = 1 + sd N(0, 1), at least 0, a pure function of (seed, stream, level);
+/// exactly 1 when sd is 0. The EIT layer (`foam_seating_jitter`, `Stream::FoamSeating`) and the
+/// pneumatic one (`seating_jitter`, `Stream::Seating`) each draw their own.
+#[derive(Debug, Clone, Copy)]
+pub struct Seating {
+    seed: u64,
+    stream: Stream,
+    sd: f64,
+}
+
+impl Seating {
+    pub fn new(seed: u64, stream: Stream, sd: f64) -> Seating {
+        Seating { seed, stream, sd }
+    }
+
+    /// The factor g of load level `level`.
+    pub fn factor(&self, level: u32) -> f64 {
+        if self.sd == 0.0 {
+            return 1.0;
+        }
+        (1.0 + self.sd * indexed_normal(self.seed, self.stream, u64::from(level))).max(0.0)
+    }
+}
+
+/// Per contact slot (index in a list of loads), the last per-item draw made for it and the
+/// item (press or level) it was for. An `indexed_normal` sets up a generator each time (a
+/// ChaCha seeding and a block refill, most of a static-hold frame's cost when done per block),
+/// while a contact keeps its slot and its press and level from one instant to the next: the
+/// memo draws once per item per slot and returns the stored value, the same to the bit, after.
+#[derive(Debug, Clone, Default)]
+pub struct SlotMemo<V> {
+    slots: Vec<(u32, V)>,
+}
+
+impl<V: Copy> SlotMemo<V> {
+    /// Room for `slots` slots without reallocation.
+    pub fn with_capacity(slots: usize) -> SlotMemo<V> {
+        SlotMemo { slots: Vec::with_capacity(slots) }
+    }
+
+    /// The value of `item` in `slot`: the stored one if the slot's last item was `item`, else
+    /// `draw(item)`, stored. `draw` must be a pure function of the item.
+    pub fn get(&mut self, slot: usize, item: u32, draw: impl FnOnce(u32) -> V) -> V {
+        match self.slots.get_mut(slot) {
+            Some((last, value)) if *last == item => *value,
+            Some(stored) => {
+                let value = draw(item);
+                *stored = (item, value);
+                value
+            }
+            None => {
+                let value = draw(item);
+                // callers walk their slots in order, so a new slot is the next one; any other
+                // is served unstored rather than leaving a gap of made-up entries
+                if slot == self.slots.len() {
+                    self.slots.push((item, value));
+                }
+                value
+            }
+        }
+    }
+}
+
 /// Number of Fourier modes of a smooth field: enough for a visually Gaussian field.
 const FIELD_MODES: usize = 64;
 
@@ -128,6 +192,45 @@ mod tests {
         }
         // mean of sample sds of far-apart points ~ 0.2 (Monte-Carlo tolerance)
         assert!((sd_sum / trials as f64 - 0.2).abs() < 0.03, "{}", sd_sum / trials as f64);
+    }
+
+    #[test]
+    fn seating_is_one_without_jitter_and_a_pure_function_of_the_level() {
+        let still = Seating::new(3, Stream::Seating, 0.0);
+        assert!((0..50).all(|level| still.factor(level) == 1.0));
+        let g = Seating::new(3, Stream::Seating, 0.05);
+        for level in [0, 1, 7, 1_000_000] {
+            let expected = (1.0 + 0.05 * indexed_normal(3, Stream::Seating, u64::from(level))).max(0.0);
+            assert_eq!(g.factor(level).to_bits(), expected.to_bits());
+        }
+        // its own stream: the EIT layer's draws are not the pneumatic layer's
+        assert_ne!(g.factor(1), Seating::new(3, Stream::FoamSeating, 0.05).factor(1));
+        // never negative, however wide the jitter
+        assert!((0..200).all(|level| Seating::new(1, Stream::Seating, 5.0).factor(level) >= 0.0));
+    }
+
+    #[test]
+    fn a_slot_memo_draws_once_per_item_and_slot() {
+        let mut memo = SlotMemo::with_capacity(2);
+        let mut draws = Vec::new();
+        let mut get = |memo: &mut SlotMemo<f64>, slot: usize, item: u32| {
+            memo.get(slot, item, |i| {
+                draws.push((slot, i));
+                f64::from(i) * 10.0 + slot as f64
+            })
+        };
+        assert_eq!(get(&mut memo, 0, 4), 40.0);
+        assert_eq!(get(&mut memo, 0, 4), 40.0);
+        assert_eq!(get(&mut memo, 1, 5), 51.0);
+        assert_eq!(get(&mut memo, 0, 4), 40.0);
+        assert_eq!(get(&mut memo, 1, 5), 51.0);
+        // a new item in a slot is drawn and replaces the old one there
+        assert_eq!(get(&mut memo, 0, 6), 60.0);
+        assert_eq!(get(&mut memo, 0, 4), 40.0);
+        // a slot out of order is served but not stored
+        assert_eq!(get(&mut memo, 5, 1), 15.0);
+        assert_eq!(get(&mut memo, 5, 1), 15.0);
+        assert_eq!(draws, vec![(0, 4), (1, 5), (0, 6), (0, 4), (5, 1), (5, 1)]);
     }
 
     #[test]

@@ -5,11 +5,13 @@
 //! only the channels the scene asks for are computed. Contacts land where `stage` puts them;
 //! the truth reports the commanded positions.
 //!
-//! `next_into` writes an EIT frame into a caller's buffer (no allocation on static holds);
-//! `next_event` and the `Iterator` impl return owned events for convenience.
+//! `next_into` writes an EIT frame and a truth row into a caller's buffers (no allocation on
+//! static holds); `next_event` and the `Iterator` impl return owned events for convenience,
+//! allocating only what an event owns (an EIT frame's values, a truth row's contacts).
 
 use crate::acquire::EitChannel;
 use crate::pneumatic::Pneumatic;
+use crate::randomness::SlotMemo;
 use crate::scene::{Rates, Scene};
 use crate::stage::Stage;
 use crate::timeline::{Load, Timeline};
@@ -45,6 +47,14 @@ pub enum EventKind {
     Truth { t_s: f64 },
 }
 
+/// The event the stream produces next, with its time (s), before it is produced.
+#[derive(Debug, Clone, Copy)]
+enum Due {
+    Truth(f64),
+    Pressure(f64),
+    Eit(f64),
+}
+
 /// A running simulation of one scene with one seed.
 #[derive(Debug)]
 pub struct Simulator {
@@ -60,12 +70,14 @@ pub struct Simulator {
     // Internal state
     next_frame: u64,
     next_sample: u64,
-    /// Truth rows, generated as the stream reaches them (never all at once).
+    /// Truth rows, generated as the stream reaches them (never all at once); the cursor is on
+    /// the next row to emit.
     truth: TruthCursor,
-    /// Time of the next truth row (its contacts in `truth_pending`); None after the last one.
+    /// Time of the next truth row (its contacts: `truth.row()`); None after the last one.
     next_truth_t: Option<f64>,
-    truth_pending: Vec<TruthContact>,
     hint: usize,
+    /// Per contact slot of `loads`: the last press's placement error (`Stage::place_cached`).
+    placement: SlotMemo<[f64; 2]>,
     loads: Vec<Load>,
 }
 
@@ -82,14 +94,12 @@ impl Simulator {
         };
         let pneumatic = scene.channels.pressure.then(|| Pneumatic::new(&scene.profile, &scene.sensor, seed));
         let mut truth = TruthCursor::new(&scene.timeline, scene.rates.pressure_hz);
-        let mut truth_pending = Vec::with_capacity(scene.timeline.max_contacts());
-        let next_truth_t = truth.next_into(&scene.timeline, &mut truth_pending);
+        let next_truth_t = truth.advance(&scene.timeline);
         Ok(Simulator {
             sensor: scene.sensor.clone(),
             rates: scene.rates,
             truth,
             next_truth_t,
-            truth_pending,
             timeline: scene.timeline.clone(),
             stage: Stage::new(&scene.profile, &scene.sensor, seed),
             duration_s: scene.duration_s(),
@@ -99,6 +109,7 @@ impl Simulator {
             next_frame: 0,
             next_sample: 0,
             hint: 0,
+            placement: SlotMemo::with_capacity(scene.timeline.max_contacts()),
             loads: Vec::with_capacity(scene.timeline.max_contacts()),
         })
     }
@@ -161,6 +172,45 @@ impl Simulator {
         self.next_truth_t.filter(|&t| t < self.duration_s)
     }
 
+    /// What comes next, None at the end of the scene (ties: truth, pressure, EIT).
+    fn due(&self) -> Option<Due> {
+        let (tt, tp, te) = (self.next_truth_t(), self.next_sample_t(), self.next_frame_t());
+        let t = [tt, tp, te].into_iter().flatten().reduce(f64::min)?;
+        Some(if tt == Some(t) {
+            Due::Truth(t)
+        } else if tp == Some(t) {
+            Due::Pressure(t)
+        } else {
+            Due::Eit(t)
+        })
+    }
+
+    /// Moves past the due truth row (its contacts are `self.truth.row()` until then).
+    fn pass_truth_row(&mut self) {
+        self.next_truth_t = self.truth.advance(&self.timeline);
+    }
+
+    /// The due pressure sample, at `t_s`, kPa.
+    fn pressure_sample(&mut self, t_s: f64) -> f64 {
+        self.hint = self.timeline.loads_into(t_s, self.hint, &mut self.loads);
+        self.stage.place_cached(&mut self.loads, &mut self.placement);
+        let pn = self.pneumatic.as_mut().expect("a sample time implies the pressure channel");
+        let kpa = pn.sample(t_s, &self.loads);
+        self.next_sample += 1;
+        kpa
+    }
+
+    /// The due EIT frame, centred at `t_s`, into `v` (length M); returns its `seq`.
+    fn eit_frame(&mut self, t_s: f64, v: &mut [f64]) -> Result<u64, SimError> {
+        let period = self.frame_period_s();
+        let eit = self.eit.as_mut().expect("a frame time implies the eit channel");
+        eit.frame_into(&self.timeline, &self.stage, t_s, period, v)
+            .map_err(|source| SimError::Eit { scene: self.scene.clone(), source })?;
+        let seq = self.next_frame;
+        self.next_frame += 1;
+        Ok(seq)
+    }
+
     /// The next event; an EIT frame's values go into `eit_v` (length M), a truth row's
     /// contacts into `truth` (cleared first). None at the end of the scene.
     pub fn next_into(
@@ -168,30 +218,17 @@ impl Simulator {
         eit_v: &mut [f64],
         truth: &mut Vec<TruthContact>,
     ) -> Result<Option<EventKind>, SimError> {
-        let (tt, tp, te) = (self.next_truth_t(), self.next_sample_t(), self.next_frame_t());
-        let first = [tt, tp, te].into_iter().flatten().reduce(f64::min);
-        let Some(t) = first else { return Ok(None) };
-        if tt == Some(t) {
-            truth.clear();
-            truth.extend_from_slice(&self.truth_pending);
-            self.next_truth_t = self.truth.next_into(&self.timeline, &mut self.truth_pending);
-            return Ok(Some(EventKind::Truth { t_s: t }));
-        }
-        if tp == Some(t) {
-            self.hint = self.timeline.loads_into(t, self.hint, &mut self.loads);
-            self.stage.place(&mut self.loads);
-            let pn = self.pneumatic.as_mut().expect("a sample time implies the pressure channel");
-            let kpa = pn.sample(t, &self.loads);
-            self.next_sample += 1;
-            return Ok(Some(EventKind::Pressure { t_s: t, kpa }));
-        }
-        let period = self.frame_period_s();
-        let eit = self.eit.as_mut().expect("a frame time implies the eit channel");
-        eit.frame_into(&self.timeline, &self.stage, t, period, eit_v)
-            .map_err(|source| SimError::Eit { scene: self.scene.clone(), source })?;
-        let seq = self.next_frame;
-        self.next_frame += 1;
-        Ok(Some(EventKind::Eit { t_s: t, seq }))
+        let Some(due) = self.due() else { return Ok(None) };
+        Ok(Some(match due {
+            Due::Truth(t_s) => {
+                truth.clear();
+                truth.extend_from_slice(self.truth.row());
+                self.pass_truth_row();
+                EventKind::Truth { t_s }
+            }
+            Due::Pressure(t_s) => EventKind::Pressure { t_s, kpa: self.pressure_sample(t_s) },
+            Due::Eit(t_s) => EventKind::Eit { t_s, seq: self.eit_frame(t_s, eit_v)? },
+        }))
     }
 
     /// An EIT frame centred at `t_s`, outside the event stream (probes, benchmarks): the stream
@@ -207,14 +244,23 @@ impl Simulator {
         }
     }
 
-    /// The next event as an owned value (allocates for EIT frames and truth rows).
+    /// The next event as an owned value. Allocates only what the event owns: an EIT frame's
+    /// values (one vector of M) and a truth row's contacts (none for a row without contact);
+    /// a pressure sample owns nothing. `next_into` allocates nothing on static holds.
     pub fn next_event(&mut self) -> Result<Option<SimEvent>, SimError> {
-        let mut v = vec![0.0; self.measurement_count()];
-        let mut contacts = Vec::new();
-        Ok(self.next_into(&mut v, &mut contacts)?.map(|k| match k {
-            EventKind::Eit { t_s, seq } => SimEvent::Eit { t_s, seq, v },
-            EventKind::Pressure { t_s, kpa } => SimEvent::Pressure { t_s, kpa },
-            EventKind::Truth { t_s } => SimEvent::Truth { t_s, contacts },
+        let Some(due) = self.due() else { return Ok(None) };
+        Ok(Some(match due {
+            Due::Truth(t_s) => {
+                let contacts = self.truth.row().to_vec();
+                self.pass_truth_row();
+                SimEvent::Truth { t_s, contacts }
+            }
+            Due::Pressure(t_s) => SimEvent::Pressure { t_s, kpa: self.pressure_sample(t_s) },
+            Due::Eit(t_s) => {
+                let mut v = vec![0.0; self.measurement_count()];
+                let seq = self.eit_frame(t_s, &mut v)?;
+                SimEvent::Eit { t_s, seq, v }
+            }
         }))
     }
 }

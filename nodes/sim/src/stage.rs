@@ -7,7 +7,7 @@
 //! Units: mm, degrees. All draws are pure functions of the seed (per press for repeatability).
 
 use crate::profile::Profile;
-use crate::randomness::{Stream, indexed_normal, normal, stream};
+use crate::randomness::{SlotMemo, Stream, indexed_normal, normal, stream};
 use crate::timeline::Load;
 use skinflow_eit::Sensor;
 
@@ -58,17 +58,38 @@ impl Stage {
     /// one may (both channels lose that part of the load to the frame), and a contact whose
     /// centre stays on the skin is placed exactly as without the clamp.
     pub fn place(&self, loads: &mut [Load]) {
+        self.place_each(loads, |_, press| self.repeat_error_mm(press));
+    }
+
+    /// [`Stage::place`] with each press's repeatability draw kept per contact slot in `memo`:
+    /// the same positions to the bit, but a press that stays in its slot (a hold, a ramp) is
+    /// drawn once instead of at every instant it is placed.
+    pub fn place_cached(&self, loads: &mut [Load], memo: &mut SlotMemo<[f64; 2]>) {
+        self.place_each(loads, |slot, press| memo.get(slot, press, |p| self.repeat_error_mm(p)));
+    }
+
+    /// Where press `press` lands off its mounted position, mm per axis (repeatability).
+    fn repeat_error_mm(&self, press: u32) -> [f64; 2] {
+        let k = 2 * u64::from(press);
+        [
+            self.repeatability_mm * indexed_normal(self.seed, Stream::StageRepeat, k),
+            self.repeatability_mm * indexed_normal(self.seed, Stream::StageRepeat, k + 1),
+        ]
+    }
+
+    /// `place`, with `repeat(slot, press)` giving the repeatability error of the load in `slot`.
+    fn place_each(&self, loads: &mut [Load], mut repeat: impl FnMut(usize, u32) -> [f64; 2]) {
         if self.is_exact() {
             return;
         }
-        for l in loads {
+        for (slot, l) in loads.iter_mut().enumerate() {
             let (x, y) = (l.x_mm, l.y_mm);
             let (mut ax, mut ay) =
                 (self.cos * x - self.sin * y + self.offset_mm[0], self.sin * x + self.cos * y + self.offset_mm[1]);
             if self.repeatability_mm > 0.0 {
-                let k = 2 * u64::from(l.press);
-                ax += self.repeatability_mm * indexed_normal(self.seed, Stream::StageRepeat, k);
-                ay += self.repeatability_mm * indexed_normal(self.seed, Stream::StageRepeat, k + 1);
+                let [ex, ey] = repeat(slot, l.press);
+                ax += ex;
+                ay += ey;
             }
             let (hx, hy) = self.half_extents_mm;
             l.x_mm = ax.clamp(-hx, hx);
@@ -108,6 +129,34 @@ mod tests {
         stage.place(&mut e);
         assert_eq!(b, c);
         assert_ne!(b, e);
+    }
+
+    #[test]
+    fn cached_placement_is_the_uncached_one_bit_for_bit() {
+        let sensor = Sensor::paper_100mm();
+        let stage = Stage::new(&Profile::paper(), &sensor, 9);
+        let mut memo = SlotMemo::with_capacity(2);
+        // instants of a stream: holds, a second contact, the first leaving (slot 1 moves to 0),
+        // a press at the edge (clamped), a new press
+        let instants: [&[Load]; 7] = [
+            &[],
+            &[load(10.0, -5.0, 0)],
+            &[load(10.0, -5.0, 0)],
+            &[load(10.0, -5.0, 0), load(-30.0, 20.0, 1)],
+            &[load(-30.0, 20.0, 1)],
+            &[load(50.0, -50.0, 2)],
+            &[load(10.0, -5.0, 3), load(-30.0, 20.0, 1)],
+        ];
+        let mut moved = 0;
+        for (i, loads) in instants.iter().enumerate() {
+            let (mut cached, mut direct) = (loads.to_vec(), loads.to_vec());
+            stage.place_cached(&mut cached, &mut memo);
+            stage.place(&mut direct);
+            let bits = |l: &[Load]| l.iter().map(|l| (l.x_mm.to_bits(), l.y_mm.to_bits())).collect::<Vec<_>>();
+            assert_eq!(bits(&cached), bits(&direct), "instant {i}");
+            moved += cached.iter().zip(loads.iter()).filter(|(a, b)| a != b).count();
+        }
+        assert!(moved >= 7, "the paper stage moves the contacts ({moved} of 8 moved)");
     }
 
     #[test]

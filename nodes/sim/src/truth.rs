@@ -25,8 +25,8 @@ pub struct TruthRow {
 
 /// The truth rows of a timeline, generated one at a time in time order: rows are a pure
 /// function of the timeline and the sample rate, so none is held beyond the current one (a
-/// 1,000 s ramp at 2 kHz has 2 million). Buffers are reused: after the widest row, producing a
-/// row allocates nothing.
+/// 1,000 s ramp at 2 kHz has 2 million). The current row is read in place (`row`), not copied
+/// out; after the widest row, producing a row allocates nothing.
 #[derive(Debug, Clone)]
 pub struct TruthCursor {
     sample_hz: f64,
@@ -57,9 +57,9 @@ impl TruthCursor {
         }
     }
 
-    /// The next row of `timeline` (the one given to `new`): its contacts into `out` (cleared
-    /// first) and its time, s; None after the last row.
-    pub fn next_into(&mut self, timeline: &Timeline, out: &mut Vec<TruthContact>) -> Option<f64> {
+    /// Moves to the next row of `timeline` (the one given to `new`) and returns its time, s;
+    /// its contacts are then `row()`. None after the last row (`row()` keeps the last one).
+    pub fn advance(&mut self, timeline: &Timeline) -> Option<f64> {
         loop {
             let i = self.segment;
             let seg = timeline.segments.get(i)?;
@@ -101,10 +101,13 @@ impl TruthCursor {
             }
             self.started = true;
             std::mem::swap(&mut self.last, &mut self.candidate);
-            out.clear();
-            out.extend_from_slice(&self.last);
             return Some(t_s);
         }
+    }
+
+    /// Contacts of the row `advance` last moved to (empty before the first: no contact).
+    pub fn row(&self) -> &[TruthContact] {
+        &self.last
     }
 }
 
@@ -113,9 +116,8 @@ impl TruthCursor {
 pub fn truth_rows(timeline: &Timeline, sample_hz: f64) -> Vec<TruthRow> {
     let mut cursor = TruthCursor::new(timeline, sample_hz);
     let mut rows = Vec::new();
-    let mut contacts = Vec::new();
-    while let Some(t_s) = cursor.next_into(timeline, &mut contacts) {
-        rows.push(TruthRow { t_s, contacts: contacts.clone() });
+    while let Some(t_s) = cursor.advance(timeline) {
+        rows.push(TruthRow { t_s, contacts: cursor.row().to_vec() });
     }
     rows
 }

@@ -5,7 +5,9 @@
 //! Before a step is expanded its length and segment count are worked out arithmetically, and a
 //! step that would take the timeline past `MAX_DURATION_S` or `MAX_SEGMENTS` is refused before
 //! anything is built (a `grid` of 1000 x 1000 with 10,000 forces and 100,000 repeats would
-//! otherwise exhaust the memory first).
+//! otherwise exhaust the memory first). The figures mirror the expansion loops; debug builds
+//! check every expanded step against them (`Builder::check_admitted`), so the two cannot drift
+//! apart unnoticed by the scene tests.
 
 use super::SceneError;
 use super::parse::{RawContact, RawGrid, RawStep};
@@ -37,6 +39,8 @@ pub(super) struct Builder {
     t_s: f64,
     press: u32,
     level: u32,
+    /// Segments and length, s, the last admitted step was worked out to bring the timeline to.
+    admitted: (f64, f64),
 }
 
 /// One contact's position and size; forces come from the step.
@@ -80,7 +84,7 @@ impl Builder {
 
     /// Refuses step `step` (1-based) before it is expanded if it would take the timeline past
     /// `MAX_DURATION_S` or `MAX_SEGMENTS`.
-    fn admit(&self, step: &StepRef<'_>, extent: Extent, err: &ErrFn<'_>) -> Result<(), SceneError> {
+    fn admit(&mut self, step: &StepRef<'_>, extent: Extent, err: &ErrFn<'_>) -> Result<(), SceneError> {
         let Extent { duration_s, segments, how } = extent;
         let total_s = self.t_s + duration_s;
         if total_s > MAX_DURATION_S || total_s.is_nan() {
@@ -104,7 +108,20 @@ impl Builder {
                 ),
             ));
         }
+        self.admitted = (total, total_s);
         Ok(())
+    }
+
+    /// Debug builds: the step just expanded built what `admit` worked out for it (segment count
+    /// exactly; length up to the rounding of summing it segment by segment).
+    pub(super) fn check_admitted(&self) {
+        let (segments, length_s) = self.admitted;
+        debug_assert_eq!(self.segments.len() as f64, segments, "segments built vs admitted");
+        debug_assert!(
+            (self.t_s - length_s).abs() <= 1e-9 * length_s.max(1.0),
+            "length built {} s vs admitted {length_s} s",
+            self.t_s
+        );
     }
 }
 

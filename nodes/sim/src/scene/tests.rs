@@ -217,3 +217,35 @@ fn faults_parse_with_defaults_and_bad_ones_are_named_where_they_are() {
     let (_, _, p) = fails(&format!("{HEAD}[[fault]]\nkind = \"dead_electrode\"\nelectrode = 1\nvolts = 3.0\n"));
     assert!(p.contains("volts"), "{p}");
 }
+
+/// The figures `admit` refuses on mirror the expansion loops by hand; `Builder::check_admitted`
+/// (run after every step in debug builds) compares them with what was built. Every branch, with
+/// the zero-length pieces the loops drop: a wrong mirror panics here.
+#[test]
+fn each_step_builds_what_it_was_admitted_as() {
+    let text = format!(
+        "{HEAD}[[step]]\nrest_s = 0.0\n\n\
+         [[step]]\ncontacts = [{{ x_mm = -30.0, y_mm = 0.0, diameter_mm = 10.0, force_n = 1.0 }},\n\
+         {{ x_mm = 30.0, y_mm = 0.0, diameter_mm = 10.0, force_n = 2.0 }}]\nhold_s = 0.7\nramp_s = 0.0\nrepeat = 3\n\n\
+         [[step]]\nat_mm = [[0.0, 0.0], [5.0, 5.0]]\ndiameter_mm = 15.0\n\
+         force_profile = [[0.5, 0.0], [0.5, 1.0], [2.0, 4.0], [2.0, 4.0], [3.0, 0.0]]\nrelease_s = 0.0\nrest_s = 0.3\nrepeat = 2\n\n\
+         [[step]]\ngrid = {{ x_mm = [-20.0, 20.0], y_mm = [0.0, 0.0], n = [3, 1] }}\ndiameter_mm = 15.0\n\
+         forces_n = [1.0, 2.0, 3.0]\nloading = \"staircase\"\nhold_s = 0.0\nramp_s = 0.4\nrelease_s = 0.2\nrepeat = 2\n\n\
+         [[step]]\nat_mm = [[10.0, 10.0]]\ndiameter_mm = 15.0\nforces_n = {{ from = 1.0, to = 2.0, n = 4 }}\n\
+         hold_frames = 3\nramp_s = 0.1\nrelease_s = 0.0\nrest_s = 0.0\nrepeat = 5\n"
+    );
+    let s = parse(&text).unwrap();
+    // kept pieces: lead-in 1, empty rest 0, contacts 3 repeats x the hold, profile 2 positions
+    // x 2 repeats x (wait, ramp, 2 non-empty windows, rest), staircase 3 x 2 x (3 ramps,
+    // release), separate 5 repeats x 4 forces x (ramp, hold)
+    assert_eq!(s.timeline.segments.len(), 1 + 3 + 20 + 24 + 40);
+}
+
+#[cfg(debug_assertions)]
+#[test]
+#[should_panic(expected = "segments built vs admitted")]
+fn a_step_that_builds_other_than_admitted_is_caught() {
+    let mut b = expand::Builder::default();
+    b.segments.push(crate::timeline::Segment { start_s: 0.0, end_s: 1.0, contacts: Vec::new() });
+    b.check_admitted();
+}

@@ -80,6 +80,7 @@ pub(super) fn validate(raw: RawScene, text: &str, at: &Locator<'_>) -> Result<Sc
         }
         let step_ref = StepRef { number: k + 1, span: step.span(), raw: s };
         expand_step(&step_ref, &sensor, rates.eit_fps, &mut builder, &err)?;
+        builder.check_admitted();
     }
     let timeline = Timeline { segments: builder.segments };
     let duration_s = timeline.duration_s();

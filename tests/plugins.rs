@@ -16,16 +16,12 @@
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
-use std::sync::atomic::{AtomicU64, Ordering::SeqCst};
 use std::sync::{Arc, Mutex};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
-use serde::Deserialize;
 use skinflow_core::graph::SourceFile;
-use skinflow_core::{
-    BuildContext, Context, GraphHandle, GraphSpec, NodeError, NodeImpl, NodeParams, NodeState, Outputs, Params,
-    Registry, RunOptions, RunReport, RunningGraph, Source, SourcePoll, StateRefused, typed,
-};
+use skinflow_core::{GraphHandle, GraphSpec, Params, Registry, RunOptions, RunReport, RunningGraph};
+use skinflow_nodes::gate::{self, Gate};
 use skinflow_nodes::payload::PressureSample;
 use skinflow_nodes::pipeline::{Captured, registry_with_capture};
 
@@ -820,106 +816,12 @@ fn shipped_csv_graphs_write_and_replay_the_pipeline_exactly() {
 // The run-time hooks: graphs run in this process (lockstep), with built libraries loaded into
 // the registry, a source held behind a gate while commands and swaps are sent.
 
-/// Holds a source once it has sent `limit` messages: it answers its polls idle until the limit
-/// is raised.
-#[derive(Default)]
-struct Gate {
-    limit: AtomicU64,
-    sent: AtomicU64,
-    /// The limit the source was last held at, and the polls it answered there.
-    held: Mutex<(u64, u64)>,
-}
-
-impl Gate {
-    fn new(limit: u64) -> Arc<Gate> {
-        Arc::new(Gate { limit: AtomicU64::new(limit), ..Gate::default() })
-    }
-
-    /// Waits until the source is held at the current limit and was polled there twice: what
-    /// it sent before has gone through the graph (a lockstep pass drains between two polls).
-    fn wait_held(&self) {
-        let limit = self.limit.load(SeqCst);
-        let t0 = Instant::now();
-        loop {
-            let (at, polls) = *self.held.lock().unwrap();
-            if at == limit && polls >= 2 {
-                return;
-            }
-            // A guard against a hang, not a timing assertion.
-            assert!(t0.elapsed() < Duration::from_secs(300), "the source was never held at {limit}");
-            std::thread::sleep(Duration::from_millis(5));
-        }
-    }
-
-    fn raise(&self, limit: u64) {
-        self.limit.store(limit, SeqCst);
-    }
-}
-
-/// A source behind a gate; the hooks go to the source it wraps.
-struct Gated {
-    inner: Box<dyn Source>,
-    gate: Arc<Gate>,
-}
-
-impl Source for Gated {
-    fn start(&mut self, ctx: &mut Context) -> Result<(), NodeError> {
-        self.inner.start(ctx)
-    }
-    fn poll(&mut self, ctx: &mut Context, out: &mut Outputs) -> Result<SourcePoll, NodeError> {
-        let g = &self.gate;
-        let limit = g.limit.load(SeqCst);
-        if g.sent.load(SeqCst) >= limit {
-            let mut held = g.held.lock().unwrap();
-            *held = if held.0 == limit { (limit, held.1 + 1) } else { (limit, 1) };
-            drop(held);
-            std::thread::yield_now();
-            return Ok(SourcePoll::Idle);
-        }
-        let r = self.inner.poll(ctx, out)?;
-        if r == SourcePoll::Emitted {
-            g.sent.fetch_add(1, SeqCst);
-        }
-        Ok(r)
-    }
-    fn stop(&mut self, ctx: &mut Context) -> Result<(), NodeError> {
-        self.inner.stop(ctx)
-    }
-    fn control(&mut self, ctx: &mut Context, cmd: &str) -> Result<(), NodeError> {
-        self.inner.control(ctx, cmd)
-    }
-    fn export_state(&mut self, ctx: &mut Context) -> Option<NodeState> {
-        self.inner.export_state(ctx)
-    }
-    fn import_state(&mut self, ctx: &mut Context, state: NodeState) -> Result<(), StateRefused> {
-        self.inner.import_state(ctx, state)
-    }
-}
-
-/// The params of the kind behind the gate, as they are.
-#[derive(Deserialize)]
-struct Pass {
-    #[serde(flatten)]
-    table: toml::Table,
-}
-impl NodeParams for Pass {}
-
 /// The built-in kinds, `capture` (into `captured`), the plugins `libs`, and `gated`: source
 /// kind `kind` behind `gate`.
 fn gated_registry(libs: &[PathBuf], captured: Captured, kind: &str, gate: &Arc<Gate>) -> Registry {
     let mut reg = registry_with_capture(captured);
     skinflow_nodes::codec::load_plugins(libs, &mut reg).expect("the plugins load");
-    let inner = reg.get(kind).unwrap_or_else(|| panic!("no kind {kind}")).clone();
-    let mut info = inner.info().clone();
-    info.name = "gated".into();
-    let gate = gate.clone();
-    reg.register(typed(info, move |p: Pass, ctx: &BuildContext| {
-        match inner.build(&Params::from_table(p.table), ctx)? {
-            NodeImpl::Source(inner) => Ok(NodeImpl::Source(Box::new(Gated { inner, gate: gate.clone() }))),
-            _ => unreachable!("a source kind"),
-        }
-    }))
-    .unwrap();
+    gate::register(&mut reg, kind, "gated", gate.clone());
     reg
 }
 
@@ -972,7 +874,7 @@ fn a_command_to_a_plugin_node_is_applied_and_a_bad_one_is_refused_naming_the_nod
     let d = workdir("control");
     let lib = plugin("skinflow-plugin-fixture-faulty");
     let captured: Captured = Arc::new(Mutex::new(Vec::new()));
-    let gate = Gate::new(10);
+    let gate = Gate::new(Some(10), None);
     let reg = gated_registry(std::slice::from_ref(&lib), captured.clone(), "fixture-count", &gate);
     let graph = "[graph]\nmode = \"lockstep\"\n\
         [[node]]\nid = \"src\"\nkind = \"gated\"\nparams = { count = 20 }\n\
@@ -1019,7 +921,7 @@ fn a_csv_pressure_source_swapped_to_a_rebuilt_library_goes_on_without_duplicates
     std::fs::write(d.join("p.csv"), format!("t_s,kpa\n{text}")).unwrap();
     std::fs::write(d.join("other.csv"), format!("t_s,kpa\n{text}")).unwrap();
     let captured: Captured = Arc::new(Mutex::new(Vec::new()));
-    let gate = Gate::new(12);
+    let gate = Gate::new(Some(12), None);
     let reg = gated_registry(std::slice::from_ref(&lib), captured.clone(), "csv-pressure", &gate);
     let again = loaded_again(&lib, &d);
     let rebuilt = again.get("csv-pressure").unwrap().clone();
@@ -1065,7 +967,7 @@ fn a_plugin_node_takes_over_its_own_kinds_state_and_not_another_kinds() {
     let d = workdir("swap-kinds");
     let lib = plugin("skinflow-plugin-fixture-faulty");
     let captured: Captured = Arc::new(Mutex::new(Vec::new()));
-    let gate = Gate::new(10);
+    let gate = Gate::new(Some(10), None);
     let reg = gated_registry(std::slice::from_ref(&lib), captured.clone(), "fixture-count", &gate);
     let again = loaded_again(&lib, &d);
     let graph = "[graph]\nmode = \"lockstep\"\n\

@@ -1,9 +1,9 @@
-//! A source held at a gate, for deterministic hot-swap tests: the graph runs in lockstep, the
-//! gate holds the source after some messages, the test queues its swaps while it is held, then
-//! opens the gate. Test support, used by this crate's unit and integration tests.
+//! A source held at a gate, for deterministic hot-swap and control tests: the graph runs in
+//! lockstep, the gate holds the source after some messages, the test sends its commands and
+//! queues its swaps while it is held, then raises or opens the gate. Test support, used by this crate's tests and the workspace's `tests/plugins.rs`.
 
-use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering::SeqCst};
+use std::sync::atomic::{AtomicU64, Ordering::SeqCst};
+use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use serde::Deserialize;
@@ -12,17 +12,17 @@ use skinflow_core::{
     StateRefused, typed,
 };
 
-/// Where a gated source stops until [`Gate::open_after`] opens it.
+/// Where a gated source stops: once it has sent `limit` messages it answers its polls idle
+/// until the limit is raised ([`Gate::raise`], [`Gate::open_after`]).
 #[derive(Debug)]
 pub struct Gate {
     /// Messages let through before holding (`u64::MAX`: never hold).
-    limit: u64,
+    limit: AtomicU64,
     /// Counts only the messages on this output; `None`: every emitted poll.
     port: Option<usize>,
-    open: AtomicBool,
     passed: AtomicU64,
-    /// Polls answered while held.
-    held: AtomicU64,
+    /// The limit the source was last held at, and the polls it answered idle there.
+    held: Mutex<(u64, u64)>,
 }
 
 impl Gate {
@@ -30,31 +30,47 @@ impl Gate {
     /// output `port` only, or every emitted poll with `None`.
     pub fn new(limit: Option<u64>, port: Option<usize>) -> Arc<Gate> {
         Arc::new(Gate {
-            limit: limit.unwrap_or(u64::MAX),
+            limit: AtomicU64::new(limit.unwrap_or(u64::MAX)),
             port,
-            open: AtomicBool::new(false),
             passed: AtomicU64::new(0),
-            held: AtomicU64::new(0),
+            held: Mutex::new((0, 0)),
         })
     }
 
-    /// Waits until the source has been held twice (so everything before the gate has run
-    /// through: a lockstep pass drains), runs `while_held` (queue the swaps), then opens.
+    /// Waits until the source is held at the current limit and was polled there twice: what
+    /// it sent before has gone through the graph (a lockstep pass drains between two polls).
     ///
     /// # Panics
-    /// When the source is never held within 300 s (a gate beyond the source's end).
-    pub fn open_after(&self, while_held: impl FnOnce()) {
+    /// When the source is not held there within 300 s (a limit beyond the source's end).
+    pub fn wait_held(&self) {
+        let limit = self.limit.load(SeqCst);
         let t0 = Instant::now();
-        while self.held.load(SeqCst) < 2 {
-            assert!(t0.elapsed() < Duration::from_secs(300), "the source was never held");
+        loop {
+            let (at, polls) = *self.held.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+            if at == limit && polls >= 2 {
+                return;
+            }
+            // A guard against a hang, not a timing assertion.
+            assert!(t0.elapsed() < Duration::from_secs(300), "the source was never held at {limit}");
             std::thread::sleep(Duration::from_millis(5));
         }
+    }
+
+    /// Lets the source go on to `limit` messages (`u64::MAX`: to its end).
+    pub fn raise(&self, limit: u64) {
+        self.limit.store(limit, SeqCst);
+    }
+
+    /// Waits until the source is held ([`Gate::wait_held`]), runs `while_held` (queue the
+    /// swaps), then opens the gate for good.
+    pub fn open_after(&self, while_held: impl FnOnce()) {
+        self.wait_held();
         while_held();
-        self.open.store(true, SeqCst);
+        self.raise(u64::MAX);
     }
 }
 
-/// A source behind a gate; hands its inner source's state over in a swap.
+/// A source behind a gate; commands and hot-swap state go to the source it wraps.
 struct Gated {
     inner: Box<dyn Source>,
     gate: Arc<Gate>,
@@ -66,8 +82,11 @@ impl Source for Gated {
     }
     fn poll(&mut self, ctx: &mut Context, out: &mut Outputs) -> Result<SourcePoll, NodeError> {
         let g = &self.gate;
-        if !g.open.load(SeqCst) && g.passed.load(SeqCst) >= g.limit {
-            g.held.fetch_add(1, SeqCst);
+        let limit = g.limit.load(SeqCst);
+        if g.passed.load(SeqCst) >= limit {
+            let mut held = g.held.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+            *held = if held.0 == limit { (limit, held.1 + 1) } else { (limit, 1) };
+            drop(held);
             std::thread::yield_now();
             return Ok(SourcePoll::Idle);
         }
@@ -83,6 +102,9 @@ impl Source for Gated {
     }
     fn stop(&mut self, ctx: &mut Context) -> Result<(), NodeError> {
         self.inner.stop(ctx)
+    }
+    fn control(&mut self, ctx: &mut Context, cmd: &str) -> Result<(), NodeError> {
+        self.inner.control(ctx, cmd)
     }
     fn export_state(&mut self, ctx: &mut Context) -> Option<NodeState> {
         self.inner.export_state(ctx)

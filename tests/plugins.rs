@@ -513,8 +513,10 @@ fn bench_varies_a_param_over_a_recording_and_writes_table_and_plot() {
 
 /// A variant whose reconstructor errs on every frame (a sensor with other channels than the
 /// recording's) is reported with its node errors, and the points' different frame counts are
-/// warned about; a variant that cannot start (a missing calibration) does not lose the
-/// variants that ran: they are written, then bench fails naming the variant and its cause.
+/// warned about; a variant naming a missing calibration is refused before anything runs and
+/// the last bench's outputs are kept; a variant that cannot start (a logger whose directory is
+/// not there) does not lose the variants that ran: they are written, then bench fails naming
+/// the variant and its cause.
 #[test]
 fn bench_reports_node_errors_and_a_failed_variant_after_the_others() {
     let d = bench_workdir("bench-health");
@@ -543,23 +545,45 @@ fn bench_reports_node_errors_and_a_failed_variant_after_the_others() {
     assert!(md.contains("## Warnings") && md.contains(&format!("node \"recon\": {} errors", recon["errors"])), "{md}");
     assert_eq!(bench_json["warnings"].as_array().unwrap().len(), 2, "{}", bench_json["warnings"]);
 
+    // A missing input file is found when the variants are checked: nothing runs, and the
+    // last bench's outputs stay as they were.
+    let before = std::fs::read(d.join("out/bench.json")).unwrap();
     let o = bench(&d, &["split-sens.calibration=calib/paper.toml,calib/missing.toml"]);
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    let variant = r#"variant "split-sens.calibration="calib/missing.toml""#;
+    let param = r#"node "split-sens": param "calibration": "#;
+    assert!(err.contains(variant) && err.contains(param) && err.contains("missing.toml: No such file"), "{err}");
+    assert!(!err.contains("warm-up"), "nothing ran: {err}");
+    assert_eq!(std::fs::read(d.join("out/bench.json")).unwrap(), before, "the last bench's report is kept");
+
+    // The shipped graph with a logger: a variant whose logger cannot create its file fails at
+    // start, after the variant before it ran.
+    let graph = std::fs::read_to_string(root().join("graphs/ab-replay.toml")).unwrap()
+        + "\n[[node]]\nid = \"log\"\nkind = \"hdf5_logger\"\nparams = { path = \"log.h5\", overwrite = true }\n\
+           [[edge]]\nfrom = \"replay.eit\"\nto = \"log.eit\"\n";
+    std::fs::create_dir_all(d.join("calib")).unwrap();
+    std::fs::copy(root().join("graphs/calib/paper.toml"), d.join("calib/paper.toml")).unwrap();
+    std::fs::write(d.join("logged.toml"), graph).unwrap();
+    let vary = r#"log.path="log.h5","no/dir/log.h5""#;
+    let o = skinflow(&d, &["bench", "logged.toml", "--replay", "rec.h5", "--out", "out", "--vary", vary]);
     assert!(!o.status.success(), "a variant that cannot start fails the bench");
     let err = stderr(&o);
     let last = err.trim().lines().last().unwrap();
-    assert!(last.starts_with(r#"error: variant "split-sens.calibration="calib/missing.toml"": "#), "{err}");
-    assert!(last.contains("missing.toml") && last.contains("1 of 2 variants failed"), "{last}");
+    assert!(last.starts_with(r#"error: variant "log.path="no/dir/log.h5"": "#), "{err}");
+    assert!(last.contains("no/dir/log.h5") && last.contains("1 of 2 variants failed"), "{last}");
     let bench_json = json_file(&d.join("out/bench.json"));
     let points = bench_json["points"].as_array().unwrap();
     assert_eq!(points.len(), 2, "the variant that ran: {bench_json}");
     assert!(points.iter().all(|p| p["variant_index"] == 0 && p["rmse_n"].as_f64().is_some()), "{bench_json}");
     let failed = &bench_json["variants"][1];
-    assert!(failed["error"].as_str().unwrap().contains("missing.toml"), "{failed}");
+    assert!(failed["error"].as_str().unwrap().contains("no/dir/log.h5"), "{failed}");
     assert!(failed["compare_json"].is_null(), "{failed}");
     let md = std::fs::read_to_string(d.join("out/bench.md")).unwrap();
-    assert!(md.contains(r#"| split-sens.calibration="calib/paper.toml" | proportional |"#), "{md}");
-    assert!(md.contains(r#"- variant 1 `split-sens.calibration="calib/missing.toml"`: FAILED: "#), "{md}");
+    assert!(md.contains(r#"| log.path="log.h5" | proportional |"#), "{md}");
+    assert!(md.contains(r#"- variant 1 `log.path="no/dir/log.h5"`: FAILED: "#), "{md}");
     assert!(d.join("out/pareto.png").is_file(), "the variants that ran are plotted");
+    assert!(d.join("log.h5").is_file(), "the variant that ran logged");
 }
 
 /// The run report of `--stats-json F`.

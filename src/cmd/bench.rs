@@ -281,12 +281,15 @@ pub fn run(graph: &Path, replay: &Path, vary: &[String], out_dir: &Path) -> Resu
         bail!("{}: recording not found", replay.display());
     }
     let out_abs = std::path::absolute(out_dir)?;
-    // Every variant validates before any runs or anything is written.
+    // Every variant validates, and opens its input files, before any runs or anything is written.
     let mut specs: Vec<(String, Overrides, GraphSpec, PathBuf)> = Vec::new();
     for (k, (label, set)) in combinations(&vary).into_iter().enumerate() {
         let json = out_abs.join(format!("variant-{k}.json"));
         let src = SourceFile::new(graph, variant_text(&base, &replay, &set, &json)?);
-        let spec = GraphSpec::parse(src, &reg).map_err(|e| invalid_variant(graph, &text, &reg, &label, e))?;
+        // As `run` does: the input files (the recording, scenes, calibrations) are opened too.
+        let spec = GraphSpec::parse(src, &reg)
+            .and_then(|spec| spec.check_files().map(|()| spec))
+            .map_err(|e| invalid_variant(graph, &text, &reg, &label, e))?;
         specs.push((label, set, spec, json));
     }
     std::fs::create_dir_all(out_dir).with_context(|| format!("{}: cannot create", out_dir.display()))?;

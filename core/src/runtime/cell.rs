@@ -87,6 +87,15 @@ pub(crate) enum StopFailure {
     Panic(String),
 }
 
+impl std::fmt::Display for StopFailure {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            StopFailure::Error(e) => write!(f, "{e}"),
+            StopFailure::Panic(msg) => write!(f, "stop panicked: {msg}"),
+        }
+    }
+}
+
 impl StopFailure {
     /// As a node error: a panic becomes [`NodeError::Panic`].
     pub fn into_error(self) -> NodeError {
@@ -99,9 +108,10 @@ impl StopFailure {
 
 /// The panic-safe stop of an instance, with the node's context: its `stop` counts what it
 /// held; an error or a panic there is returned, never propagated. Used for a node's own
-/// instance at the end of the run ([`Cell::stop_at_end`]) and for an instance taken out of
-/// the node ([`Cell::stop_replaced`]).
-fn stop_caught(imp: &mut NodeImpl, ctx: &mut Context) -> Result<(), StopFailure> {
+/// instance at the end of the run ([`Cell::stop_at_end`]), for an instance taken out of the
+/// node ([`Cell::stop_replaced`]), for the nodes already started when another's `start`
+/// fails, and for a swap replacement that is never installed.
+pub(crate) fn stop_caught(imp: &mut NodeImpl, ctx: &mut Context) -> Result<(), StopFailure> {
     match catch_unwind(AssertUnwindSafe(|| imp.stop(ctx))) {
         Ok(Ok(())) => Ok(()),
         Ok(Err(e)) => Err(StopFailure::Error(e)),

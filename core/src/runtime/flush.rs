@@ -15,7 +15,7 @@
 use std::time::Instant;
 
 use super::cell::{Cell, Flushed};
-use super::lockstep::{Dirty, drain, run_controls};
+use super::lockstep::{Dirty, drain};
 use super::pool::{Exec, Shared};
 use crate::graph::Trigger;
 use crate::node::NodeImpl;
@@ -27,7 +27,7 @@ pub(crate) fn flush_all(shared: &Shared, cells: &mut [Box<Cell>], topo: &[usize]
     let n = Dirty::new(cells.len());
     settle(shared, cells, &order, &n);
     for &i in &order {
-        run_controls(shared, i, &mut cells[i]);
+        shared.run_controls(i, &mut cells[i]);
         if cells[i].dead || !matches!(cells[i].imp, NodeImpl::Processor(_)) {
             continue; // a dead instance's state is not trusted; a sink's `stop` is its flush
         }

@@ -200,6 +200,8 @@ impl GraphHandle {
         factory.check_wiring(&params, &Wiring::new(&wired)).map_err(|e| swap_err(e.to_string()))?;
         let build =
             BuildContext { base_dir: self.inner.base_dir.clone(), mode: self.inner.mode, node_id: node.to_owned() };
+        // The input files the params name, as `check` and `run` open them before a run.
+        factory.check_files(&params, &build).map_err(|e| swap_err(e.to_string()))?;
         let mut imp = factory.build(&params, &build).map_err(|e| swap_err(format!("build failed: {e}")))?;
         if imp.role() != info.role {
             return Err(swap_err(format!("factory built a {:?} for a kind declared {:?}", imp.role(), info.role)));
@@ -216,7 +218,7 @@ impl GraphHandle {
         imp.start(&mut ctx).map_err(|e: NodeError| swap_err(format!("start failed: {e}")))?;
         if shared.slots[i].ended.load(SeqCst) {
             // Ended while the replacement was built: it is stopped unused.
-            if let Err(e) = imp.stop(&mut ctx) {
+            if let Err(e) = super::cell::stop_caught(&mut imp, &mut ctx) {
                 tracing::warn!(node, "an unused swap replacement failed to stop: {e}");
             }
             return Err(ended());

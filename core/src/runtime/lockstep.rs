@@ -12,7 +12,7 @@ use std::time::Instant;
 
 use super::DRAIN_TIMEOUT;
 use super::cell::{Cell, Fired, Notify};
-use super::pool::{Exec, Shared, take_flag};
+use super::pool::{Exec, Shared};
 use crate::error::NodeError;
 use crate::graph::Trigger;
 
@@ -34,16 +34,6 @@ impl Notify for Dirty {
     }
 }
 
-/// Applies a node's queued control work (commands, a hot swap) between two of its calls.
-pub(crate) fn run_controls(shared: &Shared, i: usize, cell: &mut Cell) {
-    let slot = &shared.slots[i];
-    if take_flag(&slot.has_control) {
-        while let Some(c) = slot.control.pop() {
-            cell.control(c, shared);
-        }
-    }
-}
-
 pub(crate) fn run(shared: &Shared, topo: &[usize], external_stop: &AtomicBool, until: Option<Instant>) {
     let mut cells: Vec<Box<Cell>> =
         shared.slots.iter().map(|s| s.cell.take().expect("cells are in their slots before a lockstep run")).collect();
@@ -61,7 +51,7 @@ pub(crate) fn run(shared: &Shared, topo: &[usize], external_stop: &AtomicBool, u
                 continue;
             }
             let cell = &mut cells[s];
-            run_controls(shared, s, cell);
+            shared.run_controls(s, cell);
             if !cell.outputs_have_space() {
                 continue;
             }
@@ -115,7 +105,7 @@ pub(crate) fn drain(shared: &Shared, cells: &mut [Box<Cell>], order: &[usize], n
         let mut any = false;
         for &i in order {
             let cell = &mut cells[i];
-            run_controls(shared, i, cell);
+            shared.run_controls(i, cell);
             if !n.0[i].replace(false) && !cell.tick && !cell.ctx.rerun {
                 continue;
             }

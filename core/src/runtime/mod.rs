@@ -174,9 +174,13 @@ impl RunningGraph {
         for &i in spec.topo.iter().rev() {
             let c = &mut cells[i];
             if let Err(error) = c.imp.start(&mut c.ctx) {
+                // The nodes already started are stopped, each under `catch_unwind`: the start
+                // error is what the run reports; a stop's own failure is logged.
                 for &j in &started {
                     let c = &mut cells[j];
-                    let _ = c.imp.stop(&mut c.ctx);
+                    if let Err(e) = cell::stop_caught(&mut c.imp, &mut c.ctx) {
+                        tracing::warn!(node = %spec.nodes[j].id, "failed to stop after another node failed to start: {e}");
+                    }
                 }
                 let ns = &spec.nodes[i];
                 return Err(RunError::Start { node: ns.id.clone(), kind: ns.kind.clone(), error });

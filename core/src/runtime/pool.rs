@@ -185,6 +185,18 @@ impl Shared {
         }
     }
 
+    /// Applies node `node`'s queued control work (commands, a hot swap) to its cell, between two
+    /// of its calls: every executor (pool, dedicated thread, source thread, lockstep) calls this
+    /// before it fires a node.
+    pub fn run_controls(&self, node: usize, cell: &mut Cell) {
+        let slot = &self.slots[node];
+        if take_flag(&slot.has_control) {
+            while let Some(c) = slot.control.pop() {
+                cell.control(c, self);
+            }
+        }
+    }
+
     /// Runs a queued node until it is not ready, its budget is spent, or it is notified no more.
     pub fn execute(&self, node: usize, n: &dyn Notify, budget: usize) {
         let slot = &self.slots[node];
@@ -192,11 +204,7 @@ impl Shared {
         let mut cell = slot.cell.take().expect("a queued node's cell is in its slot");
         let mut left = budget;
         loop {
-            if take_flag(&slot.has_control) {
-                while let Some(c) = slot.control.pop() {
-                    cell.control(c, self);
-                }
-            }
+            self.run_controls(node, &mut cell);
             if take_flag(&slot.tick) {
                 cell.tick = true;
             }
@@ -327,11 +335,7 @@ pub(crate) fn source_loop(shared: &Shared, node: usize) {
         if shared.stop.load(SeqCst) {
             break;
         }
-        if take_flag(&slot.has_control) {
-            while let Some(c) = slot.control.pop() {
-                cell.control(c, shared);
-            }
-        }
+        shared.run_controls(node, &mut cell);
         if !cell.outputs_have_space() {
             std::thread::park_timeout(IDLE_PARK);
             continue;

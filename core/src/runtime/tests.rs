@@ -1,8 +1,10 @@
 //! The runtime's own tests: what a panicking instance held is counted; a swap counts (and
 //! shows its kind) only once installed, is answered with a replacement's refusal, and never
-//! runs when its node does not; deadline and restart policy change while the graph runs; a
+//! runs when its node does not, and is refused when an input file its params name is not
+//! there; deadline and restart policy change while the graph runs; a
 //! source's end (its stop, what is queued for it) and a stop that fails or panics go the same
-//! way under both executors.
+//! way under both executors, and so does a failed start (the nodes already started are
+//! stopped, a panic there caught).
 //!
 //! No assertion depends on timing: waits only give the graph time to reach a state.
 
@@ -34,9 +36,23 @@ struct HoldParams {
     /// `stop` panics, after counting what the instance holds.
     #[serde(default)]
     stop_panics: bool,
+    /// `start` fails.
+    #[serde(default)]
+    start_fails: bool,
+    /// A file that must exist ([`NodeParams::check_files`]); none by default.
+    #[serde(default)]
+    needs_file: Option<std::path::PathBuf>,
 }
 
-impl NodeParams for HoldParams {}
+impl NodeParams for HoldParams {
+    fn check_files(&self, ctx: &crate::registry::BuildContext) -> Result<(), crate::ParamError> {
+        let Some(f) = &self.needs_file else { return Ok(()) };
+        let p = ctx.resolve(f);
+        std::fs::metadata(&p)
+            .map(drop)
+            .map_err(|e| crate::ParamError::new("needs_file", format!("{}: {e}", p.display())))
+    }
+}
 
 /// Emits each input once `by` newer ones arrived (holds its last `by`), flushes them at end
 /// of stream, counts what it still holds at stop, panics on call `panic_at` (and in `stop`
@@ -48,6 +64,13 @@ struct Hold {
 }
 
 impl Processor for Hold {
+    fn start(&mut self, _ctx: &mut Context) -> Result<(), NodeError> {
+        if self.p.start_fails {
+            return Err(NodeError::msg("hold: start failed"));
+        }
+        Ok(())
+    }
+
     fn process(&mut self, _ctx: &mut Context, inputs: &Inputs, out: &mut Outputs) -> Result<(), NodeError> {
         self.calls += 1;
         if self.calls == self.p.panic_at {
@@ -609,4 +632,58 @@ fn a_control_command_that_panics_is_counted_and_the_restart_policy_applies() {
             }
         }
     }
+}
+
+#[test]
+fn when_a_start_fails_the_nodes_already_started_are_stopped_and_a_stop_that_panics_is_caught() {
+    for mode in ["lockstep", "realtime"] {
+        let reg = registry(&Arc::default());
+        // Sinks start first: `late` (its stop panics) is started when `early` fails to start.
+        let g = spec(
+            &reg,
+            &format!(
+                "[graph]\nmode = \"{mode}\"\n\
+                 [[node]]\nid = \"src\"\nkind = \"counter\"\nparams = {{ count = 3 }}\n\
+                 [[node]]\nid = \"early\"\nkind = \"hold\"\nparams = {{ by = 0, start_fails = true }}\n\
+                 [[node]]\nid = \"late\"\nkind = \"hold\"\nparams = {{ by = 0, stop_panics = true }}\n\
+                 [[node]]\nid = \"out\"\nkind = \"null\"\n\
+                 [[edge]]\nfrom = \"src.out\"\nto = \"early.in\"\n\
+                 [[edge]]\nfrom = \"early.out\"\nto = \"late.in\"\n\
+                 [[edge]]\nfrom = \"late.out\"\nto = \"out.in\"\n"
+            ),
+        );
+        match RunningGraph::start(&g) {
+            Err(RunError::Start { node, kind, error }) => {
+                assert_eq!((node.as_str(), kind.as_str()), ("early", "hold"), "{mode}");
+                assert_eq!(error.to_string(), "hold: start failed", "{mode}");
+            }
+            Err(other) => panic!("{mode}: expected the start error, got {other:?}"),
+            Ok(_) => panic!("{mode}: the graph started"),
+        }
+    }
+}
+
+#[test]
+fn a_swap_whose_input_file_is_missing_is_refused_naming_the_param_and_the_node_goes_on() {
+    let reg = registry(&Arc::default());
+    let running = RunningGraph::start(&spec(
+        &reg,
+        "[[node]]\nid = \"src\"\nkind = \"slow\"\nparams = { every_s = 0.001 }\n\
+         [[node]]\nid = \"h\"\nkind = \"hold\"\nparams = { by = 0 }\n\
+         [[node]]\nid = \"out\"\nkind = \"null\"\n\
+         [[edge]]\nfrom = \"src.out\"\nto = \"h.in\"\n\
+         [[edge]]\nfrom = \"h.out\"\nto = \"out.in\"\n",
+    ))
+    .unwrap();
+    let h = running.handle();
+    let hold = reg.get("hold").unwrap().clone();
+    let missing = "by = 0\nneeds_file = \"no/such/file.toml\"";
+    let e = h.swap("h", hold.clone(), Params::from_toml(missing).unwrap()).unwrap_err().to_string();
+    assert!(e.contains("node \"h\"") && e.contains("needs_file") && e.contains("no/such/file.toml"), "{e}");
+    // A file that is there: the swap goes through.
+    let present = format!("by = 0\nneeds_file = \"{}\"", env!("CARGO_MANIFEST_PATH"));
+    h.swap_wait("h", hold, Params::from_toml(&present).unwrap(), Duration::from_secs(10)).unwrap();
+    let r = running.wait(&RunOptions { stop: Some(Arc::new(AtomicBool::new(true))), ..RunOptions::default() });
+    assert!(r.failures.is_empty(), "{:?}", r.failures);
+    assert_eq!(node(&r, "h").swaps, 1);
 }

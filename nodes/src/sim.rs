@@ -12,6 +12,10 @@
 //! it) and seed takes the running simulation over and goes on where it stopped, paced from the
 //! last event sent by its own `pacing`. Another scene or seed refuses the swap: the simulation
 //! would start again at time 0, and the times and sequence numbers it sends would go back.
+//!
+//! Payloads come from rings of reused buffers ([`Recycler`]) filled from the simulator's
+//! reused event buffers (`Simulator::next_into`): once the rings are warm, and while consumers
+//! release what they are sent, sending an event allocates nothing.
 
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -19,9 +23,9 @@ use std::sync::Arc;
 use serde::Deserialize;
 use skinflow_core::{
     BuildContext, Context, Header, KindInfo, Message, NodeError, NodeImpl, NodeParams, NodeState, Outputs, ParamDoc,
-    PortSpec, Registry, Role, Source, SourcePoll, StateRefused, typed,
+    PortSpec, Recycler, Registry, Role, Source, SourcePoll, StateRefused, typed,
 };
-use skinflow_sim::{Pacing, Scene, SimEvent, Simulator};
+use skinflow_sim::{EventKind, Pacing, Scene, SimError, Simulator};
 
 use crate::order::AvailabilityOrder;
 use crate::pace::{Pacer, ns};
@@ -65,6 +69,9 @@ impl NodeParams for SimParams {
 const EIT: usize = 0;
 const PRESSURE: usize = 1;
 const TRUTH: usize = 2;
+/// Buffers per ring: more than the messages of one kind in flight downstream (queues and the
+/// frames waiting in `AvailabilityOrder`), as `replay` has.
+const RING: usize = 64;
 
 pub struct Sim {
     /// What the simulation is: a swap goes on only from the same.
@@ -73,6 +80,31 @@ pub struct Sim {
     pacer: Pacer,
     /// `None` only once handed over to a replacement (the engine then stops this instance).
     stream: Option<Stream>,
+    /// The payloads sent, reused once no consumer holds them.
+    rings: Rings,
+}
+
+struct Rings {
+    frames: Recycler<EitFrame>,
+    samples: Recycler<PressureSample>,
+    rows: Recycler<Truth>,
+}
+
+impl Rings {
+    fn new() -> Rings {
+        Rings {
+            frames: Recycler::new(RING, EitFrame::default),
+            samples: Recycler::new(RING, PressureSample::default),
+            rows: Recycler::new(RING, Truth::default),
+        }
+    }
+}
+
+/// A simulated event with its payload, in the order's queue until it is due.
+enum Event {
+    Eit { t_s: f64, seq: u64, frame: Arc<EitFrame> },
+    Pressure { t_s: f64, sample: Arc<PressureSample> },
+    Truth { t_s: f64, row: Arc<Truth> },
 }
 
 /// The scene file (as resolved), its text when read, and the seed.
@@ -86,9 +118,13 @@ pub struct Identity {
 /// The running simulation and where it is: what a hot swap hands over.
 struct Stream {
     sim: Simulator,
-    order: AvailabilityOrder<SimEvent>,
+    order: AvailabilityOrder<Event>,
     pressure_seq: u64,
     truth_seq: u64,
+    /// The simulator's output buffers, reused from event to event: an EIT frame's values
+    /// (length M) and a truth row's contacts.
+    v: Vec<f64>,
+    contacts: Vec<skinflow_sim::TruthContact>,
 }
 
 /// A sim's hand-over.
@@ -107,8 +143,20 @@ impl Sim {
             Some(_) => true,
             None => rates.pacing == Pacing::Realtime,
         };
-        let stream = Stream { order: AvailabilityOrder::new(1.0 / rates.eit_fps), sim, pressure_seq: 0, truth_seq: 0 };
-        Ok(Sim { identity, pacer: Pacer::new(if paced { 1.0 } else { 0.0 }, 0.0), stream: Some(stream) })
+        let stream = Stream {
+            order: AvailabilityOrder::new(1.0 / rates.eit_fps),
+            v: vec![0.0; sim.measurement_count()],
+            contacts: Vec::with_capacity(sim.max_contacts()),
+            sim,
+            pressure_seq: 0,
+            truth_seq: 0,
+        };
+        Ok(Sim {
+            identity,
+            pacer: Pacer::new(if paced { 1.0 } else { 0.0 }, 0.0),
+            stream: Some(stream),
+            rings: Rings::new(),
+        })
     }
 
     /// Why this instance cannot go on from a simulation of `other`, if it cannot.
@@ -134,14 +182,33 @@ impl Source for Sim {
     fn poll(&mut self, ctx: &mut Context, out: &mut Outputs) -> Result<SourcePoll, NodeError> {
         let st =
             self.stream.as_mut().ok_or_else(|| NodeError::msg("polled after handing its simulation over").fatal())?;
-        let sim = &mut st.sim;
-        let next = st.order.next(|| {
-            sim.next_event().map(|e| {
-                e.map(|e| match &e {
-                    SimEvent::Eit { t_s, .. } => (*t_s, true, e),
-                    SimEvent::Pressure { t_s, .. } | SimEvent::Truth { t_s, .. } => (*t_s, false, e),
-                })
-            })
+        let (sim, v, contacts, rings) = (&mut st.sim, &mut st.v, &mut st.contacts, &mut self.rings);
+        let next = st.order.next(|| -> Result<_, SimError> {
+            let Some(e) = sim.next_into(v, contacts)? else { return Ok(None) };
+            Ok(Some(match e {
+                EventKind::Eit { t_s, seq } => {
+                    let frame = rings.frames.fill(|f| {
+                        f.v.clear();
+                        f.v.extend_from_slice(v);
+                    });
+                    (t_s, true, Event::Eit { t_s, seq, frame })
+                }
+                EventKind::Pressure { t_s, kpa } => {
+                    (t_s, false, Event::Pressure { t_s, sample: rings.samples.fill(|p| p.kpa = kpa) })
+                }
+                EventKind::Truth { t_s } => {
+                    let row = rings.rows.fill(|r| {
+                        r.contacts.clear();
+                        r.contacts.extend(contacts.iter().map(|c| TruthContact {
+                            x_mm: c.x_mm,
+                            y_mm: c.y_mm,
+                            force_n: c.force_n,
+                            diameter_mm: c.diameter_mm,
+                        }));
+                    });
+                    (t_s, false, Event::Truth { t_s, row })
+                }
+            }))
         });
         let Some((avail_s, event)) = next.map_err(|e| NodeError::msg(format!("simulator: {e}")).fatal())? else {
             return Ok(SourcePoll::Finished);
@@ -151,29 +218,16 @@ impl Source for Sim {
         }
         let origin = ctx.index();
         match event {
-            SimEvent::Eit { t_s, seq, v } => {
-                out.send(EIT, Message::new(Header { seq, t_ns: ns(t_s), origin }, EitFrame { v }))?;
+            Event::Eit { t_s, seq, frame } => {
+                out.send(EIT, Message::from_arc(Header { seq, t_ns: ns(t_s), origin }, frame))?;
             }
-            SimEvent::Pressure { t_s, kpa } => {
+            Event::Pressure { t_s, sample } => {
                 st.pressure_seq += 1;
-                out.send(
-                    PRESSURE,
-                    Message::new(Header { seq: st.pressure_seq, t_ns: ns(t_s), origin }, PressureSample { kpa }),
-                )?;
+                out.send(PRESSURE, Message::from_arc(Header { seq: st.pressure_seq, t_ns: ns(t_s), origin }, sample))?;
             }
-            SimEvent::Truth { t_s, contacts } => {
+            Event::Truth { t_s, row } => {
                 st.truth_seq += 1;
-                let contacts = contacts
-                    .iter()
-                    .map(|c| TruthContact {
-                        x_mm: c.x_mm,
-                        y_mm: c.y_mm,
-                        force_n: c.force_n,
-                        diameter_mm: c.diameter_mm,
-                    })
-                    .collect();
-                let payload = Arc::new(Truth { contacts });
-                out.send(TRUTH, Message::from_arc(Header { seq: st.truth_seq, t_ns: ns(t_s), origin }, payload))?;
+                out.send(TRUTH, Message::from_arc(Header { seq: st.truth_seq, t_ns: ns(t_s), origin }, row))?;
             }
         }
         Ok(SourcePoll::Emitted)
@@ -223,6 +277,8 @@ mod tests {
     use skinflow_sim::Scene;
 
     use super::{Identity, Sim};
+    use crate::payload::{EitFrame, PressureSample, Truth};
+    use crate::pipeline::{Captured, registry_with_capture};
     use crate::swap_test::run;
 
     fn press() -> PathBuf {
@@ -237,6 +293,55 @@ mod tests {
         let parsed = Scene::from_file(scene).unwrap();
         let identity = Identity { scene: scene.to_path_buf(), text: text.to_owned(), seed };
         Sim::new(&parsed, identity, Some("fast")).unwrap()
+    }
+
+    /// The node sends what the simulator makes, value for value: its payloads are refilled
+    /// ring buffers (here all held by the capture, so the rings grow), not the events' own.
+    #[test]
+    fn the_payloads_are_the_simulators_events() {
+        use skinflow_core::graph::SourceFile;
+        use skinflow_core::{GraphSpec, RunOptions, RunningGraph};
+        use skinflow_sim::{SimEvent, Simulator};
+
+        let scene = press();
+        let captured: Captured = Default::default();
+        let reg = registry_with_capture(captured.clone());
+        let edges: String = ["eit", "pressure", "truth"]
+            .iter()
+            .map(|o| format!("[[edge]]\nfrom = \"src.{o}\"\nto = \"cap.in\"\ncapacity = 4096\n"))
+            .collect();
+        let graph = format!(
+            "[graph]\nmode = \"lockstep\"\n[[node]]\nid = \"src\"\nkind = \"sim\"\nparams = {{ {} }}\n\
+             [[node]]\nid = \"cap\"\nkind = \"capture\"\n{edges}",
+            params(&scene, ", seed = 3, pacing = \"fast\"")
+        );
+        let spec = GraphSpec::parse(SourceFile::new(scene.with_file_name("g.toml"), graph), &reg).unwrap();
+        let report = RunningGraph::start(&spec).unwrap().wait(&RunOptions::default());
+        assert!(report.failures.is_empty(), "{:?}", report.failures);
+
+        let (mut frames, mut samples, mut rows) = (Vec::new(), Vec::new(), Vec::new());
+        for m in captured.lock().unwrap().iter().flatten() {
+            if let Some(f) = m.get::<EitFrame>() {
+                frames.push((m.header.seq, f.v.clone()));
+            } else if let Some(p) = m.get::<PressureSample>() {
+                samples.push(p.kpa.to_bits());
+            } else if let Some(t) = m.get::<Truth>() {
+                rows.push(t.contacts.iter().map(|c| [c.x_mm, c.y_mm, c.force_n, c.diameter_mm]).collect::<Vec<_>>());
+            }
+        }
+        let (mut want_frames, mut want_samples, mut want_rows) = (Vec::new(), Vec::new(), Vec::new());
+        for e in Simulator::new(&Scene::from_file(&scene).unwrap(), 3).unwrap() {
+            match e.unwrap() {
+                SimEvent::Eit { seq, v, .. } => want_frames.push((seq, v)),
+                SimEvent::Pressure { kpa, .. } => want_samples.push(kpa.to_bits()),
+                SimEvent::Truth { contacts, .. } => want_rows
+                    .push(contacts.iter().map(|c| [c.x_mm, c.y_mm, c.force_n, c.diameter_mm]).collect::<Vec<_>>()),
+            }
+        }
+        assert!(frames.len() >= 6 && rows.iter().any(|r| !r.is_empty()), "{} frames", frames.len());
+        assert!(frames == want_frames, "EIT frames differ");
+        assert_eq!(samples, want_samples);
+        assert_eq!(rows, want_rows);
     }
 
     #[test]

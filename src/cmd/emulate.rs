@@ -13,7 +13,7 @@ use anyhow::Result;
 use skinflow_serial::{
     Device, Emulator, EmulatorConfig, EmulatorFeed, Fault, FaultPlan, Pacing, TimedForce, TimedFrame, TimedPressure,
 };
-use skinflow_sim::{Scene, SimEvent, Simulator};
+use skinflow_sim::{EventKind, Scene, Simulator};
 
 /// The options of `skinflow emulate`.
 #[derive(Debug, Clone, clap::Args)]
@@ -65,11 +65,14 @@ pub fn feed(scene_path: &Path, seed: u64) -> Result<(Vec<TimedFrame>, Vec<TimedP
     let mut sim = Simulator::new(&scene, seed).map_err(anyhow::Error::msg)?;
     let half = 0.5 / sim.rates().eit_fps;
     let (mut eit, mut pressure, mut force) = (Vec::new(), Vec::new(), Vec::new());
-    while let Some(e) = sim.next_event().map_err(anyhow::Error::msg)? {
+    // Reused from event to event; a frame is copied out, as the feed owns its frames.
+    let mut v = vec![0.0; sim.measurement_count()];
+    let mut contacts = Vec::with_capacity(sim.max_contacts());
+    while let Some(e) = sim.next_into(&mut v, &mut contacts).map_err(anyhow::Error::msg)? {
         match e {
-            SimEvent::Eit { t_s, v, .. } => eit.push(TimedFrame { t_s: t_s + half, volts: v }),
-            SimEvent::Pressure { t_s, kpa } => pressure.push(TimedPressure { t_s, kpa }),
-            SimEvent::Truth { t_s, contacts } => {
+            EventKind::Eit { t_s, .. } => eit.push(TimedFrame { t_s: t_s + half, volts: v.clone() }),
+            EventKind::Pressure { t_s, kpa } => pressure.push(TimedPressure { t_s, kpa }),
+            EventKind::Truth { t_s } => {
                 force.push(TimedForce { t_s, force_n: contacts.iter().map(|c| c.force_n).sum() })
             }
         }

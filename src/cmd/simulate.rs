@@ -11,7 +11,7 @@ use std::time::Instant;
 
 use anyhow::{Context as _, Result};
 use skinflow_record::write::{RecordingWriter, Streams, TruthContact, WriterOptions};
-use skinflow_sim::{Scene, SimEvent, Simulator};
+use skinflow_sim::{EventKind, Scene, Simulator};
 
 pub fn run(scene_path: &Path, out: &Path, seed: u64, overwrite: bool) -> Result<()> {
     super::paths::check_outputs(&[("scene", scene_path)], &[("--out", out)])?;
@@ -42,22 +42,25 @@ pub fn run(scene_path: &Path, out: &Path, seed: u64, overwrite: bool) -> Result<
 }
 
 /// Writes every event of `sim` to a new recording at `path`; returns the EIT frame, pressure
-/// sample and truth row counts.
+/// sample and truth row counts. The frame and truth row buffers are reused from event to event
+/// (`Simulator::next_into`): the writer copies what it is given.
 fn write(sim: &mut Simulator, path: &Path, o: &WriterOptions) -> Result<(u64, u64, u64)> {
     let mut w = RecordingWriter::create(path, o).map_err(anyhow::Error::msg)?;
-    let mut truth = Vec::new();
+    let mut v = vec![0.0; sim.measurement_count()];
+    let mut contacts = Vec::with_capacity(sim.max_contacts());
+    let mut truth = Vec::with_capacity(sim.max_contacts());
     let (mut frames, mut samples, mut rows) = (0u64, 0u64, 0u64);
-    while let Some(e) = sim.next_event().map_err(anyhow::Error::msg)? {
+    while let Some(e) = sim.next_into(&mut v, &mut contacts).map_err(anyhow::Error::msg)? {
         match e {
-            SimEvent::Eit { t_s, seq, v } => {
+            EventKind::Eit { t_s, seq } => {
                 w.append_eit(t_s, seq, &v).map_err(anyhow::Error::msg)?;
                 frames += 1;
             }
-            SimEvent::Pressure { t_s, kpa } => {
+            EventKind::Pressure { t_s, kpa } => {
                 w.append_pressure(t_s, kpa).map_err(anyhow::Error::msg)?;
                 samples += 1;
             }
-            SimEvent::Truth { t_s, contacts } => {
+            EventKind::Truth { t_s } => {
                 truth.clear();
                 truth.extend(contacts.iter().map(|c| TruthContact {
                     x_mm: c.x_mm,

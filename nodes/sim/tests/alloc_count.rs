@@ -1,10 +1,11 @@
 //! Per-frame hot path without heap allocation: once a hold's state is solved, further EIT
 //! frames, pressure samples and truth rows of the hold allocate nothing (counting allocator,
 //! in a test binary of its own so no other test's allocations are counted); owned events
-//! (`next_event`) allocate what they own and nothing else. Counted on the
-//! calling thread: faer may start its rayon worker pool while the hold is solved, and those
-//! threads allocate on their own schedule (a CI run once saw two such allocations land inside
-//! the counted window).
+//! (`next_event`) allocate what they own and nothing else, and through reused buffers
+//! (`next_into`, as the writer paths take them) truth rows during ramps allocate nothing.
+//! Counted on the calling thread: faer may start its rayon worker pool while the hold is
+//! solved, and those threads allocate on their own schedule (a CI run once saw two such
+//! allocations land inside the counted window).
 
 use skinflow_sim::{Scene, SimEvent, Simulator};
 
@@ -103,4 +104,37 @@ fn owned_events_allocate_what_they_own_and_nothing_else() {
         "{loaded} rows with contacts, {empty} without, {samples} samples"
     );
     assert_eq!(allocations, loaded, "{allocations} allocations for {loaded} rows with contacts");
+}
+
+#[test]
+fn reused_buffers_take_truth_rows_without_allocating() {
+    // The writer paths (`skinflow simulate`, `skinflow emulate`, the `sim` node) take events
+    // through `next_into` with buffers kept from event to event: the ramps' truth rows with
+    // contacts, which `next_event` allocates one vector for each, then allocate nothing.
+    let text = "[scene]\nchannels = [\"pressure\"]\n[[step]]\nrest_s = 1.0\n[[step]]\nat_mm = [[5.0, 5.0], [-5.0, 0.0]]\n\
+        diameter_mm = 15.0\nforces_n = [2.0, 4.0]\nhold_s = 1.0\nramp_s = 0.5\nrest_s = 1.0\n";
+    let scene = Scene::from_str(text, "t.toml").unwrap();
+    let mut sim = Simulator::new(&scene, 4).unwrap();
+    let mut v = vec![0.0; sim.measurement_count()];
+    let mut truth = Vec::with_capacity(sim.max_contacts());
+    // past the first indentation (the pressure channel's per-contact state is built then)
+    while let Some(e) = sim.next_into(&mut v, &mut truth).unwrap() {
+        if let skinflow_sim::EventKind::Pressure { t_s, .. } = e
+            && t_s >= 4.0
+        {
+            break;
+        }
+    }
+    let (mut loaded, mut samples) = (0u64, 0u64);
+    let allocations = allocations_in(|| {
+        while let Some(e) = sim.next_into(&mut v, &mut truth).unwrap() {
+            match e {
+                skinflow_sim::EventKind::Truth { .. } => loaded += u64::from(!truth.is_empty()),
+                skinflow_sim::EventKind::Pressure { .. } => samples += 1,
+                skinflow_sim::EventKind::Eit { .. } => unreachable!("no eit channel"),
+            }
+        }
+    });
+    assert!(loaded > 40 && samples > 150, "{loaded} rows with contacts, {samples} samples");
+    assert_eq!(allocations, 0, "{allocations} allocations for {loaded} rows with contacts");
 }

@@ -75,6 +75,60 @@ fn a_scene_of_too_many_segments_is_refused_even_when_short() {
     assert_eq!(accepted("[scene]\n[[step]]\nrest_s = 1e6\n").duration_s(), 1e6);
 }
 
+/// A `contacts` step of `n` contacts (on a 10-wide raster 8 mm apart), `hold_s = 1`, with the
+/// given `extra` lines.
+fn many_contacts(n: usize, extra: &str) -> String {
+    let list: Vec<String> = (0..n)
+        .map(|i| {
+            let (x, y) = (-36.0 + 8.0 * (i % 10) as f64, -36.0 + 8.0 * (i / 10 % 10) as f64);
+            format!("{{ x_mm = {x}, y_mm = {y}, diameter_mm = 5.0, force_n = 0.5 }}")
+        })
+        .collect();
+    format!("[[step]]\ncontacts = [{}]\nhold_s = 1.0\n{extra}", list.join(", "))
+}
+
+#[test]
+fn a_scene_holding_too_many_contacts_is_refused_before_it_is_built() {
+    // 100 contacts x 100,000 repeats: 2e5 s and 4e5 segments pass, but the 3e7 contacts held
+    // by the ramps, holds and releases took 1.44 GB to build.
+    let (line, _, msg) = refused(&scene(&many_contacts(
+        100,
+        "repeat = 100000
+",
+    )));
+    assert_eq!(line, 4, "the [[step]] line: {msg}");
+    assert!(
+        msg.starts_with(
+            "[[step]] 2: this step holds 30000000 contacts over its ramps, holds and releases \
+             (100 contacts x 3 ramp(s), hold(s) and release(s) x 100000 repeat(s)), 30000000 in the scene, \
+             more than the 2000000 a scene may hold"
+        ),
+        "{msg}"
+    );
+    // the cap itself is accepted (100 contacts x 2 x 10,000: no release), one repeat more not
+    let at_cap = many_contacts(100, "release_s = 0.0\nrepeat = 10000\n");
+    let held = |s: Scene| s.timeline.segments.iter().map(|g| g.contacts.len()).sum::<usize>();
+    assert_eq!(held(accepted(&scene(&at_cap))), 2_000_000, "48 bytes each: 96 MB");
+    let (_, _, msg) = refused(&scene(&at_cap.replace("10000", "10001")));
+    assert!(msg.contains("(100 contacts x 2 ramp(s), hold(s) and release(s) x 10001 repeat(s))"), "{msg}");
+    assert!(msg.contains("2000200 in the scene"), "{msg}");
+    // the cap is on the whole scene; segments without force hold no contact
+    let steps = format!(
+        "{}\n[[step]]\ncontacts = [{{ x_mm = 0.0, y_mm = 0.0, diameter_mm = 5.0, force_n = 0.0 }}]\nhold_s = 1.0\n\n\
+         [[step]]\nat_mm = [[0.0, 0.0]]\ndiameter_mm = 5.0\nforces_n = {{ from = 0.0, to = 5.0, n = 101 }}\nhold_s = 1.0\n",
+        many_contacts(100, "repeat = 6666\n")
+    );
+    let (line, _, msg) = refused(&scene(&steps));
+    assert_eq!(line, 13, "the third contact step: {msg}");
+    assert!(
+        msg.starts_with(
+            "[[step]] 4: this step holds 300 contacts over its ramps, holds and releases (1 position(s) x \
+             1 repeat(s) x 300 ramp(s), hold(s) and release(s) under load), 2000100 in the scene"
+        ),
+        "{msg}"
+    );
+}
+
 // ---- finding 2: the scene opens with a no-load EIT frame
 
 #[test]

@@ -2,12 +2,13 @@
 //! lists become holds joined by ramps (one indentation per force, or one staircase indentation
 //! per position), repetitions repeat, and each step may end with a rest.
 //!
-//! Before a step is expanded its length and segment count are worked out arithmetically, and a
-//! step that would take the timeline past `MAX_DURATION_S` or `MAX_SEGMENTS` is refused before
-//! anything is built (a `grid` of 1000 x 1000 with 10,000 forces and 100,000 repeats would
-//! otherwise exhaust the memory first). The figures mirror the expansion loops; debug builds
-//! check every expanded step against them (`Builder::check_admitted`), so the two cannot drift
-//! apart unnoticed by the scene tests.
+//! Before a step is expanded its length, segment count and contacts held are worked out
+//! arithmetically, and a step that would take the timeline past `MAX_DURATION_S`,
+//! `MAX_SEGMENTS` or `MAX_CONTACTS_HELD` is refused before anything is built (a `grid` of
+//! 1000 x 1000 with 10,000 forces and 100,000 repeats, or 100 `contacts` pressed 100,000
+//! times, would otherwise exhaust the memory first). The figures mirror the expansion loops;
+//! debug builds check every expanded step against them (`Builder::check_admitted`), so the two
+//! cannot drift apart unnoticed by the scene tests.
 
 use super::SceneError;
 use super::parse::{RawContact, RawGrid, RawStep};
@@ -25,6 +26,14 @@ pub(super) const MAX_DURATION_S: f64 = 1e6;
 /// longest timeline. The timeline is held in memory; truth rows are generated as the stream
 /// reaches them (`truth::TruthCursor`), not stored.
 pub(super) const MAX_SEGMENTS: usize = 1_000_000;
+/// Most contacts a timeline may hold, summed over its segments (a contact pressed once, with a
+/// ramp, a hold and a release, counts 3; segments without force hold none). Each is a
+/// `SegmentContact` of 48 bytes kept for the whole run beside the segment's 40, so with
+/// `contacts` steps (whose contacts per segment are not otherwise bounded) this is what sizes
+/// the timeline: 100 contacts x 100,000 repeats would take 1.44 GB. 2,000,000 is about 96 MB,
+/// the order of `MAX_SEGMENTS` single-contact segments (88 MB, all of which it admits), and
+/// holds e.g. 100 contacts pressed 6,666 times or 10 pressed 66,666 times.
+pub(super) const MAX_CONTACTS_HELD: usize = 2_000_000;
 /// The accepted forms of `forces_n`, for its errors.
 const FORCES_FORMS: &str = "give a list of forces in N (`forces_n = [1.0, 2.5]`) or n evenly spaced \
      forces (`forces_n = { from = 1.0, to = 10.0, n = 9 }`)";
@@ -39,8 +48,11 @@ pub(super) struct Builder {
     t_s: f64,
     press: u32,
     level: u32,
-    /// Segments and length, s, the last admitted step was worked out to bring the timeline to.
-    admitted: (f64, f64),
+    /// Contacts held by `segments`, summed over them.
+    held: usize,
+    /// Segments, length, s, and contacts held the last admitted step was worked out to bring
+    /// the timeline to.
+    admitted: (f64, f64, f64),
 }
 
 /// One contact's position and size; forces come from the step.
@@ -74,6 +86,7 @@ impl Builder {
                 })
                 .collect()
         };
+        self.held += contacts.len();
         self.segments.push(Segment { start_s: self.t_s, end_s: self.t_s + len_s, contacts });
         self.t_s += len_s;
     }
@@ -83,9 +96,9 @@ impl Builder {
     }
 
     /// Refuses step `step` (1-based) before it is expanded if it would take the timeline past
-    /// `MAX_DURATION_S` or `MAX_SEGMENTS`.
+    /// `MAX_DURATION_S`, `MAX_SEGMENTS` or `MAX_CONTACTS_HELD`.
     fn admit(&mut self, step: &StepRef<'_>, extent: Extent, err: &ErrFn<'_>) -> Result<(), SceneError> {
-        let Extent { duration_s, segments, how } = extent;
+        let Extent { duration_s, segments, how, held, held_how } = extent;
         let total_s = self.t_s + duration_s;
         if total_s > MAX_DURATION_S || total_s.is_nan() {
             return Err(err(
@@ -108,15 +121,28 @@ impl Builder {
                 ),
             ));
         }
-        self.admitted = (total, total_s);
+        let total_held = self.held as f64 + held;
+        if total_held > MAX_CONTACTS_HELD as f64 || total_held.is_nan() {
+            return Err(err(
+                step.span.clone(),
+                format!(
+                    "[[step]] {}: this step holds {held:.0} contacts over its ramps, holds and releases \
+                     ({held_how}), {total_held:.0} in the scene, more than the {MAX_CONTACTS_HELD} a scene may \
+                     hold (the timeline keeps each in memory)",
+                    step.number
+                ),
+            ));
+        }
+        self.admitted = (total, total_s, total_held);
         Ok(())
     }
 
     /// Debug builds: the step just expanded built what `admit` worked out for it (segment count
-    /// exactly; length up to the rounding of summing it segment by segment).
+    /// and contacts held exactly; length up to the rounding of summing it segment by segment).
     pub(super) fn check_admitted(&self) {
-        let (segments, length_s) = self.admitted;
+        let (segments, length_s, held) = self.admitted;
         debug_assert_eq!(self.segments.len() as f64, segments, "segments built vs admitted");
+        debug_assert_eq!(self.held as f64, held, "contacts held built vs admitted");
         debug_assert!(
             (self.t_s - length_s).abs() <= 1e-9 * length_s.max(1.0),
             "length built {} s vs admitted {length_s} s",
@@ -132,18 +158,29 @@ pub(super) struct StepRef<'a> {
     pub(super) raw: &'a RawStep,
 }
 
-/// What a step adds to the timeline: its length, s, and its segments of non-zero length
-/// (counted as floats: the product of the step's counts may exceed any integer type).
+/// What a step adds to the timeline: its length, s, its segments of non-zero length and the
+/// contacts they hold (counted as floats: the product of the step's counts may exceed any
+/// integer type).
 struct Extent {
     duration_s: f64,
     segments: f64,
-    /// How the figures come about, for the error.
+    /// How the length and segments come about, for the error.
     how: String,
+    held: f64,
+    /// How the contacts held come about, for the error.
+    held_how: String,
 }
 
 /// 1 for a segment of this length that is kept, 0 for one that is dropped.
 fn kept(len_s: f64) -> f64 {
     if len_s > 0.0 { 1.0 } else { 0.0 }
+}
+
+/// 1 for a single contact's segment of this length, going from force `from` to `to`, that is
+/// kept with its contact, 0 for one dropped or kept empty (`Builder::push`: no force at either
+/// end).
+fn loaded(len_s: f64, from: f64, to: f64) -> f64 {
+    if from == 0.0 && to == 0.0 { 0.0 } else { kept(len_s) }
 }
 
 pub(super) fn expand_step(
@@ -175,7 +212,12 @@ pub(super) fn expand_step(
         if s.rest_s.is_none() {
             return Err(err(step_span, "empty [[step]]: give `rest_s` or contacts".into()));
         }
-        b.admit(step, Extent { duration_s: rest_s, segments: kept(rest_s), how: format!("rest_s = {rest_s}") }, err)?;
+        let how = format!("rest_s = {rest_s}");
+        b.admit(
+            step,
+            Extent { duration_s: rest_s, segments: kept(rest_s), how, held: 0.0, held_how: String::new() },
+            err,
+        )?;
         b.rest(rest_s);
         return Ok(());
     }
@@ -241,7 +283,13 @@ pub(super) fn expand_step(
         let per = kept(ramp_s) + kept(hold_s) + kept(release_s) + kept(rest_s);
         let r = repeat as f64;
         let how = format!("{repeat} repeat(s) x {per_s} s");
-        b.admit(step, Extent { duration_s: r * per_s, segments: r * per, how }, err)?;
+        // all the contacts in each ramp, hold and release, unless no force is ever applied
+        let per_contact =
+            if forces.iter().any(|&f| f != 0.0) { kept(ramp_s) + kept(hold_s) + kept(release_s) } else { 0.0 };
+        let n = spots.len();
+        let held = r * n as f64 * per_contact;
+        let held_how = format!("{n} contacts x {per_contact} ramp(s), hold(s) and release(s) x {repeat} repeat(s)");
+        b.admit(step, Extent { duration_s: r * per_s, segments: r * per, how, held, held_how }, err)?;
         let zeros = vec![0.0; spots.len()];
         for _ in 0..repeat {
             b.level += 1;
@@ -315,7 +363,12 @@ pub(super) fn expand_step(
             + kept(release_s)
             + kept(rest_s);
         let how = format!("{counted} x {per_s} s");
-        b.admit(step, Extent { duration_s: pr * per_s, segments: pr * per, how }, err)?;
+        let last = pts[pts.len() - 1][1];
+        let per_held = loaded(ramp_s, 0.0, pts[0][1])
+            + pts.windows(2).map(|w| loaded(w[1][0] - w[0][0], w[0][1], w[1][1])).sum::<f64>()
+            + loaded(release_s, last, 0.0);
+        let held_how = format!("{counted} x {per_held} segment(s) under load");
+        b.admit(step, Extent { duration_s: pr * per_s, segments: pr * per, how, held: pr * per_held, held_how }, err)?;
         for (x, y) in at.positions(&inside)? {
             let spot = [Spot { x_mm: x, y_mm: y, diameter_mm: diameter }];
             for _ in 0..repeat {
@@ -356,16 +409,28 @@ pub(super) fn expand_step(
         },
     };
     let nf = forces.len() as f64;
-    let extent = if staircase {
+    // per position and repeat: `times` x (length, segments), and segments holding the contact
+    let (times, per_s, per, per_held, how) = if staircase {
         let per_s = nf * (ramp_s + hold_s) + release_s + rest_s;
         let per = nf * (kept(ramp_s) + kept(hold_s)) + kept(release_s) + kept(rest_s);
-        Extent { duration_s: pr * per_s, segments: pr * per, how: format!("{counted} x {per_s} s") }
+        let mut prev = 0.0;
+        let mut per_held = 0.0;
+        for &f in &forces {
+            per_held += loaded(ramp_s, prev, f) + loaded(hold_s, f, f);
+            prev = f;
+        }
+        per_held += loaded(release_s, prev, 0.0);
+        (1.0, per_s, per, per_held, format!("{counted} x {per_s} s"))
     } else {
         let per_s = ramp_s + hold_s + release_s + rest_s;
         let per = kept(ramp_s) + kept(hold_s) + kept(release_s) + kept(rest_s);
-        let how = format!("{counted} x {} force(s) x {per_s} s", forces.len());
-        Extent { duration_s: pr * nf * per_s, segments: pr * nf * per, how }
+        let per_held =
+            forces.iter().map(|&f| loaded(ramp_s, 0.0, f) + loaded(hold_s, f, f) + loaded(release_s, f, 0.0)).sum();
+        (nf, per_s, per, per_held, format!("{counted} x {} force(s) x {per_s} s", forces.len()))
     };
+    let held_how = format!("{counted} x {per_held} ramp(s), hold(s) and release(s) under load");
+    let extent =
+        Extent { duration_s: pr * times * per_s, segments: pr * times * per, how, held: pr * per_held, held_how };
     b.admit(step, extent, err)?;
     for (x, y) in at.positions(&inside)? {
         let spot = [Spot { x_mm: x, y_mm: y, diameter_mm: diameter }];

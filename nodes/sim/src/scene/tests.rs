@@ -241,6 +241,32 @@ fn each_step_builds_what_it_was_admitted_as() {
     assert_eq!(s.timeline.segments.len(), 1 + 3 + 20 + 24 + 40);
 }
 
+/// The contacts held `admit` refuses on: zero forces make segments without contacts
+/// (`Builder::push` keeps a segment empty when no force is applied at either end), which the
+/// figures must leave out as the loops do; `Builder::check_admitted` compares them with what was
+/// built.
+#[test]
+fn contacts_held_are_admitted_as_built() {
+    let text = format!(
+        "{HEAD}[[step]]\ncontacts = [{{ x_mm = -30.0, y_mm = 0.0, diameter_mm = 10.0, force_n = 0.0 }},\n\
+         {{ x_mm = 30.0, y_mm = 0.0, diameter_mm = 10.0, force_n = 0.0 }}]\nhold_s = 0.7\nrepeat = 2\n\n\
+         [[step]]\ncontacts = [{{ x_mm = -30.0, y_mm = 0.0, diameter_mm = 10.0, force_n = 0.0 }},\n\
+         {{ x_mm = 30.0, y_mm = 0.0, diameter_mm = 10.0, force_n = 2.0 }}]\nhold_s = 0.7\nrelease_s = 0.0\n\n\
+         [[step]]\nat_mm = [[0.0, 0.0], [5.0, 5.0]]\ndiameter_mm = 15.0\n\
+         force_profile = [[0.5, 0.0], [1.0, 0.0], [2.0, 4.0], [3.0, 0.0], [4.0, 0.0], [5.0, 1.0]]\n\n\
+         [[step]]\nat_mm = [[10.0, 10.0]]\ndiameter_mm = 15.0\nforces_n = [0.0, 0.0, 3.0, 0.0, 1.0]\n\
+         loading = \"staircase\"\nhold_s = 0.5\nrepeat = 2\n\n\
+         [[step]]\nat_mm = [[10.0, 10.0]]\ndiameter_mm = 15.0\nforces_n = [0.0, 2.0, 0.0]\nhold_s = 0.5\n\
+         ramp_s = 0.0\nrelease_s = 0.5\n"
+    );
+    let s = parse(&text).unwrap();
+    let held: usize = s.timeline.segments.iter().map(|g| g.contacts.len()).sum();
+    // zero-force contacts 0, one loaded contact of two: 2 x (ramp, hold), profile 2 positions x
+    // (2 windows to and from 4 N, 1 to 1 N, release), staircase 2 x (ramp to 3 N, hold, ramp
+    // to 0, ramp to 1 N, hold, release), separate (hold, release of 2 N)
+    assert_eq!(held, 4 + 8 + 12 + 2);
+}
+
 #[cfg(debug_assertions)]
 #[test]
 #[should_panic(expected = "segments built vs admitted")]

@@ -2,7 +2,9 @@
 //! no-load start; then hands each step to `expand`, and checks the whole (length, EIT frames,
 //! faults). Errors carry the span of the culprit.
 
-use super::expand::{Builder, MAX_DURATION_S, MAX_SEGMENTS, StepRef, describe, expand_step, has_contacts};
+use super::expand::{
+    Builder, MAX_CONTACTS_HELD, MAX_DURATION_S, MAX_SEGMENTS, StepRef, describe, expand_step, has_contacts,
+};
 use super::parse::{RawFault, RawScene};
 use super::spans::{KeyPath, Spans};
 use super::{Channels, Fault, Locator, Pacing, Rates, Scene, SceneError};
@@ -88,12 +90,13 @@ pub(super) fn validate(raw: RawScene, text: &str, at: &Locator<'_>) -> Result<Sc
         return Err(at.error(None, "empty timeline: the steps add up to 0 s".into()));
     }
     // `expand` refuses each step that would pass these; a backstop against rounding
-    if duration_s > MAX_DURATION_S || timeline.segments.len() > MAX_SEGMENTS {
+    let held: usize = timeline.segments.iter().map(|g| g.contacts.len()).sum();
+    if duration_s > MAX_DURATION_S || timeline.segments.len() > MAX_SEGMENTS || held > MAX_CONTACTS_HELD {
         return Err(at.error(
             None,
             format!(
-                "the steps add up to {duration_s:.4e} s in {} rests, ramps and holds, more than {MAX_DURATION_S:e} s \
-                 (11.6 days) or {MAX_SEGMENTS}",
+                "the steps add up to {duration_s:.4e} s in {} rests, ramps and holds holding {held} contacts, more \
+                 than {MAX_DURATION_S:e} s (11.6 days), {MAX_SEGMENTS} or {MAX_CONTACTS_HELD}",
                 timeline.segments.len()
             ),
         ));

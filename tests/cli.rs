@@ -897,7 +897,7 @@ fn check_reports_missing_and_invalid_input_files() {
         (
             sim_graph(scene, "bad-calib.toml"),
             "g.toml:20:12: node \"force\": param \"calibration\": bad-calib.toml: ",
-            "missing field `format`",
+            "not a skinflow calibration: the file has no `format` key",
         ),
         (
             std::fs::read_to_string(d.join(pipeline_graph(&d, "missing.h5", "x"))).unwrap(),
@@ -971,4 +971,221 @@ fn check_reports_every_bad_input_and_passes_good_ones() {
         let text = ok(&skinflow(&d, &["check", g.to_str().unwrap()]));
         assert!(text.contains(": ok ("), "{shipped}: {text}");
     }
+}
+
+/// Runs `args` in `d` expecting exit 1 with a one-line error holding `want`; returns it.
+fn refused(d: &Path, args: &[&str], want: &str) -> String {
+    let out = skinflow(d, args);
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(1), "{args:?}: {err}");
+    assert!(err.contains(want), "{args:?}: want {want:?} in:\n{err}");
+    let errors: Vec<&str> = err.lines().filter(|l| l.starts_with("error:")).collect();
+    assert_eq!(errors.len(), 1, "{args:?}: one error line: {err}");
+    assert!(!err.contains("panicked") && !err.contains("H5Fopen"), "{args:?}: {err}");
+    err
+}
+
+/// A directory, a truncated copy or a headless HDF5 file given as a recording is refused by
+/// every command that reads one, naming the file and the cause in one line (not HDF5's
+/// multi-line report with its buffer address); `repair` writes nothing and names no staging
+/// file.
+#[test]
+fn directories_truncated_and_headless_recordings_are_refused_saying_why() {
+    let d = workdir("bad-recordings");
+    simulate(&d, "tiny-eval.toml", "rec.h5");
+    let bytes = std::fs::read(d.join("rec.h5")).unwrap();
+    std::fs::write(d.join("cut.h5"), &bytes[..bytes.len() / 2]).unwrap();
+    std::fs::create_dir(d.join("adir")).unwrap();
+    {
+        let file = hdf5::File::create(d.join("nosensor.h5")).unwrap();
+        let format: hdf5::types::VarLenUnicode = "skinflow-recording".parse().unwrap();
+        let attr = file.new_attr::<hdf5::types::VarLenUnicode>().shape(()).create("format").unwrap();
+        attr.write_scalar(&format).unwrap();
+        file.new_attr::<i64>().shape(()).create("format_version").unwrap().write_scalar(&1).unwrap();
+    }
+    // Every EIT value NaN: no channel to reconstruct from (not "every frame is a no-load frame").
+    std::fs::copy(d.join("rec.h5"), d.join("nan.h5")).unwrap();
+    {
+        let file = hdf5::File::open_rw(d.join("nan.h5")).unwrap();
+        let ds = file.dataset("/eit/v").unwrap();
+        ds.write_raw(&vec![f64::NAN; ds.size()]).unwrap();
+    }
+    let calib = root().join("graphs/calib/paper.toml");
+    let calib = calib.to_str().unwrap();
+    let nan = "nan.h5: /eit/v: no finite value in any of its ";
+    refused(&d, &["calibrate", "nan.h5", "--out", "calib.toml"], nan);
+    refused(&d, &["eval", "nan.h5", "--calib", calib], nan);
+    let truncated = format!("cut.h5: truncated: {} bytes, shorter than the {} bytes", bytes.len() / 2, bytes.len());
+    for (rec, want) in [
+        ("adir", "adir: is a directory, not a recording file".to_owned()),
+        ("cut.h5", truncated),
+        ("nosensor.h5", "nosensor.h5: / attr sensor: is missing".to_owned()),
+    ] {
+        let before = listing(&d);
+        refused(&d, &["inspect", rec], &want);
+        refused(&d, &["repair", rec, "--out", "fixed.h5"], &want);
+        refused(&d, &["calibrate", rec, "--out", "calib.toml"], &want);
+        refused(&d, &["eval", rec, "--calib", calib, "--json", "e.json"], &want);
+        // Also as the second of two: refused before the first is run.
+        refused(&d, &["eval", "rec.h5", rec, "--calib", calib, "--json", "e.json"], &want);
+        assert_eq!(listing(&d), before, "{rec}: nothing written");
+    }
+}
+
+/// An output in a directory that takes no file (/proc), a `--plots` directory that is a file
+/// or lies under one, and a `reproduce --out` that is a file are refused before any work,
+/// naming the flag: no JSON is written before `--plots` fails, nothing is created.
+#[test]
+fn outputs_that_cannot_be_created_are_refused_before_any_work() {
+    let d = workdir("bad-outputs");
+    simulate(&d, "tiny-eval.toml", "rec.h5");
+    std::fs::write(d.join("afile"), "a file").unwrap();
+    let calib = root().join("graphs/calib/paper.toml");
+    let calib = calib.to_str().unwrap();
+    let scenes = root().join("graphs/scenes");
+    let scenes = scenes.to_str().unwrap();
+    let before = listing(&d);
+    let cases: [(&[&str], &str); 9] = [
+        (&["calibrate", "rec.h5", "--out", "/proc/x.toml"], "--out /proc/x.toml: cannot create a file in /proc: "),
+        (&["repair", "rec.h5", "--out", "/proc/x.h5"], "--out /proc/x.h5: cannot create a file in /proc: "),
+        (&["eval", "rec.h5", "--calib", calib, "--json", "/proc/x.json"], "--json /proc/x.json: cannot create a file"),
+        (&["eval", "rec.h5", "--calib", calib, "--contacts-csv", "/proc/x.csv"], "--contacts-csv /proc/x.csv: cannot"),
+        (
+            &["eval", "rec.h5", "--calib", calib, "--json", "e.json", "--plots", "afile"],
+            "--plots afile: is a file, not a",
+        ),
+        (
+            &["eval", "rec.h5", "--calib", calib, "--json", "e.json", "--plots", "afile/p"],
+            "--plots afile/p: afile is a file",
+        ),
+        (
+            &["eval", "rec.h5", "--calib", calib, "--plots", "/proc/p"],
+            "--plots /proc/p: cannot create a directory in /proc",
+        ),
+        (&["reproduce", "--out", "afile", "--scenes", scenes], "--out afile: is a file, not a directory"),
+        (&["reproduce", "--out", "afile/r", "--scenes", scenes], "--out afile/r: afile is a file, not a directory"),
+    ];
+    for (args, want) in cases {
+        let started = std::time::Instant::now();
+        refused(&d, args, want);
+        assert!(started.elapsed().as_secs_f64() < 5.0, "{args:?}: refused only after the work");
+        assert_eq!(listing(&d), before, "{args:?}: nothing written");
+    }
+    assert_eq!(std::fs::read_to_string(d.join("afile")).unwrap(), "a file");
+}
+
+/// `--recon`, `--segment` and `--sync` values out of range, and a bad `--fit`, are refused
+/// before any file is read, naming the flag in one line (not a generated graph's line and
+/// column after the recording was opened); `reproduce` refuses them, and any bad scene of
+/// its five, before it simulates anything.
+#[test]
+fn out_of_range_flags_and_bad_scenes_are_refused_before_any_work() {
+    let d = workdir("bad-flags");
+    std::fs::write(d.join("rec.h5"), "not read: the flags are checked first").unwrap();
+    let calib = root().join("graphs/calib/paper.toml");
+    let calib = calib.to_str().unwrap();
+    let scenes = root().join("graphs/scenes");
+    let scenes = scenes.to_str().unwrap();
+    let cases: [(&[&str], &str); 7] = [
+        (
+            &["calibrate", "rec.h5", "--out", "c.toml", "--recon", "lambda = -1"],
+            "--recon 'lambda = -1': parameter \"lambda\": must be finite and > 0",
+        ),
+        (
+            &["calibrate", "rec.h5", "--out", "c.toml", "--segment", "floor = 0"],
+            "--segment 'floor = 0': param \"floor\": must be finite and > 0",
+        ),
+        (
+            &["eval", "rec.h5", "--calib", calib, "--sync", "tare_s = nan"],
+            "--sync 'tare_s = nan': param \"tare_s\": must be finite and > 0",
+        ),
+        (
+            &["eval", "rec.h5", "--calib", calib, "--recon", "mesh = { elements = 0 }"],
+            "--recon 'mesh = { elements = 0 }': parameter \"elements\": must be in",
+        ),
+        (
+            &["calibrate", "rec.h5", "--out", "c.toml", "--fit", "holdout_folds = -1"],
+            "--fit 'holdout_folds = -1': invalid value: integer `-1`",
+        ),
+        (
+            &["reproduce", "--out", "r", "--scenes", scenes, "--recon", "lambda = -1"],
+            "--recon 'lambda = -1': parameter \"lambda\"",
+        ),
+        (
+            &["reproduce", "--out", "r", "--scenes", scenes, "--fit", "holdout_folds = 1"],
+            "--fit 'holdout_folds = 1': calibrate: param \"holdout_folds\"",
+        ),
+    ];
+    for (args, want) in cases {
+        refused(&d, args, want);
+    }
+    // A scene that does not parse, then the two-size scene (read last, minutes in) missing.
+    std::fs::create_dir(d.join("scenes")).unwrap();
+    for s in ["calibration", "single-contact", "cross-diameter", "multi-contact", "calibration-two-sizes"] {
+        std::fs::copy(root().join(format!("graphs/scenes/{s}.toml")), d.join(format!("scenes/{s}.toml"))).unwrap();
+    }
+    let multi = d.join("scenes/multi-contact.toml");
+    std::fs::write(&multi, std::fs::read_to_string(&multi).unwrap() + "garbage [\n").unwrap();
+    refused(&d, &["reproduce", "--out", "r", "--scenes", "scenes"], "--scenes scenes: scenes/multi-contact.toml:");
+    std::fs::copy(root().join("graphs/scenes/multi-contact.toml"), &multi).unwrap();
+    std::fs::remove_file(d.join("scenes/calibration-two-sizes.toml")).unwrap();
+    refused(&d, &["reproduce", "--out", "r", "--scenes", "scenes"], "scenes/calibration-two-sizes.toml");
+    assert!(!d.join("r").exists() && !d.join("c.toml").exists(), "nothing created");
+}
+
+/// A calibration names the sensor it was fitted on; `eval` refuses a recording of another
+/// sensor with it, and `calibrate` and `eval` refuse to pool recordings of two sensors. A
+/// file that is no calibration is named as such, and a calibration whose samples were all
+/// rejected says which recording and why.
+#[test]
+fn recordings_of_another_sensor_and_files_that_are_no_calibration_are_refused() {
+    let d = workdir("other-sensor");
+    simulate(&d, "tiny-calibration.toml", "cal.h5");
+    ok(&skinflow(&d, &["calibrate", "cal.h5", "--out", "calib.toml"]));
+    let calib: toml::Table = std::fs::read_to_string(d.join("calib.toml")).unwrap().parse().unwrap();
+    let sensor = &calib["provenance"]["sensor"];
+    assert_eq!(sensor["name"].as_str(), Some("paper-100mm"), "{calib:?}");
+    assert_eq!((sensor["width_mm"].as_float(), sensor["electrodes"].as_integer()), (Some(100.0), Some(16)));
+    let scene = "[scene]\nname = \"small\"\nprofile = \"paper\"\n\
+        [sensor]\nname = \"small-60mm\"\nwidth_mm = 60.0\nheight_mm = 60.0\n\
+        [[step]]\nrest_s = 4.0\n\
+        [[step]]\nat_mm = [[-10.0, 10.0]]\ndiameter_mm = 10.0\nforces_n = [3.0, 6.0]\nhold_frames = 3\nrest_s = 0.5\n";
+    std::fs::write(d.join("small.toml"), scene).unwrap();
+    ok(&skinflow(&d, &["simulate", "small.toml", "--out", "small.h5"]));
+    let small = "\"small-60mm\" (60 x 60 mm, 16 electrodes, pairwise)";
+    let paper = "\"paper-100mm\" (100 x 100 mm, 16 electrodes, pairwise)";
+    refused(
+        &d,
+        &["eval", "small.h5", "--calib", "calib.toml", "--json", "e.json"],
+        &format!("--calib calib.toml: fitted on sensor {paper}, but small.h5 was recorded on {small}"),
+    );
+    let pooled =
+        format!("small.h5: recorded on sensor {small}, but cal.h5 on {paper}; recordings of different sensors");
+    refused(&d, &["calibrate", "cal.h5", "small.h5", "--out", "c.toml"], &pooled);
+    refused(&d, &["eval", "cal.h5", "small.h5", "--calib", "calib.toml"], &pooled);
+    assert!(!d.join("e.json").exists() && !d.join("c.toml").exists());
+
+    std::fs::write(d.join("empty.toml"), "").unwrap();
+    for (file, want) in [
+        ("empty.toml", "empty.toml: not a skinflow calibration: the file is empty"),
+        ("small.toml", "small.toml: not a skinflow calibration: the file has no `format` key"),
+        ("small.h5", "small.h5: not a skinflow calibration: not UTF-8 text"),
+    ] {
+        refused(&d, &["eval", "cal.h5", "--calib", file], want);
+    }
+
+    // Every true force negative: each sample is rejected, and the error says which file and why.
+    std::fs::copy(d.join("small.h5"), d.join("negative.h5")).unwrap();
+    {
+        let file = hdf5::File::open_rw(d.join("negative.h5")).unwrap();
+        let ds = file.dataset("/truth/force_n").unwrap();
+        let forces: Vec<f64> = ds.read_raw::<f64>().unwrap().iter().map(|f| -f).collect();
+        let shape = ds.shape();
+        ds.write_raw(&forces).unwrap();
+        assert_eq!(ds.shape(), shape);
+    }
+    refused(&d, &["calibrate", "negative.h5", "--out", "c.toml"], "negative.h5: calibrate: 0 usable samples (of ");
+    let err = stderr(&skinflow(&d, &["calibrate", "negative.h5", "--out", "c.toml"]));
+    assert!(err.contains("F <= 0"), "{err}");
+    assert!(!d.join("c.toml").exists());
 }

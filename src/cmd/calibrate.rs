@@ -9,7 +9,9 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context as _, Result, bail};
 use sha2::{Digest, Sha256};
 use skinflow_contact::CalibSample;
-use skinflow_contact::correct::{CalibParams, Calibrated, FFit, PipelineSettings, Provenance, RecordingRef, calibrate};
+use skinflow_contact::correct::{
+    CalibParams, Calibrated, FFit, PipelineSettings, Provenance, RecordingRef, SensorRef, calibrate,
+};
 use skinflow_nodes::payload::Contacts;
 
 use super::pipeline::{PipelineArgs, Settled, SettledBy};
@@ -82,17 +84,75 @@ pub struct FitArgs {
     pub fit: String,
 }
 
-/// Parses the `--fit` TOML (fields of `CalibParams`; empty: the defaults).
+/// Parses the `--fit` TOML (fields of `CalibParams`; empty: the defaults). Errors are one
+/// line naming the flag and its text (not the TOML parser's multi-line snippet).
 pub fn fit_params(text: &str) -> Result<CalibParams> {
-    let params: CalibParams = toml::from_str(text).map_err(|e| anyhow::anyhow!("--fit: {e}"))?;
-    params.validate().map_err(|e| anyhow::anyhow!("--fit: {e}"))?;
+    let params: CalibParams = toml::from_str(text).map_err(|e| anyhow::anyhow!("--fit '{text}': {}", e.message()))?;
+    params.validate().map_err(|e| anyhow::anyhow!("--fit '{text}': {e}"))?;
     Ok(params)
+}
+
+/// The sensor of a recording, as a calibration records it.
+pub fn sensor_of(rec: &skinflow_record::Recording) -> SensorRef {
+    SensorRef {
+        name: rec.sensor.name.clone(),
+        width_mm: rec.sensor.width_mm,
+        height_mm: rec.sensor.height_mm,
+        electrodes: rec.sensor.electrodes.len(),
+        protocol: rec.sensor.protocol.name().to_owned(),
+    }
+}
+
+/// Opens every recording before any is run through the pipeline: refuses one the pipeline
+/// cannot use (not a recording, no EIT, pressure or truth, no finite EIT value at all) and
+/// recordings of different sensors (sizes, electrodes or protocol: their samples or frames are
+/// not comparable), naming the files. Returns the sensor they share.
+pub fn check_recordings(recordings: &[PathBuf]) -> Result<SensorRef> {
+    let mut first: Option<(SensorRef, &Path)> = None;
+    for recording in recordings {
+        let rec = super::pipeline::require_truth(recording)?;
+        // NaN channels are masked (a dead electrode), but with none left there is no image:
+        // every frame would fail in the reconstructor and leave "no frame" to use.
+        if let Some(eit) = rec.eit.as_ref().filter(|e| !e.v.iter().any(|v| v.is_finite())) {
+            bail!(
+                "{}: /eit/v: no finite value in any of its {} frames (all NaN or infinite): there is nothing to reconstruct",
+                recording.display(),
+                eit.len()
+            );
+        }
+        let sensor = sensor_of(&rec);
+        drop(rec);
+        match &first {
+            None => first = Some((sensor, recording)),
+            Some((shared, by)) if !shared.same_geometry(&sensor) => bail!(
+                "{}: recorded on sensor {sensor}, but {} on {shared}; recordings of different sensors cannot be pooled",
+                recording.display(),
+                by.display()
+            ),
+            Some(_) => {}
+        }
+    }
+    first.map(|(s, _)| s).ok_or_else(|| anyhow::anyhow!("no recording given"))
+}
+
+/// The calibration fitted on the samples of `recordings`; an error names them.
+pub fn fit_samples(
+    recordings: &[PathBuf],
+    samples: &[CalibSample],
+    params: &CalibParams,
+    provenance: Provenance,
+) -> Result<Calibrated> {
+    calibrate(samples, params, provenance).map_err(|e| {
+        let names: Vec<String> = recordings.iter().map(|r| r.display().to_string()).collect();
+        anyhow::anyhow!("{}: {e}", names.join(", "))
+    })
 }
 
 /// Runs the pipeline over a calibration recording and fits the calibration.
 pub fn fit(recording: &Path, params: &CalibParams, args: &PipelineArgs) -> Result<Calibrated> {
-    let (samples, provenance) = collect(&[recording.to_path_buf()], args)?;
-    calibrate(&samples, params, provenance).map_err(anyhow::Error::msg)
+    let recordings = [recording.to_path_buf()];
+    let (samples, provenance) = collect(&recordings, args)?;
+    fit_samples(&recordings, &samples, params, provenance)
 }
 
 /// Each recording with its content hash, in the order given; refuses the same recording given
@@ -118,6 +178,7 @@ pub fn distinct(recordings: &[PathBuf], what: &str) -> Result<Vec<RecordingRef>>
 /// provenance naming every recording. Refuses a recording that gives no sample and the same
 /// recording given twice (its samples would count double), naming the files.
 pub fn collect(recordings: &[PathBuf], args: &PipelineArgs) -> Result<(Vec<CalibSample>, Provenance)> {
+    let sensor = check_recordings(recordings)?;
     let refs = distinct(recordings, "samples")?;
     let mut all = Vec::new();
     for recording in recordings {
@@ -135,6 +196,7 @@ pub fn collect(recordings: &[PathBuf], args: &PipelineArgs) -> Result<(Vec<Calib
         software_version: concat!("skinflow ", env!("CARGO_PKG_VERSION")).to_owned(),
         more_recordings: refs.collect(),
         pipeline: Some(PipelineSettings { recon: args.recon.clone(), segment: args.segment.clone() }),
+        sensor: Some(sensor),
     };
     Ok((all, provenance))
 }
@@ -181,7 +243,7 @@ pub fn run(recordings: &[PathBuf], out: &Path, fit_toml: &str, args: &PipelineAr
     args.validate()?;
     let (samples, provenance) = collect(recordings, args)?;
     // Its warnings are logged by `calibrate` itself (target skinflow::calibrate).
-    let fitted = calibrate(&samples, &params, provenance).map_err(anyhow::Error::msg)?;
+    let fitted = fit_samples(recordings, &samples, &params, provenance)?;
     let cal = &fitted.calibration;
     println!("{}", cal.r2);
     let lam = |v: Option<f64>| v.map_or_else(|| "prior".to_string(), |v| format!("{v:.3e}"));
@@ -235,7 +297,8 @@ pub fn run(recordings: &[PathBuf], out: &Path, fit_toml: &str, args: &PipelineAr
         let held = t.holdout_rmse_n.get(name).map_or_else(|| "-".into(), |v| format!("{v:.3}"));
         println!("{name:<34} {train:>9.3} {held:>9}");
     }
-    cal.write(out).map_err(anyhow::Error::msg)?;
+    let text = cal.to_toml_string().map_err(anyhow::Error::msg)?;
+    super::paths::write_file(&format!("--out {}", out.display()), out, text.as_bytes())?;
     eprintln!("calibration written to {}", out.display());
     Ok(())
 }

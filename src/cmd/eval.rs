@@ -273,14 +273,31 @@ pub fn run(
     let outputs: Vec<(&str, &Path)> =
         [("--json", json), ("--contacts-csv", contacts_csv)].into_iter().filter_map(|(f, p)| Some((f, p?))).collect();
     super::paths::check_outputs(&inputs, &outputs)?;
-    if let Some(dir) = plots_dir
-        && inputs.iter().any(|(_, p)| super::paths::same_file(p, dir))
-    {
-        anyhow::bail!("--plots {}: is an input file, not a directory for the plots", dir.display());
+    if let Some(dir) = plots_dir {
+        if inputs.iter().any(|(_, p)| super::paths::same_file(p, dir)) {
+            bail!("--plots {}: is an input file, not a directory for the plots", dir.display());
+        }
+        if let Some((flag, _)) = outputs.iter().find(|(_, p)| *p == dir) {
+            bail!("--plots {} and {flag} {} name the same path", dir.display(), dir.display());
+        }
+        // Before the evaluation, not after the JSON and the table are written.
+        super::paths::check_output_dir("--plots", dir)?;
     }
     let cal = check_calibration(calib)?;
     args.validate()?;
     args.warn_calibration_settings(calib, cal.provenance.pipeline.as_ref());
+    // Every recording is checked before the first is evaluated.
+    let sensor = super::calibrate::check_recordings(recordings)?;
+    if let Some(fitted_on) = &cal.provenance.sensor
+        && !fitted_on.same_geometry(&sensor)
+    {
+        bail!(
+            "--calib {}: fitted on sensor {fitted_on}, but {} was recorded on {sensor}; a calibration's region, \
+             fields and conductivity scale belong to its sensor: calibrate on recordings of this one",
+            calib.display(),
+            recordings[0].display()
+        );
+    }
     if recordings.len() > 1 {
         super::calibrate::distinct(recordings, "frames")?;
     }
@@ -292,7 +309,7 @@ pub fn run(
             text.push_str(line);
             text.push('\n');
         }
-        std::fs::write(p, text).with_context(|| format!("{}: cannot write", p.display()))?;
+        super::paths::write_file(&format!("--contacts-csv {}", p.display()), p, text.as_bytes())?;
         eprintln!("per-contact table written to {}", p.display());
     }
     let mut names = recordings.iter().map(|r| r.display().to_string());
@@ -300,7 +317,7 @@ pub fn run(
     report.more_recordings = names.collect();
     println!("{report}");
     if let Some(p) = json {
-        std::fs::write(p, report.to_json()).with_context(|| format!("{}: cannot write", p.display()))?;
+        super::paths::write_file(&format!("--json {}", p.display()), p, report.to_json().as_bytes())?;
         eprintln!("JSON written to {}", p.display());
     }
     if let Some(dir) = plots_dir {
@@ -319,7 +336,7 @@ pub fn check_calibration(calib: &Path) -> Result<Calibration> {
 }
 
 fn write_plots(dir: &Path, calib: &Path, o: &EvalOutcome, args: &PipelineArgs) -> Result<()> {
-    std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create", dir.display()))?;
+    std::fs::create_dir_all(dir).with_context(|| format!("--plots {}: cannot create", dir.display()))?;
     let cal = Calibration::read(calib).map_err(anyhow::Error::msg)?;
     let p = |name: &str| -> PathBuf { dir.join(name) };
     plots::predicted_vs_true(&p("predicted_vs_true.png"), &o.evaluator).map_err(anyhow::Error::msg)?;

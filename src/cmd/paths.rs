@@ -1,8 +1,9 @@
 //! Checks of the files a command writes, done before any work: an output must not be one of
 //! the command's inputs (the same file under another name included), and it must be creatable
-//! (its directory exists, it is no directory).
+//! (its directory exists and takes a new file, it is no directory). And the write itself,
+//! which replaces an existing file only once the new one is whole.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use anyhow::{Result, bail};
 
@@ -31,6 +32,82 @@ pub fn check_outputs(inputs: &[(&str, &Path)], outputs: &[(&str, &Path)]) -> Res
         if let Some(why) = skinflow_nodes::output::unwritable(out) {
             bail!("{flag} {}: {why}", out.display());
         }
+        // An existing directory that takes no file (/proc, a read-only mount, no permission)
+        // would fail only when the result is written, after all the work.
+        let dir = parent(out);
+        if let Err(e) = probe_file(dir) {
+            bail!("{flag} {}: cannot create a file in {}: {e}", out.display(), dir.display());
+        }
+    }
+    Ok(())
+}
+
+/// The directory a file is created in (`.` for a bare name).
+fn parent(path: &Path) -> &Path {
+    path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."))
+}
+
+/// A name in `dir` for a file of this process that nobody else uses.
+fn hidden(dir: &Path, name: &str) -> PathBuf {
+    dir.join(format!(".{name}.{}.partial", std::process::id()))
+}
+
+/// Creates and removes an empty hidden file in `dir`: whether a file can be created there.
+fn probe_file(dir: &Path) -> std::io::Result<()> {
+    let probe = hidden(dir, "skinflow-probe");
+    std::fs::OpenOptions::new().write(true).create_new(true).open(&probe)?;
+    let _ = std::fs::remove_file(&probe);
+    Ok(())
+}
+
+/// Refuses a directory a command is to write into (`flag`, `dir`: `--plots`, `reproduce
+/// --out`) that cannot be: an existing file, a path under a file, or a place where no file
+/// or directory can be created. Creates nothing.
+pub fn check_output_dir(flag: &str, dir: &Path) -> Result<()> {
+    if let Ok(meta) = std::fs::metadata(dir) {
+        if !meta.is_dir() {
+            bail!("{flag} {}: is a file, not a directory", dir.display());
+        }
+        if let Err(e) = probe_file(dir) {
+            bail!("{flag} {}: cannot create files in it: {e}", dir.display());
+        }
+        return Ok(());
+    }
+    // The nearest existing ancestor, in which the first missing directory is created.
+    let mut ancestor = parent(dir);
+    while std::fs::metadata(ancestor).is_err() {
+        ancestor = match ancestor.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p,
+            _ => Path::new("."),
+        };
+        if ancestor == Path::new(".") || ancestor == Path::new("/") {
+            break;
+        }
+    }
+    if !ancestor.is_dir() {
+        bail!("{flag} {}: {} is a file, not a directory", dir.display(), ancestor.display());
+    }
+    let probe = hidden(ancestor, "skinflow-probe");
+    if let Err(e) = std::fs::create_dir(&probe) {
+        bail!("{flag} {}: cannot create a directory in {}: {e}", dir.display(), ancestor.display());
+    }
+    let _ = std::fs::remove_dir(&probe);
+    Ok(())
+}
+
+/// Writes `bytes` to `path` (through a symbolic link to its target) under a hidden name in
+/// its directory, then renames it over `path`: an existing file is replaced only by a whole new
+/// one, never left half-written. `what` names the file in errors (`--json out.json`).
+pub fn write_file(what: &str, path: &Path, bytes: &[u8]) -> Result<()> {
+    let is_link = std::fs::symlink_metadata(path).is_ok_and(|m| m.file_type().is_symlink());
+    let target =
+        if is_link { std::fs::canonicalize(path).unwrap_or_else(|_| path.to_path_buf()) } else { path.to_path_buf() };
+    let name = target.file_name().map_or_else(|| "output".into(), |n| n.to_string_lossy().into_owned());
+    let staging = hidden(parent(&target), &name);
+    let written = std::fs::write(&staging, bytes).and_then(|()| std::fs::rename(&staging, &target));
+    if let Err(e) = written {
+        let _ = std::fs::remove_file(&staging);
+        bail!("{what}: cannot write: {e}");
     }
     Ok(())
 }
@@ -55,5 +132,54 @@ mod tests {
         assert!(e.contains("name the same file"), "{e}");
         check_outputs(&[("recording", &rec)], &[("--out", &d.join("calib.toml"))]).unwrap();
         assert_eq!(std::fs::read_to_string(&rec).unwrap(), "x");
+        // A directory that exists but takes no file, and a path under a regular file.
+        let e = check_outputs(&[], &[("--json", Path::new("/proc/x.json"))]).unwrap_err().to_string();
+        assert!(e.starts_with("--json /proc/x.json: cannot create a file in /proc: "), "{e}");
+        let e = check_outputs(&[], &[("--out", &rec.join("x.toml"))]).unwrap_err().to_string();
+        assert!(e.contains("--out") && e.contains("does not exist"), "{e}");
+        let names = |d: &Path| std::fs::read_dir(d).unwrap().count();
+        assert_eq!(names(&d), 2, "no probe file is left");
+        let _ = std::fs::remove_dir_all(&d);
+    }
+
+    #[test]
+    fn output_directories_are_checked_without_creating_them() {
+        let d = std::env::temp_dir().join(format!("skinflow-paths-dir-{}", std::process::id()));
+        std::fs::create_dir_all(&d).unwrap();
+        let file = d.join("file");
+        std::fs::write(&file, "x").unwrap();
+        check_output_dir("--plots", &d).unwrap();
+        check_output_dir("--plots", &d.join("new/deeper")).unwrap();
+        assert!(!d.join("new").exists());
+        let e = check_output_dir("--plots", &file).unwrap_err().to_string();
+        assert_eq!(e, format!("--plots {}: is a file, not a directory", file.display()));
+        let e = check_output_dir("--out", &file.join("a/b")).unwrap_err().to_string();
+        assert_eq!(e, format!("--out {}: {} is a file, not a directory", file.join("a/b").display(), file.display()));
+        let e = check_output_dir("--plots", Path::new("/proc/plots")).unwrap_err().to_string();
+        assert!(e.starts_with("--plots /proc/plots: cannot create a directory in /proc: "), "{e}");
+        let e = check_output_dir("--plots", Path::new("/proc")).unwrap_err().to_string();
+        assert!(e.starts_with("--plots /proc: cannot create files in it: "), "{e}");
+        assert_eq!(std::fs::read_dir(&d).unwrap().count(), 1, "nothing created");
+        let _ = std::fs::remove_dir_all(&d);
+    }
+
+    #[test]
+    fn a_write_replaces_a_file_whole_or_not_at_all() {
+        let d = std::env::temp_dir().join(format!("skinflow-paths-write-{}", std::process::id()));
+        std::fs::create_dir_all(&d).unwrap();
+        let out = d.join("calib.toml");
+        std::fs::write(&out, "old").unwrap();
+        write_file("--out calib.toml", &out, b"new").unwrap();
+        assert_eq!(std::fs::read_to_string(&out).unwrap(), "new");
+        // Through a link, to its target; the link stays.
+        let link = d.join("link.toml");
+        std::os::unix::fs::symlink(&out, &link).unwrap();
+        write_file("--out link.toml", &link, b"newer").unwrap();
+        assert!(std::fs::symlink_metadata(&link).unwrap().file_type().is_symlink());
+        assert_eq!(std::fs::read_to_string(&out).unwrap(), "newer");
+        let e = write_file("--json x", &d.join("missing/x.json"), b"{}").unwrap_err().to_string();
+        assert!(e.starts_with("--json x: cannot write: "), "{e}");
+        assert_eq!(std::fs::read_dir(&d).unwrap().count(), 2, "no staging file is left");
+        let _ = std::fs::remove_dir_all(&d);
     }
 }

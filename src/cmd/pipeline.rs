@@ -60,13 +60,32 @@ fn parse_params<T: serde::de::DeserializeOwned>(flag: &str, text: &str) -> Resul
 }
 
 impl PipelineArgs {
-    /// Refuses `--recon`, `--segment` and `--sync` values that are not valid params of their
-    /// node (syntax, unknown or mistyped fields); run before any work.
+    /// Refuses `--recon`, `--segment` and `--sync` values their nodes refuse (syntax, unknown
+    /// or mistyped fields, values out of range), naming the flag, before any work: the
+    /// pipeline graph is validated as it is built for a recording, without one (validation
+    /// opens no file).
     pub fn validate(&self) -> Result<()> {
         check_params::<skinflow_nodes::reconstruct::ReconstructorParams>("--recon", &self.recon)?;
         check_params::<skinflow_nodes::segment::SegmenterParams>("--segment", &self.segment)?;
         check_params::<skinflow_nodes::sync::SyncParams>("--sync", &self.sync)?;
-        Ok(())
+        let spec = self.spec(PathBuf::from("recording.h5"));
+        let registry = skinflow_nodes::pipeline::registry_with_capture(Default::default());
+        let src = skinflow_core::graph::SourceFile::new("<pipeline>", spec.graph_toml());
+        let Err(errors) = skinflow_core::GraphSpec::parse(src, &registry) else { return Ok(()) };
+        let causes: Vec<String> = errors
+            .0
+            .iter()
+            .map(|e| {
+                let (flag, text) = match e.node.as_deref() {
+                    Some("recon") => ("--recon", &self.recon),
+                    Some("segment") => ("--segment", &self.segment),
+                    Some("sync") => ("--sync", &self.sync),
+                    _ => return e.to_string(),
+                };
+                format!("{flag} '{text}': {}", e.kind)
+            })
+            .collect();
+        bail!("{}", causes.join("; "))
     }
 
     /// Warns, one line per flag, when this run's reconstructor or segmenter settings differ

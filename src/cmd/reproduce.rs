@@ -42,6 +42,9 @@ mod paper {
 
 const SCENES: [&str; 4] = ["calibration", "single-contact", "cross-diameter", "multi-contact"];
 
+/// The scene of the two-size calibration (see [`two_size_calibration`]), read after the others.
+const TWO_SIZES: &str = "calibration-two-sizes";
+
 fn f(v: Option<f64>, p: usize) -> String {
     v.filter(|x| x.is_finite()).map_or_else(|| "-".into(), |v| format!("{v:.p$}"))
 }
@@ -49,13 +52,11 @@ fn f(v: Option<f64>, p: usize) -> String {
 pub fn run(scenes_dir: &Path, out: &Path, seed: u64, fit_toml: &str, args: &PipelineArgs) -> Result<()> {
     let params = super::calibrate::fit_params(fit_toml)?;
     args.validate()?;
-    // Before anything is created: every scene file is there.
-    let missing: Vec<String> = SCENES
-        .iter()
-        .map(|s| scenes_dir.join(format!("{s}.toml")))
-        .filter(|p| !p.is_file())
-        .map(|p| p.display().to_string())
-        .collect();
+    // Before anything is created: every scene file is there and valid (the last one is read
+    // only after the other experiments, minutes in).
+    let scenes: Vec<PathBuf> =
+        SCENES.iter().chain([&TWO_SIZES]).map(|s| scenes_dir.join(format!("{s}.toml"))).collect();
+    let missing: Vec<String> = scenes.iter().filter(|p| !p.is_file()).map(|p| p.display().to_string()).collect();
     if !missing.is_empty() {
         bail!(
             "--scenes {}: missing scene file(s) {} (run from the repository root, or pass --scenes DIR with the scenes of graphs/scenes)",
@@ -63,8 +64,12 @@ pub fn run(scenes_dir: &Path, out: &Path, seed: u64, fit_toml: &str, args: &Pipe
             missing.join(", ")
         );
     }
+    for scene in &scenes {
+        skinflow_sim::Scene::from_file(scene).map_err(|e| anyhow::anyhow!("--scenes {}: {e}", scenes_dir.display()))?;
+    }
+    super::paths::check_output_dir("--out", out)?;
     let t0 = Instant::now();
-    std::fs::create_dir_all(out).with_context(|| format!("{}: cannot create", out.display()))?;
+    std::fs::create_dir_all(out).with_context(|| format!("--out {}: cannot create", out.display()))?;
     let ctx = Run { scenes_dir, out, seed, params: &params, args };
     let rec = |s: &str| ctx.rec(s);
     for s in SCENES {
@@ -72,14 +77,15 @@ pub fn run(scenes_dir: &Path, out: &Path, seed: u64, fit_toml: &str, args: &Pipe
     }
     let calib_path = out.join("calib.toml");
     let (samples, provenance) = super::calibrate::collect(&[rec("calibration")], args)?;
-    let fitted = calibrate(&samples, &params, provenance.clone()).map_err(anyhow::Error::msg)?;
+    let fitted = super::calibrate::fit_samples(&[rec("calibration")], &samples, &params, provenance.clone())?;
     fitted.calibration.write(&calib_path).map_err(anyhow::Error::msg)?;
     let cal = &fitted.calibration;
     let report_of = |scene: &str, calib: &Path| ctx.report(scene, calib);
     let mut reports: Vec<(&str, EvalReport)> = Vec::new();
     for s in &SCENES[1..] {
         let r = report_of(s, &calib_path)?;
-        std::fs::write(out.join(format!("{s}.json")), r.to_json())?;
+        let json = out.join(format!("{s}.json"));
+        super::paths::write_file(&json.display().to_string(), &json, r.to_json().as_bytes())?;
         println!("== {s}\n{r}");
         reports.push((s, r));
     }
@@ -359,7 +365,7 @@ fn size_ablation(ctx: &Run, md: &mut String, cross: &EvalReport) -> Result<()> {
 /// (`calibration-two-sizes.toml`), its calibration evaluated on the same cross-diameter and
 /// multi-contact recordings beside the paper's one-size calibration.
 fn two_size_calibration(ctx: &Run, md: &mut String, cross: &EvalReport, multi: &EvalReport) -> Result<()> {
-    let name = "calibration-two-sizes";
+    let name = TWO_SIZES;
     let rec = ctx.simulate(&ctx.scenes_dir.join(format!("{name}.toml")), name)?;
     let fitted = super::calibrate::fit(&rec, ctx.params, ctx.args)
         .with_context(|| format!("{}: calibration failed", rec.display()))?;

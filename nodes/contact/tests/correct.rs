@@ -5,7 +5,7 @@ mod synth;
 use skinflow_contact::correct::average_holds;
 use skinflow_contact::correct::calibrate::{CalibParams, CalibSample, CalibWarning, calibrate};
 use skinflow_contact::correct::calibration::{
-    Calibration, CvGroups, FFit, FORMAT_VERSION, OLDEST_FORMAT_VERSION, Provenance, RecordingRef,
+    Calibration, CvGroups, FFit, FORMAT_VERSION, OLDEST_FORMAT_VERSION, Provenance, RecordingRef, SensorRef,
 };
 use skinflow_contact::correct::field::{NPHI, Region, phi};
 use skinflow_contact::correct::fit::{CvSearch, RidgeProblem, cross_validate, fold_of};
@@ -18,6 +18,7 @@ fn provenance() -> Provenance {
         software_version: "0.1.0".into(),
         more_recordings: Vec::new(),
         pipeline: None,
+        sensor: None,
     }
 }
 
@@ -374,6 +375,52 @@ fn too_few_samples_fall_back_and_too_few_for_a_map_is_an_error() {
     assert!(out.calibration.pneumatic.locaware.prior_fallback);
     let err = calibrate(&frames[..2], &CalibParams::default(), provenance()).unwrap_err();
     assert!(err.to_string().contains("force map needs >= 3"), "{err}");
+    // Samples that were all rejected: the error says why, not only that none was usable.
+    let mut negative = frames.clone();
+    for f in &mut negative {
+        f.force_n = -f.force_n;
+    }
+    let err = calibrate(&negative, &CalibParams::default(), provenance()).unwrap_err().to_string();
+    assert!(
+        err.contains("0 usable samples (of 12 frames: rejected 12 of 12 samples (non-finite, C <= 0, F <= 0"),
+        "{err}"
+    );
+}
+
+/// A calibration names the sensor its recordings were made with (read back as written), and
+/// files that are not calibrations are named as such rather than by a missing field.
+#[test]
+fn calibration_file_names_its_sensor_and_other_files_are_named_as_such() {
+    let mut cal = fitted();
+    let sensor = SensorRef {
+        name: "paper-100mm".into(),
+        width_mm: 100.0,
+        height_mm: 100.0,
+        electrodes: 16,
+        protocol: "pairwise".into(),
+    };
+    cal.provenance.sensor = Some(sensor.clone());
+    let text = cal.to_toml_string().unwrap();
+    assert!(text.contains("[provenance.sensor]"), "{text}");
+    assert_eq!(Calibration::from_toml_str(&text, "<test>").unwrap(), cal);
+    assert_eq!(sensor.to_string(), "\"paper-100mm\" (100 x 100 mm, 16 electrodes, pairwise)");
+    let renamed = SensorRef { name: "skin-b".into(), ..sensor.clone() };
+    let smaller = SensorRef { width_mm: 60.0, ..sensor.clone() };
+    assert!(sensor.same_geometry(&renamed) && !sensor.same_geometry(&smaller));
+    for (text, want) in [
+        ("", "x.toml: not a skinflow calibration: the file is empty"),
+        ("[sensor]\nwidth_mm = 60.0\n", "x.toml: not a skinflow calibration: the file has no `format` key"),
+    ] {
+        let err = Calibration::from_toml_str(text, "x.toml").unwrap_err().to_string();
+        assert!(err.starts_with(want) && err.contains("skinflow calibrate"), "{err}");
+    }
+    let dir = std::env::temp_dir().join(format!("skinflow-contact-binary-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let binary = dir.join("rec.h5");
+    std::fs::write(&binary, b"\x89HDF\r\n\x1a\n\xff\xfe").unwrap();
+    let err = Calibration::read(&binary).unwrap_err().to_string();
+    assert!(err.contains("rec.h5: not a skinflow calibration: not UTF-8 text"), "{err}");
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]

@@ -100,6 +100,19 @@ pub enum RecordError {
     /// The file is not HDF5 at all (no HDF5 signature where the format puts one).
     #[error("{}: not an HDF5 file (a skinflow recording is HDF5: CONTRACTS.md section 2)", file.display())]
     NotHdf5 { file: PathBuf },
+    /// A directory or another file that is no regular file (`what` says which), given as a
+    /// recording.
+    #[error("{}: {what}, not a recording file", file.display())]
+    NotAFile { file: PathBuf, what: &'static str },
+    /// Shorter than its HDF5 superblock says: a copy, download or disk cut short. The missing
+    /// bytes hold data HDF5 needs to open the file, so no reader (nor `repair`) can open it.
+    #[error(
+        "{}: truncated: {len} bytes, shorter than the {} its HDF5 superblock records (a copy, transfer or disk \
+         that was cut short); HDF5 cannot open it, nor can `skinflow repair`: copy it again from its source",
+        file.display(),
+        expected.map_or_else(|| "size".to_owned(), |n| format!("{n} bytes"))
+    )]
+    Truncated { file: PathBuf, len: u64, expected: Option<u64> },
     /// An HDF5 file that is not a skinflow recording (no `format` attribute on its root).
     #[error(
         "{}: an HDF5 file, but not a skinflow recording (its root has no `format` attribute; \

@@ -158,22 +158,36 @@ pub(crate) fn open_file(path: &Path) -> Result<File, RecordError> {
 
 /// [`open_file`], also saying whether the file carried the SWMR "open for writing" mark.
 pub(crate) fn open_file_marked(path: &Path) -> Result<(File, bool), RecordError> {
-    if let Err(source) = std::fs::metadata(path) {
-        return Err(RecordError::Io { path: path.to_path_buf(), source });
+    let meta = std::fs::metadata(path).map_err(|source| RecordError::Io { path: path.to_path_buf(), source })?;
+    // HDF5 would report a directory as a failed read with its buffer address and errno.
+    if !meta.is_file() {
+        let what = if meta.is_dir() { "is a directory" } else { "is no regular file" };
+        return Err(RecordError::NotAFile { file: path.to_path_buf(), what });
     }
     match File::open(path) {
         Ok(f) => Ok((f, false)),
         Err(first) => File::open_as(path, OpenMode::ReadSWMR).map(|f| (f, true)).map_err(|_| {
-            // HDF5's own words for a lock held by a writer (errno EAGAIN/EWOULDBLOCK).
-            if first.to_string().contains("unable to lock file") {
+            let text = first.to_string();
+            // HDF5's own words for a lock held by a writer (errno EAGAIN/EWOULDBLOCK), and for
+            // a file shorter than its superblock records ("truncated file: eof = 30000,
+            // sblock->base_addr = 0, stored_eof = 72221").
+            if text.contains("unable to lock file") {
                 RecordError::Locked { file: path.to_path_buf() }
-            } else if has_hdf5_signature(path) {
-                RecordError::hdf5(path, "/", first)
-            } else {
+            } else if !has_hdf5_signature(path) {
                 RecordError::NotHdf5 { file: path.to_path_buf() }
+            } else if text.contains("truncated file") {
+                RecordError::Truncated { file: path.to_path_buf(), len: meta.len(), expected: stored_eof(&text) }
+            } else {
+                RecordError::hdf5(path, "/", first)
             }
         }),
     }
+}
+
+/// The file size HDF5's "truncated file" error says the superblock records (`stored_eof = N`).
+fn stored_eof(hdf5_error: &str) -> Option<u64> {
+    let rest = &hdf5_error[hdf5_error.find("stored_eof = ")? + "stored_eof = ".len()..];
+    rest[..rest.find(|c: char| !c.is_ascii_digit()).unwrap_or(rest.len())].parse().ok()
 }
 
 /// The 8-byte signature HDF5 puts at the start of its superblock.

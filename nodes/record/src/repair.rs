@@ -68,6 +68,9 @@ pub fn repair(input: &Path, output: &Path, overwrite: bool) -> Result<RepairRepo
     }
     let (src, swmr_mark) = open_file_marked(input)?;
     check_format(&src, input)?;
+    // The root attributes are copied as they are: one the reader refuses (a missing or invalid
+    // sensor) is refused here, before anything is written.
+    Recording::check_header(input)?;
     // Copies keep each object's format version: a file written in SWMR mode holds 1.10-format
     // datasets, which a file bounded to the 1.8 formats cannot take. New objects (the root
     // attributes) get the earliest format, so a 1.8-format input stays readable by HDF5 1.8.
@@ -78,7 +81,7 @@ pub fn repair(input: &Path, output: &Path, overwrite: bool) -> Result<RepairRepo
     let done = result.and_then(|(cuts, not_copied)| {
         closed?;
         // Validated under the hidden name: `output` only ever names a file that opens.
-        let mut recording = Recording::open(&staging).map_err(|e| still_refused(input, &cuts, e))?;
+        let mut recording = Recording::open(&staging).map_err(|e| still_refused(input, &staging, &cuts, e))?;
         publish(output, overwrite)?;
         recording.path = output.to_path_buf();
         Ok(RepairReport {
@@ -103,15 +106,18 @@ fn same_file(a: &Path, b: &Path) -> bool {
     }
 }
 
-/// The repaired file still does not open: say what was cut and why it is still refused.
-fn still_refused(input: &Path, cuts: &[TableCut], e: RecordError) -> RecordError {
+/// The repaired file still does not open: say what was cut and why it is still refused (the
+/// reader's error, without the name of the hidden file that is removed).
+fn still_refused(input: &Path, staging: &Path, cuts: &[TableCut], e: RecordError) -> RecordError {
     let cut = if cuts.is_empty() {
         "no table needed cutting".to_owned()
     } else {
         let tables: Vec<String> = cuts.iter().map(|c| format!("{} to {} rows", c.table, c.rows_kept)).collect();
         format!("after cutting {}", tables.join(", "))
     };
-    RecordError::NotRepairable { file: input.to_path_buf(), reason: format!("{cut}, it is still refused ({e})") }
+    let e = e.to_string();
+    let why = e.strip_prefix(&format!("{}: ", staging.display())).unwrap_or(&e);
+    RecordError::NotRepairable { file: input.to_path_buf(), reason: format!("{cut}, it is still refused ({why})") }
 }
 
 /// Copies the root attributes and objects of `src` into `dst` (open under the hidden name
@@ -332,7 +338,7 @@ impl std::fmt::Display for RepairReport {
             writeln!(f, "{input}: {what}: neither a string, a number nor a group or dataset; not copied")?;
         }
         let r = &self.recording;
-        let count = |n: Option<usize>| n.map_or_else(|| "none".to_owned(), |n| n.to_string());
+        let count = |n: Option<usize>| n.map_or_else(|| "no".to_owned(), |n| n.to_string());
         write!(
             f,
             "wrote {}: {} EIT frames, {} pressure samples, {} truth rows",

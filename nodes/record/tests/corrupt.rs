@@ -40,6 +40,24 @@ fn truncated_files_are_refused() {
         std::fs::write(&path, &bytes[..(bytes.len() as f64 * fraction) as usize]).unwrap();
         assert_refused(&path, &format!("truncated to {fraction}"));
     }
+    // Past the superblock, said so with both sizes, not in the library's words.
+    let path = dir.join("truncated-0.5.h5");
+    let err = Recording::open(&path).unwrap_err();
+    let half = (bytes.len() as f64 * 0.5) as u64;
+    let want = format!("{}: truncated: {half} bytes, shorter than the {} bytes", path.display(), bytes.len());
+    assert!(matches!(err, RecordError::Truncated { .. }) && err.to_string().starts_with(&want), "{err}");
+    assert!(!err.to_string().contains("sblock"), "{err}");
+}
+
+/// A directory given as a recording is said to be one, not reported as HDF5's failed read
+/// with its buffer address and errno over several lines.
+#[test]
+fn a_directory_is_refused_saying_so() {
+    let dir = tempdir("directory");
+    for result in [Recording::open(&dir).map(drop), Recording::check_header(&dir), inspect(&dir).map(drop)] {
+        let err = result.unwrap_err().to_string();
+        assert_eq!(err, format!("{}: is a directory, not a recording file", dir.display()));
+    }
 }
 
 #[test]

@@ -237,6 +237,7 @@ fn what_a_cut_cannot_mend_is_refused_and_nothing_is_written() {
     let err = repair(&input, &out, false).unwrap_err().to_string();
     assert!(err.contains("cannot be repaired: after cutting /pressure/t to 89 rows"), "{err}");
     assert!(err.contains("/eit/t: is not increasing at row 11"), "{err}");
+    assert!(!err.contains(".partial"), "the removed staging file is not named: {err}");
     let left: Vec<_> = std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().file_name()).collect();
     assert_eq!(left, [std::ffi::OsString::from("rec.h5")], "no output and no staging file");
     let _ = std::fs::remove_dir_all(&dir);
@@ -265,5 +266,15 @@ fn outputs_are_never_clobbered_and_other_files_are_refused() {
     assert!(err.contains("other.h5: an HDF5 file, but not a skinflow recording"), "{err}");
     let err = repair(&dir.join("absent.h5"), &dir.join("y.h5"), false).unwrap_err().to_string();
     assert!(err.contains("absent.h5"), "{err}");
+    // A recording without its sensor is refused before anything is written, naming the input.
+    let nosensor = dir.join("nosensor.h5");
+    let file = hdf5::File::create(&nosensor).unwrap();
+    let format: hdf5::types::VarLenUnicode = "skinflow-recording".parse().unwrap();
+    file.new_attr::<hdf5::types::VarLenUnicode>().shape(()).create("format").unwrap().write_scalar(&format).unwrap();
+    file.new_attr::<i64>().shape(()).create("format_version").unwrap().write_scalar(&1).unwrap();
+    file.close().unwrap();
+    let err = repair(&nosensor, &dir.join("z.h5"), false).unwrap_err().to_string();
+    assert!(err.starts_with(&format!("{}: / attr sensor: is missing", nosensor.display())), "{err}");
+    assert!(!dir.join("z.h5").exists() && !err.contains(".partial"), "{err}");
     let _ = std::fs::remove_dir_all(&dir);
 }

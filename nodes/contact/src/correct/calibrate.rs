@@ -245,9 +245,16 @@ pub enum CalibWarning {
 pub enum CalibrateError {
     /// Too few usable samples for even the signal-to-force quadratic.
     #[error(
-        "calibrate: {usable} usable samples (of {frames} frames); the {signal} force map needs >= 3 with 3 distinct signal values"
+        "calibrate: {usable} usable samples (of {frames} frames{why}); the {signal} force map needs >= 3 with 3 distinct signal values"
     )]
-    SignalFit { signal: &'static str, usable: usize, frames: usize },
+    SignalFit {
+        signal: &'static str,
+        usable: usize,
+        frames: usize,
+        /// What the fit noticed on the way (the samples it rejected and why), as `: ...`;
+        /// empty when nothing.
+        why: String,
+    },
     /// A parameter out of range.
     #[error("calibrate: param \"{name}\": {problem}")]
     Param { name: &'static str, problem: &'static str },
@@ -439,7 +446,12 @@ fn fit_once(frames: &[CalibSample], params: &CalibParams, provenance: Provenance
     let force: Vec<f64> = samples.iter().map(|s| s.force_n).collect();
     let dp: Vec<f64> = samples.iter().map(|s| s.dp_kpa).collect();
     let cond: Vec<f64> = samples.iter().map(|s| s.cond_sum).collect();
-    let err = |signal| CalibrateError::SignalFit { signal, usable: t, frames: frames.len() };
+    let why = if warnings.is_empty() {
+        String::new()
+    } else {
+        format!(": {}", warnings.iter().map(ToString::to_string).collect::<Vec<_>>().join("; "))
+    };
+    let err = |signal| CalibrateError::SignalFit { signal, usable: t, frames: frames.len(), why: why.clone() };
     if t < 3 {
         return Err(err("pneumatic"));
     }

@@ -18,10 +18,11 @@ use std::path::Path;
 /// Value of the `format` key.
 pub const FORMAT: &str = "skinflow-calibration";
 /// Current `format_version`.
-pub const FORMAT_VERSION: u32 = 7;
+pub const FORMAT_VERSION: u32 = 8;
 /// Oldest `format_version` still read (version 3 lacks the location-held-out figures, versions
 /// 3 and 4 the `cv_groups` choice, versions 3 to 5 `provenance.more_recordings`, versions 3 to
-/// 6 the breakdown of the rejected samples, read as 0, and `provenance.pipeline`).
+/// 6 the breakdown of the rejected samples, read as 0, and `provenance.pipeline`, versions 3
+/// to 7 `provenance.sensor`).
 pub const OLDEST_FORMAT_VERSION: u32 = 3;
 
 /// Where a calibration came from (all given by the caller).
@@ -44,6 +45,44 @@ pub struct Provenance {
     /// Absent before version 7.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub pipeline: Option<PipelineSettings>,
+    /// The sensor the recordings were made with, so a calibration is not applied to another
+    /// sensor's recordings (its region, fields and conductivity scale belong to this one).
+    /// Absent before version 8.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sensor: Option<SensorRef>,
+}
+
+/// A sensor as far as a calibration depends on it: its size, electrodes and protocol (the
+/// name is for messages; two sensors of one design calibrate alike).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SensorRef {
+    pub name: String,
+    pub width_mm: f64,
+    pub height_mm: f64,
+    pub electrodes: usize,
+    pub protocol: String,
+}
+
+impl SensorRef {
+    /// Whether `other` has the same size (to 1 µm), electrode count and protocol, whatever
+    /// its name.
+    pub fn same_geometry(&self, other: &SensorRef) -> bool {
+        (self.width_mm - other.width_mm).abs() < 1e-3
+            && (self.height_mm - other.height_mm).abs() < 1e-3
+            && self.electrodes == other.electrodes
+            && self.protocol == other.protocol
+    }
+}
+
+impl fmt::Display for SensorRef {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "\"{}\" ({} x {} mm, {} electrodes, {})",
+            self.name, self.width_mm, self.height_mm, self.electrodes, self.protocol
+        )
+    }
 }
 
 /// The reconstructor's and segmenter's params as the bodies of their TOML params tables
@@ -318,6 +357,19 @@ impl Calibration {
             format: String,
             format_version: u32,
         }
+        // Another TOML file (a sensor, a scene, a graph) or an empty one is named as such,
+        // not as a missing `format` field at line 1.
+        let table: toml::Table = toml::from_str(text).map_err(parse)?;
+        if !table.contains_key("format") {
+            let what = if table.is_empty() { "is empty" } else { "has no `format` key" };
+            return Err(CalibrationFileError::Invalid {
+                path: origin.to_string(),
+                problem: format!(
+                    "not a skinflow calibration: the file {what} (a calibration starts with format = \"{FORMAT}\"; \
+                     `skinflow calibrate` writes one)"
+                ),
+            });
+        }
         let h: Header = toml::from_str(text).map_err(parse)?;
         if h.format != FORMAT || !(OLDEST_FORMAT_VERSION..=FORMAT_VERSION).contains(&h.format_version) {
             return Err(CalibrationFileError::Format {
@@ -412,8 +464,17 @@ impl Calibration {
 
     /// Reads a calibration file.
     pub fn read(path: &Path) -> Result<Self, CalibrationFileError> {
-        let text = std::fs::read_to_string(path)
-            .map_err(|source| CalibrationFileError::Io { path: path.display().to_string(), source })?;
+        let text = std::fs::read_to_string(path).map_err(|source| {
+            let path = path.display().to_string();
+            if source.kind() == std::io::ErrorKind::InvalidData {
+                // A binary file (a recording given as --calib, say), not the io error's
+                // "stream did not contain valid UTF-8".
+                let problem = "not a skinflow calibration: not UTF-8 text (a calibration is the TOML file `skinflow calibrate` writes)".to_owned();
+                CalibrationFileError::Invalid { path, problem }
+            } else {
+                CalibrationFileError::Io { path, source }
+            }
+        })?;
         Self::from_toml_str(&text, &path.display().to_string())
     }
 

@@ -20,6 +20,6 @@ pub mod strategy;
 pub use average::{Holds, average_holds};
 pub use calibrate::{CalibParams, CalibSample, CalibWarning, CalibrateError, Calibrated, calibrate};
 pub use calibration::{
-    Calibration, CalibrationFileError, CvGroups, FFit, PipelineSettings, Provenance, R2Table, RecordingRef,
+    Calibration, CalibrationFileError, CvGroups, FFit, PipelineSettings, Provenance, R2Table, RecordingRef, SensorRef,
 };
 pub use strategy::{ForceEstimate, ForceFlags, Strategy, StrategyKind};

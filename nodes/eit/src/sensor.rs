@@ -148,6 +148,9 @@ protocol = "pairwise"
 /// Tolerance, in mm, for "this point lies on the boundary": explicit electrodes are checked
 /// against it. Generous enough for coordinates typed with 0.1 mm precision.
 pub const ON_BOUNDARY_TOL_MM: f64 = 1e-6;
+/// Largest sensor side, mm: far beyond any skin (1 km), and far inside the coordinates the
+/// mesher takes (its triangulation refuses beyond 2^201, about 3.2e60 mm).
+pub const MAX_SIDE_MM: f64 = 1e6;
 
 impl Sensor {
     /// The default sensor of CONTRACTS.md section 1.
@@ -160,11 +163,14 @@ impl Sensor {
         let file: SensorFile = toml::from_str(text)?;
         let s = file.sensor;
         let ok = |x: f64| x.is_finite() && x > 0.0;
-        if !ok(s.width_mm) {
-            return Err(invalid("width_mm", format!("must be finite and > 0 (got {})", s.width_mm)));
-        }
-        if !ok(s.height_mm) {
-            return Err(invalid("height_mm", format!("must be finite and > 0 (got {})", s.height_mm)));
+        for (field, side) in [("width_mm", s.width_mm), ("height_mm", s.height_mm)] {
+            if !ok(side) {
+                return Err(invalid(field, format!("must be finite and > 0 (got {side})")));
+            }
+            if side > MAX_SIDE_MM {
+                let max = format!("{MAX_SIDE_MM:e} mm (1 km; the mesher's range)");
+                return Err(invalid(field, format!("must be at most {max} (got {side:e})")));
+            }
         }
         let (hw, hh) = (0.5 * s.width_mm, 0.5 * s.height_mm);
         let electrodes = if s.electrode.is_empty() {
@@ -199,11 +205,18 @@ impl Sensor {
                 if el.length_mm().is_nan() || el.length_mm() <= 0.0 {
                     return Err(invalid(format!("electrode[{i}]"), "has zero length"));
                 }
-                if side_of(e.start_mm, hw, hh) != side_of(e.end_mm, hw, hh)
-                    && !is_corner(e.start_mm, hw, hh)
-                    && !is_corner(e.end_mm, hw, hh)
-                {
-                    return Err(invalid(format!("electrode[{i}]"), "must lie on one side (it may not wrap a corner)"));
+                // Both ends on one side (a corner is on both of its sides): an electrode from a
+                // corner to another side would cross the sensor, and no mesh edge lies on it.
+                let (a, b) = (sides(e.start_mm, hw, hh), sides(e.end_mm, hw, hh));
+                if !(0..4).any(|k| a[k] && b[k]) {
+                    return Err(invalid(
+                        format!("electrode[{i}]"),
+                        format!(
+                            "from ({}, {}) to ({}, {}) mm: must lie on one side (it may not wrap a corner or cross \
+                             the sensor)",
+                            e.start_mm[0], e.start_mm[1], e.end_mm[0], e.end_mm[1]
+                        ),
+                    ));
                 }
                 v.push(el);
             }
@@ -316,23 +329,10 @@ fn on_boundary(p: [f64; 2], hw: f64, hh: f64) -> bool {
     inside && ((p[0].abs() - hw).abs() <= t || (p[1].abs() - hh).abs() <= t)
 }
 
-fn is_corner(p: [f64; 2], hw: f64, hh: f64) -> bool {
+/// Which sides point `p` is on: bottom, right, top, left (a corner is on two).
+fn sides(p: [f64; 2], hw: f64, hh: f64) -> [bool; 4] {
     let t = ON_BOUNDARY_TOL_MM;
-    (p[0].abs() - hw).abs() <= t && (p[1].abs() - hh).abs() <= t
-}
-
-/// 0 bottom, 1 right, 2 top, 3 left.
-fn side_of(p: [f64; 2], hw: f64, hh: f64) -> u8 {
-    let t = ON_BOUNDARY_TOL_MM;
-    if (p[1] + hh).abs() <= t {
-        0
-    } else if (p[0] - hw).abs() <= t {
-        1
-    } else if (p[1] - hh).abs() <= t {
-        2
-    } else {
-        3
-    }
+    [(p[1] + hh).abs() <= t, (p[0] - hw).abs() <= t, (p[1] - hh).abs() <= t, (p[0] + hw).abs() <= t]
 }
 
 #[cfg(test)]
@@ -385,6 +385,33 @@ mod tests {
         let e =
             Sensor::from_toml("[sensor]\n[[sensor.electrode]]\nstart_mm=[0.0,0.0]\nend_mm=[1.0,0.0]\n").unwrap_err();
         assert!(e.to_string().contains("not on the boundary"), "{e}");
+        let e = Sensor::from_toml("[sensor]\nheight_mm = 1e62\n").unwrap_err().to_string();
+        assert_eq!(e, "sensor: height_mm: must be at most 1e6 mm (1 km; the mesher's range) (got 1e62)");
+    }
+
+    /// A corner is on both of its sides: an electrode from it runs along either, never to
+    /// another side (it would cross the sensor, and no mesh edge would lie on it).
+    #[test]
+    fn an_electrode_from_a_corner_stays_on_one_of_its_sides() {
+        let with = |end: &str| {
+            Sensor::from_toml(&format!(
+                "[sensor]\n[[sensor.electrode]]\nstart_mm = [-50.0, -50.0]\nend_mm = {end}\n\
+                 [[sensor.electrode]]\nstart_mm = [10.0, -50.0]\nend_mm = [20.0, -50.0]\n\
+                 [[sensor.electrode]]\nstart_mm = [50.0, 10.0]\nend_mm = [50.0, 20.0]\n"
+            ))
+        };
+        for end in ["[-40.0, -50.0]", "[-50.0, -40.0]"] {
+            let s = with(end).unwrap();
+            let mesh = crate::mesh::Mesh::generate(&s, &crate::mesh::MeshParams::default());
+            assert!(mesh.is_ok(), "{end}: {:?}", mesh.err());
+        }
+        for end in ["[0.0, 50.0]", "[50.0, 50.0]", "[50.0, 0.0]"] {
+            let e = with(end).unwrap_err().to_string();
+            assert!(
+                e.starts_with("sensor: electrode[0]: from (-50, -50) to ") && e.contains("must lie on one side"),
+                "{e}"
+            );
+        }
     }
 
     #[test]

@@ -12,6 +12,10 @@ pub const MIN_MESH_ELEMENTS: usize = 100;
 /// Most elements of the simulation mesh: the largest mesh skinflow-eit generates
 /// (`MeshParams::elements`); the simulator clamps to `[mesh_min_elements, mesh_max_elements]`.
 pub const MAX_MESH_ELEMENTS: usize = 2_000_000;
+/// Largest `contact_impedance_ohm_mm2`: each electrode's is it times max(1 + spread N(0, 1),
+/// 0.1) with spread < 1, a factor far below 1e8 for any draw, so every electrode's stays
+/// finite (the forward model refuses an infinite one).
+pub const MAX_CONTACT_IMPEDANCE_OHM_MM2: f64 = 1e300;
 
 /// Every constant of the model. Field docs are the `[model]` TOML reference.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -219,6 +223,18 @@ impl Profile {
         frac("foam_heterogeneity", self.foam_heterogeneity)?;
         pos("foam_heterogeneity_length_mm", self.foam_heterogeneity_length_mm)?;
         pos("contact_impedance_ohm_mm2", self.contact_impedance_ohm_mm2)?;
+        // Each electrode's is this times max(1 + spread N(0, 1), 0.1) (`EitChannel::new`): a
+        // value near f64::MAX overflowed to inf there for most seeds, and the run was refused.
+        if self.contact_impedance_ohm_mm2 > MAX_CONTACT_IMPEDANCE_OHM_MM2 {
+            return Err((
+                "contact_impedance_ohm_mm2",
+                format!(
+                    "must be at most {MAX_CONTACT_IMPEDANCE_OHM_MM2:e} (got {:e}): each electrode's is drawn \
+                     around it and must stay finite",
+                    self.contact_impedance_ohm_mm2
+                ),
+            ));
+        }
         frac("contact_impedance_spread", self.contact_impedance_spread)?;
         nonneg("electrode_misplacement_mm", self.electrode_misplacement_mm)?;
         nonneg("eit_noise_rel", self.eit_noise_rel)?;

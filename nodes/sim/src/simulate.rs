@@ -17,6 +17,7 @@ use crate::stage::Stage;
 use crate::timeline::{Load, Timeline};
 use crate::truth::{TruthContact, TruthCursor};
 use skinflow_eit::{EitError, Sensor};
+use std::sync::Arc;
 use thiserror::Error;
 
 /// Errors from building or running a simulation.
@@ -61,7 +62,8 @@ pub struct Simulator {
     // Configuration
     sensor: Sensor,
     rates: Rates,
-    timeline: Timeline,
+    /// The scene's own timeline, shared (never copied: it may be tens of MB).
+    timeline: Arc<Timeline>,
     stage: Stage,
     duration_s: f64,
     scene: String,
@@ -83,6 +85,8 @@ pub struct Simulator {
 
 impl Simulator {
     /// Prepares the channels the scene asks for (meshing and symbolic factorization happen here).
+    /// The simulator shares the scene's timeline (`Scene::timeline`, an `Arc`): the scene may be
+    /// kept or dropped, the timeline is held once either way.
     pub fn new(scene: &Scene, seed: u64) -> Result<Simulator, SimError> {
         let eit = if scene.channels.eit {
             Some(
@@ -100,7 +104,7 @@ impl Simulator {
             rates: scene.rates,
             truth,
             next_truth_t,
-            timeline: scene.timeline.clone(),
+            timeline: Arc::clone(&scene.timeline),
             stage: Stage::new(&scene.profile, &scene.sensor, seed),
             duration_s: scene.duration_s(),
             scene: scene.name.clone(),
@@ -130,6 +134,11 @@ impl Simulator {
     /// Values per EIT frame (M), 0 when the scene has no EIT channel.
     pub fn measurement_count(&self) -> usize {
         self.eit.as_ref().map_or(0, |e| e.measurement_count())
+    }
+
+    /// The timeline the simulator walks: the scene's own (`Scene::timeline`), not a copy.
+    pub fn timeline(&self) -> &Timeline {
+        &self.timeline
     }
 
     /// Most contacts at once in the scene (the truth width C of a recording).

@@ -415,3 +415,60 @@ fn shipped_scenes_and_fixtures_load() {
     }
     assert!(n >= 13, "found only {n} scenes");
 }
+
+// ---- scenes that reading passed but `Simulator::new` refused (meshing, contact impedance)
+
+/// A sensor with explicit electrodes from line 4: one from the bottom-left corner to `end`, and
+/// three short ones on the other sides.
+fn electrodes(end: &str) -> String {
+    format!(
+        "[scene]\n[sensor]\nwidth_mm = 100.0\n[[sensor.electrode]]\nstart_mm = [-50.0, -50.0]\nend_mm = {end}\n\
+         [[sensor.electrode]]\nstart_mm = [10.0, -50.0]\nend_mm = [20.0, -50.0]\n\
+         [[sensor.electrode]]\nstart_mm = [50.0, 10.0]\nend_mm = [50.0, 20.0]\n\
+         [[sensor.electrode]]\nstart_mm = [10.0, 50.0]\nend_mm = [20.0, 50.0]\n[[step]]\nrest_s = 2.0\n"
+    )
+}
+
+#[test]
+fn a_scene_the_simulator_cannot_mesh_is_refused_when_read() {
+    // an electrode from a corner to another side crosses the sensor: skinflow-eit accepted it,
+    // and meshing refused it ("electrode 0: boundary edges cover -0 mm of its 111.8 mm")
+    let (line, col, msg) = refused(&electrodes("[0.0, 50.0]"));
+    assert_eq!((line, col), (4, 1), "{msg}");
+    let want = "[sensor] \"electrode[0]\": from (-50, -50) to (0, 50) mm: must lie on one side (it may not wrap a \
+                corner or cross the sensor)";
+    assert_eq!(msg, want);
+    let (_, _, msg) = refused(&electrodes("[50.0, 50.0]"));
+    assert!(msg.starts_with("[sensor] \"electrode[0]\": from (-50, -50) to (50, 50) mm: must lie on one"), "{msg}");
+    // from a corner along either of its sides is an electrode on one side
+    for end in ["[-40.0, -50.0]", "[-50.0, -40.0]"] {
+        let s = accepted(&electrodes(end));
+        skinflow_sim::Simulator::new(&s, 1).unwrap_or_else(|e| panic!("{end}: {e}"));
+    }
+    // corners beyond the mesher's range (spade: 2^201 mm) refused meshing ("TooLarge")
+    let big = "[scene]\n[sensor]\nwidth_mm = 1e62\n[[step]]\nrest_s = 2.0\n";
+    let (line, col, msg) = refused(big);
+    assert_eq!((line, col), (3, 12), "{msg}");
+    assert_eq!(msg, "[sensor] \"width_mm\": must be at most 1e6 mm (1 km; the mesher's range) (got 1e62)");
+}
+
+#[test]
+fn a_contact_impedance_that_overflows_per_electrode_is_refused_when_read() {
+    // each electrode's is drawn around it: at 1.7e308 it overflowed to inf for most seeds
+    let text = "[scene]\n[model]\ncontact_impedance_ohm_mm2 = 1.7e308\n[[step]]\nrest_s = 2.0\n";
+    let (line, _, msg) = refused(text);
+    assert_eq!(line, 3, "{msg}");
+    assert!(msg.starts_with("[model] \"contact_impedance_ohm_mm2\": must be at most 1e300 (got 1.7e308)"), "{msg}");
+}
+
+/// `Scene::read`, as `skinflow check` calls it for a `sim` node, names the file.
+#[test]
+fn reading_a_scene_file_refuses_what_the_simulator_could_not_set_up() {
+    let dir = std::env::temp_dir().join(format!("skinflow-sim-meshable-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("crossing.toml");
+    std::fs::write(&path, electrodes("[0.0, 50.0]")).unwrap();
+    let e = Scene::read(&path).unwrap_err().to_string();
+    std::fs::remove_dir_all(&dir).unwrap();
+    assert!(e.starts_with(&format!("{}:4:1: [sensor] \"electrode[0]\"", path.display())), "{e}");
+}

@@ -129,6 +129,28 @@ fn channels_not_asked_for_are_not_computed() {
     assert_eq!(events.iter().filter(|e| matches!(e, SimEvent::Pressure { .. })).count(), 40);
 }
 
+/// The simulator walks the scene's own timeline, shared, not a copy of it: a scene at the
+/// contact cap (about 96 MB of timeline) is held once, whether the caller keeps the scene or
+/// drops it.
+#[test]
+fn the_simulator_shares_the_scenes_timeline() {
+    let text = format!(
+        "[scene]\nchannels = [\"pressure\"]\n{SMALL_MESH}[[step]]\nrest_s = 2.0\n\
+         [[step]]\nat_mm = [[0.0, 0.0], [10.0, 0.0]]\ndiameter_mm = 15.0\nforces_n = [2.0, 4.0]\nhold_s = 1.0\n"
+    );
+    let s = Scene::from_str(&text, "p.toml").unwrap();
+    assert_eq!(std::sync::Arc::strong_count(&s.timeline), 1);
+    let mut sim = Simulator::new(&s, 0).unwrap();
+    assert!(std::ptr::eq(sim.timeline(), &*s.timeline), "the simulator copied the timeline");
+    assert_eq!(std::sync::Arc::strong_count(&s.timeline), 2);
+    // the events are those of the scene's timeline, which outlives the scene
+    let segments = s.timeline.segments.clone();
+    drop(s);
+    assert_eq!(sim.timeline().segments, segments);
+    let pressure = sim.by_ref().filter(|e| matches!(e, Ok(SimEvent::Pressure { .. }))).count();
+    assert!(pressure > 100, "{pressure}");
+}
+
 #[test]
 fn static_holds_are_solved_once() {
     let s = scene(

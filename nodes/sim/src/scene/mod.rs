@@ -18,6 +18,7 @@ use parse::RawScene;
 use skinflow_eit::Sensor;
 use std::ops::Range;
 use std::path::Path;
+use std::sync::Arc;
 use thiserror::Error;
 
 /// Errors from reading, parsing or validating a scene.
@@ -85,7 +86,9 @@ pub struct Scene {
     pub profile_name: String,
     pub rates: Rates,
     pub channels: Channels,
-    pub timeline: Timeline,
+    /// The expanded steps (up to about 96 MB, see MODEL.md): shared, not copied, with every
+    /// `Simulator` of the scene.
+    pub timeline: Arc<Timeline>,
     /// Injected hardware faults (`[[fault]]`).
     pub faults: Vec<Fault>,
     /// The scene's TOML text, verbatim (recordings may store it).

@@ -11,6 +11,7 @@ use super::{Channels, Fault, Locator, Pacing, Rates, Scene, SceneError};
 use crate::profile::Profile;
 use crate::timeline::Timeline;
 use skinflow_eit::{Sensor, SensorError};
+use std::sync::Arc;
 use toml::Spanned;
 
 const DEFAULT_EIT_FPS: f64 = 1.3;
@@ -144,7 +145,7 @@ pub(super) fn validate(raw: RawScene, text: &str, at: &Locator<'_>) -> Result<Sc
         profile_name,
         rates,
         channels,
-        timeline,
+        timeline: Arc::new(timeline),
         faults,
         toml: text.to_owned(),
     })

@@ -313,7 +313,11 @@ fn load(path: &Path, inputs: InputFiles) -> Result<Result<GraphSpec, ExitCode>> 
         Err(code) => return Ok(Err(code)),
     };
     let checked = GraphSpec::load(path, &reg).and_then(|spec| match inputs {
-        InputFiles::Check => spec.check_files().map(|()| spec),
+        // Then the sensors the files name agree (a reconstructor with its sources and the
+        // calibrations downstream of it): checked only once every file reads.
+        InputFiles::Check => {
+            spec.check_files().and_then(|()| skinflow_nodes::sensors::check_graph(&spec)).map(|()| spec)
+        }
         InputFiles::Skip => Ok(spec),
     });
     match checked {

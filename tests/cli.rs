@@ -1189,3 +1189,92 @@ fn recordings_of_another_sensor_and_files_that_are_no_calibration_are_refused() 
     assert!(err.contains("F <= 0"), "{err}");
     assert!(!d.join("c.toml").exists());
 }
+
+/// A reconstructor images on its own `sensor` param, not on the sensor of its frames: `check`
+/// (and `run`, before any node starts) refuse one whose sensor differs from the recording's or
+/// scene's upstream of it, or from the sensor a calibration downstream of it was fitted on.
+#[test]
+fn a_reconstructor_of_another_sensor_than_its_recording_scene_or_calibration_is_refused() {
+    let d = workdir("sensor-mismatch");
+    let small_sensor = "[sensor]\nname = \"small-60mm\"\nwidth_mm = 60.0\nheight_mm = 60.0\n";
+    let scene = format!(
+        "[scene]\nname = \"small\"\nprofile = \"paper\"\n{small_sensor}\
+         [[step]]\nrest_s = 4.0\n\
+         [[step]]\nat_mm = [[-10.0, 10.0]]\ndiameter_mm = 10.0\nforces_n = [3.0, 6.0]\nhold_frames = 3\nrest_s = 0.5\n"
+    );
+    std::fs::write(d.join("small.toml"), scene).unwrap();
+    std::fs::write(d.join("small-sensor.toml"), small_sensor).unwrap();
+    ok(&skinflow(&d, &["simulate", "small.toml", "--out", "small.h5"]));
+    simulate(&d, "tiny-calibration.toml", "cal.h5");
+    ok(&skinflow(&d, &["calibrate", "cal.h5", "--out", "calib.toml"]));
+    let small = "sensor \"small-60mm\" (60 x 60 mm, 16 electrodes, pairwise)";
+    let paper = "sensor \"paper-100mm\" (100 x 100 mm, 16 electrodes, pairwise)";
+    let refused_by_check = |graph: &str, want: &[&str]| {
+        std::fs::write(d.join("g.toml"), graph).unwrap();
+        let out = skinflow(&d, &["check", "g.toml"]);
+        let err = stderr(&out);
+        assert_eq!(out.status.code(), Some(2), "{err}");
+        assert_eq!(err.lines().count(), 1, "one error: {err}");
+        assert!(err.starts_with("g.toml:") && err.contains("node \"recon\": param \"sensor\": "), "{err}");
+        for w in want {
+            assert!(err.contains(w), "want {w:?} in:\n{err}");
+        }
+        assert!(out.stdout.is_empty(), "no \"ok\" line");
+        err
+    };
+
+    // A 60 mm recording through a default (100 mm) reconstructor (the shipped calibration is of
+    // the 100 mm sensor, or records none: either way not at fault).
+    pipeline_graph(&d, "small.h5", "pneumatic-locaware");
+    let graph = std::fs::read_to_string(d.join("g.toml")).unwrap();
+    let err = refused_by_check(
+        &graph,
+        &[
+            &format!("reconstructs on {paper}, the default (no `sensor` param)"),
+            &format!("replay \"replay\", whose recording small.h5 was made on {small}"),
+            "give the reconstructor `sensor = \"...\"` matching the recording",
+        ],
+    );
+    assert!(err.starts_with("g.toml:10:1: "), "at the reconstructor's table: {err}");
+    let run = skinflow(&d, &["run", "g.toml"]);
+    assert_eq!((run.status.code(), stderr(&run)), (Some(2), err), "run stops on the same error");
+    assert!(!d.join("out.h5").exists(), "nothing ran");
+
+    // The same from a simulated skin.
+    let sim = sim_graph("small.toml", "calib.toml");
+    refused_by_check(
+        &sim,
+        &[&format!("reconstructs on {paper}"), &format!("sim \"sim\", whose scene small.toml was made on {small}")],
+    );
+
+    // Given the recording's sensor, the reconstructor passes, up to a calibration fitted on the
+    // 100 mm sensor downstream of it.
+    let sized = "kind = \"reconstructor\"\nparams = { sensor = \"small-sensor.toml\" }\n";
+    let graph = graph.replace("kind = \"reconstructor\"\n", sized);
+    let ours = fixture("../../graphs/calib/paper.toml");
+    let graph = graph.replace(&format!("{:?}", ours.to_str().unwrap()), "\"calib.toml\"");
+    assert!(graph.contains("calibration = \"calib.toml\""), "{graph}");
+    let err = refused_by_check(
+        &graph,
+        &[
+            &format!("reconstructs on {small} of small-sensor.toml"),
+            &format!("corrector \"force\" downstream uses calibration calib.toml, fitted on {paper}"),
+            "recalibrate on recordings of this sensor",
+        ],
+    );
+    assert!(err.starts_with("g.toml:13:12: "), "at the reconstructor's sensor param: {err}");
+    // The sim graph's reconstructor too.
+    refused_by_check(
+        &sim.replace("kind = \"reconstructor\"\n", sized),
+        &[&format!("corrector \"force\" downstream uses calibration calib.toml, fitted on {paper}")],
+    );
+
+    // A calibration of the 60 mm sensor's geometry (here: renamed) passes.
+    let calib = std::fs::read_to_string(d.join("calib.toml")).unwrap();
+    let resized = calib.replace("width_mm = 100.0", "width_mm = 60.0").replace("height_mm = 100.0", "height_mm = 60.0");
+    assert_ne!(resized, calib);
+    std::fs::write(d.join("calib-60.toml"), resized).unwrap();
+    std::fs::write(d.join("g.toml"), graph.replace("\"calib.toml\"", "\"calib-60.toml\"")).unwrap();
+    let text = ok(&skinflow(&d, &["check", "g.toml"]));
+    assert!(text.starts_with("g.toml: ok ("), "{text}");
+}

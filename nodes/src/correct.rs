@@ -30,7 +30,7 @@ use skinflow_core::{
 };
 
 use crate::payload::{Forces, Split};
-use crate::split::{check_calibration, load_calibration};
+use crate::split::{SensorGuard, check_calibration, load_calibration};
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -84,6 +84,7 @@ fn estimate_split(strategy: &Strategy, split: &Split, out: &mut Vec<ForceEstimat
 
 pub struct Corrector {
     strategy: Strategy,
+    sensor: SensorGuard,
     name: Option<String>,
     ring: Recycler<Forces>,
     /// Frames seen whose pressure change was unknown.
@@ -95,6 +96,7 @@ impl Processor for Corrector {
         let Some(m) = inputs.get(0) else { return Ok(()) };
         let t0 = Instant::now();
         let split = m.arc::<Split>().ok_or(NodeError::Input { port: "split".into(), problem: "not a split".into() })?;
+        self.sensor.check("split", &split.contacts.image)?;
         self.without_pressure += u64::from(!split.contacts.image.src.has_pressure());
         let strategy = &self.strategy;
         let name = &self.name;
@@ -165,6 +167,7 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
             let cal = load_calibration(&p.calibration, ctx)?;
             Ok(NodeImpl::Processor(Box::new(Corrector {
                 strategy: Strategy::new(&cal, kind),
+                sensor: SensorGuard::new(&cal, &p.calibration, ctx),
                 name: p.name,
                 ring: Recycler::new(128, Forces::default),
                 without_pressure: 0,

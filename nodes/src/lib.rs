@@ -18,6 +18,7 @@ pub mod pipeline;
 pub mod reconstruct;
 pub mod replay;
 pub mod segment;
+pub mod sensors;
 pub mod serial;
 pub mod sim;
 pub mod split;

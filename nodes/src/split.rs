@@ -84,6 +84,45 @@ pub(crate) fn check_calibration(param: &str, path: &std::path::Path, ctx: &Build
     load_calibration(path, ctx).map(drop).map_err(|e| ParamError::new(param, e.to_string()))
 }
 
+/// A calibration's sensor, checked against the frames a node receives: a calibration fitted
+/// on one sensor gives wrong forces (and wrong locations for its fields) on another's frames.
+/// Each image carries its sensor's size (`Image::width_mm`, `height_mm`); a calibration from
+/// before format version 8 records no sensor and is not checked.
+pub(crate) struct SensorGuard {
+    /// The calibration's file and sensor, when it records one.
+    expected: Option<(PathBuf, skinflow_contact::correct::SensorRef)>,
+}
+
+impl SensorGuard {
+    pub(crate) fn new(cal: &Calibration, path: &std::path::Path, ctx: &BuildContext) -> SensorGuard {
+        SensorGuard { expected: cal.provenance.sensor.clone().map(|s| (ctx.resolve(path), s)) }
+    }
+
+    /// No calibration, nothing to check.
+    pub(crate) fn none() -> SensorGuard {
+        SensorGuard { expected: None }
+    }
+
+    /// Refuses, as an error that stops the graph, a frame of a sensor of another size than the
+    /// calibration's (to 1 µm, as `SensorRef::same_geometry`). An image that gives no size
+    /// (0 mm: a synthetic one, a plugin's that leaves the field unset) is not checked.
+    pub(crate) fn check(&self, port: &'static str, image: &crate::payload::Image) -> Result<(), NodeError> {
+        let Some((path, s)) = &self.expected else { return Ok(()) };
+        let unknown = !(image.width_mm > 0.0 && image.height_mm > 0.0);
+        if unknown || (image.width_mm - s.width_mm).abs() < 1e-3 && (image.height_mm - s.height_mm).abs() < 1e-3 {
+            return Ok(());
+        }
+        let problem = format!(
+            "frames of a {} x {} mm sensor, but calibration {} was fitted on sensor {s}: calibrate on this \
+             sensor's recordings (or give the reconstructor the calibration's sensor)",
+            image.width_mm,
+            image.height_mm,
+            path.display()
+        );
+        Err(NodeError::Input { port: port.into(), problem }.fatal())
+    }
+}
+
 /// How weights are computed.
 enum Weights {
     Math(Box<SplitMath>),
@@ -93,6 +132,7 @@ enum Weights {
 
 pub struct Splitter {
     weights: Weights,
+    sensor: SensorGuard,
     ring: Recycler<Split>,
 }
 
@@ -102,6 +142,7 @@ impl Processor for Splitter {
         let t0 = Instant::now();
         let contacts =
             m.arc::<Contacts>().ok_or(NodeError::Input { port: "contacts".into(), problem: "not contacts".into() })?;
+        self.sensor.check("contacts", &contacts.image)?;
         let dp = contacts.image.src.dp_kpa;
         let weights = &self.weights;
         let payload = self.ring.fill(|s| {
@@ -149,21 +190,74 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
                 "calibration TOML (relative to the graph file; needed by every strategy but proportional)",
             )),
         |p: SplitterParams, ctx| {
-            let cal = || load_calibration(p.calibration.as_ref().expect("validated: calibration is set"), ctx);
-            let weights = match p.strategy {
-                SplitStrategy::Proportional => Weights::Math(Box::new(SplitMath::Proportional)),
-                SplitStrategy::SensitivityCompensated => {
-                    Weights::Math(Box::new(SplitMath::SensitivityCompensated(cal()?.sensitivity)))
+            // The calibration, for every strategy but `proportional`.
+            let cal = match (p.strategy, &p.calibration) {
+                (SplitStrategy::Proportional, _) | (_, None) => None,
+                (_, Some(path)) => Some((load_calibration(path, ctx)?, path)),
+            };
+            let sensor = cal.as_ref().map_or_else(SensorGuard::none, |(c, path)| SensorGuard::new(c, path, ctx));
+            let weights = match (p.strategy, cal) {
+                (SplitStrategy::SensitivityCompensated, Some((c, _))) => {
+                    Weights::Math(Box::new(SplitMath::SensitivityCompensated(c.sensitivity)))
                 }
-                SplitStrategy::ForceBalance => {
-                    let c = cal()?;
+                (SplitStrategy::ForceBalance, Some((c, _))) => {
                     Weights::Math(Box::new(SplitMath::ForceBalance { sensitivity: c.sensitivity, forward: c.forward }))
                 }
-                SplitStrategy::EitForce => {
-                    Weights::EitForce(Box::new(Strategy::new(&cal()?, StrategyKind::EitLocAware)))
+                (SplitStrategy::EitForce, Some((c, _))) => {
+                    Weights::EitForce(Box::new(Strategy::new(&c, StrategyKind::EitLocAware)))
                 }
+                // `validate` requires a calibration for every strategy but this one.
+                _ => Weights::Math(Box::new(SplitMath::Proportional)),
             };
-            Ok(NodeImpl::Processor(Box::new(Splitter { weights, ring: Recycler::new(128, Split::default) })))
+            Ok(NodeImpl::Processor(Box::new(Splitter { weights, sensor, ring: Recycler::new(128, Split::default) })))
         },
     ))
+}
+
+#[cfg(test)]
+mod tests {
+    use std::path::Path;
+    use std::sync::Arc;
+
+    use skinflow_contact::Calibration;
+    use skinflow_contact::correct::SensorRef;
+    use skinflow_core::{BuildContext, Mode, NodeError};
+
+    use super::SensorGuard;
+    use crate::payload::Image;
+
+    fn image(width_mm: f64, height_mm: f64) -> Image {
+        Image { width_mm, height_mm, src: Arc::default(), ..Image::default() }
+    }
+
+    /// Frames of another sensor's size stop the graph, naming both; a calibration that records
+    /// no sensor (before format 8) checks nothing, nor does an image without a size.
+    #[test]
+    fn a_calibration_refuses_frames_of_another_sensor_size() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../graphs/calib/paper.toml");
+        let mut cal = Calibration::read(&path).unwrap();
+        let ctx = BuildContext { base_dir: "/graphs".into(), mode: Mode::Lockstep, node_id: "force".into() };
+        cal.provenance.sensor = None;
+        SensorGuard::new(&cal, Path::new("calib.toml"), &ctx).check("split", &image(60.0, 60.0)).unwrap();
+        cal.provenance.sensor = Some(SensorRef {
+            name: "paper-100mm".into(),
+            width_mm: 100.0,
+            height_mm: 100.0,
+            electrodes: 16,
+            protocol: "pairwise".into(),
+        });
+        let guard = SensorGuard::new(&cal, Path::new("calib.toml"), &ctx);
+        guard.check("split", &image(100.0, 100.0 + 1e-4)).unwrap();
+        match guard.check("split", &image(60.0, 60.0)) {
+            Err(NodeError::Fatal(e)) => assert_eq!(
+                e.to_string(),
+                "input \"split\": frames of a 60 x 60 mm sensor, but calibration /graphs/calib.toml was fitted on \
+                 sensor \"paper-100mm\" (100 x 100 mm, 16 electrodes, pairwise): calibrate on this sensor's \
+                 recordings (or give the reconstructor the calibration's sensor)"
+            ),
+            other => panic!("expected a fatal input error, got {other:?}"),
+        }
+        guard.check("split", &image(0.0, 0.0)).unwrap();
+        SensorGuard::none().check("contacts", &image(60.0, 60.0)).unwrap();
+    }
 }

@@ -94,13 +94,7 @@ pub fn fit_params(text: &str) -> Result<CalibParams> {
 
 /// The sensor of a recording, as a calibration records it.
 pub fn sensor_of(rec: &skinflow_record::Recording) -> SensorRef {
-    SensorRef {
-        name: rec.sensor.name.clone(),
-        width_mm: rec.sensor.width_mm,
-        height_mm: rec.sensor.height_mm,
-        electrodes: rec.sensor.electrodes.len(),
-        protocol: rec.sensor.protocol.name().to_owned(),
-    }
+    skinflow_nodes::sensors::sensor_ref(&rec.sensor)
 }
 
 /// Opens every recording before any is run through the pipeline: refuses one the pipeline

@@ -267,6 +267,12 @@ impl Recording {
         open_head(path.as_ref()).map(drop)
     }
 
+    /// The sensor a recording was made on (its root `sensor` attribute), checked as
+    /// [`Recording::check_header`] does and as cheaply: no stream is read.
+    pub fn read_sensor(path: impl AsRef<Path>) -> Result<Sensor, RecordError> {
+        open_head(path.as_ref()).map(|head| head.sensor)
+    }
+
     /// Opens and validates `path` (CONTRACTS.md section 2), then reads every stream.
     pub fn open(path: impl AsRef<Path>) -> Result<Recording, RecordError> {
         let fpath = path.as_ref();

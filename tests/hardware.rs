@@ -234,6 +234,13 @@ fn logging_graph(scene: &str) -> String {
     )
 }
 
+/// Killed between flushes, a logging run leaves a file that opens with the rows flushed before
+/// the kill, the EIT rows a gap-free prefix. A kill that lands while HDF5 rewrites a partly
+/// filled chunk (each flush appends to the last chunk of every column, so a compressed chunk
+/// moves to new space) can leave that chunk unreadable: seen once in about 20 CI runs, as
+/// "/eit/t: H5Dread(): can't read data: inflate() failed" (README, "Recording"). So up to
+/// three runs are killed, each at a different moment; one must leave a readable file, and any
+/// that does not is refused by the reader with an error naming the dataset, never a panic.
 #[test]
 fn a_logging_run_killed_with_sigkill_leaves_a_readable_file() {
     let d = workdir("sigkill");
@@ -241,27 +248,40 @@ fn a_logging_run_killed_with_sigkill_leaves_a_readable_file() {
     // The simulator alone is fast; loop it through a replay would be faster still, but the
     // point is a logger in the middle of writing: kill it while the scene is being logged.
     std::fs::write(d.join("g.toml"), graph).unwrap();
-    let child = Command::new(bin())
-        .args(["run", "g.toml"])
-        .current_dir(&d)
-        .env("RUST_LOG", "info")
-        .stderr(Stdio::piped())
-        .stdout(Stdio::null())
-        .spawn()
-        .unwrap();
-    // Wait until the logger announces the file, then past a few flush intervals.
-    let t0 = Instant::now();
-    while !d.join("crash.h5").exists() {
-        assert!(t0.elapsed() < Duration::from_secs(60), "the logger never created its file");
-        std::thread::sleep(Duration::from_millis(20));
+    let mut refused = Vec::new();
+    for (attempt, wait_ms) in [700, 530, 910].into_iter().enumerate() {
+        let _ = std::fs::remove_file(d.join("crash.h5"));
+        let child = Command::new(bin())
+            .args(["run", "g.toml"])
+            .current_dir(&d)
+            .env("RUST_LOG", "info")
+            .stderr(Stdio::piped())
+            .stdout(Stdio::null())
+            .spawn()
+            .unwrap();
+        // Wait until the logger announces the file, then past a few flush intervals.
+        let t0 = Instant::now();
+        while !d.join("crash.h5").exists() {
+            assert!(t0.elapsed() < Duration::from_secs(60), "the logger never created its file");
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        std::thread::sleep(Duration::from_millis(wait_ms));
+        Command::new("kill").args(["-KILL", &child.id().to_string()]).status().unwrap();
+        let _ = child.wait_with_output();
+        let out = skinflow(&d, &["inspect", "crash.h5"]);
+        if !out.status.success() {
+            let err = stderr(&out);
+            assert!(err.starts_with("error: crash.h5: /") && !err.contains("panicked"), "attempt {attempt}: {err}");
+            refused.push(err);
+            continue;
+        }
+        let summary = String::from_utf8_lossy(&out.stdout).into_owned();
+        let p = rows(&summary, "/pressure");
+        assert!(p > 0, "rows flushed before the kill survive:\n{summary}");
+        assert!(summary.contains("0 frames lost"), "the EIT rows that survived are a gap-free prefix:\n{summary}");
+        return;
     }
-    std::thread::sleep(Duration::from_millis(700));
-    Command::new("kill").args(["-KILL", &child.id().to_string()]).status().unwrap();
-    let _ = child.wait_with_output();
-    let summary = inspect(&d, "crash.h5");
-    let p = rows(&summary, "/pressure");
-    assert!(p > 0, "rows flushed before the kill survive:\n{summary}");
-    assert!(summary.contains("0 frames lost"), "the EIT rows that survived are a gap-free prefix:\n{summary}");
+    panic!("no killed run left a readable file: {refused:?}");
 }
 
 /// Killed while the logger creates its file (before the first flush HDF5 has written no valid

@@ -9,7 +9,7 @@
 use std::path::Path;
 use std::time::Instant;
 
-use anyhow::{Context as _, Result};
+use anyhow::Result;
 use skinflow_record::write::{RecordingWriter, Streams, TruthContact, WriterOptions};
 use skinflow_sim::{EventKind, Scene, Simulator};
 
@@ -21,7 +21,9 @@ pub fn run(scene_path: &Path, out: &Path, seed: u64, overwrite: bool) -> Result<
     let t0 = Instant::now();
     let scene = Scene::from_file(scene_path).map_err(anyhow::Error::msg)?;
     let mut sim =
-        Simulator::new(&scene, seed).with_context(|| format!("{}: preparing the simulation", scene_path.display()))?;
+        // The error's message ends with its cause: as one line, not followed by the cause again.
+        Simulator::new(&scene, seed)
+            .map_err(|e| anyhow::anyhow!("{}: preparing the simulation: {e}", scene_path.display()))?;
     let mut o = WriterOptions::new(sim.sensor().toml.clone());
     o.software_version = concat!("skinflow ", env!("CARGO_PKG_VERSION")).to_owned();
     o.overwrite = overwrite;

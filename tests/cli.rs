@@ -1278,3 +1278,21 @@ fn a_reconstructor_of_another_sensor_than_its_recording_scene_or_calibration_is_
     let text = ok(&skinflow(&d, &["check", "g.toml"]));
     assert!(text.starts_with("g.toml: ok ("), "{text}");
 }
+
+/// A scene the simulator cannot set up (a sensor too thin to mesh at 100 elements; reading the
+/// scene cannot tell) is refused with its cause said once, not repeated as the error's chain.
+#[test]
+fn a_simulation_that_cannot_be_set_up_is_refused_saying_its_cause_once() {
+    let d = workdir("thin-sensor");
+    std::fs::write(
+        d.join("thin.toml"),
+        "[scene]\n[sensor]\nwidth_mm = 100.0\nheight_mm = 0.01\nelectrode_length_mm = 0.0001\n\
+         [model]\nmesh_min_elements = 100\nmesh_max_elements = 100\n[[step]]\nrest_s = 2.0\n",
+    )
+    .unwrap();
+    let cause = "mesh: refinement did not reach 25 degrees";
+    let err = refused(&d, &["simulate", "thin.toml", "--out", "thin.h5"], cause);
+    assert!(err.contains("thin.toml: preparing the simulation: scene \"thin\": eit channel: "), "{err}");
+    assert_eq!(err.matches(cause).count(), 1, "{err}");
+    assert!(!d.join("thin.h5").exists());
+}

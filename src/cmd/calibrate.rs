@@ -92,11 +92,6 @@ pub fn fit_params(text: &str) -> Result<CalibParams> {
     Ok(params)
 }
 
-/// The sensor of a recording, as a calibration records it.
-pub fn sensor_of(rec: &skinflow_record::Recording) -> SensorRef {
-    skinflow_nodes::sensors::sensor_ref(&rec.sensor)
-}
-
 /// Opens every recording before any is run through the pipeline: refuses one the pipeline
 /// cannot use (not a recording, no EIT, pressure or truth, no finite EIT value at all) and
 /// recordings of different sensors (sizes, electrodes or protocol: their samples or frames are
@@ -114,7 +109,7 @@ pub fn check_recordings(recordings: &[PathBuf]) -> Result<SensorRef> {
                 eit.len()
             );
         }
-        let sensor = sensor_of(&rec);
+        let sensor = skinflow_nodes::sensors::sensor_ref(&rec.sensor);
         drop(rec);
         match &first {
             None => first = Some((sensor, recording)),

@@ -316,6 +316,14 @@ impl Codec for TruthCodec {
         let n = cols.require("x_mm")?.len();
         let [x, y, force, diameter] = ["x_mm", "y_mm", "force_n", "diameter_mm"].map(|c| cols.require_len(c, n));
         let (x, y, force, diameter) = (x?, y?, force?, diameter?);
+        for i in 0..n {
+            let c =
+                skinflow_record::TruthContact { x_mm: x[i], y_mm: y[i], force_n: force[i], diameter_mm: diameter[i] };
+            if let Some((path, value, expected)) = skinflow_record::read::contact_value_problem(&c) {
+                let column = path.trim_start_matches("/truth/");
+                return Err(format!("contact {i}: column \"{column}\" = {value} is not {expected}"));
+            }
+        }
         let payload = self.ring.fill(|t| {
             t.contacts.clear();
             t.contacts.extend((0..n).map(|i| TruthContact {
@@ -427,6 +435,24 @@ mod tests {
         assert!(e.contains("column \"v\" is empty"), "{e}");
         let e = round_trip(PressureSample::TYPE, &Message::new(h, PressureSample { kpa: f64::NAN })).unwrap_err();
         assert!(e.contains("not a pressure"), "{e}");
+        // A truth contact the recording reader would refuse is refused where it comes in.
+        let good = TruthContact { x_mm: 1.0, y_mm: -2.0, force_n: 0.0, diameter_mm: 10.0 };
+        let cases = [
+            (TruthContact { x_mm: f64::NAN, ..good }, "contact 1: column \"x_mm\" = NaN is not a finite position"),
+            (TruthContact { y_mm: f64::INFINITY, ..good }, "contact 1: column \"y_mm\" = inf is not a finite position"),
+            (
+                TruthContact { force_n: -0.5, ..good },
+                "contact 1: column \"force_n\" = -0.5 is not a finite force >= 0 N",
+            ),
+            (
+                TruthContact { diameter_mm: 0.0, ..good },
+                "contact 1: column \"diameter_mm\" = 0 is not a finite diameter > 0 mm",
+            ),
+        ];
+        for (bad, want) in cases {
+            let e = round_trip(Truth::TYPE, &Message::new(h, Truth { contacts: vec![good, bad] })).unwrap_err();
+            assert_eq!(e, want);
+        }
     }
 
     #[test]

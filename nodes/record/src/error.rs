@@ -45,6 +45,23 @@ pub enum SchemaProblem {
     NotIncreasing { row: usize, t_s: f64, previous_s: f64 },
     #[error("has element type {found}, expected a number")]
     NotNumericData { found: String },
+    /// `/truth/x_mm` holds an infinity: a column is either no contact (NaN) or a contact at a
+    /// finite position.
+    #[error("row {row} column {column}: {x_mm} is not a finite position (NaN is how no contact is written)")]
+    TruthInfiniteX { row: usize, column: usize, x_mm: f64 },
+    /// A value of a contact (`/truth/x_mm` not NaN) in `/truth/y_mm`, `/truth/force_n` or
+    /// `/truth/diameter_mm` breaks its rule; `expected` says the rule ("a finite force >= 0 N").
+    #[error(
+        "row {row} column {column}: {value} is not {expected}, but /truth/x_mm holds a contact there (x_mm = {x_mm})"
+    )]
+    TruthBadContact { row: usize, column: usize, value: f64, expected: &'static str, x_mm: f64 },
+    /// A value in `/truth/y_mm`, `/truth/force_n` or `/truth/diameter_mm` where `/truth/x_mm`
+    /// is NaN (no contact).
+    #[error(
+        "row {row} column {column}: holds {value} where /truth/x_mm is NaN (no contact); no contact is NaN \
+         in every truth array, not 0 or another value"
+    )]
+    TruthWithoutContact { row: usize, column: usize, value: f64 },
 }
 
 /// Error of the recording writer or reader.

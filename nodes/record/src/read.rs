@@ -2,8 +2,10 @@
 //! and loads its streams whole as flat row-major vectors. Streams are `None` when their group
 //! is absent; each present stream has consistent lengths and widths, and EIT frames have the
 //! width M of the sensor's protocol, and the times of every stream are finite and in time
-//! order (a NaN or a step back is refused naming the dataset and row). A stream may be absent
-//! (e.g. a logger without pressure connected); callers that need one use `require_*`.
+//! order (a NaN or a step back is refused naming the dataset and row). Each truth column is a
+//! contact with finite position, force and size or NaN throughout (`check_truth_values`; a bad
+//! value is refused naming the dataset, row and column). A stream may be absent (e.g. a logger
+//! without pressure connected); callers that need one use `require_*`.
 //! Times are seconds, EIT volts, pressure kPa, truth mm/N.
 
 pub(crate) mod attr;
@@ -63,7 +65,9 @@ impl PressureStream {
     }
 }
 
-/// `/truth/*`: k rows of up to C contacts, NaN-padded, as stored.
+/// `/truth/*`: k rows of up to C contacts, NaN-padded, as stored. Every column is either a
+/// contact (finite x, y, finite force >= 0 N, finite diameter > 0 mm) or NaN in all four arrays
+/// (checked on reading).
 #[derive(Debug, Clone, PartialEq)]
 pub struct TruthStream {
     pub t_s: Vec<f64>,
@@ -394,5 +398,90 @@ fn read_truth(file: &File, fpath: &Path) -> Result<Option<TruthStream>, RecordEr
     };
     let (y_mm, force_n, diameter_mm) =
         (column(layout::TRUTH_Y_MM)?, column(layout::TRUTH_FORCE_N)?, column(layout::TRUTH_DIAMETER_MM)?);
+    check_truth_values(fpath, x.width(), &x.values, [&y_mm, &force_n, &diameter_mm])?;
     Ok(Some(TruthStream { max_contacts: x.width(), t_s: t.values, x_mm: x.values, y_mm, force_n, diameter_mm }))
+}
+
+/// What a contact's value must be in one of the arrays beside `/truth/x_mm`.
+struct ContactRule {
+    /// The dataset.
+    path: &'static str,
+    /// The rule in words, for the error.
+    expected: &'static str,
+    holds: fn(f64) -> bool,
+}
+
+/// The arrays beside `/truth/x_mm`, in the order [`check_truth_values`] takes them.
+const CONTACT_RULES: [ContactRule; 3] = [
+    ContactRule { path: layout::TRUTH_Y_MM, expected: "a finite position", holds: f64::is_finite },
+    ContactRule {
+        path: layout::TRUTH_FORCE_N,
+        expected: "a finite force >= 0 N",
+        holds: |f| f.is_finite() && f >= 0.0,
+    },
+    ContactRule {
+        path: layout::TRUTH_DIAMETER_MM,
+        expected: "a finite diameter > 0 mm",
+        holds: |d| d.is_finite() && d > 0.0,
+    },
+];
+
+/// The values of `/truth` (CONTRACTS.md: a row with no contact has NaN in every column), checked
+/// cell by cell in one pass over the row-major [k, C] arrays, the first bad cell refused naming
+/// the dataset that holds it, its row and its column:
+///
+/// - `x_mm` NaN is no contact: `y_mm`, `force_n` and `diameter_mm` must be NaN there too (a
+///   force of 0 is not how no contact is written, so a 0 there is refused as well);
+/// - any other `x_mm` is a contact: `x_mm` and `y_mm` must be finite, `force_n` finite and
+///   >= 0 N (0 N is a measured force, accepted), `diameter_mm` finite and > 0 mm.
+///
+/// Positions outside the sensor are not refused here (the sensor's size is checked where the
+/// truth is used).
+fn check_truth_values(fpath: &Path, width: usize, x_mm: &[f64], others: [&[f64]; 3]) -> Result<(), RecordError> {
+    let [y_mm, force_n, diameter_mm] = others;
+    let cells = x_mm.iter().zip(y_mm).zip(force_n).zip(diameter_mm);
+    for (i, (((&x, &y), &f), &d)) in cells.enumerate() {
+        // width > 0 here: the arrays hold a cell
+        let (row, column) = (i / width, i % width);
+        check_truth_cell(row, column, x, [y, f, d])
+            .map_err(|(path, problem)| RecordError::schema(fpath, path, problem))?;
+    }
+    Ok(())
+}
+
+/// The first value of one present contact that breaks the rules of [`check_truth_values`]
+/// (x and y finite, force finite and >= 0 N, diameter finite and > 0 mm): its dataset, the value
+/// and the rule in words. For what hands truth to a writer (a decoder, the logger), so that a
+/// row the reader would refuse is refused where it comes in, not written.
+pub fn contact_value_problem(c: &TruthContact) -> Option<(&'static str, f64, &'static str)> {
+    if !c.x_mm.is_finite() {
+        return Some((layout::TRUTH_X_MM, c.x_mm, "a finite position"));
+    }
+    [c.y_mm, c.force_n, c.diameter_mm]
+        .into_iter()
+        .zip(CONTACT_RULES)
+        .find(|(v, rule)| !(rule.holds)(*v))
+        .map(|(v, rule)| (rule.path, v, rule.expected))
+}
+
+/// One cell of [`check_truth_values`]: `x_mm` and the values of the other arrays, in the order
+/// of [`CONTACT_RULES`]; a bad cell gives the dataset that holds the bad value and the problem.
+fn check_truth_cell(
+    row: usize,
+    column: usize,
+    x_mm: f64,
+    others: [f64; 3],
+) -> Result<(), (&'static str, SchemaProblem)> {
+    if x_mm.is_infinite() {
+        return Err((layout::TRUTH_X_MM, SchemaProblem::TruthInfiniteX { row, column, x_mm }));
+    }
+    for (value, ContactRule { path, expected, holds }) in others.into_iter().zip(CONTACT_RULES) {
+        if x_mm.is_nan() && !value.is_nan() {
+            return Err((path, SchemaProblem::TruthWithoutContact { row, column, value }));
+        }
+        if !x_mm.is_nan() && !holds(value) {
+            return Err((path, SchemaProblem::TruthBadContact { row, column, value, expected, x_mm }));
+        }
+    }
+    Ok(())
 }

@@ -182,10 +182,20 @@ impl RecordingWriter {
     }
 
     /// One truth row (valid from `t_s` until the next row); an empty slice means no contact.
+    /// A contact the reader would refuse (a non-finite position, a negative or non-finite
+    /// force, a diameter not > 0) is refused here, naming the dataset, row and column, and
+    /// nothing of the row is written.
     pub fn append_truth(&mut self, t_s: f64, contacts: &[TruthContact]) -> Result<(), RecordError> {
         let max = self.opts.truth_max_contacts;
         if contacts.len() > max {
             return Err(RecordError::TooManyTruthContacts { file: self.path.clone(), found: contacts.len(), max });
+        }
+        let row = self.truth.as_ref().map_or(0, |t| t.rows_appended as usize);
+        for (column, c) in contacts.iter().enumerate() {
+            if let Some((path, value, expected)) = crate::read::contact_value_problem(c) {
+                let problem = SchemaProblem::TruthBadContact { row, column, value, expected, x_mm: c.x_mm };
+                return Err(RecordError::schema(&self.path, path, problem));
+            }
         }
         self.before_append(Slot::Truth, t_s)?;
         if let Some(table) = self.truth.as_mut() {

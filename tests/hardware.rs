@@ -234,13 +234,12 @@ fn logging_graph(scene: &str) -> String {
     )
 }
 
-/// Killed between flushes, a logging run leaves a file that opens with the rows flushed before
-/// the kill, the EIT rows a gap-free prefix. A kill that lands while HDF5 rewrites a partly
-/// filled chunk (each flush appends to the last chunk of every column, so a compressed chunk
-/// moves to new space) can leave that chunk unreadable: seen once in about 20 CI runs, as
-/// "/eit/t: H5Dread(): can't read data: inflate() failed" (README, "Recording"). So up to
-/// three runs are killed, each at a different moment; one must leave a readable file, and any
-/// that does not is refused by the reader with an error naming the dataset, never a panic.
+/// Killed between flushes or inside one, a logging run leaves a file that opens with the rows
+/// flushed before the kill, the EIT rows a gap-free prefix. The logger stores uncompressed by
+/// default, so a flush rewrites the last chunk of each column in place: with deflate (which
+/// moves a growing chunk to new file space at every flush) 13 of 60 kills left a column
+/// unreadable, uncompressed none of 210 (`scripts/research/kill-stress.sh`; README,
+/// "Recording"). So every one of three kills, each at another moment, must leave a readable file.
 #[test]
 fn a_logging_run_killed_with_sigkill_leaves_a_readable_file() {
     let d = workdir("sigkill");
@@ -248,7 +247,6 @@ fn a_logging_run_killed_with_sigkill_leaves_a_readable_file() {
     // The simulator alone is fast; loop it through a replay would be faster still, but the
     // point is a logger in the middle of writing: kill it while the scene is being logged.
     std::fs::write(d.join("g.toml"), graph).unwrap();
-    let mut refused = Vec::new();
     for (attempt, wait_ms) in [700, 530, 910].into_iter().enumerate() {
         let _ = std::fs::remove_file(d.join("crash.h5"));
         let child = Command::new(bin())
@@ -269,19 +267,15 @@ fn a_logging_run_killed_with_sigkill_leaves_a_readable_file() {
         Command::new("kill").args(["-KILL", &child.id().to_string()]).status().unwrap();
         let _ = child.wait_with_output();
         let out = skinflow(&d, &["inspect", "crash.h5"]);
-        if !out.status.success() {
-            let err = stderr(&out);
-            assert!(err.starts_with("error: crash.h5: /") && !err.contains("panicked"), "attempt {attempt}: {err}");
-            refused.push(err);
-            continue;
-        }
+        assert!(out.status.success(), "attempt {attempt}: the killed run's file is refused: {}", stderr(&out));
         let summary = String::from_utf8_lossy(&out.stdout).into_owned();
         let p = rows(&summary, "/pressure");
-        assert!(p > 0, "rows flushed before the kill survive:\n{summary}");
-        assert!(summary.contains("0 frames lost"), "the EIT rows that survived are a gap-free prefix:\n{summary}");
-        return;
+        assert!(p > 0, "attempt {attempt}: rows flushed before the kill survive:\n{summary}");
+        assert!(
+            summary.contains("0 frames lost"),
+            "attempt {attempt}: the EIT rows that survived are a gap-free prefix:\n{summary}"
+        );
     }
-    panic!("no killed run left a readable file: {refused:?}");
 }
 
 /// Killed while the logger creates its file (before the first flush HDF5 has written no valid

@@ -112,7 +112,11 @@ pub struct WriterOptions {
     /// Largest number of rows per chunk (also capped so a chunk of the widest column of a
     /// stream stays near 1 MiB). Default 1024.
     pub chunk_rows: usize,
-    /// Deflate level 0-9 (with the shuffle filter); 0 stores uncompressed. Default 1.
+    /// Deflate level 0-9 (with the shuffle filter); 0 stores uncompressed. Default 1. A flush
+    /// moves each column's growing compressed last chunk to new file space, so a process killed
+    /// inside a flush can leave that chunk unreadable (and a SWMR writer, which never reuses
+    /// space, keeps every moved copy); uncompressed chunks are rewritten in place. Files written
+    /// in one go (`name_at_close`) compress safely; live loggers should store uncompressed.
     pub deflate_level: u8,
     /// Columns C of `/truth/*`; rows with fewer contacts are NaN-padded. Default 8.
     pub truth_max_contacts: usize,

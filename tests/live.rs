@@ -335,3 +335,55 @@ fn deadline_and_restart_edits_apply_and_graph_keys_need_a_restart() {
     assert_eq!(f["swaps"], 0, "{f}");
     assert_eq!(rows(&d.join("out.csv")).len(), 1500);
 }
+
+/// A replay through a reconstructor with `recon_params`, its images to a null sink.
+fn recon_graph(recon_params: &str) -> String {
+    format!(
+        "[[node]]\nid = \"replay\"\nkind = \"replay\"\nparams = {{ path = \"in.h5\", speed = 2.0 }}\n\
+         [[node]]\nid = \"sync\"\nkind = \"sync\"\n\
+         [[node]]\nid = \"recon\"\nkind = \"reconstructor\"\nparams = {{ {recon_params} }}\n\
+         [[node]]\nid = \"sink\"\nkind = \"null\"\n\
+         [[edge]]\nfrom = \"replay.eit\"\nto = \"sync.eit\"\n\
+         [[edge]]\nfrom = \"replay.pressure\"\nto = \"sync.pressure\"\n\
+         [[edge]]\nfrom = \"replay.reference\"\nto = \"recon.reference\"\n\
+         [[edge]]\nfrom = \"sync.frame\"\nto = \"recon.frame\"\n\
+         [[edge]]\nfrom = \"recon.image\"\nto = \"sink.in\"\n"
+    )
+}
+
+/// `check` and `run` refuse a reconstructor on another sensor than its recording's; so do a
+/// swap from the control socket and an edit of the graph file (they used to install it, and
+/// the images were computed on the wrong sensor). The graph runs on to its end unswapped.
+#[test]
+fn a_live_swap_or_edit_onto_another_sensor_is_refused() {
+    let d = workdir("live", "sensor");
+    super::support::ok(&skinflow(
+        &d,
+        &["simulate", super::support::fixture("tiny-eval.toml").to_str().unwrap(), "--out", "in.h5", "--seed", "3"],
+    ));
+    std::fs::write(d.join("small.toml"), "[sensor]\nname = \"small-60mm\"\nwidth_mm = 60.0\nheight_mm = 60.0\n")
+        .unwrap();
+    let g = d.join("g.toml");
+    let sock = d.join("ctl.sock");
+    std::fs::write(&g, recon_graph("")).unwrap();
+    let child = run_watched_with_stats(&d, &g, &sock);
+    wait_for_out(&sock, "recon", 3);
+    let mismatch = "small.toml, but its frames come from replay \"replay\", whose recording";
+    let small = "node \"recon\": param \"sensor\": reconstructs on sensor \"small-60mm\" (60 x 60 mm, 16 electrodes, \
+                 pairwise) of ";
+    let reply =
+        ask(&sock, r#"{"cmd": "swap", "node": "recon", "kind": "reconstructor", "params": {"sensor": "small.toml"}}"#);
+    assert_eq!(reply["ok"], false, "{reply}");
+    let error = reply["error"].as_str().unwrap();
+    assert!(error.contains(small) && error.contains(mismatch), "{reply}");
+    std::fs::write(&g, recon_graph("sensor = \"small.toml\"")).unwrap();
+    std::thread::sleep(Duration::from_millis(1500));
+    let out = child.wait_with_output().unwrap();
+    let stderr = stderr(&out);
+    assert!(out.status.success(), "{stderr}");
+    assert!(stderr.contains(": edit rejected: ") && stderr.contains(small) && stderr.contains(mismatch), "{stderr}");
+    let stats: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(d.join("stats.json")).unwrap()).unwrap();
+    let recon = stats["nodes"].as_array().unwrap().iter().find(|n| n["id"] == "recon").unwrap();
+    assert_eq!(recon["swaps"], 0, "{recon}");
+}

@@ -224,6 +224,31 @@ impl Live {
         Ok(())
     }
 
+    /// Refuses a swap of `node` to `kind` with `params` after which the graph's sensors would
+    /// disagree ([`check_sensors`]), checked on the graph as it runs now with that one change.
+    fn check_swap(
+        &self,
+        node: &str,
+        factory: &Arc<dyn NodeFactory>,
+        kind: &str,
+        params: &Params,
+    ) -> Result<(), String> {
+        let mut spec = self.started.clone();
+        let running = self.lock_nodes().clone();
+        let kinds = self.lock_kinds();
+        for (n, (id, k, p)) in spec.nodes.iter_mut().zip(running) {
+            let (k, p) = if id == node { (kind.to_owned(), params.clone()) } else { (k, p) };
+            if id == node {
+                n.factory = factory.clone();
+            } else if let Some(f) = kinds.registry.get(&k).filter(|_| k != n.kind) {
+                n.factory = f.clone();
+            }
+            (n.kind, n.params) = (k, p);
+        }
+        drop(kinds);
+        check_sensors(&spec)
+    }
+
     /// Applies one validated edit: checks the structure and what only a restart can change are
     /// unchanged, sets the deadlines and restart policies that changed, and swaps the nodes
     /// whose kind or params differ from what runs now.
@@ -251,6 +276,7 @@ impl Live {
         if let Some(why) = needs_restart(old, new) {
             return Err(rejected(why));
         }
+        check_sensors(new).map_err(rejected)?;
         let mut applied = Applied::default();
         {
             let mut policies = self.policies.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
@@ -397,6 +423,14 @@ pub fn watch(path: PathBuf, live: Arc<Live>, done: Arc<AtomicBool>) {
     }
 }
 
+/// The sensors of the graph agree (`skinflow_nodes::sensors::check_graph`, as `check` and `run`
+/// check them before starting): an edit or a swap that would image frames on another sensor
+/// than theirs, or apply a calibration of another sensor, is refused, and the graph runs on.
+fn check_sensors(spec: &GraphSpec) -> Result<(), String> {
+    skinflow_nodes::sensors::check_graph(spec)
+        .map_err(|errs| errs.0.iter().map(ToString::to_string).collect::<Vec<_>>().join("; "))
+}
+
 /// Longest a `tare` or `control` request waits for the node to run the command.
 const CONTROL_REPLY_TIMEOUT: Duration = Duration::from_secs(10);
 
@@ -438,7 +472,12 @@ fn reply(live: &Live, line: &str) -> Value {
                     Some(f) => {
                         let params = req.get("params").cloned().unwrap_or(json!({}));
                         match toml::Table::try_from(params) {
-                            Ok(t) => live.swap(n, f, k, Params::from_table(t)).map(|()| json!({})),
+                            Ok(t) => {
+                                let params = Params::from_table(t);
+                                live.check_swap(n, &f, k, &params)
+                                    .and_then(|()| live.swap(n, f, k, params))
+                                    .map(|()| json!({}))
+                            }
                             Err(e) => Err(format!("params: {e}")),
                         }
                     }

@@ -1174,18 +1174,26 @@ fn recordings_of_another_sensor_and_files_that_are_no_calibration_are_refused() 
         refused(&d, &["eval", "cal.h5", "--calib", file], want);
     }
 
-    // Every true force negative: each sample is rejected, and the error says which file and why.
-    std::fs::copy(d.join("small.h5"), d.join("negative.h5")).unwrap();
-    {
-        let file = hdf5::File::open_rw(d.join("negative.h5")).unwrap();
+    // Every true force negative: the reader refuses the file, naming the dataset, row and
+    // column. Every true force 0 N (a measured force, read): each sample is rejected by
+    // calibrate, and the error says which file and why.
+    let set_forces = |name: &str, f: fn(f64) -> f64| {
+        std::fs::copy(d.join("small.h5"), d.join(name)).unwrap();
+        let file = hdf5::File::open_rw(d.join(name)).unwrap();
         let ds = file.dataset("/truth/force_n").unwrap();
-        let forces: Vec<f64> = ds.read_raw::<f64>().unwrap().iter().map(|f| -f).collect();
+        let forces: Vec<f64> =
+            ds.read_raw::<f64>().unwrap().iter().map(|&x| if x.is_nan() { x } else { f(x) }).collect();
         let shape = ds.shape();
         ds.write_raw(&forces).unwrap();
         assert_eq!(ds.shape(), shape);
-    }
-    refused(&d, &["calibrate", "negative.h5", "--out", "c.toml"], "negative.h5: calibrate: 0 usable samples (of ");
+    };
+    set_forces("negative.h5", |f| -f);
     let err = stderr(&skinflow(&d, &["calibrate", "negative.h5", "--out", "c.toml"]));
+    assert!(err.starts_with("error: negative.h5: /truth/force_n: row "), "{err}");
+    assert!(err.contains("is not a finite force >= 0 N, but /truth/x_mm holds a contact there"), "{err}");
+    set_forces("zero.h5", |_| 0.0);
+    refused(&d, &["calibrate", "zero.h5", "--out", "c.toml"], "zero.h5: calibrate: 0 usable samples (of ");
+    let err = stderr(&skinflow(&d, &["calibrate", "zero.h5", "--out", "c.toml"]));
     assert!(err.contains("F <= 0"), "{err}");
     assert!(!d.join("c.toml").exists());
 }

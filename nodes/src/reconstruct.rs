@@ -11,6 +11,12 @@
 //! (`masked_channels`), and a change of the set is logged with its causes.
 //! Math: `skinflow_eit`.
 //!
+//! A frame no image can be made of (every channel NaN: a dead or unplugged board; a frame of
+//! another sensor's width) is dropped. The first is the node's error, logged with its cause by
+//! the engine; later ones are counted as the node's discarded messages (the run report's
+//! `drops`) and summarised at most every 10 s while they go on and once at stop, so a dead
+//! board does not log a line per frame.
+//!
 //! Hot swap: the replacement takes over the reference (tracker, the running no-load mean, a
 //! pending tare) when the sensor has the same channel count; while the reference is still
 //! being averaged, the replacement's `reference_frames` applies (a count already reached
@@ -193,6 +199,74 @@ pub struct Reconstructor {
     /// Source radius of the point spread, mm (0: none).
     spread_mm: f64,
     spread: Option<Spread>,
+    dropped: DroppedFrames,
+}
+
+/// Graph-clock time between two summaries of dropped frames while they go on, ns.
+const DROP_SUMMARY_NS: u64 = 10_000_000_000;
+
+/// The frames a reconstructor dropped because no image could be made of them. The first is
+/// returned as the node's error (the engine logs it with its cause and counts it); the rest
+/// are counted as the node's discarded messages and summarised at most every
+/// [`DROP_SUMMARY_NS`] and at stop.
+#[derive(Debug, Default)]
+struct DroppedFrames {
+    /// Over this instance's run.
+    total: u64,
+    /// Since the last line about them.
+    unreported: u64,
+    /// Graph clock of that line, ns.
+    reported_ns: u64,
+    /// Why the latest one was dropped.
+    last_cause: Option<NodeError>,
+}
+
+impl DroppedFrames {
+    /// Counts a frame dropped at graph time `now_ns` for `cause` (an `Input` error): the first
+    /// comes back as the error to return, the later ones are counted as discarded and logged
+    /// when a summary is due.
+    fn record(&mut self, ctx: &Context, now_ns: u64, cause: NodeError) -> Result<(), NodeError> {
+        self.total += 1;
+        if self.total == 1 {
+            self.reported_ns = now_ns;
+            let first = first_drop(&cause);
+            self.last_cause = Some(cause);
+            return Err(first);
+        }
+        ctx.count_discarded(1);
+        self.unreported += 1;
+        if now_ns.saturating_sub(self.reported_ns) >= DROP_SUMMARY_NS {
+            tracing::warn!(
+                node = ctx.id(), frames = self.unreported, total = self.total, last_cause = %cause,
+                "EIT frames dropped since the last report (counted as discarded): no image could be made of them"
+            );
+            self.unreported = 0;
+            self.reported_ns = now_ns;
+        }
+        self.last_cause = Some(cause);
+        Ok(())
+    }
+
+    /// The summary at stop, when frames were dropped after the first.
+    fn stop(&mut self, ctx: &Context) {
+        let Some(cause) = self.last_cause.as_ref().filter(|_| self.total > 1) else { return };
+        tracing::warn!(
+            node = ctx.id(), frames = self.total, since_last_report = self.unreported, last_cause = %cause,
+            "EIT frames dropped over the run: no image could be made of them (the first is the node's error, the rest are counted as discarded)"
+        );
+        self.unreported = 0;
+    }
+}
+
+/// The error of the first dropped frame: its cause, and what happens to the next ones.
+fn first_drop(cause: &NodeError) -> NodeError {
+    let note = "frame dropped; later frames no image can be made of are counted as discarded, summarised every 10 s while they go on and at stop";
+    match cause {
+        NodeError::Input { port, problem } => {
+            NodeError::Input { port: port.clone(), problem: format!("{problem} ({note})") }
+        }
+        other => NodeError::msg(format!("{other} ({note})")),
+    }
 }
 
 impl Reconstructor {
@@ -230,6 +304,7 @@ impl Reconstructor {
             sensor,
             spread_mm: p.point_spread_mm,
             spread,
+            dropped: DroppedFrames::default(),
         })
     }
 
@@ -293,17 +368,21 @@ fn reference_source(s: EitRef) -> ReferenceSource {
     }
 }
 
-impl Processor for Reconstructor {
-    fn process(&mut self, ctx: &mut Context, inputs: &Inputs, out: &mut Outputs) -> Result<(), NodeError> {
-        if let Some(m) = inputs.get(1) {
-            let f = m
-                .get::<EitFrame>()
-                .ok_or(NodeError::Input { port: "reference".into(), problem: "not an EIT frame".into() })?;
-            self.check_width("reference", &f.v)?;
-            self.tracker = ReferenceTracker::from_reference(&f.v);
-            self.report_reference(ctx);
-        }
-        let Some(m) = inputs.get(0) else { return Ok(()) };
+impl Reconstructor {
+    /// A recorded reference frame replaces the reference.
+    fn take_reference(&mut self, ctx: &Context, m: &Message) -> Result<(), NodeError> {
+        let f = m
+            .get::<EitFrame>()
+            .ok_or(NodeError::Input { port: "reference".into(), problem: "not an EIT frame".into() })?;
+        self.check_width("reference", &f.v)?;
+        self.tracker = ReferenceTracker::from_reference(&f.v);
+        self.report_reference(ctx);
+        Ok(())
+    }
+
+    /// The image of the synced frame `m` (the reference, mask and matrix updated on the way).
+    /// An `Input` error: no image can be made of this frame.
+    fn image_of(&mut self, ctx: &Context, m: &Message) -> Result<Arc<Image>, NodeError> {
         let t0 = Instant::now();
         let synced = m
             .arc::<SyncedFrame>()
@@ -318,12 +397,13 @@ impl Processor for Reconstructor {
                 .accumulate(v)
                 .map_err(|e| NodeError::Input { port: "frame".into(), problem: e.to_string() })?;
         } else if !self.tracker.finish() {
-            // The no-load period ended before any usable frame: the best remaining choice.
+            // The no-load period ended before any usable frame: the best remaining choice, once
+            // a frame has a finite channel (a dead board's frames are dropped until then).
+            self.tracker.tare(v).map_err(|e| NodeError::Input { port: "frame".into(), problem: e.to_string() })?;
             tracing::warn!(
                 node = ctx.id(),
                 "no usable no-load frame before the first loaded one: taking this frame as the reference"
             );
-            self.tracker.tare(v).map_err(|e| NodeError::Input { port: "frame".into(), problem: e.to_string() })?;
         }
         self.report_reference(ctx);
         // Channel masking, of the frame and of the reference it is differenced against: a
@@ -334,10 +414,13 @@ impl Processor for Reconstructor {
             .detect_mask_into(v, v_ref, &mut self.mask_scratch)
             .map_err(|e| NodeError::Input { port: "frame".into(), problem: e.to_string() })?;
         if self.mask_scratch != self.mask {
-            std::mem::swap(&mut self.mask, &mut self.mask_scratch);
+            // The matrix first: a set it cannot image (every channel excluded) leaves the node's
+            // mask and matrix as they were, and this frame is dropped; adopting the mask anyway
+            // made the next frames of that set skip `set_mask` and be imaged on the old matrix.
             self.math
-                .set_mask(&self.mask)
+                .set_mask(&self.mask_scratch)
                 .map_err(|e| NodeError::Input { port: "frame".into(), problem: e.to_string() })?;
+            std::mem::swap(&mut self.mask, &mut self.mask_scratch);
             self.spread = point_spread(&mut self.math, self.spread_mm)?;
             tracing::warn!(
                 node = ctx.id(), excluded = ?self.mask.excluded_channels(), dead_electrodes = ?self.mask.dead_electrodes(),
@@ -379,7 +462,28 @@ impl Processor for Reconstructor {
             img.compute_ns = t0.elapsed().as_nanos() as u64;
         });
         result.map_err(|e| NodeError::Input { port: "frame".into(), problem: e.to_string() })?;
-        out.send(0, Message::from_arc(m.header, payload))
+        Ok(payload)
+    }
+}
+
+impl Processor for Reconstructor {
+    fn process(&mut self, ctx: &mut Context, inputs: &Inputs, out: &mut Outputs) -> Result<(), NodeError> {
+        if let Some(m) = inputs.get(1) {
+            self.take_reference(ctx, m)?;
+        }
+        let Some(m) = inputs.get(0) else { return Ok(()) };
+        match self.image_of(ctx, m) {
+            Ok(image) => out.send(0, Message::from_arc(m.header, image)),
+            // The engine logs every error a node returns: only the first such frame is one, the
+            // rest are counted as discarded (a line per frame while a board is dead, else).
+            Err(cause @ NodeError::Input { .. }) => self.dropped.record(ctx, ctx.now_ns(), cause),
+            Err(e) => Err(e),
+        }
+    }
+
+    fn stop(&mut self, ctx: &mut Context) -> Result<(), NodeError> {
+        self.dropped.stop(ctx);
+        Ok(())
     }
 
     fn control(&mut self, ctx: &mut Context, cmd: &str) -> Result<(), NodeError> {
@@ -467,4 +571,213 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
         .param(ParamDoc::new("no_cache", "bool", "false", "do not use the disk cache")),
         |p: ReconstructorParams, ctx| Ok(NodeImpl::Processor(Box::new(Reconstructor::new(&p, ctx)?))),
     ))
+}
+
+#[cfg(test)]
+mod tests {
+    use std::collections::{BTreeMap, VecDeque};
+    use std::fmt::Debug;
+    use std::sync::{Arc, Mutex};
+
+    use serde::Deserialize;
+    use skinflow_core::graph::SourceFile;
+    use skinflow_core::stats::NodeReport;
+    use skinflow_core::{
+        Context, GraphSpec, Header, KindInfo, Message, NodeError, NodeImpl, NodeParams, Outputs, PortSpec, Role,
+        RunOptions, RunningGraph, Source, SourcePoll, typed,
+    };
+    use tracing::field::{Field, Visit};
+    use tracing::span::{Attributes, Id, Record};
+    use tracing::{Event, Level, Metadata};
+
+    use super::{DROP_SUMMARY_NS, DroppedFrames};
+    use crate::payload::{EitFrame, Image, SyncedFrame};
+    use crate::pipeline::{Captured, registry_with_capture};
+
+    /// The WARN and ERROR events of the thread it is the default of, by message (a node's and
+    /// the engine's, which logs each error a node returns).
+    #[derive(Clone, Default)]
+    struct Warnings(Arc<Mutex<BTreeMap<String, usize>>>);
+
+    struct MessageText(String);
+
+    impl Visit for MessageText {
+        fn record_debug(&mut self, field: &Field, value: &dyn Debug) {
+            if field.name() == "message" {
+                self.0 = format!("{value:?}");
+            }
+        }
+    }
+
+    impl tracing::Subscriber for Warnings {
+        fn enabled(&self, metadata: &Metadata<'_>) -> bool {
+            *metadata.level() <= Level::WARN
+        }
+        fn new_span(&self, _: &Attributes<'_>) -> Id {
+            Id::from_u64(1)
+        }
+        fn record(&self, _: &Id, _: &Record<'_>) {}
+        fn record_follows_from(&self, _: &Id, _: &Id) {}
+        fn event(&self, event: &Event<'_>) {
+            let mut text = MessageText(String::new());
+            event.record(&mut text);
+            *self.0.lock().unwrap().entry(text.0).or_default() += 1;
+        }
+        fn enter(&self, _: &Id) {}
+        fn exit(&self, _: &Id) {}
+    }
+
+    #[derive(Deserialize)]
+    #[serde(deny_unknown_fields)]
+    struct NoParams {}
+
+    impl NodeParams for NoParams {}
+
+    /// Emits its synced frames, one per poll.
+    struct Frames(VecDeque<SyncedFrame>, u64);
+
+    impl Source for Frames {
+        fn poll(&mut self, _ctx: &mut Context, out: &mut Outputs) -> Result<SourcePoll, NodeError> {
+            let Some(f) = self.0.pop_front() else { return Ok(SourcePoll::Finished) };
+            self.1 += 1;
+            out.send(0, Message::new(Header { seq: self.1, t_ns: self.1 * 769_230_769, origin: 0 }, f))?;
+            Ok(SourcePoll::Emitted)
+        }
+    }
+
+    /// `n` frames of the default sensor (120 channels), every channel at `v` volts.
+    fn frames(n: usize, v: f64, no_load: bool) -> impl Iterator<Item = SyncedFrame> {
+        let frame = Arc::new(EitFrame { v: vec![v; 120] });
+        (0..n).map(move |_| SyncedFrame { frame: frame.clone(), dp_kpa: 0.0, no_load, ..SyncedFrame::default() })
+    }
+
+    /// Runs `sent` through a reconstructor in lockstep: the images it emitted, its line of the
+    /// report, and the warnings logged during the run.
+    fn run(sent: Vec<SyncedFrame>) -> (usize, NodeReport, BTreeMap<String, usize>) {
+        let captured: Captured = Arc::new(Mutex::new(Vec::new()));
+        let mut reg = registry_with_capture(captured.clone());
+        let sent = VecDeque::from(sent);
+        reg.register(typed(
+            KindInfo::new("frames", Role::Source, "synced frames of a test")
+                .output(PortSpec::output::<SyncedFrame>("frame", "synced frames")),
+            move |_: NoParams, _| Ok(NodeImpl::Source(Box::new(Frames(sent.clone(), 0)))),
+        ))
+        .unwrap();
+        let graph = "[graph]\nmode = \"lockstep\"\n\
+             [[node]]\nid = \"src\"\nkind = \"frames\"\n\
+             [[node]]\nid = \"recon\"\nkind = \"reconstructor\"\n\
+             params = { no_cache = true, point_spread_mm = 0.0, mesh = { elements = 1500 } }\n\
+             [[node]]\nid = \"cap\"\nkind = \"capture\"\n\
+             [[edge]]\nfrom = \"src.frame\"\nto = \"recon.frame\"\n\
+             [[edge]]\nfrom = \"recon.image\"\nto = \"cap.in\"\ncapacity = 4096\n";
+        let spec = GraphSpec::parse(SourceFile::new("flood.toml", graph.to_owned()), &reg).unwrap();
+        let warnings = Warnings::default();
+        // Lockstep: every node runs on this thread, so the subscriber sees every line.
+        let report = tracing::subscriber::with_default(warnings.clone(), || {
+            RunningGraph::start(&spec).unwrap().wait(&RunOptions::default())
+        });
+        assert!(report.failures.is_empty(), "{:?}", report.failures);
+        let images = captured.lock().unwrap().iter().flatten().filter(|m| m.get::<Image>().is_some()).count();
+        let recon = report.stats.node("recon").unwrap().clone();
+        let lines = warnings.0.lock().unwrap().clone();
+        (images, recon, lines)
+    }
+
+    /// How many times each message was logged, at most: a flood shows as one message logged
+    /// once per bad frame.
+    fn assert_no_flood(lines: &BTreeMap<String, usize>) {
+        for (text, &n) in lines {
+            assert_eq!(n, 1, "logged {n} times: {text}\nall: {lines:#?}");
+        }
+        assert!(lines.len() <= 4, "{lines:#?}");
+    }
+
+    const DEAD: usize = 60;
+
+    /// A board that dies after a good start (every voltage NaN from then on): each frame it
+    /// sends is dropped, as before, but only the first is the node's error (logged with its
+    /// cause), the rest are counted as discarded and logged once, in the summary at stop, not
+    /// once per frame; the frames after it comes back are imaged again.
+    #[test]
+    fn a_board_dying_part_way_is_reported_once_not_per_frame() {
+        let sent: Vec<SyncedFrame> = frames(4, 0.3, true)
+            .chain(frames(4, 0.3, false))
+            .chain(frames(DEAD, f64::NAN, false))
+            .chain(frames(3, 0.3, false))
+            .collect();
+        let (images, recon, lines) = run(sent);
+        let counted = (recon.errors, recon.discarded);
+        assert_eq!((images, counted), (11, (1, DEAD as u64 - 1)), "{recon:?}\n{lines:#?}");
+        assert_no_flood(&lines);
+    }
+
+    /// A board dead from power-on: every frame that is not emitted is counted (one error, the
+    /// rest discarded), and the log does not grow with the frames.
+    #[test]
+    fn a_board_dead_from_the_start_is_reported_once_not_per_frame() {
+        let sent: Vec<SyncedFrame> = frames(4, f64::NAN, true).chain(frames(DEAD, f64::NAN, false)).collect();
+        let n = sent.len() as u64;
+        let (images, recon, lines) = run(sent);
+        let lost = recon.errors + recon.discarded;
+        assert_eq!((images, lost, recon.errors), (0, n, 1), "{recon:?}\n{lines:#?}");
+        assert_no_flood(&lines);
+    }
+
+    /// A board stuck at 0 V (every channel under the zero floor, so all masked): every such
+    /// frame is dropped and counted. The mask used to be adopted before the matrix refused it,
+    /// so the first was dropped and the rest imaged on the old matrix, all 120 channels.
+    #[test]
+    fn a_board_stuck_at_zero_volts_is_dropped_not_imaged_on_the_old_matrix() {
+        let sent: Vec<SyncedFrame> = frames(4, 0.3, true)
+            .chain(frames(4, 0.3, false))
+            .chain(frames(DEAD, 0.0, false))
+            .chain(frames(3, 0.3, false))
+            .collect();
+        let (images, recon, lines) = run(sent);
+        let counted = (recon.errors, recon.discarded);
+        assert_eq!((images, counted), (11, (1, DEAD as u64 - 1)), "{recon:?}\n{lines:#?}");
+        assert_no_flood(&lines);
+    }
+
+    /// A board dead through the no-load period that comes back: its dead frames are no
+    /// reference (the first good loaded frame is), so it is imaged again; a dead frame used to
+    /// become the reference and every later frame was masked whole against it.
+    #[test]
+    fn a_dead_frame_is_not_taken_as_the_reference() {
+        let sent: Vec<SyncedFrame> =
+            frames(4, f64::NAN, true).chain(frames(5, f64::NAN, false)).chain(frames(3, 0.3, false)).collect();
+        let (images, recon, lines) = run(sent);
+        assert_eq!((images, recon.errors + recon.discarded), (3, 9), "{recon:?}\n{lines:#?}");
+        assert_no_flood(&lines);
+    }
+
+    /// While frames go on being dropped, one summary per interval of the graph clock; at stop
+    /// one line with the total; the first frame is the error to return, every later one is
+    /// counted as discarded.
+    #[test]
+    fn dropped_frames_are_summarised_per_interval_and_at_stop() {
+        let ctx = Context::detached("recon", skinflow_core::Mode::Realtime);
+        let warnings = Warnings::default();
+        let mut dropped = DroppedFrames::default();
+        // 25 s of a dead board at 40 frames/s.
+        let period_ns = DROP_SUMMARY_NS / 400;
+        let mut errors = Vec::new();
+        tracing::subscriber::with_default(warnings.clone(), || {
+            for i in 0..1000 {
+                let cause = NodeError::Input { port: "frame".into(), problem: format!("bad frame {i}") };
+                if let Err(e) = dropped.record(&ctx, i * period_ns, cause) {
+                    errors.push(e.to_string());
+                }
+            }
+            dropped.stop(&ctx);
+        });
+        assert_eq!(errors.len(), 1, "{errors:?}");
+        assert!(errors[0].starts_with("input \"frame\": bad frame 0 (frame dropped; later frames"), "{errors:?}");
+        assert_eq!(ctx.discarded(), 999);
+        let lines = warnings.0.lock().unwrap().clone();
+        let count = |prefix: &str| lines.iter().filter(|(t, _)| t.starts_with(prefix)).map(|(_, n)| n).sum::<usize>();
+        assert_eq!(count("EIT frames dropped since the last report"), 2, "at 10 s and 20 s: {lines:#?}");
+        assert_eq!(count("EIT frames dropped over the run"), 1, "{lines:#?}");
+        assert_eq!(lines.values().sum::<usize>(), 3, "{lines:#?}");
+    }
 }

@@ -31,6 +31,8 @@ pub enum EitError {
     #[error("channel {channel}: difference {value} is not finite (mask the channel)")]
     NonFinite { channel: usize, value: f64 },
     /// Every channel is masked out, nothing is left to reconstruct from.
+    #[error("frame has no finite channel: it cannot be the reference")]
+    NoFiniteReference,
     #[error("channel mask excludes all {total} channels")]
     NoChannels { total: usize },
 }

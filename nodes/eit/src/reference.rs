@@ -136,9 +136,14 @@ impl ReferenceTracker {
         self.source != ReferenceSource::None
     }
 
-    /// Makes `frame` the reference (a `tare` message).
+    /// Makes `frame` the reference (a `tare` message). A frame without one finite channel (a
+    /// dead board) is refused and the reference stays as it was: every frame would be masked
+    /// whole against it, even once the board recovers.
     pub fn tare(&mut self, frame: &[f64]) -> Result<(), EitError> {
         self.check(frame)?;
+        if !frame.iter().any(|v| v.is_finite()) {
+            return Err(EitError::NoFiniteReference);
+        }
         self.reference.copy_from_slice(frame);
         self.source = ReferenceSource::Tare;
         Ok(())
@@ -186,6 +191,13 @@ mod tests {
         r.tare(&[5.0, 6.0]).unwrap();
         assert_eq!((r.reference(), r.source()), (Some(&[5.0, 6.0][..]), ReferenceSource::Tare));
         assert!(r.tare(&[1.0]).is_err());
+        // A frame of a dead board is no reference: refused, the reference kept; one finite
+        // channel is enough (the rest are masked against it).
+        let e = r.tare(&[f64::NAN, f64::NEG_INFINITY]).unwrap_err();
+        assert_eq!(e.to_string(), "frame has no finite channel: it cannot be the reference");
+        assert_eq!((r.reference(), r.source()), (Some(&[5.0, 6.0][..]), ReferenceSource::Tare));
+        r.tare(&[f64::NAN, 7.0]).unwrap();
+        assert_eq!(r.missing_channels(), 1);
     }
 
     #[test]

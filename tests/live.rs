@@ -242,6 +242,12 @@ fn wait_for_out(sock: &Path, id: &str, n: u64) {
     }
 }
 
+/// `d/in.h5`: the tiny evaluation scene, simulated with seed 3.
+fn simulate_input(d: &Path) {
+    let scene = super::support::fixture("tiny-eval.toml");
+    super::support::ok(&skinflow(d, &["simulate", scene.to_str().unwrap(), "--out", "in.h5", "--seed", "3"]));
+}
+
 /// A recording replayed at `speed` into a logger writing `rec.h5`.
 fn replay_graph(speed: &str, log_params: &str) -> String {
     format!(
@@ -260,10 +266,7 @@ fn replay_graph(speed: &str, log_params: &str) -> String {
 #[test]
 fn a_sped_up_replay_goes_on_and_a_logger_swap_onto_its_own_file_is_refused() {
     let d = workdir("live", "replay-speed");
-    super::support::ok(&skinflow(
-        &d,
-        &["simulate", super::support::fixture("tiny-eval.toml").to_str().unwrap(), "--out", "in.h5", "--seed", "3"],
-    ));
+    simulate_input(&d);
     let g = d.join("g.toml");
     let sock = d.join("ctl.sock");
     std::fs::write(&g, replay_graph("2.0", "")).unwrap();
@@ -357,10 +360,7 @@ fn recon_graph(recon_params: &str) -> String {
 #[test]
 fn a_live_swap_or_edit_onto_another_sensor_is_refused() {
     let d = workdir("live", "sensor");
-    super::support::ok(&skinflow(
-        &d,
-        &["simulate", super::support::fixture("tiny-eval.toml").to_str().unwrap(), "--out", "in.h5", "--seed", "3"],
-    ));
+    simulate_input(&d);
     std::fs::write(d.join("small.toml"), "[sensor]\nname = \"small-60mm\"\nwidth_mm = 60.0\nheight_mm = 60.0\n")
         .unwrap();
     let g = d.join("g.toml");

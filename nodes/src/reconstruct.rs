@@ -700,9 +700,15 @@ mod tests {
     /// once per frame; the frames after it comes back are imaged again.
     #[test]
     fn a_board_dying_part_way_is_reported_once_not_per_frame() {
+        dead_between_good_frames(f64::NAN);
+    }
+
+    /// 8 good frames, [`DEAD`] frames of every channel at `dead_v`, 3 good ones: the 11 good
+    /// ones imaged, the dead ones one error and the rest discarded, no line logged twice.
+    fn dead_between_good_frames(dead_v: f64) {
         let sent: Vec<SyncedFrame> = frames(4, 0.3, true)
             .chain(frames(4, 0.3, false))
-            .chain(frames(DEAD, f64::NAN, false))
+            .chain(frames(DEAD, dead_v, false))
             .chain(frames(3, 0.3, false))
             .collect();
         let (images, recon, lines) = run(sent);
@@ -728,15 +734,7 @@ mod tests {
     /// so the first was dropped and the rest imaged on the old matrix, all 120 channels.
     #[test]
     fn a_board_stuck_at_zero_volts_is_dropped_not_imaged_on_the_old_matrix() {
-        let sent: Vec<SyncedFrame> = frames(4, 0.3, true)
-            .chain(frames(4, 0.3, false))
-            .chain(frames(DEAD, 0.0, false))
-            .chain(frames(3, 0.3, false))
-            .collect();
-        let (images, recon, lines) = run(sent);
-        let counted = (recon.errors, recon.discarded);
-        assert_eq!((images, counted), (11, (1, DEAD as u64 - 1)), "{recon:?}\n{lines:#?}");
-        assert_no_flood(&lines);
+        dead_between_good_frames(0.0);
     }
 
     /// A board dead through the no-load period that comes back: its dead frames are no

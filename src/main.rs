@@ -315,9 +315,14 @@ fn load(path: &Path, inputs: InputFiles) -> Result<Result<GraphSpec, ExitCode>> 
     let checked = GraphSpec::load(path, &reg).and_then(|spec| match inputs {
         // Then the sensors the files name agree (a reconstructor with its sources and the
         // calibrations downstream of it): checked only once every file reads.
-        InputFiles::Check => {
-            spec.check_files().and_then(|()| skinflow_nodes::sensors::check_graph(&spec)).map(|()| spec)
-        }
+        // Last, a warning for each calibration applied on another image scale than it was
+        // fitted on (`skinflow_nodes::scale`).
+        InputFiles::Check => spec.check_files().and_then(|()| skinflow_nodes::sensors::check_graph(&spec)).map(|()| {
+            for w in skinflow_nodes::scale::check_graph(&spec) {
+                eprintln!("warning: {}: {w}", path.display());
+            }
+            spec
+        }),
         InputFiles::Skip => Ok(spec),
     });
     match checked {

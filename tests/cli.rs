@@ -1304,3 +1304,48 @@ fn a_simulation_that_cannot_be_set_up_is_refused_saying_its_cause_once() {
     assert_eq!(err.matches(cause).count(), 1, "{err}");
     assert!(!d.join("thin.h5").exists());
 }
+
+/// A calibration records the reconstructor and segmenter settings it was fitted with; `check`
+/// and `run` warn (naming both nodes, the calibration and both settings) for each corrector
+/// whose upstream reconstructor or segmenter runs with others, since the EIT strategies and
+/// area terms read conductivity sums on the calibration's scale. An explicit default, the
+/// precision and the cache do not count. A warning, not an error: the graph still checks ok.
+#[test]
+fn a_calibration_applied_on_another_image_scale_is_warned_about() {
+    let d = workdir("scale-warning");
+    simulate(&d, "tiny-calibration.toml", "cal.h5");
+    ok(&skinflow(&d, &["calibrate", "cal.h5", "--out", "calib.toml", "--recon", "lambda = 0.05"]));
+    pipeline_graph(&d, "cal.h5", "pneumatic-locaware");
+    let ours = fixture("../../graphs/calib/paper.toml");
+    let graph = std::fs::read_to_string(d.join("g.toml"))
+        .unwrap()
+        .replace(&format!("{:?}", ours.to_str().unwrap()), "\"calib.toml\"");
+    let check = |recon: &str, seg: &str| {
+        let g = graph
+            .replace("kind = \"reconstructor\"\n", &format!("kind = \"reconstructor\"\nparams = {{ {recon} }}\n"))
+            .replace("kind = \"segmenter\"\n", &format!("kind = \"segmenter\"\nparams = {{ {seg} }}\n"));
+        std::fs::write(d.join("g.toml"), g).unwrap();
+        let out = skinflow(&d, &["check", "g.toml"]);
+        assert!(out.status.success(), "{}", stderr(&out));
+        assert!(String::from_utf8_lossy(&out.stdout).starts_with("g.toml: ok ("));
+        stderr(&out)
+    };
+    let err = check("", "");
+    assert_eq!(err.lines().count(), 1, "{err}");
+    assert!(
+        err.starts_with(
+            "warning: g.toml: node \"force\": calibration calib.toml was fitted with reconstructor settings \
+             'lambda = 0.05', but reconstructor \"recon\" upstream runs with its defaults: the EIT strategies"
+        ),
+        "{err}"
+    );
+    assert_eq!(check("lambda = 0.05, precision = \"f32\", no_cache = true", ""), "");
+    let err = check("lambda = 0.05", "floor = 0.5");
+    assert!(
+        err.starts_with(
+            "warning: g.toml: node \"force\": calibration calib.toml was fitted with the default segmenter \
+             settings, but segmenter \"seg\" upstream runs with { floor = 0.5 }"
+        ) && err.lines().count() == 1,
+        "{err}"
+    );
+}

@@ -17,6 +17,7 @@ pub mod payload;
 pub mod pipeline;
 pub mod reconstruct;
 pub mod replay;
+pub mod scale;
 pub mod segment;
 pub mod sensors;
 pub mod serial;

@@ -52,11 +52,7 @@ fn check_params<T: serde::de::DeserializeOwned>(flag: &str, text: &str) -> Resul
 
 /// `text`, the body of a node's params table, as `T`; errors name the flag.
 fn parse_params<T: serde::de::DeserializeOwned>(flag: &str, text: &str) -> Result<T> {
-    let doc = format!("params = {{ {text} }}");
-    let mut table: toml::Table =
-        toml::from_str(&doc).map_err(|e| anyhow::anyhow!("{flag} '{text}': not a TOML table body: {}", e.message()))?;
-    let params = table.remove("params").unwrap_or_else(|| toml::Value::Table(toml::Table::new()));
-    T::deserialize(params).map_err(|e| anyhow::anyhow!("{flag} '{text}': {}", e.message()))
+    skinflow_nodes::scale::parse_body(text).map_err(|e| anyhow::anyhow!("{flag} '{text}': {e}"))
 }
 
 impl PipelineArgs {
@@ -95,8 +91,13 @@ impl PipelineArgs {
     pub fn warn_calibration_settings(&self, calib: &Path, recorded: Option<&PipelineSettings>) {
         let Some(recorded) = recorded else { return };
         for (flag, now, then, same) in [
-            ("--recon", &self.recon, &recorded.recon, same_recon(&self.recon, &recorded.recon)),
-            ("--segment", &self.segment, &recorded.segment, same_segment(&self.segment, &recorded.segment)),
+            ("--recon", &self.recon, &recorded.recon, skinflow_nodes::scale::same_recon(&self.recon, &recorded.recon)),
+            (
+                "--segment",
+                &self.segment,
+                &recorded.segment,
+                skinflow_nodes::scale::same_segment(&self.segment, &recorded.segment),
+            ),
         ] {
             if !same {
                 eprintln!(
@@ -260,31 +261,6 @@ impl Settled {
         let i = self.change_t.partition_point(|&t| t <= lo);
         self.change_t.get(i).is_none_or(|&t| t > hi)
     }
-}
-
-/// Whether two `--recon` bodies give the same image scale: equal params once the matrix cache,
-/// precision (f32 agrees to 1e-4), `reference_frames` and `elements` are set aside. A body
-/// that does not parse (written by another version) counts as different.
-fn same_recon(a: &str, b: &str) -> bool {
-    use skinflow_nodes::reconstruct::ReconstructorParams;
-    let scale = |text: &str| {
-        parse_params::<ReconstructorParams>("--recon", text).ok().map(|p| ReconstructorParams {
-            cache_dir: None,
-            no_cache: false,
-            precision: None,
-            reference_frames: 0,
-            elements: false,
-            ..p
-        })
-    };
-    matches!((scale(a), scale(b)), (Some(x), Some(y)) if x == y)
-}
-
-/// Whether two `--segment` bodies give equal segmenter params (each shapes the ROIs).
-fn same_segment(a: &str, b: &str) -> bool {
-    use skinflow_nodes::segment::SegmenterParams;
-    let parse = |text: &str| parse_params::<SegmenterParams>("--segment", text).ok();
-    matches!((parse(a), parse(b)), (Some(x), Some(y)) if x == y)
 }
 
 /// Fewest no-load frames before [`Settled::warn_short_no_load`] stays quiet: a reference

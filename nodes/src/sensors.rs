@@ -9,8 +9,9 @@
 //!
 //! Sensors agree when they have the same geometry ([`SensorRef::same_geometry`]: size to 1 µm,
 //! electrode count, protocol), whatever their names. The recording is opened for its header
-//! only; the scene is read as the `sim` node reads it (`Scene::read`, which also expands its
-//! timeline). A file that cannot be read is skipped here: `check_files` reports it.
+//! only; of the scene only its `[sensor]` table is read (`Scene::read_sensor`), so a large
+//! scene is not expanded again. A file that cannot be read is skipped here: `check_files`
+//! reports it.
 
 use std::collections::HashMap;
 use std::ops::Range;
@@ -177,7 +178,7 @@ fn source_sensor(spec: &GraphSpec, i: usize, ctx: &BuildContext) -> Option<Other
         }
         "sim" => {
             let file = ctx.resolve(&params.parse::<SimParams>().ok()?.scene);
-            (Scene::read(&file).ok()?.0.sensor, file)
+            (Scene::read_sensor(&file).ok()?, file)
         }
         _ => return None,
     };

@@ -115,6 +115,21 @@ impl Scene {
         Ok((scene, text))
     }
 
+    /// The sensor of a scene file as [`Scene::read`] builds it (its `[sensor]` table, or the
+    /// default `paper-100mm`), without validating or expanding the rest: a scene of millions of
+    /// contacts is not expanded a second time to compare sensors across a graph. For scenes
+    /// `read` accepts; on others the error is one line, without a position.
+    pub fn read_sensor(path: impl AsRef<Path>) -> Result<Sensor, SceneError> {
+        let path = path.as_ref();
+        let fail = |cause: String| SceneError::Read { file: path.display().to_string(), cause };
+        let text = std::fs::read_to_string(path).map_err(|e| fail(e.to_string()))?;
+        let mut doc: toml::Table = toml::from_str(&text).map_err(|e| fail(e.message().to_owned()))?;
+        let Some(table) = doc.remove("sensor") else { return Ok(Sensor::paper_100mm()) };
+        let sensor_text = toml::to_string(&toml::Table::from_iter([("sensor".to_owned(), table)]))
+            .map_err(|e| fail(e.to_string()))?;
+        Sensor::from_toml(&sensor_text).map_err(|e| fail(e.to_string()))
+    }
+
     /// Parses and validates scene text; `file` names it in errors.
     #[allow(clippy::should_implement_trait)] // needs the file name, FromStr cannot take it
     pub fn from_str(text: &str, file: &str) -> Result<Scene, SceneError> {

@@ -189,6 +189,28 @@ fn inline_sensor_is_used() {
     assert_eq!(s.sensor.width_mm, 60.0);
 }
 
+/// `read_sensor` gives the sensor `read` builds, with a `[sensor]` table and without one.
+#[test]
+fn the_sensor_alone_is_the_sensor_of_the_scene() {
+    let dir = std::env::temp_dir().join(format!("skinflow-scene-sensor-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let steps =
+        "[[step]]\nrest_s = 1.0\n[[step]]\nat_mm = [[25.0, 0.0]]\ndiameter_mm = 10.0\nforces_n = [1.0]\nhold_s = 1.0\n";
+    let sized = "[sensor]\nname = \"small\"\nwidth_mm = 60.0\nheight_mm = 40.0\nelectrodes_per_side = 3\n";
+    for (name, text) in
+        [("default.toml", format!("[scene]\n{steps}")), ("sized.toml", format!("[scene]\n{sized}{steps}"))]
+    {
+        let path = dir.join(name);
+        std::fs::write(&path, text).unwrap();
+        let alone = Scene::read_sensor(&path).unwrap();
+        let (scene, _) = Scene::read(&path).unwrap();
+        assert_eq!(alone, scene.sensor, "{name}");
+    }
+    assert_eq!(Scene::read_sensor(dir.join("sized.toml")).unwrap().width_mm, 60.0);
+    let e = Scene::read_sensor(dir.join("missing.toml")).unwrap_err().to_string();
+    assert!(e.contains("missing.toml: "), "{e}");
+}
+
 #[test]
 fn faults_parse_with_defaults_and_bad_ones_are_named_where_they_are() {
     let ok = parse(&format!("{HEAD}[[fault]]\nkind = \"dead_electrode\"\nelectrode = 15\n")).unwrap();

@@ -424,6 +424,38 @@ fn a_stale_tare_gives_no_load_shares_end_to_end() {
     assert!(text.contains(&format!("; {} no load", shares.no_load)), "{text}");
 }
 
+/// A board dead for a stretch of a test session (every voltage NaN for 6 loaded frames): no
+/// image can be made of those frames, so `eval` scores the others and says why it drops them;
+/// it does not fail the run (it did while the reconstructor counted its later drops as
+/// discarded messages, which the offline pipeline refuses).
+#[test]
+fn eval_scores_a_recording_with_a_dead_stretch_without_those_frames() {
+    let d = workdir("dead-stretch");
+    simulate(&d, "tiny-eval.toml", "rec.h5");
+    std::fs::copy(d.join("rec.h5"), d.join("dead.h5")).unwrap();
+    {
+        let file = hdf5::File::open_rw(d.join("dead.h5")).unwrap();
+        let ds = file.dataset("/eit/v").unwrap();
+        let mut v = ds.read_2d::<f64>().unwrap();
+        for i in 12..18 {
+            v.row_mut(i).fill(f64::NAN);
+        }
+        ds.write(&v).unwrap();
+    }
+    let calib = root().join("graphs/calib/paper.toml");
+    let frames = |rec: &str| {
+        let json = d.join(format!("{rec}.json"));
+        let out = skinflow(&d, &["eval", rec, "--calib", calib.to_str().unwrap(), "--json", json.to_str().unwrap()]);
+        ok(&out);
+        let report: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(json).unwrap()).unwrap();
+        (report["frames"].as_u64().unwrap(), stderr(&out))
+    };
+    let (all, _) = frames("rec.h5");
+    let (some, err) = frames("dead.h5");
+    assert!(some < all && some + 6 >= all, "{some} of {all} frames scored");
+    assert!(err.contains("(frame dropped; later frames no image can be made of are counted as discarded"), "{err}");
+}
+
 /// Electrode 6 detaches between two rounds of the same five presses
 /// (`tests/fixtures/dead-electrode.toml`): its 15 pairs read the rail, the reconstructor masks
 /// them and says so, and every press is still found. Against the same scene without the fault

@@ -237,9 +237,9 @@ fn logging_graph(scene: &str) -> String {
 /// Killed between flushes or inside one, a logging run leaves a file that opens with the rows
 /// flushed before the kill, the EIT rows a gap-free prefix. The logger stores uncompressed by
 /// default, so a flush rewrites the last chunk of each column in place: with deflate (which
-/// moves a growing chunk to new file space at every flush) 13 of 60 kills left a column
-/// unreadable, uncompressed none of 210 (`scripts/research/kill-stress.sh`; README,
-/// "Recording"). So every one of three kills, each at another moment, must leave a readable file.
+/// moves a growing chunk to new file space at every flush) 6 and 13 of 60 kills in two runs
+/// left a column unreadable, uncompressed none of 100 and 150
+/// (`scripts/research/kill-stress/kill-stress.sh`; README, "Recording"). So every one of three kills, each at another moment, must leave a readable file.
 #[test]
 fn a_logging_run_killed_with_sigkill_leaves_a_readable_file() {
     let d = workdir("sigkill");

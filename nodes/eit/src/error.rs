@@ -30,9 +30,10 @@ pub enum EitError {
     /// A channel that is not masked out holds a non-finite difference (mask it first).
     #[error("channel {channel}: difference {value} is not finite (mask the channel)")]
     NonFinite { channel: usize, value: f64 },
-    /// Every channel is masked out, nothing is left to reconstruct from.
+    /// A frame offered as the reference has no finite channel (a dead board).
     #[error("frame has no finite channel: it cannot be the reference")]
     NoFiniteReference,
+    /// Every channel is masked out, nothing is left to reconstruct from.
     #[error("channel mask excludes all {total} channels")]
     NoChannels { total: usize },
 }

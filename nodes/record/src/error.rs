@@ -45,8 +45,8 @@ pub enum SchemaProblem {
     NotIncreasing { row: usize, t_s: f64, previous_s: f64 },
     #[error("has element type {found}, expected a number")]
     NotNumericData { found: String },
-    /// `/truth/x_mm` holds an infinity: a column is either no contact (NaN) or a contact at a
-    /// finite position.
+    /// `/truth/x_mm` holds an infinity (or, given to the writer as a contact, a NaN): a column
+    /// is either no contact (NaN) or a contact at a finite position.
     #[error("row {row} column {column}: {x_mm} is not a finite position (NaN is how no contact is written)")]
     TruthInfiniteX { row: usize, column: usize, x_mm: f64 },
     /// A value of a contact (`/truth/x_mm` not NaN) in `/truth/y_mm`, `/truth/force_n` or

@@ -193,7 +193,13 @@ impl RecordingWriter {
         let row = self.truth.as_ref().map_or(0, |t| t.rows_appended as usize);
         for (column, c) in contacts.iter().enumerate() {
             if let Some((path, value, expected)) = crate::read::contact_value_problem(c) {
-                let problem = SchemaProblem::TruthBadContact { row, column, value, expected, x_mm: c.x_mm };
+                let problem = if path == crate::layout::TRUTH_X_MM {
+                    // A written contact is present: its x must be finite (NaN is how no contact
+                    // is stored, which an empty slot of `contacts` gives).
+                    SchemaProblem::TruthInfiniteX { row, column, x_mm: value }
+                } else {
+                    SchemaProblem::TruthBadContact { row, column, value, expected, x_mm: c.x_mm }
+                };
                 return Err(RecordError::schema(&self.path, path, problem));
             }
         }

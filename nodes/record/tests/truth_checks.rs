@@ -235,7 +235,10 @@ fn the_writer_refuses_what_the_reader_would() {
     let good = TruthContact { x_mm: 10.0, y_mm: -5.0, force_n: 2.0, diameter_mm: 10.0 };
     w.append_truth(0.0, &[good]).unwrap();
     let cases = [
-        (TruthContact { x_mm: NAN, ..good }, "/truth/x_mm: row 1 column 1: NaN is not a finite position"),
+        (
+            TruthContact { x_mm: NAN, ..good },
+            "/truth/x_mm: row 1 column 1: NaN is not a finite position (NaN is how no contact is written)",
+        ),
         (TruthContact { y_mm: -INF, ..good }, "/truth/y_mm: row 1 column 1: -inf is not a finite position"),
         (TruthContact { force_n: -0.5, ..good }, "/truth/force_n: row 1 column 1: -0.5 is not a finite force >= 0 N"),
         (TruthContact { diameter_mm: NAN, ..good }, "/truth/diameter_mm: row 1 column 1: NaN is not a finite diameter"),

@@ -20,10 +20,9 @@ use skinflow_core::BuildContext;
 use skinflow_core::graph::GraphSpec;
 use skinflow_eit::reconstruct::{Precision, ReconParams};
 
-use crate::correct::CorrectorParams;
 use crate::reconstruct::ReconstructorParams;
 use crate::segment::SegmenterParams;
-use crate::split::{SplitStrategy, SplitterParams};
+use crate::sensors::calibration_path;
 
 /// Parses a `--recon` / `--segment` body (`lambda = 0.05, image_nx = 48`) as a node's params.
 pub fn parse_body<T: DeserializeOwned>(text: &str) -> Result<T, String> {
@@ -64,7 +63,7 @@ pub fn check_graph(spec: &GraphSpec) -> Vec<String> {
     let mut read: HashMap<PathBuf, Option<PipelineSettings>> = HashMap::new();
     let mut warnings = Vec::new();
     for (c, node) in spec.nodes.iter().enumerate() {
-        let Some(path) = calibration_of(spec, c) else { continue };
+        let Some(path) = calibration_path(spec, c) else { continue };
         let ctx = BuildContext { base_dir: base_dir.clone(), mode: spec.mode, node_id: node.id.clone() };
         let file = ctx.resolve(&path);
         let recorded = read.entry(file.clone()).or_insert_with(|| Calibration::read(&file).ok()?.provenance.pipeline);
@@ -107,21 +106,6 @@ pub fn check_graph(spec: &GraphSpec) -> Vec<String> {
         }
     }
     warnings
-}
-
-/// The calibration file a node applies: a corrector's, or a splitter's that uses one.
-fn calibration_of(spec: &GraphSpec, i: usize) -> Option<PathBuf> {
-    let params = &spec.nodes[i].params;
-    match spec.nodes[i].kind.as_str() {
-        "corrector" => Some(params.parse::<CorrectorParams>().ok()?.calibration),
-        "splitter" => match params.parse::<SplitterParams>().ok()? {
-            SplitterParams { strategy, calibration: Some(path) } if strategy != SplitStrategy::Proportional => {
-                Some(path)
-            }
-            _ => None,
-        },
-        _ => None,
-    }
 }
 
 /// The nodes whose messages reach node `to`, in node order.

@@ -186,20 +186,27 @@ fn source_sensor(spec: &GraphSpec, i: usize, ctx: &BuildContext) -> Option<Other
 }
 
 /// The sensor the calibration of a `corrector` or `splitter` node was fitted on, when it
-/// records one (a splitter reads its calibration for every strategy but `proportional`).
+/// records one.
 fn calibration_sensor(spec: &GraphSpec, i: usize, ctx: &BuildContext) -> Option<Other> {
-    let params = &spec.nodes[i].params;
-    let path = match spec.nodes[i].kind.as_str() {
-        "corrector" => params.parse::<CorrectorParams>().ok()?.calibration,
-        "splitter" => match params.parse::<SplitterParams>().ok()? {
-            SplitterParams { strategy, calibration: Some(path) } if strategy != SplitStrategy::Proportional => path,
-            _ => return None,
-        },
-        _ => return None,
-    };
-    let file = ctx.resolve(&path);
+    let file = ctx.resolve(&calibration_path(spec, i)?);
     let sensor = Calibration::read(&file).ok()?.provenance.sensor?;
     Some(Other { sensor, file })
+}
+
+/// The calibration file node `i` applies, as written: a corrector's, or a splitter's that
+/// reads one (every strategy but `proportional`).
+pub(crate) fn calibration_path(spec: &GraphSpec, i: usize) -> Option<PathBuf> {
+    let params = &spec.nodes[i].params;
+    match spec.nodes[i].kind.as_str() {
+        "corrector" => Some(params.parse::<CorrectorParams>().ok()?.calibration),
+        "splitter" => match params.parse::<SplitterParams>().ok()? {
+            SplitterParams { strategy, calibration: Some(path) } if strategy != SplitStrategy::Proportional => {
+                Some(path)
+            }
+            _ => None,
+        },
+        _ => None,
+    }
 }
 
 /// The `[[node]]` tables of a graph file read without their schema, for their spans.

@@ -11,8 +11,10 @@ export CARGO_INCREMENTAL=0
 
 cargo fmt --all -- --check
 cargo clippy --workspace --all-targets -- -D warnings
-cargo test --workspace
+# Build first: the plugin tests load the example plugins' cdylibs, which `cargo test` does not
+# make. With the workspace's resolver (Cargo.toml) the tests then reuse every dependency.
 cargo build --workspace
+cargo test --workspace
 # `check` opens the input files a graph names: make the recordings the replay graphs read, as
 # their headers say (kept when present, so a developer's own out/ is not overwritten).
 [ -e out/multi.h5 ] || ./target/debug/skinflow simulate graphs/scenes/multi-contact.toml --out out/multi.h5

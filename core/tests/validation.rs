@@ -150,6 +150,7 @@ fn errors_name_the_node_where_one_is_involved() {
         ("invalid-unknown-node-key.toml", "c"),
         ("invalid-align-misplaced.toml", "s"),
         ("invalid-pool-rt-priority.toml", "s"),
+        ("invalid-pool-source.toml", "c"),
     ] {
         let errs = GraphSpec::load(&dir.join(case), &reg).err().unwrap().0;
         assert_eq!(errs[0].node.as_deref(), Some(node), "{case}");

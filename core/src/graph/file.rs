@@ -101,7 +101,8 @@ pub enum Restart {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum ThreadMode {
-    /// Processors: the shared worker pool. Sources: always their own thread.
+    /// Processors and sinks: the shared worker pool. Refused on a source, which always runs on
+    /// a thread of its own.
     #[default]
     Pool,
     /// A thread of its own (implied by `cpu` or `rt_priority`).

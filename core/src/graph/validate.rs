@@ -386,11 +386,19 @@ fn option_errors(n: &NodeEntry) -> Vec<(Range<usize>, String)> {
     out
 }
 
-/// `thread = "pool"` on a processor or sink that also sets `rt_priority` or `cpu`: the
-/// runtime gives such a node a thread of its own anyway (see `RunningGraph::start`), so
-/// the pool request would be silently ignored. A source always has its own thread.
+/// `thread = "pool"` on a source, or on a processor or sink that also sets `rt_priority` or
+/// `cpu`: the runtime gives such a node a thread of its own anyway (a source always; see
+/// `RunningGraph::start`), so the pool request would be silently ignored.
 fn placement_error(n: &NodeEntry, role: Role) -> Option<(Range<usize>, String)> {
-    let thread = n.thread.as_ref().filter(|t| *t.get_ref() == ThreadMode::Pool && role != Role::Source)?;
+    let thread = n.thread.as_ref().filter(|t| *t.get_ref() == ThreadMode::Pool)?;
+    if role == Role::Source {
+        return Some((
+            thread.span(),
+            "a source always runs on a thread of its own (it waits on its device or clock), not on \
+             the shared pool: leave thread out, or set thread = \"dedicated\""
+                .to_owned(),
+        ));
+    }
     let option = if n.rt_priority.is_some() {
         "rt_priority"
     } else if n.cpu.is_some() {

@@ -46,7 +46,7 @@ use skinflow_eit::mask::ChannelMask;
 use skinflow_eit::precompute::DifferenceMode;
 use skinflow_eit::reconstruct::{Precision, ReconParams};
 use skinflow_eit::reference::{ReferenceSource as EitRef, ReferenceTracker};
-use skinflow_eit::{CemParams, MaskParams, Sensor};
+use skinflow_eit::{CemParams, EitError, MaskParams, Sensor};
 
 use crate::payload::{EitFrame, Image, ReferenceSource, Spread, SyncedFrame};
 
@@ -277,8 +277,7 @@ impl Reconstructor {
             recon.cache_dir = Some(p.cache_dir.as_ref().map_or_else(default_cache_dir, |d| ctx.resolve(d)));
         }
         let t0 = Instant::now();
-        let mut math = skinflow_eit::Reconstructor::new(&sensor, &recon)
-            .map_err(|e| NodeError::Param { param: "reconstruction".into(), problem: e.to_string() })?;
+        let mut math = skinflow_eit::Reconstructor::new(&sensor, &recon).map_err(|e| setup_error(e, None))?;
         // Built before the log line, so its setup time includes reading (or, on the first
         // start, building) the Jacobian the point spread needs.
         let spread = point_spread(&mut math, p.point_spread_mm)?;
@@ -353,10 +352,22 @@ fn point_spread(math: &mut skinflow_eit::Reconstructor, radius_mm: f64) -> Resul
     if radius_mm == 0.0 {
         return Ok(None);
     }
-    let s = math
-        .point_spread(radius_mm)
-        .map_err(|e| NodeError::Param { param: "point_spread_mm".into(), problem: e.to_string() })?;
+    let s = math.point_spread(radius_mm).map_err(|e| setup_error(e, Some("point_spread_mm")))?;
     Ok(Some(Spread(Arc::new(EitSpread(s)))))
+}
+
+/// An error building the matrix or its point spread: a cache that cannot be read or written
+/// is `cache_dir`'s (or the default directory's; `no_cache = true` turns the cache off), the
+/// rest `param`'s, or the reconstruction's as a whole.
+fn setup_error(e: EitError, param: Option<&str>) -> NodeError {
+    match (e, param) {
+        (e @ EitError::Cache { .. }, _) => NodeError::Param {
+            param: "cache_dir".into(),
+            problem: format!("{e} (give a directory skinflow can write, or no_cache = true)"),
+        },
+        (e, Some(param)) => NodeError::Param { param: param.into(), problem: e.to_string() },
+        (e, None) => NodeError::msg(format!("building the reconstruction: {e}")),
+    }
 }
 
 fn reference_source(s: EitRef) -> ReferenceSource {
@@ -693,6 +704,33 @@ mod tests {
     }
 
     const DEAD: usize = 60;
+
+    /// A cache directory that cannot be made (under a regular file) is `cache_dir`'s error,
+    /// naming the directory and the way out, not an unknown "reconstruction" param's.
+    #[test]
+    fn an_unwritable_cache_dir_is_the_cache_dir_params_error() {
+        let dir = std::env::temp_dir().join(format!("skinflow-recon-cache-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let file = dir.join("a-file");
+        std::fs::write(&file, "x").unwrap();
+        let params: super::ReconstructorParams = toml::from_str(&format!(
+            "cache_dir = {}\npoint_spread_mm = 0.0\nmesh = {{ elements = 1500 }}",
+            toml::Value::String(file.join("cache").display().to_string())
+        ))
+        .unwrap();
+        let ctx = skinflow_core::BuildContext {
+            base_dir: dir.clone(),
+            mode: skinflow_core::Mode::Lockstep,
+            node_id: "recon".into(),
+        };
+        let Err(NodeError::Param { param, problem }) = super::Reconstructor::new(&params, &ctx) else {
+            panic!("expected a param error");
+        };
+        assert_eq!(param, "cache_dir");
+        assert!(problem.starts_with("cache ") && problem.contains("no_cache = true"), "{problem}");
+        assert!(problem.contains(&file.join("cache").display().to_string()), "{problem}");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 
     /// A board that dies after a good start (every voltage NaN from then on): each frame it
     /// sends is dropped, as before, but only the first is the node's error (logged with its

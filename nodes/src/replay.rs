@@ -290,6 +290,16 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
         |p: ReplayParams, ctx| {
             let path = ctx.resolve(&p.path);
             let rec = Recording::open(&path).map_err(NodeError::other)?; // names the file
+            let rows = rec.eit.as_ref().map_or(0, |e| e.len())
+                + rec.pressure.as_ref().map_or(0, |p| p.len())
+                + rec.truth.as_ref().map_or(0, |t| t.len());
+            if rows == 0 {
+                tracing::warn!(
+                    node = %ctx.node_id,
+                    path = %path.display(),
+                    "the recording holds no EIT frame, pressure sample or truth row: the replay sends nothing"
+                );
+            }
             Ok(NodeImpl::Source(Box::new(Replay::new(
                 std::path::absolute(&path).unwrap_or(path),
                 rec,

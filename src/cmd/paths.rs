@@ -16,8 +16,47 @@ pub fn same_file(a: &Path, b: &Path) -> bool {
 }
 
 /// Refuses an output (`flag`, `out`) that is the same file as an input (`name`, path) or as
-/// another output, and an output whose directory does not exist.
+/// another output, an output whose directory does not exist, and an output that would replace
+/// an existing HDF5 file (most likely a recording) with text: a mistyped `--out` or `--json`
+/// must not cost a session's data. Commands that write recordings, and replace one only when
+/// asked (`--overwrite`), use [`check_recording_outputs`].
 pub fn check_outputs(inputs: &[(&str, &Path)], outputs: &[(&str, &Path)]) -> Result<()> {
+    check_recording_outputs(inputs, outputs)?;
+    for &(flag, out) in outputs {
+        if is_hdf5(out) {
+            bail!(
+                "{flag} {}: is an HDF5 file (a recording?); refusing to replace it with this command's text output",
+                out.display()
+            );
+        }
+    }
+    Ok(())
+}
+
+/// Whether `path` is an existing HDF5 file: its signature at offset 0, 512, 1024, 2048, ...
+/// (HDF5 allows a user block of that size before the superblock).
+fn is_hdf5(path: &Path) -> bool {
+    use std::io::{Read, Seek, SeekFrom};
+    const SIGNATURE: &[u8; 8] = b"\x89HDF\r\n\x1a\n";
+    let Ok(mut f) = std::fs::File::open(path) else { return false };
+    let len = f.metadata().map_or(0, |m| m.len());
+    let mut offset = 0u64;
+    while offset + 8 <= len {
+        let mut head = [0u8; 8];
+        if f.seek(SeekFrom::Start(offset)).is_err() || f.read_exact(&mut head).is_err() {
+            return false;
+        }
+        if &head == SIGNATURE {
+            return true;
+        }
+        offset = if offset == 0 { 512 } else { offset * 2 };
+    }
+    false
+}
+
+/// As [`check_outputs`], without refusing an existing HDF5 output: for `simulate` and
+/// `repair`, which write recordings and refuse any existing `--out` unless `--overwrite`.
+pub fn check_recording_outputs(inputs: &[(&str, &Path)], outputs: &[(&str, &Path)]) -> Result<()> {
     for (k, &(flag, out)) in outputs.iter().enumerate() {
         for &(name, input) in inputs {
             if same_file(out, input) {
@@ -139,6 +178,39 @@ mod tests {
         assert!(e.contains("--out") && e.contains("does not exist"), "{e}");
         let names = |d: &Path| std::fs::read_dir(d).unwrap().count();
         assert_eq!(names(&d), 2, "no probe file is left");
+        let _ = std::fs::remove_dir_all(&d);
+    }
+
+    #[test]
+    fn a_text_output_never_replaces_an_hdf5_file() {
+        let d = std::env::temp_dir().join(format!("skinflow-paths-h5-{}", std::process::id()));
+        std::fs::create_dir_all(&d).unwrap();
+        let rec = d.join("session.h5");
+        let mut bytes = b"\x89HDF\r\n\x1a\n".to_vec();
+        bytes.resize(4096, 0);
+        std::fs::write(&rec, &bytes).unwrap();
+        // The same signature after a 512-byte user block.
+        let blocked = d.join("blocked.dat");
+        let mut with_block = vec![0u8; 512];
+        with_block.extend_from_slice(&bytes);
+        std::fs::write(&blocked, &with_block).unwrap();
+        let text = d.join("old.json");
+        std::fs::write(&text, "{}").unwrap();
+        for out in [&rec, &blocked] {
+            let e = check_outputs(&[], &[("--json", out)]).unwrap_err().to_string();
+            assert_eq!(
+                e,
+                format!(
+                    "--json {}: is an HDF5 file (a recording?); refusing to replace it with this command's text output",
+                    out.display()
+                )
+            );
+            // Writers of recordings decide themselves (`--overwrite`).
+            check_recording_outputs(&[], &[("--out", out)]).unwrap();
+        }
+        check_outputs(&[], &[("--json", &text)]).unwrap();
+        check_outputs(&[], &[("--json", &d.join("new.json"))]).unwrap();
+        assert_eq!(std::fs::read(&rec).unwrap(), bytes, "nothing written");
         let _ = std::fs::remove_dir_all(&d);
     }
 

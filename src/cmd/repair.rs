@@ -7,7 +7,7 @@ use std::path::Path;
 use anyhow::Result;
 
 pub fn run(input: &Path, out: &Path, overwrite: bool) -> Result<()> {
-    super::paths::check_outputs(&[("recording", input)], &[("--out", out)])?;
+    super::paths::check_recording_outputs(&[("recording", input)], &[("--out", out)])?;
     if !overwrite && std::fs::symlink_metadata(out).is_ok() {
         anyhow::bail!("--out {}: exists (pass --overwrite to replace it)", out.display());
     }

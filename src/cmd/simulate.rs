@@ -14,7 +14,7 @@ use skinflow_record::write::{RecordingWriter, Streams, TruthContact, WriterOptio
 use skinflow_sim::{EventKind, Scene, Simulator};
 
 pub fn run(scene_path: &Path, out: &Path, seed: u64, overwrite: bool) -> Result<()> {
-    super::paths::check_outputs(&[("scene", scene_path)], &[("--out", out)])?;
+    super::paths::check_recording_outputs(&[("scene", scene_path)], &[("--out", out)])?;
     if !overwrite && std::fs::symlink_metadata(out).is_ok() {
         anyhow::bail!("--out {}: exists (pass --overwrite to replace it)", out.display());
     }

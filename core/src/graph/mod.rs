@@ -24,6 +24,10 @@ use crate::registry::{BuildContext, NodeFactory, Registry};
 /// Default queue capacity of an edge, in messages.
 pub const DEFAULT_CAPACITY: usize = 64;
 
+/// Largest queue capacity of an edge, in messages. Every slot is allocated when the graph
+/// starts, so a mistyped capacity would otherwise abort the run on a failed allocation.
+pub const MAX_CAPACITY: usize = 1 << 20;
+
 /// When a processor or sink runs.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Trigger {

@@ -13,7 +13,7 @@ use toml::Spanned;
 use super::error::{GraphError, GraphErrorKind as K, GraphErrors};
 use super::file::{AlignBy, GraphFile, LooseFile, NodeEntry, ThreadMode, TriggerKind};
 use super::source::SourceFile;
-use super::{DEFAULT_CAPACITY, EdgeSpec, GraphSpec, NodeSpec, Trigger, connected_inputs};
+use super::{DEFAULT_CAPACITY, EdgeSpec, GraphSpec, MAX_CAPACITY, NodeSpec, Trigger, connected_inputs};
 use crate::node::Mode;
 use crate::params::Params;
 use crate::registry::Wiring;
@@ -209,6 +209,16 @@ pub(super) fn validate(src: SourceFile, registry: &Registry) -> Result<GraphSpec
         if capacity == 0 {
             let span = ed.capacity.as_ref().map(|c| c.span());
             err(span, None, K::Option("edge capacity must be >= 1 (got 0)".into()));
+        } else if capacity > MAX_CAPACITY {
+            let span = ed.capacity.as_ref().map(|c| c.span());
+            err(
+                span,
+                None,
+                K::Option(format!(
+                    "edge capacity must be <= {MAX_CAPACITY} messages (got {capacity}): every slot is allocated \
+                     when the graph starts"
+                )),
+            );
         }
         let (Some((fnode, fport_name)), Some((tnode, tport_name))) = (from, to) else {
             // An input whose edge failed for another reason (reported above) is not also

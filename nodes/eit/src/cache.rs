@@ -84,7 +84,7 @@ fn write<'a>(
     words: &[usize],
     (floats, n): (impl Iterator<Item = &'a f64>, usize),
 ) -> Result<(), EitError> {
-    std::fs::create_dir_all(dir).map_err(|e| cache_err(dir, e))?;
+    std::fs::create_dir_all(dir).map_err(|e| cache_err(dir, format!("cannot create the cache directory: {e}")))?;
     let mut bytes = Vec::with_capacity(8 + 8 * (words.len() + n));
     bytes.extend_from_slice(magic);
     for &w in words {

@@ -25,7 +25,7 @@ pub enum EitError {
     #[error("{what}: matrix is not positive definite")]
     NotPositiveDefinite { what: &'static str },
     /// Reading or writing the on-disk cache failed.
-    #[error("cache file {path}: {cause}")]
+    #[error("cache {path}: {cause}")]
     Cache { path: String, cause: String },
     /// A channel that is not masked out holds a non-finite difference (mask it first).
     #[error("channel {channel}: difference {value} is not finite (mask the channel)")]

@@ -9,7 +9,7 @@
 //! and on disk).
 
 use crate::cache;
-use crate::error::{EitError, check_positive};
+use crate::error::{EitError, check_positive, invalid};
 use crate::forward::CemParams;
 use crate::image::{ImageGrid, SUBSAMPLES};
 use crate::lambda::{LambdaChoice, gcv};
@@ -89,9 +89,30 @@ impl ReconParams {
         self.prior.validate()?;
         check_positive("lambda", self.lambda)?;
         self.mask.validate()?;
-        ImageGrid::new(sensor, self.image_nx, self.image_ny).map(|_| ())
+        let grid = ImageGrid::new(sensor, self.image_nx, self.image_ny)?;
+        // The image matrix (pixels x measurements, f64) is allocated whole when the node is
+        // built: a size that cannot be is refused here, not by an aborted allocation.
+        let bytes = grid.pixel_count() as f64 * sensor.measurement_count() as f64 * 8.0;
+        if bytes > MAX_IMAGE_MATRIX_BYTES {
+            return Err(invalid(
+                "image size",
+                format!(
+                    "{} x {} pixels x {} measurements is a {:.1} GB image matrix (at most {:.1} GB): use a coarser image",
+                    self.image_nx,
+                    self.image_ny,
+                    sensor.measurement_count(),
+                    bytes / 1e9,
+                    MAX_IMAGE_MATRIX_BYTES / 1e9
+                ),
+            ));
+        }
+        Ok(())
     }
 }
+
+/// Largest image matrix [`ReconParams::validate`] accepts, bytes (1 GiB: 1024 x 1024 pixels
+/// on the paper's 16-electrode sensor).
+pub const MAX_IMAGE_MATRIX_BYTES: f64 = (1u64 << 30) as f64;
 
 /// Whether the matrix came from the disk cache.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -508,4 +529,24 @@ fn matvec<T: faer::traits::ComplexField>(a: &[T], x: &[T], out: &mut [T]) {
     let rhs = MatRef::from_column_major_slice(x, x.len(), 1);
     let dst = MatMut::from_column_major_slice_mut(out, lhs.nrows(), 1);
     matmul(dst, Accum::Replace, lhs, rhs, T::one_impl(), Par::Seq);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The image matrix's size is checked before anything is allocated: 1024 x 1024 pixels on
+    /// the paper's sensor (120 measurements, 1.0 GB) is accepted, 1100 x 1100 (1.2 GB) is not, and
+    /// the largest grid [`ImageGrid`] allows (4096 x 4096, 16.1 GB) is refused naming it.
+    #[test]
+    fn an_image_matrix_too_large_to_allocate_is_refused_by_validate() {
+        let sensor = Sensor::paper_100mm();
+        assert_eq!(sensor.measurement_count(), 120);
+        let p = |nx, ny| ReconParams { image_nx: nx, image_ny: ny, ..Default::default() };
+        p(1024, 1024).validate(&sensor).unwrap();
+        let e = p(1100, 1100).validate(&sensor).unwrap_err().to_string();
+        assert!(e.contains("1100 x 1100 pixels x 120 measurements is a 1.2 GB image matrix (at most 1.1 GB)"), "{e}");
+        let e = p(4096, 4096).validate(&sensor).unwrap_err().to_string();
+        assert!(e.contains("image size") && e.contains("16.1 GB") && e.contains("coarser"), "{e}");
+    }
 }

@@ -4,12 +4,16 @@
 //! The recording is built under the writer's hidden staging name beside `--out`
 //! (`.NAME.PID.partial`) and given its name only when the whole scene is written
 //! (`WriterOptions::name_at_close`), so an interrupted or failed run never leaves a shorter
-//! recording that looks complete under the requested name, only the hidden file.
+//! recording that looks complete under the requested name. A failure or a Ctrl-C (SIGINT)
+//! removes the hidden file too (`RecordingWriter::discard`); only a process killed outright
+//! leaves it (`.NAME.PID.partial`, safe to delete).
 
 use std::path::Path;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
-use anyhow::Result;
+use anyhow::{Context, Result};
 use skinflow_record::write::{RecordingWriter, Streams, TruthContact, WriterOptions};
 use skinflow_sim::{EventKind, Scene, Simulator};
 
@@ -47,12 +51,36 @@ pub fn run(scene_path: &Path, out: &Path, seed: u64, overwrite: bool) -> Result<
 /// sample and truth row counts. The frame and truth row buffers are reused from event to event
 /// (`Simulator::next_into`): the writer copies what it is given.
 fn write(sim: &mut Simulator, path: &Path, o: &WriterOptions) -> Result<(u64, u64, u64)> {
+    let interrupted = Arc::new(AtomicBool::new(false));
+    let flag = interrupted.clone();
+    ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst)).context("installing the Ctrl-C handler")?;
     let mut w = RecordingWriter::create(path, o).map_err(anyhow::Error::msg)?;
+    match append_all(sim, &mut w, &interrupted) {
+        Ok(counts) => {
+            w.close().map_err(anyhow::Error::msg)?;
+            Ok(counts)
+        }
+        Err(e) => {
+            let what = match w.discard() {
+                Ok(()) => "nothing written".to_owned(),
+                Err(d) => format!("the unfinished file not removed: {d}"),
+            };
+            Err(anyhow::anyhow!("{e:#} (--out {}: {what})", path.display()))
+        }
+    }
+}
+
+/// Appends every event of `sim` to `w` until the scene ends, an append fails, or `interrupted`
+/// is set.
+fn append_all(sim: &mut Simulator, w: &mut RecordingWriter, interrupted: &AtomicBool) -> Result<(u64, u64, u64)> {
     let mut v = vec![0.0; sim.measurement_count()];
     let mut contacts = Vec::with_capacity(sim.max_contacts());
     let mut truth = Vec::with_capacity(sim.max_contacts());
     let (mut frames, mut samples, mut rows) = (0u64, 0u64, 0u64);
     while let Some(e) = sim.next_into(&mut v, &mut contacts).map_err(anyhow::Error::msg)? {
+        if interrupted.load(Ordering::Relaxed) {
+            anyhow::bail!("interrupted");
+        }
         match e {
             EventKind::Eit { t_s, seq } => {
                 w.append_eit(t_s, seq, &v).map_err(anyhow::Error::msg)?;
@@ -75,6 +103,5 @@ fn write(sim: &mut Simulator, path: &Path, o: &WriterOptions) -> Result<(u64, u6
             }
         }
     }
-    w.close().map_err(anyhow::Error::msg)?;
     Ok((frames, samples, rows))
 }

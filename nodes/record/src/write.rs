@@ -370,6 +370,28 @@ impl RecordingWriter {
         Ok(self.stats())
     }
 
+    /// Abandons a recording made with `name_at_close` (an interrupted or failed
+    /// `skinflow simulate`): closes the part being written without naming it and removes its
+    /// staging file, so neither a shorter recording nor a hidden one is left behind. Parts
+    /// already completed by rotation keep their names. Without `name_at_close` the file
+    /// already has its name and holds what was appended: it is closed as by `close`.
+    pub fn discard(mut self) -> Result<(), RecordError> {
+        if !self.opts.name_at_close {
+            return self.close().map(|_| ());
+        }
+        let closed = self.close_file();
+        let staging = create::staging_path(&self.path);
+        let removed = match std::fs::remove_file(&staging) {
+            Err(e) if e.kind() != std::io::ErrorKind::NotFound => Err(RecordError::hdf5(
+                &self.path,
+                "/",
+                hdf5::Error::from(format!("cannot remove the unfinished {}: {e}", staging.display())),
+            )),
+            _ => Ok(()),
+        };
+        closed.and(removed)
+    }
+
     /// With `name_at_close`, gives the part just closed its name (see `publish`).
     fn name_completed_part(&self) -> Result<(), RecordError> {
         if self.opts.name_at_close { publish(&self.path, self.opts.overwrite) } else { Ok(()) }
@@ -602,6 +624,29 @@ mod tests {
         let second = Recording::open(part_path(&dir.join("rec.h5"), 2)).unwrap();
         let img = second.derived.image.expect("declared in the later part");
         assert_eq!((img.hw, img.t_s), ([3, 4], vec![1.5]));
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    /// A discarded `name_at_close` recording leaves nothing: no file under the name, no hidden
+    /// staging file; without `name_at_close`, discarding keeps the named file as `close` does.
+    #[test]
+    fn a_discarded_recording_made_for_naming_at_close_leaves_no_file() {
+        let dir = tempdir("discard");
+        let mut opts = WriterOptions::new(PAPER_100MM_TOML);
+        opts.streams = Streams { pressure: true, ..Streams::default() };
+        opts.name_at_close = true;
+        let mut w = RecordingWriter::create(dir.join("rec.h5"), &opts).unwrap();
+        w.append_pressure(0.0, 1.0).unwrap();
+        w.flush().unwrap();
+        assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 1, "the staging file");
+        w.discard().unwrap();
+        assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 0, "nothing left");
+
+        opts.name_at_close = false;
+        let mut w = RecordingWriter::create(dir.join("live.h5"), &opts).unwrap();
+        w.append_pressure(0.0, 1.0).unwrap();
+        w.discard().unwrap();
+        assert_eq!(Recording::open(dir.join("live.h5")).unwrap().pressure.unwrap().kpa, [1.0]);
         let _ = std::fs::remove_dir_all(&dir);
     }
 

@@ -45,6 +45,10 @@ pub enum SchemaProblem {
     NotIncreasing { row: usize, t_s: f64, previous_s: f64 },
     #[error("has element type {found}, expected a number")]
     NotNumericData { found: String },
+    /// A counter (`/eit/seq`) stored as floats or signed integers (MATLAB writes doubles)
+    /// holds a value that is no count: fractional, negative or beyond 2^53.
+    #[error("row {row}: {value} is not a whole number >= 0 (a count)")]
+    NotACount { row: usize, value: f64 },
     /// `/truth/x_mm` holds an infinity (or, given to the writer as a contact, a NaN): a column
     /// is either no contact (NaN) or a contact at a finite position.
     #[error("row {row} column {column}: {x_mm} is not a finite position (NaN is how no contact is written)")]

@@ -357,7 +357,7 @@ fn read_eit(file: &File, fpath: &Path, sensor: &Sensor) -> Result<Option<EitStre
         return Ok(None);
     }
     let t = data::read::<f64>(file, fpath, layout::EIT_T, 1)?;
-    let seq = data::read::<u64>(file, fpath, layout::EIT_SEQ, 1)?;
+    let seq = data::read_counts(file, fpath, layout::EIT_SEQ, 1)?;
     let v = data::read::<f64>(file, fpath, layout::EIT_V, 2)?;
     data::expect_rows(fpath, layout::EIT_SEQ, &seq, layout::EIT_T, t.rows())?;
     data::expect_rows(fpath, layout::EIT_V, &v, layout::EIT_T, t.rows())?;

@@ -107,6 +107,22 @@ fn every_violation_is_refused_with_file_path_and_problem() {
             SchemaProblem::LengthMismatch { found: 3, other: "/eit/t".into(), expected: 10 },
         ),
         (
+            "eit/seq fractional (as doubles)",
+            |f| replace_dataset(f, "/eit/seq", &[0.0, 1.0, 2.0, 3.5, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0], &[10]),
+            "/eit/seq",
+            SchemaProblem::NotACount { row: 3, value: 3.5 },
+        ),
+        (
+            "eit/seq negative (as int64)",
+            |f| {
+                f.unlink("/eit/seq").unwrap();
+                let seq: Vec<i64> = (-1..9).collect();
+                f.new_dataset_builder().with_data(&seq[..]).create("/eit/seq").unwrap();
+            },
+            "/eit/seq",
+            SchemaProblem::NotACount { row: 0, value: -1.0 },
+        ),
+        (
             "pressure/kpa longer",
             |f| replace_dataset(f, "/pressure/kpa", &[0.0; 11], &[11]),
             "/pressure/kpa",
@@ -185,6 +201,18 @@ fn every_violation_is_refused_with_file_path_and_problem() {
             other => panic!("{what}: expected a schema error, got {other}"),
         }
     }
+    // Counters written as doubles (MATLAB) or int64 (h5py) with whole values read as they are.
+    let file = valid_file(&dir, "seq-doubles.h5");
+    let seq: Vec<f64> = (0..10).map(|i| (i * 3) as f64).collect();
+    replace_dataset(&hdf5::File::open_rw(&file).unwrap(), "/eit/seq", &seq, &[10]);
+    assert_eq!(Recording::open(&file).unwrap().eit.unwrap().seq, (0..10).map(|i| i * 3).collect::<Vec<u64>>());
+    let file = valid_file(&dir, "seq-int64.h5");
+    {
+        let f = hdf5::File::open_rw(&file).unwrap();
+        f.unlink("/eit/seq").unwrap();
+        f.new_dataset_builder().with_data(&(5..15).collect::<Vec<i64>>()[..]).create("/eit/seq").unwrap();
+    }
+    assert_eq!(Recording::open(&file).unwrap().eit.unwrap().seq, (5..15).collect::<Vec<u64>>());
     // A NaN time (NaN != NaN, so checked by its message).
     let file = valid_file(&dir, "nan-time.h5");
     replace_dataset(

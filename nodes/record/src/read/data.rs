@@ -1,6 +1,6 @@
 //! Numeric datasets as flat row-major vectors, with their shape checked against the format.
 //! Any integer or float element type is accepted and converted by HDF5 (h5py writes int64
-//! counters, MATLAB doubles).
+//! counters, MATLAB doubles); counters must hold whole values >= 0 ([`read_counts`]).
 
 use std::path::Path;
 
@@ -48,6 +48,30 @@ pub fn read<T: H5Type>(file: &File, fpath: &Path, path: &str, rank: usize) -> Re
     let ds = open(file, fpath, path, rank)?;
     let shape = ds.shape();
     let values = ds.read_raw::<T>().map_err(|e| RecordError::hdf5(fpath, path, e))?;
+    Ok(Data { values, shape })
+}
+
+/// Reads a numeric dataset of counts (`/eit/seq`) of the given rank. Stored as unsigned
+/// integers it is read as is; stored as floats (MATLAB) or signed integers (h5py's int64), every
+/// value must be a whole number >= 0 (exact below 2^53 as a float), else it is refused naming
+/// the row: HDF5's own conversion would truncate 3.5 to 3 and clamp -1 to 0 without a word.
+pub fn read_counts(file: &File, fpath: &Path, path: &str, rank: usize) -> Result<Data<u64>, RecordError> {
+    let ds = open(file, fpath, path, rank)?;
+    let desc = ds.dtype().and_then(|t| t.to_descriptor()).map_err(|e| RecordError::hdf5(fpath, path, e))?;
+    if matches!(desc, TypeDescriptor::Unsigned(_)) {
+        return read::<u64>(file, fpath, path, rank);
+    }
+    let shape = ds.shape();
+    let raw = ds.read_raw::<f64>().map_err(|e| RecordError::hdf5(fpath, path, e))?;
+    const EXACT: f64 = 9_007_199_254_740_992.0; // 2^53
+    let mut values = Vec::with_capacity(raw.len());
+    for (i, &v) in raw.iter().enumerate() {
+        if !((0.0..=EXACT).contains(&v) && v.fract() == 0.0) {
+            let row = i / shape.iter().skip(1).product::<usize>().max(1);
+            return Err(RecordError::schema(fpath, path, SchemaProblem::NotACount { row, value: v }));
+        }
+        values.push(v as u64);
+    }
     Ok(Data { values, shape })
 }
 

@@ -95,7 +95,8 @@ impl Params {
         let (parsed, key_spans) = match &self.located {
             Some(loc) => parse_located::<P>(loc)?,
             None => {
-                let p = P::deserialize(toml::Value::Table(self.table.clone())).map_err(|e| ParamError {
+                let table = toml::Value::Table(self.table.clone());
+                let p = skinflow_toml::deserialize::<P, _>(table).map_err(|e| ParamError {
                     param: None,
                     problem: e.to_string(),
                     span: None,
@@ -150,12 +151,13 @@ fn parse_located<P: serde::de::DeserializeOwned>(loc: &Located) -> Result<(P, Ke
                 }
                 _ => Vec::new(),
             };
-            let parsed = P::deserialize(p.into_deserializer()).map_err(to_err)?;
+            // Through the strict wrapper: toml alone fills `[f64; 2]` from a longer array.
+            let parsed = skinflow_toml::deserialize::<P, _>(p.into_deserializer()).map_err(to_err)?;
             Ok((parsed, spans))
         }
         None => {
             let empty = toml::Value::Table(toml::Table::new());
-            let parsed = P::deserialize(empty.into_deserializer()).map_err(|e| ParamError {
+            let parsed = skinflow_toml::deserialize::<P, _>(empty.into_deserializer()).map_err(|e| ParamError {
                 param: None,
                 problem: e.message().to_owned(),
                 span: node_span,

@@ -25,6 +25,16 @@ struct NoParams {}
 
 impl NodeParams for NoParams {}
 
+/// A fixed-size array param: a longer array in the graph must be refused, not truncated.
+#[derive(serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct PlacedParams {
+    #[allow(dead_code)]
+    position_mm: [f64; 2],
+}
+
+impl NodeParams for PlacedParams {}
+
 struct Silent;
 
 impl Source for Silent {
@@ -52,6 +62,12 @@ fn registry() -> Registry {
         KindInfo::new("text_optional", Role::Sink, "test: an optional text input")
             .input(PortSpec::input::<Text>("in", "text").optional()),
         |_: NoParams, _| Ok(NodeImpl::Sink(Box::new(Silent))),
+    ))
+    .unwrap();
+    r.register(typed(
+        KindInfo::new("placed", Role::Sink, "test: a fixed-size array param, an optional text input")
+            .input(PortSpec::input::<Text>("in", "text").optional()),
+        |_: PlacedParams, _| Ok(NodeImpl::Sink(Box::new(Silent))),
     ))
     .unwrap();
     r
@@ -151,6 +167,7 @@ fn errors_name_the_node_where_one_is_involved() {
         ("invalid-align-misplaced.toml", "s"),
         ("invalid-pool-rt-priority.toml", "s"),
         ("invalid-pool-source.toml", "c"),
+        ("invalid-param-array-too-long.toml", "p"),
     ] {
         let errs = GraphSpec::load(&dir.join(case), &reg).err().unwrap().0;
         assert_eq!(errs[0].node.as_deref(), Some(node), "{case}");

@@ -805,9 +805,9 @@ mod tests {
         assert_eq!((r.frames, r.unsettled_frames, r.matched), (2, 0, 2));
         assert!((r.rmse_n - (0.5f64.powi(2) / 2.0 + 2.0).sqrt()).abs() < 1e-12, "{}", r.rmse_n);
         // The parameter as written in a graph file.
-        let p: CompareParams = toml::from_str("frames = \"all\"").unwrap();
+        let p: CompareParams = skinflow_toml::from_str("frames = \"all\"").unwrap();
         assert_eq!(p.frames, ScoredFrames::All);
-        assert!(toml::from_str::<CompareParams>("frames = \"some\"").is_err());
+        assert!(skinflow_toml::from_str::<CompareParams>("frames = \"some\"").is_err());
     }
 
     #[test]

@@ -29,7 +29,7 @@ pub fn parse_body<T: DeserializeOwned>(text: &str) -> Result<T, String> {
     let doc = format!("params = {{ {text} }}");
     let mut table: toml::Table = toml::from_str(&doc).map_err(|e| format!("not a TOML table body: {}", e.message()))?;
     let params = table.remove("params").unwrap_or_else(|| toml::Value::Table(toml::Table::new()));
-    T::deserialize(params).map_err(|e| e.message().to_owned())
+    skinflow_toml::deserialize::<T, _>(params).map_err(|e| e.message().to_owned())
 }
 
 /// What of a reconstructor's params sets the image's scale: the math with defaults filled in

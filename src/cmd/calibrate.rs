@@ -87,7 +87,8 @@ pub struct FitArgs {
 /// Parses the `--fit` TOML (fields of `CalibParams`; empty: the defaults). Errors are one
 /// line naming the flag and its text (not the TOML parser's multi-line snippet).
 pub fn fit_params(text: &str) -> Result<CalibParams> {
-    let params: CalibParams = toml::from_str(text).map_err(|e| anyhow::anyhow!("--fit '{text}': {}", e.message()))?;
+    let params: CalibParams =
+        skinflow_toml::from_str(text).map_err(|e| anyhow::anyhow!("--fit '{text}': {}", e.message()))?;
     params.validate().map_err(|e| anyhow::anyhow!("--fit '{text}': {e}"))?;
     Ok(params)
 }

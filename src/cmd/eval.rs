@@ -347,7 +347,7 @@ fn write_plots(dir: &Path, calib: &Path, o: &EvalOutcome, args: &PipelineArgs) -
         plots::localization_map(&p("localization.png"), &o.evaluator, (-hx, hx, -hy, hy))
             .map_err(anyhow::Error::msg)?;
         let seg_params: skinflow_nodes::segment::SegmenterParams =
-            toml::from_str(&args.segment).map_err(|e| anyhow::anyhow!("--segment: {e}"))?;
+            skinflow_toml::from_str(&args.segment).map_err(|e| anyhow::anyhow!("--segment: {e}"))?;
         let mut seg = Segmenter::new(grid, &seg_params.math()).map_err(anyhow::Error::msg)?;
         let mut found = seg.new_contacts();
         seg.segment_into(&img.pixels, &mut found).map_err(anyhow::Error::msg)?;

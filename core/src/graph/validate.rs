@@ -20,7 +20,7 @@ use crate::registry::Wiring;
 use crate::registry::{Registry, Role};
 
 fn parse_file(src: &SourceFile) -> Result<GraphFile, GraphErrors> {
-    toml::from_str::<GraphFile>(&src.text).map_err(|e| GraphErrors(vec![schema_error(src, &e)]))
+    skinflow_toml::from_str::<GraphFile>(&src.text).map_err(|e| GraphErrors(vec![schema_error(src, &e)]))
 }
 
 /// A `[[node]]` table as written: keys and values with their spans.

@@ -250,6 +250,28 @@ fn table_two_layout() {
 }
 
 #[test]
+fn calibration_file_with_too_many_field_coefficients_is_refused_at_the_key() {
+    // toml alone reads `gain` into the six coefficients of a quadratic field and drops the
+    // rest, a calibration whose forces are several times off; the load must refuse it.
+    let text = fitted().to_toml_string().unwrap();
+    let mut doc: toml::Table = toml::from_str(&text).unwrap();
+    let gain = doc["pneumatic"]["locaware"]["gain"].as_array().unwrap().len();
+    assert_eq!(gain, NPHI);
+    let locaware = doc.get_mut("pneumatic").and_then(|p| p.get_mut("locaware")).unwrap();
+    let gain = locaware.get_mut("gain").and_then(|g| g.as_array_mut()).unwrap();
+    gain.extend([toml::Value::Float(0.5), toml::Value::Float(-0.25)]);
+    let bad = toml::to_string_pretty(&doc).unwrap();
+    let err = Calibration::from_toml_str(&bad, "calib.toml").unwrap_err().to_string();
+    assert!(err.starts_with("calib.toml:"), "{err}");
+    assert!(err.contains("expected an array of 6 elements, found 8"), "{err}");
+    // The error shows the line of the key, by number.
+    let section = bad.find("[pneumatic.locaware]").unwrap();
+    let key = section + bad[section..].find("gain = ").unwrap();
+    let line = bad[..key].matches('\n').count() + 1;
+    assert!(err.contains(&format!("line {line}, column 8")) && err.contains("gain = ["), "{err}");
+}
+
+#[test]
 fn calibration_file_round_trips_and_rejects_unknown_keys() {
     let cal = fitted();
     let text = cal.to_toml_string().unwrap();

@@ -160,7 +160,7 @@ impl Sensor {
 
     /// Parses and validates a sensor description (a TOML document with a `[sensor]` table).
     pub fn from_toml(text: &str) -> Result<Sensor, SensorError> {
-        let file: SensorFile = toml::from_str(text)?;
+        let file: SensorFile = skinflow_toml::from_str(text)?;
         let s = file.sensor;
         let ok = |x: f64| x.is_finite() && x > 0.0;
         for (field, side) in [("width_mm", s.width_mm), ("height_mm", s.height_mm)] {

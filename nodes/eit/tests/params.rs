@@ -24,7 +24,7 @@ fn full_params_parse_and_unknown_keys_fail() {
         [mask]
         saturation_v = 3.3
     "#;
-    let p: ReconParams = toml::from_str(text).unwrap();
+    let p: ReconParams = skinflow_toml::from_str(text).unwrap();
     assert_eq!(p.mode, DifferenceMode::Plain);
     assert_eq!(p.precision, Precision::F32);
     assert_eq!(p.prior, Prior::Laplacian { epsilon: 0.01 });
@@ -32,13 +32,13 @@ fn full_params_parse_and_unknown_keys_fail() {
     assert_eq!(p.mesh.min_angle_deg, MeshParams::default().min_angle_deg);
     assert_eq!(p.cem.current_ua, 20.0);
     assert_eq!(p.cem.thickness_mm, CemParams::default().thickness_mm);
-    let p: ReconParams = toml::from_str("prior = { noser = { p = 1.0 } }").unwrap();
+    let p: ReconParams = skinflow_toml::from_str("prior = { noser = { p = 1.0 } }").unwrap();
     assert_eq!(p.prior, Prior::Noser { p: 1.0 });
-    let p: ReconParams = toml::from_str(r#"prior = "identity""#).unwrap();
+    let p: ReconParams = skinflow_toml::from_str(r#"prior = "identity""#).unwrap();
     assert_eq!(p.prior, Prior::Identity);
-    let e = toml::from_str::<ReconParams>("lamda = 0.1").unwrap_err();
+    let e = skinflow_toml::from_str::<ReconParams>("lamda = 0.1").unwrap_err();
     assert!(e.to_string().contains("lamda"), "{e}");
-    let e = toml::from_str::<ReconParams>("[mesh]\nelemnts = 3").unwrap_err();
+    let e = skinflow_toml::from_str::<ReconParams>("[mesh]\nelemnts = 3").unwrap_err();
     assert!(e.to_string().contains("elemnts"), "{e}");
     let bad = ReconParams { lambda: -1.0, ..Default::default() };
     let e = Reconstructor::new(&Sensor::paper_100mm(), &bad).err().unwrap();
@@ -73,4 +73,18 @@ fn adjacent_protocol_reconstructs_an_inclusion() {
     let peak = r.grid().pixel_centre_mm(k);
     assert!(img[k] < 0.0 && (peak[0] - c[0]).hypot(peak[1] - c[1]) <= 5.0, "{peak:?}");
     assert!(el.iter().all(|x| x.is_finite()));
+}
+
+#[test]
+fn an_electrode_end_with_three_coordinates_is_refused() {
+    // toml alone would read [10.0, -5.0, 3.0] as (10, -5) and drop the third value.
+    let text = "[sensor]\nwidth_mm = 20.0\nheight_mm = 10.0\n\
+        [[sensor.electrode]]\nstart_mm = [10.0, -5.0, 3.0]\nend_mm = [10.0, 5.0]\n\
+        [[sensor.electrode]]\nstart_mm = [-10.0, 5.0]\nend_mm = [-10.0, -5.0]\n\
+        [[sensor.electrode]]\nstart_mm = [0.05, 5.0]\nend_mm = [-0.05, 5.0]\n";
+    let e = Sensor::from_toml(text).unwrap_err();
+    let shown = e.to_string();
+    assert!(shown.contains("expected an array of 2 elements, found 3"), "{shown}");
+    assert!(shown.contains("line 5, column 12"), "{shown}");
+    Sensor::from_toml(&text.replace(", 3.0]", "]")).unwrap();
 }

@@ -320,7 +320,7 @@ mod tests {
     use crate::serial::{EitParams, LoadcellParams, PortParams};
 
     fn params(toml_text: &str) -> PortParams {
-        toml::from_str::<LoadcellParams>(toml_text).unwrap().port_params()
+        skinflow_toml::from_str::<LoadcellParams>(toml_text).unwrap().port_params()
     }
 
     /// The hand-over steps of two hot swaps and a second node, on an emulated load cell's pty.
@@ -386,10 +386,11 @@ mod tests {
         let emulator = Emulator::spawn(config, EmulatorFeed::default().with_eit(frames), faults).expect("emulator");
         let path = emulator.path(Device::Eit).expect("eit pty");
         // The emulator sends from its spawn: keep what the port buffered before the open.
-        let p =
-            toml::from_str::<EitParams>(&format!("port = {path:?}\nmeasurements = {m}\nclear_input_at_open = false"))
-                .unwrap()
-                .port_params();
+        let p = skinflow_toml::from_str::<EitParams>(&format!(
+            "port = {path:?}\nmeasurements = {m}\nclear_input_at_open = false"
+        ))
+        .unwrap()
+        .port_params();
         let ctx = Context::detached("eit", Mode::Realtime);
         let mut port = Port::new(&p, EitDecoder::new(m), m as u64);
         port.start(&p, &ctx).unwrap();

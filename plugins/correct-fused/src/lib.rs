@@ -135,7 +135,8 @@ impl PluginNode for Fused {
     fn new(p: FusedParams, base_dir: &Path) -> Result<Self, String> {
         let path = base_dir.join(&p.calibration);
         let text = std::fs::read_to_string(&path).map_err(|e| format!("{}: {e}", path.display()))?;
-        let cal: CalibrationMaps = toml::from_str(&text).map_err(|e| format!("{}: {}", path.display(), e.message()))?;
+        let cal: CalibrationMaps =
+            skinflow_toml::from_str(&text).map_err(|e| format!("{}: {}", path.display(), e.message()))?;
         if cal.format != "skinflow-calibration" {
             return Err(format!("{}: not a calibration file (format \"{}\")", path.display(), cal.format));
         }

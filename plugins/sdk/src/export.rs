@@ -493,7 +493,7 @@ fn nothing_held<T>(_: &T) -> u64 {
 }
 
 fn parse<A: Author>(text: &str) -> Result<A::Params, String> {
-    let p: A::Params = toml::from_str(text).map_err(|e| e.message().to_owned())?;
+    let p: A::Params = skinflow_toml::from_str(text).map_err(|e| e.message().to_owned())?;
     A::validate(&p)?;
     Ok(p)
 }

@@ -370,7 +370,7 @@ impl Calibration {
                 ),
             });
         }
-        let h: Header = toml::from_str(text).map_err(parse)?;
+        let h: Header = skinflow_toml::from_str(text).map_err(parse)?;
         if h.format != FORMAT || !(OLDEST_FORMAT_VERSION..=FORMAT_VERSION).contains(&h.format_version) {
             return Err(CalibrationFileError::Format {
                 path: origin.to_string(),
@@ -378,7 +378,8 @@ impl Calibration {
                 version: h.format_version,
             });
         }
-        let mut cal: Calibration = toml::from_str(text).map_err(parse)?;
+        // Strict: toml alone fills `[f64; 6]` from a longer array, dropping the rest.
+        let mut cal: Calibration = skinflow_toml::from_str(text).map_err(parse)?;
         cal.validate().map_err(|problem| CalibrationFileError::Invalid { path: origin.to_string(), problem })?;
         // Read as the current version (older files lack only optional figures), so a file
         // written back is consistent with its keys.

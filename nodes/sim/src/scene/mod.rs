@@ -134,7 +134,7 @@ impl Scene {
     #[allow(clippy::should_implement_trait)] // needs the file name, FromStr cannot take it
     pub fn from_str(text: &str, file: &str) -> Result<Scene, SceneError> {
         let at = Locator { text, file };
-        let raw: RawScene = toml::from_str(text).map_err(|e| at.error(e.span(), e.message().to_owned()))?;
+        let raw: RawScene = skinflow_toml::from_str(text).map_err(|e| at.error(e.span(), e.message().to_owned()))?;
         validate::validate(raw, text, &at)
     }
 

@@ -297,3 +297,26 @@ fn a_step_that_builds_other_than_admitted_is_caught() {
     b.segments.push(crate::timeline::Segment { start_s: 0.0, end_s: 1.0, contacts: Vec::new() });
     b.check_admitted();
 }
+
+#[test]
+fn too_long_positions_and_grid_counts_are_refused_not_truncated() {
+    // toml alone fills `[f64; 2]` from a longer array and drops the rest: a point at
+    // (10, 20) where (10, 20, 30) was written, a 2 x 2 grid where [2, 2, 7] was.
+    let step = |body: &str| format!("{HEAD}[[step]]\n{body}diameter_mm = 10.0\nforces_n = [1.0]\nhold_s = 1.0\n");
+    let (line, column, problem) = fails(&step("at_mm = [[10.0, 20.0, 30.0]]\n"));
+    assert_eq!((line, column), (9, 10), "{problem}");
+    assert_eq!(problem, "expected an array of 2 elements, found 3");
+    let (line, column, problem) = fails(&step("at_mm = [[0.0, 0.0], [1.0, 2.0, 3.0, 4.0]]\n"));
+    assert_eq!((line, column), (9, 22), "{problem}");
+    assert_eq!(problem, "expected an array of 2 elements, found 4");
+    let grid = "grid = { x_mm = [-20.0, 20.0], y_mm = [-20.0, 20.0], n = [2, 2, 7] }\n";
+    let (line, column, problem) = fails(&step(grid));
+    assert_eq!((line, column), (9, 58), "{problem}");
+    assert_eq!(problem, "expected an array of 2 elements, found 3");
+    let profile = "at_mm = [[0.0, 0.0]]\nforce_profile = [[0.0, 0.0], [1.0, 2.0, 9.0]]\n";
+    let (line, column, problem) = fails(&format!("{HEAD}[[step]]\n{profile}diameter_mm = 10.0\n"));
+    assert_eq!((line, column), (10, 30), "{problem}");
+    assert_eq!(problem, "expected an array of 2 elements, found 3");
+    // The right lengths still parse.
+    parse(&step("at_mm = [[10.0, 20.0]]\n")).unwrap();
+}

@@ -226,7 +226,8 @@ fn override_profile(
         };
         table.insert(k.clone(), value);
     }
-    toml::Value::Table(table).try_into::<Profile>().map_err(|e| err(model.span(), format!("[model]: {}", e.message())))
+    skinflow_toml::deserialize::<Profile, _>(toml::Value::Table(table))
+        .map_err(|e| err(model.span(), format!("[model]: {}", e.message())))
 }
 
 /// Fault `number` (1-based), checked against the sensor and the scene: it must touch at least

@@ -389,28 +389,6 @@ fn replayed_pipeline_logs_derived_streams_without_drops() {
     assert!(shares.loaded > 0, "no loaded frame with contacts");
 }
 
-/// Forces of a strategy the logger was not told about (e.g. after a swap renamed it) are left
-/// out with one warning and counted, not an error per frame; the other streams are complete.
-#[test]
-fn forces_of_an_unlisted_strategy_warn_once_and_are_counted() {
-    let d = workdir("unlisted-strategy");
-    simulate(&d, "tiny-eval.toml", "rec.h5");
-    let g = pipeline_graph(&d, "rec.h5", "eit-nocal");
-    let out = skinflow(&d, &["run", &g, "--stats-json", "stats.json"]);
-    ok(&out);
-    let err = stderr(&out);
-    let (frames, log) = check_pipeline_stats(&d, "rec.h5");
-    assert_eq!(err.matches("is not in `strategies`").count(), 1, "{err}");
-    assert!(err.contains("forces of strategy \"pneumatic-locaware\" are not logged"), "{err}");
-    assert!(err.contains(&format!("frames={frames}")) && err.contains("force frames not logged"), "{err}");
-    let stats: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(d.join("stats.json")).unwrap()).unwrap();
-    let log_node = stats["nodes"].as_array().unwrap().iter().find(|n| n["id"] == "log").unwrap().clone();
-    assert_eq!(log_node["errors"], 0, "{log_node}");
-    let rec = skinflow_record::Recording::open(&log).unwrap();
-    assert_eq!(rec.derived.sync.as_ref().expect("/derived/sync").t_s.len(), frames);
-}
-
 /// Drift the tare cannot follow pushes dP to or below zero while the EIT layer still sees the
 /// press: those shares carry the no-load bit and zero force, and every other share does not.
 #[test]
@@ -1378,6 +1356,32 @@ fn a_calibration_applied_on_another_image_scale_is_warned_about() {
             "warning: g.toml: node \"force\": calibration calib.toml was fitted with the default segmenter \
              settings, but segmenter \"seg\" upstream runs with { floor = 0.5 }"
         ) && err.lines().count() == 1,
+        "{err}"
+    );
+}
+
+/// A replay of a recording that holds no rows at all (a logger that recorded nothing) runs,
+/// sends nothing, and says so instead of ending silently.
+#[test]
+fn a_replay_of_an_empty_recording_warns_that_it_sends_nothing() {
+    let d = workdir("replay-empty");
+    let mut opts = skinflow_record::write::WriterOptions::new(
+        "[sensor]\nname = \"square-100mm\"\nwidth_mm = 100.0\nheight_mm = 100.0\n",
+    );
+    opts.streams = skinflow_record::write::Streams { truth: true, ..Default::default() };
+    skinflow_record::write::RecordingWriter::create(d.join("empty.h5"), &opts).unwrap().close().unwrap();
+    std::fs::write(
+        d.join("g.toml"),
+        "[[node]]\nid = \"replay\"\nkind = \"replay\"\nparams = { path = \"empty.h5\", speed = 0.0 }\n\
+         [[node]]\nid = \"sink\"\nkind = \"null\"\n\
+         [[edge]]\nfrom = \"replay.eit\"\nto = \"sink.in\"\n",
+    )
+    .unwrap();
+    let out = skinflow(&d, &["run", "g.toml"]);
+    let err = stderr(&out);
+    assert!(out.status.success(), "{err}");
+    assert!(
+        err.contains("the recording holds no EIT frame, pressure sample or truth row: the replay sends nothing"),
         "{err}"
     );
 }

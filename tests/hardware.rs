@@ -314,3 +314,54 @@ fn a_logging_run_killed_while_creating_its_file_leaves_no_unreadable_file() {
     }
     eprintln!("{named} of 8 killed runs had named their file");
 }
+
+/// `simulate` interrupted with Ctrl-C (SIGINT) mid-scene fails saying nothing was written, and
+/// leaves no file at all: not the recording, not its hidden `.NAME.PID.partial` (which a big
+/// scene grew to hundreds of MB). A scene that cannot fit in the free disk space is refused
+/// before anything is simulated.
+#[test]
+fn an_interrupted_simulate_leaves_no_file() {
+    let d = workdir("simulate-sigint");
+    // Long enough that the interrupt lands mid-scene on any machine (about 130,000 frames).
+    std::fs::write(
+        d.join("long.toml"),
+        "[scene]\nname = \"long\"\nprofile = \"paper\"\n\n[[step]]\nrest_s = 100000.0\n",
+    )
+    .unwrap();
+    let child = Command::new(bin())
+        .args(["simulate", "long.toml", "--out", "long.h5"])
+        .current_dir(&d)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Interrupt once the recording is being written.
+    let t0 = Instant::now();
+    let writing =
+        || std::fs::read_dir(&d).unwrap().any(|e| e.unwrap().file_name().to_string_lossy().ends_with(".partial"));
+    while !writing() {
+        assert!(t0.elapsed() < Duration::from_secs(60), "simulate never started writing");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    Command::new("kill").args(["-INT", &child.id().to_string()]).status().unwrap();
+    let out = child.wait_with_output().unwrap();
+    let err = stderr(&out);
+    assert!(!out.status.success(), "{err}");
+    assert!(err.contains("interrupted (--out long.h5: nothing written)"), "{err}");
+    let left: Vec<String> =
+        std::fs::read_dir(&d).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
+    assert_eq!(left, ["long.toml"]);
+
+    // The longest scene at the highest rates: 2.6 TB, more than a test machine's disk holds.
+    std::fs::write(
+        d.join("huge.toml"),
+        "[scene]\nname = \"huge\"\nprofile = \"paper\"\n\n[rates]\neit_fps = 1000.0\npressure_hz = 100000.0\n\n\
+         [[step]]\nrest_s = 999000.0\n",
+    )
+    .unwrap();
+    let out = skinflow(&d, &["simulate", "huge.toml", "--out", "huge.h5"]);
+    let err = stderr(&out);
+    assert!(!out.status.success(), "{err}");
+    assert!(err.contains("--out huge.h5: the scene's recording needs at least ") && err.contains("GB free"), "{err}");
+    assert!(!d.join("huge.h5").exists());
+}

@@ -272,6 +272,15 @@ fn a_sped_up_replay_goes_on_and_a_logger_swap_onto_its_own_file_is_refused() {
     std::fs::write(&g, replay_graph("2.0", "")).unwrap();
     let child = run_watched_with_stats(&d, &g, &sock);
     wait_for_out(&sock, "replay", 100);
+    // A swap of the logger onto the recording the replay reads is refused as `check` refuses
+    // it (the rows compared below show in.h5 intact).
+    let reply = ask(
+        &sock,
+        r#"{"cmd": "swap", "node": "log", "kind": "hdf5_logger", "params": {"path": "in.h5", "overwrite": true}}"#,
+    );
+    assert_eq!(reply["ok"], false, "{reply}");
+    let error = reply["error"].as_str().unwrap();
+    assert!(error.contains("the recording replay \"replay\" reads (its `path` ") && error.contains("in.h5"), "{reply}");
     std::fs::write(&g, replay_graph("4.0", "")).unwrap();
     std::thread::sleep(Duration::from_millis(700));
     std::fs::write(&g, replay_graph("4.0", ", overwrite = true, flush_interval_s = 0.5")).unwrap();

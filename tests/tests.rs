@@ -4,6 +4,7 @@ mod cli;
 mod engine;
 mod hardware;
 mod live;
+mod outputs;
 mod plugins;
 mod segment;
 mod support;

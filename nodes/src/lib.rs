@@ -12,6 +12,7 @@ pub mod gate;
 pub mod log;
 pub mod order;
 pub mod output;
+pub mod outputs;
 pub mod pace;
 pub mod payload;
 pub mod pipeline;

@@ -21,18 +21,29 @@
 //! graph (`NodeFactory::build` called directly) is checked again at its first message, which
 //! names the strategies that arrived, before the file is created.
 //!
-//! Forces of a strategy not in `strategies` (e.g. after a hot swap renamed a corrector's
-//! strategy) are not logged: one warning per strategy name, and the frames left out are
-//! counted and reported at stop. Each logged strategy has one table, so it must come from one
-//! input: forces of one name from two `forces` edges (two correctors with the same `name`)
-//! stop the graph at the first clash, with the rows recorded so far kept.
+//! Graph checks (`skinflow check`, and before a run starts) also refuse a name in `strategies`
+//! that no corrector connected to `forces` produces (a typo would log nothing of the strategy
+//! meant), listing the names that arrive; the names are derived from the correctors' and
+//! splitters' params as the corrector names its output, and not checked when a plugin produces
+//! forces (`skinflow_nodes::outputs::check_strategies`).
 //!
-//! Nothing recorded is replaced by the run itself: a logger does not start on the file another
-//! logger of this process is writing (a hot swap's replacement, or a restart after a panic,
-//! with the same `path` and `overwrite = true` would truncate the session's recording), and a
-//! hot swap onto the file the running logger writes is refused at the switch, with the reason;
-//! a replacement with another `path` starts a new file from the swap on, the replaced one
-//! closes its own with every row it received.
+//! Forces of a strategy not in `strategies` (one left out on purpose, or after a hot swap
+//! renamed a corrector's strategy) are not logged: each such force frame is counted as
+//! discarded in the node's statistics (`discarded`, and its `drops`, in the run report and
+//! `--stats-json`), with one warning per strategy name when its first frame arrives and the
+//! frames left out per strategy reported at stop. Each logged strategy has one table, so it
+//! must come from one input: forces of one name from two `forces` edges (two correctors with
+//! the same `name`) stop the graph at the first clash, with the rows recorded so far kept.
+//!
+//! Nothing recorded is replaced by the run itself. Graph checks (`skinflow check`, before a run
+//! starts, and at a hot swap) refuse a `path` that is the graph file, a file a node of the graph reads (a replay's
+//! recording, a scene, a calibration, a sensor file) or another node's output file, whatever
+//! `overwrite` says (`skinflow_nodes::outputs::check_files`). A logger does not start on the file
+//! another logger of this process is writing (a hot swap's replacement, or a restart after a panic,
+//! with the same `path` and `overwrite = true` would truncate the session's recording), and a hot
+//! swap onto the file the running logger writes is refused at the switch, with the reason; a
+//! replacement with another `path` starts a new file from the swap on, the replaced one closes its
+//! own with every row it received.
 //!
 //! Images are logged at the size of the first image (the reconstructor's `image_nx` x
 //! `image_ny`); one recording holds one size. The logger's own `image_nx` / `image_ny` are
@@ -386,13 +397,15 @@ impl Sink for Logger {
             let k = w.strategy_index(&f.strategy);
             claim_strategy(lane_strategy, lane, k, &f.strategy)?;
             let Some(k) = k else {
+                // Received and never recorded: a discard, in the node's statistics.
+                ctx.count_discarded(1);
                 match unlisted.iter_mut().find(|(name, _)| *name == f.strategy) {
                     Some((_, n)) => *n += 1,
                     None => {
                         tracing::warn!(
                             node = ctx.id(),
                             path = %path.display(),
-                            "forces of strategy \"{}\" are not logged: it is not in `strategies` (warned once; frames counted)",
+                            "forces of strategy \"{}\" are not logged: it is not in `strategies` (warned once; frames counted as discarded)",
                             f.strategy
                         );
                         unlisted.push((f.strategy.clone(), 1));

@@ -217,7 +217,7 @@ struct NodeTables {
 }
 
 /// The byte span of each `[[node]]` table, in file order (the order of `spec.nodes`).
-fn table_spans(spec: &GraphSpec) -> Vec<Range<usize>> {
+pub(crate) fn table_spans(spec: &GraphSpec) -> Vec<Range<usize>> {
     toml::from_str::<NodeTables>(&spec.source.text)
         .map_or_else(|_| Vec::new(), |f| f.node.iter().map(|t| t.span()).collect())
 }

@@ -290,7 +290,10 @@ pub fn run(graph: &Path, replay: &Path, vary: &[String], out_dir: &Path) -> Resu
         // and the sensors they name must agree.
         let spec = GraphSpec::parse(src, &reg)
             .and_then(|spec| {
-                spec.check_files().and_then(|()| skinflow_nodes::sensors::check_graph(&spec)).map(|()| spec)
+                spec.check_files()
+                    .and_then(|()| skinflow_nodes::sensors::check_graph(&spec))
+                    .and_then(|()| skinflow_nodes::outputs::check_graph(&spec))
+                    .map(|()| spec)
             })
             .map_err(|e| invalid_variant(graph, &text, &reg, &label, e))?;
         specs.push((label, set, spec, json));

@@ -225,7 +225,8 @@ impl Live {
     }
 
     /// Refuses a swap of `node` to `kind` with `params` after which the graph's sensors would
-    /// disagree ([`check_sensors`]), checked on the graph as it runs now with that one change.
+    /// disagree or a node would write over an input or another's output
+    /// ([`check_swapped_graph`]), checked on the graph as it runs now with that one change.
     fn check_swap(
         &self,
         node: &str,
@@ -246,7 +247,7 @@ impl Live {
             (n.kind, n.params) = (k, p);
         }
         drop(kinds);
-        check_sensors(&spec)
+        check_swapped_graph(&spec)
     }
 
     /// Applies one validated edit: checks the structure and what only a restart can change are
@@ -276,7 +277,7 @@ impl Live {
         if let Some(why) = needs_restart(old, new) {
             return Err(rejected(why));
         }
-        check_sensors(new).map_err(rejected)?;
+        check_swapped_graph(new).map_err(rejected)?;
         let mut applied = Applied::default();
         {
             let mut policies = self.policies.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
@@ -423,11 +424,15 @@ pub fn watch(path: PathBuf, live: Arc<Live>, done: Arc<AtomicBool>) {
     }
 }
 
-/// The sensors of the graph agree (`skinflow_nodes::sensors::check_graph`, as `check` and `run`
-/// check them before starting): an edit or a swap that would image frames on another sensor
-/// than theirs, or apply a calibration of another sensor, is refused, and the graph runs on.
-fn check_sensors(spec: &GraphSpec) -> Result<(), String> {
+/// The sensors of the graph agree (`skinflow_nodes::sensors::check_graph`), and no node writes
+/// a file the graph reads or another node writes (`skinflow_nodes::outputs::check_files`), as
+/// `check` and `run` check before starting: an edit or a swap that would image frames on
+/// another sensor than theirs, apply a calibration of another sensor, or record over an input,
+/// is refused, and the graph runs on. (A logger's `strategies` are not checked here: a swap may
+/// rename a corrector's output, whose frames the logger then counts as discarded.)
+fn check_swapped_graph(spec: &GraphSpec) -> Result<(), String> {
     skinflow_nodes::sensors::check_graph(spec)
+        .and_then(|()| skinflow_nodes::outputs::check_files(spec))
         .map_err(|errs| errs.0.iter().map(ToString::to_string).collect::<Vec<_>>().join("; "))
 }
 

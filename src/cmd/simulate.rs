@@ -9,11 +9,11 @@
 //! leaves it (`.NAME.PID.partial`, safe to delete).
 
 use std::path::Path;
-use std::sync::Arc;
+use std::sync::OnceLock;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use skinflow_record::write::{RecordingWriter, Streams, TruthContact, WriterOptions};
 use skinflow_sim::{EventKind, Scene, Simulator};
 
@@ -28,6 +28,7 @@ pub fn run(scene_path: &Path, out: &Path, seed: u64, overwrite: bool) -> Result<
         // The error's message ends with its cause: as one line, not followed by the cause again.
         Simulator::new(&scene, seed)
             .map_err(|e| anyhow::anyhow!("{}: preparing the simulation: {e}", scene_path.display()))?;
+    check_space(&sim, scene.channels.eit, scene.channels.pressure, out)?;
     let mut o = WriterOptions::new(sim.sensor().toml.clone());
     o.software_version = concat!("skinflow ", env!("CARGO_PKG_VERSION")).to_owned();
     o.overwrite = overwrite;
@@ -51,11 +52,9 @@ pub fn run(scene_path: &Path, out: &Path, seed: u64, overwrite: bool) -> Result<
 /// sample and truth row counts. The frame and truth row buffers are reused from event to event
 /// (`Simulator::next_into`): the writer copies what it is given.
 fn write(sim: &mut Simulator, path: &Path, o: &WriterOptions) -> Result<(u64, u64, u64)> {
-    let interrupted = Arc::new(AtomicBool::new(false));
-    let flag = interrupted.clone();
-    ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst)).context("installing the Ctrl-C handler")?;
+    let interrupted = interrupted()?;
     let mut w = RecordingWriter::create(path, o).map_err(anyhow::Error::msg)?;
-    match append_all(sim, &mut w, &interrupted) {
+    match append_all(sim, &mut w, interrupted) {
         Ok(counts) => {
             w.close().map_err(anyhow::Error::msg)?;
             Ok(counts)
@@ -68,6 +67,16 @@ fn write(sim: &mut Simulator, path: &Path, o: &WriterOptions) -> Result<(u64, u6
             Err(anyhow::anyhow!("{e:#} (--out {}: {what})", path.display()))
         }
     }
+}
+
+/// Set by Ctrl-C (SIGINT). Installed once per process: `reproduce` simulates several scenes.
+fn interrupted() -> Result<&'static AtomicBool> {
+    static FLAG: OnceLock<Result<(), String>> = OnceLock::new();
+    static INTERRUPTED: AtomicBool = AtomicBool::new(false);
+    FLAG.get_or_init(|| ctrlc::set_handler(|| INTERRUPTED.store(true, Ordering::SeqCst)).map_err(|e| e.to_string()))
+        .as_ref()
+        .map_err(|e| anyhow::anyhow!("installing the Ctrl-C handler: {e}"))?;
+    Ok(&INTERRUPTED)
 }
 
 /// Appends every event of `sim` to `w` until the scene ends, an append fails, or `interrupted`
@@ -104,4 +113,45 @@ fn append_all(sim: &mut Simulator, w: &mut RecordingWriter, interrupted: &Atomic
         }
     }
     Ok((frames, samples, rows))
+}
+
+/// Refuses a scene whose recording cannot fit in the free space of `--out`'s file system,
+/// before anything is simulated: the EIT frames (8 bytes per value, plus time and sequence
+/// number) and pressure samples (time and value) it will write. Truth rows and HDF5's own
+/// structure are left out, so this is a lower bound on the file's size.
+fn check_space(sim: &Simulator, eit: bool, pressure: bool, out: &Path) -> Result<()> {
+    let (rates, duration_s) = (sim.rates(), sim.duration_s());
+    let frames = if eit { (duration_s * rates.eit_fps).ceil() } else { 0.0 };
+    let samples = if pressure { (duration_s * rates.pressure_hz).ceil() } else { 0.0 };
+    let need = frames * (sim.measurement_count() as f64 * 8.0 + 16.0) + samples * 16.0;
+    let dir = out.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let Some(free) = free_bytes(dir) else { return Ok(()) };
+    if need > free as f64 {
+        anyhow::bail!(
+            "--out {}: the scene's recording needs at least {:.2} GB ({frames} EIT frames, {samples} pressure samples \
+             over {duration_s} s), but {} has {:.2} GB free",
+            out.display(),
+            need / 1e9,
+            dir.display(),
+            free as f64 / 1e9
+        );
+    }
+    Ok(())
+}
+
+/// Bytes an unprivileged process may still write in the file system holding `dir` (None when
+/// it cannot be asked).
+fn free_bytes(dir: &Path) -> Option<u64> {
+    use std::os::unix::ffi::OsStrExt;
+    let c = std::ffi::CString::new(dir.as_os_str().as_bytes()).ok()?;
+    let mut st = std::mem::MaybeUninit::<libc::statvfs>::uninit();
+    // SAFETY: `c` is a NUL-terminated path that outlives the call, and `st` points to writable
+    // memory of the struct's size, which statvfs fills completely when it returns 0.
+    let st = unsafe {
+        if libc::statvfs(c.as_ptr(), st.as_mut_ptr()) != 0 {
+            return None;
+        }
+        st.assume_init()
+    };
+    Some((st.f_bavail as u64).saturating_mul(st.f_frsize as u64))
 }

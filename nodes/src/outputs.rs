@@ -1,0 +1,503 @@
+//! The files a graph writes, against the files it reads, and the force strategies its loggers
+//! list, against those that can reach them: for `skinflow check`, for `skinflow run` before
+//! any node starts (after `GraphSpec::check_files` and `sensors::check_graph`), and for hot
+//! swaps ([`check_graph`]; [`check_files`] and [`check_strategies`] apart).
+//!
+//! [`check_files`] refuses an output file of a node (an `hdf5_logger`'s `path`, a `compare`'s
+//! `json`, a `collect`'s `path`) that is the same file as
+//!
+//! - the graph file itself, or a `[[plugin]]` library it loads;
+//! - a file a node reads: a `replay` recording, a `sim` scene, a `corrector`'s or `splitter`'s
+//!   calibration, a `reconstructor`'s or `hdf5_logger`'s sensor file, a serial device, and any
+//!   `path`-typed param of a plugin kind (which may read or write it: an output over it loses
+//!   either way);
+//! - another node's output file.
+//!
+//! Whether `overwrite` is set or not: the run would replace an input, or two writers would
+//! replace each other's rows. Paths are resolved against the graph file's directory (as the
+//! nodes resolve them) and compared as files: an existing one canonicalized (links followed,
+//! and on Unix a hard link to the same file is the same file), one that does not exist yet by
+//! its canonicalized existing directory and the rest of its path normalized (`.` and `..`).
+//! A logger that rotates (`rotate_mb` / `rotate_s`) writes `name-0001.h5`, `name-0002.h5`, ...
+//! beside `name.h5`: a file of that pattern counts as its output too. Each conflict is an error
+//! located at the writer's param (the later writer's, for two writers), naming both nodes and
+//! files. Two plugin params naming one file are not refused (two readers are fine, and what a
+//! plugin does with a path is not known here); a reconstructor's `cache_dir` is a directory of
+//! cache files and is not compared.
+//!
+//! [`check_strategies`] refuses a name in an `hdf5_logger`'s `strategies` that no node
+//! upstream of its `forces` input produces (a typo logs nothing of the strategy meant). The
+//! names are derived as the `corrector` node names its output: its `name`, else its strategy,
+//! suffixed with `-<splitter strategy>` for a pneumatic strategy fed by a splitter that is not
+//! `proportional`. When a `forces` edge comes from anything else than a built-in corrector (a
+//! plugin corrector), or a corrector's `split` edge from anything else than a built-in
+//! splitter (a plugin splitter, whose strategy name is its own), the names that arrive are not
+//! known here and the logger's list is not checked.
+
+use std::collections::BTreeSet;
+use std::ops::Range;
+use std::path::{Component, Path, PathBuf};
+
+use skinflow_contact::StrategyKind;
+use skinflow_core::graph::{GraphError, GraphErrorKind, GraphErrors, GraphSpec, plugin_paths};
+use skinflow_core::{BuildContext, ParamError};
+
+use crate::correct::CorrectorParams;
+use crate::log::LoggerParams;
+use crate::sensors::table_spans;
+use crate::split::{SplitStrategy, SplitterParams};
+
+/// [`check_files`] and [`check_strategies`]: every error of both, in file order.
+pub fn check_graph(spec: &GraphSpec) -> Result<(), GraphErrors> {
+    let mut errs = Vec::new();
+    for r in [check_files(spec), check_strategies(spec)] {
+        if let Err(GraphErrors(e)) = r {
+            errs.extend(e);
+        }
+    }
+    finish(errs)
+}
+
+fn finish(mut errs: Vec<GraphError>) -> Result<(), GraphErrors> {
+    if errs.is_empty() {
+        return Ok(());
+    }
+    errs.sort_by_key(|e| (e.line, e.col)); // stable: one place keeps the order found
+    Err(GraphErrors(errs))
+}
+
+/// What a node does with the file a `path`-typed param names.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Use {
+    /// Writes it (replacing what is there).
+    Writes,
+    /// Reads it.
+    Reads,
+    /// A plugin's: reads or writes it, not known here.
+    Names,
+    /// A directory of its own files (a reconstructor's `cache_dir`): not compared.
+    Directory,
+}
+
+/// What a built-in kind does with its `path`-typed param; `None` for a kind or param not
+/// listed (a plugin's).
+fn builtin_use(kind: &str, param: &str) -> Option<Use> {
+    Some(match (kind, param) {
+        ("hdf5_logger", "path") | ("compare", "json") | ("collect", "path") => Use::Writes,
+        ("replay", "path")
+        | ("sim", "scene")
+        | ("corrector" | "splitter", "calibration")
+        | ("reconstructor" | "hdf5_logger", "sensor")
+        | ("serial_eit" | "serial_pressure" | "serial_loadcell", "port") => Use::Reads,
+        ("reconstructor", "cache_dir") => Use::Directory,
+        _ => return None,
+    })
+}
+
+/// What the kind of a file a node reads is called in an error.
+fn what_is_read(kind: &str, param: &str) -> &'static str {
+    match (kind, param) {
+        ("replay", _) => "recording",
+        ("sim", _) => "scene",
+        (_, "calibration") => "calibration",
+        (_, "sensor") => "sensor file",
+        (_, "port") => "serial device",
+        _ => "file",
+    }
+}
+
+/// One file a graph names, as the node resolves it and as a file identity.
+struct Named {
+    /// The node (`None`: the graph file or a plugin library).
+    node: Option<usize>,
+    param: String,
+    resolved: PathBuf,
+    id: FileId,
+    use_: Use,
+    /// A logger that rotates: `stem-NNNN.ext` beside `resolved` are its files too.
+    rotates: bool,
+}
+
+/// A file's identity: its normalized absolute path (see [`file_id`]) and, for an existing
+/// file on Unix, its device and inode.
+#[derive(Debug, Clone, PartialEq, Eq)]
+struct FileId {
+    path: PathBuf,
+    inode: Option<(u64, u64)>,
+}
+
+impl FileId {
+    fn same(&self, other: &FileId) -> bool {
+        self.path == other.path || (self.inode.is_some() && self.inode == other.inode)
+    }
+
+    /// Whether this is a rotated part of the recording `base` writes: `stem-NNNN.ext` (at least
+    /// four digits) in the same directory (`skinflow_record::rotate::part_path`).
+    fn is_part_of(&self, base: &FileId) -> bool {
+        let (Some(dir), Some(name)) = (self.path.parent(), self.path.file_name().and_then(|n| n.to_str())) else {
+            return false;
+        };
+        if base.path.parent() != Some(dir) {
+            return false;
+        }
+        let Some(stem) = base.path.file_stem().and_then(|s| s.to_str()) else { return false };
+        let rest = match base.path.extension().map(|e| e.to_str()) {
+            Some(Some(ext)) => name.strip_suffix(ext).and_then(|n| n.strip_suffix('.')),
+            Some(None) => None,
+            None => Some(name),
+        };
+        let digits = rest.and_then(|r| r.strip_prefix(stem)).and_then(|r| r.strip_prefix('-'));
+        digits.is_some_and(|d| d.len() >= 4 && d.bytes().all(|b| b.is_ascii_digit()))
+    }
+}
+
+/// The identity of `p`: absolute, with each existing prefix canonicalized (links followed) and
+/// the part that does not exist yet normalized lexically (`.` dropped, `..` taking off the
+/// component before it).
+fn file_id(p: &Path) -> FileId {
+    let abs = std::path::absolute(p).unwrap_or_else(|_| p.to_path_buf());
+    let mut path = PathBuf::new();
+    for c in abs.components() {
+        match c {
+            Component::CurDir => {}
+            Component::ParentDir => {
+                path.pop();
+            }
+            c => {
+                path.push(c);
+                if let Ok(canonical) = std::fs::canonicalize(&path) {
+                    path = canonical;
+                }
+            }
+        }
+    }
+    FileId { inode: inode(&path), path }
+}
+
+#[cfg(unix)]
+fn inode(p: &Path) -> Option<(u64, u64)> {
+    use std::os::unix::fs::MetadataExt;
+    std::fs::metadata(p).ok().map(|m| (m.dev(), m.ino()))
+}
+
+#[cfg(not(unix))]
+fn inode(_p: &Path) -> Option<(u64, u64)> {
+    None
+}
+
+/// Every file the graph names: the graph file, its plugin libraries, then each node's
+/// `path`-typed params that are set, in node and param order.
+fn named_files(spec: &GraphSpec) -> Vec<Named> {
+    let base_dir = spec.source.base_dir();
+    let mut files = vec![Named {
+        node: None,
+        param: "graph".into(),
+        resolved: spec.source.path.clone(),
+        id: file_id(&spec.source.path),
+        use_: Use::Reads,
+        rotates: false,
+    }];
+    // Resolved against the graph's directory by `plugin_paths`.
+    for lib in plugin_paths(&spec.source).unwrap_or_default() {
+        files.push(Named {
+            node: None,
+            param: "plugin".into(),
+            id: file_id(&lib),
+            resolved: lib,
+            use_: Use::Reads,
+            rotates: false,
+        });
+    }
+    for (i, node) in spec.nodes.iter().enumerate() {
+        let ctx = BuildContext { base_dir: base_dir.clone(), mode: spec.mode, node_id: node.id.clone() };
+        let table = node.params.table();
+        let rotates = node.kind == "hdf5_logger" && (table.contains_key("rotate_mb") || table.contains_key("rotate_s"));
+        for doc in node.factory.info().params.iter().filter(|d| d.ty == "path") {
+            let Some(value) = table.get(doc.name.as_ref()).and_then(toml::Value::as_str) else { continue };
+            if value.is_empty() {
+                continue;
+            }
+            let use_ = builtin_use(&node.kind, &doc.name).unwrap_or(Use::Names);
+            if use_ == Use::Directory {
+                continue;
+            }
+            let resolved = ctx.resolve(Path::new(value));
+            files.push(Named {
+                node: Some(i),
+                param: doc.name.to_string(),
+                id: file_id(&resolved),
+                resolved,
+                use_,
+                rotates: rotates && use_ == Use::Writes,
+            });
+        }
+    }
+    files
+}
+
+/// Whether writer `w` writes over file `f` (its file, or a rotated part of it).
+fn writes_over(w: &Named, f: &FileId) -> bool {
+    w.id.same(f) || (w.rotates && f.is_part_of(&w.id))
+}
+
+/// Refuses every output file of a node that is the graph file, a plugin library, a file a
+/// node reads or another node's output file (see the module docs); each error is located at
+/// the writer's param and names both nodes and files.
+pub fn check_files(spec: &GraphSpec) -> Result<(), GraphErrors> {
+    let files = named_files(spec);
+    let mut node_spans: Option<Vec<Range<usize>>> = None;
+    let mut errs = Vec::new();
+    for (wi, w) in files.iter().enumerate() {
+        let (Use::Writes, Some(n)) = (w.use_, w.node) else { continue };
+        let writes = format!("writes {}", w.resolved.display());
+        let same = |f: &Named| {
+            if f.resolved.as_os_str() == w.resolved.as_os_str() { "" } else { ", the same file" }
+        };
+        for (fi, f) in files.iter().enumerate() {
+            if fi == wi {
+                continue;
+            }
+            let problem = match (f.use_, f.node) {
+                (Use::Directory, _) => continue,
+                // Two writers: reported once, at the later one.
+                (Use::Writes, Some(o)) => {
+                    if fi > wi || !(writes_over(w, &f.id) || writes_over(f, &w.id)) {
+                        continue;
+                    }
+                    let other = &spec.nodes[o];
+                    format!(
+                        "{writes}, which {} \"{}\" writes too (its `{}` {}{}): each would replace the other's \
+                         output, whatever `overwrite` says; give each node its own file",
+                        other.kind,
+                        other.id,
+                        f.param,
+                        f.resolved.display(),
+                        same(f)
+                    )
+                }
+                _ if !writes_over(w, &f.id) => continue,
+                (_, None) if f.param == "graph" => format!(
+                    "{writes}, which is this graph's own file {}{}: the run would replace the graph with its \
+                     output, whatever `overwrite` says; give `{}` another file",
+                    f.resolved.display(),
+                    same(f),
+                    w.param
+                ),
+                (_, None) => format!(
+                    "{writes}, which is the plugin library {} this graph loads (`[[plugin]] path`){}: the run \
+                     would replace it, whatever `overwrite` says; give `{}` another file",
+                    f.resolved.display(),
+                    same(f),
+                    w.param
+                ),
+                (Use::Reads, Some(o)) => {
+                    let other = &spec.nodes[o];
+                    let whose =
+                        if o == n { "this node".to_owned() } else { format!("{} \"{}\"", other.kind, other.id) };
+                    format!(
+                        "{writes}, the {} {whose} reads (its `{}` {}{}): the run would overwrite that input, \
+                         whatever `overwrite` says, and what it holds would be lost; give `{}` another file",
+                        what_is_read(&other.kind, &f.param),
+                        f.param,
+                        f.resolved.display(),
+                        same(f),
+                        w.param
+                    )
+                }
+                (_, Some(o)) => {
+                    let other = &spec.nodes[o];
+                    format!(
+                        "{writes}, which {} \"{}\" (a plugin kind) names in its `{}` {}{}: whether it reads or \
+                         writes that file, the run would replace it or have it replaced, whatever `overwrite` says; \
+                         give `{}` another file",
+                        other.kind,
+                        other.id,
+                        f.param,
+                        f.resolved.display(),
+                        same(f),
+                        w.param
+                    )
+                }
+            };
+            errs.push(error_at(spec, n, &w.param, problem, &mut node_spans));
+        }
+    }
+    finish(errs)
+}
+
+/// An error of node `n`'s param `param`, located at the param (its `[[node]]` table when the
+/// param is not written).
+fn error_at(
+    spec: &GraphSpec,
+    n: usize,
+    param: &str,
+    problem: String,
+    node_spans: &mut Option<Vec<Range<usize>>>,
+) -> GraphError {
+    let node = &spec.nodes[n];
+    let located = node.params.locate::<()>(Err(ParamError::new(param, problem))).unwrap_err();
+    let span = located.span.clone().or_else(|| node_spans.get_or_insert_with(|| table_spans(spec)).get(n).cloned());
+    let (line, col) = span.map_or((1, 1), |s| spec.source.line_col(s.start));
+    GraphError {
+        file: spec.source.path.clone(),
+        line,
+        col,
+        node: Some(node.id.clone()),
+        kind: GraphErrorKind::Param(located.to_string()),
+    }
+}
+
+/// The strategy names that can arrive, each with the node that names it (`None`: not known
+/// here: a plugin upstream).
+type Arriving = Option<Vec<(String, usize)>>;
+
+/// The name of a splitter strategy on its splits (`Split::strategy`), as the node sets it.
+fn split_name(s: SplitStrategy) -> &'static str {
+    match s {
+        SplitStrategy::Proportional => "proportional",
+        SplitStrategy::SensitivityCompensated => "sensitivity-compensated",
+        SplitStrategy::EitForce => "eit-force",
+        SplitStrategy::ForceBalance => "force-balance",
+    }
+}
+
+/// The edges into node `to`'s input `port`.
+fn edges_into<'a>(spec: &'a GraphSpec, to: usize, port: &str) -> impl Iterator<Item = usize> + 'a {
+    let p = spec.nodes[to].factory.info().inputs.iter().position(|s| s.name == port);
+    spec.edges.iter().filter(move |e| e.to_node == to && Some(e.to_port) == p).map(|e| e.from_node)
+}
+
+/// The names the forces of node `c` can carry, when it is a built-in corrector whose splits
+/// come from built-in splitters (as `Corrector::process` names them); `None` otherwise.
+fn corrector_names(spec: &GraphSpec, c: usize) -> Option<Vec<String>> {
+    let node = &spec.nodes[c];
+    if node.kind != "corrector" {
+        return None; // a plugin's forces: their names are its own
+    }
+    let p = node.params.parse::<CorrectorParams>().ok()?;
+    if let Some(name) = p.name {
+        return Some(vec![name]);
+    }
+    let kind = StrategyKind::from_name(&p.strategy)?;
+    if !kind.is_pneumatic() {
+        return Some(vec![kind.name().to_owned()]);
+    }
+    let mut names = Vec::new();
+    for s in edges_into(spec, c, "split") {
+        let splitter = &spec.nodes[s];
+        if splitter.kind != "splitter" {
+            return None; // a plugin splitter names its own strategy
+        }
+        let split = split_name(splitter.params.parse::<SplitterParams>().ok()?.strategy);
+        names.push(match split {
+            "proportional" => kind.name().to_owned(),
+            split => format!("{}-{split}", kind.name()),
+        });
+    }
+    Some(names)
+}
+
+/// The strategy names that can reach logger `l`'s `forces` input (see [`Arriving`]).
+fn arriving(spec: &GraphSpec, l: usize) -> Arriving {
+    let mut names = Vec::new();
+    for f in edges_into(spec, l, "forces") {
+        names.extend(corrector_names(spec, f)?.into_iter().map(|n| (n, f)));
+    }
+    Some(names)
+}
+
+/// Refuses a name in an `hdf5_logger`'s `strategies` that no corrector upstream of its
+/// `forces` input produces, naming the param and the names that do arrive (see the module
+/// docs; not checked when a plugin produces some of the forces).
+pub fn check_strategies(spec: &GraphSpec) -> Result<(), GraphErrors> {
+    let mut node_spans = None;
+    let mut errs = Vec::new();
+    for (l, node) in spec.nodes.iter().enumerate() {
+        if node.kind != "hdf5_logger" || edges_into(spec, l, "forces").next().is_none() {
+            continue;
+        }
+        let Ok(params) = node.params.parse::<LoggerParams>() else { continue };
+        // A forces producer whose names are not known here (a plugin): nothing to refuse.
+        let Some(arriving) = arriving(spec, l) else { continue };
+        let known: BTreeSet<&str> = arriving.iter().map(|(n, _)| n.as_str()).collect();
+        let missing: Vec<String> =
+            params.strategies.iter().filter(|s| !known.contains(s.as_str())).map(|s| format!("{s:?}")).collect();
+        if missing.is_empty() {
+            continue;
+        }
+        let (these, are) = if missing.len() == 1 { ("strategy", "is") } else { ("strategies", "are") };
+        let names = if arriving.is_empty() {
+            "none (no corrector's forces reach it)".to_owned()
+        } else {
+            let mut seen = BTreeSet::new();
+            arriving
+                .iter()
+                .filter(|(n, _)| seen.insert(n.clone()))
+                .map(|(n, c)| format!("\"{n}\" (corrector \"{}\")", spec.nodes[*c].id))
+                .collect::<Vec<_>>()
+                .join(", ")
+        };
+        let problem = format!(
+            "{these} {} {are} not produced by any corrector connected to `forces`, so nothing would be logged \
+             under {}; the names that arrive: {names} (a corrector's `name`, else its strategy, suffixed \
+             with -<splitter strategy> for a pneumatic one after a splitter other than proportional)",
+            missing.join(", "),
+            if missing.len() == 1 { "it" } else { "them" },
+        );
+        errs.push(error_at(spec, l, "strategies", problem, &mut node_spans));
+    }
+    finish(errs)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn splitter_names_are_those_the_params_spell() {
+        for s in [
+            SplitStrategy::Proportional,
+            SplitStrategy::SensitivityCompensated,
+            SplitStrategy::EitForce,
+            SplitStrategy::ForceBalance,
+        ] {
+            let parsed: SplitStrategy =
+                serde::Deserialize::deserialize(toml::Value::String(split_name(s).into())).unwrap();
+            assert_eq!(parsed, s);
+        }
+    }
+
+    #[test]
+    fn rotated_parts_and_normalized_paths() {
+        let base = file_id(Path::new("/nonexistent-skinflow/d/rec.h5"));
+        let id = |p: &str| file_id(Path::new(p));
+        assert!(id("/nonexistent-skinflow/d/rec-0001.h5").is_part_of(&base));
+        assert!(id("/nonexistent-skinflow/d/rec-12345.h5").is_part_of(&base));
+        assert!(!id("/nonexistent-skinflow/d/rec-001.h5").is_part_of(&base));
+        assert!(!id("/nonexistent-skinflow/e/rec-0001.h5").is_part_of(&base));
+        assert!(!id("/nonexistent-skinflow/d/rec-0001.hdf5").is_part_of(&base));
+        assert!(id("/nonexistent-skinflow/d/x/../rec-0002.h5").is_part_of(&base));
+        assert!(id("/nonexistent-skinflow/d/./x/../rec.h5").same(&base));
+        let bare = id("/nonexistent-skinflow/d/rec");
+        assert!(id("/nonexistent-skinflow/d/rec-0003").is_part_of(&bare));
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn links_are_the_file_they_lead_to() {
+        let d = std::env::temp_dir().join(format!("skinflow-outputs-links-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        std::fs::create_dir_all(d.join("sub")).unwrap();
+        std::fs::write(d.join("a.h5"), "x").unwrap();
+        std::os::unix::fs::symlink(d.join("a.h5"), d.join("link.h5")).unwrap();
+        std::fs::hard_link(d.join("a.h5"), d.join("hard.h5")).unwrap();
+        std::os::unix::fs::symlink(d.join("sub"), d.join("dirlink")).unwrap();
+        let a = file_id(&d.join("a.h5"));
+        assert!(file_id(&d.join("link.h5")).same(&a));
+        assert!(file_id(&d.join("hard.h5")).same(&a));
+        assert!(file_id(&d.join("sub/../a.h5")).same(&a));
+        // Not there yet: the existing directory canonicalized, through the link.
+        assert!(file_id(&d.join("dirlink/new.h5")).same(&file_id(&d.join("sub/new.h5"))));
+        let _ = std::fs::remove_dir_all(&d);
+    }
+}

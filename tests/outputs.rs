@@ -1,0 +1,186 @@
+//! Whole-binary tests of the graph checks on output files and logged strategies
+//! (`skinflow_nodes::outputs`): `check` refuses, and `run` stops before any node starts on,
+//! a logger writing the recording its graph replays, the graph file itself, the file another
+//! logger writes, or listing a strategy no corrector produces; each error is located at the
+//! param and the inputs are left as they were.
+
+use std::path::{Path, PathBuf};
+
+use super::support::{fixture, ok, skinflow, stderr};
+
+fn workdir(test: &str) -> PathBuf {
+    super::support::workdir("outputs", test)
+}
+
+/// A replay of `rec.h5` (simulated from a tiny fixture scene) into `logger`'s params, with
+/// `extra` nodes and edges appended; written as `d/g.toml`.
+fn replay_graph(d: &Path, loggers: &[(&str, &str)], extra: &str) -> String {
+    let mut graph = "[graph]\nmode = \"lockstep\"\n\
+         [[node]]\nid = \"replay\"\nkind = \"replay\"\nparams = { path = \"rec.h5\", speed = 0.0 }\n"
+        .to_owned();
+    for (id, params) in loggers {
+        graph += &format!("[[node]]\nid = \"{id}\"\nkind = \"hdf5_logger\"\nparams = {{ {params} }}\n");
+    }
+    for (id, _) in loggers {
+        graph += &format!("[[edge]]\nfrom = \"replay.eit\"\nto = \"{id}.eit\"\n");
+        graph += &format!("[[edge]]\nfrom = \"replay.truth\"\nto = \"{id}.truth\"\n");
+    }
+    graph += extra;
+    std::fs::write(d.join("g.toml"), &graph).unwrap();
+    graph
+}
+
+fn recording(d: &Path) {
+    let scene = fixture("tiny-eval.toml");
+    ok(&skinflow(d, &["simulate", scene.to_str().unwrap(), "--out", "rec.h5", "--seed", "3"]));
+}
+
+/// `check g.toml` and `run g.toml` both exit 2 with exactly `want` on stderr, and print no "ok".
+fn refused(d: &Path, want: &str) {
+    for cmd in ["check", "run"] {
+        let out = skinflow(d, &[cmd, "g.toml"]);
+        let err = stderr(&out);
+        assert_eq!(out.status.code(), Some(2), "{cmd}: {err}");
+        assert_eq!(err.trim_end(), want, "{cmd}");
+        assert!(out.stdout.is_empty(), "{cmd}: no \"ok\" line");
+    }
+}
+
+#[test]
+fn a_logger_over_the_recording_replayed_or_the_graph_file_is_refused_and_both_are_kept() {
+    let d = workdir("over-inputs");
+    recording(&d);
+    let rec = std::fs::read(d.join("rec.h5")).unwrap();
+    let truth_rows = skinflow_record::Recording::open(d.join("rec.h5")).unwrap().truth.unwrap().len();
+    assert!(truth_rows > 0);
+
+    // The audit's case: overwrite = true over the replay's recording (under another spelling
+    // too). Before, `check` said ok and `run` replaced the recording with its own rows.
+    for (path, same) in [("rec.h5", ""), ("./sub/../rec.h5", ", the same file")] {
+        std::fs::create_dir_all(d.join("sub")).unwrap();
+        replay_graph(&d, &[("log", &format!("path = {path:?}, overwrite = true"))], "");
+        refused(
+            &d,
+            &format!(
+                "g.toml:10:12: node \"log\": param \"path\": writes {path}, the recording replay \"replay\" reads \
+                 (its `path` rec.h5{same}): the run would overwrite that input, whatever `overwrite` says, and what \
+                 it holds would be lost; give `path` another file"
+            ),
+        );
+        assert_eq!(std::fs::read(d.join("rec.h5")).unwrap(), rec, "{path}: the recording is untouched");
+    }
+    let kept = skinflow_record::Recording::open(d.join("rec.h5")).unwrap();
+    assert_eq!(kept.truth.unwrap().len(), truth_rows);
+
+    // The graph file itself.
+    let graph = replay_graph(&d, &[("log", "path = \"g.toml\", overwrite = true")], "");
+    refused(
+        &d,
+        "g.toml:10:12: node \"log\": param \"path\": writes g.toml, which is this graph's own file g.toml: the run \
+         would replace the graph with its output, whatever `overwrite` says; give `path` another file",
+    );
+    assert_eq!(std::fs::read_to_string(d.join("g.toml")).unwrap(), graph, "the graph file is untouched");
+}
+
+#[test]
+fn two_loggers_on_one_file_are_refused_at_the_second() {
+    let d = workdir("two-loggers");
+    recording(&d);
+    replay_graph(&d, &[("a", "path = \"out.h5\""), ("b", "path = \"./out.h5\", overwrite = true")], "");
+    refused(
+        &d,
+        "g.toml:14:12: node \"b\": param \"path\": writes ./out.h5, which hdf5_logger \"a\" writes too (its `path` \
+         out.h5, the same file): each would replace the other's output, whatever `overwrite` says; give each node \
+         its own file",
+    );
+    assert!(!d.join("out.h5").exists(), "nothing ran");
+    // Distinct files: accepted.
+    replay_graph(&d, &[("a", "path = \"out.h5\""), ("b", "path = \"out2.h5\"")], "");
+    ok(&skinflow(&d, &["check", "g.toml"]));
+}
+
+/// The pipeline after the replay: sync, reconstructor, segmenter, a proportional and a
+/// force-balance splitter, and correctors `(id, params)` after `(splitter)`, all into logger
+/// "log"'s `forces`.
+fn pipeline(correctors: &[(&str, &str, &str)]) -> String {
+    let calib = fixture("../../graphs/calib/paper.toml");
+    let mut text = format!(
+        "[[node]]\nid = \"sync\"\nkind = \"sync\"\n\
+         [[node]]\nid = \"recon\"\nkind = \"reconstructor\"\n\
+         [[node]]\nid = \"seg\"\nkind = \"segmenter\"\n\
+         [[node]]\nid = \"split\"\nkind = \"splitter\"\n\
+         [[node]]\nid = \"split-fb\"\nkind = \"splitter\"\nparams = {{ strategy = \"force-balance\", calibration = {calib:?} }}\n"
+    );
+    for (id, splitter, params) in correctors {
+        text +=
+            &format!("[[node]]\nid = \"{id}\"\nkind = \"corrector\"\nparams = {{ calibration = {calib:?}{params} }}\n");
+        text += &format!("[[edge]]\nfrom = \"{splitter}.split\"\nto = \"{id}.split\"\n");
+        text += &format!("[[edge]]\nfrom = \"{id}.forces\"\nto = \"log.forces\"\n");
+    }
+    text + "[[edge]]\nfrom = \"replay.eit\"\nto = \"sync.eit\"\n\
+         [[edge]]\nfrom = \"replay.pressure\"\nto = \"sync.pressure\"\n\
+         [[edge]]\nfrom = \"replay.truth\"\nto = \"sync.truth\"\n\
+         [[edge]]\nfrom = \"sync.frame\"\nto = \"recon.frame\"\n\
+         [[edge]]\nfrom = \"recon.image\"\nto = \"seg.image\"\n\
+         [[edge]]\nfrom = \"seg.contacts\"\nto = \"split.contacts\"\n\
+         [[edge]]\nfrom = \"seg.contacts\"\nto = \"split-fb.contacts\"\n"
+}
+
+#[test]
+fn a_listed_strategy_no_corrector_produces_is_refused_naming_those_that_arrive() {
+    let d = workdir("strategy-typo");
+    recording(&d);
+    let correctors = [
+        ("paper", "split", ""),
+        ("ours", "split-fb", ", strategy = \"pneumatic-forward\", name = \"pneumatic-forward-balance\""),
+    ];
+    let logged = "path = \"out.h5\", strategies = [\"pneumatic-locaware\", \"pneumatic-forwrd-balance\"]";
+    replay_graph(&d, &[("log", logged)], &pipeline(&correctors));
+    refused(
+        &d,
+        "g.toml:10:29: node \"log\": param \"strategies\": strategy \"pneumatic-forwrd-balance\" is not produced by \
+         any corrector connected to `forces`, so nothing would be logged under it; the names that arrive: \
+         \"pneumatic-locaware\" (corrector \"paper\"), \"pneumatic-forward-balance\" (corrector \"ours\") (a \
+         corrector's `name`, else its strategy, suffixed with -<splitter strategy> for a pneumatic one after a \
+         splitter other than proportional)",
+    );
+    assert!(!d.join("out.h5").exists(), "nothing ran");
+    let fixed = logged.replace("forwrd", "forward");
+    replay_graph(&d, &[("log", &fixed)], &pipeline(&correctors));
+    ok(&skinflow(&d, &["check", "g.toml"]));
+}
+
+/// Forces of a strategy the logger does not list are left out with one warning, and each of
+/// their frames is counted as discarded in the logger's statistics (before, only a log line
+/// said so, and the stats showed 0 drops). The other strategy's name, derived at check from
+/// the corrector's and splitter's params, is the one its forces carry: its table is complete.
+#[test]
+fn forces_of_an_unlisted_strategy_are_counted_as_discarded() {
+    let d = workdir("unlisted-discarded");
+    recording(&d);
+    let correctors = [("paper", "split", ""), ("fwd", "split-fb", ", strategy = \"pneumatic-forward\"")];
+    let logged = "path = \"out.h5\", strategies = [\"pneumatic-forward-force-balance\"]";
+    replay_graph(&d, &[("log", logged)], &pipeline(&correctors));
+    let out = skinflow(&d, &["run", "g.toml", "--stats-json", "stats.json"]);
+    ok(&out);
+    let err = stderr(&out);
+    assert_eq!(err.matches("is not in `strategies`").count(), 1, "{err}");
+    assert!(err.contains("forces of strategy \"pneumatic-locaware\" are not logged"), "{err}");
+
+    let frames = skinflow_record::Recording::open(d.join("rec.h5")).unwrap().eit.unwrap().len() as u64;
+    assert!(frames > 10);
+    assert!(err.contains(&format!("frames={frames}")) && err.contains("force frames not logged"), "{err}");
+    let stats: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(d.join("stats.json")).unwrap()).unwrap();
+    let node = |id: &str| stats["nodes"].as_array().unwrap().iter().find(|n| n["id"] == id).unwrap().clone();
+    let log = node("log");
+    assert_eq!(log["errors"], 0, "{log}");
+    assert_eq!((log["discarded"].as_u64(), log["drops"].as_u64()), (Some(frames), Some(frames)), "{log}");
+    assert_eq!(node("paper")["msgs_out"].as_u64(), Some(frames), "{stats}");
+    let edge_drops: u64 = stats["edges"].as_array().unwrap().iter().map(|e| e["drops"].as_u64().unwrap()).sum();
+    assert_eq!(edge_drops, 0, "{stats}");
+
+    let rec = skinflow_record::Recording::open(d.join("out.h5")).unwrap();
+    let tables: Vec<(&str, usize)> = rec.derived.forces.iter().map(|f| (f.name.as_str(), f.t_s.len())).collect();
+    assert_eq!(tables, [("pneumatic-forward-force-balance", frames as usize)]);
+}

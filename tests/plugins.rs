@@ -1026,3 +1026,21 @@ fn a_plugin_node_takes_over_its_own_kinds_state_and_not_another_kinds() {
     let x = report.stats.nodes.iter().find(|n| n.id == "x").unwrap();
     assert_eq!((x.swaps, x.errors), (2, 0), "{x:?}");
 }
+
+/// A recording without truth gives speed without error: bench writes its tables (every lane's
+/// latency, no RMSE) and succeeds without a Pareto plot, naming the recording; it used to fail
+/// after writing them, as if the run had not finished.
+#[test]
+fn bench_of_a_recording_without_truth_reports_speed_and_draws_no_plot() {
+    let d = bench_workdir("bench-no-truth");
+    hdf5::File::open_rw(d.join("rec.h5")).unwrap().unlink("/truth").unwrap();
+    let o = bench(&d, &["recon.lambda=0.1"]);
+    let err = stderr(&o);
+    assert!(o.status.success(), "{err}");
+    assert!(err.contains("rec.h5 has no truth, or no lane scored a frame): wrote bench.md and bench.json"), "{err}");
+    assert!(!d.join("out/pareto.png").exists());
+    let json = json_file(&d.join("out/bench.json"));
+    let points = json["points"].as_array().unwrap();
+    assert!(!points.is_empty(), "{json}");
+    assert!(points.iter().all(|p| p["latency_us_p50"].is_number() && p["rmse_n"].is_null()), "{json}");
+}

@@ -354,6 +354,16 @@ pub fn run(graph: &Path, replay: &Path, vary: &[String], out_dir: &Path) -> Resu
             out_dir.join("bench.md").display()
         );
     }
+    if !report::plottable(&points) {
+        // Speed without error: the tables hold every lane's latency; there is no curve to draw.
+        eprintln!(
+            "bench: no lane has both a latency and an RMSE ({} has no truth, or no lane scored a frame): \
+             wrote bench.md and bench.json to {}, no pareto.png",
+            replay.display(),
+            out_dir.display()
+        );
+        return Ok(());
+    }
     report::plot(&out_dir.join("pareto.png"), &points)?;
     eprintln!("bench: wrote bench.md, bench.json and pareto.png to {}", out_dir.display());
     Ok(())

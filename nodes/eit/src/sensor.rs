@@ -13,9 +13,10 @@ use thiserror::Error;
 /// Errors from parsing or validating a sensor description.
 #[derive(Debug, Error)]
 pub enum SensorError {
-    /// The TOML text did not parse or has unknown or mistyped keys.
-    #[error("sensor TOML: {0}")]
-    Toml(#[from] toml::de::Error),
+    /// The TOML text did not parse or has unknown or mistyped keys: toml's message, its span
+    /// in the text and the 1-based line and column that span starts at. Shown on one line.
+    #[error("sensor TOML: {}{message}", .line_col.map_or(String::new(), |(l, c)| format!("line {l}, column {c}: ")))]
+    Toml { message: String, span: Option<std::ops::Range<usize>>, line_col: Option<(usize, usize)> },
     /// A value is out of range.
     #[error("sensor: {field}: {problem}")]
     Invalid { field: String, problem: String },
@@ -160,7 +161,13 @@ impl Sensor {
 
     /// Parses and validates a sensor description (a TOML document with a `[sensor]` table).
     pub fn from_toml(text: &str) -> Result<Sensor, SensorError> {
-        let file: SensorFile = skinflow_toml::from_str(text)?;
+        let file: SensorFile = skinflow_toml::from_str(text).map_err(|error| {
+            let line_col = error.span().map(|span| {
+                let before = &text[..span.start.min(text.len())];
+                (before.matches('\n').count() + 1, before.chars().rev().take_while(|&c| c != '\n').count() + 1)
+            });
+            SensorError::Toml { message: error.message().to_owned(), span: error.span(), line_col }
+        })?;
         let s = file.sensor;
         let ok = |x: f64| x.is_finite() && x > 0.0;
         for (field, side) in [("width_mm", s.width_mm), ("height_mm", s.height_mm)] {
@@ -379,7 +386,12 @@ mod tests {
 
     #[test]
     fn unknown_keys_and_bad_values_are_rejected() {
-        assert!(Sensor::from_toml("[sensor]\nwidht_mm = 3.0\n").is_err());
+        // A TOML error is one line: its place and toml's message, not toml's source excerpt.
+        let e = Sensor::from_toml("[sensor]\nwidth_mm = 3.0\n  widht_mm = 3.0\n").unwrap_err().to_string();
+        assert!(e.starts_with("sensor TOML: line 3, column 3: unknown field `widht_mm`"), "{e}");
+        assert!(!e.contains('\n'), "{e}");
+        let e = Sensor::from_toml("[sensor\n").unwrap_err().to_string();
+        assert!(e.starts_with("sensor TOML: line 1, column ") && !e.contains('\n'), "{e}");
         let e = Sensor::from_toml("[sensor]\nwidth_mm = -1.0\n").unwrap_err();
         assert!(e.to_string().contains("width_mm"), "{e}");
         let e =

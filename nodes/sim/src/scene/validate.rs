@@ -162,11 +162,10 @@ fn sensor_error(
     err: &ErrFn<'_>,
 ) -> SceneError {
     let (path, on_key, problem) = match e {
-        SensorError::Toml(t) => {
-            let found = t.span().and_then(|s| Spans::parse(sensor_text).path_at(s.start));
-            match found {
-                Some((path, on_key)) => (Some(path), on_key, t.message().to_owned()),
-                None => (None, false, t.message().to_owned()),
+        SensorError::Toml { message, span, .. } => {
+            match span.and_then(|s| Spans::parse(sensor_text).path_at(s.start)) {
+                Some((path, on_key)) => (Some(path), on_key, message),
+                None => (None, false, message),
             }
         }
         SensorError::Invalid { field, problem } => (KeyPath::parse(&field).map(|p| p.under("sensor")), false, problem),

@@ -313,22 +313,15 @@ fn load(path: &Path, inputs: InputFiles) -> Result<Result<GraphSpec, ExitCode>> 
         Err(code) => return Ok(Err(code)),
     };
     let checked = GraphSpec::load(path, &reg).and_then(|spec| match inputs {
-        // Then the sensors the files name agree (a reconstructor with its sources and the
-        // calibrations downstream of it): checked only once every file reads.
-        // Then no node writes the graph file, a file a node reads or another node's output,
-        // and every strategy a logger lists arrives on its `forces` (`skinflow_nodes::outputs`).
-        // Last, a warning for each calibration applied on another image scale than it was
+        // The files the nodes read, the sensors they name, and the files the nodes write
+        // (`skinflow_nodes::check_graph_files`). Last, a warning for each calibration applied on another image scale than it was
         // fitted on (`skinflow_nodes::scale`).
-        InputFiles::Check => spec
-            .check_files()
-            .and_then(|()| skinflow_nodes::sensors::check_graph(&spec))
-            .and_then(|()| skinflow_nodes::outputs::check_graph(&spec))
-            .map(|()| {
-                for w in skinflow_nodes::scale::check_graph(&spec) {
-                    eprintln!("warning: {}: {w}", path.display());
-                }
-                spec
-            }),
+        InputFiles::Check => skinflow_nodes::check_graph_files(&spec).map(|()| {
+            for w in skinflow_nodes::scale::check_graph(&spec) {
+                eprintln!("warning: {}: {w}", path.display());
+            }
+            spec
+        }),
         InputFiles::Skip => Ok(spec),
     });
     match checked {

@@ -30,7 +30,7 @@ use skinflow_core::{
 };
 
 use crate::payload::{Forces, Split};
-use crate::split::{SensorGuard, check_calibration, load_calibration};
+use crate::split::{SensorGuard, SplitStrategy, check_calibration, load_calibration};
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -47,6 +47,24 @@ pub struct CorrectorParams {
 
 fn default_strategy() -> String {
     "pneumatic-locaware".into()
+}
+
+/// Whether the name of a corrector's forces follows its splits' strategy: without a `name`,
+/// for a pneumatic strategy.
+pub(crate) fn name_follows_split(name: Option<&str>, kind: StrategyKind) -> bool {
+    name.is_none() && kind.is_pneumatic()
+}
+
+/// Writes into `into` the name of a corrector's forces (`Forces::strategy`): its `name`, else
+/// its strategy's, suffixed with `-<split>` when that follows a split strategy other than
+/// `proportional`. Reuses `into`'s buffer (the corrector fills it once per frame).
+pub(crate) fn output_name(into: &mut String, name: Option<&str>, kind: StrategyKind, split: &str) {
+    into.clear();
+    into.push_str(name.unwrap_or(kind.name()));
+    if name_follows_split(name, kind) && split != SplitStrategy::Proportional.name() {
+        into.push('-');
+        into.push_str(split);
+    }
 }
 
 fn kind_of(name: &str) -> Result<StrategyKind, ParamError> {
@@ -102,17 +120,7 @@ impl Processor for Corrector {
         let name = &self.name;
         let payload = self.ring.fill(|f| {
             estimate_split(strategy, &split, &mut f.forces);
-            f.strategy.clear();
-            match name {
-                Some(n) => f.strategy.push_str(n),
-                None => {
-                    f.strategy.push_str(strategy.kind().name());
-                    if split.strategy != "proportional" && strategy.kind().is_pneumatic() {
-                        f.strategy.push('-');
-                        f.strategy.push_str(split.strategy);
-                    }
-                }
-            }
+            output_name(&mut f.strategy, name.as_deref(), strategy.kind(), split.strategy);
             f.compute_ns = t0.elapsed().as_nanos() as u64;
             f.split = split;
         });

@@ -34,6 +34,16 @@ use skinflow_core::registry::DuplicateKind;
 /// A module's kind registration.
 type Register = fn(&mut Registry) -> Result<(), DuplicateKind>;
 
+/// Every check of a graph's files before it runs, in order, each only once the one before
+/// passes: the files its nodes read open as the nodes read them
+/// ([`GraphSpec::check_files`](skinflow_core::GraphSpec::check_files)), the sensors they name
+/// agree ([`sensors::check_graph`]), and no node writes over a file the graph reads or another
+/// node writes, and every strategy a logger lists arrives ([`outputs::check_graph`]). Used by
+/// `skinflow check`, `run` and each `bench` variant.
+pub fn check_graph_files(spec: &skinflow_core::GraphSpec) -> Result<(), skinflow_core::graph::GraphErrors> {
+    spec.check_files().and_then(|()| sensors::check_graph(spec)).and_then(|()| outputs::check_graph(spec))
+}
+
 /// Every built-in node kind.
 pub fn registry() -> Registry {
     let mut r = Registry::new();

@@ -35,15 +35,15 @@
 //! must come from one input: forces of one name from two `forces` edges (two correctors with
 //! the same `name`) stop the graph at the first clash, with the rows recorded so far kept.
 //!
-//! Nothing recorded is replaced by the run itself. Graph checks (`skinflow check`, before a run
-//! starts, and at a hot swap) refuse a `path` that is the graph file, a file a node of the graph reads (a replay's
-//! recording, a scene, a calibration, a sensor file) or another node's output file, whatever
-//! `overwrite` says (`skinflow_nodes::outputs::check_files`). A logger does not start on the file
-//! another logger of this process is writing (a hot swap's replacement, or a restart after a panic,
-//! with the same `path` and `overwrite = true` would truncate the session's recording), and a hot
-//! swap onto the file the running logger writes is refused at the switch, with the reason; a
-//! replacement with another `path` starts a new file from the swap on, the replaced one closes its
-//! own with every row it received.
+//! Nothing recorded is replaced by the run itself. Graph checks (`skinflow check`, before a
+//! run starts, and at a hot swap) refuse a `path` that is the graph file, a file a node of the
+//! graph reads (a replay's recording, a scene, a calibration, a sensor file) or another node's
+//! output file, whatever `overwrite` says (`skinflow_nodes::outputs::check_files`). A logger
+//! does not start on the file another logger of this process is writing (a hot swap's
+//! replacement, or a restart after a panic, with the same `path` and `overwrite = true` would
+//! truncate the session's recording), and a hot swap onto the file the running logger writes
+//! is refused at the switch, with the reason; a replacement with another `path` starts a new
+//! file from the swap on, the replaced one closes its own with every row it received.
 //!
 //! Images are logged at the size of the first image (the reconstructor's `image_nx` x
 //! `image_ny`); one recording holds one size. The logger's own `image_nx` / `image_ny` are

@@ -39,12 +39,12 @@ use std::ops::Range;
 use std::path::{Component, Path, PathBuf};
 
 use skinflow_contact::StrategyKind;
-use skinflow_core::graph::{GraphError, GraphErrorKind, GraphErrors, GraphSpec, plugin_paths};
-use skinflow_core::{BuildContext, ParamError};
+use skinflow_core::BuildContext;
+use skinflow_core::graph::{GraphError, GraphErrors, GraphSpec, plugin_paths};
 
-use crate::correct::CorrectorParams;
+use crate::correct::{CorrectorParams, name_follows_split, output_name};
 use crate::log::LoggerParams;
-use crate::sensors::table_spans;
+use crate::sensors::param_error_at;
 use crate::split::{SplitStrategy, SplitterParams};
 
 /// [`check_files`] and [`check_strategies`]: every error of both, in file order.
@@ -319,47 +319,15 @@ pub fn check_files(spec: &GraphSpec) -> Result<(), GraphErrors> {
                     )
                 }
             };
-            errs.push(error_at(spec, n, &w.param, problem, &mut node_spans));
+            errs.push(param_error_at(spec, n, &w.param, problem, &mut node_spans));
         }
     }
     finish(errs)
 }
 
-/// An error of node `n`'s param `param`, located at the param (its `[[node]]` table when the
-/// param is not written).
-fn error_at(
-    spec: &GraphSpec,
-    n: usize,
-    param: &str,
-    problem: String,
-    node_spans: &mut Option<Vec<Range<usize>>>,
-) -> GraphError {
-    let node = &spec.nodes[n];
-    let located = node.params.locate::<()>(Err(ParamError::new(param, problem))).unwrap_err();
-    let span = located.span.clone().or_else(|| node_spans.get_or_insert_with(|| table_spans(spec)).get(n).cloned());
-    let (line, col) = span.map_or((1, 1), |s| spec.source.line_col(s.start));
-    GraphError {
-        file: spec.source.path.clone(),
-        line,
-        col,
-        node: Some(node.id.clone()),
-        kind: GraphErrorKind::Param(located.to_string()),
-    }
-}
-
 /// The strategy names that can arrive, each with the node that names it (`None`: not known
 /// here: a plugin upstream).
 type Arriving = Option<Vec<(String, usize)>>;
-
-/// The name of a splitter strategy on its splits (`Split::strategy`), as the node sets it.
-fn split_name(s: SplitStrategy) -> &'static str {
-    match s {
-        SplitStrategy::Proportional => "proportional",
-        SplitStrategy::SensitivityCompensated => "sensitivity-compensated",
-        SplitStrategy::EitForce => "eit-force",
-        SplitStrategy::ForceBalance => "force-balance",
-    }
-}
 
 /// The edges into node `to`'s input `port`.
 fn edges_into<'a>(spec: &'a GraphSpec, to: usize, port: &str) -> impl Iterator<Item = usize> + 'a {
@@ -368,19 +336,22 @@ fn edges_into<'a>(spec: &'a GraphSpec, to: usize, port: &str) -> impl Iterator<I
 }
 
 /// The names the forces of node `c` can carry, when it is a built-in corrector whose splits
-/// come from built-in splitters (as `Corrector::process` names them); `None` otherwise.
+/// come from built-in splitters (named as `Corrector::process` names them: `output_name`);
+/// `None` otherwise.
 fn corrector_names(spec: &GraphSpec, c: usize) -> Option<Vec<String>> {
     let node = &spec.nodes[c];
     if node.kind != "corrector" {
         return None; // a plugin's forces: their names are its own
     }
     let p = node.params.parse::<CorrectorParams>().ok()?;
-    if let Some(name) = p.name {
-        return Some(vec![name]);
-    }
     let kind = StrategyKind::from_name(&p.strategy)?;
-    if !kind.is_pneumatic() {
-        return Some(vec![kind.name().to_owned()]);
+    let named = |split: &str| {
+        let mut n = String::new();
+        output_name(&mut n, p.name.as_deref(), kind, split);
+        n
+    };
+    if !name_follows_split(p.name.as_deref(), kind) {
+        return Some(vec![named(SplitStrategy::Proportional.name())]);
     }
     let mut names = Vec::new();
     for s in edges_into(spec, c, "split") {
@@ -388,11 +359,7 @@ fn corrector_names(spec: &GraphSpec, c: usize) -> Option<Vec<String>> {
         if splitter.kind != "splitter" {
             return None; // a plugin splitter names its own strategy
         }
-        let split = split_name(splitter.params.parse::<SplitterParams>().ok()?.strategy);
-        names.push(match split {
-            "proportional" => kind.name().to_owned(),
-            split => format!("{}-{split}", kind.name()),
-        });
+        names.push(named(splitter.params.parse::<SplitterParams>().ok()?.strategy.name()));
     }
     Some(names)
 }
@@ -444,7 +411,7 @@ pub fn check_strategies(spec: &GraphSpec) -> Result<(), GraphErrors> {
             missing.join(", "),
             if missing.len() == 1 { "it" } else { "them" },
         );
-        errs.push(error_at(spec, l, "strategies", problem, &mut node_spans));
+        errs.push(param_error_at(spec, l, "strategies", problem, &mut node_spans));
     }
     finish(errs)
 }
@@ -452,20 +419,6 @@ pub fn check_strategies(spec: &GraphSpec) -> Result<(), GraphErrors> {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn splitter_names_are_those_the_params_spell() {
-        for s in [
-            SplitStrategy::Proportional,
-            SplitStrategy::SensitivityCompensated,
-            SplitStrategy::EitForce,
-            SplitStrategy::ForceBalance,
-        ] {
-            let parsed: SplitStrategy =
-                serde::Deserialize::deserialize(toml::Value::String(split_name(s).into())).unwrap();
-            assert_eq!(parsed, s);
-        }
-    }
 
     #[test]
     fn rotated_parts_and_normalized_paths() {

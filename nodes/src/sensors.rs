@@ -107,17 +107,7 @@ pub fn check_graph(spec: &GraphSpec) -> Result<(), GraphErrors> {
             ));
         }
         for problem in problems {
-            let located = node.params.locate::<()>(Err(ParamError::new("sensor", problem))).unwrap_err();
-            let span =
-                located.span.clone().or_else(|| node_spans.get_or_insert_with(|| table_spans(spec)).get(r).cloned());
-            let (line, col) = span.map_or((1, 1), |s| spec.source.line_col(s.start));
-            errs.push(GraphError {
-                file: spec.source.path.clone(),
-                line,
-                col,
-                node: Some(node.id.clone()),
-                kind: GraphErrorKind::Param(located.to_string()),
-            });
+            errs.push(param_error_at(spec, r, "sensor", problem, &mut node_spans));
         }
     }
     if errs.is_empty() {
@@ -209,6 +199,28 @@ pub(crate) fn calibration_path(spec: &GraphSpec, i: usize) -> Option<PathBuf> {
     }
 }
 
+/// An error of node `n`'s param `param`, located at the param in the graph file (at its
+/// `[[node]]` table when the param is not written; `node_spans` caches those spans).
+pub(crate) fn param_error_at(
+    spec: &GraphSpec,
+    n: usize,
+    param: &str,
+    problem: String,
+    node_spans: &mut Option<Vec<Range<usize>>>,
+) -> GraphError {
+    let node = &spec.nodes[n];
+    let located = node.params.locate::<()>(Err(ParamError::new(param, problem))).unwrap_err();
+    let span = located.span.clone().or_else(|| node_spans.get_or_insert_with(|| table_spans(spec)).get(n).cloned());
+    let (line, col) = span.map_or((1, 1), |s| spec.source.line_col(s.start));
+    GraphError {
+        file: spec.source.path.clone(),
+        line,
+        col,
+        node: Some(node.id.clone()),
+        kind: GraphErrorKind::Param(located.to_string()),
+    }
+}
+
 /// The `[[node]]` tables of a graph file read without their schema, for their spans.
 #[derive(Deserialize)]
 struct NodeTables {
@@ -217,7 +229,7 @@ struct NodeTables {
 }
 
 /// The byte span of each `[[node]]` table, in file order (the order of `spec.nodes`).
-pub(crate) fn table_spans(spec: &GraphSpec) -> Vec<Range<usize>> {
+fn table_spans(spec: &GraphSpec) -> Vec<Range<usize>> {
     toml::from_str::<NodeTables>(&spec.source.text)
         .map_or_else(|_| Vec::new(), |f| f.node.iter().map(|t| t.span()).collect())
 }

@@ -38,6 +38,19 @@ pub enum SplitStrategy {
     ForceBalance,
 }
 
+impl SplitStrategy {
+    /// The strategy's name as the param spells it, and as the node's splits carry it
+    /// (`Split::strategy`; a corrector's output name follows it).
+    pub fn name(self) -> &'static str {
+        match self {
+            SplitStrategy::Proportional => "proportional",
+            SplitStrategy::SensitivityCompensated => "sensitivity-compensated",
+            SplitStrategy::EitForce => "eit-force",
+            SplitStrategy::ForceBalance => "force-balance",
+        }
+    }
+}
+
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SplitterParams {
@@ -131,6 +144,8 @@ enum Weights {
 }
 
 pub struct Splitter {
+    /// `SplitStrategy::name`, put on every split.
+    name: &'static str,
     weights: Weights,
     sensor: SensorGuard,
     ring: Recycler<Split>,
@@ -144,14 +159,13 @@ impl Processor for Splitter {
             m.arc::<Contacts>().ok_or(NodeError::Input { port: "contacts".into(), problem: "not contacts".into() })?;
         self.sensor.check("contacts", &contacts.image)?;
         let dp = contacts.image.src.dp_kpa;
-        let weights = &self.weights;
+        let (weights, name) = (&self.weights, self.name);
         let payload = self.ring.fill(|s| {
             s.dp_kpa.clear();
             s.dp_kpa.resize(contacts.contacts.len(), 0.0);
             match weights {
                 Weights::Math(math) => {
                     math.split_into(dp, &contacts.contacts, &mut s.dp_kpa);
-                    s.strategy = math.name();
                 }
                 Weights::EitForce(eit) => {
                     for (w, c) in s.dp_kpa.iter_mut().zip(&contacts.contacts) {
@@ -162,9 +176,9 @@ impl Processor for Splitter {
                     for w in s.dp_kpa.iter_mut() {
                         *w = if total > 0.0 { *w / total * dp } else { dp / n };
                     }
-                    s.strategy = "eit-force";
                 }
             }
+            s.strategy = name;
             s.compute_ns = t0.elapsed().as_nanos() as u64;
             s.contacts = contacts;
         });
@@ -209,7 +223,12 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
                 // `validate` requires a calibration for every strategy but this one.
                 _ => Weights::Math(Box::new(SplitMath::Proportional)),
             };
-            Ok(NodeImpl::Processor(Box::new(Splitter { weights, sensor, ring: Recycler::new(128, Split::default) })))
+            Ok(NodeImpl::Processor(Box::new(Splitter {
+                name: p.strategy.name(),
+                weights,
+                sensor,
+                ring: Recycler::new(128, Split::default),
+            })))
         },
     ))
 }
@@ -225,6 +244,20 @@ mod tests {
 
     use super::SensorGuard;
     use crate::payload::Image;
+
+    #[test]
+    fn splitter_names_are_those_the_params_spell() {
+        for s in [
+            super::SplitStrategy::Proportional,
+            super::SplitStrategy::SensitivityCompensated,
+            super::SplitStrategy::EitForce,
+            super::SplitStrategy::ForceBalance,
+        ] {
+            let parsed: super::SplitStrategy =
+                serde::Deserialize::deserialize(toml::Value::String(s.name().into())).unwrap();
+            assert_eq!(parsed, s);
+        }
+    }
 
     fn image(width_mm: f64, height_mm: f64) -> Image {
         Image { width_mm, height_mm, src: Arc::default(), ..Image::default() }

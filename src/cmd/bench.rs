@@ -287,14 +287,9 @@ pub fn run(graph: &Path, replay: &Path, vary: &[String], out_dir: &Path) -> Resu
         let json = out_abs.join(format!("variant-{k}.json"));
         let src = SourceFile::new(graph, variant_text(&base, &replay, &set, &json)?);
         // As `run` does: the input files (the recording, scenes, calibrations) are opened too,
-        // and the sensors they name must agree.
+        // the sensors they name must agree, and no output may replace an input.
         let spec = GraphSpec::parse(src, &reg)
-            .and_then(|spec| {
-                spec.check_files()
-                    .and_then(|()| skinflow_nodes::sensors::check_graph(&spec))
-                    .and_then(|()| skinflow_nodes::outputs::check_graph(&spec))
-                    .map(|()| spec)
-            })
+            .and_then(|spec| skinflow_nodes::check_graph_files(&spec).map(|()| spec))
             .map_err(|e| invalid_variant(graph, &text, &reg, &label, e))?;
         specs.push((label, set, spec, json));
     }

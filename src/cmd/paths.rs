@@ -23,7 +23,7 @@ pub fn same_file(a: &Path, b: &Path) -> bool {
 pub fn check_outputs(inputs: &[(&str, &Path)], outputs: &[(&str, &Path)]) -> Result<()> {
     check_recording_outputs(inputs, outputs)?;
     for &(flag, out) in outputs {
-        if is_hdf5(out) {
+        if skinflow_record::read::hdf5_signature(out) == Some(true) {
             bail!(
                 "{flag} {}: is an HDF5 file (a recording?); refusing to replace it with this command's text output",
                 out.display()
@@ -31,27 +31,6 @@ pub fn check_outputs(inputs: &[(&str, &Path)], outputs: &[(&str, &Path)]) -> Res
         }
     }
     Ok(())
-}
-
-/// Whether `path` is an existing HDF5 file: its signature at offset 0, 512, 1024, 2048, ...
-/// (HDF5 allows a user block of that size before the superblock).
-fn is_hdf5(path: &Path) -> bool {
-    use std::io::{Read, Seek, SeekFrom};
-    const SIGNATURE: &[u8; 8] = b"\x89HDF\r\n\x1a\n";
-    let Ok(mut f) = std::fs::File::open(path) else { return false };
-    let len = f.metadata().map_or(0, |m| m.len());
-    let mut offset = 0u64;
-    while offset + 8 <= len {
-        let mut head = [0u8; 8];
-        if f.seek(SeekFrom::Start(offset)).is_err() || f.read_exact(&mut head).is_err() {
-            return false;
-        }
-        if &head == SIGNATURE {
-            return true;
-        }
-        offset = if offset == 0 { 512 } else { offset * 2 };
-    }
-    false
 }
 
 /// As [`check_outputs`], without refusing an existing HDF5 output: for `simulate` and

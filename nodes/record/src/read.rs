@@ -201,21 +201,27 @@ const HDF5_SIGNATURE: [u8; 8] = *b"\x89HDF\r\n\x1a\n";
 /// 512, 1024, 2048, ... (a user block may come first). Unreadable counts as having it, so the
 /// caller reports the library's own error.
 fn has_hdf5_signature(path: &Path) -> bool {
+    hdf5_signature(path).unwrap_or(true)
+}
+
+/// Whether the file at `path` has the HDF5 signature where the format allows the superblock
+/// (byte 0, 512, 1024, 2048, ...: a user block may come first); `None` when it cannot be read
+/// (missing, no permission).
+pub fn hdf5_signature(path: &Path) -> Option<bool> {
     use std::io::{Read, Seek, SeekFrom};
-    let Ok(mut f) = std::fs::File::open(path) else { return true };
-    let Ok(len) = f.metadata().map(|m| m.len()) else { return true };
+    let mut f = std::fs::File::open(path).ok()?;
+    let len = f.metadata().ok()?.len();
     let mut at = 0u64;
     while at + 8 <= len {
         let mut sig = [0u8; 8];
-        if f.seek(SeekFrom::Start(at)).is_err() || f.read_exact(&mut sig).is_err() {
-            return true;
-        }
+        f.seek(SeekFrom::Start(at)).ok()?;
+        f.read_exact(&mut sig).ok()?;
         if sig == HDF5_SIGNATURE {
-            return true;
+            return Some(true);
         }
         at = if at == 0 { 512 } else { 2 * at };
     }
-    false
+    Some(false)
 }
 
 /// The root attributes `format` and `format_version` of a skinflow recording: refuses another

@@ -1115,7 +1115,7 @@ fn out_of_range_flags_and_bad_scenes_are_refused_before_any_work() {
         ),
         (
             &["calibrate", "rec.h5", "--out", "c.toml", "--fit", "holdout_folds = -1"],
-            "--fit 'holdout_folds = -1': invalid value: integer `-1`",
+            "--fit 'holdout_folds = -1': holdout_folds: invalid value: integer `-1`",
         ),
         (
             &["reproduce", "--out", "r", "--scenes", scenes, "--recon", "lambda = -1"],

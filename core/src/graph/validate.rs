@@ -44,10 +44,27 @@ fn schema_error(src: &SourceFile, e: &toml::de::Error) -> GraphError {
             Some(Err(problem)) => GraphError::at(src, span, None, K::UnnamedNode { problem, key, cause }),
         };
     };
-    let key = table.iter().find(|(_, v)| v.span().contains(&at)).map(|(k, _)| k.get_ref().clone());
+    // skinflow-toml names the key path from the file's root (`node[1].cpu: ...`); the node is
+    // named by its id here, so its `node[N]` goes, and a path left names the key itself.
+    let (cause, named) = within_node(&cause);
+    let key =
+        if named { None } else { table.iter().find(|(_, v)| v.span().contains(&at)).map(|(k, _)| k.get_ref().clone()) };
     match node_name(&table) {
         Ok(id) => GraphError::at(src, span, Some(&id), K::NodeField { key, cause }),
         Err(problem) => GraphError::at(src, span, None, K::UnnamedNode { problem, key, cause }),
+    }
+}
+
+/// `cause` without the `node[N]` that begins skinflow-toml's key path of an error in a
+/// `[[node]]` table, and whether what is left of the path (`cpu: ...`, `trigger.kind: ...`)
+/// names the key.
+fn within_node(cause: &str) -> (String, bool) {
+    match skinflow_toml::split_path(cause) {
+        (Some(path), rest) if path.starts_with("node[") => {
+            let below = path.split_once(']').map_or("", |(_, below)| below).trim_start_matches('.');
+            if below.is_empty() { (rest.to_owned(), false) } else { (format!("{below}: {rest}"), true) }
+        }
+        _ => (cause.to_owned(), false),
     }
 }
 

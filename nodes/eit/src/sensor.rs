@@ -388,7 +388,7 @@ mod tests {
     fn unknown_keys_and_bad_values_are_rejected() {
         // A TOML error is one line: its place and toml's message, not toml's source excerpt.
         let e = Sensor::from_toml("[sensor]\nwidth_mm = 3.0\n  widht_mm = 3.0\n").unwrap_err().to_string();
-        assert!(e.starts_with("sensor TOML: line 3, column 3: unknown field `widht_mm`"), "{e}");
+        assert!(e.starts_with("sensor TOML: line 3, column 3: sensor: unknown field `widht_mm`"), "{e}");
         assert!(!e.contains('\n'), "{e}");
         let e = Sensor::from_toml("[sensor\n").unwrap_err().to_string();
         assert!(e.starts_with("sensor TOML: line 1, column ") && !e.contains('\n'), "{e}");

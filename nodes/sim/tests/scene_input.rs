@@ -195,12 +195,20 @@ fn contacts_that_would_never_touch_are_refused() {
 
 #[test]
 fn overlapping_contacts_are_accepted() {
-    // Two indenters on one spot are a legitimate hard case, not an input error.
+    // Two indenters on one spot are simulated, not an input error; exactly the same place and
+    // diameter is warned about (tests/contacts_on_skin.rs), overlapping ones nearby are not.
     let s = accepted(&scene(
         "[[step]]\ncontacts = [{ x_mm = 5.0, y_mm = 5.0, diameter_mm = 10.0, force_n = 1.0 },\n\
          { x_mm = 5.0, y_mm = 5.0, diameter_mm = 10.0, force_n = 2.0 }]\nhold_s = 1.0\n",
     ));
     assert_eq!(s.timeline.max_contacts(), 2);
+    assert_eq!(s.warnings.len(), 1, "{:?}", s.warnings);
+    let s = accepted(&scene(
+        "[[step]]\ncontacts = [{ x_mm = 5.0, y_mm = 5.0, diameter_mm = 10.0, force_n = 1.0 },\n\
+         { x_mm = 9.0, y_mm = 5.0, diameter_mm = 10.0, force_n = 2.0 }]\nhold_s = 1.0\n",
+    ));
+    assert_eq!(s.timeline.max_contacts(), 2);
+    assert!(s.warnings.is_empty(), "{:?}", s.warnings);
 }
 
 #[test]
@@ -471,4 +479,211 @@ fn reading_a_scene_file_refuses_what_the_simulator_could_not_set_up() {
     let e = Scene::read(&path).unwrap_err().to_string();
     std::fs::remove_dir_all(&dir).unwrap();
     assert!(e.starts_with(&format!("{}:4:1: [sensor] \"electrode[0]\"", path.display())), "{e}");
+}
+
+/// Contacts that make no physical sense on the skin: a centre off the skin is refused, an
+/// indenter overhanging the skin's edge and two identical contacts pressed together are
+/// accepted with a warning that says what the simulator makes of them; overlapping contacts at
+/// nearby places (a deliberate hard case) stay silent. The default sensor is 100 x 100 mm.
+mod contacts_on_skin {
+    use super::*;
+    use skinflow_sim::pneumatic::Pneumatic;
+    use skinflow_sim::{Load, Profile};
+
+    /// The warnings of a scene that must be accepted.
+    fn warnings(text: &str) -> Vec<String> {
+        Scene::from_str(text, FILE).unwrap_or_else(|e| panic!("{e}\n{text}")).warnings
+    }
+
+    /// A scene with a 2 s lead-in (lines 1-3) and then `body` from line 4.
+    fn scene(body: &str) -> String {
+        format!("[scene]\n[[step]]\nrest_s = 2.0\n{body}")
+    }
+
+    /// A `contacts` step ([[step]] on line 4, one contact a line from line 6).
+    fn contacts(list: &[(f64, f64, f64, f64)]) -> String {
+        let lines: Vec<String> = list
+            .iter()
+            .map(|(x, y, d, f)| format!("  {{ x_mm = {x:?}, y_mm = {y:?}, diameter_mm = {d:?}, force_n = {f:?} }},\n"))
+            .collect();
+        scene(&format!("[[step]]\ncontacts = [\n{}]\nhold_s = 1.0\n", lines.concat()))
+    }
+
+    /// A single-contact step at `places` (`at_mm = ...` or `grid = ...`, line 5) of `diameter`.
+    fn single(places: &str, diameter: f64) -> String {
+        scene(&format!("[[step]]\n{places}\ndiameter_mm = {diameter:?}\nforces_n = [2.0]\nhold_s = 1.0\n"))
+    }
+
+    #[test]
+    fn a_centre_off_the_skin_is_refused_naming_the_step_the_contact_and_its_line() {
+        let (line, col, msg) = refused(&contacts(&[(0.0, 0.0, 10.0, 1.0), (0.0, 50.5, 10.0, 1.0)]));
+        assert_eq!((line, col), (7, 3), "{msg}");
+        assert_eq!(
+            msg,
+            "[[step]] 2, contact 2 of \"contacts\": the centre (0, 50.5) mm is outside the sensor (x in [-50, 50], \
+             y in [-50, 50]): an indenter centred off the skin would press on the frame, not the skin"
+        );
+        let shown = Scene::from_str(&contacts(&[(0.0, 0.0, 10.0, 1.0), (0.0, 50.5, 10.0, 1.0)]), FILE).unwrap_err();
+        assert!(shown.to_string().starts_with("s.toml:7:3: [[step]] 2, contact 2"), "{shown}");
+        // an `at_mm` entry: at its own line and column
+        let (line, col, msg) = refused(&single("at_mm = [[0.0, 0.0],\n  [-60.0, 10.0]]", 10.0));
+        assert_eq!((line, col), (6, 3), "{msg}");
+        assert!(
+            msg.starts_with("[[step]] 2, \"at_mm\" position 2: the centre (-60, 10) mm is outside the sensor"),
+            "{msg}"
+        );
+        // a grid position: at the grid, by its number, column and row
+        let (line, col, msg) =
+            refused(&single("grid = { x_mm = [-40.0, 40.0], y_mm = [0.0, 55.0], n = [3, 2] }", 10.0));
+        assert_eq!((line, col), (5, 8), "{msg}");
+        assert!(
+            msg.starts_with("[[step]] 2, \"grid\" position 4 (column 1, row 2): the centre (-40, 55) mm is outside"),
+            "{msg}"
+        );
+        // NaN is not on the skin either (TOML writes it `nan`)
+        let (_, _, msg) = refused(&scene(
+            "[[step]]\ncontacts = [{ x_mm = nan, y_mm = 0.0, diameter_mm = 10.0, force_n = 1.0 }]\nhold_s = 1.0\n",
+        ));
+        assert!(msg.contains("the centre (NaN, 0) mm is outside the sensor"), "{msg}");
+    }
+
+    #[test]
+    fn a_centre_on_the_edge_or_in_a_corner_is_accepted() {
+        // the sensor is the closed rectangle: a centre on its edge is on the skin (and half its
+        // disc overhangs, which is warned about)
+        let w = warnings(&contacts(&[(50.0, -50.0, 10.0, 1.0)]));
+        assert_eq!(w.len(), 1, "{w:?}");
+        assert!(w[0].contains("75.0 % of the 10 mm disc at (50, -50) mm is off the skin"), "{w:?}");
+    }
+
+    #[test]
+    fn an_overhanging_disc_is_warned_about_with_the_share_off_the_skin_and_what_is_simulated() {
+        // a 15 mm disc 5 mm from the edge: the circular segment beyond it is 10.96 % of the disc
+        let w = warnings(&contacts(&[(-20.0, 0.0, 10.0, 1.0), (45.0, 0.0, 15.0, 2.0)]));
+        assert_eq!(w.len(), 1, "{w:?}");
+        assert_eq!(
+            w[0],
+            "s.toml:7:3: [[step]] 2, 1 of 2 contacts put part of the disc off the skin, up to 11.0 % (contact 2 of \
+             \"contacts\": the 15 mm disc at (45, 0) mm): that part presses on the frame. The truth keeps the full \
+             force at the commanded centre, but only the part of the disc on the skin loads the EIT foam (at the \
+             disc's pressure, force / its whole area) and the pneumatic chamber (no sensitivity off the skin), so \
+             both channels respond as to a smaller force"
+        );
+        // one position: named alone, at its line
+        let w = warnings(&single("at_mm = [\n  [0.0, 46.0]]", 10.0));
+        assert_eq!(w.len(), 1, "{w:?}");
+        assert!(
+            w[0].starts_with("s.toml:6:3: [[step]] 2, \"at_mm\" position 1: 5.2 % of the 10 mm disc at (0, 46) mm"),
+            "{w:?}"
+        );
+        // a grid: one warning for the step, the worst position named (a corner)
+        let w = warnings(&single("grid = { x_mm = [-40.0, 40.0], y_mm = [-40.0, 40.0], n = [5, 5] }", 22.0));
+        assert_eq!(w.len(), 1, "{w:?}");
+        assert!(
+            w[0].starts_with(
+                "s.toml:5:8: [[step]] 2, 16 of 25 positions put part of the disc off the skin, up to 3.2 % (\"grid\" \
+                 position 1 (column 1, row 1): the 22 mm disc at (-40, -40) mm)"
+            ),
+            "{w:?}"
+        );
+        // force profiles go through the same positions
+        let profile =
+            scene("[[step]]\nat_mm = [[49.0, 0.0]]\ndiameter_mm = 10.0\nforce_profile = [[0.0, 0.0], [1.0, 2.0]]\n");
+        assert_eq!(warnings(&profile).len(), 1);
+    }
+
+    #[test]
+    fn a_disc_touching_the_edge_or_inside_it_is_not_warned_about() {
+        assert_eq!(warnings(&contacts(&[(42.5, 0.0, 15.0, 1.0), (-42.5, -42.5, 15.0, 1.0)])), Vec::<String>::new());
+        assert_eq!(
+            warnings(&single("grid = { x_mm = [-40.0, 40.0], y_mm = [-40.0, 40.0], n = [5, 5] }", 20.0)),
+            Vec::<String>::new()
+        );
+    }
+
+    #[test]
+    fn the_warning_says_what_the_pneumatic_channel_does() {
+        // without heterogeneity and edge stiffening the footprint sensitivity is S0 times the share
+        // of the footprint's quadrature points on the skin: an overhanging disc reads less
+        let mut profile = Profile::ideal();
+        profile.edge_stiffening = 0.0;
+        profile.sensitivity_heterogeneity = 0.0;
+        let sensor = skinflow_eit::Sensor::paper_100mm();
+        let p = Pneumatic::new(&profile, &sensor, 1);
+        let load = |x: f64| Load { x_mm: x, y_mm: 0.0, diameter_mm: 15.0, force_n: 2.0, press: 0, level: 0 };
+        let inside = p.static_dp_kpa(&[load(0.0)]);
+        let over = p.static_dp_kpa(&[load(45.0)]);
+        assert!(inside > 0.0);
+        // 11 % of the disc is off the skin; the 37-point rule puts 6 of its points there
+        let ratio = over / inside;
+        assert!((ratio - 31.0 / 37.0).abs() < 1e-12, "{ratio}");
+    }
+
+    #[test]
+    fn identical_contacts_pressed_together_are_warned_about_and_nearby_ones_are_not() {
+        let w = warnings(&contacts(&[(5.0, 5.0, 10.0, 1.0), (-20.0, 0.0, 10.0, 1.0), (5.0, 5.0, 10.0, 2.0)]));
+        assert_eq!(w.len(), 1, "{w:?}");
+        assert!(
+            w[0].starts_with(
+                "s.toml:8:3: [[step]] 2, contact 3 of \"contacts\": at the place of contact 1 with the same diameter \
+                 (x_mm = 5, y_mm = 5, diameter_mm = 10), pressed at the same time"
+            ),
+            "{w:?}"
+        );
+        assert!(w[0].contains("if one indenter is meant, give one contact with force_n = 3"), "{w:?}");
+        // -0 and 0 are one place
+        assert_eq!(warnings(&contacts(&[(0.0, -0.0, 10.0, 1.0), (-0.0, 0.0, 10.0, 1.0)])).len(), 1);
+        // overlapping at nearby places, or concentric of another size: the hard cases, silent
+        for list in [
+            [(5.0, 5.0, 10.0, 1.0), (5.0, 5.1, 10.0, 1.0)],
+            [(5.0, 5.0, 10.0, 1.0), (10.0, 5.0, 10.0, 1.0)],
+            [(5.0, 5.0, 10.0, 1.0), (5.0, 5.0, 12.0, 1.0)],
+        ] {
+            assert_eq!(warnings(&contacts(&list)), Vec::<String>::new(), "{list:?}");
+        }
+        // the same place in successive steps, or twice in an `at_mm` list, is pressed at other times
+        let twice = scene(
+            "[[step]]\ncontacts = [{ x_mm = 5.0, y_mm = 5.0, diameter_mm = 10.0, force_n = 1.0 }]\nhold_s = 1.0\n\
+             [[step]]\ncontacts = [{ x_mm = 5.0, y_mm = 5.0, diameter_mm = 10.0, force_n = 1.0 }]\nhold_s = 1.0\n",
+        );
+        assert_eq!(warnings(&twice), Vec::<String>::new());
+        assert_eq!(warnings(&single("at_mm = [[1.0, 1.0], [1.0, 1.0]]", 10.0)), Vec::<String>::new());
+    }
+
+    #[test]
+    fn shipped_scenes_warn_only_where_a_disc_overhangs() {
+        let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+        let mut found = Vec::new();
+        for dir in ["graphs/scenes", "tests/fixtures", "nodes/tests/fixtures"] {
+            let mut paths: Vec<_> = std::fs::read_dir(root.join(dir)).unwrap().map(|e| e.unwrap().path()).collect();
+            paths.sort();
+            for path in paths {
+                let text = std::fs::read_to_string(&path).unwrap_or_default();
+                if path.extension().is_some_and(|e| e == "toml") && text.contains("[[step]]") {
+                    let scene = Scene::from_file(&path).unwrap_or_else(|e| panic!("{e}"));
+                    for w in scene.warnings {
+                        found.push((format!("{dir}/{}", path.file_name().unwrap().to_string_lossy()), w));
+                    }
+                }
+            }
+        }
+        // the two scenes whose grids reach within a radius of the edge, and nothing else
+        let expected = [
+            (
+                "graphs/scenes/calibration-two-sizes.toml",
+                ":30:8: [[step]] 3, 16 of 25 positions put part of the disc off the skin, up to 3.2 % (\"grid\" position 1 \
+                 (column 1, row 1): the 22 mm disc at (-40, -40) mm)",
+            ),
+            (
+                "graphs/scenes/single-contact.toml",
+                ":14:8: [[step]] 2, 24 of 49 positions put part of the disc off the skin, up to 21.8 % (\"grid\" position \
+                 1 (column 1, row 1): the 15 mm disc at (-45, -45) mm)",
+            ),
+        ];
+        assert_eq!(found.len(), expected.len(), "{found:#?}");
+        for ((file, w), (want_file, want)) in found.iter().zip(expected) {
+            assert_eq!(file, want_file);
+            assert!(w.contains(want), "{w}");
+        }
+    }
 }

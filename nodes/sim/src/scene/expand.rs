@@ -15,6 +15,8 @@ use super::parse::{RawContact, RawGrid, RawStep};
 use super::validate::{ErrFn, MAX_FORCE_N, at_most, non_negative, positive};
 use crate::timeline::{Segment, SegmentContact};
 use skinflow_eit::Sensor;
+use std::collections::HashMap;
+use std::ops::Range;
 use toml::Spanned;
 
 /// Default ramp and release times, s: a quasi-static indentation by an XYZ stage.
@@ -53,6 +55,8 @@ pub(super) struct Builder {
     /// Segments, length, s, and contacts held the last admitted step was worked out to bring
     /// the timeline to.
     admitted: (f64, f64, f64),
+    /// Warnings about the steps (a disc overhanging the skin's edge), each at its span.
+    pub(super) warnings: Vec<(Range<usize>, String)>,
 }
 
 /// One contact's position and size; forces come from the step.
@@ -222,14 +226,18 @@ pub(super) fn expand_step(
         return Ok(());
     }
 
-    let inside = |x: f64, y: f64, span: std::ops::Range<usize>| {
+    let number = step.number;
+    let inside = |x: f64, y: f64, what: &str, span: Range<usize>| {
         if x.is_finite() && y.is_finite() && sensor.contains_mm(x, y) {
             Ok(())
         } else {
             let (hx, hy) = sensor.half_extents_mm();
             Err(err(
                 span,
-                format!("contact at ({x}, {y}) mm is outside the sensor (x in [-{hx}, {hx}], y in [-{hy}, {hy}])"),
+                format!(
+                    "[[step]] {number}, {what}: the centre ({x}, {y}) mm is outside the sensor (x in [-{hx}, {hx}], \
+                     y in [-{hy}, {hy}]): an indenter centred off the skin would press on the frame, not the skin"
+                ),
             ))
         }
     };
@@ -267,15 +275,41 @@ pub(super) fn expand_step(
         }
         let mut spots = Vec::new();
         let mut forces = Vec::new();
-        for c in list.get_ref() {
+        let mut overhang = Overhang::default();
+        // each contact's place and diameter (bits, -0 as 0): the first contact there
+        let mut seen: HashMap<[u64; 3], usize> = HashMap::new();
+        for (i, c) in list.get_ref().iter().enumerate() {
             let RawContact { x_mm, y_mm, diameter_mm, force_n } = c.get_ref();
-            inside(*x_mm.get_ref(), *y_mm.get_ref(), c.span())?;
+            let (x, y) = (*x_mm.get_ref(), *y_mm.get_ref());
+            let what = format!("contact {} of \"contacts\"", i + 1);
+            inside(x, y, &what, c.span())?;
             let d = diameter(diameter_mm, sensor, err)?;
             let f = non_negative("force_n", force_n, err)?;
             let f = at_most("force_n", force_n, f, MAX_FORCE_N, err)?;
-            spots.push(Spot { x_mm: *x_mm.get_ref(), y_mm: *y_mm.get_ref(), diameter_mm: d });
+            let place = [x + 0.0, y + 0.0, d].map(f64::to_bits);
+            if let Some(&first) = seen.get(&place) {
+                b.warnings.push((
+                    c.span(),
+                    format!(
+                        "[[step]] {number}, {what}: at the place of contact {} with the same diameter \
+                         (x_mm = {x}, y_mm = {y}, diameter_mm = {d}), pressed at the same time: simulated as two \
+                         loads on one footprint (the EIT foam as under one indenter of {} N, the summed force; the \
+                         pneumatic chamber as the sum of two separately saturating contacts), and the truth lists \
+                         both contacts at the one place, where a segmenter can find only one (if one indenter is \
+                         meant, give one contact with force_n = {})",
+                        first + 1,
+                        forces[first] + f,
+                        forces[first] + f
+                    ),
+                ));
+            } else {
+                seen.insert(place, i);
+            }
+            overhang.add(sensor, x, y, d, || what.clone(), c.span());
+            spots.push(Spot { x_mm: x, y_mm: y, diameter_mm: d });
             forces.push(f);
         }
+        overhang.warn(number, "contacts", &mut b.warnings);
         let hold_s = hold(s, eit_fps, err)?
             .ok_or_else(|| err(step_span.clone(), "a contact step needs `hold_s` or `hold_frames`".into()))?;
         never_touching(ramp_s + hold_s + release_s, "hold_s, ramp_s and release_s are", step_span.clone(), err)?;
@@ -369,7 +403,7 @@ pub(super) fn expand_step(
             + loaded(release_s, last, 0.0);
         let held_how = format!("{counted} x {per_held} segment(s) under load");
         b.admit(step, Extent { duration_s: pr * per_s, segments: pr * per, how, held: pr * per_held, held_how }, err)?;
-        for (x, y) in at.positions(&inside)? {
+        for (x, y) in at.positions(&inside, sensor, diameter, number, &mut b.warnings)? {
             let spot = [Spot { x_mm: x, y_mm: y, diameter_mm: diameter }];
             for _ in 0..repeat {
                 b.level += 1;
@@ -432,7 +466,7 @@ pub(super) fn expand_step(
     let extent =
         Extent { duration_s: pr * times * per_s, segments: pr * times * per, how, held: pr * per_held, held_how };
     b.admit(step, extent, err)?;
-    for (x, y) in at.positions(&inside)? {
+    for (x, y) in at.positions(&inside, sensor, diameter, number, &mut b.warnings)? {
         let spot = [Spot { x_mm: x, y_mm: y, diameter_mm: diameter }];
         for _ in 0..repeat {
             if staircase {
@@ -563,7 +597,7 @@ fn forces(f: &Spanned<toml::Value>, err: &ErrFn<'_>) -> Result<Vec<f64>, SceneEr
 /// generated (a grid may hold a million positions).
 enum Places<'a> {
     Grid(&'a Spanned<RawGrid>),
-    List(&'a Spanned<Vec<[f64; 2]>>),
+    List(&'a Spanned<Vec<Spanned<[f64; 2]>>>),
 }
 
 impl Places<'_> {
@@ -574,11 +608,31 @@ impl Places<'_> {
         }
     }
 
-    /// The positions, each checked with `inside` (which gets the span of the `grid` or
-    /// `at_mm` that gave it).
-    fn positions(&self, inside: &InsideFn<'_>) -> Result<Vec<(f64, f64)>, SceneError> {
-        let (list, span) = match self {
-            Places::List(l) => (l.get_ref().iter().map(|p| (p[0], p[1])).collect::<Vec<_>>(), l.span()),
+    /// The positions, each checked with `inside` (which gets the span of the `at_mm` entry
+    /// or the `grid` that gave it); a warning of step `number` in `warnings` if the disc of
+    /// `diameter_mm` overhangs the skin at any.
+    fn positions(
+        &self,
+        inside: &InsideFn<'_>,
+        sensor: &Sensor,
+        diameter_mm: f64,
+        number: usize,
+        warnings: &mut Vec<(Range<usize>, String)>,
+    ) -> Result<Vec<(f64, f64)>, SceneError> {
+        let mut overhang = Overhang::default();
+        let list = match self {
+            Places::List(l) => {
+                let mut list = Vec::with_capacity(l.get_ref().len());
+                for (i, p) in l.get_ref().iter().enumerate() {
+                    let [x, y] = *p.get_ref();
+                    let what = || format!("\"at_mm\" position {}", i + 1);
+                    inside(x, y, &what(), p.span())?;
+                    overhang.add(sensor, x, y, diameter_mm, what, p.span());
+                    list.push((x, y));
+                }
+                overhang.warn(number, "positions", warnings);
+                return Ok(list);
+            }
             Places::Grid(g) => {
                 let grid = g.get_ref();
                 let axis = |r: [f64; 2], n: i64| -> Vec<f64> {
@@ -592,17 +646,106 @@ impl Places<'_> {
                 let xs = axis(grid.x_mm, grid.n[0]);
                 let ys = axis(grid.y_mm, grid.n[1]);
                 // row by row from the bottom, left to right (a raster scan of the stage)
-                (ys.iter().flat_map(|&y| xs.iter().map(move |&x| (x, y))).collect(), g.span())
+                let list: Vec<(f64, f64)> = ys.iter().flat_map(|&y| xs.iter().map(move |&x| (x, y))).collect();
+                for (k, &(x, y)) in list.iter().enumerate() {
+                    let what = || {
+                        format!("\"grid\" position {} (column {}, row {})", k + 1, k % xs.len() + 1, k / xs.len() + 1)
+                    };
+                    inside(x, y, &what(), g.span())?;
+                    overhang.add(sensor, x, y, diameter_mm, what, g.span());
+                }
+                list
             }
         };
-        for &(x, y) in &list {
-            inside(x, y, span.clone())?;
-        }
+        overhang.warn(number, "positions", warnings);
         Ok(list)
     }
 }
 
-type InsideFn<'a> = dyn Fn(f64, f64, std::ops::Range<usize>) -> Result<(), SceneError> + 'a;
+type InsideFn<'a> = dyn Fn(f64, f64, &str, Range<usize>) -> Result<(), SceneError> + 'a;
+
+/// The contacts of a step whose disc overhangs the skin's edge: how many of how many, and the
+/// one that overhangs most.
+#[derive(Default)]
+struct Overhang {
+    count: usize,
+    total: usize,
+    /// Off-skin fraction, which contact, where, its diameter and its span.
+    worst: Option<(f64, String, f64, f64, f64, Range<usize>)>,
+}
+
+impl Overhang {
+    /// Counts a contact at (x, y) mm (on the sensor) of `diameter_mm`, named by `what`.
+    fn add(
+        &mut self,
+        sensor: &Sensor,
+        x: f64,
+        y: f64,
+        diameter_mm: f64,
+        what: impl FnOnce() -> String,
+        span: Range<usize>,
+    ) {
+        self.total += 1;
+        let off = off_skin_fraction(sensor, x, y, diameter_mm);
+        if off > 0.0 {
+            self.count += 1;
+            if self.worst.as_ref().is_none_or(|w| off > w.0) {
+                self.worst = Some((off, what(), x, y, diameter_mm, span));
+            }
+        }
+    }
+
+    /// The warning of step `number` (its contacts called `noun`), if any disc overhangs.
+    fn warn(self, number: usize, noun: &str, warnings: &mut Vec<(Range<usize>, String)>) {
+        let Some((off, what, x, y, d, span)) = self.worst else { return };
+        let pct = 100.0 * off;
+        let pct = if pct < 0.1 { "less than 0.1".to_owned() } else { format!("{pct:.1}") };
+        let which = if self.total == 1 {
+            format!("{what}: {pct} % of the {d} mm disc at ({x}, {y}) mm is off the skin")
+        } else {
+            format!(
+                "{} of {} {noun} put part of the disc off the skin, up to {pct} % ({what}: the {d} mm disc at \
+                 ({x}, {y}) mm)",
+                self.count, self.total
+            )
+        };
+        warnings.push((
+            span,
+            format!(
+                "[[step]] {number}, {which}: that part presses on the frame. The truth keeps the full force at \
+                 the commanded centre, but only the part of the disc on the skin loads the EIT foam (at the disc's \
+                 pressure, force / its whole area) and the pneumatic chamber (no sensitivity off the skin), so both \
+                 channels respond as to a smaller force"
+            ),
+        ));
+    }
+}
+
+/// The fraction of a disc of `diameter_mm` centred at (x, y) mm, a point of the sensor, that
+/// lies outside the sensor's rectangle. The disc is no wider than the sensor's shorter side
+/// (`diameter`), so it can cross at most one vertical and one horizontal edge, the nearer ones.
+pub(super) fn off_skin_fraction(sensor: &Sensor, x: f64, y: f64, diameter_mm: f64) -> f64 {
+    let (hx, hy) = sensor.half_extents_mm();
+    let r = 0.5 * diameter_mm;
+    // distances from the centre to the nearer vertical and horizontal edges
+    let (a, b) = ((hx - x.abs()).max(0.0), (hy - y.abs()).max(0.0));
+    if a >= r && b >= r {
+        return 0.0;
+    }
+    // area of the disc beyond a line at distance d from its centre
+    let segment = |d: f64| if d >= r { 0.0 } else { r * r * (d / r).acos() - d * (r * r - d * d).sqrt() };
+    // area of the disc beyond both lines (x > a and y > b, in the frame of the centre)
+    let corner = if a * a + b * b >= r * r {
+        0.0
+    } else {
+        let antiderivative =
+            |t: f64| 0.5 * (t * (r * r - t * t).max(0.0).sqrt() + r * r * (t / r).clamp(-1.0, 1.0).asin());
+        let end = (r * r - b * b).sqrt();
+        antiderivative(end) - antiderivative(a) - b * (end - a)
+    };
+    let off = segment(a) + segment(b) - corner;
+    (off / (std::f64::consts::PI * r * r)).clamp(0.0, 1.0)
+}
 
 fn places<'a>(s: &'a RawStep, step_span: std::ops::Range<usize>, err: &ErrFn<'_>) -> Result<Places<'a>, SceneError> {
     match (&s.grid, &s.at_mm) {

@@ -93,6 +93,10 @@ pub struct Scene {
     pub faults: Vec<Fault>,
     /// The scene's TOML text, verbatim (recordings may store it).
     pub toml: String,
+    /// What the scene asks for that the simulator carries out other than as written (an
+    /// indenter overhanging the skin's edge), each `file:line:column: ...`. Logged as tracing
+    /// warnings (target `skinflow::scene`) when the scene is read.
+    pub warnings: Vec<String>,
 }
 
 impl Scene {
@@ -134,13 +138,34 @@ impl Scene {
     #[allow(clippy::should_implement_trait)] // needs the file name, FromStr cannot take it
     pub fn from_str(text: &str, file: &str) -> Result<Scene, SceneError> {
         let at = Locator { text, file };
-        let raw: RawScene = skinflow_toml::from_str(text).map_err(|e| at.error(e.span(), e.message().to_owned()))?;
+        let raw: RawScene =
+            skinflow_toml::from_str(text).map_err(|e| at.error(e.span(), scene_problem(e.message())))?;
         validate::validate(raw, text, &at)
     }
 
     /// Scene duration, s.
     pub fn duration_s(&self) -> f64 {
         self.timeline.duration_s()
+    }
+}
+
+/// A TOML error of the scene file in the words of the scene's other errors: the key path
+/// skinflow-toml puts first (`step[1].at_mm[0]: ...`) as `[[step]] 2 "at_mm[0]": ...` (steps
+/// and faults counted from 1, as elsewhere), `rates.eit_fps: ...` as `[rates] "eit_fps": ...`.
+fn scene_problem(message: &str) -> String {
+    let (Some(path), rest) = skinflow_toml::split_path(message) else { return message.to_owned() };
+    let table_end = path.find(['.', '[']).unwrap_or(path.len());
+    let (table, below) = path.split_at(table_end);
+    let (head, below) = match below.strip_prefix('[').and_then(|b| b.split_once(']')) {
+        Some((index, below)) if table == "step" || table == "fault" => {
+            let number = index.parse::<usize>().map_or_else(|_| index.to_owned(), |i| (i + 1).to_string());
+            (format!("[[{table}]] {number}"), below)
+        }
+        _ => (format!("[{table}]"), below),
+    };
+    match below.trim_start_matches('.') {
+        "" => format!("{head}: {rest}"),
+        key => format!("{head} \"{key}\": {rest}"),
     }
 }
 

@@ -61,8 +61,8 @@ pub(crate) struct RawStep {
     pub contacts: Option<Spanned<Vec<Spanned<RawContact>>>>,
     /// Single-contact positions on a regular grid.
     pub grid: Option<Spanned<RawGrid>>,
-    /// Single-contact positions listed as [x_mm, y_mm].
-    pub at_mm: Option<Spanned<Vec<[f64; 2]>>>,
+    /// Single-contact positions listed as [x_mm, y_mm] (each spanned, for its errors).
+    pub at_mm: Option<Spanned<Vec<Spanned<[f64; 2]>>>>,
     pub diameter_mm: Option<Spanned<f64>>,
     /// A list of forces or a range `{ from, to, n }`; kept as TOML so that `expand` can say
     /// which forms are accepted when it is neither.

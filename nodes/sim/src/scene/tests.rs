@@ -305,18 +305,59 @@ fn too_long_positions_and_grid_counts_are_refused_not_truncated() {
     let step = |body: &str| format!("{HEAD}[[step]]\n{body}diameter_mm = 10.0\nforces_n = [1.0]\nhold_s = 1.0\n");
     let (line, column, problem) = fails(&step("at_mm = [[10.0, 20.0, 30.0]]\n"));
     assert_eq!((line, column), (9, 10), "{problem}");
-    assert_eq!(problem, "expected an array of 2 elements, found 3");
+    assert_eq!(problem, "[[step]] 2 \"at_mm[0]\": expected an array of 2 elements, found 3");
     let (line, column, problem) = fails(&step("at_mm = [[0.0, 0.0], [1.0, 2.0, 3.0, 4.0]]\n"));
     assert_eq!((line, column), (9, 22), "{problem}");
-    assert_eq!(problem, "expected an array of 2 elements, found 4");
+    assert_eq!(problem, "[[step]] 2 \"at_mm[1]\": expected an array of 2 elements, found 4");
     let grid = "grid = { x_mm = [-20.0, 20.0], y_mm = [-20.0, 20.0], n = [2, 2, 7] }\n";
     let (line, column, problem) = fails(&step(grid));
     assert_eq!((line, column), (9, 58), "{problem}");
-    assert_eq!(problem, "expected an array of 2 elements, found 3");
+    assert_eq!(problem, "[[step]] 2 \"grid.n\": expected an array of 2 elements, found 3");
     let profile = "at_mm = [[0.0, 0.0]]\nforce_profile = [[0.0, 0.0], [1.0, 2.0, 9.0]]\n";
     let (line, column, problem) = fails(&format!("{HEAD}[[step]]\n{profile}diameter_mm = 10.0\n"));
     assert_eq!((line, column), (10, 30), "{problem}");
-    assert_eq!(problem, "expected an array of 2 elements, found 3");
+    assert_eq!(problem, "[[step]] 2 \"force_profile[1]\": expected an array of 2 elements, found 3");
     // The right lengths still parse.
     parse(&step("at_mm = [[10.0, 20.0]]\n")).unwrap();
+}
+
+/// The off-skin share of a disc, in closed form, against a brute-force count over a fine grid
+/// of the disc: edges, corners, tangent and concentric discs, a sensor that is not square.
+#[test]
+fn off_skin_fraction_matches_a_brute_force_count() {
+    let text = "[sensor]\nname = \"r\"\nwidth_mm = 80.0\nheight_mm = 50.0\n";
+    let sensor = skinflow_eit::Sensor::from_toml(text).unwrap();
+    let brute = |x: f64, y: f64, d: f64| {
+        let (r, n) = (0.5 * d, 1000);
+        let (mut inside_disc, mut off) = (0u64, 0u64);
+        for i in 0..n {
+            for j in 0..n {
+                let (u, v) = (-r + d * (i as f64 + 0.5) / n as f64, -r + d * (j as f64 + 0.5) / n as f64);
+                if u * u + v * v <= r * r {
+                    inside_disc += 1;
+                    off += u64::from(!sensor.contains_mm(x + u, y + v));
+                }
+            }
+        }
+        off as f64 / inside_disc as f64
+    };
+    for (x, y, d) in [
+        (0.0, 0.0, 50.0),
+        (15.0, 0.0, 50.0),
+        (35.0, 0.0, 10.0),
+        (-38.0, 20.0, 12.0),
+        (40.0, 25.0, 10.0),
+        (-40.0, -25.0, 50.0),
+        (36.0, -21.0, 12.0),
+        (0.0, 23.0, 6.0),
+    ] {
+        let exact = expand::off_skin_fraction(&sensor, x, y, d);
+        let counted = brute(x, y, d);
+        assert!((exact - counted).abs() < 2e-3, "({x}, {y}) d {d}: {exact} vs {counted}");
+    }
+    // exactly inside or tangent: nothing off; a centre in a corner: three quarters
+    assert_eq!(expand::off_skin_fraction(&sensor, 0.0, 0.0, 50.0), 0.0);
+    assert_eq!(expand::off_skin_fraction(&sensor, 35.0, 20.0, 10.0), 0.0);
+    assert!((expand::off_skin_fraction(&sensor, 40.0, -25.0, 10.0) - 0.75).abs() < 1e-12);
+    assert!((expand::off_skin_fraction(&sensor, -40.0, 0.0, 10.0) - 0.5).abs() < 1e-12);
 }

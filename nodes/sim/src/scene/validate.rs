@@ -85,6 +85,11 @@ pub(super) fn validate(raw: RawScene, text: &str, at: &Locator<'_>) -> Result<Sc
         expand_step(&step_ref, &sensor, rates.eit_fps, &mut builder, &err)?;
         builder.check_admitted();
     }
+    let warnings: Vec<String> =
+        builder.warnings.into_iter().map(|(span, w)| at.error(Some(span), w).to_string()).collect();
+    for w in &warnings {
+        tracing::warn!(target: "skinflow::scene", "{w}");
+    }
     let timeline = Timeline { segments: builder.segments };
     let duration_s = timeline.duration_s();
     if duration_s <= 0.0 {
@@ -148,6 +153,7 @@ pub(super) fn validate(raw: RawScene, text: &str, at: &Locator<'_>) -> Result<Sc
         timeline: Arc::new(timeline),
         faults,
         toml: text.to_owned(),
+        warnings,
     })
 }
 
@@ -164,7 +170,8 @@ fn sensor_error(
     let (path, on_key, problem) = match e {
         SensorError::Toml { message, span, .. } => {
             match span.and_then(|s| Spans::parse(sensor_text).path_at(s.start)) {
-                Some((path, on_key)) => (Some(path), on_key, message),
+                // named from its span below: without the key path skinflow-toml put first
+                Some((path, on_key)) => (Some(path), on_key, skinflow_toml::split_path(&message).1.to_owned()),
                 None => (None, false, message),
             }
         }

@@ -4,14 +4,15 @@
 //! swaps ([`check_graph`]; [`check_files`] and [`check_strategies`] apart).
 //!
 //! [`check_files`] refuses an output file of a node (an `hdf5_logger`'s `path`, a `compare`'s
-//! `json`, a `collect`'s `path`) that is the same file as
+//! `json`, a `collect`'s `path`, a plugin kind's `output-path`-typed param) that is the same
+//! file as
 //!
 //! - the graph file itself, or a `[[plugin]]` library it loads;
 //! - a file a node reads: a `replay` recording, a `sim` scene, a `corrector`'s or `splitter`'s
-//!   calibration, a `reconstructor`'s or `hdf5_logger`'s sensor file, a serial device, and any
-//!   `path`-typed param of a plugin kind (which may read or write it: an output over it loses
-//!   either way);
-//! - another node's output file.
+//!   calibration, a `reconstructor`'s or `hdf5_logger`'s sensor file, a serial device, a plugin
+//!   kind's `input-path`-typed param, and any `path`-typed param of a plugin kind (which may
+//!   read or write it: an output over it loses either way);
+//! - another node's output file (a plugin's `output-path` included).
 //!
 //! Whether `overwrite` is set or not: the run would replace an input, or two writers would
 //! replace each other's rows. Paths are resolved against the graph file's directory (as the
@@ -21,9 +22,16 @@
 //! A logger that rotates (`rotate_mb` / `rotate_s`) writes `name-0001.h5`, `name-0002.h5`, ...
 //! beside `name.h5`: a file of that pattern counts as its output too. Each conflict is an error
 //! located at the writer's param (the later writer's, for two writers), naming both nodes and
-//! files. Two plugin params naming one file are not refused (two readers are fine, and what a
-//! plugin does with a path is not known here); a reconstructor's `cache_dir` is a directory of
-//! cache files and is not compared.
+//! files. A plugin param's type (`skinflow_plugin_sdk::export::PARAM_TYPES`) says what the
+//! kind does with its file: `output-path` writes it, `input-path` reads it, `path` may do
+//! either (not known here), so two `path` params, or a `path` and an `input-path`, naming one
+//! file are not refused (two readers are fine); an array of one of them (`[output-path]`)
+//! names a file with each string. A reconstructor's `cache_dir` is a directory of cache files
+//! and is not compared.
+//!
+//! [`check_extra_output`] refuses an output file given outside the graph (a command-line
+//! option such as `skinflow run --stats-json`) that is the same file as any file the graph
+//! names (read, written, or either), the graph file and its plugin libraries included.
 //!
 //! [`check_strategies`] refuses a name in an `hdf5_logger`'s `strategies` that no node
 //! upstream of its `forces` input produces (a typo logs nothing of the strategy meant). The
@@ -41,6 +49,7 @@ use std::path::{Component, Path, PathBuf};
 use skinflow_contact::StrategyKind;
 use skinflow_core::BuildContext;
 use skinflow_core::graph::{GraphError, GraphErrors, GraphSpec, plugin_paths};
+use skinflow_plugin_sdk::export::{INPUT_PATH, OUTPUT_PATH, PATH};
 
 use crate::correct::{CorrectorParams, name_follows_split, output_name};
 use crate::log::LoggerParams;
@@ -66,14 +75,14 @@ fn finish(mut errs: Vec<GraphError>) -> Result<(), GraphErrors> {
     Err(GraphErrors(errs))
 }
 
-/// What a node does with the file a `path`-typed param names.
+/// What a node does with the file a `path`-, `input-path`- or `output-path`-typed param names.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Use {
-    /// Writes it (replacing what is there).
+    /// Writes it (replacing what is there, or appending to it).
     Writes,
     /// Reads it.
     Reads,
-    /// A plugin's: reads or writes it, not known here.
+    /// A plugin's `path`: reads or writes it, not known here.
     Names,
     /// A directory of its own files (a reconstructor's `cache_dir`): not compared.
     Directory,
@@ -92,6 +101,32 @@ fn builtin_use(kind: &str, param: &str) -> Option<Use> {
         ("reconstructor", "cache_dir") => Use::Directory,
         _ => return None,
     })
+}
+
+/// What a node of kind `kind` does with the file its param `param` of type `ty` names: a
+/// built-in kind's as [`builtin_use`] lists it, else as the type says (`output-path` writes,
+/// `input-path` reads, `path` either; an array `[T]` as `T`); `None` for a param that names no
+/// file.
+fn param_use(kind: &str, param: &str, ty: &str) -> Option<Use> {
+    let scalar = ty.strip_prefix('[').and_then(|t| t.strip_suffix(']')).unwrap_or(ty);
+    let by_type = match scalar {
+        OUTPUT_PATH => Use::Writes,
+        INPUT_PATH => Use::Reads,
+        PATH => Use::Names,
+        _ => return None,
+    };
+    Some(builtin_use(kind, param).unwrap_or(by_type))
+}
+
+/// The file names a param of type `ty` holds in `value`: a string, or for an array type
+/// (`[output-path]`) the strings of an array; empty ones left out (unset).
+fn file_names<'a>(ty: &str, value: &'a toml::Value) -> Vec<&'a str> {
+    let names = match value {
+        toml::Value::String(s) => vec![s.as_str()],
+        toml::Value::Array(a) if ty.starts_with('[') => a.iter().filter_map(toml::Value::as_str).collect(),
+        _ => Vec::new(),
+    };
+    names.into_iter().filter(|s| !s.is_empty()).collect()
 }
 
 /// What the kind of a file a node reads is called in an error.
@@ -185,8 +220,8 @@ fn inode(_p: &Path) -> Option<(u64, u64)> {
     None
 }
 
-/// Every file the graph names: the graph file, its plugin libraries, then each node's
-/// `path`-typed params that are set, in node and param order.
+/// Every file the graph names: the graph file, its plugin libraries, then each node's params
+/// naming a file ([`param_use`]) that are set, in node and param order.
 fn named_files(spec: &GraphSpec) -> Vec<Named> {
     let base_dir = spec.source.base_dir();
     let mut files = vec![Named {
@@ -212,24 +247,23 @@ fn named_files(spec: &GraphSpec) -> Vec<Named> {
         let ctx = BuildContext { base_dir: base_dir.clone(), mode: spec.mode, node_id: node.id.clone() };
         let table = node.params.table();
         let rotates = node.kind == "hdf5_logger" && (table.contains_key("rotate_mb") || table.contains_key("rotate_s"));
-        for doc in node.factory.info().params.iter().filter(|d| d.ty == "path") {
-            let Some(value) = table.get(doc.name.as_ref()).and_then(toml::Value::as_str) else { continue };
-            if value.is_empty() {
-                continue;
-            }
-            let use_ = builtin_use(&node.kind, &doc.name).unwrap_or(Use::Names);
+        for doc in node.factory.info().params.iter() {
+            let Some(use_) = param_use(&node.kind, &doc.name, &doc.ty) else { continue };
+            let Some(value) = table.get(doc.name.as_ref()) else { continue };
             if use_ == Use::Directory {
                 continue;
             }
-            let resolved = ctx.resolve(Path::new(value));
-            files.push(Named {
-                node: Some(i),
-                param: doc.name.to_string(),
-                id: file_id(&resolved),
-                resolved,
-                use_,
-                rotates: rotates && use_ == Use::Writes,
-            });
+            for name in file_names(&doc.ty, value) {
+                let resolved = ctx.resolve(Path::new(name));
+                files.push(Named {
+                    node: Some(i),
+                    param: doc.name.to_string(),
+                    id: file_id(&resolved),
+                    resolved,
+                    use_,
+                    rotates: rotates && use_ == Use::Writes,
+                });
+            }
         }
     }
     files
@@ -265,11 +299,12 @@ pub fn check_files(spec: &GraphSpec) -> Result<(), GraphErrors> {
                         continue;
                     }
                     let other = &spec.nodes[o];
+                    // The same node: two files of an array param (`[output-path]`).
+                    let whose =
+                        if o == n { "this node".to_owned() } else { format!("{} \"{}\"", other.kind, other.id) };
                     format!(
-                        "{writes}, which {} \"{}\" writes too (its `{}` {}{}): each would replace the other's \
+                        "{writes}, which {whose} writes too (its `{}` {}{}): each would replace the other's \
                          output, whatever `overwrite` says; give each node its own file",
-                        other.kind,
-                        other.id,
                         f.param,
                         f.resolved.display(),
                         same(f)
@@ -323,6 +358,61 @@ pub fn check_files(spec: &GraphSpec) -> Result<(), GraphErrors> {
         }
     }
     finish(errs)
+}
+
+/// Refuses an output file given outside the graph, `path` (as given: relative to the current
+/// directory, not to the graph file), named `what` in the error (e.g. `--stats-json`), that is
+/// the same file as one the graph names: the graph file, a plugin library, a file a node reads
+/// or writes (or, for a plugin's `path`, either), or a rotated part of a logger's recording.
+/// The error names each such node, its param and its file; files are compared as in
+/// [`check_files`] (links followed, `.` and `..` normalized). A reconstructor's `cache_dir` is
+/// not compared.
+pub fn check_extra_output(spec: &GraphSpec, what: &str, path: &Path) -> Result<(), String> {
+    let id = file_id(path);
+    let same = |f: &Named| if f.resolved.as_os_str() == path.as_os_str() { "" } else { ", the same file" };
+    let mut found = Vec::new();
+    for f in named_files(spec) {
+        if f.use_ == Use::Directory {
+            continue;
+        }
+        let part = !f.id.same(&id) && f.rotates && id.is_part_of(&f.id);
+        if !f.id.same(&id) && !part {
+            continue;
+        }
+        let file = f.resolved.display();
+        found.push(match (f.use_, f.node) {
+            (_, None) if f.param == "graph" => format!("this graph's own file {file}{}", same(&f)),
+            (_, None) => format!("the plugin library {file} this graph loads (`[[plugin]] path`{})", same(&f)),
+            (use_, Some(o)) => {
+                let node = &spec.nodes[o];
+                let (kind, nid, param) = (&node.kind, &node.id, &f.param);
+                match use_ {
+                    Use::Reads => format!(
+                        "the {} {kind} \"{nid}\" reads (its `{param}` {file}{})",
+                        what_is_read(kind, param),
+                        same(&f)
+                    ),
+                    Use::Writes if part => {
+                        format!("a rotated part of the recording {kind} \"{nid}\" writes (its `{param}` {file})")
+                    }
+                    Use::Writes => format!("the file {kind} \"{nid}\" writes (its `{param}` {file}{})", same(&f)),
+                    Use::Names | Use::Directory => format!(
+                        "the file {kind} \"{nid}\" (a plugin kind) reads or writes (its `{param}` {file}{})",
+                        same(&f)
+                    ),
+                }
+            }
+        });
+    }
+    if found.is_empty() {
+        return Ok(());
+    }
+    Err(format!(
+        "{what} {} is {}: writing it would replace that file, or the graph would write over it; give {what} \
+         another file",
+        path.display(),
+        found.join(", and ")
+    ))
 }
 
 /// The strategy names that can arrive, each with the node that names it (`None`: not known
@@ -419,6 +509,234 @@ pub fn check_strategies(spec: &GraphSpec) -> Result<(), GraphErrors> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    use serde::Deserialize;
+    use skinflow_core::graph::SourceFile;
+    use skinflow_core::{KindInfo, NodeError, NodeImpl, NodeParams, ParamDoc, PortSpec, Registry, Role, typed};
+
+    use crate::payload::{Forces, Split};
+
+    /// Params of `p-files`, standing in for a plugin kind: one file of each type, and an array
+    /// of files it writes.
+    #[derive(Debug, Deserialize)]
+    #[serde(deny_unknown_fields)]
+    #[allow(dead_code)] // only parsed: never built
+    struct FileParams {
+        out: Option<String>,
+        outs: Option<Vec<String>>,
+        #[serde(rename = "in")]
+        input: Option<String>,
+        either: Option<String>,
+    }
+
+    impl NodeParams for FileParams {}
+
+    /// The built-in kinds, plus stand-ins for plugin kinds (never built): `p-files` (forces, and
+    /// an `output-path`, a `[output-path]`, an `input-path` and a `path` param) and `p-split`.
+    fn registry() -> Registry {
+        let mut r = crate::registry();
+        r.register(typed(
+            KindInfo::new("p-files", Role::Source, "a plugin's files")
+                .output(PortSpec::output::<Forces>("forces", "forces"))
+                .param(ParamDoc::new("out", OUTPUT_PATH, "none", "a file it writes"))
+                .param(ParamDoc::new("outs", "[output-path]", "[]", "files it writes"))
+                .param(ParamDoc::new("in", INPUT_PATH, "none", "a file it reads"))
+                .param(ParamDoc::new("either", PATH, "none", "a file it reads or writes")),
+            |_: FileParams, _: &BuildContext| -> Result<NodeImpl, NodeError> { Err(NodeError::msg("not built")) },
+        ))
+        .unwrap();
+        r.register(typed(
+            KindInfo::new("p-split", Role::Source, "a plugin's splits")
+                .output(PortSpec::output::<Split>("split", "splits")),
+            |_: FileParams, _: &BuildContext| -> Result<NodeImpl, NodeError> { Err(NodeError::msg("not built")) },
+        ))
+        .unwrap();
+        r
+    }
+
+    /// The directory the graph "is in": it does not exist (paths compared normalized).
+    fn base() -> PathBuf {
+        std::env::temp_dir().join("skinflow-outputs-unit-nonexistent")
+    }
+
+    fn spec(text: &str) -> GraphSpec {
+        GraphSpec::parse(SourceFile::new(base().join("g.toml"), text.to_owned()), &registry()).expect("a valid graph")
+    }
+
+    /// The errors of `check_files` on `text` (as `base()/g.toml`), one per line, `base()`
+    /// written `DIR`; empty: accepted.
+    fn errors(text: &str) -> String {
+        match check_files(&spec(text)) {
+            Ok(()) => String::new(),
+            Err(e) => e.to_string().replace(&base().display().to_string(), "DIR"),
+        }
+    }
+
+    fn files(id: &str, params: &str) -> String {
+        format!("[[node]]\nid = \"{id}\"\nkind = \"p-files\"\nparams = {{ {params} }}\n")
+    }
+
+    const REPLAY: &str = "[[node]]\nid = \"replay\"\nkind = \"replay\"\nparams = { path = \"rec.h5\" }\n";
+
+    #[test]
+    fn two_plugin_outputs_on_one_file_are_refused_at_the_later() {
+        let text = files("a", "out = \"x.csv\"") + &files("b", "out = \"sub/../x.csv\"");
+        assert_eq!(
+            errors(&text),
+            "DIR/g.toml:8:12: node \"b\": param \"out\": writes DIR/sub/../x.csv, which p-files \"a\" writes too \
+             (its `out` DIR/x.csv, the same file): each would replace the other's output, whatever `overwrite` says; \
+             give each node its own file"
+        );
+        // One of an array's files, and one file twice in one array.
+        let text = files("a", "out = \"x.csv\"") + &files("b", "outs = [\"y.csv\", \"x.csv\"]");
+        assert!(
+            errors(&text).starts_with(
+                "DIR/g.toml:8:12: node \"b\": param \"outs\": writes DIR/x.csv, which p-files \"a\" writes too (its \
+                 `out` DIR/x.csv)"
+            ),
+            "{}",
+            errors(&text)
+        );
+        let text = files("a", "outs = [\"y.csv\", \"./y.csv\"]");
+        assert!(
+            errors(&text).starts_with(
+                "DIR/g.toml:4:12: node \"a\": param \"outs\": writes DIR/./y.csv, which this node writes too (its \
+                 `outs` DIR/y.csv, the same file)"
+            ),
+            "{}",
+            errors(&text)
+        );
+        // Different files: accepted.
+        let text = files("a", "out = \"x.csv\", outs = [\"y.csv\"]") + &files("b", "out = \"z.csv\"");
+        assert_eq!(errors(&text), "");
+    }
+
+    #[test]
+    fn a_plugin_output_over_a_file_any_node_reads_or_writes_is_refused() {
+        // A recording replayed.
+        let text = format!("{REPLAY}{}", files("csv", "out = \"rec.h5\""));
+        assert_eq!(
+            errors(&text),
+            "DIR/g.toml:8:12: node \"csv\": param \"out\": writes DIR/rec.h5, the recording replay \"replay\" \
+             reads (its `path` DIR/rec.h5): the run would overwrite that input, whatever `overwrite` says, and what \
+             it holds would be lost; give `out` another file"
+        );
+        // The graph file; a plugin's input-path; a plugin's path (read or written).
+        let text = files("csv", "out = \"g.toml\"");
+        assert!(errors(&text).contains("writes DIR/g.toml, which is this graph's own file"), "{}", errors(&text));
+        let text = files("r", "in = \"p.csv\"") + &files("w", "out = \"p.csv\"");
+        assert!(
+            errors(&text).starts_with(
+                "DIR/g.toml:8:12: node \"w\": param \"out\": writes DIR/p.csv, the file p-files \"r\" reads (its `in` \
+                 DIR/p.csv)"
+            ),
+            "{}",
+            errors(&text)
+        );
+        let text = files("w", "out = \"p.csv\"") + &files("e", "either = \"p.csv\"");
+        assert!(
+            errors(&text).starts_with(
+                "DIR/g.toml:4:12: node \"w\": param \"out\": writes DIR/p.csv, which p-files \"e\" (a plugin kind) \
+                 names in its `either` DIR/p.csv"
+            ),
+            "{}",
+            errors(&text)
+        );
+        // A logger over a plugin's output, and over a file a plugin reads.
+        for param in ["out", "in"] {
+            let text = format!(
+                "{REPLAY}{}[[node]]\nid = \"log\"\nkind = \"hdf5_logger\"\nparams = {{ path = \"p.h5\" }}\n\
+                 [[edge]]\nfrom = \"replay.eit\"\nto = \"log.eit\"\n",
+                files("p", &format!("{param} = \"p.h5\""))
+            );
+            assert!(
+                errors(&text).starts_with("DIR/g.toml:12:12: node \"log\": param \"path\": writes DIR/p.h5"),
+                "{param}"
+            );
+        }
+        // A file a plugin reads (input-path or path) may be read by any number of nodes.
+        let text = files("a", "in = \"p.csv\"")
+            + &files("b", "in = \"p.csv\", either = \"q.csv\"")
+            + &files("c", "either = \"p.csv\"");
+        assert_eq!(errors(&text), "");
+    }
+
+    #[test]
+    fn param_types_say_what_a_plugin_does_with_its_file() {
+        assert_eq!(param_use("p", "f", "output-path"), Some(Use::Writes));
+        assert_eq!(param_use("p", "f", "[output-path]"), Some(Use::Writes));
+        assert_eq!(param_use("p", "f", "input-path"), Some(Use::Reads));
+        assert_eq!(param_use("p", "f", "path"), Some(Use::Names));
+        assert_eq!(param_use("p", "f", "string"), None);
+        // A built-in kind's, as listed (its type is `path`).
+        assert_eq!(param_use("hdf5_logger", "path", "path"), Some(Use::Writes));
+        assert_eq!(param_use("replay", "path", "path"), Some(Use::Reads));
+        assert_eq!(param_use("reconstructor", "cache_dir", "path"), Some(Use::Directory));
+    }
+
+    #[test]
+    fn an_extra_output_over_any_file_of_the_graph_is_refused_naming_node_param_and_file() {
+        let text = format!(
+            "{REPLAY}\
+             [[node]]\nid = \"log\"\nkind = \"hdf5_logger\"\nparams = {{ path = \"out.h5\", rotate_s = 60.0 }}\n\
+             [[node]]\nid = \"split\"\nkind = \"p-split\"\n\
+             [[node]]\nid = \"force\"\nkind = \"corrector\"\nparams = {{ calibration = \"calib.toml\" }}\n\
+             {}{}\
+             [[edge]]\nfrom = \"replay.eit\"\nto = \"log.eit\"\n\
+             [[edge]]\nfrom = \"split.split\"\nto = \"force.split\"\n",
+            files("csv", "out = \"f.csv\", either = \"e.csv\""),
+            files("csv2", "in = \"calib.toml\"")
+        );
+        let spec = spec(&text);
+        assert_eq!(check_files(&spec), Ok(()), "the graph itself is fine");
+        let check = |p: &str| {
+            check_extra_output(&spec, "--stats-json", &base().join(p))
+                .map_err(|e| e.replace(&base().display().to_string(), "DIR"))
+        };
+        let tail = ": writing it would replace that file, or the graph would write over it; give --stats-json another \
+                    file";
+        assert_eq!(
+            check("rec.h5").unwrap_err(),
+            format!("--stats-json DIR/rec.h5 is the recording replay \"replay\" reads (its `path` DIR/rec.h5){tail}")
+        );
+        assert_eq!(
+            check("sub/../calib.toml").unwrap_err(),
+            format!(
+                "--stats-json DIR/sub/../calib.toml is the calibration corrector \"force\" reads (its `calibration` \
+                 DIR/calib.toml, the same file), and the file p-files \"csv2\" reads (its `in` DIR/calib.toml, the \
+                 same file){tail}"
+            )
+        );
+        assert_eq!(
+            check("g.toml").unwrap_err(),
+            format!("--stats-json DIR/g.toml is this graph's own file DIR/g.toml{tail}")
+        );
+        assert_eq!(
+            check("out.h5").unwrap_err(),
+            format!("--stats-json DIR/out.h5 is the file hdf5_logger \"log\" writes (its `path` DIR/out.h5){tail}")
+        );
+        assert_eq!(
+            check("out-0002.h5").unwrap_err(),
+            format!(
+                "--stats-json DIR/out-0002.h5 is a rotated part of the recording hdf5_logger \"log\" writes (its \
+                 `path` DIR/out.h5){tail}"
+            )
+        );
+        assert_eq!(
+            check("f.csv").unwrap_err(),
+            format!("--stats-json DIR/f.csv is the file p-files \"csv\" writes (its `out` DIR/f.csv){tail}")
+        );
+        assert_eq!(
+            check("e.csv").unwrap_err(),
+            format!(
+                "--stats-json DIR/e.csv is the file p-files \"csv\" (a plugin kind) reads or writes (its `either` \
+                 DIR/e.csv){tail}"
+            )
+        );
+        // Another file, and a name relative to the current directory, not the graph's.
+        check("stats.json").unwrap();
+        check_extra_output(&spec, "--stats-json", Path::new("rec.h5")).unwrap();
+    }
 
     #[test]
     fn rotated_parts_and_normalized_paths() {

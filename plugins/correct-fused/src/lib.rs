@@ -18,6 +18,7 @@
 use std::path::{Path, PathBuf};
 
 use serde::Deserialize;
+use skinflow_plugin_sdk::export::INPUT_PATH;
 use skinflow_plugin_sdk::{Columns, KindSpec, Outputs, PluginNode};
 
 /// `f(s) = a0 + a1 s + a2 s^2` fitted on `[signal_min, signal_max]`, as in the calibration file.
@@ -118,7 +119,7 @@ impl PluginNode for Fused {
         KindSpec::new("fused-corrector", "per-contact force fusing the pneumatic and EIT global force maps")
             .input("split", "split", "dP_i per contact")
             .output("forces", "forces", "per-contact forces, N")
-            .param("calibration", "path", "", "calibration TOML from `skinflow calibrate`")
+            .param("calibration", INPUT_PATH, "", "calibration TOML from `skinflow calibrate` (read at load)")
             .param("weight_pneumatic", "float", "0.8", "weight of the pneumatic estimate, in [0, 1]")
             .param(
                 "name",

@@ -29,6 +29,7 @@
 use std::path::{Path, PathBuf};
 
 use serde::Deserialize;
+use skinflow_plugin_sdk::export::INPUT_PATH;
 use skinflow_plugin_sdk::{ImportOutcome, KindSpec, Outputs, PluginSource, Poll, SourceCtx, StateReader, StateWriter};
 
 #[derive(Deserialize)]
@@ -223,7 +224,7 @@ impl PluginSource for CsvPressure {
             "replays pressure samples (t_s,kpa) from a CSV file, paced or as fast as possible",
         )
         .output("pressure", "pressure", "one gauge-pressure sample per row, kPa, stamped with its t_s")
-        .param("path", "path", "", "the CSV file, relative to the graph file")
+        .param("path", INPUT_PATH, "", "the CSV file it reads, relative to the graph file")
         .param("speed", "float", "1.0", "playback speed against the file's times; 0 = as fast as possible")
     }
 

@@ -12,6 +12,10 @@
 //! created (with its parent directories) and truncated, or with `append = true` appended to
 //! (the header line only when it is new or empty).
 //!
+//! `path` is declared an `output-path`: `skinflow check` refuses two of these sinks on one
+//! file (their rows would replace or interleave with each other's), and one over a file the
+//! graph reads (a recording, a calibration, the CSV a `csv-pressure` source replays).
+//!
 //! ```toml
 //! params = { path = "../out/forces.csv", append = false }
 //! ```
@@ -21,6 +25,7 @@ use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 
 use serde::Deserialize;
+use skinflow_plugin_sdk::export::OUTPUT_PATH;
 use skinflow_plugin_sdk::{Columns, KindSpec, PluginSink};
 
 #[derive(Deserialize)]
@@ -84,7 +89,7 @@ impl PluginSink for ForcesCsv {
     fn spec() -> KindSpec {
         KindSpec::new("forces-csv", "appends each forces frame to a CSV file, one row per contact, flushed per frame")
             .input("forces", "forces", "per-contact forces")
-            .param("path", "path", "", "the CSV file, relative to the graph file")
+            .param("path", OUTPUT_PATH, "", "the CSV file it writes, relative to the graph file")
             .param("append", "bool", "false", "append to an existing file instead of replacing it")
     }
 
@@ -125,7 +130,7 @@ impl PluginSink for PressureCsv {
     fn spec() -> KindSpec {
         KindSpec::new("pressure-csv", "writes pressure samples to a CSV file (t_s,kpa: what csv-pressure replays)")
             .input("pressure", "pressure", "gauge-pressure samples")
-            .param("path", "path", "", "the CSV file, relative to the graph file")
+            .param("path", OUTPUT_PATH, "", "the CSV file it writes, relative to the graph file")
             .param("append", "bool", "false", "append to an existing file instead of replacing it")
     }
 

@@ -40,8 +40,32 @@ pub struct PortDecl {
 /// The type names a param may be documented with ([`KindSpec::param`]): those `skinflow
 /// nodes` lists for the built-in kinds, plus an array of one, written `[T]` (e.g. `[string]`).
 /// The host refuses a library with any other (a typo such as `flaot` would mislead users).
+///
+/// Three name a file, relative to the graph file (the `base_dir` a kind's `new` gets); the
+/// graph checks (`skinflow check`, `run`, a hot swap) compare the files by what the kind does
+/// with them:
+///
+/// - [`OUTPUT_PATH`] (`output-path`): a file the kind writes (creates, truncates or appends
+///   to). Refused when it is the graph file, a plugin library, a file any node reads, or a
+///   file another node writes (two `output-path` params of two nodes included): one writer
+///   would replace the other's rows, or the run an input.
+/// - [`INPUT_PATH`] (`input-path`): a file the kind only reads. Any number of nodes may read
+///   one file; a node writing it is refused.
+/// - [`PATH`] (`path`): a file the kind reads or writes, not said which. A node writing it is
+///   refused, but two `path` params naming one file are not (they may be two readers): declare
+///   `output-path` or `input-path` instead when you know.
 pub const PARAM_TYPES: &[&str] =
-    &["bool", "integer", "float", "string", "path", "table", "f64", "u8", "u32", "u64", "usize"];
+    &["bool", "integer", "float", "string", PATH, INPUT_PATH, OUTPUT_PATH, "table", "f64", "u8", "u32", "u64", "usize"];
+
+/// The param type of a file a kind reads or writes, not said which (see [`PARAM_TYPES`]).
+pub const PATH: &str = "path";
+
+/// The param type of a file a kind only reads (see [`PARAM_TYPES`]).
+pub const INPUT_PATH: &str = "input-path";
+
+/// The param type of a file a kind writes (see [`PARAM_TYPES`]): checked like a built-in
+/// writer's (an `hdf5_logger`'s `path`) against every other file of the graph.
+pub const OUTPUT_PATH: &str = "output-path";
 
 /// Whether `ty` is one of [`PARAM_TYPES`] or `[T]` of one.
 pub fn is_param_type(ty: &str) -> bool {
@@ -94,6 +118,11 @@ impl KindSpec {
 
     /// A documented param: `ty` is one of [`PARAM_TYPES`] or `[T]` of one (the host refuses
     /// the library otherwise), `default` TOML text (empty: required).
+    ///
+    /// A file the kind writes is an [`OUTPUT_PATH`] (`"output-path"`), one it only reads an
+    /// [`INPUT_PATH`] (`"input-path"`): the graph checks then refuse an output of this node
+    /// over any file the graph reads or writes, and any other node's output over a file this
+    /// one reads. [`PATH`] (`"path"`) says neither, and two of them naming one file pass.
     ///
     /// A param named `name` (type `string`) is also read by the host: the node's derived
     /// outputs (`split`, `forces`) carry it as their strategy name (the `compare` lane, the
@@ -1076,6 +1105,24 @@ macro_rules! export_plugin {
             })
         }
     };
+}
+
+#[cfg(test)]
+mod param_types {
+    use super::{INPUT_PATH, OUTPUT_PATH, PARAM_TYPES, PATH, is_param_type};
+
+    #[test]
+    fn the_file_types_are_param_types_alone_and_in_arrays() {
+        assert_eq!((PATH, INPUT_PATH, OUTPUT_PATH), ("path", "input-path", "output-path"));
+        for ty in [PATH, INPUT_PATH, OUTPUT_PATH] {
+            assert!(PARAM_TYPES.contains(&ty), "{ty}");
+            assert!(is_param_type(ty), "{ty}");
+            assert!(is_param_type(&format!("[{ty}]")), "[{ty}]");
+        }
+        for bad in ["output_path", "out-path", "output-path ", "[output-path", "[[output-path]]", ""] {
+            assert!(!is_param_type(bad), "{bad:?}");
+        }
+    }
 }
 
 #[cfg(all(test, feature = "host"))]

@@ -38,7 +38,10 @@
 //! ```
 //!
 //! Param docs ([`KindSpec::param`]) use the type names of [`export::PARAM_TYPES`] (checked at
-//! load); a param `name` is also read by the host as the name of the node's outputs. What a
+//! load): a file the kind writes is an `output-path` ([`export::OUTPUT_PATH`]), one it only
+//! reads an `input-path`, so the graph checks refuse two nodes writing one file or a node
+//! writing a file another reads. A param `name` is also read by the host as the name of the
+//! node's outputs. What a
 //! derived output (`contacts`, `split`, `forces`) carries of its input is found by header:
 //! see [`PluginNode::process`]. More in `plugins/README.md`.
 

@@ -147,6 +147,8 @@ enum Cmd {
         contacts_csv: Option<PathBuf>,
         #[command(flatten)]
         pipeline: cmd::pipeline::PipelineArgs,
+        #[command(flatten)]
+        lanes: cmd::eval::LaneArgs,
     },
 }
 
@@ -245,10 +247,16 @@ fn dispatch(cmd: Cmd) -> Result<ExitCode> {
         Cmd::Calibrate { recordings, out, fit, pipeline } => {
             cmd::calibrate::run(&recordings, &out, &fit.fit, &pipeline).map(|()| ExitCode::SUCCESS)
         }
-        Cmd::Eval { recordings, calib, json, plots, contacts_csv, pipeline } => {
-            cmd::eval::run(&recordings, &calib, json.as_deref(), plots.as_deref(), contacts_csv.as_deref(), &pipeline)
-                .map(|()| ExitCode::SUCCESS)
-        }
+        Cmd::Eval { recordings, calib, json, plots, contacts_csv, pipeline, lanes } => cmd::eval::run(
+            &recordings,
+            &calib,
+            json.as_deref(),
+            plots.as_deref(),
+            contacts_csv.as_deref(),
+            &pipeline,
+            &lanes,
+        )
+        .map(|()| ExitCode::SUCCESS),
         // Drawing needs the graph only, not the files it reads.
         Cmd::Dot { graph } => match load(&graph, InputFiles::Skip)? {
             Ok(spec) => {
@@ -352,8 +360,13 @@ fn run(
         None => None,
     };
     // Before the graph starts: a bad --stats-json or --control path fails without any data flowing.
+    // Neither may be a file the graph reads or writes (a calibration, a logger's recording).
     if let Some(stats) = stats_json {
+        skinflow_nodes::outputs::check_extra_output(&spec, "--stats-json", stats).map_err(anyhow::Error::msg)?;
         cmd::paths::check_outputs(&[("graph", path)], &[("--stats-json", stats)])?;
+    }
+    if let Some(sock) = control {
+        skinflow_nodes::outputs::check_extra_output(&spec, "--control", sock).map_err(anyhow::Error::msg)?;
     }
     let stop = interrupt_flag()?;
     // The kinds live swaps can use: the graph's plugins loaded again (fresh copies, so a

@@ -2,10 +2,14 @@
 //! (`skinflow_nodes::outputs`): `check` refuses, and `run` stops before any node starts on,
 //! a logger writing the recording its graph replays, the graph file itself, the file another
 //! logger writes, or listing a strategy no corrector produces; each error is located at the
-//! param and the inputs are left as they were.
+//! param and the inputs are left as they were. The same for the example plugin sinks, whose
+//! `path` is an `output-path` (plugins/csv-writers): two `forces-csv` sinks on one file, one
+//! over the recording replayed or the calibration a corrector reads, a `pressure-csv` over the
+//! file a `csv-pressure` source reads (its `input-path`); a sink on a file of its own runs.
 
 use std::path::{Path, PathBuf};
 
+use super::plugins::plugin;
 use super::support::{fixture, ok, skinflow, stderr};
 
 fn workdir(test: &str) -> PathBuf {
@@ -183,4 +187,180 @@ fn forces_of_an_unlisted_strategy_are_counted_as_discarded() {
     let rec = skinflow_record::Recording::open(d.join("out.h5")).unwrap();
     let tables: Vec<(&str, usize)> = rec.derived.forces.iter().map(|f| (f.name.as_str(), f.t_s.len())).collect();
     assert_eq!(tables, [("pneumatic-forward-force-balance", frames as usize)]);
+}
+
+/// A TOML string of `p`.
+fn quoted(p: &Path) -> String {
+    toml::Value::String(p.to_string_lossy().into_owned()).to_string()
+}
+
+/// The 1-based line of the `params` of node `id` in `graph` (where its errors are located).
+fn params_line(graph: &str, id: &str) -> usize {
+    let lines: Vec<&str> = graph.lines().collect();
+    let at = lines.iter().position(|l| *l == format!("id = \"{id}\"")).unwrap_or_else(|| panic!("{id}: {graph}"));
+    at + lines[at..].iter().position(|l| l.starts_with("params = ")).expect("a params line") + 1
+}
+
+/// The csv-writers library, then a replay of `rec.h5` through the pipeline into corrector
+/// "paper" (calibration `calib.toml`, a copy of the paper's), whose forces go to `forces-csv`
+/// sinks `(id, path)`; written as `d/g.toml`.
+fn forces_csv_graph(d: &Path, sinks: &[(&str, &str)]) -> String {
+    let calib = d.join("calib.toml");
+    if !calib.exists() {
+        std::fs::copy(fixture("../../graphs/calib/paper.toml"), &calib).unwrap();
+    }
+    let mut graph = format!(
+        "[graph]\nmode = \"lockstep\"\n\
+         [[plugin]]\npath = {}\n\
+         [[node]]\nid = \"replay\"\nkind = \"replay\"\nparams = {{ path = \"rec.h5\", speed = 0.0 }}\n\
+         [[node]]\nid = \"sync\"\nkind = \"sync\"\n\
+         [[node]]\nid = \"recon\"\nkind = \"reconstructor\"\n\
+         [[node]]\nid = \"seg\"\nkind = \"segmenter\"\n\
+         [[node]]\nid = \"split\"\nkind = \"splitter\"\n\
+         [[node]]\nid = \"paper\"\nkind = \"corrector\"\nparams = {{ calibration = \"calib.toml\" }}\n",
+        quoted(&plugin("skinflow-plugin-csv-writers"))
+    );
+    for (id, path) in sinks {
+        graph += &format!("[[node]]\nid = \"{id}\"\nkind = \"forces-csv\"\nparams = {{ path = {path:?} }}\n");
+    }
+    graph += "[[edge]]\nfrom = \"replay.eit\"\nto = \"sync.eit\"\n\
+         [[edge]]\nfrom = \"replay.pressure\"\nto = \"sync.pressure\"\n\
+         [[edge]]\nfrom = \"sync.frame\"\nto = \"recon.frame\"\n\
+         [[edge]]\nfrom = \"recon.image\"\nto = \"seg.image\"\n\
+         [[edge]]\nfrom = \"seg.contacts\"\nto = \"split.contacts\"\n\
+         [[edge]]\nfrom = \"split.split\"\nto = \"paper.split\"\n";
+    for (id, _) in sinks {
+        graph += &format!("[[edge]]\nfrom = \"paper.forces\"\nto = \"{id}.forces\"\n");
+    }
+    std::fs::write(d.join("g.toml"), &graph).unwrap();
+    graph
+}
+
+/// Before, two plugin sinks on one file passed `check` (a plugin's `path` param could be
+/// read or written) and overwrote each other's rows; with `path` an `output-path`, the later
+/// one is refused, naming both nodes.
+#[test]
+fn two_plugin_sinks_on_one_file_are_refused_naming_both_nodes() {
+    let d = workdir("plugin-two-sinks");
+    recording(&d);
+    let graph = forces_csv_graph(&d, &[("a", "forces.csv"), ("b", "./forces.csv")]);
+    refused(
+        &d,
+        &format!(
+            "g.toml:{}:12: node \"b\": param \"path\": writes ./forces.csv, which forces-csv \"a\" writes too (its \
+             `path` forces.csv, the same file): each would replace the other's output, whatever `overwrite` says; \
+             give each node its own file",
+            params_line(&graph, "b")
+        ),
+    );
+    assert!(!d.join("forces.csv").exists(), "nothing ran");
+}
+
+#[test]
+fn a_plugin_sink_over_the_recording_or_the_calibration_is_refused_and_both_are_kept() {
+    let d = workdir("plugin-over-inputs");
+    recording(&d);
+    let rec = std::fs::read(d.join("rec.h5")).unwrap();
+    let graph = forces_csv_graph(&d, &[("csv", "rec.h5")]);
+    let calib = std::fs::read(d.join("calib.toml")).unwrap();
+    refused(
+        &d,
+        &format!(
+            "g.toml:{}:12: node \"csv\": param \"path\": writes rec.h5, the recording replay \"replay\" reads (its \
+             `path` rec.h5): the run would overwrite that input, whatever `overwrite` says, and what it holds would \
+             be lost; give `path` another file",
+            params_line(&graph, "csv")
+        ),
+    );
+    let graph = forces_csv_graph(&d, &[("csv", "sub/../calib.toml")]);
+    refused(
+        &d,
+        &format!(
+            "g.toml:{}:12: node \"csv\": param \"path\": writes sub/../calib.toml, the calibration corrector \
+             \"paper\" reads (its `calibration` calib.toml, the same file): the run would overwrite that input, \
+             whatever `overwrite` says, and what it holds would be lost; give `path` another file",
+            params_line(&graph, "csv")
+        ),
+    );
+    assert_eq!(std::fs::read(d.join("rec.h5")).unwrap(), rec, "the recording is untouched");
+    assert_eq!(std::fs::read(d.join("calib.toml")).unwrap(), calib, "the calibration is untouched");
+}
+
+/// `csv-pressure`'s `path` is an `input-path`: a `pressure-csv` writing that file is refused
+/// (it would truncate the samples being replayed).
+#[test]
+fn a_plugin_sink_over_the_file_a_plugin_source_reads_is_refused() {
+    let d = workdir("plugin-over-plugin-input");
+    std::fs::write(d.join("p.csv"), "t_s,kpa\n0,101.25\n0.5,101.5\n").unwrap();
+    let graph = format!(
+        "[graph]\nmode = \"lockstep\"\n\
+         [[plugin]]\npath = {}\n[[plugin]]\npath = {}\n\
+         [[node]]\nid = \"daq\"\nkind = \"csv-pressure\"\nparams = {{ path = \"p.csv\", speed = 0.0 }}\n\
+         [[node]]\nid = \"out\"\nkind = \"pressure-csv\"\nparams = {{ path = \"p.csv\", append = true }}\n\
+         [[edge]]\nfrom = \"daq.pressure\"\nto = \"out.pressure\"\n",
+        quoted(&plugin("skinflow-plugin-csv-pressure")),
+        quoted(&plugin("skinflow-plugin-csv-writers"))
+    );
+    std::fs::write(d.join("g.toml"), &graph).unwrap();
+    refused(
+        &d,
+        &format!(
+            "g.toml:{}:12: node \"out\": param \"path\": writes p.csv, the file csv-pressure \"daq\" reads (its \
+             `path` p.csv): the run would overwrite that input, whatever `overwrite` says, and what it holds would be \
+             lost; give `path` another file",
+            params_line(&graph, "out")
+        ),
+    );
+    assert_eq!(std::fs::read_to_string(d.join("p.csv")).unwrap(), "t_s,kpa\n0,101.25\n0.5,101.5\n");
+    // Another file: the samples are copied.
+    std::fs::write(d.join("g.toml"), graph.replace("path = \"p.csv\", append", "path = \"q.csv\", append")).unwrap();
+    ok(&skinflow(&d, &["run", "g.toml"]));
+    assert_eq!(std::fs::read_to_string(d.join("q.csv")).unwrap(), "t_s,kpa\n0,101.25\n0.5,101.5\n");
+}
+
+/// Two plugin sinks on files of their own pass `check` and each gets every row.
+#[test]
+fn plugin_sinks_on_files_of_their_own_run() {
+    let d = workdir("plugin-own-files");
+    recording(&d);
+    forces_csv_graph(&d, &[("a", "a.csv"), ("b", "sub/b.csv")]);
+    ok(&skinflow(&d, &["check", "g.toml"]));
+    ok(&skinflow(&d, &["run", "g.toml"]));
+    let a = std::fs::read_to_string(d.join("a.csv")).unwrap();
+    assert!(a.starts_with("seq,t_s,contact,x_mm,y_mm,area_mm2,dp_kpa,force_n\n"), "{a}");
+    assert!(a.lines().count() > 1, "rows written: {a}");
+    assert_eq!(std::fs::read_to_string(d.join("sub/b.csv")).unwrap(), a, "each sink wrote every row");
+}
+
+/// `run --stats-json` (and `--control`) given a file the graph reads or writes: refused
+/// before any node starts, naming the node and its param; the file is left as it was. Before,
+/// only the graph file itself was refused, and the statistics replaced a calibration.
+#[test]
+fn stats_json_over_a_file_the_graph_reads_or_writes_is_refused() {
+    let d = workdir("stats-json");
+    recording(&d);
+    replay_graph(&d, &[("log", "path = \"out.h5\"")], "");
+    let rec = std::fs::read(d.join("rec.h5")).unwrap();
+    let cases = [
+        (
+            "--stats-json",
+            "sub/../rec.h5",
+            "--stats-json sub/../rec.h5 is the recording replay \"replay\" reads (its `path` ",
+        ),
+        ("--stats-json", "out.h5", "--stats-json out.h5 is the file hdf5_logger \"log\" writes (its `path` "),
+        ("--control", "out.h5", "--control out.h5 is the file hdf5_logger \"log\" writes (its `path` "),
+    ];
+    std::fs::create_dir_all(d.join("sub")).unwrap();
+    for (flag, file, want) in cases {
+        let out = skinflow(&d, &["run", "g.toml", flag, file]);
+        let err = stderr(&out);
+        assert!(!out.status.success(), "{flag} {file}: {err}");
+        assert!(err.contains(want), "{flag} {file}: {err}");
+        assert!(err.contains(&format!("give {flag} another file")), "{err}");
+        assert!(!d.join("out.h5").exists(), "{flag} {file}: nothing ran");
+    }
+    assert_eq!(std::fs::read(d.join("rec.h5")).unwrap(), rec, "the recording is untouched");
+    // A file of its own: the run goes on and writes it.
+    ok(&skinflow(&d, &["run", "g.toml", "--stats-json", "stats.json"]));
+    assert!(std::fs::read_to_string(d.join("stats.json")).unwrap().contains("\"log\""));
 }

@@ -2,6 +2,7 @@
 
 mod cli;
 mod engine;
+mod eval_lanes;
 mod hardware;
 mod live;
 mod outputs;

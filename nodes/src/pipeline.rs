@@ -1,7 +1,8 @@
 //! The skin pipeline as a library call: a recording replayed through the real nodes
 //! (`replay -> sync -> reconstructor -> segmenter -> splitter -> corrector`) in lockstep, with
 //! every lane's output captured in memory. `skinflow calibrate` and `skinflow eval` use it, so
-//! their figures are those of the graph a user runs, bit for bit.
+//! their figures are those of the graph a user runs, bit for bit. A lane's splitter or
+//! corrector may be any kind with fitting ports, a plugin's too (`eval --lane`).
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -47,6 +48,56 @@ pub fn registry_with_capture(into: Captured) -> Registry {
     r
 }
 
+/// One node of a lane: its splitter or its corrector.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Stage {
+    /// The built-in `splitter` (or `corrector`) with this `strategy` and the spec's
+    /// calibration; a corrector also gets its lane's name as the `name` param.
+    Strategy(String),
+    /// Any kind (a plugin's, say) with its params in full; `input` and `output` are the ports
+    /// wired into the lane (a splitter: `contacts` in, `split` out; a corrector: `split` in,
+    /// `forces` out).
+    Node { kind: String, params: toml::Table, input: String, output: String },
+}
+
+impl Stage {
+    /// The port wired into the lane: the built-in kind's, or the given one.
+    fn input_port(&self, built_in: &'static str) -> &str {
+        match self {
+            Stage::Strategy(_) => built_in,
+            Stage::Node { input, .. } => input,
+        }
+    }
+
+    /// As [`Stage::input_port`], for the output.
+    fn output_port(&self, built_in: &'static str) -> &str {
+        match self {
+            Stage::Strategy(_) => built_in,
+            Stage::Node { output, .. } => output,
+        }
+    }
+}
+
+/// One lane: contacts -> splitter -> corrector -> captured forces.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Lane {
+    /// Unique among the spec's lanes; letters, digits, '_' and '-' (it is part of a node id).
+    pub name: String,
+    pub split: Stage,
+    pub correct: Stage,
+}
+
+impl Lane {
+    /// A lane of the built-in splitter and corrector strategies.
+    pub fn strategies(name: &str, split: &str, correct: &str) -> Lane {
+        Lane {
+            name: name.to_owned(),
+            split: Stage::Strategy(split.to_owned()),
+            correct: Stage::Strategy(correct.to_owned()),
+        }
+    }
+}
+
 /// What to run.
 #[derive(Debug, Clone)]
 pub struct PipelineSpec {
@@ -57,10 +108,13 @@ pub struct PipelineSpec {
     pub segmenter: String,
     /// Inline TOML table body for the sync node's params.
     pub sync: String,
-    /// With a calibration: (lane name, splitter strategy, corrector strategy) per lane.
-    /// Without: contacts are captured instead of forces.
-    pub lanes: Vec<(String, String, String)>,
+    /// With a calibration: the lanes, in capture order. Splitters shared by lanes (the same
+    /// strategy, or the same kind with identical params) run once. Without: contacts are
+    /// captured instead of forces.
+    pub lanes: Vec<Lane>,
     pub calibration: Option<PathBuf>,
+    /// Plugin libraries the lanes' kinds come from (relative to the current directory).
+    pub plugins: Vec<PathBuf>,
 }
 
 fn quote(s: &str) -> String {
@@ -71,11 +125,104 @@ fn path_str(p: &Path) -> String {
     quote(&p.to_string_lossy())
 }
 
+/// `base`, or `base-2`, `base-3`, ... whichever `used` does not hold yet (then added to it).
+fn unique_id(base: String, used: &mut Vec<String>) -> String {
+    let mut id = base.clone();
+    let mut n = 1;
+    while used.contains(&id) {
+        n += 1;
+        id = format!("{base}-{n}");
+    }
+    used.push(id.clone());
+    id
+}
+
+/// The lanes' nodes: each distinct splitter once with its id, and per lane the index of its
+/// splitter and the id of its corrector.
+struct Layout<'a> {
+    splitters: Vec<(String, &'a Stage)>,
+    lanes: Vec<(usize, String)>,
+}
+
+/// The node of a run error, when it names one.
+fn failed_node(e: &skinflow_core::RunError) -> Option<&str> {
+    use skinflow_core::RunError as E;
+    match e {
+        E::Start { node, .. } | E::Node { node, .. } | E::Stop { node, .. } | E::Swap { node, .. } => Some(node),
+        E::SwapTimeout { node, .. } | E::Control { node, .. } | E::ControlTimeout { node, .. } => Some(node),
+        E::UnknownNode(_) => None,
+    }
+}
+
 impl PipelineSpec {
+    fn layout(&self) -> Layout<'_> {
+        let mut used = Vec::new();
+        let mut splitters: Vec<(String, &Stage)> = Vec::new();
+        let mut lanes = Vec::with_capacity(self.lanes.len());
+        for lane in &self.lanes {
+            let s = match splitters.iter().position(|(_, s)| **s == lane.split) {
+                Some(i) => i,
+                None => {
+                    let base = match &lane.split {
+                        Stage::Strategy(s) => format!("split-{s}"),
+                        Stage::Node { kind, .. } => format!("split-{kind}"),
+                    };
+                    splitters.push((unique_id(base, &mut used), &lane.split));
+                    splitters.len() - 1
+                }
+            };
+            lanes.push((s, String::new()));
+        }
+        // Correctors after the splitters, so a splitter keeps its id whatever the lane names.
+        for ((_, id), lane) in lanes.iter_mut().zip(&self.lanes) {
+            *id = unique_id(format!("correct-{}", lane.name), &mut used);
+        }
+        Layout { splitters, lanes }
+    }
+
+    /// The names of the lanes node `id` is part of (a shared splitter is part of several),
+    /// in lane order; empty for the shared stages and unknown ids.
+    pub fn lanes_of(&self, id: &str) -> Vec<&str> {
+        if self.calibration.is_none() {
+            return Vec::new();
+        }
+        let layout = self.layout();
+        self.lanes
+            .iter()
+            .zip(&layout.lanes)
+            .filter(|(_, (s, c))| c == id || layout.splitters[*s].0 == id)
+            .map(|(lane, _)| lane.name.as_str())
+            .collect()
+    }
+
+    /// `message` prefixed with the lanes node `id` belongs to (`lane "a": ...`), if any.
+    fn in_lanes(&self, id: Option<&str>, message: String) -> String {
+        let lanes = id.map_or_else(Vec::new, |id| self.lanes_of(id));
+        match lanes.as_slice() {
+            [] => message,
+            [one] => format!("lane \"{one}\": {message}"),
+            many => {
+                let names: Vec<String> = many.iter().map(|n| format!("\"{n}\"")).collect();
+                format!("lanes {}: {message}", names.join(", "))
+            }
+        }
+    }
+
+    /// The built-in kinds, the capture sink writing into `into`, and the kinds of
+    /// [`PipelineSpec::plugins`].
+    pub fn registry(&self, into: Captured) -> Result<Registry, String> {
+        let mut reg = registry_with_capture(into);
+        crate::codec::load_plugins(&self.plugins, &mut reg).map_err(|e| e.to_string())?;
+        Ok(reg)
+    }
+
     /// The graph as TOML text (also what `--print-graph` shows).
     pub fn graph_toml(&self) -> String {
         let mut g = String::new();
         let _ = writeln!(g, "[graph]\nname = \"pipeline\"\nmode = \"lockstep\"\n");
+        for p in &self.plugins {
+            let _ = writeln!(g, "[[plugin]]\npath = {}\n", path_str(p));
+        }
         let _ = writeln!(
             g,
             "[[node]]\nid = \"replay\"\nkind = \"replay\"\nparams = {{ path = {}, speed = 0.0 }}\n",
@@ -99,44 +246,70 @@ impl PipelineSpec {
             None => edge(&mut g, "segment.contacts", "capture.in"),
             Some(cal) => {
                 let cal = path_str(cal);
-                let mut splitters: Vec<&str> = Vec::new();
-                for (_, split, _) in &self.lanes {
-                    if !splitters.contains(&split.as_str()) {
-                        splitters.push(split);
+                let layout = self.layout();
+                let node = |g: &mut String, id: &str, kind: &str, params: &str| {
+                    let _ = writeln!(g, "[[node]]\nid = \"{id}\"\nkind = {}\nparams = {params}\n", quote(kind));
+                };
+                for (id, stage) in &layout.splitters {
+                    match stage {
+                        Stage::Strategy(s) => {
+                            node(&mut g, id, "splitter", &format!("{{ strategy = {}, calibration = {cal} }}", quote(s)))
+                        }
+                        Stage::Node { kind, params, .. } => node(&mut g, id, kind, &inline_table(params)),
                     }
+                    edge(&mut g, "segment.contacts", &format!("{id}.{}", stage.input_port("contacts")));
                 }
-                for s in &splitters {
-                    let _ = writeln!(
-                        g,
-                        "[[node]]\nid = \"split-{s}\"\nkind = \"splitter\"\nparams = {{ strategy = {}, calibration = {cal} }}\n",
-                        quote(s)
+                for (lane, (s, id)) in self.lanes.iter().zip(&layout.lanes) {
+                    match &lane.correct {
+                        Stage::Strategy(strategy) => node(
+                            &mut g,
+                            id,
+                            "corrector",
+                            &format!(
+                                "{{ strategy = {}, calibration = {cal}, name = {} }}",
+                                quote(strategy),
+                                quote(&lane.name)
+                            ),
+                        ),
+                        Stage::Node { kind, params, .. } => node(&mut g, id, kind, &inline_table(params)),
+                    }
+                    let (split_id, split) = &layout.splitters[*s];
+                    edge(
+                        &mut g,
+                        &format!("{split_id}.{}", split.output_port("split")),
+                        &format!("{id}.{}", lane.correct.input_port("split")),
                     );
-                    edge(&mut g, "segment.contacts", &format!("split-{s}.contacts"));
-                }
-                for (name, split, strategy) in &self.lanes {
-                    let _ = writeln!(
-                        g,
-                        "[[node]]\nid = \"correct-{name}\"\nkind = \"corrector\"\nparams = {{ strategy = {}, calibration = {cal}, name = {} }}\n",
-                        quote(strategy),
-                        quote(name)
-                    );
-                    edge(&mut g, &format!("split-{split}.split"), &format!("correct-{name}.split"));
-                    edge(&mut g, &format!("correct-{name}.forces"), "capture.in");
+                    edge(&mut g, &format!("{id}.{}", lane.correct.output_port("forces")), "capture.in");
                 }
             }
         }
         g
     }
 
-    /// Runs the pipeline over the recording; one captured row per EIT frame.
+    /// Runs the pipeline over the recording; one captured row per EIT frame. A failure or an
+    /// error of a lane's node (a plugin's, say) names the lane.
     pub fn run(&self) -> Result<Vec<Vec<Message>>, String> {
         let captured: Captured = Arc::new(Mutex::new(Vec::new()));
-        let reg = registry_with_capture(captured.clone());
+        let reg = self.registry(captured.clone())?;
         let src = SourceFile::new("<pipeline>", self.graph_toml());
         let spec = GraphSpec::parse(src, &reg).map_err(|e| e.to_string())?;
-        let report = skinflow_core::run(&spec, &RunOptions::default()).map_err(|e| e.to_string())?;
+        let report = skinflow_core::run(&spec, &RunOptions::default())
+            .map_err(|e| self.in_lanes(failed_node(&e), e.to_string()))?;
         if let Some(f) = report.failures.first() {
-            return Err(f.to_string());
+            return Err(self.in_lanes(failed_node(f), f.to_string()));
+        }
+        // A lane node that failed on some frames (logged as each happened) would leave those
+        // frames out of every lane (the capture aligns the lanes): an error, not fewer frames.
+        if let Some(n) = report.stats.nodes.iter().find(|n| n.errors + n.panics > 0 && !self.lanes_of(&n.id).is_empty())
+        {
+            let what = format!(
+                "node \"{}\" (kind \"{}\"): {} of {} calls failed (each is logged with the node's id)",
+                n.id,
+                n.kind,
+                n.errors + n.panics,
+                n.calls
+            );
+            return Err(self.in_lanes(Some(&n.id), what));
         }
         // Frames no image can be made of (a dead board's) are the reconstructor's: the first
         // its error, the rest its discards. They have no image, and are scored as such, as
@@ -148,5 +321,93 @@ impl PipelineSpec {
         }
         let rows = std::mem::take(&mut *captured.lock().map_err(|_| "capture buffer poisoned".to_string())?);
         Ok(rows)
+    }
+}
+
+/// `params` as an inline TOML table (`{ a = 1, b = "x" }`).
+fn inline_table(params: &toml::Table) -> String {
+    let body: Vec<String> = params.iter().map(|(k, v)| format!("{} = {}", key(k), inline_value(v))).collect();
+    if body.is_empty() { "{}".to_owned() } else { format!("{{ {} }}", body.join(", ")) }
+}
+
+/// A key, quoted unless bare (letters, digits, '_' and '-').
+fn key(k: &str) -> String {
+    if !k.is_empty() && k.chars().all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-') {
+        k.to_owned()
+    } else {
+        quote(k)
+    }
+}
+
+/// A value on one line: tables inline, at any depth.
+fn inline_value(v: &toml::Value) -> String {
+    match v {
+        toml::Value::Table(t) => inline_table(t),
+        toml::Value::Array(a) => format!("[{}]", a.iter().map(inline_value).collect::<Vec<_>>().join(", ")),
+        other => other.to_string(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn spec(lanes: Vec<Lane>) -> PipelineSpec {
+        PipelineSpec {
+            recording: PathBuf::from("rec.h5"),
+            reconstructor: String::new(),
+            segmenter: String::new(),
+            sync: String::new(),
+            lanes,
+            calibration: Some(PathBuf::from("calib.toml")),
+            plugins: vec![PathBuf::from("libp.so")],
+        }
+    }
+
+    fn node(kind: &str, params: &str, input: &str, output: &str) -> Stage {
+        Stage::Node {
+            kind: kind.to_owned(),
+            params: toml::from_str(params).unwrap(),
+            input: input.to_owned(),
+            output: output.to_owned(),
+        }
+    }
+
+    /// Splitters of one strategy, or of one kind with identical params, run once; other params
+    /// make another node. A failing node's error names every lane it is part of.
+    #[test]
+    fn splitters_are_shared_only_when_kind_and_params_are_identical() {
+        let peak = |e: &str| node("peak", &format!("exponent = {e}"), "contacts", "split");
+        let fused = node("fused", "calibration = \"c.toml\"\nw = { a = [1, 2] }", "split", "forces");
+        let s = spec(vec![
+            Lane::strategies("a", "proportional", "pneumatic-locaware"),
+            Lane::strategies("b", "proportional", "eit-nocal"),
+            Lane { name: "p1".into(), split: peak("1.0"), correct: Stage::Strategy("pneumatic-locaware".into()) },
+            Lane { name: "p1b".into(), split: peak("1.0"), correct: fused },
+            Lane { name: "p2".into(), split: peak("2.0"), correct: Stage::Strategy("pneumatic-locaware".into()) },
+        ]);
+        let g = s.graph_toml();
+        assert!(
+            g.starts_with("[graph]\nname = \"pipeline\"\nmode = \"lockstep\"\n\n[[plugin]]\npath = \"libp.so\"\n"),
+            "{g}"
+        );
+        assert_eq!(g.matches("kind = \"splitter\"").count(), 1, "{g}");
+        assert_eq!(g.matches("kind = \"peak\"").count(), 2, "{g}");
+        assert!(g.contains("id = \"split-peak\"\nkind = \"peak\"\nparams = { exponent = 1.0 }"), "{g}");
+        assert!(g.contains("id = \"split-peak-2\"\nkind = \"peak\"\nparams = { exponent = 2.0 }"), "{g}");
+        assert!(g.contains("params = { calibration = \"c.toml\", w = { a = [1, 2] } }"), "{g}");
+        assert!(g.contains("from = \"split-peak.split\"\nto = \"correct-p1b.split\""), "{g}");
+        assert!(g.contains("from = \"split-peak-2.split\"\nto = \"correct-p2.split\""), "{g}");
+        assert_eq!(s.lanes_of("split-proportional"), ["a", "b"]);
+        assert_eq!(s.lanes_of("split-peak"), ["p1", "p1b"]);
+        assert_eq!(s.lanes_of("correct-p2"), ["p2"]);
+        assert!(s.lanes_of("recon").is_empty());
+        assert_eq!(s.in_lanes(Some("split-peak"), "x".into()), "lanes \"p1\", \"p1b\": x");
+        assert_eq!(s.in_lanes(Some("correct-b"), "x".into()), "lane \"b\": x");
+        // The generated graph parses with the built-in kinds standing in for the plugin's.
+        let builtin = spec(vec![Lane::strategies("a", "force-balance", "pneumatic-forward")]);
+        let builtin = PipelineSpec { plugins: Vec::new(), ..builtin };
+        let src = SourceFile::new("<pipeline>", builtin.graph_toml());
+        GraphSpec::parse(src, &registry_with_capture(Captured::default())).unwrap();
     }
 }

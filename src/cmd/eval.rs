@@ -1,7 +1,8 @@
 //! `skinflow eval REC.h5 [MORE.h5 ...] --calib CALIB.toml [--json OUT] [--plots DIR]`: every
 //! force strategy on recordings with ground truth: the paper's Table III plus per-diameter RMSE,
 //! localization, multi-contact per-contact RMSE, RES50/RES75 and each strategy's latency.
-//! Several recordings (test sessions of one skin) are pooled into one report.
+//! Several recordings (test sessions of one skin) are pooled into one report. `--lane` adds
+//! lanes after the built-in nine: other strategies, or node kinds of `--plugin` libraries.
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -13,6 +14,9 @@ use skinflow_contact::{Calibration, ImageGrid, Segmenter};
 use skinflow_nodes::payload::{Forces, Image};
 
 use super::pipeline::{PipelineArgs, SettledBy};
+
+mod lanes;
+pub use lanes::{ExtraLanes, LaneArgs};
 
 /// (lane name, splitter, corrector strategy, label), in report order: the paper's four, then ours.
 pub const LANES: [(&str, &str, &str, &str); 9] = [
@@ -48,11 +52,22 @@ pub struct EvalOutcome {
 /// recordings' frames (each recording is reconstructed against its own no-load reference and
 /// tared on its own, as recorded); `want_rows` says whether to build the per-contact CSV lines.
 pub fn evaluate(recordings: &[PathBuf], calib: &Path, args: &PipelineArgs, want_rows: bool) -> Result<EvalOutcome> {
-    let labels: Vec<(&str, &str)> = LANES.iter().map(|(n, _, _, l)| (*n, *l)).collect();
-    let mut outcome = EvalOutcome { evaluator: Evaluator::new(&labels), contact_rows: Vec::new(), example: None };
+    evaluate_lanes(recordings, calib, args, &ExtraLanes::default(), want_rows)
+}
+
+/// As [`evaluate`], with `extra` lanes after the built-in nine.
+pub fn evaluate_lanes(
+    recordings: &[PathBuf],
+    calib: &Path,
+    args: &PipelineArgs,
+    extra: &ExtraLanes,
+    want_rows: bool,
+) -> Result<EvalOutcome> {
+    let mut outcome =
+        EvalOutcome { evaluator: Evaluator::new(&extra.labels()), contact_rows: Vec::new(), example: None };
     for recording in recordings {
         let frames = outcome.evaluator.frames();
-        evaluate_one(recording, calib, args, want_rows, &mut outcome)?;
+        evaluate_one(recording, calib, args, extra, want_rows, &mut outcome)?;
         let evaluated = outcome.evaluator.frames() - frames;
         if evaluated == 0 {
             bail!(
@@ -73,13 +88,15 @@ fn evaluate_one(
     recording: &Path,
     calib: &Path,
     args: &PipelineArgs,
+    extra: &ExtraLanes,
     want_rows: bool,
     outcome: &mut EvalOutcome,
 ) -> Result<()> {
     let (rows, settled) = args.run(recording, |spec| {
         spec.calibration = Some(calib.to_path_buf());
-        spec.lanes = LANES.iter().map(|(n, s, c, _)| ((*n).to_owned(), (*s).to_owned(), (*c).to_owned())).collect();
+        extra.configure(spec);
     })?;
+    let lanes = outcome.evaluator.names().len();
     let EvalOutcome { evaluator: ev, contact_rows, example } = outcome;
     let mut truth = Vec::new();
     let mut detected = Vec::new();
@@ -149,6 +166,7 @@ fn evaluate_one(
                 t_s: row[0].header.t_s(),
                 dp_kpa: synced.dp_kpa,
                 n_truth: truth.len(),
+                lanes,
             };
             for (t, truth_c) in truth.iter().enumerate() {
                 let pred = pairs.iter().find(|p| p.truth == t).map(|p| p.pred);
@@ -213,6 +231,8 @@ struct CsvFrame<'a> {
     t_s: f64,
     dp_kpa: f64,
     n_truth: usize,
+    /// Force columns (one per lane).
+    lanes: usize,
 }
 
 impl CsvFrame<'_> {
@@ -241,20 +261,21 @@ impl CsvFrame<'_> {
             opt(det.map(|c| c.area_mm2)),
             opt(det.map(|c| c.peak)),
         ];
-        cols.extend((0..LANES.len()).map(|i| opt(forces.get(i).copied())));
+        cols.extend((0..self.lanes).map(|i| opt(forces.get(i).copied())));
         cols.join(",")
     }
 }
 
 /// Header of the `--contacts-csv` table (units in the names). `eval_frame` counts evaluated
 /// frames over all recordings (no-load and load-change frames are skipped); `recording` is the
-/// frame's recording as given on the command line; `t_s` is the frame's time in it.
-pub fn contacts_csv_header() -> String {
+/// frame's recording as given on the command line; `t_s` is the frame's time in it. One force
+/// column per lane (`names`, in order).
+pub fn contacts_csv_header(names: &[String]) -> String {
     let mut h = String::from(
         "eval_frame,t_s,kind,recording,truth_contacts,dp_kpa,true_x_mm,true_y_mm,true_force_n,true_diameter_mm,\
          x_mm,y_mm,c_sum,area_mm2,peak",
     );
-    for (name, ..) in LANES {
+    for name in names {
         h.push_str(&format!(",{name}_n"));
     }
     h
@@ -267,6 +288,7 @@ pub fn run(
     plots_dir: Option<&Path>,
     contacts_csv: Option<&Path>,
     args: &PipelineArgs,
+    lane_args: &LaneArgs,
 ) -> Result<()> {
     let mut inputs: Vec<(&str, &Path)> = recordings.iter().map(|r| ("recording", r.as_path())).collect();
     inputs.push(("--calib", calib));
@@ -284,7 +306,14 @@ pub fn run(
         super::paths::check_output_dir("--plots", dir)?;
     }
     let cal = check_calibration(calib)?;
-    args.validate()?;
+    let extra = ExtraLanes::resolve(lane_args, calib)?;
+    args.validate_with(
+        |spec| {
+            spec.calibration = Some(calib.to_path_buf());
+            extra.configure(spec);
+        },
+        |spec, node| extra.origin(spec, node),
+    )?;
     args.warn_calibration_settings(calib, cal.provenance.pipeline.as_ref());
     // Every recording is checked before the first is evaluated.
     let sensor = super::calibrate::check_recordings(recordings)?;
@@ -301,9 +330,9 @@ pub fn run(
     if recordings.len() > 1 {
         super::calibrate::distinct(recordings, "frames")?;
     }
-    let outcome = evaluate(recordings, calib, args, contacts_csv.is_some())?;
+    let outcome = evaluate_lanes(recordings, calib, args, &extra, contacts_csv.is_some())?;
     if let Some(p) = contacts_csv {
-        let mut text = contacts_csv_header();
+        let mut text = contacts_csv_header(outcome.evaluator.names());
         text.push('\n');
         for line in &outcome.contact_rows {
             text.push_str(line);

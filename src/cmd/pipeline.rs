@@ -61,11 +61,24 @@ impl PipelineArgs {
     /// pipeline graph is validated as it is built for a recording, without one (validation
     /// opens no file).
     pub fn validate(&self) -> Result<()> {
+        self.validate_with(|_| {}, |_, _| None)
+    }
+
+    /// As [`PipelineArgs::validate`], on the graph with the lanes, calibration and plugins
+    /// `configure` sets: an error of a node for which `origin` gives the option that made it
+    /// (`--lane '...'`) names that option instead of the generated graph. The plugins are
+    /// loaded to check their kinds.
+    pub fn validate_with(
+        &self,
+        configure: impl FnOnce(&mut PipelineSpec),
+        origin: impl Fn(&PipelineSpec, &str) -> Option<String>,
+    ) -> Result<()> {
         check_params::<skinflow_nodes::reconstruct::ReconstructorParams>("--recon", &self.recon)?;
         check_params::<skinflow_nodes::segment::SegmenterParams>("--segment", &self.segment)?;
         check_params::<skinflow_nodes::sync::SyncParams>("--sync", &self.sync)?;
-        let spec = self.spec(PathBuf::from("recording.h5"));
-        let registry = skinflow_nodes::pipeline::registry_with_capture(Default::default());
+        let mut spec = self.spec(PathBuf::from("recording.h5"));
+        configure(&mut spec);
+        let registry = spec.registry(Default::default()).map_err(anyhow::Error::msg)?;
         let src = skinflow_core::graph::SourceFile::new("<pipeline>", spec.graph_toml());
         let Err(errors) = skinflow_core::GraphSpec::parse(src, &registry) else { return Ok(()) };
         let causes: Vec<String> = errors
@@ -76,7 +89,11 @@ impl PipelineArgs {
                     Some("recon") => ("--recon", &self.recon),
                     Some("segment") => ("--segment", &self.segment),
                     Some("sync") => ("--sync", &self.sync),
-                    _ => return e.to_string(),
+                    Some(node) => match origin(&spec, node) {
+                        Some(option) => return format!("{option}: {}", e.kind),
+                        None => return e.to_string(),
+                    },
+                    None => return e.to_string(),
                 };
                 format!("{flag} '{text}': {}", e.kind)
             })
@@ -118,6 +135,7 @@ impl PipelineArgs {
             sync: self.sync.clone(),
             lanes: Vec::new(),
             calibration: None,
+            plugins: Vec::new(),
         }
     }
 

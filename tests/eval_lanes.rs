@@ -1,0 +1,271 @@
+//! `skinflow eval --plugin LIB --lane SPEC` through the binary: lanes of plugin kinds (the
+//! example splitter and corrector) evaluated beside the built-in nine in the table, the JSON,
+//! the per-contact CSV, the plots and the printed graph; a lane of built-in strategies giving
+//! exactly the figures of the built-in lane it repeats; every refused `--lane` as one line
+//! naming it, before any work; a plugin failing while the pipeline runs named by its lane.
+//!
+//! The recordings (the small fixture scenes) and their calibration are made once and shared
+//! by the tests of this module; the plugin libraries are found (or built) as tests/plugins.rs
+//! does.
+
+use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
+
+use super::plugins::plugin;
+use super::support::{fixture, ok, skinflow, stderr};
+
+/// A directory holding `cal.h5`, `test.h5` (tiny-eval: single and two-contact presses) and
+/// `calib.toml`, made once per test process.
+fn shared() -> &'static Path {
+    static DIR: OnceLock<PathBuf> = OnceLock::new();
+    DIR.get_or_init(|| {
+        let d = super::support::workdir("eval-lanes", "shared");
+        for (scene, out) in [("tiny-calibration.toml", "cal.h5"), ("tiny-eval.toml", "test.h5")] {
+            ok(&skinflow(&d, &["simulate", fixture(scene).to_str().unwrap(), "--out", out, "--seed", "3"]));
+        }
+        ok(&skinflow(&d, &["calibrate", "cal.h5", "--out", "calib.toml"]));
+        d
+    })
+}
+
+/// A fresh work directory for one test, and the arguments `eval <test.h5> --calib <calib>`.
+fn setup(test: &str) -> (PathBuf, Vec<String>) {
+    let s = shared();
+    let d = super::support::workdir("eval-lanes", test);
+    let path = |f: &str| s.join(f).to_string_lossy().into_owned();
+    (d, vec!["eval".into(), path("test.h5"), "--calib".into(), path("calib.toml")])
+}
+
+fn run(d: &Path, args: &[String]) -> std::process::Output {
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    skinflow(d, &args)
+}
+
+fn json(path: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
+
+fn lib(package: &str) -> String {
+    plugin(package).to_string_lossy().into_owned()
+}
+
+const SPLIT_WEIGHTED: &str = "skinflow-plugin-split-weighted";
+const CORRECT_FUSED: &str = "skinflow-plugin-correct-fused";
+
+/// The metrics of strategy `name` that do not depend on timing.
+fn figures(v: &serde_json::Value, name: &str) -> Vec<serde_json::Value> {
+    let s = &v["strategies"][name];
+    assert!(s.is_object(), "strategy {name} missing: {v}");
+    vec![
+        s["rmse_n"].clone(),
+        s["rmse_sd_n"].clone(),
+        s["per_diameter_rmse_n"].clone(),
+        s["relative_error_pct"].clone(),
+        v["multi_contact"]["per_contact_rmse_n"][name].clone(),
+    ]
+}
+
+#[test]
+fn plugin_lanes_are_evaluated_beside_the_built_in_ones() {
+    let (d, base) = setup("plugins");
+    let mut args = base.clone();
+    args.extend(
+        [
+            "--plugin",
+            &lib(SPLIT_WEIGHTED),
+            "--plugin",
+            &lib(CORRECT_FUSED),
+            "--lane",
+            r#"name = "peak2", split = "peak-weighted-splitter", split_params = { exponent = 2.0 }"#,
+            "--lane",
+            r#"name = "fused", correct = "fused-corrector", correct_params = { weight_pneumatic = 0.8 }"#,
+            // The same plugin splitter and params as peak2: one node; other params: another.
+            "--lane",
+            r#"name = "peak2-eit", split = "peak-weighted-splitter", split_params = { exponent = 2.0 }, correct = "eit-nocal""#,
+            "--lane",
+            r#"name = "peak3", split = "peak-weighted-splitter", split_params = { exponent = 3.0 }, label = "Peak^3 split""#,
+            "--json",
+            "e.json",
+            "--contacts-csv",
+            "c.csv",
+            "--plots",
+            "plots",
+            "--print-graph",
+        ]
+        .map(String::from),
+    );
+    let out = ok(&run(&d, &args));
+    let v = json(&d.join("e.json"));
+    let strategies = v["strategies"].as_object().unwrap();
+    assert_eq!(strategies.len(), 9 + 4, "{v}");
+    for name in ["peak2", "fused", "peak2-eit", "peak3"] {
+        let s = &v["strategies"][name];
+        for key in ["rmse_n", "rmse_sd_n", "relative_error_pct", "latency_us_p50", "latency_us_p99"] {
+            let x = s[key].as_f64().unwrap_or_else(|| panic!("{name}.{key} is not a number: {v}"));
+            assert!(x.is_finite() && x >= 0.0, "{name}.{key} = {x}");
+        }
+        assert!(s["latency_us_p50"].as_f64().unwrap() > 0.0, "{name}: no latency measured: {v}");
+        assert!(!s["per_diameter_rmse_n"].as_object().unwrap().is_empty(), "{name}: {v}");
+        assert!(v["multi_contact"]["per_contact_rmse_n"][name].as_f64().is_some(), "{name}: {v}");
+    }
+    // The plugins ran: their estimates differ from the built-in lanes they vary.
+    assert_ne!(figures(&v, "fused"), figures(&v, "pneumatic-locaware"));
+    assert_ne!(figures(&v, "peak2"), figures(&v, "pneumatic-locaware"));
+    assert_ne!(figures(&v, "peak2"), figures(&v, "peak3"));
+    // Extra lanes change nothing of the built-in ones (nor the default output's figures).
+    let plain = ok(&run(&d, &[base, vec!["--json".into(), "plain.json".into()]].concat()));
+    let p = json(&d.join("plain.json"));
+    assert_eq!(p["strategies"].as_object().unwrap().len(), 9);
+    for name in p["strategies"].as_object().unwrap().keys() {
+        assert_eq!(figures(&p, name), figures(&v, name), "{name}");
+    }
+    assert!(!plain.contains("(plugin)") && !plain.contains("[[plugin]]"), "{plain}");
+    // The table: a row per lane, labelled.
+    for label in ["peak2 (plugin)", "fused (plugin)", "peak2-eit (plugin)", "Peak^3 split"] {
+        assert!(out.lines().any(|l| l.starts_with(label)), "no row {label:?}:\n{out}");
+    }
+    // The per-contact CSV: a force column per lane, filled for every matched contact.
+    let csv = std::fs::read_to_string(d.join("c.csv")).unwrap();
+    let mut lines = csv.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    assert_eq!(header[header.len() - 4..], ["peak2_n", "fused_n", "peak2-eit_n", "peak3_n"]);
+    let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
+    let matched: Vec<&Vec<&str>> = rows.iter().filter(|r| r[2] == "matched").collect();
+    assert_eq!(matched.len() as u64, v["localization"]["matched"].as_u64().unwrap());
+    for r in &matched {
+        assert_eq!(r.len(), header.len(), "ragged CSV");
+        for f in &r[r.len() - 4..] {
+            assert!(f.parse::<f64>().is_ok_and(f64::is_finite), "force column {f:?} in {r:?}");
+        }
+    }
+    // The predicted-against-true plot has a panel per lane (it is drawn at all).
+    assert!(d.join("plots/predicted_vs_true.png").is_file());
+    // The printed graph: the libraries, the plugin kinds, one node per distinct splitter.
+    assert!(out.contains("[[plugin]]\npath = "), "{out}");
+    assert_eq!(out.matches("kind = \"peak-weighted-splitter\"").count(), 2, "{out}");
+    assert!(out.contains(
+        "id = \"split-peak-weighted-splitter\"\nkind = \"peak-weighted-splitter\"\nparams = { exponent = 2.0 }"
+    ));
+    assert!(out.contains("from = \"split-peak-weighted-splitter.split\"\nto = \"correct-peak2-eit.split\""), "{out}");
+    // The plugin corrector got eval's --calib and the lane's name.
+    let fused = out.lines().skip_while(|l| *l != "id = \"correct-fused\"").nth(2).unwrap_or_default();
+    assert!(
+        fused.contains("calibration = ") && fused.contains("calib.toml") && fused.contains("name = \"fused\""),
+        "{fused}"
+    );
+}
+
+#[test]
+fn a_lane_of_built_in_strategies_gives_the_built_in_lanes_figures() {
+    let (d, mut args) = setup("builtin");
+    args.extend(
+        [
+            "--lane",
+            r#"name = "fb", split = "force-balance", correct = "pneumatic-forward""#,
+            // The built-in kinds named as kinds, with their params.
+            "--lane",
+            r#"name = "sens", split = "splitter", split_params = { strategy = "sensitivity-compensated" }, correct = "corrector""#,
+            "--lane",
+            r#"name = "nocal", correct = "eit-nocal""#,
+            "--json",
+            "e.json",
+        ]
+        .map(String::from),
+    );
+    let out = ok(&run(&d, &args));
+    let v = json(&d.join("e.json"));
+    assert_eq!(figures(&v, "fb"), figures(&v, "pneumatic-forward-balance"));
+    assert_eq!(figures(&v, "sens"), figures(&v, "pneumatic-locaware-sensitivity"));
+    assert_eq!(figures(&v, "nocal"), figures(&v, "eit-nocal"));
+    assert!(v["strategies"]["fb"]["rmse_n"].as_f64().is_some_and(f64::is_finite), "{v}");
+    // No plugin kind: labelled by name alone.
+    assert!(out.lines().any(|l| l.starts_with("fb ")), "{out}");
+    assert!(!out.contains("(plugin)"), "{out}");
+}
+
+#[test]
+fn refused_lanes_name_the_lane_and_the_cause_before_any_work() {
+    let (d, base) = setup("refused");
+    let split_weighted = lib(SPLIT_WEIGHTED);
+    let faulty = lib("skinflow-plugin-fixture-faulty");
+    let cases: Vec<(Vec<&str>, &str, &str)> = vec![
+        (vec![], r#"name = "x", split = "nope""#, "split \"nope\": unknown"),
+        (
+            vec![],
+            r#"name = "x", correct = "fused-corrector""#,
+            "no plugin is loaded (load a library with --plugin LIB)",
+        ),
+        (
+            vec!["--plugin", &split_weighted],
+            r#"name = "x", correct = "nope""#,
+            "plugin kinds: area-weighted-splitter, peak-weighted-splitter",
+        ),
+        (vec!["--plugin", &faulty], r#"name = "x", split = "fixture-scale""#, "does not fit as a splitter"),
+        (
+            vec!["--plugin", &split_weighted],
+            r#"name = "x", correct = "area-weighted-splitter""#,
+            "a corrector needs an input of type \"split\"",
+        ),
+        (vec![], r#"name = "x", split = "segmenter""#, "its inputs: image (image)"),
+        (vec![], r#"name = "pneumatic-locaware""#, "is a built-in lane's"),
+        (vec![], r#"name = "x" split = "force-balance""#, "not a TOML table body"),
+        (vec![], r#"name = "x", colour = "red""#, "unknown field `colour`"),
+        (vec![], r#"split = "force-balance""#, "missing field `name`"),
+        (vec![], r#"name = "a b""#, "use letters, digits"),
+        // Params the kind refuses, found when the graph is checked: named by the lane too.
+        (
+            vec!["--plugin", &split_weighted],
+            r#"name = "x", split = "peak-weighted-splitter", split_params = { exponent = 9.0 }"#,
+            "param \"exponent\": must be in [0, 4]",
+        ),
+        (
+            vec!["--plugin", &split_weighted],
+            r#"name = "x", split = "peak-weighted-splitter", split_params = { exponant = 2.0 }"#,
+            "unknown field `exponant`",
+        ),
+    ];
+    for (extra, lane, cause) in cases {
+        let mut args = base.clone();
+        args.extend(extra.iter().map(|s| s.to_string()));
+        args.extend(["--lane".into(), lane.into(), "--json".into(), "e.json".into()]);
+        let out = run(&d, &args);
+        let err = stderr(&out);
+        assert!(!out.status.success(), "{lane}: accepted");
+        let line = err.lines().find(|l| l.starts_with("error: ")).unwrap_or_else(|| panic!("{lane}: {err}"));
+        assert!(line.starts_with(&format!("error: --lane '{lane}': ")) && line.contains(cause), "{lane}: {err}");
+        assert!(!err.contains("<pipeline>"), "{lane}: the generated graph is named: {err}");
+        assert!(!d.join("e.json").exists(), "{lane}: evaluated anyway");
+    }
+    // Two lanes of one name: the second is refused, naming the first.
+    let mut args = base.clone();
+    args.extend(["--lane", r#"name = "a""#, "--lane", r#"name = "a", correct = "eit-nocal""#].map(String::from));
+    let err = stderr(&run(&d, &args));
+    assert!(
+        err.contains(r#"--lane 'name = "a", correct = "eit-nocal"': name "a" is also the name of --lane 'name = "a"'"#),
+        "{err}"
+    );
+    // A library that does not exist.
+    let mut args = base;
+    args.extend(["--plugin", "no-such.so", "--lane", r#"name = "x""#].map(String::from));
+    let out = run(&d, &args);
+    assert!(!out.status.success() && stderr(&out).contains("--plugin: plugin no-such.so: file not found"));
+}
+
+#[test]
+fn a_plugin_failing_in_the_pipeline_is_named_by_its_lane() {
+    let (d, mut args) = setup("failing");
+    args.extend(
+        [
+            "--plugin",
+            &lib(CORRECT_FUSED),
+            "--lane",
+            r#"name = "broken", correct = "fused-corrector", correct_params = { calibration = "missing.toml" }"#,
+        ]
+        .map(String::from),
+    );
+    let out = run(&d, &args);
+    let err = stderr(&out);
+    assert!(!out.status.success(), "{err}");
+    assert!(err.contains("lane \"broken\": node \"correct-broken\" (kind \"fused-corrector\")"), "{err}");
+    assert!(err.contains("missing.toml"), "{err}");
+}

@@ -650,6 +650,36 @@ mod contacts_on_skin {
         assert_eq!(warnings(&single("at_mm = [[1.0, 1.0], [1.0, 1.0]]", 10.0)), Vec::<String>::new());
     }
 
+    /// Three or more contacts at one place: one warning for the place, of the total force there
+    /// (not one per pair, each of a pair's sum); another place of two gets its own.
+    #[test]
+    fn contacts_at_one_place_give_one_warning_of_their_total_force() {
+        let w = warnings(&contacts(&[
+            (10.0, 0.0, 10.0, 3.0),
+            (-20.0, 0.0, 10.0, 0.5),
+            (10.0, 0.0, 10.0, 2.0),
+            (-20.0, 0.0, 10.0, 0.25),
+            (10.0, 0.0, 10.0, 1.0),
+        ]));
+        assert_eq!(w.len(), 2, "{w:?}");
+        assert!(
+            w[0].starts_with(
+                "s.toml:8:3: [[step]] 2, contacts 3 and 5 of \"contacts\": at the place of contact 1 with the same \
+                 diameter (x_mm = 10, y_mm = 0, diameter_mm = 10), pressed at the same time: simulated as 3 loads on \
+                 one footprint (the EIT foam as under one indenter of 6 N, the summed force; the pneumatic chamber \
+                 as the sum of 3 separately saturating contacts), and the truth lists all 3 contacts at the one place"
+            ),
+            "{w:?}"
+        );
+        assert!(w[0].ends_with("give one contact with force_n = 6)"), "{w:?}");
+        assert!(
+            w[1].starts_with("s.toml:9:3: [[step]] 2, contact 4 of \"contacts\": at the place of contact 2"),
+            "{w:?}"
+        );
+        assert!(w[1].contains("simulated as two loads") && w[1].contains("lists both contacts"), "{w:?}");
+        assert!(w[1].ends_with("give one contact with force_n = 0.75)"), "{w:?}");
+    }
+
     #[test]
     fn shipped_scenes_warn_only_where_a_disc_overhangs() {
         let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");

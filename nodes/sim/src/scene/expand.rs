@@ -276,8 +276,10 @@ pub(super) fn expand_step(
         let mut spots = Vec::new();
         let mut forces = Vec::new();
         let mut overhang = Overhang::default();
-        // each contact's place and diameter (bits, -0 as 0): the first contact there
-        let mut seen: HashMap<[u64; 3], usize> = HashMap::new();
+        // each contact's place and diameter (bits, -0 as 0): the contacts there, by index
+        let mut places: HashMap<[u64; 3], usize> = HashMap::new();
+        let mut at_one_place: Vec<Vec<usize>> = Vec::new();
+        let mut spans = Vec::new();
         for (i, c) in list.get_ref().iter().enumerate() {
             let RawContact { x_mm, y_mm, diameter_mm, force_n } = c.get_ref();
             let (x, y) = (*x_mm.get_ref(), *y_mm.get_ref());
@@ -287,27 +289,22 @@ pub(super) fn expand_step(
             let f = non_negative("force_n", force_n, err)?;
             let f = at_most("force_n", force_n, f, MAX_FORCE_N, err)?;
             let place = [x + 0.0, y + 0.0, d].map(f64::to_bits);
-            if let Some(&first) = seen.get(&place) {
-                b.warnings.push((
-                    c.span(),
-                    format!(
-                        "[[step]] {number}, {what}: at the place of contact {} with the same diameter \
-                         (x_mm = {x}, y_mm = {y}, diameter_mm = {d}), pressed at the same time: simulated as two \
-                         loads on one footprint (the EIT foam as under one indenter of {} N, the summed force; the \
-                         pneumatic chamber as the sum of two separately saturating contacts), and the truth lists \
-                         both contacts at the one place, where a segmenter can find only one (if one indenter is \
-                         meant, give one contact with force_n = {})",
-                        first + 1,
-                        forces[first] + f,
-                        forces[first] + f
-                    ),
-                ));
-            } else {
-                seen.insert(place, i);
-            }
+            let group = *places.entry(place).or_insert_with(|| {
+                at_one_place.push(Vec::new());
+                at_one_place.len() - 1
+            });
+            at_one_place[group].push(i);
             overhang.add(sensor, x, y, d, || what.clone(), c.span());
             spots.push(Spot { x_mm: x, y_mm: y, diameter_mm: d });
             forces.push(f);
+            spans.push(c.span());
+        }
+        // one warning per place of several contacts, at the second one's span, in that order
+        at_one_place.retain(|g| g.len() > 1);
+        at_one_place.sort_by_key(|g| g[1]);
+        for g in &at_one_place {
+            let spot = &spots[g[0]];
+            b.warnings.push((spans[g[1]].clone(), same_place(number, g, spot, &forces)));
         }
         overhang.warn(number, "contacts", &mut b.warnings);
         let hold_s = hold(s, eit_fps, err)?
@@ -593,6 +590,28 @@ fn forces(f: &Spanned<toml::Value>, err: &ErrFn<'_>) -> Result<Vec<f64>, SceneEr
     Ok(list)
 }
 
+/// The warning of step `number` about its contacts `at` (indices, two or more, the first
+/// one's first) of `spot`, pressed at the same time with `forces` (all the step's, by index).
+fn same_place(number: usize, at: &[usize], spot: &Spot, forces: &[f64]) -> String {
+    let Spot { x_mm: x, y_mm: y, diameter_mm: d } = *spot;
+    let total: f64 = at.iter().map(|&i| forces[i]).sum();
+    let n = at.len();
+    let ordinals: Vec<String> = at[1..].iter().map(|i| (i + 1).to_string()).collect();
+    let (which, loads, all) = match ordinals.as_slice() {
+        [one] => (format!("contact {one}"), "two".to_owned(), "both".to_owned()),
+        [rest @ .., last] => (format!("contacts {} and {last}", rest.join(", ")), n.to_string(), format!("all {n}")),
+        [] => unreachable!("two or more contacts"),
+    };
+    format!(
+        "[[step]] {number}, {which} of \"contacts\": at the place of contact {} with the same diameter \
+         (x_mm = {x}, y_mm = {y}, diameter_mm = {d}), pressed at the same time: simulated as {loads} loads on one \
+         footprint (the EIT foam as under one indenter of {total} N, the summed force; the pneumatic chamber as \
+         the sum of {loads} separately saturating contacts), and the truth lists {all} contacts at the one place, \
+         where a segmenter can find only one (if one indenter is meant, give one contact with force_n = {total})",
+        at[0] + 1
+    )
+}
+
 /// Where a single-contact step presses: a `grid` or an `at_mm` list, checked but not yet
 /// generated (a grid may hold a million positions).
 enum Places<'a> {
@@ -619,20 +638,8 @@ impl Places<'_> {
         number: usize,
         warnings: &mut Vec<(Range<usize>, String)>,
     ) -> Result<Vec<(f64, f64)>, SceneError> {
-        let mut overhang = Overhang::default();
-        let list = match self {
-            Places::List(l) => {
-                let mut list = Vec::with_capacity(l.get_ref().len());
-                for (i, p) in l.get_ref().iter().enumerate() {
-                    let [x, y] = *p.get_ref();
-                    let what = || format!("\"at_mm\" position {}", i + 1);
-                    inside(x, y, &what(), p.span())?;
-                    overhang.add(sensor, x, y, diameter_mm, what, p.span());
-                    list.push((x, y));
-                }
-                overhang.warn(number, "positions", warnings);
-                return Ok(list);
-            }
+        let (list, columns) = match self {
+            Places::List(l) => (l.get_ref().iter().map(|p| (p.get_ref()[0], p.get_ref()[1])).collect(), 1),
             Places::Grid(g) => {
                 let grid = g.get_ref();
                 let axis = |r: [f64; 2], n: i64| -> Vec<f64> {
@@ -647,16 +654,24 @@ impl Places<'_> {
                 let ys = axis(grid.y_mm, grid.n[1]);
                 // row by row from the bottom, left to right (a raster scan of the stage)
                 let list: Vec<(f64, f64)> = ys.iter().flat_map(|&y| xs.iter().map(move |&x| (x, y))).collect();
-                for (k, &(x, y)) in list.iter().enumerate() {
-                    let what = || {
-                        format!("\"grid\" position {} (column {}, row {})", k + 1, k % xs.len() + 1, k / xs.len() + 1)
-                    };
-                    inside(x, y, &what(), g.span())?;
-                    overhang.add(sensor, x, y, diameter_mm, what, g.span());
-                }
-                list
+                (list, xs.len())
             }
         };
+        let mut overhang = Overhang::default();
+        for (k, &(x, y)) in list.iter().enumerate() {
+            let span = match self {
+                Places::List(l) => l.get_ref()[k].span(),
+                Places::Grid(g) => g.span(),
+            };
+            let what = || match self {
+                Places::List(_) => format!("\"at_mm\" position {}", k + 1),
+                Places::Grid(_) => {
+                    format!("\"grid\" position {} (column {}, row {})", k + 1, k % columns + 1, k / columns + 1)
+                }
+            };
+            inside(x, y, &what(), span.clone())?;
+            overhang.add(sensor, x, y, diameter_mm, what, span);
+        }
         overhang.warn(number, "positions", warnings);
         Ok(list)
     }

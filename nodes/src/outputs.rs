@@ -188,11 +188,23 @@ impl FileId {
 
 /// The identity of `p`: absolute, with each existing prefix canonicalized (links followed) and
 /// the part that does not exist yet normalized lexically (`.` dropped, `..` taking off the
-/// component before it).
+/// component before it). A link leading where nothing is yet (a dangling one) is followed too:
+/// its target, relative to the link's directory, is where a writer through it creates the file.
 fn file_id(p: &Path) -> FileId {
     let abs = std::path::absolute(p).unwrap_or_else(|_| p.to_path_buf());
+    let path = resolved(&abs, MAX_LINKS);
+    FileId { inode: inode(&path), path }
+}
+
+/// Dangling links [`file_id`] follows in a row, at most (as the kernel's limit on links in a
+/// path): beyond, a loop of links say, the rest is normalized lexically.
+const MAX_LINKS: usize = 40;
+
+/// `abs` (absolute) as [`file_id`] identifies it, following at most `links` dangling links.
+fn resolved(abs: &Path, links: usize) -> PathBuf {
     let mut path = PathBuf::new();
-    for c in abs.components() {
+    let mut components = abs.components();
+    while let Some(c) = components.next() {
         match c {
             Component::CurDir => {}
             Component::ParentDir => {
@@ -202,11 +214,23 @@ fn file_id(p: &Path) -> FileId {
                 path.push(c);
                 if let Ok(canonical) = std::fs::canonicalize(&path) {
                     path = canonical;
+                } else if links > 0
+                    && let Ok(target) = std::fs::read_link(&path)
+                {
+                    // A link to nothing (yet): its target, from the link's directory (already
+                    // canonical), then the components after the link.
+                    path.pop();
+                    let mut next = path.join(target);
+                    let rest = components.as_path();
+                    if !rest.as_os_str().is_empty() {
+                        next.push(rest);
+                    }
+                    return resolved(&next, links - 1);
                 }
             }
         }
     }
-    FileId { inode: inode(&path), path }
+    path
 }
 
 #[cfg(unix)]
@@ -769,6 +793,37 @@ mod tests {
         assert!(file_id(&d.join("sub/../a.h5")).same(&a));
         // Not there yet: the existing directory canonicalized, through the link.
         assert!(file_id(&d.join("dirlink/new.h5")).same(&file_id(&d.join("sub/new.h5"))));
+        let _ = std::fs::remove_dir_all(&d);
+    }
+
+    /// A link leading where no file is yet is the file a writer through it creates: its target,
+    /// relative to the link's directory, through links to links and dangling directory links;
+    /// a loop of links ends. Two writers, through the link and at its target, are refused.
+    #[cfg(unix)]
+    #[test]
+    fn dangling_links_are_the_file_they_lead_to() {
+        use std::os::unix::fs::symlink;
+        let d = std::env::temp_dir().join(format!("skinflow-outputs-dangling-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        std::fs::create_dir_all(d.join("realdir")).unwrap();
+        symlink("realdir/nonexist.csv", d.join("dangling.csv")).unwrap();
+        symlink(d.join("dangling.csv"), d.join("link-to-link.csv")).unwrap();
+        symlink("realdir/newsub", d.join("dirdangle")).unwrap();
+        symlink("loop2", d.join("loop1")).unwrap();
+        symlink("loop1", d.join("loop2")).unwrap();
+        let target = file_id(&d.join("realdir/nonexist.csv"));
+        assert!(file_id(&d.join("dangling.csv")).same(&target));
+        assert!(file_id(&d.join("link-to-link.csv")).same(&target));
+        assert!(file_id(&d.join("./realdir/../dangling.csv")).same(&target));
+        assert!(file_id(&d.join("dirdangle/x.csv")).same(&file_id(&d.join("realdir/newsub/x.csv"))));
+        assert!(!file_id(&d.join("loop1")).same(&file_id(&d.join("loop2"))));
+        assert!(!file_id(&d.join("realdir/other.csv")).same(&target));
+
+        let out = |p: &str| format!("out = {:?}", d.join(p).to_str().unwrap());
+        let text = format!("{}{}", files("a", &out("dangling.csv")), files("b", &out("realdir/nonexist.csv")));
+        let e = errors(&text);
+        assert!(e.contains("nonexist.csv"), "{e}");
+        assert_eq!(errors(&files("a", &out("dangling.csv"))), "");
         let _ = std::fs::remove_dir_all(&d);
     }
 }

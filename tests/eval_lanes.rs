@@ -251,21 +251,135 @@ fn refused_lanes_name_the_lane_and_the_cause_before_any_work() {
     assert!(!out.status.success() && stderr(&out).contains("--plugin: plugin no-such.so: file not found"));
 }
 
+/// A lane's node that fails while the pipeline runs is named by its lane: an error on some
+/// frames, one force too few, frames without forces (which the capture cannot align, so the
+/// other lanes' messages are dropped: the lane that sent too few is named, not the drops).
 #[test]
 fn a_plugin_failing_in_the_pipeline_is_named_by_its_lane() {
-    let (d, mut args) = setup("failing");
+    let (d, base) = setup("failing");
+    let faulty = lib("skinflow-plugin-fixture-faulty");
+    for (mode, cause) in
+        [("error", "calls failed"), ("short", "calls failed"), ("skip", "each lane must send one message per frame")]
+    {
+        let mut args = base.clone();
+        let lane = format!(r#"name = "bad", correct = "fixture-forces", correct_params = {{ mode = "{mode}" }}"#);
+        args.extend(["--plugin".into(), faulty.clone(), "--lane".into(), lane, "--json".into(), "e.json".into()]);
+        let out = run(&d, &args);
+        let err = stderr(&out);
+        assert!(!out.status.success(), "{mode}: {err}");
+        let line = err.lines().find(|l| l.starts_with("error: ")).unwrap_or_else(|| panic!("{mode}: {err}"));
+        assert!(line.contains("pipeline: lane \"bad\": node \"correct-bad\""), "{mode}: {line}");
+        assert!(line.contains(cause), "{mode}: {line}");
+        assert!(!d.join("e.json").exists(), "{mode}: a report was written");
+    }
+    // The same kind behaving (1 N per contact) is scored.
+    let mut args = base;
+    args.extend(
+        ["--plugin", &faulty, "--lane", r#"name = "one", correct = "fixture-forces""#, "--json", "e.json"]
+            .map(String::from),
+    );
+    ok(&run(&d, &args));
+    assert!(json(&d.join("e.json"))["strategies"]["one"]["rmse_n"].as_f64().is_some_and(f64::is_finite));
+}
+
+/// A plugin kind whose name is no valid node id (`fixture.dot`) still makes a lane: the
+/// generated graph's ids are made of valid characters.
+#[test]
+fn a_plugin_kind_of_any_name_makes_a_lane() {
+    let (d, mut args) = setup("dot");
     args.extend(
         [
             "--plugin",
-            &lib(CORRECT_FUSED),
+            &lib("skinflow-plugin-fixture-faulty"),
             "--lane",
-            r#"name = "broken", correct = "fused-corrector", correct_params = { calibration = "missing.toml" }"#,
+            r#"name = "equal", split = "fixture.dot""#,
+            "--json",
+            "e.json",
         ]
         .map(String::from),
     );
     let out = run(&d, &args);
-    let err = stderr(&out);
-    assert!(!out.status.success(), "{err}");
-    assert!(err.contains("lane \"broken\": node \"correct-broken\" (kind \"fused-corrector\")"), "{err}");
-    assert!(err.contains("missing.toml"), "{err}");
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(json(&d.join("e.json"))["strategies"]["equal"]["rmse_n"].as_f64().is_some_and(f64::is_finite));
+}
+
+/// A lane's calibration gets the checks `--calib` gets: one that does not exist, or was fitted
+/// on another sensor, is refused before any frame is run, naming the lane.
+#[test]
+fn a_lanes_own_calibration_is_checked_like_calib() {
+    let (d, base) = setup("lane-calibration");
+    let calib = std::fs::read_to_string(shared().join("calib.toml")).unwrap();
+    assert!(calib.contains("electrodes = 16"), "{calib}");
+    std::fs::write(d.join("other.toml"), calib.replace("electrodes = 16", "electrodes = 32")).unwrap();
+    let faulty = lib(CORRECT_FUSED);
+    for (lane, cause) in [
+        (
+            r#"name = "o", correct = "pneumatic-forward", correct_params = { calibration = "other.toml" }"#,
+            "calibration other.toml: fitted on sensor",
+        ),
+        (
+            r#"name = "o", correct = "fused-corrector", correct_params = { calibration = "other.toml" }"#,
+            "calibration other.toml: fitted on sensor",
+        ),
+        (
+            r#"name = "o", correct = "fused-corrector", correct_params = { calibration = "missing.toml" }"#,
+            "missing.toml",
+        ),
+    ] {
+        let mut args = base.clone();
+        args.extend(["--plugin", &faulty, "--lane", lane, "--json", "e.json"].map(String::from));
+        let out = run(&d, &args);
+        let err = stderr(&out);
+        assert!(!out.status.success(), "{lane}: {err}");
+        let line = err.lines().find(|l| l.starts_with("error: ")).unwrap_or_else(|| panic!("{lane}: {err}"));
+        assert!(line.starts_with(&format!("error: --lane '{lane}': calibration")), "{lane}: {line}");
+        assert!(line.contains(cause), "{lane}: {line}");
+        assert!(!d.join("e.json").exists(), "{lane}: evaluated anyway");
+    }
+}
+
+/// `--json`, `--contacts-csv` and `--plots` may not be a `--plugin` library or a file a lane
+/// reads (before, the library was replaced by the JSON); both are kept.
+#[test]
+fn eval_outputs_over_a_plugin_library_or_a_lane_file_are_refused() {
+    let (d, base) = setup("outputs");
+    std::fs::copy(plugin(CORRECT_FUSED), d.join("fused.so")).unwrap();
+    std::fs::copy(shared().join("calib.toml"), d.join("mine.toml")).unwrap();
+    let (lib_bytes, calib_bytes) =
+        (std::fs::read(d.join("fused.so")).unwrap(), std::fs::read(d.join("mine.toml")).unwrap());
+    let lane = r#"name = "f", correct = "fused-corrector", correct_params = { calibration = "mine.toml" }"#;
+    for (flag, file, cause) in [
+        ("--json", "fused.so", "is the --plugin library ./fused.so"),
+        ("--contacts-csv", "./mine.toml", "is the file correct_params.calibration of --lane \"f\" mine.toml"),
+        ("--plots", "mine.toml", "is an input file"),
+    ] {
+        let mut args = base.clone();
+        args.extend(["--plugin", "./fused.so", "--lane", lane, flag, file].map(String::from));
+        let out = run(&d, &args);
+        let err = stderr(&out);
+        assert!(!out.status.success(), "{flag}: {err}");
+        assert!(err.contains(&format!("{flag} {file}: ")) && err.contains(cause), "{flag}: {err}");
+    }
+    assert_eq!(std::fs::read(d.join("fused.so")).unwrap(), lib_bytes, "the library is kept");
+    assert_eq!(std::fs::read(d.join("mine.toml")).unwrap(), calib_bytes, "the calibration is kept");
+}
+
+/// Rows and plot panels are told apart by their labels: an empty one, a built-in lane's and
+/// one another `--lane` has are refused.
+#[test]
+fn lane_labels_must_tell_the_lanes_apart() {
+    let (d, base) = setup("labels");
+    for (lanes, cause) in [
+        (vec![r#"name = "a", label = " ""#], "label is empty"),
+        (vec![r#"name = "a", label = "Pneumatic-Forward""#], "is the built-in lane pneumatic-forward's"),
+        (vec![r#"name = "a", label = "x""#, r#"name = "b", label = "x""#], "is also the label of --lane"),
+    ] {
+        let mut args = base.clone();
+        for l in &lanes {
+            args.extend(["--lane".to_owned(), (*l).to_owned()]);
+        }
+        let err = stderr(&run(&d, &args));
+        assert!(err.contains(cause), "{lanes:?}: {err}");
+        assert!(err.contains(&format!("--lane '{}'", lanes.last().unwrap())), "{err}");
+    }
 }

@@ -12,7 +12,7 @@ use serde::Deserialize;
 use skinflow_core::graph::SourceFile;
 use skinflow_core::{
     Context, GraphSpec, Inputs, KindInfo, Message, NodeError, NodeImpl, NodeParams, PortSpec, Registry, Role,
-    RunOptions, Sink, typed,
+    RunOptions, Sink, StatsReport, typed,
 };
 
 /// Messages captured per call of the capture sink: one per lane, in lane order.
@@ -125,6 +125,12 @@ fn path_str(p: &Path) -> String {
     quote(&p.to_string_lossy())
 }
 
+/// `s` with every character a node id may not hold (all but ASCII letters, digits, '_' and
+/// '-') replaced by '-': a plugin's kind `my.split` gives `my-split`.
+fn id_part(s: &str) -> String {
+    s.chars().map(|c| if c.is_ascii_alphanumeric() || c == '_' || c == '-' { c } else { '-' }).collect()
+}
+
 /// `base`, or `base-2`, `base-3`, ... whichever `used` does not hold yet (then added to it).
 fn unique_id(base: String, used: &mut Vec<String>) -> String {
     let mut id = base.clone();
@@ -164,8 +170,8 @@ impl PipelineSpec {
                 Some(i) => i,
                 None => {
                     let base = match &lane.split {
-                        Stage::Strategy(s) => format!("split-{s}"),
-                        Stage::Node { kind, .. } => format!("split-{kind}"),
+                        Stage::Strategy(s) => format!("split-{}", id_part(s)),
+                        Stage::Node { kind, .. } => format!("split-{}", id_part(kind)),
                     };
                     splitters.push((unique_id(base, &mut used), &lane.split));
                     splitters.len() - 1
@@ -175,7 +181,7 @@ impl PipelineSpec {
         }
         // Correctors after the splitters, so a splitter keeps its id whatever the lane names.
         for ((_, id), lane) in lanes.iter_mut().zip(&self.lanes) {
-            *id = unique_id(format!("correct-{}", lane.name), &mut used);
+            *id = unique_id(format!("correct-{}", id_part(&lane.name)), &mut used);
         }
         Layout { splitters, lanes }
     }
@@ -287,12 +293,18 @@ impl PipelineSpec {
     }
 
     /// Runs the pipeline over the recording; one captured row per EIT frame. A failure or an
-    /// error of a lane's node (a plugin's, say) names the lane.
+    /// error of a lane's node (a plugin's, say) names the lane, as does a lane's node that did
+    /// not send one message per frame (whose frames the capture then drops in every lane).
     pub fn run(&self) -> Result<Vec<Vec<Message>>, String> {
         let captured: Captured = Arc::new(Mutex::new(Vec::new()));
         let reg = self.registry(captured.clone())?;
+        self.run_with(&reg, &captured)
+    }
+
+    /// [`PipelineSpec::run`] with the kinds of `reg`, whose `capture` writes into `captured`.
+    fn run_with(&self, reg: &Registry, captured: &Captured) -> Result<Vec<Vec<Message>>, String> {
         let src = SourceFile::new("<pipeline>", self.graph_toml());
-        let spec = GraphSpec::parse(src, &reg).map_err(|e| e.to_string())?;
+        let spec = GraphSpec::parse(src, reg).map_err(|e| e.to_string())?;
         let report = skinflow_core::run(&spec, &RunOptions::default())
             .map_err(|e| self.in_lanes(failed_node(&e), e.to_string()))?;
         if let Some(f) = report.failures.first() {
@@ -317,10 +329,65 @@ impl PipelineSpec {
         let recon = report.stats.node("recon").map_or(0, |n| n.discarded);
         let drops = report.stats.total_drops() - recon;
         if drops > 0 {
-            return Err(format!("{drops} messages were dropped in the pipeline (see the stats)"));
+            return Err(self.drops_error(&report.stats, drops));
         }
         let rows = std::mem::take(&mut *captured.lock().map_err(|_| "capture buffer poisoned".to_string())?);
         Ok(rows)
+    }
+}
+
+impl PipelineSpec {
+    /// The error for `drops` messages lost in a run: the lane nodes that did not send one
+    /// message per message received (a corrector that sent nothing for some frames, say) are
+    /// named with their lanes, as the capture, aligning the lanes frame by frame, then drops the
+    /// other lanes' messages of those frames; without such a node, the bare count.
+    fn drops_error(&self, stats: &StatsReport, drops: u64) -> String {
+        let bare = format!("{drops} messages were dropped in the pipeline (see the stats)");
+        if self.calibration.is_none() {
+            return bare;
+        }
+        let layout = self.layout();
+        let splitters = layout.splitters.iter().map(|(id, stage)| (id.as_str(), stage.output_port("split")));
+        let correctors = self
+            .lanes
+            .iter()
+            .zip(&layout.lanes)
+            .map(|(lane, (_, id))| (id.as_str(), lane.correct.output_port("forces")));
+        let mut blamed = Vec::new();
+        let mut fewer = true;
+        for (id, port) in splitters.chain(correctors) {
+            let Some(n) = stats.node(id) else { continue };
+            // What it sent into the lane: the messages on its lane port (any other port of a
+            // plugin's kind aside), else all it sent.
+            let from = format!("{id}.{port}");
+            let sent = stats.edges.iter().find(|e| e.from == from).map_or(n.msgs_out, |e| e.pushed);
+            if sent == n.msgs_in {
+                continue;
+            }
+            fewer &= sent < n.msgs_in;
+            let what = match port {
+                "forces" => "forces".to_owned(),
+                "split" => "splits".to_owned(),
+                other => format!("messages on \"{other}\""),
+            };
+            let line = if sent < n.msgs_in {
+                format!("node \"{id}\" sent {what} for {sent} of {} frames", n.msgs_in)
+            } else {
+                format!("node \"{id}\" sent {sent} {what} for {} frames", n.msgs_in)
+            };
+            blamed.push(self.in_lanes(Some(id), line));
+        }
+        if blamed.is_empty() {
+            return bare;
+        }
+        let at_capture: u64 = stats.edges.iter().filter(|e| e.to.starts_with("capture.")).map(|e| e.drops).sum();
+        let whose = if fewer { "of the other lanes" } else { "it could not match across the lanes" };
+        let all =
+            if at_capture == drops { String::new() } else { format!(" ({drops} dropped in the pipeline in all)") };
+        format!(
+            "{}; each lane must send one message per frame: the capture dropped {at_capture} messages {whose}{all}",
+            blamed.join("; ")
+        )
     }
 }
 
@@ -351,6 +418,7 @@ fn inline_value(v: &toml::Value) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::swap_test::recording;
 
     fn spec(lanes: Vec<Lane>) -> PipelineSpec {
         PipelineSpec {
@@ -409,5 +477,121 @@ mod tests {
         let builtin = PipelineSpec { plugins: Vec::new(), ..builtin };
         let src = SourceFile::new("<pipeline>", builtin.graph_toml());
         GraphSpec::parse(src, &registry_with_capture(Captured::default())).unwrap();
+    }
+
+    /// A kind whose name may not be part of a node id (a plugin's `my.split`) gives a node id
+    /// of valid characters only, still unique, and the generated graph parses.
+    #[test]
+    fn node_ids_are_made_of_valid_characters_whatever_the_kind() {
+        let s = spec(vec![
+            Lane {
+                name: "a".into(),
+                split: node("my.split", "", "in", "out"),
+                correct: node("my corr/ü", "", "in", "out"),
+            },
+            Lane { name: "b".into(), split: node("my-split", "", "in", "out"), correct: node("pass", "", "in", "out") },
+        ]);
+        let layout = s.layout();
+        let ids: Vec<&str> = layout.splitters.iter().map(|(id, _)| id.as_str()).collect();
+        assert_eq!(ids, ["split-my-split", "split-my-split-2"]);
+        assert_eq!(s.lanes_of("split-my-split"), ["a"]);
+        assert_eq!(s.lanes_of("split-my-split-2"), ["b"]);
+        // The kinds registered under those names (standing in for a plugin's): the graph parses.
+        let mut reg = registry_with_capture(Captured::default());
+        for kind in ["my.split", "my-split", "my corr/ü", "pass"] {
+            register_every(&mut reg, kind);
+        }
+        let s = PipelineSpec { plugins: Vec::new(), ..s };
+        let g = GraphSpec::parse(SourceFile::new("<pipeline>", s.graph_toml()), &reg).unwrap();
+        let mut ids: Vec<&str> = g.nodes.iter().map(|n| n.id.as_str()).collect();
+        ids.sort_unstable();
+        assert_eq!(
+            ids,
+            [
+                "capture",
+                "correct-a",
+                "correct-b",
+                "recon",
+                "replay",
+                "segment",
+                "split-my-split",
+                "split-my-split-2",
+                "sync"
+            ]
+        );
+    }
+
+    #[derive(Deserialize)]
+    #[serde(deny_unknown_fields)]
+    struct EveryParams {
+        /// Leaves out every `skip`-th message (0: none).
+        #[serde(default)]
+        skip: u64,
+    }
+
+    impl NodeParams for EveryParams {}
+
+    /// Passes its input on, but for every `skip`-th message.
+    struct Every {
+        skip: u64,
+        seen: u64,
+    }
+
+    impl skinflow_core::Processor for Every {
+        fn process(
+            &mut self,
+            _ctx: &mut Context,
+            inputs: &Inputs,
+            out: &mut skinflow_core::Outputs,
+        ) -> Result<(), NodeError> {
+            let Some(m) = inputs.get(0) else { return Ok(()) };
+            self.seen += 1;
+            if self.skip > 0 && self.seen.is_multiple_of(self.skip) {
+                return Ok(());
+            }
+            out.send(0, m.clone())
+        }
+    }
+
+    /// Registers kind `kind`: any payload in on `in`, out on `out`, but every `skip`-th.
+    fn register_every(reg: &mut Registry, kind: &'static str) {
+        let info = KindInfo::new(kind, Role::Processor, "test: passes its input on, but every skip-th")
+            .input(PortSpec::any("in", "anything").multi())
+            .output(PortSpec::any("out", "its input"));
+        reg.register(typed(info, |p: EveryParams, _| {
+            Ok(NodeImpl::Processor(Box::new(Every { skip: p.skip, seen: 0 })))
+        }))
+        .unwrap();
+    }
+
+    /// A lane whose node sends nothing for some frames makes the capture drop the other lanes'
+    /// messages of those frames: the run fails naming that lane and node and what it sent; a
+    /// lane node sending one message per frame is not blamed.
+    #[test]
+    fn a_lane_node_skipping_frames_is_named_with_its_lane() {
+        let rec = recording("skip", 12);
+        let every = |skip: u64| node("every", &format!("skip = {skip}"), "in", "out");
+        let lanes = vec![
+            Lane { name: "full".into(), split: every(0), correct: every(0) },
+            Lane { name: "skip".into(), split: every(0), correct: every(3) },
+        ];
+        let s = PipelineSpec { recording: rec.clone(), plugins: Vec::new(), ..spec(lanes) };
+        let captured = Captured::default();
+        let mut reg = registry_with_capture(captured.clone());
+        register_every(&mut reg, "every");
+        let e = s.run_with(&reg, &captured).unwrap_err();
+        assert!(e.starts_with("lane \"skip\": node \"correct-skip\" sent messages on \"out\" for "), "{e}");
+        assert!(e.contains("each lane must send one message per frame: the capture dropped "), "{e}");
+        assert!(e.ends_with(" messages of the other lanes"), "{e}");
+        assert!(!e.contains("split-every") && !e.contains("correct-full"), "{e}");
+
+        // Every lane node sending one message per frame: the run gives one row per frame.
+        let lanes = vec![Lane { name: "full".into(), split: every(0), correct: every(0) }];
+        let s = PipelineSpec { recording: rec, plugins: Vec::new(), ..spec(lanes) };
+        let captured = Captured::default();
+        let mut reg = registry_with_capture(captured.clone());
+        register_every(&mut reg, "every");
+        let rows = s.run_with(&reg, &captured).unwrap();
+        assert!(!rows.is_empty() && rows.iter().all(|r| r.len() == 1), "{}", rows.len());
     }
 }

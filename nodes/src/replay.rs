@@ -312,37 +312,13 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
 
 #[cfg(test)]
 mod tests {
-    use std::path::{Path, PathBuf};
+    use std::path::Path;
 
     use skinflow_core::{Context, Mode, Source};
-    use skinflow_eit::Sensor;
     use skinflow_record::read::Recording;
-    use skinflow_record::write::{RecordingWriter, Streams, WriterOptions};
 
     use super::{Replay, ReplayState};
-    use crate::swap_test::run;
-
-    /// A recording of `frames` EIT frames at 10 Hz and pressure at 50 Hz over the same time,
-    /// in a fresh directory; returns its path.
-    fn recording(name: &str, frames: u64) -> PathBuf {
-        let dir = std::env::temp_dir().join(format!("skinflow-replay-{}-{name}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).unwrap();
-        let path = dir.join("rec.h5");
-        let sensor = Sensor::paper_100mm();
-        let mut o = WriterOptions::new(sensor.toml.clone());
-        o.streams = Streams { eit: true, pressure: true, ..Streams::default() };
-        let mut w = RecordingWriter::create(&path, &o).unwrap();
-        let v = vec![0.5; sensor.measurement_count()];
-        for k in 0..frames {
-            w.append_eit(0.05 + 0.1 * k as f64, k, &v).unwrap();
-        }
-        for k in 0..frames * 5 {
-            w.append_pressure(0.02 * k as f64, 0.01 * k as f64).unwrap();
-        }
-        w.close().unwrap();
-        path
-    }
+    use crate::swap_test::{recording, run};
 
     fn params(path: &Path, rest: &str) -> String {
         format!("path = {:?}{rest}", path.to_str().unwrap())

@@ -1,6 +1,8 @@
 //! Hot swap of a source mid-stream, deterministically, behind a [`crate::gate`]. Shared by the
-//! `replay` and `sim` tests.
+//! `replay` and `sim` tests; and a small recording of a given length (`recording`) for the
+//! `replay` and `pipeline` tests.
 
+use std::path::PathBuf;
 use std::sync::{Arc, Mutex};
 
 use skinflow_core::graph::SourceFile;
@@ -61,4 +63,28 @@ pub fn run(kind: &str, params: &str, swap: Option<(u64, &str)>) -> (Vec<Sent>, R
         })
         .collect();
     (sent, report)
+}
+
+/// A recording of `frames` EIT frames at 10 Hz and pressure at 50 Hz over the same time,
+/// in a fresh directory; returns its path.
+pub fn recording(name: &str, frames: u64) -> PathBuf {
+    use skinflow_eit::Sensor;
+    use skinflow_record::write::{RecordingWriter, Streams, WriterOptions};
+    let dir = std::env::temp_dir().join(format!("skinflow-nodes-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("rec.h5");
+    let sensor = Sensor::paper_100mm();
+    let mut o = WriterOptions::new(sensor.toml.clone());
+    o.streams = Streams { eit: true, pressure: true, ..Streams::default() };
+    let mut w = RecordingWriter::create(&path, &o).unwrap();
+    let v = vec![0.5; sensor.measurement_count()];
+    for k in 0..frames {
+        w.append_eit(0.05 + 0.1 * k as f64, k, &v).unwrap();
+    }
+    for k in 0..frames * 5 {
+        w.append_pressure(0.02 * k as f64, 0.01 * k as f64).unwrap();
+    }
+    w.close().unwrap();
+    path
 }

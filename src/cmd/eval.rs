@@ -290,8 +290,12 @@ pub fn run(
     args: &PipelineArgs,
     lane_args: &LaneArgs,
 ) -> Result<()> {
+    // The lanes first: their plugin libraries and calibrations are inputs too.
+    let extra = ExtraLanes::resolve(lane_args, calib)?;
+    let lane_files = extra.files();
     let mut inputs: Vec<(&str, &Path)> = recordings.iter().map(|r| ("recording", r.as_path())).collect();
     inputs.push(("--calib", calib));
+    inputs.extend(lane_files.iter().map(|(what, p)| (what.as_str(), *p)));
     let outputs: Vec<(&str, &Path)> =
         [("--json", json), ("--contacts-csv", contacts_csv)].into_iter().filter_map(|(f, p)| Some((f, p?))).collect();
     super::paths::check_outputs(&inputs, &outputs)?;
@@ -306,7 +310,6 @@ pub fn run(
         super::paths::check_output_dir("--plots", dir)?;
     }
     let cal = check_calibration(calib)?;
-    let extra = ExtraLanes::resolve(lane_args, calib)?;
     args.validate_with(
         |spec| {
             spec.calibration = Some(calib.to_path_buf());
@@ -326,6 +329,21 @@ pub fn run(
             calib.display(),
             recordings[0].display()
         );
+    }
+    // A lane's own calibration gets the checks `--calib` gets.
+    for (lane, path) in extra.calibrations(calib) {
+        let lane_cal = Calibration::read(path).map_err(|e| anyhow::anyhow!("--lane '{lane}': calibration: {e}"))?;
+        if let Some(fitted_on) = &lane_cal.provenance.sensor
+            && !fitted_on.same_geometry(&sensor)
+        {
+            bail!(
+                "--lane '{lane}': calibration {}: fitted on sensor {fitted_on}, but {} was recorded on {sensor}; \
+                 calibrate on recordings of this one",
+                path.display(),
+                recordings[0].display()
+            );
+        }
+        args.warn_calibration_settings(path, lane_cal.provenance.pipeline.as_ref());
     }
     if recordings.len() > 1 {
         super::calibrate::distinct(recordings, "frames")?;

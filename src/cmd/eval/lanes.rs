@@ -77,6 +77,9 @@ struct ExtraLane {
     text: String,
     lane: Lane,
     label: String,
+    /// The files its nodes' params name (a calibration, a plugin's `path`-typed params), as
+    /// (`split_params.x` or `correct_params.x`, path relative to the current directory).
+    files: Vec<(String, PathBuf)>,
 }
 
 /// The lanes after the built-in nine, and the plugin libraries their kinds come from.
@@ -155,6 +158,32 @@ impl ExtraLanes {
         spec.plugins = self.plugins.clone();
     }
 
+    /// The files these lanes read (or name): the `--plugin` libraries and the files their
+    /// nodes' params name, each with what it is for an error (`the --plugin library`, `file
+    /// correct_params.calibration of --lane "x"`). Outputs of `eval` must be none of them.
+    pub(super) fn files(&self) -> Vec<(String, &Path)> {
+        let plugins = self.plugins.iter().map(|p| ("--plugin library".to_owned(), p.as_path()));
+        let params = self.lanes.iter().flat_map(|l| {
+            l.files.iter().map(move |(param, p)| (format!("file {param} of --lane \"{}\"", l.lane.name), p.as_path()))
+        });
+        plugins.chain(params).collect()
+    }
+
+    /// The calibrations lanes set themselves (a `calibration` param other than `--calib`), with
+    /// the `--lane` text that sets each.
+    pub(super) fn calibrations<'a>(&'a self, calib: &'a Path) -> Vec<(&'a str, &'a Path)> {
+        let mut out: Vec<(&str, &Path)> = Vec::new();
+        for l in &self.lanes {
+            for (param, p) in &l.files {
+                let own = param.ends_with(".calibration") && !super::super::paths::same_file(p, calib);
+                if own && !out.iter().any(|(_, q)| super::super::paths::same_file(p, q)) {
+                    out.push((l.text.as_str(), p.as_path()));
+                }
+            }
+        }
+        out
+    }
+
     /// `--lane '<text>'` of the first of these lanes node `id` of `spec` is part of.
     pub(super) fn origin(&self, spec: &PipelineSpec, id: &str) -> Option<String> {
         let names = spec.lanes_of(id);
@@ -194,12 +223,32 @@ fn resolve_lane(text: &str, registry: &Registry, calib: &Path, earlier: &[ExtraL
     if let Some(other) = earlier.iter().find(|l| l.lane.name == name) {
         bail!("name \"{name}\" is also the name of --lane '{}'", other.text);
     }
-    let (split, split_plugin) = stage(Role::Split, &arg.split, arg.split_params, registry, calib, &name)?;
-    let (correct, correct_plugin) = stage(Role::Correct, &arg.correct, arg.correct_params, registry, calib, &name)?;
+    let mut files = Vec::new();
+    let (split, split_plugin) = stage(Role::Split, &arg.split, arg.split_params, registry, calib, &name, &mut files)?;
+    let (correct, correct_plugin) =
+        stage(Role::Correct, &arg.correct, arg.correct_params, registry, calib, &name, &mut files)?;
     let label = arg
         .label
         .unwrap_or_else(|| if split_plugin || correct_plugin { format!("{name} (plugin)") } else { name.clone() });
-    Ok(ExtraLane { text: text.to_owned(), lane: Lane { name, split, correct }, label })
+    // Rows and plot panels are told apart by their labels.
+    if label.trim().is_empty() {
+        bail!("label is empty: rows of the table and panels of the plots are told apart by it");
+    }
+    if let Some((n, ..)) = LANES.iter().find(|(.., l)| *l == label) {
+        bail!("label \"{label}\" is the built-in lane {n}'s; choose another");
+    }
+    if let Some(other) = earlier.iter().find(|l| l.label == label) {
+        bail!("label \"{label}\" is also the label of --lane '{}'", other.text);
+    }
+    Ok(ExtraLane { text: text.to_owned(), lane: Lane { name, split, correct }, label, files })
+}
+
+/// Whether a param of type `ty` names files (`path`, `input-path`, `output-path`, or an array
+/// of one of them).
+fn names_files(ty: &str) -> bool {
+    use skinflow_plugin_sdk::export::{INPUT_PATH, OUTPUT_PATH, PATH};
+    let scalar = ty.strip_prefix('[').and_then(|t| t.strip_suffix(']')).unwrap_or(ty);
+    [PATH, INPUT_PATH, OUTPUT_PATH].contains(&scalar)
 }
 
 /// A lane's splitter or corrector: a built-in strategy (`params` empty), else a node kind
@@ -213,6 +262,7 @@ fn stage(
     registry: &Registry,
     calib: &Path,
     lane: &str,
+    files: &mut Vec<(String, PathBuf)>,
 ) -> Result<(Stage, bool)> {
     let (builtin_kind, a_role, in_ty, out_ty) = role.shape();
     let key = role.key();
@@ -270,6 +320,15 @@ fn stage(
     }
     if matches!(role, Role::Correct) && declares("name") && !params.contains_key("name") {
         params.insert("name".into(), toml::Value::String(lane.to_owned()));
+    }
+    for doc in info.params.iter().filter(|d| names_files(&d.ty)) {
+        let named: Vec<&str> = match params.get(doc.name.as_ref()) {
+            Some(toml::Value::String(one)) => vec![one.as_str()],
+            Some(toml::Value::Array(many)) => many.iter().filter_map(toml::Value::as_str).collect(),
+            _ => Vec::new(),
+        };
+        let param = format!("{key}_params.{}", doc.name);
+        files.extend(named.into_iter().filter(|f| !f.is_empty()).map(|f| (param.clone(), PathBuf::from(f))));
     }
     let stage =
         Stage::Node { kind: kind.to_owned(), params, input: input.name.to_string(), output: output.name.to_string() };

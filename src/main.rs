@@ -367,7 +367,18 @@ fn run(
     }
     if let Some(sock) = control {
         skinflow_nodes::outputs::check_extra_output(&spec, "--control", sock).map_err(anyhow::Error::msg)?;
+        if let Some(stats) = stats_json.filter(|s| {
+            let abs = |p: &Path| std::path::absolute(p).ok();
+            abs(s) == abs(sock) || cmd::paths::same_file(s, sock)
+        }) {
+            bail!("--stats-json {} and --control {} name the same file", stats.display(), sock.display());
+        }
     }
+    // A hot swap may not point a node at either (checked with every edit and swap).
+    let extra_outputs: Vec<(&'static str, PathBuf)> = [("--stats-json", stats_json), ("--control", control)]
+        .into_iter()
+        .filter_map(|(what, p)| Some((what, p?.to_path_buf())))
+        .collect();
     let stop = interrupt_flag()?;
     // The kinds live swaps can use: the graph's plugins loaded again (fresh copies, so a
     // rebuilt library is told apart later); they loaded a moment ago for validation.
@@ -389,7 +400,7 @@ fn run(
     };
     let done = Arc::new(AtomicBool::new(false));
     let mut helpers = Vec::new();
-    let live = kinds.map(|k| cmd::live::Live::new(&spec, k, running.handle()));
+    let live = kinds.map(|k| cmd::live::Live::new(&spec, k, running.handle(), extra_outputs.clone()));
     if let (true, Some(live)) = (watch, &live) {
         let (p, live, d) = (path.to_path_buf(), Arc::clone(live), done.clone());
         helpers.push(std::thread::spawn(move || cmd::live::watch(p, live, d)));

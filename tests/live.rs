@@ -281,6 +281,12 @@ fn a_sped_up_replay_goes_on_and_a_logger_swap_onto_its_own_file_is_refused() {
     assert_eq!(reply["ok"], false, "{reply}");
     let error = reply["error"].as_str().unwrap();
     assert!(error.contains("the recording replay \"replay\" reads (its `path` ") && error.contains("in.h5"), "{reply}");
+    // Nor onto the file this run writes its statistics to (they would replace its rows).
+    let reply =
+        ask(&sock, r#"{"cmd": "swap", "node": "log", "kind": "hdf5_logger", "params": {"path": "stats.json"}}"#);
+    assert_eq!(reply["ok"], false, "{reply}");
+    let error = reply["error"].as_str().unwrap();
+    assert!(error.contains("--stats-json ") && error.contains("is the file hdf5_logger \"log\" writes"), "{reply}");
     std::fs::write(&g, replay_graph("4.0", "")).unwrap();
     std::thread::sleep(Duration::from_millis(700));
     std::fs::write(&g, replay_graph("4.0", ", overwrite = true, flush_interval_s = 0.5")).unwrap();

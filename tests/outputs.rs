@@ -360,6 +360,9 @@ fn stats_json_over_a_file_the_graph_reads_or_writes_is_refused() {
         assert!(!d.join("out.h5").exists(), "{flag} {file}: nothing ran");
     }
     assert_eq!(std::fs::read(d.join("rec.h5")).unwrap(), rec, "the recording is untouched");
+    // Nor one file for both (the statistics would replace the socket).
+    let out = skinflow(&d, &["run", "g.toml", "--stats-json", "s", "--control", "./s"]);
+    assert!(!out.status.success() && stderr(&out).contains("--stats-json s and --control ./s name the same file"));
     // A file of its own: the run goes on and writes it.
     ok(&skinflow(&d, &["run", "g.toml", "--stats-json", "stats.json"]));
     assert!(std::fs::read_to_string(d.join("stats.json")).unwrap().contains("\"log\""));

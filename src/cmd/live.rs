@@ -161,6 +161,9 @@ pub struct Live {
     nodes: Mutex<Vec<NodeNow>>,
     policies: Mutex<Vec<Policy>>,
     kinds: Mutex<Kinds>,
+    /// Files the command writes beside the graph (`--stats-json`, `--control`), as (option,
+    /// path): no swap may point a node at one of them.
+    extra_outputs: Vec<(&'static str, PathBuf)>,
 }
 
 /// An edit that could not be applied whole: the deadlines and restart policies it changed are
@@ -197,13 +200,20 @@ impl EditError {
 
 impl Live {
     /// `spec` is the graph as started, `kinds` its plugins loaded for swaps (`Kinds::load`).
-    pub fn new(spec: &GraphSpec, kinds: Kinds, handle: GraphHandle) -> Arc<Live> {
+    /// `extra_outputs`: the files the command writes beside the graph, as (option, path).
+    pub fn new(
+        spec: &GraphSpec,
+        kinds: Kinds,
+        handle: GraphHandle,
+        extra_outputs: Vec<(&'static str, PathBuf)>,
+    ) -> Arc<Live> {
         Arc::new(Live {
             handle,
             started: spec.clone(),
             nodes: Mutex::new(node_key(spec)),
             policies: Mutex::new(spec.nodes.iter().map(policy).collect()),
             kinds: Mutex::new(kinds),
+            extra_outputs,
         })
     }
 
@@ -247,7 +257,7 @@ impl Live {
             (n.kind, n.params) = (k, p);
         }
         drop(kinds);
-        check_swapped_graph(&spec)
+        check_swapped_graph(&spec, &self.extra_outputs)
     }
 
     /// Applies one validated edit: checks the structure and what only a restart can change are
@@ -277,7 +287,7 @@ impl Live {
         if let Some(why) = needs_restart(old, new) {
             return Err(rejected(why));
         }
-        check_swapped_graph(new).map_err(rejected)?;
+        check_swapped_graph(new, &self.extra_outputs).map_err(rejected)?;
         let mut applied = Applied::default();
         {
             let mut policies = self.policies.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
@@ -430,10 +440,16 @@ pub fn watch(path: PathBuf, live: Arc<Live>, done: Arc<AtomicBool>) {
 /// another sensor than theirs, apply a calibration of another sensor, or record over an input,
 /// is refused, and the graph runs on. (A logger's `strategies` are not checked here: a swap may
 /// rename a corrector's output, whose frames the logger then counts as discarded.)
-fn check_swapped_graph(spec: &GraphSpec) -> Result<(), String> {
+/// The command's own output files (`extra`: `--stats-json`, `--control`) are checked against
+/// the swapped graph's files too (`skinflow_nodes::outputs::check_extra_output`).
+fn check_swapped_graph(spec: &GraphSpec, extra: &[(&'static str, PathBuf)]) -> Result<(), String> {
     skinflow_nodes::sensors::check_graph(spec)
         .and_then(|()| skinflow_nodes::outputs::check_files(spec))
-        .map_err(|errs| errs.0.iter().map(ToString::to_string).collect::<Vec<_>>().join("; "))
+        .map_err(|errs| errs.0.iter().map(ToString::to_string).collect::<Vec<_>>().join("; "))?;
+    for (what, path) in extra {
+        skinflow_nodes::outputs::check_extra_output(spec, what, path)?;
+    }
+    Ok(())
 }
 
 /// Longest a `tare` or `control` request waits for the node to run the command.

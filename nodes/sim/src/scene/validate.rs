@@ -87,9 +87,7 @@ pub(super) fn validate(raw: RawScene, text: &str, at: &Locator<'_>) -> Result<Sc
     }
     let warnings: Vec<String> =
         builder.warnings.into_iter().map(|(span, w)| at.error(Some(span), w).to_string()).collect();
-    for w in &warnings {
-        tracing::warn!(target: "skinflow::scene", "{w}");
-    }
+    log_once(&warnings);
     let timeline = Timeline { segments: builder.segments };
     let duration_s = timeline.duration_s();
     if duration_s <= 0.0 {
@@ -372,5 +370,19 @@ pub(super) fn non_negative(name: &str, v: &Spanned<f64>, err: &ErrFn<'_>) -> Res
         Ok(x)
     } else {
         Err(err(v.span(), format!("\"{name}\": must be finite and >= 0 (got {x})")))
+    }
+}
+
+/// Logs each warning (target `skinflow::scene`) the first time this process reads it: a scene
+/// is read by `check` and again by the `sim` node that runs it, and again after every `--watch`
+/// reload, and says the same each time. `Scene::warnings` keeps them all.
+fn log_once(warnings: &[String]) {
+    static LOGGED: std::sync::Mutex<Option<std::collections::HashSet<String>>> = std::sync::Mutex::new(None);
+    let mut logged = LOGGED.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+    let logged = logged.get_or_insert_with(Default::default);
+    for w in warnings {
+        if logged.insert(w.clone()) {
+            tracing::warn!(target: "skinflow::scene", "{w}");
+        }
     }
 }

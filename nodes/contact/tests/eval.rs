@@ -28,7 +28,12 @@ fn truth(x_mm: f64, force_n: f64, diameter_mm: f64) -> TruthContact {
 /// Two strategies; frame 0: one 10 mm contact (errors +1 / -2 N), frame 1: two 12.5 mm
 /// contacts (errors 0, +2 / -1, +1 N) plus a spurious detection, frame 2: a missed contact.
 fn evaluator() -> Evaluator {
-    let mut e = Evaluator::new(&[("a", "Strategy A"), ("b", "Strategy B")]);
+    evaluator_with(&[("a", "Strategy A"), ("b", "Strategy B")])
+}
+
+/// [`evaluator`]'s frames, with these strategy labels.
+fn evaluator_with(labels: &[(&str, &str)]) -> Evaluator {
+    let mut e = Evaluator::new(labels);
     let res = Some(Resolution { res50_pct: 70.0, res75_pct: 80.0 });
     e.push(&FrameInput {
         truth: &[truth(0.0, 4.0, 10.0)],
@@ -124,4 +129,27 @@ fn table_three_layout_lists_strategies_in_order() {
     assert!(lines[3].starts_with("Strategy B"));
     assert!(text.contains("10 mm") && text.contains("12.5 mm"));
     assert!(text.contains("Localization: 2.0 ± 2.6 mm over 3 matched contacts (1 missed, 1 spurious)"), "{text}");
+}
+
+/// The printed table's label column is as wide as the longest label (38 at least), so every
+/// row's figures start in one column whatever labels `eval --lane` gives.
+#[test]
+fn the_table_aligns_any_label() {
+    let long = "a label far longer than the thirty-eight the built-in ones need";
+    for labels in [[("a", "Strategy A"), ("b", "Strategy B")], [("a", "Strategy A"), ("b", long)]] {
+        let text = evaluator_with(&labels).report("rec.h5").to_string();
+        let width = labels.iter().map(|(_, l)| l.len()).max().unwrap().max(38);
+        let rows: Vec<&str> = text.lines().filter(|l| labels.iter().any(|(_, lab)| l.starts_with(lab))).collect();
+        // Force table and per-diameter table, each one row per strategy.
+        assert_eq!(rows.len(), 4, "{text}");
+        for row in rows {
+            let (label, rest) = row.split_at(width);
+            assert!(labels.iter().any(|(_, l)| label.trim_end() == *l), "{row}");
+            assert!(rest.starts_with(' ') && !rest.trim_start().is_empty(), "{row}");
+        }
+        let multi = text.lines().skip_while(|l| !l.starts_with("Multi-contact")).skip(1).take(2);
+        for row in multi {
+            assert_eq!(row.find(|c: char| c.is_ascii_digit()), Some(width + 3), "{row}");
+        }
+    }
 }

@@ -185,6 +185,8 @@ impl fmt::Display for EvalReport {
             self.order.clone()
         };
         let matched = self.localization.matched;
+        // The label column: 38 wide, or as wide as the longest label (`eval --lane` sets any).
+        let w = order.iter().map(|(_, l)| l.chars().count()).max().unwrap_or(0).max(38);
         if !self.more_recordings.is_empty() {
             writeln!(
                 f,
@@ -197,7 +199,7 @@ impl fmt::Display for EvalReport {
         writeln!(f, "Force estimation ({} frames, {matched} matched contacts). Lower is better.", self.frames)?;
         writeln!(
             f,
-            "{:<38} {:>14} {:>13} {:>10} {:>10}",
+            "{:<w$} {:>14} {:>13} {:>10} {:>10}",
             "Method", "RMSE [N]", "rel. err [%]", "p50 [us]", "p99 [us]"
         )?;
         for (name, label) in &order {
@@ -210,7 +212,7 @@ impl fmt::Display for EvalReport {
             };
             writeln!(
                 f,
-                "{label:<38} {rmse:>14} {:>13} {:>10} {:>10}",
+                "{label:<w$} {rmse:>14} {:>13} {:>10} {:>10}",
                 num(s.relative_error_pct, 1),
                 num(s.latency_us_p50, 1),
                 num(s.latency_us_p99, 1)
@@ -221,7 +223,7 @@ impl fmt::Display for EvalReport {
         diameters.dedup();
         if !diameters.is_empty() {
             writeln!(f)?;
-            write!(f, "{:<38}", "Per-diameter RMSE [N]")?;
+            write!(f, "{:<w$}", "Per-diameter RMSE [N]")?;
             for d in &diameters {
                 write!(f, " {:>9}", format!("{d} mm"))?;
             }
@@ -230,7 +232,7 @@ impl fmt::Display for EvalReport {
                 let Some(s) = self.strategies.get(name) else {
                     continue;
                 };
-                write!(f, "{label:<38}")?;
+                write!(f, "{label:<w$}")?;
                 for d in &diameters {
                     write!(f, " {:>9}", num(s.per_diameter_rmse_n.get(*d).copied(), 2))?;
                 }
@@ -254,7 +256,7 @@ impl fmt::Display for EvalReport {
                 write!(f, "Multi-contact ({} frames), per-contact RMSE [N]:", m.frames)?;
                 for (name, label) in &order {
                     if let Some(v) = m.per_contact_rmse_n.get(name) {
-                        write!(f, "\n  {label:<36} {}", num(*v, 2))?;
+                        write!(f, "\n  {label:<w$} {}", num(*v, 2))?;
                     }
                 }
                 writeln!(f)?;

@@ -244,6 +244,16 @@ fn refused_lanes_name_the_lane_and_the_cause_before_any_work() {
         err.contains(r#"--lane 'name = "a", correct = "eit-nocal"': name "a" is also the name of --lane 'name = "a"'"#),
         "{err}"
     );
+    // One library twice (another spelling): refused as such, not as its kinds defined twice.
+    let mut args = base.clone();
+    let again = format!(
+        "{}/./{}",
+        Path::new(&split_weighted).parent().unwrap().display(),
+        Path::new(&split_weighted).file_name().unwrap().to_string_lossy()
+    );
+    args.extend(["--plugin", &split_weighted, "--plugin", &again, "--lane", r#"name = "x""#].map(String::from));
+    let err = stderr(&run(&d, &args));
+    assert!(err.contains(&format!("plugin {again}: given twice (also as {split_weighted})")), "{err}");
     // A library that does not exist.
     let mut args = base;
     args.extend(["--plugin", "no-such.so", "--lane", r#"name = "x""#].map(String::from));

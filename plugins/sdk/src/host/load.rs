@@ -42,6 +42,8 @@ pub enum PluginError {
     Kind { path: PathBuf, kind: String, problem: String },
     #[error("plugin {}: kind \"{kind}\" is already defined by {existing}", path.display())]
     DuplicateKind { path: PathBuf, kind: String, existing: String },
+    #[error("plugin {}: given twice (also as {}); load each library once", path.display(), first.display())]
+    Twice { path: PathBuf, first: PathBuf },
 }
 
 /// A mapped plugin library.
@@ -386,6 +388,16 @@ pub fn load(path: &Path, registry: &mut Registry, codecs: &Codecs) -> Result<Loa
 
 /// Loads every plugin in order; stops at the first failure.
 pub fn load_all(paths: &[PathBuf], registry: &mut Registry, codecs: &Codecs) -> Result<Vec<Loaded>, PluginError> {
+    // One library named twice (under any spelling) would define each of its kinds twice.
+    let same = |a: &Path, b: &Path| match (a.canonicalize(), b.canonicalize()) {
+        (Ok(a), Ok(b)) => a == b,
+        _ => a == b,
+    };
+    for (k, path) in paths.iter().enumerate() {
+        if let Some(first) = paths[..k].iter().find(|p| same(p, path)) {
+            return Err(PluginError::Twice { path: path.clone(), first: first.clone() });
+        }
+    }
     paths.iter().map(|p| load(p, registry, codecs)).collect()
 }
 

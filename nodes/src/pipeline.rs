@@ -128,7 +128,7 @@ fn path_str(p: &Path) -> String {
 /// `s` with every character a node id may not hold (all but ASCII letters, digits, '_' and
 /// '-') replaced by '-': a plugin's kind `my.split` gives `my-split`.
 fn id_part(s: &str) -> String {
-    s.chars().map(|c| if c.is_ascii_alphanumeric() || c == '_' || c == '-' { c } else { '-' }).collect()
+    s.chars().map(|c| if skinflow_toml::is_bare_char(c) { c } else { '-' }).collect()
 }
 
 /// `base`, or `base-2`, `base-3`, ... whichever `used` does not hold yet (then added to it).
@@ -399,11 +399,7 @@ fn inline_table(params: &toml::Table) -> String {
 
 /// A key, quoted unless bare (letters, digits, '_' and '-').
 fn key(k: &str) -> String {
-    if !k.is_empty() && k.chars().all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-') {
-        k.to_owned()
-    } else {
-        quote(k)
-    }
+    if skinflow_toml::is_bare_key(k) { k.to_owned() } else { quote(k) }
 }
 
 /// A value on one line: tables inline, at any depth.

@@ -141,8 +141,9 @@ pub(super) fn plugin_paths(src: &SourceFile) -> Result<Vec<PathBuf>, GraphErrors
     Ok(file.plugin.iter().map(|p| base.join(p.path.get_ref())).collect())
 }
 
+/// A node id is a bare TOML key: letters, digits, `_` and `-`.
 fn valid_id(id: &str) -> bool {
-    !id.is_empty() && id.chars().all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
+    skinflow_toml::is_bare_key(id)
 }
 
 pub(super) fn validate(src: SourceFile, registry: &Registry) -> Result<GraphSpec, GraphErrors> {

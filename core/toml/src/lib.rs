@@ -68,6 +68,17 @@ pub fn deserialize<'de, T: de::Deserialize<'de>, D: Deserializer<'de>>(deseriali
     T::deserialize(strict(deserializer))
 }
 
+/// Whether `c` may appear in a bare TOML key (ASCII letters, digits, `_` and `-`). skinflow's
+/// node ids, lane names and generated keys use the same rule.
+pub fn is_bare_char(c: char) -> bool {
+    c.is_ascii_alphanumeric() || c == '_' || c == '-'
+}
+
+/// Whether `key` is a bare TOML key: not empty, and made of [`is_bare_char`] characters.
+pub fn is_bare_key(key: &str) -> bool {
+    !key.is_empty() && key.chars().all(is_bare_char)
+}
+
 /// Splits the key path this crate puts in front of an error message from the rest:
 /// `("a.b[2].c", "invalid type: ...")` for `a.b[2].c: invalid type: ...`, `None` and the whole
 /// message when it does not start with one (an error about the top level). For callers that
@@ -76,7 +87,7 @@ pub fn deserialize<'de, T: de::Deserialize<'de>, D: Deserializer<'de>>(deseriali
 /// (`custom: ...`, from a `Deserialize` impl at the top level) reads as a path too: use it on
 /// errors of values below the top level.
 pub fn split_path(message: &str) -> (Option<&str>, &str) {
-    let bare = |c: char| c.is_ascii_alphanumeric() || c == '_' || c == '-';
+    let bare = is_bare_char;
     let bytes = message.as_bytes();
     let mut i = 0;
     loop {
@@ -145,8 +156,7 @@ impl fmt::Display for Path<'_> {
                 if !matches!(parent, Path::Root) {
                     write!(f, "{parent}.")?;
                 }
-                let bare = !key.is_empty() && key.chars().all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-');
-                if bare { f.write_str(key) } else { write!(f, "{key:?}") }
+                if is_bare_key(key) { f.write_str(key) } else { write!(f, "{key:?}") }
             }
             Path::Index(parent, i) => write!(f, "{parent}[{i}]"),
         }

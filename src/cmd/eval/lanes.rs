@@ -194,7 +194,7 @@ impl ExtraLanes {
 
 /// Whether `name` can be a lane's: a node id part and a JSON key and CSV column name.
 fn valid_name(name: &str) -> bool {
-    !name.is_empty() && name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
+    skinflow_toml::is_bare_key(name)
 }
 
 /// One `--lane` (errors without the `--lane '<text>'` prefix); `earlier` are the lanes before it.

@@ -39,6 +39,14 @@ pub enum SplitStrategy {
 }
 
 impl SplitStrategy {
+    /// Every strategy, in the order the docs list them.
+    pub const ALL: [SplitStrategy; 4] = [
+        SplitStrategy::Proportional,
+        SplitStrategy::SensitivityCompensated,
+        SplitStrategy::EitForce,
+        SplitStrategy::ForceBalance,
+    ];
+
     /// The strategy's name as the param spells it, and as the node's splits carry it
     /// (`Split::strategy`; a corrector's output name follows it).
     pub fn name(self) -> &'static str {
@@ -247,12 +255,7 @@ mod tests {
 
     #[test]
     fn splitter_names_are_those_the_params_spell() {
-        for s in [
-            super::SplitStrategy::Proportional,
-            super::SplitStrategy::SensitivityCompensated,
-            super::SplitStrategy::EitForce,
-            super::SplitStrategy::ForceBalance,
-        ] {
+        for s in super::SplitStrategy::ALL {
             let parsed: super::SplitStrategy =
                 serde::Deserialize::deserialize(toml::Value::String(s.name().into())).unwrap();
             assert_eq!(parsed, s);

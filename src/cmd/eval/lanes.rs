@@ -13,13 +13,6 @@ use skinflow_nodes::pipeline::{Lane, PipelineSpec, Stage};
 use skinflow_nodes::split::SplitStrategy;
 
 use super::LANES;
-/// The splitter node's `strategy` values.
-const SPLIT_STRATEGIES: [SplitStrategy; 4] = [
-    SplitStrategy::Proportional,
-    SplitStrategy::SensitivityCompensated,
-    SplitStrategy::EitForce,
-    SplitStrategy::ForceBalance,
-];
 
 /// `--plugin` and `--lane`: lanes evaluated after the built-in nine.
 #[derive(Debug, Clone, Default, clap::Args)]
@@ -116,7 +109,7 @@ impl Role {
     /// The built-in kind's `strategy` values.
     fn strategies(self) -> Vec<&'static str> {
         match self {
-            Role::Split => SPLIT_STRATEGIES.iter().map(|s| s.name()).collect(),
+            Role::Split => SplitStrategy::ALL.iter().map(|s| s.name()).collect(),
             Role::Correct => StrategyKind::ALL.iter().map(|k| k.name()).collect(),
         }
     }

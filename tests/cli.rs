@@ -1369,7 +1369,11 @@ fn a_replay_of_an_empty_recording_warns_that_it_sends_nothing() {
         "[sensor]\nname = \"square-100mm\"\nwidth_mm = 100.0\nheight_mm = 100.0\n",
     );
     opts.streams = skinflow_record::write::Streams { truth: true, ..Default::default() };
-    skinflow_record::write::RecordingWriter::create(d.join("empty.h5"), &opts).unwrap().close().unwrap();
+    // Written under another name and copied: HDF5 opens its files without close-on-exec, so a
+    // `skinflow` child another test spawns while this one writes would inherit the descriptor
+    // and hold the file's lock for its whole run (std's copy opens with close-on-exec).
+    skinflow_record::write::RecordingWriter::create(d.join("written.h5"), &opts).unwrap().close().unwrap();
+    std::fs::copy(d.join("written.h5"), d.join("empty.h5")).unwrap();
     std::fs::write(
         d.join("g.toml"),
         "[[node]]\nid = \"replay\"\nkind = \"replay\"\nparams = { path = \"empty.h5\", speed = 0.0 }\n\

@@ -4,7 +4,7 @@
 
 use std::path::{Path, PathBuf};
 
-use super::support::{fixture, ok, root, skinflow, stderr};
+use super::support::{fixture, hdf5_io, ok, read_recording, root, skinflow, spawn, stderr};
 
 /// A fresh work directory for one test of this module.
 fn workdir(test: &str) -> std::path::PathBuf {
@@ -45,12 +45,12 @@ fn an_interrupted_simulate_leaves_no_file_under_the_requested_name() {
                  [[step]]\nrest_s = 2.0\n\n[[step]]\nat_mm = [[0.0, 0.0]]\ndiameter_mm = 15.0\nforces_n = [5.0]\nramp_s = 300.0\n\
                  hold_s = 1.0\nrest_s = 1.0\n";
     std::fs::write(d.join("long.toml"), scene).unwrap();
-    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_skinflow"))
-        .current_dir(&d)
-        .args(["simulate", "long.toml", "--out", "rec.h5"])
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .unwrap();
+    let mut child = spawn(
+        std::process::Command::new(env!("CARGO_BIN_EXE_skinflow"))
+            .current_dir(&d)
+            .args(["simulate", "long.toml", "--out", "rec.h5"])
+            .stderr(std::process::Stdio::piped()),
+    );
     // Killed once its hidden staging file exists (the scene has been prepared and writing began).
     let building = |d: &Path| {
         std::fs::read_dir(d).unwrap().any(|e| e.unwrap().file_name().to_string_lossy().ends_with(".partial"))
@@ -411,7 +411,7 @@ fn eval_scores_a_recording_with_a_dead_stretch_without_those_frames() {
     let d = workdir("dead-stretch");
     simulate(&d, "tiny-eval.toml", "rec.h5");
     std::fs::copy(d.join("rec.h5"), d.join("dead.h5")).unwrap();
-    {
+    hdf5_io(|| {
         let file = hdf5::File::open_rw(d.join("dead.h5")).unwrap();
         let ds = file.dataset("/eit/v").unwrap();
         let mut v = ds.read_2d::<f64>().unwrap();
@@ -419,7 +419,7 @@ fn eval_scores_a_recording_with_a_dead_stretch_without_those_frames() {
             v.row_mut(i).fill(f64::NAN);
         }
         ds.write(&v).unwrap();
-    }
+    });
     let calib = root().join("graphs/calib/paper.toml");
     let frames = |rec: &str| {
         let json = d.join(format!("{rec}.json"));
@@ -538,7 +538,7 @@ pub(super) fn check_pipeline_stats(d: &Path, rec: &str) -> (usize, PathBuf) {
         assert_eq!((n["discarded"].as_u64(), n["drops"].as_u64()), (Some(0), Some(0)), "{n}");
     }
     let node = |id: &str| stats["nodes"].as_array().unwrap().iter().find(|n| n["id"] == id).unwrap().clone();
-    let recorded = skinflow_record::Recording::open(d.join(rec)).unwrap().eit.unwrap().len() as u64;
+    let recorded = read_recording(d.join(rec)).eit.unwrap().len() as u64;
     assert!(recorded > 10);
     assert_eq!(node("sync")["msgs_out"].as_u64().unwrap(), recorded, "{stats}");
     assert_eq!(node("recon")["msgs_in"].as_u64().unwrap(), recorded, "{stats}");
@@ -563,7 +563,7 @@ pub(super) struct Shares {
 /// ones, never both (the bit mapping itself is unit-tested in the logger).
 pub(super) fn derived_streams_agree(path: &Path, frames: usize) -> Shares {
     use skinflow_record::layout::force_flags;
-    let rec = skinflow_record::Recording::open(path).unwrap();
+    let rec = read_recording(path);
     let sync = rec.derived.sync.as_ref().expect("/derived/sync");
     assert_eq!(sync.t_s.len(), frames);
     assert!(sync.no_load[0] && !sync.no_load[frames - 1], "the scene starts with a rest and ends loaded or resting");
@@ -706,13 +706,13 @@ fn bench_exits_2_on_an_invalid_graph_and_printing_commands_survive_a_closed_pipe
     assert_eq!(out.status.code(), Some(2), "{err}");
     assert!(err.contains("segmentor"), "{err}");
 
-    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_skinflow"))
-        .arg("nodes")
-        .current_dir(&d)
-        .stdout(std::process::Stdio::piped())
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .unwrap();
+    let mut child = spawn(
+        std::process::Command::new(env!("CARGO_BIN_EXE_skinflow"))
+            .arg("nodes")
+            .current_dir(&d)
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::piped()),
+    );
     drop(child.stdout.take()); // the reader goes away before the first line
     let out = child.wait_with_output().unwrap();
     let err = String::from_utf8_lossy(&out.stderr);
@@ -811,14 +811,14 @@ fn repair_salvages_a_recording_whose_last_flush_was_cut_short() {
     simulate(&d, "tiny-eval.toml", "rec.h5");
     let whole = ok(&skinflow(&d, &["inspect", "rec.h5"]));
     // Values written before the times, as the logger orders them, and then the writer stopped.
-    {
+    hdf5_io(|| {
         let file = hdf5::File::open_rw(d.join("rec.h5")).unwrap();
         let v = file.dataset("/eit/v").unwrap();
         let mut shape = v.shape();
         shape[0] += 3;
         v.resize(shape).unwrap();
         file.close().unwrap();
-    }
+    });
     let out = skinflow(&d, &["inspect", "rec.h5"]);
     assert_eq!(out.status.code(), Some(1));
     assert!(stderr(&out).contains("rec.h5: /eit/v: has "), "{}", stderr(&out));
@@ -887,7 +887,7 @@ fn check_reports_missing_and_invalid_input_files() {
     .unwrap();
     std::fs::write(d.join("bad-calib.toml"), "x = 1\n").unwrap();
     std::fs::write(d.join("text.h5"), "recording bytes").unwrap();
-    hdf5::File::create(d.join("plain.h5")).unwrap().create_group("eit").unwrap();
+    hdf5_io(|| hdf5::File::create(d.join("plain.h5")).unwrap().create_group("eit").unwrap());
     let cases: [(String, &str, &str); 7] = [
         (
             sim_graph("missing-scene.toml", calib),
@@ -1006,20 +1006,20 @@ fn directories_truncated_and_headless_recordings_are_refused_saying_why() {
     let bytes = std::fs::read(d.join("rec.h5")).unwrap();
     std::fs::write(d.join("cut.h5"), &bytes[..bytes.len() / 2]).unwrap();
     std::fs::create_dir(d.join("adir")).unwrap();
-    {
+    hdf5_io(|| {
         let file = hdf5::File::create(d.join("nosensor.h5")).unwrap();
         let format: hdf5::types::VarLenUnicode = "skinflow-recording".parse().unwrap();
         let attr = file.new_attr::<hdf5::types::VarLenUnicode>().shape(()).create("format").unwrap();
         attr.write_scalar(&format).unwrap();
         file.new_attr::<i64>().shape(()).create("format_version").unwrap().write_scalar(&1).unwrap();
-    }
+    });
     // Every EIT value NaN: no channel to reconstruct from (not "every frame is a no-load frame").
     std::fs::copy(d.join("rec.h5"), d.join("nan.h5")).unwrap();
-    {
+    hdf5_io(|| {
         let file = hdf5::File::open_rw(d.join("nan.h5")).unwrap();
         let ds = file.dataset("/eit/v").unwrap();
         ds.write_raw(&vec![f64::NAN; ds.size()]).unwrap();
-    }
+    });
     let calib = root().join("graphs/calib/paper.toml");
     let calib = calib.to_str().unwrap();
     let nan = "nan.h5: /eit/v: no finite value in any of its ";
@@ -1189,13 +1189,15 @@ fn recordings_of_another_sensor_and_files_that_are_no_calibration_are_refused() 
     // calibrate, and the error says which file and why.
     let set_forces = |name: &str, f: fn(f64) -> f64| {
         std::fs::copy(d.join("small.h5"), d.join(name)).unwrap();
-        let file = hdf5::File::open_rw(d.join(name)).unwrap();
-        let ds = file.dataset("/truth/force_n").unwrap();
-        let forces: Vec<f64> =
-            ds.read_raw::<f64>().unwrap().iter().map(|&x| if x.is_nan() { x } else { f(x) }).collect();
-        let shape = ds.shape();
-        ds.write_raw(&forces).unwrap();
-        assert_eq!(ds.shape(), shape);
+        hdf5_io(|| {
+            let file = hdf5::File::open_rw(d.join(name)).unwrap();
+            let ds = file.dataset("/truth/force_n").unwrap();
+            let forces: Vec<f64> =
+                ds.read_raw::<f64>().unwrap().iter().map(|&x| if x.is_nan() { x } else { f(x) }).collect();
+            let shape = ds.shape();
+            ds.write_raw(&forces).unwrap();
+            assert_eq!(ds.shape(), shape);
+        });
     };
     set_forces("negative.h5", |f| -f);
     let err = stderr(&skinflow(&d, &["calibrate", "negative.h5", "--out", "c.toml"]));
@@ -1369,11 +1371,7 @@ fn a_replay_of_an_empty_recording_warns_that_it_sends_nothing() {
         "[sensor]\nname = \"square-100mm\"\nwidth_mm = 100.0\nheight_mm = 100.0\n",
     );
     opts.streams = skinflow_record::write::Streams { truth: true, ..Default::default() };
-    // Written under another name and copied: HDF5 opens its files without close-on-exec, so a
-    // `skinflow` child another test spawns while this one writes would inherit the descriptor
-    // and hold the file's lock for its whole run (std's copy opens with close-on-exec).
-    skinflow_record::write::RecordingWriter::create(d.join("written.h5"), &opts).unwrap().close().unwrap();
-    std::fs::copy(d.join("written.h5"), d.join("empty.h5")).unwrap();
+    hdf5_io(|| skinflow_record::write::RecordingWriter::create(d.join("empty.h5"), &opts).unwrap().close().unwrap());
     std::fs::write(
         d.join("g.toml"),
         "[[node]]\nid = \"replay\"\nkind = \"replay\"\nparams = { path = \"empty.h5\", speed = 0.0 }\n\

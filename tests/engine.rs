@@ -9,7 +9,7 @@ use std::time::{Duration, Instant};
 
 const LIMIT: Duration = Duration::from_secs(60);
 
-use super::support::{bin, text};
+use super::support::{bin, spawn, status, text};
 
 fn skinflow() -> Command {
     let mut c = Command::new(bin());
@@ -30,7 +30,7 @@ fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
 
 /// Runs to completion, failing the test if it takes longer than `LIMIT` (a hang).
 fn run_to_end(cmd: &mut Command) -> Output {
-    let mut child = cmd.stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().unwrap();
+    let mut child = spawn(cmd.stdout(Stdio::piped()).stderr(Stdio::piped()));
     let t0 = Instant::now();
     while child.try_wait().unwrap().is_none() {
         if t0.elapsed() > LIMIT {
@@ -118,15 +118,15 @@ to = "out.in"
 "#,
     );
     let stats_json = dir.join("stats.json");
-    let mut child = skinflow()
-        .arg("run")
-        .arg(&graph)
-        .arg("--stats-json")
-        .arg(&stats_json)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
+    let mut child = spawn(
+        skinflow()
+            .arg("run")
+            .arg(&graph)
+            .arg("--stats-json")
+            .arg(&stats_json)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped()),
+    );
     let (tx, rx) = mpsc::channel();
     let stderr = child.stderr.take().unwrap();
     let reader = std::thread::spawn(move || {
@@ -151,8 +151,7 @@ to = "out.in"
         }
     }
     std::thread::sleep(Duration::from_millis(500)); // let some messages flow
-    let status = Command::new("kill").args(["-INT", &child.id().to_string()]).status().unwrap();
-    assert!(status.success());
+    assert!(status(Command::new("kill").args(["-INT", &child.id().to_string()])).success());
     while child.try_wait().unwrap().is_none() {
         if t0.elapsed() > LIMIT {
             let _ = child.kill();

@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use super::support::{bin, ok, root, skinflow, stderr};
+use super::support::{bin, ok, root, skinflow, spawn, status, stderr};
 
 /// A fresh work directory for one test of this module.
 fn workdir(test: &str) -> PathBuf {
@@ -39,13 +39,13 @@ fn serial_sources_drive_the_pipeline_through_emulated_boards() {
     let d = workdir("emulate");
     let emu_dir = d.join("emu");
     // One CRC failure: the frame is lost, and counted as the EIT node's discarded message.
-    let mut emu = Command::new(bin())
-        .args(["emulate", &fixture("tiny-eval.toml"), "--dir", emu_dir.to_str().unwrap(), "--fault", "eit:5:crc"])
-        .env("RUST_LOG", "warn")
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
+    let mut emu = spawn(
+        Command::new(bin())
+            .args(["emulate", &fixture("tiny-eval.toml"), "--dir", emu_dir.to_str().unwrap(), "--fault", "eit:5:crc"])
+            .env("RUST_LOG", "warn")
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped()),
+    );
     // The emulator prints "eit PATH", "pressure PATH", "loadcell PATH" once its ptys exist.
     let mut lines = BufReader::new(emu.stdout.take().unwrap()).lines();
     let mut paths = std::collections::HashMap::new();
@@ -79,21 +79,21 @@ fn serial_sources_drive_the_pipeline_through_emulated_boards() {
         calib()
     );
     std::fs::write(d.join("g.toml"), graph).unwrap();
-    let run = Command::new(bin())
-        .args(["run", "g.toml", "--for", "1000", "--stats-json", "stats.json"])
-        .current_dir(&d)
-        .env("RUST_LOG", "warn")
-        .env("XDG_CACHE_HOME", d.join("cache"))
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
+    let run = spawn(
+        Command::new(bin())
+            .args(["run", "g.toml", "--for", "1000", "--stats-json", "stats.json"])
+            .current_dir(&d)
+            .env("RUST_LOG", "warn")
+            .env("XDG_CACHE_HOME", d.join("cache"))
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped()),
+    );
     // The emulator ends with its scene (real rates: about 14 s); then stop the graph.
     let t0 = Instant::now();
     let emu_out = emu.wait_with_output().unwrap();
     assert!(emu_out.status.success(), "{}", stderr(&emu_out));
     std::thread::sleep(Duration::from_millis(300));
-    Command::new("kill").args(["-INT", &run.id().to_string()]).status().unwrap();
+    status(Command::new("kill").args(["-INT", &run.id().to_string()]));
     let out = run.wait_with_output().unwrap();
     let stderr = stderr(&out);
     assert!(out.status.success(), "{stderr}");
@@ -249,14 +249,14 @@ fn a_logging_run_killed_with_sigkill_leaves_a_readable_file() {
     std::fs::write(d.join("g.toml"), graph).unwrap();
     for (attempt, wait_ms) in [700, 530, 910].into_iter().enumerate() {
         let _ = std::fs::remove_file(d.join("crash.h5"));
-        let child = Command::new(bin())
-            .args(["run", "g.toml"])
-            .current_dir(&d)
-            .env("RUST_LOG", "info")
-            .stderr(Stdio::piped())
-            .stdout(Stdio::null())
-            .spawn()
-            .unwrap();
+        let child = spawn(
+            Command::new(bin())
+                .args(["run", "g.toml"])
+                .current_dir(&d)
+                .env("RUST_LOG", "info")
+                .stderr(Stdio::piped())
+                .stdout(Stdio::null()),
+        );
         // Wait until the logger announces the file, then past a few flush intervals.
         let t0 = Instant::now();
         while !d.join("crash.h5").exists() {
@@ -264,7 +264,7 @@ fn a_logging_run_killed_with_sigkill_leaves_a_readable_file() {
             std::thread::sleep(Duration::from_millis(20));
         }
         std::thread::sleep(Duration::from_millis(wait_ms));
-        Command::new("kill").args(["-KILL", &child.id().to_string()]).status().unwrap();
+        status(Command::new("kill").args(["-KILL", &child.id().to_string()]));
         let _ = child.wait_with_output();
         let out = skinflow(&d, &["inspect", "crash.h5"]);
         assert!(out.status.success(), "attempt {attempt}: the killed run's file is refused: {}", stderr(&out));
@@ -291,13 +291,9 @@ fn a_logging_run_killed_while_creating_its_file_leaves_no_unreadable_file() {
     let mut named = 0;
     for k in 0..8 {
         let _ = std::fs::remove_file(d.join("crash.h5"));
-        let mut child = Command::new(bin())
-            .args(["run", "g.toml"])
-            .current_dir(&d)
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .spawn()
-            .unwrap();
+        let mut child = spawn(
+            Command::new(bin()).args(["run", "g.toml"]).current_dir(&d).stdout(Stdio::null()).stderr(Stdio::null()),
+        );
         let staging = d.join(format!(".crash.h5.{}.partial", child.id()));
         let t0 = Instant::now();
         while !staging.exists() && !d.join("crash.h5").exists() {
@@ -328,13 +324,13 @@ fn an_interrupted_simulate_leaves_no_file() {
         "[scene]\nname = \"long\"\nprofile = \"paper\"\n\n[[step]]\nrest_s = 100000.0\n",
     )
     .unwrap();
-    let child = Command::new(bin())
-        .args(["simulate", "long.toml", "--out", "long.h5"])
-        .current_dir(&d)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
+    let child = spawn(
+        Command::new(bin())
+            .args(["simulate", "long.toml", "--out", "long.h5"])
+            .current_dir(&d)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped()),
+    );
     // Interrupt once the recording is being written.
     let t0 = Instant::now();
     let writing =
@@ -343,7 +339,7 @@ fn an_interrupted_simulate_leaves_no_file() {
         assert!(t0.elapsed() < Duration::from_secs(60), "simulate never started writing");
         std::thread::sleep(Duration::from_millis(20));
     }
-    Command::new("kill").args(["-INT", &child.id().to_string()]).status().unwrap();
+    status(Command::new("kill").args(["-INT", &child.id().to_string()]));
     let out = child.wait_with_output().unwrap();
     let err = stderr(&out);
     assert!(!out.status.success(), "{err}");

@@ -8,7 +8,7 @@ use std::path::Path;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use super::support::{bin, skinflow, stderr, workdir};
+use super::support::{bin, output, read_recording, skinflow, spawn, stderr, workdir};
 
 fn graph(scale_params: &str, out: &str) -> String {
     format!(
@@ -35,7 +35,7 @@ fn run_watched(g: &Path, sock: Option<&Path>) -> Child {
     if let Some(sock) = sock {
         cmd.args(["--control", sock.to_str().unwrap()]);
     }
-    let child = cmd.env("RUST_LOG", "warn").stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().unwrap();
+    let child = spawn(cmd.env("RUST_LOG", "warn").stdout(Stdio::piped()).stderr(Stdio::piped()));
     let t0 = Instant::now();
     while sock.is_some_and(|s| !s.exists()) {
         assert!(t0.elapsed() < Duration::from_secs(20), "no control socket");
@@ -122,11 +122,11 @@ fn control_refuses_to_replace_a_file_that_is_not_a_socket() {
     std::fs::write(&g, graph("factor = 2", "out.csv")).unwrap();
     let precious = d.join("notes.txt");
     std::fs::write(&precious, "keep me").unwrap();
-    let out = Command::new(bin())
-        .args(["run", g.to_str().unwrap(), "--control", precious.to_str().unwrap()])
-        .env("RUST_LOG", "warn")
-        .output()
-        .unwrap();
+    let out = output(
+        Command::new(bin())
+            .args(["run", g.to_str().unwrap(), "--control", precious.to_str().unwrap()])
+            .env("RUST_LOG", "warn"),
+    );
     let err = stderr(&out);
     assert_eq!(out.status.code(), Some(1), "{err}");
     assert!(err.contains(&format!("{}: --control: exists and is not a socket (a file)", precious.display())), "{err}");
@@ -213,14 +213,14 @@ fn a_rebuilt_plugin_is_reloaded_and_its_nodes_swapped() {
 /// `skinflow run G --watch --control SOCK` with `--stats-json stats.json`, once the socket
 /// answers.
 fn run_watched_with_stats(d: &Path, g: &Path, sock: &Path) -> Child {
-    let child = Command::new(bin())
-        .args(["run", g.to_str().unwrap(), "--watch", "--control", sock.to_str().unwrap(), "--stats-json"])
-        .arg(d.join("stats.json"))
-        .env("RUST_LOG", "warn")
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
+    let child = spawn(
+        Command::new(bin())
+            .args(["run", g.to_str().unwrap(), "--watch", "--control", sock.to_str().unwrap(), "--stats-json"])
+            .arg(d.join("stats.json"))
+            .env("RUST_LOG", "warn")
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped()),
+    );
     let t0 = Instant::now();
     while !sock.exists() {
         assert!(t0.elapsed() < Duration::from_secs(20), "no control socket");
@@ -302,7 +302,7 @@ fn a_sped_up_replay_goes_on_and_a_logger_swap_onto_its_own_file_is_refused() {
     assert!(stderr.contains(&refused), "{stderr}");
     // Every row once, in order: the logged streams equal the replayed recording's (times to
     // the nanosecond of the messages' headers).
-    let open = |f: &str| skinflow_record::Recording::open(d.join(f)).unwrap();
+    let open = |f: &str| read_recording(d.join(f));
     let (src, rec) = (open("in.h5"), open("rec.h5"));
     let ns = |t: &[f64]| t.iter().map(|t| (t * 1e9).round() as u64).collect::<Vec<_>>();
     let (a, b) = (src.eit.as_ref().unwrap(), rec.eit.as_ref().unwrap());

@@ -10,7 +10,7 @@
 use std::path::{Path, PathBuf};
 
 use super::plugins::plugin;
-use super::support::{fixture, ok, skinflow, stderr};
+use super::support::{fixture, ok, read_recording, skinflow, stderr};
 
 fn workdir(test: &str) -> PathBuf {
     super::support::workdir("outputs", test)
@@ -55,7 +55,7 @@ fn a_logger_over_the_recording_replayed_or_the_graph_file_is_refused_and_both_ar
     let d = workdir("over-inputs");
     recording(&d);
     let rec = std::fs::read(d.join("rec.h5")).unwrap();
-    let truth_rows = skinflow_record::Recording::open(d.join("rec.h5")).unwrap().truth.unwrap().len();
+    let truth_rows = read_recording(d.join("rec.h5")).truth.unwrap().len();
     assert!(truth_rows > 0);
 
     // The audit's case: overwrite = true over the replay's recording (under another spelling
@@ -73,7 +73,7 @@ fn a_logger_over_the_recording_replayed_or_the_graph_file_is_refused_and_both_ar
         );
         assert_eq!(std::fs::read(d.join("rec.h5")).unwrap(), rec, "{path}: the recording is untouched");
     }
-    let kept = skinflow_record::Recording::open(d.join("rec.h5")).unwrap();
+    let kept = read_recording(d.join("rec.h5"));
     assert_eq!(kept.truth.unwrap().len(), truth_rows);
 
     // The graph file itself.
@@ -171,7 +171,7 @@ fn forces_of_an_unlisted_strategy_are_counted_as_discarded() {
     assert_eq!(err.matches("is not in `strategies`").count(), 1, "{err}");
     assert!(err.contains("forces of strategy \"pneumatic-locaware\" are not logged"), "{err}");
 
-    let frames = skinflow_record::Recording::open(d.join("rec.h5")).unwrap().eit.unwrap().len() as u64;
+    let frames = read_recording(d.join("rec.h5")).eit.unwrap().len() as u64;
     assert!(frames > 10);
     assert!(err.contains(&format!("frames={frames}")) && err.contains("force frames not logged"), "{err}");
     let stats: serde_json::Value =
@@ -184,7 +184,7 @@ fn forces_of_an_unlisted_strategy_are_counted_as_discarded() {
     let edge_drops: u64 = stats["edges"].as_array().unwrap().iter().map(|e| e["drops"].as_u64().unwrap()).sum();
     assert_eq!(edge_drops, 0, "{stats}");
 
-    let rec = skinflow_record::Recording::open(d.join("out.h5")).unwrap();
+    let rec = read_recording(d.join("out.h5"));
     let tables: Vec<(&str, usize)> = rec.derived.forces.iter().map(|f| (f.name.as_str(), f.t_s.len())).collect();
     assert_eq!(tables, [("pneumatic-forward-force-balance", frames as usize)]);
 }

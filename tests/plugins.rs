@@ -25,7 +25,7 @@ use skinflow_nodes::gate::{self, Gate};
 use skinflow_nodes::payload::PressureSample;
 use skinflow_nodes::pipeline::{Captured, registry_with_capture};
 
-use super::support::{bin, ok, root, skinflow, stderr};
+use super::support::{bin, hdf5_io, ok, read_recording, root, skinflow, spawn, status, stderr};
 
 /// target/<profile>/, where cargo puts the binary and the cdylibs.
 fn profile_dir() -> PathBuf {
@@ -45,12 +45,12 @@ pub(crate) fn plugin(package: &str) -> PathBuf {
     };
     let target_dir = dir.parent().expect("target/<profile> has a parent");
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
-    let status = Command::new(cargo)
-        .args(["build", "-p", package, "--profile", &profile, "--target-dir"])
-        .arg(target_dir)
-        .current_dir(root())
-        .status()
-        .unwrap_or_else(|e| panic!("cannot run cargo to build {package}: {e}"));
+    let status = status(
+        Command::new(cargo)
+            .args(["build", "-p", package, "--profile", &profile, "--target-dir"])
+            .arg(target_dir)
+            .current_dir(root()),
+    );
     assert!(
         status.success() && lib.is_file(),
         "{} is missing and `cargo build -p {package}` did not make it",
@@ -345,7 +345,7 @@ fn plugin_lanes_are_named_after_their_nodes_in_compare_and_the_logger() {
     for id in ["split-area", "fused-a", "fused-b", "fused-c"] {
         assert_eq!((count(&stats, id, "errors"), count(&stats, id, "msgs_out")), (0, frames), "{id}");
     }
-    let rec = skinflow_record::Recording::open(d.join("log.h5")).unwrap();
+    let rec = read_recording(d.join("log.h5"));
     let logged: Vec<&str> = rec.derived.forces.iter().map(|f| f.name.as_str()).collect();
     for name in names {
         let f = rec.derived.forces.iter().find(|f| f.name == name).unwrap_or_else(|| panic!("{name}: {logged:?}"));
@@ -697,14 +697,14 @@ fn a_paced_plugin_source_stops_promptly_on_run_for() {
         quoted(&plugin("skinflow-plugin-csv-writers"))
     );
     std::fs::write(d.join("slow.toml"), g).unwrap();
-    let mut child = Command::new(bin())
-        .args(["run", "slow.toml", "--for", "1"])
-        .current_dir(&d)
-        .env("RUST_LOG", "warn")
-        .stdout(std::process::Stdio::null())
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .unwrap();
+    let mut child = spawn(
+        Command::new(bin())
+            .args(["run", "slow.toml", "--for", "1"])
+            .current_dir(&d)
+            .env("RUST_LOG", "warn")
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::piped()),
+    );
     // A guard against a hang, not a timing assertion: a source blocked for the hour would
     // keep the run alive far longer than this.
     let deadline = std::time::Instant::now() + std::time::Duration::from_secs(120);
@@ -789,7 +789,7 @@ fn shipped_csv_graphs_write_and_replay_the_pipeline_exactly() {
     let json = d.join("out.json");
     ok(&skinflow(&d, &["run", g.to_str().unwrap(), "--stats-json", json.to_str().unwrap()]));
     let report = stats(&json);
-    let rec = skinflow_record::Recording::open(d.join("log.h5")).unwrap();
+    let rec = read_recording(d.join("log.h5"));
 
     // Pressure: one row per sample, the logger's samples exactly.
     let pressure = csv_rows(&d.join("plugin-pressure.csv"));
@@ -1033,7 +1033,7 @@ fn a_plugin_node_takes_over_its_own_kinds_state_and_not_another_kinds() {
 #[test]
 fn bench_of_a_recording_without_truth_reports_speed_and_draws_no_plot() {
     let d = bench_workdir("bench-no-truth");
-    hdf5::File::open_rw(d.join("rec.h5")).unwrap().unlink("/truth").unwrap();
+    hdf5_io(|| hdf5::File::open_rw(d.join("rec.h5")).unwrap().unlink("/truth").unwrap());
     let o = bench(&d, &["recon.lambda=0.1"]);
     let err = stderr(&o);
     assert!(o.status.success(), "{err}");

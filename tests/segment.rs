@@ -8,7 +8,7 @@ use skinflow_record::Recording;
 use skinflow_record::layout::force_flags;
 
 use super::cli::pipeline_graph;
-use super::support::{fixture, ok, skinflow, stderr};
+use super::support::{fixture, ok, read_recording, skinflow, stderr};
 
 /// Runs the replayed pipeline on `rec.h5` with the segmenter's limit `max_contacts` (the
 /// crosstalk pass off, so both limits see the same regions) and returns the logged file.
@@ -22,7 +22,7 @@ fn run_with_limit(d: &Path, max_contacts: usize) -> (Recording, String) {
     std::fs::write(d.join(&name), graph.replace(seg, &params).replace("\"out.h5\"", &format!("{log:?}"))).unwrap();
     let out = skinflow(d, &["run", &name]);
     ok(&out);
-    (Recording::open(d.join(&log)).unwrap(), stderr(&out))
+    (read_recording(d.join(&log)), stderr(&out))
 }
 
 #[test]

@@ -7,7 +7,7 @@
 use std::path::Path;
 
 use super::cli::{check_pipeline_stats, derived_streams_agree, pipeline_graph};
-use super::support::{fixture, ok, rewrite_pressure, skinflow, stderr};
+use super::support::{fixture, hdf5_io, ok, read_recording, rewrite_pressure, skinflow, stderr};
 
 /// EIT frames (0-based) whose acquisition window the pressure board misses: both after the
 /// first contact (tiny-eval rests 4 s, about 5 frames).
@@ -18,7 +18,7 @@ const DROPOUTS: [usize; 2] = [12, 20];
 /// sample and can never be closed by a later one. Returns the EIT frame times.
 fn cut_recording(d: &Path) -> Vec<f64> {
     ok(&skinflow(d, &["simulate", fixture("tiny-eval.toml").to_str().unwrap(), "--out", "rec.h5", "--seed", "3"]));
-    let eit_t = skinflow_record::Recording::open(d.join("rec.h5")).unwrap().eit.unwrap().t_s;
+    let eit_t = read_recording(d.join("rec.h5")).eit.unwrap().t_s;
     let half = 0.5 * (eit_t[1] - eit_t[0]);
     let last = eit_t[eit_t.len() - 1];
     // A margin of 10 ms keeps samples off the windows' edges.
@@ -54,7 +54,7 @@ fn every_recorded_frame_is_synced_and_a_frame_without_pressure_is_flagged() {
     let log = d.join("out.h5");
     let shares = derived_streams_agree(&log, eit_t.len());
     assert!(shares.no_pressure > 0 && shares.loaded > 0, "{shares:?}");
-    let rec = skinflow_record::Recording::open(&log).unwrap();
+    let rec = read_recording(&log);
     let sync = rec.derived.sync.as_ref().unwrap();
     // A sync row per recorded frame, the last one included (times went through nanoseconds).
     assert_eq!(sync.t_s.len(), eit_t.len());
@@ -77,25 +77,27 @@ fn every_recorded_frame_is_synced_and_a_frame_without_pressure_is_flagged() {
 }
 
 /// A copy of recording `src` without its truth: EIT frames, their no-load reference and the
-/// pressure only (a session recorded without a load cell).
+/// pressure only (a session recorded without a load cell), under [`hdf5_io`].
 fn copy_without_truth(src: &Path, dst: &Path) {
     use skinflow_record::{Recording, RecordingWriter, Streams, WriterOptions};
-    let rec = Recording::open(src).unwrap();
-    let mut opts = WriterOptions::new(rec.sensor_toml.clone());
-    opts.streams = Streams { eit: true, pressure: true, truth: false, ..Streams::default() };
-    let mut w = RecordingWriter::create(dst, &opts).unwrap();
-    let eit = rec.eit.as_ref().unwrap();
-    for i in 0..eit.len() {
-        w.append_eit(eit.t_s[i], eit.seq[i], eit.frame(i)).unwrap();
-    }
-    if let Some(reference) = &rec.reference {
-        w.set_reference(reference).unwrap();
-    }
-    let p = rec.pressure.as_ref().unwrap();
-    for i in 0..p.len() {
-        w.append_pressure(p.t_s[i], p.kpa[i]).unwrap();
-    }
-    w.close().unwrap();
+    hdf5_io(|| {
+        let rec = Recording::open(src).unwrap();
+        let mut opts = WriterOptions::new(rec.sensor_toml.clone());
+        opts.streams = Streams { eit: true, pressure: true, truth: false, ..Streams::default() };
+        let mut w = RecordingWriter::create(dst, &opts).unwrap();
+        let eit = rec.eit.as_ref().unwrap();
+        for i in 0..eit.len() {
+            w.append_eit(eit.t_s[i], eit.seq[i], eit.frame(i)).unwrap();
+        }
+        if let Some(reference) = &rec.reference {
+            w.set_reference(reference).unwrap();
+        }
+        let p = rec.pressure.as_ref().unwrap();
+        for i in 0..p.len() {
+            w.append_pressure(p.t_s[i], p.kpa[i]).unwrap();
+        }
+        w.close().unwrap();
+    });
 }
 
 /// `graphs/ab-replay.toml` on a recording without truth (its truth edge wired, nothing on
@@ -107,7 +109,7 @@ fn a_recording_without_truth_is_tared_by_time_and_its_lanes_compared() {
     let d = super::support::workdir("sync", "notruth");
     ok(&skinflow(&d, &["simulate", fixture("tiny-eval.toml").to_str().unwrap(), "--out", "rec.h5", "--seed", "3"]));
     copy_without_truth(&d.join("rec.h5"), &d.join("notruth.h5"));
-    assert!(skinflow_record::Recording::open(d.join("notruth.h5")).unwrap().truth.is_none());
+    assert!(read_recording(d.join("notruth.h5")).truth.is_none());
     let root = super::support::root();
     let graph = std::fs::read_to_string(root.join("graphs/ab-replay.toml"))
         .unwrap()
@@ -123,7 +125,7 @@ fn a_recording_without_truth_is_tared_by_time_and_its_lanes_compared() {
     let report: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(d.join("ab.json")).unwrap()).unwrap();
     let lanes = report["lanes"].as_array().unwrap();
     assert_eq!(lanes.len(), 2, "{report}");
-    let frames = skinflow_record::Recording::open(d.join("notruth.h5")).unwrap().eit.unwrap().len() as u64;
+    let frames = read_recording(d.join("notruth.h5")).eit.unwrap().len() as u64;
     for l in lanes {
         let count = |k: &str| l[k].as_u64().unwrap();
         // 2 s of 4 s rest at 1.3 frames/s: two or three no-load frames.

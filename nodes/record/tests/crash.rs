@@ -4,6 +4,7 @@
 use std::io::{BufRead, BufReader};
 use std::path::PathBuf;
 use std::process::{Command, Stdio};
+use std::sync::{PoisonError, RwLock};
 
 use skinflow_record::Recording;
 
@@ -16,6 +17,12 @@ fn example_binary() -> PathBuf {
     bin
 }
 
+/// The two tests run in parallel threads. A child inherits every descriptor not marked
+/// close-on-exec, as HDF5's are, with the file's lock: a writer spawned while the other test
+/// has a file open here would keep that file locked. So spawns (shared) and this process's
+/// HDF5 work (exclusive) exclude each other.
+static SPAWN_OR_HDF5: RwLock<()> = RwLock::new(());
+
 /// Kills a writer after `flushes` flushes; checks the file keeps every flushed row and that
 /// `repair` copies it (without SWMR's "open for writing" mark) row for row.
 fn kill_after_flushes(mode: &str, flushes: usize) {
@@ -23,8 +30,10 @@ fn kill_after_flushes(mode: &str, flushes: usize) {
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
     let path = dir.join("rec.h5");
-    let mut child =
-        Command::new(example_binary()).arg(&path).arg(mode).stdout(Stdio::piped()).spawn().expect("spawn writer");
+    let mut child = {
+        let _no_hdf5_open = SPAWN_OR_HDF5.read().unwrap_or_else(PoisonError::into_inner);
+        Command::new(example_binary()).arg(&path).arg(mode).stdout(Stdio::piped()).spawn().expect("spawn writer")
+    };
     let mut lines = BufReader::new(child.stdout.take().unwrap()).lines();
     let mut durable = 0u64;
     let mut seen = 0;
@@ -41,6 +50,7 @@ fn kill_after_flushes(mode: &str, flushes: usize) {
     child.kill().unwrap();
     child.wait().unwrap();
 
+    let _no_spawn = SPAWN_OR_HDF5.write().unwrap_or_else(PoisonError::into_inner);
     let rec = Recording::open(&path).unwrap_or_else(|e| panic!("killed file does not open: {e}"));
     let eit = rec.eit.as_ref().unwrap();
     let p = rec.pressure.as_ref().unwrap();

@@ -10,10 +10,11 @@
 //!
 //! [`strict`] wraps any serde [`Deserializer`]: everything is forwarded unchanged (so
 //! `toml::Spanned`, toml's error spans, `deny_unknown_fields`, enums, `Option` and defaults
-//! behave as before), every nested value is deserialized through the wrapper too, and a
-//! tuple, fixed-size array, tuple struct or tuple variant whose sequence has elements left
-//! after the value took its own fails with "expected an array of N elements, found M". The
-//! error is raised inside the array's own deserializer, so toml gives it the array's span.
+//! behave as before; an enum below the top level is asked for by way of a newtype struct, see
+//! below), every nested value is deserialized through the wrapper too, and a tuple, fixed-size
+//! array, tuple struct or tuple variant whose sequence has elements left after the value took
+//! its own fails with "expected an array of N elements, found M". The error is raised inside
+//! the array's own deserializer, so toml gives it the array's span.
 //!
 //! # Key paths in errors
 //!
@@ -37,10 +38,15 @@
 //!   field gets the path of the table holding the key, never the key itself again:
 //!   ``sensor.electrode[0]: unknown field `stop_mm`, expected ...``. At the top level these
 //!   read exactly as toml's.
-//! - An error the wrapped deserializer raises itself, not through a visitor (toml's
-//!   `wanted string or table` for an enum given a number, `integer number overflowed`), is
-//!   passed on as it is, unprefixed: it may carry a span narrower than its value's, which a
-//!   rewritten error would lose.
+//! - A choice (an enum) given a value of a type no variant takes (`pacing = 3`) is refused by
+//!   toml itself, before any visitor runs (`wanted string or table`; `toml::Value`'s reads
+//!   ``invalid type: unit variant, expected string only``). That error too gets the path of the
+//!   value, and the choices after toml's words: ``pacing: wanted string or table (one of
+//!   `realtime`, `as-fast`)``, at the value's line and column (the wrapper names it inside
+//!   toml's scope, by asking for a newtype struct whose visitor then asks for the enum).
+//! - Any other error the wrapped deserializer raises itself, not through a visitor (toml's
+//!   `integer number overflowed`), is passed on as it is, unprefixed: it may carry a span
+//!   narrower than its value's, which a rewritten error would lose.
 //!
 //! [`split_path`] takes the path off again, for callers that name the place of an error
 //! themselves (a graph file's node and key, a scene file's table).
@@ -221,9 +227,10 @@ fn copy_path<'a>(path: &'a Path<'a>) -> Path<'a> {
 }
 
 /// Invokes `$forward` on every `deserialize_*` method of serde's `Deserializer` but
-/// `deserialize_tuple` and `deserialize_tuple_struct` (which [`Inner`] wraps with their length),
-/// with its extra arguments.
-macro_rules! every_method_but_tuples {
+/// `deserialize_tuple` and `deserialize_tuple_struct` (which [`Inner`] wraps with their length)
+/// and `deserialize_enum` (which it hands the wrapped deserializer through a [`Choice`]), with
+/// its extra arguments.
+macro_rules! every_plain_method {
     ($forward:ident) => {
         $forward! {
             deserialize_any();
@@ -252,7 +259,6 @@ macro_rules! every_method_but_tuples {
             deserialize_seq();
             deserialize_map();
             deserialize_struct(name: &'static str, fields: &'static [&'static str]);
-            deserialize_enum(name: &'static str, variants: &'static [&'static str]);
             deserialize_identifier();
             deserialize_ignored_any();
         }
@@ -272,10 +278,11 @@ macro_rules! forward_deserialize {
 impl<'de, D: Deserializer<'de>> Deserializer<'de> for Strict<D> {
     type Error = D::Error;
 
-    every_method_but_tuples!(forward_deserialize);
+    every_plain_method!(forward_deserialize);
     forward_deserialize! {
         deserialize_tuple(len: usize);
         deserialize_tuple_struct(name: &'static str, len: usize);
+        deserialize_enum(name: &'static str, variants: &'static [&'static str]);
     }
 
     fn is_human_readable(&self) -> bool {
@@ -309,8 +316,8 @@ macro_rules! forward_inner {
 impl<'de, D: Deserializer<'de>> Deserializer<'de> for Inner<'_, D> {
     type Error = D::Error;
 
-    // The tuples are wrapped with their length, below.
-    every_method_but_tuples!(forward_inner);
+    // The tuples are wrapped with their length, and enums through a `Choice`, below.
+    every_plain_method!(forward_inner);
 
     fn deserialize_tuple<V: Visitor<'de>>(self, len: usize, visitor: V) -> Result<V::Value, Self::Error> {
         let (ctx, visitor) = (self.ctx, self.wrap(visitor, Some(len)));
@@ -325,6 +332,21 @@ impl<'de, D: Deserializer<'de>> Deserializer<'de> for Inner<'_, D> {
     ) -> Result<V::Value, Self::Error> {
         let (ctx, visitor) = (self.ctx, self.wrap(visitor, Some(len)));
         ctx.pass(self.de.deserialize_tuple_struct(name, len, visitor))
+    }
+
+    fn deserialize_enum<V: Visitor<'de>>(
+        self,
+        name: &'static str,
+        variants: &'static [&'static str],
+        visitor: V,
+    ) -> Result<V::Value, Self::Error> {
+        let (ctx, visitor) = (self.ctx, self.wrap(visitor, None));
+        if self.key || matches!(ctx.path, Path::Root) {
+            // A key (an enum keying a map) is named by its table, and the top level has no
+            // path: nothing to add.
+            return ctx.pass(self.de.deserialize_enum(name, variants, visitor));
+        }
+        ctx.pass(self.de.deserialize_newtype_struct(name, Choice { visitor, name, variants }))
     }
 
     fn is_human_readable(&self) -> bool {
@@ -465,6 +487,138 @@ impl<'de, V: Visitor<'de>> Visitor<'de> for Wrap<'_, V> {
         self.ctx.state.settled.set(false);
         let ctx = self.ctx;
         ctx.name(self.visitor.visit_enum(Enum { data, ctx }))
+    }
+}
+
+/// The visitor of a choice (an enum) at a path, handed to the wrapped deserializer as a
+/// newtype struct's so that its refusal of the value's type gets the path.
+///
+/// toml refuses a value no variant can take (`pacing = 3`: `wanted string or table`; an empty
+/// table: `wanted exactly 1 element, ...`) in `deserialize_enum` itself, before any visitor
+/// runs, with the value's span. Named after `deserialize_enum` returned, the error would lose
+/// that span (a rewritten error has none, and toml gives an array's element none of its own
+/// on the way out). So the wrapper asks for a newtype struct, which toml's deserializers (and
+/// most self-describing ones) answer by handing the same deserializer back to
+/// [`Visitor::visit_newtype_struct`] and giving an error without a span the value's span on
+/// the way out: there this calls `deserialize_enum` and names the refusal, inside that scope,
+/// so toml puts back exactly the span it had.
+///
+/// A deserializer that reads the newtype hint as `deserialize_any` instead (serde's value
+/// deserializers) hands over the value itself: a string is taken as a variant's name, a map as
+/// a variant and its content (as self-describing formats read a choice), anything else is
+/// refused by the enum's visitor, named at the path.
+struct Choice<'a, V> {
+    visitor: Wrap<'a, V>,
+    name: &'static str,
+    variants: &'static [&'static str],
+}
+
+/// A visit of a deserializer that took the newtype hint as `deserialize_any`: the value is
+/// offered to the enum's visitor as it is.
+macro_rules! choice_visit {
+    ($($method:ident($ty:ty);)*) => {$(
+        fn $method<E: de::Error>(self, v: $ty) -> Result<Self::Value, E> {
+            self.visitor.$method(v)
+        }
+    )*};
+}
+
+impl<'de, V: Visitor<'de>> Visitor<'de> for Choice<'_, V> {
+    type Value = V::Value;
+
+    fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        self.visitor.expecting(f)
+    }
+
+    fn visit_newtype_struct<D: Deserializer<'de>>(self, deserializer: D) -> Result<Self::Value, D::Error> {
+        let ctx = self.visitor.ctx;
+        ctx.state.settled.set(false);
+        let variants = self.variants;
+        deserializer.deserialize_enum(self.name, variants, self.visitor).map_err(|e| {
+            // Settled if the visitor ran (and named its error or passed on a deeper one);
+            // otherwise the deserializer refused the value's type itself.
+            if ctx.state.settled.replace(true) {
+                return e;
+            }
+            let message = e.to_string();
+            de::Error::custom(format_args!("{}: {}{}", ctx.path, message.trim_end(), OneOf(variants)))
+        })
+    }
+
+    fn visit_str<E: de::Error>(self, v: &str) -> Result<Self::Value, E> {
+        self.visitor.visit_enum(de::value::StrDeserializer::new(v))
+    }
+
+    fn visit_borrowed_str<E: de::Error>(self, v: &'de str) -> Result<Self::Value, E> {
+        self.visitor.visit_enum(de::value::BorrowedStrDeserializer::new(v))
+    }
+
+    fn visit_string<E: de::Error>(self, v: String) -> Result<Self::Value, E> {
+        self.visitor.visit_enum(de::value::StringDeserializer::new(v))
+    }
+
+    fn visit_map<A: MapAccess<'de>>(self, map: A) -> Result<Self::Value, A::Error> {
+        self.visitor.visit_enum(de::value::MapAccessDeserializer::new(map))
+    }
+
+    choice_visit! {
+        visit_bool(bool);
+        visit_i8(i8);
+        visit_i16(i16);
+        visit_i32(i32);
+        visit_i64(i64);
+        visit_i128(i128);
+        visit_u8(u8);
+        visit_u16(u16);
+        visit_u32(u32);
+        visit_u64(u64);
+        visit_u128(u128);
+        visit_f32(f32);
+        visit_f64(f64);
+        visit_char(char);
+        visit_bytes(&[u8]);
+        visit_borrowed_bytes(&'de [u8]);
+        visit_byte_buf(Vec<u8>);
+    }
+
+    fn visit_none<E: de::Error>(self) -> Result<Self::Value, E> {
+        self.visitor.visit_none()
+    }
+
+    fn visit_unit<E: de::Error>(self) -> Result<Self::Value, E> {
+        self.visitor.visit_unit()
+    }
+
+    fn visit_some<D: Deserializer<'de>>(self, deserializer: D) -> Result<Self::Value, D::Error> {
+        self.visitor.visit_some(deserializer)
+    }
+
+    fn visit_seq<A: SeqAccess<'de>>(self, seq: A) -> Result<Self::Value, A::Error> {
+        self.visitor.visit_seq(seq)
+    }
+
+    fn visit_enum<A: EnumAccess<'de>>(self, data: A) -> Result<Self::Value, A::Error> {
+        self.visitor.visit_enum(data)
+    }
+}
+
+/// The names of a choice's variants after a refusal of its value's type: ``(one of `a`, `b`)``.
+struct OneOf(&'static [&'static str]);
+
+impl fmt::Display for OneOf {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self.0 {
+            [] => Ok(()),
+            [only] => write!(f, " (only `{only}`)"),
+            names => {
+                f.write_str(" (one of ")?;
+                for (i, name) in names.iter().enumerate() {
+                    let sep = if i == 0 { "" } else { ", " };
+                    write!(f, "{sep}`{name}`")?;
+                }
+                f.write_str(")")
+            }
+        }
     }
 }
 

@@ -457,9 +457,12 @@ mod paths {
         let (message, _) = fail::<Recon>("[mesh]\nelements = 3\nprior = { laplace = [1] }\n");
         assert!(message.starts_with("mesh.prior.laplace: invalid type: sequence, expected f64"), "{message}");
         // an enum given a number: toml's own error, raised before any visitor, keeps its wording
-        // and span and gets no path
+        // and span, and gets the path and the choices too (tests/choices.rs)
         let text = "[mesh]\nelements = 3\nprior = 4\n";
-        assert_eq!(fail::<Recon>(text), plain::<Recon>(text));
+        let (message, at) = fail::<Recon>(text);
+        let (theirs, their_at) = plain::<Recon>(text);
+        assert_eq!(message, format!("mesh.prior: {theirs} (one of `identity`, `noser`, `laplace`)"));
+        assert_eq!(at, their_at);
     }
 
     #[test]

@@ -20,9 +20,10 @@
 //! and on Unix a hard link to the same file is the same file), one that does not exist yet by
 //! its canonicalized existing directory and the rest of its path normalized (`.` and `..`).
 //! A logger that rotates (`rotate_mb` / `rotate_s`) writes `name-0001.h5`, `name-0002.h5`, ...
-//! beside `name.h5`: a file of that pattern counts as its output too. Each conflict is an error
-//! located at the writer's param (the later writer's, for two writers), naming both nodes and
-//! files. A plugin param's type (`skinflow_plugin_sdk::export::PARAM_TYPES`) says what the
+//! beside `name.h5` as given (in its directory, canonicalized: not beside the file a link
+//! `name.h5` leads to): a file of that pattern there, or one an existing part there leads to,
+//! counts as its output too. Each conflict is an error located at the writer's param (the
+//! later writer's, for two writers), naming both nodes and files. A plugin param's type (`skinflow_plugin_sdk::export::PARAM_TYPES`) says what the
 //! kind does with its file: `output-path` writes it, `input-path` reads it, `path` may do
 //! either (not known here), so two `path` params, or a `path` and an `input-path`, naming one
 //! file are not refused (two readers are fine); an array of one of them (`[output-path]`)
@@ -149,8 +150,8 @@ struct Named {
     resolved: PathBuf,
     id: FileId,
     use_: Use,
-    /// A logger that rotates: `stem-NNNN.ext` beside `resolved` are its files too.
-    rotates: bool,
+    /// A logger that rotates: the parts it writes (beside `resolved`, as given).
+    parts: Option<Parts>,
 }
 
 /// A file's identity: its normalized absolute path (see [`file_id`]) and, for an existing
@@ -165,23 +166,66 @@ impl FileId {
     fn same(&self, other: &FileId) -> bool {
         self.path == other.path || (self.inode.is_some() && self.inode == other.inode)
     }
+}
 
-    /// Whether this is a rotated part of the recording `base` writes: `stem-NNNN.ext` (at least
-    /// four digits) in the same directory (`skinflow_record::rotate::part_path`).
-    fn is_part_of(&self, base: &FileId) -> bool {
-        let (Some(dir), Some(name)) = (self.path.parent(), self.path.file_name().and_then(|n| n.to_str())) else {
+/// The rotated parts a logger writes, `stem-NNNN.ext` (at least four digits), as
+/// `skinflow_record::rotate::part_path` makes them: beside its path as given, named after the
+/// given file name. A link there is not followed (if `rec.h5` leads to `other/x.h5`, the parts
+/// are `rec-0001.h5`, ... beside the link, not `other/x-0001.h5`); the directory is
+/// canonicalized as [`file_id`] does.
+#[derive(Debug)]
+struct Parts {
+    /// The given path's directory, as [`file_id`] identifies it.
+    dir: PathBuf,
+    /// The given file name's stem and extension (converted as `part_path` converts them).
+    stem: String,
+    ext: Option<String>,
+    /// The parts that exist in `dir` already, each as [`file_id`] identifies it: one that is a
+    /// link (dangling or not) or a hard link is written where it leads.
+    existing: Vec<FileId>,
+}
+
+impl Parts {
+    /// The parts a logger rotating over `given` writes; `None` for a path naming no file
+    /// (ending in `..`, or a root).
+    fn of(given: &Path) -> Option<Parts> {
+        let abs = std::path::absolute(given).unwrap_or_else(|_| given.to_path_buf());
+        let name = Path::new(abs.file_name()?);
+        let dir = file_id(abs.parent()?).path;
+        let stem = name.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+        let ext = name.extension().map(|e| e.to_string_lossy().into_owned());
+        let mut parts = Parts { dir, stem, ext, existing: Vec::new() };
+        if let Ok(entries) = std::fs::read_dir(&parts.dir) {
+            let existing = entries
+                .filter_map(Result::ok)
+                .map(|e| parts.dir.join(e.file_name()))
+                .filter(|p| parts.is_part_name(p))
+                .map(|p| file_id(&p))
+                .collect();
+            parts.existing = existing;
+        }
+        Some(parts)
+    }
+
+    /// Whether `f` is one of the parts: a file of the pattern in [`Parts::dir`] (one that is
+    /// not there yet is created there), or the file an existing part leads to.
+    fn includes(&self, f: &FileId) -> bool {
+        self.is_part_name(&f.path) || self.existing.iter().any(|p| p.same(f))
+    }
+
+    /// Whether `p` is `dir/stem-NNNN.ext` (at least four digits).
+    fn is_part_name(&self, p: &Path) -> bool {
+        let (Some(dir), Some(name)) = (p.parent(), p.file_name().and_then(|n| n.to_str())) else {
             return false;
         };
-        if base.path.parent() != Some(dir) {
+        if dir != self.dir {
             return false;
         }
-        let Some(stem) = base.path.file_stem().and_then(|s| s.to_str()) else { return false };
-        let rest = match base.path.extension().map(|e| e.to_str()) {
-            Some(Some(ext)) => name.strip_suffix(ext).and_then(|n| n.strip_suffix('.')),
-            Some(None) => None,
+        let rest = match &self.ext {
+            Some(ext) => name.strip_suffix(ext.as_str()).and_then(|n| n.strip_suffix('.')),
             None => Some(name),
         };
-        let digits = rest.and_then(|r| r.strip_prefix(stem)).and_then(|r| r.strip_prefix('-'));
+        let digits = rest.and_then(|r| r.strip_prefix(self.stem.as_str())).and_then(|r| r.strip_prefix('-'));
         digits.is_some_and(|d| d.len() >= 4 && d.bytes().all(|b| b.is_ascii_digit()))
     }
 }
@@ -254,7 +298,7 @@ fn named_files(spec: &GraphSpec) -> Vec<Named> {
         resolved: spec.source.path.clone(),
         id: file_id(&spec.source.path),
         use_: Use::Reads,
-        rotates: false,
+        parts: None,
     }];
     // Resolved against the graph's directory by `plugin_paths`.
     for lib in plugin_paths(&spec.source).unwrap_or_default() {
@@ -264,7 +308,7 @@ fn named_files(spec: &GraphSpec) -> Vec<Named> {
             id: file_id(&lib),
             resolved: lib,
             use_: Use::Reads,
-            rotates: false,
+            parts: None,
         });
     }
     for (i, node) in spec.nodes.iter().enumerate() {
@@ -283,9 +327,9 @@ fn named_files(spec: &GraphSpec) -> Vec<Named> {
                     node: Some(i),
                     param: doc.name.to_string(),
                     id: file_id(&resolved),
+                    parts: if rotates && use_ == Use::Writes { Parts::of(&resolved) } else { None },
                     resolved,
                     use_,
-                    rotates: rotates && use_ == Use::Writes,
                 });
             }
         }
@@ -295,7 +339,7 @@ fn named_files(spec: &GraphSpec) -> Vec<Named> {
 
 /// Whether writer `w` writes over file `f` (its file, or a rotated part of it).
 fn writes_over(w: &Named, f: &FileId) -> bool {
-    w.id.same(f) || (w.rotates && f.is_part_of(&w.id))
+    w.id.same(f) || w.parts.as_ref().is_some_and(|p| p.includes(f))
 }
 
 /// Refuses every output file of a node that is the graph file, a plugin library, a file a
@@ -399,7 +443,7 @@ pub fn check_extra_output(spec: &GraphSpec, what: &str, path: &Path) -> Result<(
         if f.use_ == Use::Directory {
             continue;
         }
-        let part = !f.id.same(&id) && f.rotates && id.is_part_of(&f.id);
+        let part = !f.id.same(&id) && f.parts.as_ref().is_some_and(|p| p.includes(&id));
         if !f.id.same(&id) && !part {
             continue;
         }
@@ -764,17 +808,22 @@ mod tests {
 
     #[test]
     fn rotated_parts_and_normalized_paths() {
-        let base = file_id(Path::new("/nonexistent-skinflow/d/rec.h5"));
+        let parts = Parts::of(Path::new("/nonexistent-skinflow/d/rec.h5")).unwrap();
         let id = |p: &str| file_id(Path::new(p));
-        assert!(id("/nonexistent-skinflow/d/rec-0001.h5").is_part_of(&base));
-        assert!(id("/nonexistent-skinflow/d/rec-12345.h5").is_part_of(&base));
-        assert!(!id("/nonexistent-skinflow/d/rec-001.h5").is_part_of(&base));
-        assert!(!id("/nonexistent-skinflow/e/rec-0001.h5").is_part_of(&base));
-        assert!(!id("/nonexistent-skinflow/d/rec-0001.hdf5").is_part_of(&base));
-        assert!(id("/nonexistent-skinflow/d/x/../rec-0002.h5").is_part_of(&base));
-        assert!(id("/nonexistent-skinflow/d/./x/../rec.h5").same(&base));
-        let bare = id("/nonexistent-skinflow/d/rec");
-        assert!(id("/nonexistent-skinflow/d/rec-0003").is_part_of(&bare));
+        assert!(parts.includes(&id("/nonexistent-skinflow/d/rec-0001.h5")));
+        assert!(parts.includes(&id("/nonexistent-skinflow/d/rec-12345.h5")));
+        assert!(!parts.includes(&id("/nonexistent-skinflow/d/rec-001.h5")));
+        assert!(!parts.includes(&id("/nonexistent-skinflow/e/rec-0001.h5")));
+        assert!(!parts.includes(&id("/nonexistent-skinflow/d/rec-0001.hdf5")));
+        assert!(!parts.includes(&id("/nonexistent-skinflow/d/rec.h5")), "the base is no part");
+        assert!(parts.includes(&id("/nonexistent-skinflow/d/x/../rec-0002.h5")));
+        assert!(id("/nonexistent-skinflow/d/./x/../rec.h5").same(&id("/nonexistent-skinflow/d/rec.h5")));
+        let bare = Parts::of(Path::new("/nonexistent-skinflow/d/rec")).unwrap();
+        assert!(bare.includes(&id("/nonexistent-skinflow/d/rec-0003")));
+        // The given path, normalized: its directory as `file_id` identifies it.
+        let dotted = Parts::of(Path::new("/nonexistent-skinflow/d/x/../rec.h5")).unwrap();
+        assert!(dotted.includes(&id("/nonexistent-skinflow/d/rec-0004.h5")));
+        assert!(Parts::of(Path::new("/nonexistent-skinflow/d/..")).is_none());
     }
 
     #[cfg(unix)]
@@ -793,6 +842,48 @@ mod tests {
         assert!(file_id(&d.join("sub/../a.h5")).same(&a));
         // Not there yet: the existing directory canonicalized, through the link.
         assert!(file_id(&d.join("dirlink/new.h5")).same(&file_id(&d.join("sub/new.h5"))));
+        let _ = std::fs::remove_dir_all(&d);
+    }
+
+    /// A rotating logger's parts are written beside its path as given (`part_path` on it), not
+    /// beside the file a link there leads to: a writer on `dir/rec-0001.h5` is refused for a
+    /// logger on `dir/rec.h5 -> other/x.h5`, one on `other/x-0001.h5` is not; the base file is
+    /// still compared through the link, and an existing part that is a link is the file it
+    /// leads to.
+    #[cfg(unix)]
+    #[test]
+    fn rotated_parts_are_beside_the_path_given_not_beside_a_links_target() {
+        use std::os::unix::fs::symlink;
+        let d = std::env::temp_dir().join(format!("skinflow-outputs-rotated-link-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        std::fs::create_dir_all(d.join("dir")).unwrap();
+        std::fs::create_dir_all(d.join("other")).unwrap();
+        std::fs::write(d.join("other/x.h5"), "x").unwrap();
+        symlink(d.join("other/x.h5"), d.join("dir/rec.h5")).unwrap();
+        // An existing part that is a link elsewhere: the logger writes through it.
+        symlink(d.join("other/y.h5"), d.join("dir/rec-0002.h5")).unwrap();
+        let path = |p: &str| d.join(p).to_str().unwrap().to_owned();
+        let logger = format!(
+            "{REPLAY}[[node]]\nid = \"log\"\nkind = \"hdf5_logger\"\nparams = {{ path = {:?}, rotate_s = 60.0 }}\n\
+             [[edge]]\nfrom = \"replay.eit\"\nto = \"log.eit\"\n",
+            path("dir/rec.h5")
+        );
+        let with = |p: &str| format!("{logger}{}", files("w", &format!("out = {:?}", path(p))));
+        let refused = "which hdf5_logger \"log\" writes too";
+        for p in ["dir/rec-0001.h5", "dir/./rec-0003.h5", "other/../dir/rec-0004.h5", "other/y.h5", "other/x.h5"] {
+            let e = errors(&with(p));
+            assert!(e.contains(refused) && e.contains("node \"w\": param \"out\""), "{p}: {e:?}");
+        }
+        for p in ["other/x-0001.h5", "other/rec-0001.h5", "dir/x-0001.h5", "dir/rec-01.h5"] {
+            assert_eq!(errors(&with(p)), "", "{p}");
+        }
+        // An output given outside the graph, likewise.
+        let spec = spec(&logger);
+        let extra = |p: &str| check_extra_output(&spec, "--stats-json", &d.join(p));
+        let e = extra("dir/rec-0001.h5").unwrap_err();
+        assert!(e.contains("is a rotated part of the recording hdf5_logger \"log\" writes"), "{e}");
+        extra("other/x-0001.h5").unwrap();
+        assert!(extra("other/x.h5").unwrap_err().contains("the file hdf5_logger \"log\" writes"));
         let _ = std::fs::remove_dir_all(&d);
     }
 

@@ -264,6 +264,9 @@ fn refused_lanes_name_the_lane_and_the_cause_before_any_work() {
 /// A lane's node that fails while the pipeline runs is named by its lane: an error on some
 /// frames, one force too few, frames without forces (which the capture cannot align, so the
 /// other lanes' messages are dropped: the lane that sent too few is named, not the drops).
+/// Before the error, the statistics of the pipeline's nodes at the failure go to stderr: the
+/// failing node's line shows what it received, sent and failed on. A run that succeeds prints
+/// none.
 #[test]
 fn a_plugin_failing_in_the_pipeline_is_named_by_its_lane() {
     let (d, base) = setup("failing");
@@ -276,20 +279,100 @@ fn a_plugin_failing_in_the_pipeline_is_named_by_its_lane() {
         args.extend(["--plugin".into(), faulty.clone(), "--lane".into(), lane, "--json".into(), "e.json".into()]);
         let out = run(&d, &args);
         let err = stderr(&out);
-        assert!(!out.status.success(), "{mode}: {err}");
-        let line = err.lines().find(|l| l.starts_with("error: ")).unwrap_or_else(|| panic!("{mode}: {err}"));
-        assert!(line.contains("pipeline: lane \"bad\": node \"correct-bad\""), "{mode}: {line}");
+        assert_eq!(out.status.code(), Some(1), "{mode}: {err}");
+        let lines: Vec<&str> = err.lines().collect();
+        let error = lines.iter().position(|l| l.starts_with("error: ")).unwrap_or_else(|| panic!("{mode}: {err}"));
+        let line = lines[error];
+        assert!(line.contains("test.h5: pipeline: lane \"bad\": node \"correct-bad\""), "{mode}: {line}");
         assert!(line.contains(cause), "{mode}: {line}");
+        assert_eq!(lines.iter().filter(|l| l.starts_with("error: ")).count(), 1, "{mode}: {err}");
         assert!(!d.join("e.json").exists(), "{mode}: a report was written");
+
+        // The statistics at the failure, before the error: the graph's line, the header, then
+        // every node of the pipeline.
+        let label = lines
+            .iter()
+            .position(|l| l.contains(AT_FAILURE))
+            .unwrap_or_else(|| panic!("{mode}: no statistics at the failure: {err}"));
+        assert!(label < error, "{mode}: the statistics come after the error: {err}");
+        assert!(lines[label].ends_with(&format!("test.h5{AT_FAILURE} (what each had done when the run ended):")));
+        assert!(lines[label + 1].starts_with("graph \"pipeline\" (Lockstep), "), "{mode}: {err}");
+        let header = ["node", "kind", "calls", "in", "out", "p50", "us", "p99", "us", "max", "us", "depth", "drops"];
+        assert!(lines[label + 2].split_whitespace().eq(header.into_iter().chain(["miss", "err"])), "{mode}: {err}");
+        let table = lines[label..error].join("\n");
+        for id in ["replay", "sync", "recon", "segment", "split-proportional", "correct-pneumatic-locaware", "capture"]
+        {
+            assert!(node_stats(&table, id).is_some(), "{mode}: no line of node {id}: {table}");
+        }
+        let good = node_stats(&table, "correct-pneumatic-locaware").unwrap();
+        let bad =
+            node_stats(&table, "correct-bad").unwrap_or_else(|| panic!("{mode}: no line of correct-bad: {table}"));
+        assert_eq!(bad.kind, "fixture-forces", "{mode}");
+        // Every split reached the failing lane's corrector as it reached a built-in lane's.
+        assert!(bad.msgs_in > 0 && bad.msgs_in == good.msgs_in && bad.calls == bad.msgs_in, "{mode}: {bad:?} {good:?}");
+        // The count of failed calls the error gives.
+        let failed_calls = || -> u64 {
+            let head = line.split(" of ").next().unwrap();
+            head.rsplit(' ').next().unwrap().parse().unwrap_or_else(|_| panic!("{line}"))
+        };
+        match mode {
+            // An error on every third frame: nothing sent for it.
+            "error" => {
+                assert_eq!(bad.errors, bad.msgs_in / 3, "{bad:?}");
+                assert_eq!(bad.msgs_out, bad.msgs_in - bad.errors, "{bad:?}");
+                assert_eq!(failed_calls(), bad.errors, "{line}");
+            }
+            // One force too few: refused by the host on every frame with contacts.
+            "short" => {
+                assert!(bad.errors > 0 && bad.msgs_out + bad.errors == bad.msgs_in, "{bad:?}");
+                assert_eq!(failed_calls(), bad.errors, "{line}");
+            }
+            // Nothing on every third frame: no error, fewer forces out, and the capture's drops.
+            _ => {
+                assert_eq!(bad.errors, 0, "{bad:?}");
+                assert_eq!(bad.msgs_out, bad.msgs_in - bad.msgs_in / 3, "{bad:?}");
+                assert!(line.contains(&format!("sent forces for {} of {} frames", bad.msgs_out, bad.msgs_in)));
+                assert!(node_stats(&table, "capture").unwrap().drops > 0, "{table}");
+                assert!(table.contains("drops by edge:\n") && table.contains(" -> capture.in "), "{table}");
+            }
+        }
     }
-    // The same kind behaving (1 N per contact) is scored.
+    // The same kind behaving (1 N per contact) is scored, and no statistics are printed.
     let mut args = base;
     args.extend(
         ["--plugin", &faulty, "--lane", r#"name = "one", correct = "fixture-forces""#, "--json", "e.json"]
             .map(String::from),
     );
-    ok(&run(&d, &args));
+    let out = run(&d, &args);
+    ok(&out);
+    let err = stderr(&out);
+    assert!(!err.contains(AT_FAILURE) && !err.contains("graph \"pipeline\""), "{err}");
     assert!(json(&d.join("e.json"))["strategies"]["one"]["rmse_n"].as_f64().is_some_and(f64::is_finite));
+}
+
+/// The label of the statistics printed at a pipeline's failure (after the recording's path).
+const AT_FAILURE: &str = ": the pipeline failed; statistics of its nodes at the failure";
+
+/// A node's line of the printed statistics table.
+#[derive(Debug)]
+struct NodeStats {
+    kind: String,
+    calls: u64,
+    msgs_in: u64,
+    msgs_out: u64,
+    drops: u64,
+    errors: u64,
+}
+
+/// The line of node `id` in the statistics table `table` (columns: node, kind, calls, in, out,
+/// p50 us, p99 us, max us, depth, drops, miss, err).
+fn node_stats(table: &str, id: &str) -> Option<NodeStats> {
+    let line =
+        table.lines().skip_while(|l| !l.starts_with("node ")).find(|l| l.split_whitespace().next() == Some(id))?;
+    let cols: Vec<&str> = line.split_whitespace().collect();
+    assert_eq!(cols.len(), 12, "{line}");
+    let n = |i: usize| cols[i].parse::<u64>().unwrap_or_else(|_| panic!("column {i} of {line:?}"));
+    Some(NodeStats { kind: cols[1].to_owned(), calls: n(2), msgs_in: n(3), msgs_out: n(4), drops: n(9), errors: n(11) })
 }
 
 /// A plugin kind whose name is no valid node id (`fixture.dot`) still makes a lane: the

@@ -48,6 +48,33 @@ pub fn registry_with_capture(into: Captured) -> Registry {
     r
 }
 
+/// A failed [`PipelineSpec::run`]: what went wrong (its `Display`, naming the lane of a lane's
+/// node), and the statistics of the run up to the failure, so a caller can show how far each
+/// node got.
+#[derive(Debug)]
+pub struct PipelineError {
+    pub message: String,
+    /// Every node's and edge's counters when the run ended (messages in and out, calls,
+    /// errors, drops, latency); `None` when no node ran: the graph was refused, a plugin
+    /// library did not load, or a node did not start.
+    pub stats: Option<StatsReport>,
+}
+
+impl std::fmt::Display for PipelineError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.message)
+    }
+}
+
+impl std::error::Error for PipelineError {}
+
+impl PipelineError {
+    /// An error before any node ran: no statistics.
+    fn before_run(message: String) -> PipelineError {
+        PipelineError { message, stats: None }
+    }
+}
+
 /// One node of a lane: its splitter or its corrector.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Stage {
@@ -294,26 +321,28 @@ impl PipelineSpec {
 
     /// Runs the pipeline over the recording; one captured row per EIT frame. A failure or an
     /// error of a lane's node (a plugin's, say) names the lane, as does a lane's node that did
-    /// not send one message per frame (whose frames the capture then drops in every lane).
-    pub fn run(&self) -> Result<Vec<Vec<Message>>, String> {
+    /// not send one message per frame (whose frames the capture then drops in every lane). An
+    /// error of a run that started carries its statistics up to the failure.
+    pub fn run(&self) -> Result<Vec<Vec<Message>>, PipelineError> {
         let captured: Captured = Arc::new(Mutex::new(Vec::new()));
-        let reg = self.registry(captured.clone())?;
+        let reg = self.registry(captured.clone()).map_err(PipelineError::before_run)?;
         self.run_with(&reg, &captured)
     }
 
     /// [`PipelineSpec::run`] with the kinds of `reg`, whose `capture` writes into `captured`.
-    fn run_with(&self, reg: &Registry, captured: &Captured) -> Result<Vec<Vec<Message>>, String> {
+    fn run_with(&self, reg: &Registry, captured: &Captured) -> Result<Vec<Vec<Message>>, PipelineError> {
         let src = SourceFile::new("<pipeline>", self.graph_toml());
-        let spec = GraphSpec::parse(src, reg).map_err(|e| e.to_string())?;
+        let spec = GraphSpec::parse(src, reg).map_err(|e| PipelineError::before_run(e.to_string()))?;
         let report = skinflow_core::run(&spec, &RunOptions::default())
-            .map_err(|e| self.in_lanes(failed_node(&e), e.to_string()))?;
+            .map_err(|e| PipelineError::before_run(self.in_lanes(failed_node(&e), e.to_string())))?;
+        let stats = report.stats;
+        let failed = |message: String| PipelineError { message, stats: Some(stats.clone()) };
         if let Some(f) = report.failures.first() {
-            return Err(self.in_lanes(failed_node(f), f.to_string()));
+            return Err(failed(self.in_lanes(failed_node(f), f.to_string())));
         }
         // A lane node that failed on some frames (logged as each happened) would leave those
         // frames out of every lane (the capture aligns the lanes): an error, not fewer frames.
-        if let Some(n) = report.stats.nodes.iter().find(|n| n.errors + n.panics > 0 && !self.lanes_of(&n.id).is_empty())
-        {
+        if let Some(n) = stats.nodes.iter().find(|n| n.errors + n.panics > 0 && !self.lanes_of(&n.id).is_empty()) {
             let what = format!(
                 "node \"{}\" (kind \"{}\"): {} of {} calls failed (each is logged with the node's id)",
                 n.id,
@@ -321,17 +350,17 @@ impl PipelineSpec {
                 n.errors + n.panics,
                 n.calls
             );
-            return Err(self.in_lanes(Some(&n.id), what));
+            return Err(failed(self.in_lanes(Some(&n.id), what)));
         }
         // Frames no image can be made of (a dead board's) are the reconstructor's: the first
         // its error, the rest its discards. They have no image, and are scored as such, as
         // when each was an error; any other drop loses data and fails the run.
-        let recon = report.stats.node("recon").map_or(0, |n| n.discarded);
-        let drops = report.stats.total_drops() - recon;
+        let recon = stats.node("recon").map_or(0, |n| n.discarded);
+        let drops = stats.total_drops() - recon;
         if drops > 0 {
-            return Err(self.drops_error(&report.stats, drops));
+            return Err(failed(self.drops_error(&stats, drops)));
         }
-        let rows = std::mem::take(&mut *captured.lock().map_err(|_| "capture buffer poisoned".to_string())?);
+        let rows = std::mem::take(&mut *captured.lock().map_err(|_| failed("capture buffer poisoned".into()))?);
         Ok(rows)
     }
 }
@@ -575,7 +604,12 @@ mod tests {
         let captured = Captured::default();
         let mut reg = registry_with_capture(captured.clone());
         register_every(&mut reg, "every");
-        let e = s.run_with(&reg, &captured).unwrap_err();
+        let PipelineError { message: e, stats } = s.run_with(&reg, &captured).unwrap_err();
+        // The run's statistics come with the error: how far the lane's node got.
+        let stats = stats.expect("the run started: its statistics");
+        let node = stats.node("correct-skip").expect("the failing lane's node in the statistics");
+        assert!(node.msgs_in > 0 && node.msgs_out == node.msgs_in - node.msgs_in / 3, "{node:?}");
+        assert!(stats.total_drops() > 0, "{stats}");
         assert!(e.starts_with("lane \"skip\": node \"correct-skip\" sent messages on \"out\" for "), "{e}");
         assert!(e.contains("each lane must send one message per frame: the capture dropped "), "{e}");
         assert!(e.ends_with(" messages of the other lanes"), "{e}");

@@ -141,7 +141,8 @@ impl PipelineArgs {
 
     /// Runs the pipeline over a recording with ground truth (refused without), its spec
     /// completed by `configure` (lanes, calibration): the captured rows, and which frames are
-    /// settled.
+    /// settled. When the pipeline fails after it started, its nodes' statistics at that point
+    /// go to stderr before the error is returned.
     pub fn run(
         &self,
         recording: &Path,
@@ -155,7 +156,18 @@ impl PipelineArgs {
         if self.print_graph {
             println!("{}", spec.graph_toml());
         }
-        let rows = spec.run().map_err(|e| anyhow::anyhow!("{}: pipeline: {e}", recording.display()))?;
+        let rows = spec.run().map_err(|e| {
+            // What each node had done when the run ended, before the error (calibrate, eval
+            // and reproduce alike): which node stopped short, dropped or failed, and where.
+            if let Some(stats) = &e.stats {
+                eprint!(
+                    "{}: the pipeline failed; statistics of its nodes at the failure (what each had done when \
+                     the run ended):\n{stats}",
+                    recording.display()
+                );
+            }
+            anyhow::anyhow!("{}: pipeline: {e}", recording.display())
+        })?;
         Ok((rows, settled))
     }
 }

@@ -270,15 +270,19 @@ impl StatsReport {
 impl fmt::Display for StatsReport {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         writeln!(f, "graph \"{}\" ({:?}), {:.3} s", self.graph, self.mode, self.wall_s)?;
+        // The id and kind columns are as wide as their longest entry (16 at least), so the
+        // counts stay under their headings.
+        let id_w = self.nodes.iter().map(|n| n.id.chars().count()).max().unwrap_or(0).max(16);
+        let kind_w = self.nodes.iter().map(|n| n.kind.chars().count()).max().unwrap_or(0).max(16);
         writeln!(
             f,
-            "{:<16} {:<16} {:>9} {:>9} {:>9} {:>10} {:>10} {:>10} {:>6} {:>7} {:>6} {:>6}",
+            "{:<id_w$} {:<kind_w$} {:>9} {:>9} {:>9} {:>10} {:>10} {:>10} {:>6} {:>7} {:>6} {:>6}",
             "node", "kind", "calls", "in", "out", "p50 us", "p99 us", "max us", "depth", "drops", "miss", "err"
         )?;
         for n in &self.nodes {
             writeln!(
                 f,
-                "{:<16} {:<16} {:>9} {:>9} {:>9} {:>10.2} {:>10.2} {:>10.2} {:>6} {:>7} {:>6} {:>6}",
+                "{:<id_w$} {:<kind_w$} {:>9} {:>9} {:>9} {:>10.2} {:>10.2} {:>10.2} {:>6} {:>7} {:>6} {:>6}",
                 n.id,
                 n.kind,
                 n.calls,
@@ -348,5 +352,36 @@ mod tests {
         assert!((p50 - 500_000.0).abs() / 500_000.0 < 0.07, "{p50}");
         assert_eq!(h.max(), 1_000_000);
         assert_eq!(h.count(), 1000);
+    }
+
+    /// A node id or kind longer than the 16 columns they get widens its column for every
+    /// line: each count stays under its heading.
+    #[test]
+    fn long_ids_and_kinds_widen_their_columns() {
+        let node = |id: &str, kind: &str, calls: u64| {
+            let s = NodeStats::default();
+            s.calls.store(calls, Relaxed);
+            NodeReport::from_stats(id, kind, &s, &[])
+        };
+        let report = StatsReport {
+            graph: "g".into(),
+            mode: crate::node::Mode::Lockstep,
+            wall_s: 1.0,
+            nodes: vec![
+                node("a", "null", 7),
+                node("correct-pneumatic-locaware-sensitivity", "corrector", 12345),
+                node("b", "a-plugin-kind-of-a-long-name", 3),
+            ],
+            edges: Vec::new(),
+        };
+        let text = report.to_string();
+        let lines: Vec<&str> = text.lines().skip(1).collect();
+        assert_eq!(lines.len(), 4, "{text}");
+        // Where each line's "calls" column ends: the heading's end, for every node.
+        let end = lines[0].find("calls").unwrap() + "calls".len();
+        for (line, calls) in lines[1..].iter().zip(["7", "12345", "3"]) {
+            assert_eq!(line.get(end - calls.len()..end), Some(calls), "{text}");
+            assert_eq!(line.len(), lines[0].len(), "{text}");
+        }
     }
 }

@@ -6,6 +6,7 @@ mod eval_lanes;
 mod hardware;
 mod live;
 mod outputs;
+mod plugin_sensors;
 mod plugins;
 mod segment;
 mod support;

@@ -10,7 +10,7 @@
 //! - the graph file itself, or a `[[plugin]]` library it loads;
 //! - a file a node reads: a `replay` recording, a `sim` scene, a `corrector`'s or `splitter`'s
 //!   calibration, a `reconstructor`'s or `hdf5_logger`'s sensor file, a serial device, a plugin
-//!   kind's `input-path`-typed param, and any `path`-typed param of a plugin kind (which may
+//!   kind's `input-path`- or `sensor`-typed param, and any `path`-typed param of a plugin kind (which may
 //!   read or write it: an output over it loses either way);
 //! - another node's output file (a plugin's `output-path` included).
 //!
@@ -50,7 +50,7 @@ use std::path::{Component, Path, PathBuf};
 use skinflow_contact::StrategyKind;
 use skinflow_core::BuildContext;
 use skinflow_core::graph::{GraphError, GraphErrors, GraphSpec, plugin_paths};
-use skinflow_plugin_sdk::export::{INPUT_PATH, OUTPUT_PATH, PATH};
+use skinflow_plugin_sdk::export::{INPUT_PATH, OUTPUT_PATH, PATH, SENSOR};
 
 use crate::correct::{CorrectorParams, name_follows_split, output_name};
 use crate::log::LoggerParams;
@@ -106,13 +106,13 @@ fn builtin_use(kind: &str, param: &str) -> Option<Use> {
 
 /// What a node of kind `kind` does with the file its param `param` of type `ty` names: a
 /// built-in kind's as [`builtin_use`] lists it, else as the type says (`output-path` writes,
-/// `input-path` reads, `path` either; an array `[T]` as `T`); `None` for a param that names no
-/// file.
+/// `input-path` and `sensor` read, `path` either; an array `[T]` as `T`); `None` for a param
+/// that names no file.
 fn param_use(kind: &str, param: &str, ty: &str) -> Option<Use> {
     let scalar = ty.strip_prefix('[').and_then(|t| t.strip_suffix(']')).unwrap_or(ty);
     let by_type = match scalar {
         OUTPUT_PATH => Use::Writes,
-        INPUT_PATH => Use::Reads,
+        INPUT_PATH | SENSOR => Use::Reads,
         PATH => Use::Names,
         _ => return None,
     };
@@ -595,6 +595,7 @@ mod tests {
         #[serde(rename = "in")]
         input: Option<String>,
         either: Option<String>,
+        sensor: Option<String>,
     }
 
     impl NodeParams for FileParams {}
@@ -609,7 +610,8 @@ mod tests {
                 .param(ParamDoc::new("out", OUTPUT_PATH, "none", "a file it writes"))
                 .param(ParamDoc::new("outs", "[output-path]", "[]", "files it writes"))
                 .param(ParamDoc::new("in", INPUT_PATH, "none", "a file it reads"))
-                .param(ParamDoc::new("either", PATH, "none", "a file it reads or writes")),
+                .param(ParamDoc::new("either", PATH, "none", "a file it reads or writes"))
+                .param(ParamDoc::new("sensor", SENSOR, "none", "the sensor its frames come from")),
             |_: FileParams, _: &BuildContext| -> Result<NodeImpl, NodeError> { Err(NodeError::msg("not built")) },
         ))
         .unwrap();
@@ -701,6 +703,15 @@ mod tests {
             "{}",
             errors(&text)
         );
+        let text = files("r", "sensor = \"s.toml\"") + &files("w", "out = \"s.toml\"");
+        assert!(
+            errors(&text).starts_with(
+                "DIR/g.toml:8:12: node \"w\": param \"out\": writes DIR/s.toml, the sensor file p-files \"r\" reads \
+                 (its `sensor` DIR/s.toml)"
+            ),
+            "{}",
+            errors(&text)
+        );
         let text = files("w", "out = \"p.csv\"") + &files("e", "either = \"p.csv\"");
         assert!(
             errors(&text).starts_with(
@@ -734,6 +745,7 @@ mod tests {
         assert_eq!(param_use("p", "f", "output-path"), Some(Use::Writes));
         assert_eq!(param_use("p", "f", "[output-path]"), Some(Use::Writes));
         assert_eq!(param_use("p", "f", "input-path"), Some(Use::Reads));
+        assert_eq!(param_use("p", "f", "sensor"), Some(Use::Reads));
         assert_eq!(param_use("p", "f", "path"), Some(Use::Names));
         assert_eq!(param_use("p", "f", "string"), None);
         // A built-in kind's, as listed (its type is `path`).

@@ -1,9 +1,14 @@
 //! Sensor agreement across a graph, for `skinflow check` and `skinflow run` (after
-//! `GraphSpec::check_files`): every `reconstructor` images on its own `sensor` param (default
-//! `paper-100mm`), whatever its frames come from. It is refused, at load, when
+//! `GraphSpec::check_files`) and a hot swap: every `reconstructor` images on its own `sensor`
+//! param (default `paper-100mm`), whatever its frames come from. It is refused, at load, when
 //!
 //! - a `replay` or `sim` node upstream of it (through its `eit` or `reference` output) has
 //!   another sensor: the recording's header (`sensor` attribute) or the scene's `[sensor]`;
+//! - a plugin node upstream of it (through an `eit_frame` output) declares another sensor: a
+//!   plugin kind's param of type `sensor` (`skinflow_plugin_sdk::export::SENSOR`) names the
+//!   sensor the frames of its outputs come from, as a reconstructor's `sensor` does (a sensor
+//!   TOML file relative to the graph file; not set, `paper-100mm`). The search upstream stops
+//!   at such a node: what reaches it from further up is not what it emits;
 //! - a `corrector` or `splitter` node downstream of it uses a calibration fitted on another
 //!   sensor (`provenance.sensor`; files before format 8 record none and are not checked).
 //!
@@ -11,22 +16,30 @@
 //! electrode count, protocol), whatever their names. The recording is opened for its header
 //! only; of the scene only its `[sensor]` table is read (`Scene::read_sensor`), so a large
 //! scene is not expanded again. A file that cannot be read is skipped here: `check_files`
-//! reports it.
+//! reports it. A plugin's `sensor` param is read here (the host cannot read a sensor for the
+//! plugin's own checks): an unreadable or invalid sensor file, or a value that is not a string,
+//! is an error located at the param, whether or not the node feeds a reconstructor.
+//!
+//! A source that does not say its sensor is not checked: a `serial_eit` board (its frames are
+//! `measurements` values wide, whatever the sensor) or a plugin kind without a `sensor` param.
+//! A reconstructor drops their frames of another sensor's width when it runs.
 
 use std::collections::HashMap;
 use std::ops::Range;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use serde::Deserialize;
 use skinflow_contact::Calibration;
 use skinflow_contact::correct::SensorRef;
 use skinflow_core::graph::{GraphError, GraphErrorKind, GraphErrors, GraphSpec};
-use skinflow_core::{BuildContext, ParamError};
+use skinflow_core::{BuildContext, ParamError, Payload};
 use skinflow_eit::Sensor;
+use skinflow_plugin_sdk::export::SENSOR;
 use skinflow_record::Recording;
 use skinflow_sim::Scene;
 
 use crate::correct::CorrectorParams;
+use crate::payload::{EitFrame, SyncedFrame};
 use crate::reconstruct::{ReconstructorParams, load_sensor};
 use crate::replay::ReplayParams;
 use crate::sim::SimParams;
@@ -43,11 +56,18 @@ pub fn sensor_ref(s: &Sensor) -> SensorRef {
     }
 }
 
-/// The sensor another node brings, and the file it comes from.
+/// The sensor another node brings, and the file it comes from (`None`: a plugin node's
+/// default, its `sensor` param not set).
 #[derive(Clone)]
 struct Other {
     sensor: SensorRef,
-    file: PathBuf,
+    file: Option<PathBuf>,
+}
+
+impl Other {
+    fn file(&self) -> std::path::Display<'_> {
+        self.file.as_deref().unwrap_or(Path::new("")).display()
+    }
 }
 
 /// Checks that every reconstructor's sensor agrees with its sources' and with the calibrations
@@ -61,6 +81,19 @@ pub fn check_graph(spec: &GraphSpec) -> Result<(), GraphErrors> {
     let mut others: HashMap<usize, Option<Other>> = HashMap::new();
     let mut node_spans: Option<Vec<Range<usize>>> = None;
     let mut errs = Vec::new();
+    // Every sensor a plugin node declares, read whether or not it feeds a reconstructor: an
+    // error in it is reported nowhere else.
+    for i in 0..spec.nodes.len() {
+        let Some(param) = sensor_param(spec, i) else { continue };
+        let declared = match declared_sensor(spec, i, param, &ctx(i)) {
+            Ok(other) => Some(other),
+            Err(problem) => {
+                errs.push(param_error_at(spec, i, param, problem, &mut node_spans));
+                None
+            }
+        };
+        others.insert(i, declared);
+    }
     for (r, node) in spec.nodes.iter().enumerate() {
         if node.kind != "reconstructor" {
             continue;
@@ -78,6 +111,19 @@ pub fn check_graph(spec: &GraphSpec) -> Result<(), GraphErrors> {
             if own.same_geometry(&other.sensor) {
                 continue;
             }
+            if let Some(param) = sensor_param(spec, s) {
+                let on = match &other.file {
+                    Some(file) => format!("sensor {} of {} (its `{param}` param)", other.sensor, file.display()),
+                    None => format!("sensor {}, the default (no `{param}` param)", other.sensor),
+                };
+                problems.push(format!(
+                    "reconstructs on {own_desc}, but its frames come from {} \"{}\" (a plugin kind), on {on}: the \
+                     images would be wrong; give the reconstructor `sensor = \"...\"` matching that sensor (or, \
+                     if the plugin's frames are of another, that sensor's file to its `{param}`)",
+                    spec.nodes[s].kind, spec.nodes[s].id
+                ));
+                continue;
+            }
             let (what, fix) = match spec.nodes[s].kind.as_str() {
                 "replay" => ("recording", "the recording's root `sensor` attribute holds its sensor TOML"),
                 _ => ("scene", "a file holding the scene's `[sensor]` table"),
@@ -87,7 +133,7 @@ pub fn check_graph(spec: &GraphSpec) -> Result<(), GraphErrors> {
                  the images would be wrong; give the reconstructor `sensor = \"...\"` matching the {what} ({fix})",
                 spec.nodes[s].kind,
                 spec.nodes[s].id,
-                other.file.display(),
+                other.file(),
                 other.sensor
             ));
         }
@@ -102,7 +148,7 @@ pub fn check_graph(spec: &GraphSpec) -> Result<(), GraphErrors> {
                  reconstructor `sensor = \"...\"` matching the calibration's",
                 spec.nodes[c].kind,
                 spec.nodes[c].id,
-                other.file.display(),
+                other.file(),
                 other.sensor
             ));
         }
@@ -117,8 +163,10 @@ pub fn check_graph(spec: &GraphSpec) -> Result<(), GraphErrors> {
     Err(GraphErrors(errs))
 }
 
-/// The `replay` and `sim` nodes whose `eit` or `reference` output reaches node `to`, directly
-/// or through other nodes (`sync`, ...), in node order.
+/// The `replay` and `sim` nodes whose `eit` or `reference` output reaches node `to`, and the
+/// nodes declaring their sensor ([`sensor_param`]) whose output of EIT frames (`eit_frame`,
+/// `synced_frame`) does, directly or through other nodes (`sync`, ...), in node order. The
+/// search does not go on upstream of a node declaring its sensor: its frames are of that one.
 fn upstream_sources(spec: &GraphSpec, to: usize) -> Vec<usize> {
     let mut seen = vec![false; spec.nodes.len()];
     let mut stack = vec![to];
@@ -126,11 +174,18 @@ fn upstream_sources(spec: &GraphSpec, to: usize) -> Vec<usize> {
     while let Some(n) = stack.pop() {
         for e in spec.edges.iter().filter(|e| e.to_node == n) {
             let from = &spec.nodes[e.from_node];
-            let port = from.factory.info().outputs.get(e.from_port).map(|p| p.name.as_ref());
-            if matches!(from.kind.as_str(), "replay" | "sim") && matches!(port, Some("eit" | "reference")) {
+            let port = from.factory.info().outputs.get(e.from_port);
+            let declares = sensor_param(spec, e.from_node).is_some();
+            let frames = if declares {
+                port.is_some_and(|p| p.ty == EitFrame::TYPE || p.ty == SyncedFrame::TYPE)
+            } else {
+                matches!(from.kind.as_str(), "replay" | "sim")
+                    && matches!(port.map(|p| p.name.as_ref()), Some("eit" | "reference"))
+            };
+            if frames {
                 found.push(e.from_node);
             }
-            if !seen[e.from_node] {
+            if !declares && !seen[e.from_node] {
                 seen[e.from_node] = true;
                 stack.push(e.from_node);
             }
@@ -172,7 +227,31 @@ fn source_sensor(spec: &GraphSpec, i: usize, ctx: &BuildContext) -> Option<Other
         }
         _ => return None,
     };
-    Some(Other { sensor: sensor_ref(&sensor), file })
+    Some(Other { sensor: sensor_ref(&sensor), file: Some(file) })
+}
+
+/// The param of node `i`'s kind of type `sensor` (a plugin kind's, `export::SENSOR`): the
+/// sensor of the EIT frames its outputs carry. At most one (the host refuses a second at load).
+fn sensor_param(spec: &GraphSpec, i: usize) -> Option<&str> {
+    spec.nodes[i].factory.info().params.iter().find(|p| p.ty == SENSOR).map(|p| p.name.as_ref())
+}
+
+/// The sensor node `i` declares in its param `param` of type `sensor`, read as a reconstructor
+/// reads its `sensor` ([`load_sensor`]: a sensor TOML file relative to the graph file; not set,
+/// `paper-100mm`); the problem, to report at the param, when it cannot be read.
+fn declared_sensor(spec: &GraphSpec, i: usize, param: &str, ctx: &BuildContext) -> Result<Other, String> {
+    let name = match spec.nodes[i].params.table().get(param) {
+        None => None,
+        Some(toml::Value::String(name)) => Some(Path::new(name)),
+        Some(v) => {
+            return Err(format!(
+                "must name a sensor TOML file (a string, relative to the graph file; not set: paper-100mm), got {} {v}",
+                v.type_str()
+            ));
+        }
+    };
+    let sensor = load_sensor(name, ctx).map_err(|e| e.to_string())?;
+    Ok(Other { sensor: sensor_ref(&sensor), file: name.map(|n| ctx.resolve(n)) })
 }
 
 /// The sensor the calibration of a `corrector` or `splitter` node was fitted on, when it
@@ -180,7 +259,7 @@ fn source_sensor(spec: &GraphSpec, i: usize, ctx: &BuildContext) -> Option<Other
 fn calibration_sensor(spec: &GraphSpec, i: usize, ctx: &BuildContext) -> Option<Other> {
     let file = ctx.resolve(&calibration_path(spec, i)?);
     let sensor = Calibration::read(&file).ok()?.provenance.sensor?;
-    Some(Other { sensor, file })
+    Some(Other { sensor, file: Some(file) })
 }
 
 /// The calibration file node `i` applies, as written: a corrector's, or a splitter's that
@@ -238,9 +317,121 @@ fn table_spans(spec: &GraphSpec) -> Vec<Range<usize>> {
 mod tests {
     use super::*;
 
+    use skinflow_core::graph::SourceFile;
+    use skinflow_core::{KindInfo, NodeError, NodeImpl, NodeParams, ParamDoc, PortSpec, Registry, Role, typed};
+
+    use crate::payload::PressureSample;
+
     #[test]
     fn a_sensor_ref_describes_the_sensor_as_a_calibration_does() {
         let s = sensor_ref(&Sensor::paper_100mm());
         assert_eq!(s.to_string(), "\"paper-100mm\" (100 x 100 mm, 16 electrodes, pairwise)");
+    }
+
+    /// Params of the stand-ins for plugin kinds (never built).
+    #[derive(Debug, Deserialize)]
+    #[serde(deny_unknown_fields)]
+    #[allow(dead_code)] // only parsed
+    struct BoardParams {
+        sensor: Option<toml::Value>,
+    }
+
+    impl NodeParams for BoardParams {}
+
+    /// The built-in kinds, plus stand-ins for plugin kinds declaring a `sensor` param:
+    /// `p-board` (a source of EIT frames and pressure) and `p-remap` (EIT frames in, EIT frames
+    /// of its own sensor out).
+    fn registry() -> Registry {
+        let mut r = crate::registry();
+        let never =
+            |_: BoardParams, _: &BuildContext| -> Result<NodeImpl, NodeError> { Err(NodeError::msg("not built")) };
+        r.register(typed(
+            KindInfo::new("p-board", Role::Source, "a plugin's board")
+                .output(PortSpec::output::<EitFrame>("eit", "frames"))
+                .output(PortSpec::output::<PressureSample>("pressure", "pressure"))
+                .param(ParamDoc::new("sensor", SENSOR, "none", "its sensor")),
+            never,
+        ))
+        .unwrap();
+        r.register(typed(
+            KindInfo::new("p-remap", Role::Processor, "a plugin's frames of another sensor")
+                .input(PortSpec::input::<EitFrame>("in", "frames"))
+                .output(PortSpec::output::<EitFrame>("out", "frames"))
+                .param(ParamDoc::new("sensor", SENSOR, "none", "the sensor of its output")),
+            never,
+        ))
+        .unwrap();
+        r
+    }
+
+    /// A directory with `small.toml`, a 60 mm sensor, and `small-scene.toml`, a scene of it.
+    fn dir(test: &str) -> PathBuf {
+        let d = std::env::temp_dir().join(format!("skinflow-sensors-unit-{}-{test}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        std::fs::create_dir_all(&d).unwrap();
+        let small = "[sensor]\nname = \"small-60mm\"\nwidth_mm = 60.0\nheight_mm = 60.0\n";
+        std::fs::write(d.join("small.toml"), small).unwrap();
+        std::fs::write(d.join("small-scene.toml"), format!("[scene]\nname = \"s\"\n{small}")).unwrap();
+        d
+    }
+
+    /// The errors of `check_graph` on `text` (as `dir/g.toml`), one per line, `dir` written
+    /// `DIR`; empty: accepted.
+    fn errors(dir: &Path, text: &str) -> String {
+        let spec = GraphSpec::parse(SourceFile::new(dir.join("g.toml"), text.to_owned()), &registry())
+            .unwrap_or_else(|e| panic!("a valid graph: {e}"));
+        match check_graph(&spec) {
+            Ok(()) => String::new(),
+            Err(e) => e.to_string().replace(&dir.display().to_string(), "DIR"),
+        }
+    }
+
+    fn node(id: &str, kind: &str, params: &str) -> String {
+        format!("[[node]]\nid = \"{id}\"\nkind = \"{kind}\"\nparams = {{ {params} }}\n")
+    }
+
+    fn edge(from: &str, to: &str) -> String {
+        format!("[[edge]]\nfrom = \"{from}\"\nto = \"{to}\"\n")
+    }
+
+    #[test]
+    fn a_plugin_nodes_sensor_is_compared_through_its_frames_alone_and_the_search_stops_there() {
+        let d = dir("search");
+        let recon = node("recon", "reconstructor", "") + &node("sync", "sync", "") + &edge("sync.frame", "recon.frame");
+        // A board of 60 mm into a default reconstructor: refused; the board's pressure alone
+        // (its frames from a default board) is not its frames.
+        let g = node("b", "p-board", "sensor = \"small.toml\"") + &recon + &edge("b.eit", "sync.eit");
+        assert!(errors(&d, &g).contains("frames come from p-board \"b\" (a plugin kind), on sensor \"small-60mm\""));
+        let g = node("b", "p-board", "sensor = \"small.toml\"")
+            + &node("d", "p-board", "")
+            + &recon
+            + &edge("d.eit", "sync.eit")
+            + &edge("b.pressure", "sync.pressure");
+        assert_eq!(errors(&d, &g), "");
+        // A scene of 60 mm through a node of the default sensor: its frames are that node's.
+        let sim = node("sim", "sim", "scene = \"small-scene.toml\"");
+        let g =
+            sim.clone() + &node("m", "p-remap", "") + &recon + &edge("sim.eit", "m.in") + &edge("m.out", "sync.eit");
+        assert_eq!(errors(&d, &g), "");
+        // ... and refused straight.
+        let g = sim + &recon + &edge("sim.eit", "sync.eit");
+        assert!(errors(&d, &g).contains("frames come from sim \"sim\", whose scene DIR/small-scene.toml"));
+    }
+
+    #[test]
+    fn a_plugin_sensor_that_cannot_be_read_is_an_error_at_its_param() {
+        let d = dir("unreadable");
+        let g = node("b", "p-board", "sensor = \"none.toml\"");
+        assert_eq!(
+            errors(&d, &g),
+            "DIR/g.toml:4:12: node \"b\": param \"sensor\": DIR/none.toml: cannot read sensor: No such file or \
+             directory (os error 2)"
+        );
+        let g = node("b", "p-board", "sensor = 60");
+        assert_eq!(
+            errors(&d, &g),
+            "DIR/g.toml:4:12: node \"b\": param \"sensor\": must name a sensor TOML file (a string, relative to \
+             the graph file; not set: paper-100mm), got integer 60"
+        );
     }
 }

@@ -54,8 +54,31 @@ pub struct PortDecl {
 /// - [`PATH`] (`path`): a file the kind reads or writes, not said which. A node writing it is
 ///   refused, but two `path` params naming one file are not (they may be two readers): declare
 ///   `output-path` or `input-path` instead when you know.
-pub const PARAM_TYPES: &[&str] =
-    &["bool", "integer", "float", "string", PATH, INPUT_PATH, OUTPUT_PATH, "table", "f64", "u8", "u32", "u64", "usize"];
+///
+/// One names a sensor: [`SENSOR`] (`sensor`), the sensor the EIT frames this node emits come
+/// from, as a `reconstructor`'s `sensor` names the one it images on: a sensor TOML file,
+/// relative to the graph file; not set, the default `paper-100mm`. The graph checks read it
+/// (an unreadable or invalid file is an error at the param), refuse a `reconstructor` fed by
+/// this node's `eit_frame` outputs that images on another sensor (as for a `replay` recording
+/// or a `sim` scene), and count the file as one the graph reads (a node writing it is
+/// refused). A kind declares at most one, and not as an array (`[sensor]` is refused): a
+/// node's frames come from one sensor.
+pub const PARAM_TYPES: &[&str] = &[
+    "bool",
+    "integer",
+    "float",
+    "string",
+    PATH,
+    INPUT_PATH,
+    OUTPUT_PATH,
+    SENSOR,
+    "table",
+    "f64",
+    "u8",
+    "u32",
+    "u64",
+    "usize",
+];
 
 /// The param type of a file a kind reads or writes, not said which (see [`PARAM_TYPES`]).
 pub const PATH: &str = "path";
@@ -67,10 +90,20 @@ pub const INPUT_PATH: &str = "input-path";
 /// writer's (an `hdf5_logger`'s `path`) against every other file of the graph.
 pub const OUTPUT_PATH: &str = "output-path";
 
-/// Whether `ty` is one of [`PARAM_TYPES`] or `[T]` of one.
+/// The param type of the sensor the EIT frames of a kind's outputs come from (see
+/// [`PARAM_TYPES`]): a sensor TOML file relative to the graph file, as a `reconstructor`'s
+/// `sensor` (not set: the default `paper-100mm`; treat it so in `Params`, or make the param
+/// required). The graph checks refuse a `reconstructor` this node's `eit_frame` outputs feed
+/// that images on another sensor. At most one per kind, never in an array.
+pub const SENSOR: &str = "sensor";
+
+/// Whether `ty` is one of [`PARAM_TYPES`] or `[T]` of one (not `[sensor]`: a node's frames
+/// come from one sensor).
 pub fn is_param_type(ty: &str) -> bool {
-    let scalar = ty.strip_prefix('[').and_then(|t| t.strip_suffix(']')).unwrap_or(ty);
-    PARAM_TYPES.contains(&scalar)
+    match ty.strip_prefix('[').and_then(|t| t.strip_suffix(']')) {
+        Some(scalar) => scalar != SENSOR && PARAM_TYPES.contains(&scalar),
+        None => PARAM_TYPES.contains(&ty),
+    }
 }
 
 /// A documented param.
@@ -123,6 +156,10 @@ impl KindSpec {
     /// [`INPUT_PATH`] (`"input-path"`): the graph checks then refuse an output of this node
     /// over any file the graph reads or writes, and any other node's output over a file this
     /// one reads. [`PATH`] (`"path"`) says neither, and two of them naming one file pass.
+    ///
+    /// An EIT source (or a processor emitting `eit_frame`) names the sensor of its frames with
+    /// a [`SENSOR`] (`"sensor"`) param: a sensor TOML file, as a `reconstructor`'s `sensor`;
+    /// the graph checks then refuse a `reconstructor` it feeds that images on another sensor.
     ///
     /// A param named `name` (type `string`) is also read by the host: the node's derived
     /// outputs (`split`, `forces`) carry it as their strategy name (the `compare` lane, the
@@ -1109,7 +1146,7 @@ macro_rules! export_plugin {
 
 #[cfg(test)]
 mod param_types {
-    use super::{INPUT_PATH, OUTPUT_PATH, PARAM_TYPES, PATH, is_param_type};
+    use super::{INPUT_PATH, OUTPUT_PATH, PARAM_TYPES, PATH, SENSOR, is_param_type};
 
     #[test]
     fn the_file_types_are_param_types_alone_and_in_arrays() {
@@ -1122,6 +1159,20 @@ mod param_types {
         for bad in ["output_path", "out-path", "output-path ", "[output-path", "[[output-path]]", ""] {
             assert!(!is_param_type(bad), "{bad:?}");
         }
+    }
+
+    #[test]
+    fn sensor_is_a_param_type_alone_but_not_in_an_array() {
+        assert_eq!(SENSOR, "sensor");
+        assert!(PARAM_TYPES.contains(&SENSOR));
+        assert!(is_param_type(SENSOR));
+        // A node's frames come from one sensor.
+        assert!(!is_param_type("[sensor]"));
+        for bad in ["Sensor", "sensors", "sensor-path", "sensor ", "[sensor", "[[sensor]]"] {
+            assert!(!is_param_type(bad), "{bad:?}");
+        }
+        // The other types still come in arrays.
+        assert!(is_param_type("[string]") && is_param_type("[input-path]"));
     }
 }
 

@@ -40,8 +40,9 @@
 //! Param docs ([`KindSpec::param`]) use the type names of [`export::PARAM_TYPES`] (checked at
 //! load): a file the kind writes is an `output-path` ([`export::OUTPUT_PATH`]), one it only
 //! reads an `input-path`, so the graph checks refuse two nodes writing one file or a node
-//! writing a file another reads. A param `name` is also read by the host as the name of the
-//! node's outputs. What a
+//! writing a file another reads; an EIT source names the sensor of its frames with a `sensor`
+//! ([`export::SENSOR`]), so they refuse a reconstructor it feeds that images on another. A param
+//! `name` is also read by the host as the name of the node's outputs. What a
 //! derived output (`contacts`, `split`, `forces`) carries of its input is found by header:
 //! see [`PluginNode::process`]. More in `plugins/README.md`.
 

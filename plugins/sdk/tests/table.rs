@@ -145,11 +145,11 @@ fn a_param_type_outside_the_listed_names_is_refused_naming_kind_and_param() {
     let e = with_type("flaot").expect_err("a misspelt type is refused");
     assert_eq!(
         e,
-        "plugin libtest.so: kind \"test-add\": param \"add\": unknown type \"flaot\" (known: bool, integer, float, string, path, input-path, output-path, table, f64, u8, u32, u64, usize, or an array of one, e.g. [string])"
+        "plugin libtest.so: kind \"test-add\": param \"add\": unknown type \"flaot\" (known: bool, integer, float, string, path, input-path, output-path, sensor, table, f64, u8, u32, u64, usize, or an array of one, e.g. [string])"
     );
     // "path" as a library built before input-path and output-path declares it; the two file
     // types the graph checks tell apart; arrays of them.
-    for ok in ["float", "u64", "[string]", "[float]", "path", "input-path", "output-path", "[output-path]"] {
+    for ok in ["float", "u64", "[string]", "[float]", "path", "input-path", "output-path", "[output-path]", "sensor"] {
         with_type(ok).unwrap_or_else(|e| panic!("{ok}: {e}"));
     }
     assert!(with_type("[flaot]").is_err());

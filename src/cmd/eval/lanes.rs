@@ -236,12 +236,12 @@ fn resolve_lane(text: &str, registry: &Registry, calib: &Path, earlier: &[ExtraL
     Ok(ExtraLane { text: text.to_owned(), lane: Lane { name, split, correct }, label, files })
 }
 
-/// Whether a param of type `ty` names files (`path`, `input-path`, `output-path`, or an array
-/// of one of them).
+/// Whether a param of type `ty` names files (`path`, `input-path`, `output-path`, `sensor`, or
+/// an array of one of them).
 fn names_files(ty: &str) -> bool {
-    use skinflow_plugin_sdk::export::{INPUT_PATH, OUTPUT_PATH, PATH};
+    use skinflow_plugin_sdk::export::{INPUT_PATH, OUTPUT_PATH, PATH, SENSOR};
     let scalar = ty.strip_prefix('[').and_then(|t| t.strip_suffix(']')).unwrap_or(ty);
-    [PATH, INPUT_PATH, OUTPUT_PATH].contains(&scalar)
+    [PATH, INPUT_PATH, OUTPUT_PATH, SENSOR].contains(&scalar)
 }
 
 /// A lane's splitter or corrector: a built-in strategy (`params` empty), else a node kind

@@ -15,7 +15,7 @@ use skinflow_core::{KindInfo, ParamDoc, PortSpec, Registry, Role};
 use super::codec::{Codecs, MakeCodec};
 use super::node::{KindFns, PluginFactory, PluginKind};
 use crate::abi::{ABI_VERSION, ENTRY_SYMBOL, EntryFn, SfKind, SfPlugin, SfPort, SfRole, SfStr, sizes};
-use crate::export::{PARAM_TYPES, is_param_type};
+use crate::export::{PARAM_TYPES, SENSOR, is_param_type};
 
 /// Why a plugin could not be loaded. Every message names the library's path.
 #[derive(Debug, thiserror::Error)]
@@ -197,15 +197,25 @@ fn read_kind(path: &Path, origin: &str, plugin: &str, k: &SfKind, codecs: &Codec
         let pname = text(path, &format!("kind \"{name}\" param name"), p.name)?;
         let what = |f: &str| format!("kind \"{name}\" param \"{pname}\" {f}");
         let ty = text(path, &what("type"), p.ty)?;
+        let refused = |problem: String| PluginError::Kind { path: path.to_path_buf(), kind: name.clone(), problem };
+        if ty == format!("[{SENSOR}]") {
+            return Err(refused(format!(
+                "param \"{pname}\": type \"{ty}\" is not allowed: a node's frames come from one sensor (declare \"{SENSOR}\")"
+            )));
+        }
         if !is_param_type(&ty) {
-            return Err(PluginError::Kind {
-                path: path.to_path_buf(),
-                kind: name.clone(),
-                problem: format!(
-                    "param \"{pname}\": unknown type \"{ty}\" (known: {}, or an array of one, e.g. [string])",
-                    PARAM_TYPES.join(", ")
-                ),
-            });
+            return Err(refused(format!(
+                "param \"{pname}\": unknown type \"{ty}\" (known: {}, or an array of one, e.g. [string])",
+                PARAM_TYPES.join(", ")
+            )));
+        }
+        if ty == SENSOR
+            && let Some(first) = info.params.iter().find(|d| d.ty == SENSOR)
+        {
+            return Err(refused(format!(
+                "param \"{pname}\": a second param of type \"{SENSOR}\" (\"{}\" is one): a node's frames come from one sensor",
+                first.name
+            )));
         }
         info.params.push(ParamDoc {
             ty: Cow::Owned(ty),
@@ -462,6 +472,65 @@ mod tests {
         // SAFETY: a whole table, alive for the call.
         let t = unsafe { table_ref(path, &raw const whole) }.unwrap();
         assert_eq!((t.abi_version, t.plugin_size, t.n_kinds), (ABI_VERSION, expected, 0));
+    }
+
+    /// A processor whose params are `sensor`-typed as `SENSORS` says: 1, one `sensor`; 2, two;
+    /// 3, one `[sensor]`.
+    struct Board<const SENSORS: u8>;
+
+    impl<const SENSORS: u8> crate::PluginNode for Board<SENSORS> {
+        type Params = toml::Table;
+
+        fn spec() -> crate::KindSpec {
+            let k = crate::KindSpec::new("test-board", "frames of a sensor")
+                .input("in", "count", "a count")
+                .output("out", "count", "the count")
+                .param("rate", "float", "1", "not a sensor");
+            match SENSORS {
+                1 => k.param("sensor", SENSOR, "none", "the sensor"),
+                2 => k.param("sensor", SENSOR, "none", "the sensor").param("other", SENSOR, "none", "another"),
+                _ => k.param("sensors", "[sensor]", "[]", "sensors"),
+            }
+        }
+
+        fn new(_: toml::Table, _: &Path) -> Result<Self, String> {
+            Ok(Board)
+        }
+
+        fn process(&mut self, _: &[crate::Columns<'_>], _: &mut crate::Outputs) -> Result<(), String> {
+            Ok(())
+        }
+    }
+
+    /// What the host makes of the table of the one kind `Board<SENSORS>`.
+    fn read_board<const SENSORS: u8>() -> Result<Vec<PluginKind>, PluginError> {
+        static TABLES: [std::sync::OnceLock<crate::export::Table>; 3] =
+            [std::sync::OnceLock::new(), std::sync::OnceLock::new(), std::sync::OnceLock::new()];
+        let cell = &TABLES[usize::from(SENSORS) - 1];
+        // SAFETY: `entry` points at the static table in `cell`.
+        let table =
+            unsafe { &*crate::export::entry(cell, "test", "0", || vec![crate::export::kind::<Board<SENSORS>>()]) };
+        read_table(Path::new("libtest.so"), table, &Codecs::new())
+    }
+
+    #[test]
+    fn one_sensor_param_is_read_and_a_second_or_an_array_of_them_refused() {
+        let kinds = read_board::<1>().expect("one sensor param loads");
+        let params: Vec<(&str, &str)> = kinds[0].info.params.iter().map(|p| (p.name.as_ref(), p.ty.as_ref())).collect();
+        assert_eq!(params, [("rate", "float"), ("sensor", "sensor")]);
+
+        let e = read_board::<2>().err().expect("two sensor params are refused").to_string();
+        assert_eq!(
+            e,
+            "plugin libtest.so: kind \"test-board\": param \"other\": a second param of type \"sensor\" (\"sensor\" \
+             is one): a node's frames come from one sensor"
+        );
+        let e = read_board::<3>().err().expect("an array of sensors is refused").to_string();
+        assert_eq!(
+            e,
+            "plugin libtest.so: kind \"test-board\": param \"sensors\": type \"[sensor]\" is not allowed: a node's \
+             frames come from one sensor (declare \"sensor\")"
+        );
     }
 
     #[test]

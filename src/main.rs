@@ -415,11 +415,12 @@ fn run(
     for h in helpers {
         let _ = h.join();
     }
-    println!("{}", report.stats);
+    // The file first: a closed standard output loses the printed table only.
     if let Some(p) = stats_json {
         let json = serde_json::to_string_pretty(&report.stats)?;
         std::fs::write(p, json).with_context(|| format!("writing {}", p.display()))?;
     }
+    cmd::print_or_warn(&format!("{}\n", report.stats), "the statistics table");
     if report.failures.is_empty() {
         Ok(ExitCode::SUCCESS)
     } else {

@@ -719,6 +719,56 @@ fn bench_exits_2_on_an_invalid_graph_and_printing_commands_survive_a_closed_pipe
     assert!(!err.contains("panicked") && out.status.code() != Some(101), "{:?}: {err}", out.status);
 }
 
+/// `run` keeps SIGPIPE ignored (its graph's nodes may write to sockets), so a closed standard
+/// output must not panic it either: its files (`--stats-json`, a `compare` node's `json`) are
+/// written, and each table it could not print is named on stderr.
+#[test]
+fn run_with_its_output_closed_writes_its_files_and_names_what_it_did_not_print() {
+    let d = workdir("run-closed-pipe");
+    let calib = fixture("../../graphs/calib/paper.toml");
+    let graph = format!(
+        "[graph]\nmode = \"lockstep\"\n\
+         [[node]]\nid = \"sim\"\nkind = \"sim\"\nparams = {{ scene = {:?}, pacing = \"fast\" }}\n\
+         [[node]]\nid = \"sync\"\nkind = \"sync\"\n\
+         [[node]]\nid = \"recon\"\nkind = \"reconstructor\"\n\
+         [[node]]\nid = \"seg\"\nkind = \"segmenter\"\n\
+         [[node]]\nid = \"split\"\nkind = \"splitter\"\n\
+         [[node]]\nid = \"force\"\nkind = \"corrector\"\nparams = {{ calibration = {calib:?} }}\n\
+         [[node]]\nid = \"compare\"\nkind = \"compare\"\ntrigger = \"aligned\"\nparams = {{ json = \"ab.json\" }}\n\
+         [[edge]]\nfrom = \"sim.eit\"\nto = \"sync.eit\"\n\
+         [[edge]]\nfrom = \"sim.pressure\"\nto = \"sync.pressure\"\n\
+         [[edge]]\nfrom = \"sim.truth\"\nto = \"sync.truth\"\n\
+         [[edge]]\nfrom = \"sync.frame\"\nto = \"recon.frame\"\n\
+         [[edge]]\nfrom = \"recon.image\"\nto = \"seg.image\"\n\
+         [[edge]]\nfrom = \"seg.contacts\"\nto = \"split.contacts\"\n\
+         [[edge]]\nfrom = \"split.split\"\nto = \"force.split\"\n\
+         [[edge]]\nfrom = \"force.forces\"\nto = \"compare.forces\"\n",
+        fixture("tiny-eval.toml")
+    );
+    std::fs::write(d.join("g.toml"), graph).unwrap();
+    let mut child = spawn(
+        std::process::Command::new(env!("CARGO_BIN_EXE_skinflow"))
+            .args(["run", "g.toml", "--stats-json", "stats.json"])
+            .current_dir(&d)
+            .env("XDG_CACHE_HOME", d.join("cache"))
+            .env("RUST_LOG", "warn")
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::piped()),
+    );
+    drop(child.stdout.take()); // the reader goes away before the first line
+    let out = child.wait_with_output().unwrap();
+    let err = stderr(&out);
+    assert!(out.status.success() && !err.contains("panicked"), "{:?}: {err}", out.status);
+    assert!(err.contains("the table was not printed: standard output"), "the compare node's table: {err}");
+    assert!(err.contains("warning: the statistics table not printed: standard output: "), "{err}");
+    let stats: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(d.join("stats.json")).unwrap()).unwrap();
+    let compare = stats["nodes"].as_array().unwrap().iter().find(|n| n["id"] == "compare").unwrap();
+    assert!(compare["msgs_in"].as_u64().unwrap() > 0, "{compare}");
+    let ab: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(d.join("ab.json")).unwrap()).unwrap();
+    assert!(ab.to_string().contains("pneumatic-locaware"), "{ab}");
+}
+
 #[test]
 fn a_missing_recording_stops_run_before_data_flows() {
     let d = workdir("missing");

@@ -543,14 +543,20 @@ impl Sink for Compare {
                  compared with the reference lane; no-load, unsettled and no-pressure frames are not scored)"
             );
         }
-        if self.print {
-            print!("{}", table(&reports));
-        }
         if let Some(p) = &self.json {
             std::fs::write(p, to_json(&reports)).map_err(|e| NodeError::Param {
                 param: "json".into(),
                 problem: format!("cannot write the report to {}: {e}", p.display()),
             })?;
+        }
+        // After the file: a closed standard output (`| head`) loses the printed table only, and
+        // is no panic (`run` keeps SIGPIPE ignored).
+        if self.print {
+            use std::io::Write;
+            let mut out = std::io::stdout().lock();
+            if let Err(e) = out.write_all(table(&reports).as_bytes()).and_then(|()| out.flush()) {
+                tracing::warn!(node = ctx.id(), error = %e, "the table was not printed: standard output");
+            }
         }
         Ok(())
     }

@@ -325,12 +325,12 @@ pub fn run(graph: &Path, replay: &Path, vary: &[String], out_dir: &Path) -> Resu
         eprintln!("bench: warning: {w}");
     }
     let md = report::markdown(graph, &replay, &variants, &points, &warnings);
-    print!("{md}");
     let write = |name: &str, body: &str| {
         std::fs::write(out_dir.join(name), body)
             .with_context(|| format!("{}: cannot write", out_dir.join(name).display()))
     };
     write("bench.md", &md)?;
+    super::print_or_warn(&md, "the bench table (it is in bench.md)");
     let json = report::json(graph, &replay, &variants, &points, &warnings);
     write("bench.json", &(serde_json::to_string_pretty(&json)? + "\n"))?;
     let failed: Vec<&Variant> = variants.iter().filter(|v| v.error.is_some()).collect();

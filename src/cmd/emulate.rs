@@ -189,7 +189,7 @@ pub fn run(scene: &Path, options: EmulateArgs, stop: Arc<AtomicBool>) -> Result<
     }
     let emu = Emulator::spawn(config, feed, plan).map_err(anyhow::Error::msg)?;
     for (device, path) in emu.paths() {
-        println!("{} {}", device.name(), path.display());
+        super::print_or_warn(&format!("{} {}\n", device.name(), path.display()), "a device's path");
     }
     let until = if fast {
         "as fast as the readers take them (every served device must be read to the end)".to_string()

@@ -937,7 +937,9 @@ fn check_reports_missing_and_invalid_input_files() {
     .unwrap();
     std::fs::write(d.join("bad-calib.toml"), "x = 1\n").unwrap();
     std::fs::write(d.join("text.h5"), "recording bytes").unwrap();
-    hdf5_io(|| hdf5::File::create(d.join("plain.h5")).unwrap().create_group("eit").unwrap());
+    hdf5_io(|| {
+        hdf5::File::create(d.join("plain.h5")).unwrap().create_group("eit").unwrap();
+    });
     let cases: [(String, &str, &str); 7] = [
         (
             sim_graph("missing-scene.toml", calib),

@@ -21,8 +21,8 @@
 //! its canonicalized existing directory and the rest of its path normalized (`.` and `..`).
 //! A logger that rotates (`rotate_mb` / `rotate_s`) writes `name-0001.h5`, `name-0002.h5`, ...
 //! beside `name.h5` as given (in its directory, canonicalized: not beside the file a link
-//! `name.h5` leads to): a file of that pattern there, or one an existing part there leads to,
-//! counts as its output too. Each conflict is an error located at the writer's param (the
+//! `name.h5` leads to): a file of that pattern there counts as its output too (one that exists
+//! as a link is replaced, not written through). Each conflict is an error located at the writer's param (the
 //! later writer's, for two writers), naming both nodes and files. A plugin param's type (`skinflow_plugin_sdk::export::PARAM_TYPES`) says what the
 //! kind does with its file: `output-path` writes it, `input-path` reads it, `path` may do
 //! either (not known here), so two `path` params, or a `path` and an `input-path`, naming one
@@ -180,9 +180,6 @@ struct Parts {
     /// The given file name's stem and extension (converted as `part_path` converts them).
     stem: String,
     ext: Option<String>,
-    /// The parts that exist in `dir` already, each as [`file_id`] identifies it: one that is a
-    /// link (dangling or not) or a hard link is written where it leads.
-    existing: Vec<FileId>,
 }
 
 impl Parts {
@@ -194,23 +191,14 @@ impl Parts {
         let dir = file_id(abs.parent()?).path;
         let stem = name.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
         let ext = name.extension().map(|e| e.to_string_lossy().into_owned());
-        let mut parts = Parts { dir, stem, ext, existing: Vec::new() };
-        if let Ok(entries) = std::fs::read_dir(&parts.dir) {
-            let existing = entries
-                .filter_map(Result::ok)
-                .map(|e| parts.dir.join(e.file_name()))
-                .filter(|p| parts.is_part_name(p))
-                .map(|p| file_id(&p))
-                .collect();
-            parts.existing = existing;
-        }
-        Some(parts)
+        Some(Parts { dir, stem, ext })
     }
 
-    /// Whether `f` is one of the parts: a file of the pattern in [`Parts::dir`] (one that is
-    /// not there yet is created there), or the file an existing part leads to.
+    /// Whether `f` is one of the parts: a file of the pattern in [`Parts::dir`]. A part that
+    /// exists as a link is replaced, never written through (the writer renames its finished
+    /// file over the name, or refuses without `overwrite`), so where it leads is no part.
     fn includes(&self, f: &FileId) -> bool {
-        self.is_part_name(&f.path) || self.existing.iter().any(|p| p.same(f))
+        self.is_part_name(&f.path)
     }
 
     /// Whether `p` is `dir/stem-NNNN.ext` (at least four digits).
@@ -860,8 +848,8 @@ mod tests {
     /// A rotating logger's parts are written beside its path as given (`part_path` on it), not
     /// beside the file a link there leads to: a writer on `dir/rec-0001.h5` is refused for a
     /// logger on `dir/rec.h5 -> other/x.h5`, one on `other/x-0001.h5` is not; the base file is
-    /// still compared through the link, and an existing part that is a link is the file it
-    /// leads to.
+    /// still compared through the link, and an existing part that is a link is replaced, so the
+    /// file it leads to is no output.
     #[cfg(unix)]
     #[test]
     fn rotated_parts_are_beside_the_path_given_not_beside_a_links_target() {
@@ -872,7 +860,7 @@ mod tests {
         std::fs::create_dir_all(d.join("other")).unwrap();
         std::fs::write(d.join("other/x.h5"), "x").unwrap();
         symlink(d.join("other/x.h5"), d.join("dir/rec.h5")).unwrap();
-        // An existing part that is a link elsewhere: the logger writes through it.
+        // An existing part that is a link elsewhere: the logger replaces the link.
         symlink(d.join("other/y.h5"), d.join("dir/rec-0002.h5")).unwrap();
         let path = |p: &str| d.join(p).to_str().unwrap().to_owned();
         let logger = format!(
@@ -882,11 +870,11 @@ mod tests {
         );
         let with = |p: &str| format!("{logger}{}", files("w", &format!("out = {:?}", path(p))));
         let refused = "which hdf5_logger \"log\" writes too";
-        for p in ["dir/rec-0001.h5", "dir/./rec-0003.h5", "other/../dir/rec-0004.h5", "other/y.h5", "other/x.h5"] {
+        for p in ["dir/rec-0001.h5", "dir/./rec-0003.h5", "other/../dir/rec-0004.h5", "other/x.h5"] {
             let e = errors(&with(p));
             assert!(e.contains(refused) && e.contains("node \"w\": param \"out\""), "{p}: {e:?}");
         }
-        for p in ["other/x-0001.h5", "other/rec-0001.h5", "dir/x-0001.h5", "dir/rec-01.h5"] {
+        for p in ["other/x-0001.h5", "other/rec-0001.h5", "dir/x-0001.h5", "dir/rec-01.h5", "other/y.h5"] {
             assert_eq!(errors(&with(p)), "", "{p}");
         }
         // An output given outside the graph, likewise.

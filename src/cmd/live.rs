@@ -15,7 +15,9 @@
 //! An edit is compared with what runs now (swaps made through the socket included), and when one
 //! of its swaps fails (a node that cannot build), the swaps before it stay and the message names
 //! them. A plugin library whose file changes (rebuilt) is loaded again as a fresh copy, and every
-//! running node of its kinds is swapped to the new code with its params.
+//! running node of its kinds is swapped to the new code with its params, once the graph with the
+//! new kinds passes an edit's checks (sensors, files: the new code may declare other params);
+//! refused, every node keeps the previous code.
 //!
 //! Control socket, one JSON object per line, one reply per line (`{"ok": true, ...}` or
 //! `{"ok": false, "error": "..."}`; `tare` and `control` wait for the node's answer, so a
@@ -244,18 +246,9 @@ impl Live {
         kind: &str,
         params: &Params,
     ) -> Result<(), String> {
-        let mut spec = self.started.clone();
         let running = self.lock_nodes().clone();
         let kinds = self.lock_kinds();
-        for (n, (id, k, p)) in spec.nodes.iter_mut().zip(running) {
-            let (k, p) = if id == node { (kind.to_owned(), params.clone()) } else { (k, p) };
-            if id == node {
-                n.factory = factory.clone();
-            } else if let Some(f) = kinds.registry.get(&k).filter(|_| k != n.kind) {
-                n.factory = f.clone();
-            }
-            (n.kind, n.params) = (k, p);
-        }
+        let spec = graph_now(&self.started, &running, &kinds.registry, &[], Some((node, factory, kind, params)));
         drop(kinds);
         check_swapped_graph(&spec, &self.extra_outputs)
     }
@@ -344,9 +337,21 @@ impl Live {
                 )));
             }
         };
-        *kinds = fresh;
         let stale: Vec<&String> = changed.iter().flat_map(|(_, k)| k).collect();
         let now = self.lock_nodes().clone();
+        // Checked as an edit's swaps are, before any node is swapped: the new code's kinds may
+        // declare other params (a sensor, a file it writes) than the running ones did.
+        if let Err(e) =
+            check_swapped_graph(&graph_now(&self.started, &now, &fresh.registry, &stale, None), &self.extra_outputs)
+        {
+            for l in kinds.libraries.iter_mut() {
+                l.mtime = mtime(&l.path);
+            }
+            return Some(Err(format!(
+                "plugin {names} changed but was not reloaded (running nodes keep its previous code): {e}"
+            )));
+        }
+        *kinds = fresh;
         let mut swapped: Vec<String> = Vec::new();
         let failed = |swapped: Vec<String>, error: String| {
             let e = EditError { done: Applied { policies: Vec::new(), swapped }, error };
@@ -442,6 +447,34 @@ pub fn watch(path: PathBuf, live: Arc<Live>, done: Arc<AtomicBool>) {
 /// rename a corrector's output, whose frames the logger then counts as discarded.)
 /// The command's own output files (`extra`: `--stats-json`, `--control`) are checked against
 /// the swapped graph's files too (`skinflow_nodes::outputs::check_extra_output`).
+/// The graph as it runs now: `started` with each node's kind and params from `running`, and its
+/// factory (the kind's ports and params, which the checks read) from `registry` when its kind
+/// changed since the start or is one of `reloaded` (the kinds of a library loaded again); then
+/// `swap` (node, factory, kind, params) applied, if any.
+fn graph_now(
+    started: &GraphSpec,
+    running: &[NodeNow],
+    registry: &Registry,
+    reloaded: &[&String],
+    swap: Option<(&str, &Arc<dyn NodeFactory>, &str, &Params)>,
+) -> GraphSpec {
+    let mut spec = started.clone();
+    for (n, (id, kind, params)) in spec.nodes.iter_mut().zip(running) {
+        if let Some((_, factory, kind, params)) = swap.filter(|(node, ..)| node == id) {
+            n.factory = factory.clone();
+            (n.kind, n.params) = (kind.to_owned(), params.clone());
+            continue;
+        }
+        if (*kind != n.kind || reloaded.contains(&kind))
+            && let Some(f) = registry.get(kind)
+        {
+            n.factory = f.clone();
+        }
+        (n.kind, n.params) = (kind.clone(), params.clone());
+    }
+    spec
+}
+
 fn check_swapped_graph(spec: &GraphSpec, extra: &[(&'static str, PathBuf)]) -> Result<(), String> {
     skinflow_nodes::sensors::check_graph(spec)
         .and_then(|()| skinflow_nodes::outputs::check_files(spec))
@@ -581,4 +614,55 @@ pub fn control_socket(
         }
         let _ = std::fs::remove_file(&path);
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use serde::Deserialize;
+    use skinflow_core::{BuildContext, KindInfo, NodeError, NodeImpl, NodeParams, ParamDoc, PortSpec, Role, typed};
+    use skinflow_nodes::payload::Forces;
+    use skinflow_plugin_sdk::export::OUTPUT_PATH;
+
+    use super::*;
+
+    #[derive(Deserialize)]
+    struct OutParams {
+        #[allow(dead_code)] // read by the graph checks through the params table
+        out: Option<String>,
+    }
+
+    impl NodeParams for OutParams {}
+
+    /// The built-in kinds and `p-out`, a stand-in plugin kind (never built) whose param `out`
+    /// has type `out_type`.
+    fn registry(out_type: &'static str) -> Registry {
+        let mut r = skinflow_nodes::registry();
+        r.register(typed(
+            KindInfo::new("p-out", Role::Source, "a plugin's file")
+                .output(PortSpec::output::<Forces>("forces", "forces"))
+                .param(ParamDoc::new("out", out_type, "none", "a file")),
+            |_: OutParams, _: &BuildContext| -> Result<NodeImpl, NodeError> { Err(NodeError::msg("not built")) },
+        ))
+        .unwrap();
+        r
+    }
+
+    /// A rebuilt library's kinds are checked with what they declare now: a param that was a
+    /// string and now names a file the kind writes (here the graph's own file) is refused before
+    /// any node is swapped; a kind of a library not reloaded keeps what it started with.
+    #[test]
+    fn a_reloaded_librarys_kinds_are_checked_with_their_new_params() {
+        let base = std::env::temp_dir().join("skinflow-live-unit-nonexistent");
+        let text = "[[node]]\nid = \"w\"\nkind = \"p-out\"\nparams = { out = \"g.toml\" }\n";
+        let old = registry("string");
+        let started = GraphSpec::parse(SourceFile::new(base.join("g.toml"), text.to_owned()), &old).unwrap();
+        let running: Vec<NodeNow> =
+            started.nodes.iter().map(|n| (n.id.clone(), n.kind.clone(), n.params.clone())).collect();
+        check_swapped_graph(&graph_now(&started, &running, &old, &[], None), &[]).unwrap();
+        let new = registry(OUTPUT_PATH);
+        let kind = "p-out".to_owned();
+        let e = check_swapped_graph(&graph_now(&started, &running, &new, &[&kind], None), &[]).unwrap_err();
+        assert!(e.contains("node \"w\": param \"out\": writes ") && e.contains("this graph's own file"), "{e}");
+        check_swapped_graph(&graph_now(&started, &running, &new, &[], None), &[]).unwrap();
+    }
 }

@@ -59,8 +59,10 @@ pub struct PortDecl {
 /// from, as a `reconstructor`'s `sensor` names the one it images on: a sensor TOML file,
 /// relative to the graph file; not set, the default `paper-100mm`. The graph checks read it
 /// (an unreadable or invalid file is an error at the param), refuse a `reconstructor` fed by
-/// this node's `eit_frame` outputs that images on another sensor (as for a `replay` recording
-/// or a `sim` scene), and count the file as one the graph reads (a node writing it is
+/// this node's `eit_frame` or `synced_frame` outputs that images on another sensor (as for a
+/// `replay` recording or a `sim` scene; what reaches this node from upstream is not compared,
+/// so a processor declaring it must be given the sensor its input frames are of, even a
+/// pass-through one: not set is `paper-100mm`, never "as upstream"), and count the file as one the graph reads (a node writing it is
 /// refused). A kind declares at most one, and not as an array (`[sensor]` is refused): a
 /// node's frames come from one sensor.
 pub const PARAM_TYPES: &[&str] = &[
@@ -93,8 +95,9 @@ pub const OUTPUT_PATH: &str = "output-path";
 /// The param type of the sensor the EIT frames of a kind's outputs come from (see
 /// [`PARAM_TYPES`]): a sensor TOML file relative to the graph file, as a `reconstructor`'s
 /// `sensor` (not set: the default `paper-100mm`; treat it so in `Params`, or make the param
-/// required). The graph checks refuse a `reconstructor` this node's `eit_frame` outputs feed
-/// that images on another sensor. At most one per kind, never in an array.
+/// required). The graph checks refuse a `reconstructor` this node's `eit_frame` or
+/// `synced_frame` outputs feed that images on another sensor. At most one per kind, never in
+/// an array.
 pub const SENSOR: &str = "sensor";
 
 /// Whether `ty` is one of [`PARAM_TYPES`] or `[T]` of one (not `[sensor]`: a node's frames

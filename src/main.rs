@@ -277,6 +277,7 @@ fn registry() -> Registry {
 fn registry_for(path: &Path) -> Result<Result<Registry, ExitCode>> {
     let mut reg = registry();
     if let Ok(src) = skinflow_core::graph::SourceFile::read(path) {
+        // Located at the library's `[[plugin]] path` line.
         match skinflow_core::graph::plugin_paths(&src) {
             Ok(plugins) => {
                 // A graph naming a library that does not load cannot be validated: exit 2,
@@ -288,7 +289,7 @@ fn registry_for(path: &Path) -> Result<Result<Registry, ExitCode>> {
                     } else {
                         ""
                     };
-                    eprintln!("{}: {e}{hint}", path.display());
+                    eprintln!("{}", skinflow_core::graph::plugin_error(&src, e.path(), format!("{e}{hint}")));
                     return Ok(Err(ExitCode::from(2)));
                 }
             }

@@ -120,7 +120,9 @@ fn a_missing_plugin_file_names_the_path() {
     let o = skinflow(&d, &["check", g.to_str().unwrap()]);
     assert!(!o.status.success());
     let e = stderr(&o);
-    assert!(e.contains(&format!("plugin {}: file not found", missing.display())), "{e}");
+    // Located at the `[[plugin]] path` value (line 6 of `toy_graph`'s file, after `path = `).
+    let at = format!("{}:6:8: plugin {}: file not found", g.display(), missing.display());
+    assert!(e.starts_with(&at), "{e}");
     assert_eq!(e.trim().lines().count(), 1, "one line: {e}");
 }
 
@@ -159,7 +161,7 @@ fn a_plugin_of_abi_version_3_is_refused_with_one_line() {
     assert_eq!(
         e.trim(),
         format!(
-            "{}: plugin {}: built for plugin ABI version 3, this skinflow loads version 4 (rebuild it against this skinflow-plugin-sdk)",
+            "{}:6:8: plugin {}: built for plugin ABI version 3, this skinflow loads version 4 (rebuild it against this skinflow-plugin-sdk)",
             graph.display(),
             lib.display()
         )

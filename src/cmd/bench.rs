@@ -195,8 +195,10 @@ fn variant_text(
 fn registry_for(src: &SourceFile) -> Result<Registry> {
     let mut reg = skinflow_nodes::registry();
     let plugins = plugin_paths(src).map_err(|e| anyhow::Error::new(super::InvalidGraph(e.to_string())))?;
-    skinflow_nodes::codec::load_plugins(&plugins, &mut reg)
-        .map_err(|e| anyhow::Error::new(super::InvalidGraph(format!("{}: {e}", src.path.display()))))?;
+    skinflow_nodes::codec::load_plugins(&plugins, &mut reg).map_err(|e| {
+        let located = skinflow_core::graph::plugin_error(src, e.path(), e.to_string());
+        anyhow::Error::new(super::InvalidGraph(located.to_string()))
+    })?;
     Ok(reg)
 }
 

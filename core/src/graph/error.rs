@@ -50,8 +50,9 @@ pub enum GraphErrorKind {
     UnnamedNode { problem: String, key: Option<String>, cause: String },
     #[error("{0}")]
     Option(String),
-    #[error("plugin {path}: {problem}")]
-    Plugin { path: String, problem: String },
+    /// A `[[plugin]]` library that did not load: the loader's message, which names it.
+    #[error("{0}")]
+    Plugin(String),
 }
 
 fn key_prefix(key: &Option<String>) -> String {

@@ -151,6 +151,17 @@ pub fn plugin_paths(src: &SourceFile) -> Result<Vec<PathBuf>, GraphErrors> {
     validate::plugin_paths(src)
 }
 
+/// A library of the graph file `src` that did not load, as an error located at its
+/// `[[plugin]] path` (`file:line:col: plugin ...: cause`): `path` the library as resolved
+/// ([`plugin_paths`]), `cause` the loader's whole message (which names the library). Located
+/// at the first entry of that path; at the file alone when none matches.
+pub fn plugin_error(src: &SourceFile, path: &Path, cause: String) -> GraphError {
+    let span = validate::plugin_entries(src)
+        .ok()
+        .and_then(|entries| entries.into_iter().find(|(p, _)| p == path).map(|(_, span)| span));
+    GraphError::at(src, span, None, GraphErrorKind::Plugin(cause))
+}
+
 /// The names of node `node`'s `inputs` that one of `edges` reaches, in port order.
 pub(crate) fn connected_inputs<'a>(inputs: &'a [PortSpec], node: usize, edges: &[EdgeSpec]) -> Vec<&'a str> {
     (0..inputs.len())

@@ -136,9 +136,15 @@ pub(super) fn node_spans(src: &SourceFile) -> Vec<Range<usize>> {
 }
 
 pub(super) fn plugin_paths(src: &SourceFile) -> Result<Vec<PathBuf>, GraphErrors> {
+    Ok(plugin_entries(src)?.into_iter().map(|(path, _)| path).collect())
+}
+
+/// Each `[[plugin]] path`, resolved against the graph file's directory, with the byte span of
+/// its value.
+pub(super) fn plugin_entries(src: &SourceFile) -> Result<Vec<(PathBuf, Range<usize>)>, GraphErrors> {
     let file = parse_file(src)?;
     let base = src.base_dir();
-    Ok(file.plugin.iter().map(|p| base.join(p.path.get_ref())).collect())
+    Ok(file.plugin.iter().map(|p| (base.join(p.path.get_ref()), p.path.span())).collect())
 }
 
 /// A node id is a bare TOML key: letters, digits, `_` and `-`.

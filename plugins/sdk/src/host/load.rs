@@ -46,6 +46,26 @@ pub enum PluginError {
     Twice { path: PathBuf, first: PathBuf },
 }
 
+impl PluginError {
+    /// The library the error is about, as the caller named it.
+    pub fn path(&self) -> &Path {
+        match self {
+            PluginError::Missing { path }
+            | PluginError::Copy { path, .. }
+            | PluginError::Open { path, .. }
+            | PluginError::NotAPlugin { path }
+            | PluginError::Entry { path }
+            | PluginError::AbiVersion { path, .. }
+            | PluginError::StructSize { path, .. }
+            | PluginError::Invalid { path, .. }
+            | PluginError::NoCodec { path, .. }
+            | PluginError::Kind { path, .. }
+            | PluginError::DuplicateKind { path, .. }
+            | PluginError::Twice { path, .. } => path,
+        }
+    }
+}
+
 /// A mapped plugin library.
 pub struct PluginLibrary {
     /// The path the user named.

@@ -192,12 +192,15 @@ pub fn run(scene: &Path, options: EmulateArgs, stop: Arc<AtomicBool>) -> Result<
         super::print_or_warn(&format!("{} {}\n", device.name(), path.display()), "a device's path");
     }
     let until = if fast {
-        "as fast as the readers take them (every served device must be read to the end)".to_string()
+        "as fast as the readers take them (every served device must be read to the end; a source reading it \
+         needs `clear_input_at_open = false`, or what was sent before it opened the port is cleared)"
+            .to_string()
     } else {
         format!("in real time, {last_s:.1} s")
     };
     eprintln!("emulating {}: {}, {until}; ends with the scene or at Ctrl-C", scene.display(), served.join(", "));
-    while !emu.finished() && !stop.load(Ordering::SeqCst) {
+    // Until each device's reader took every byte (stopping closes the ptys, losing the rest).
+    while !emu.delivered() && !stop.load(Ordering::SeqCst) {
         std::thread::sleep(Duration::from_millis(50));
     }
     for d in devices {

@@ -252,3 +252,28 @@ fn stale_input_is_cleared_at_open_and_a_burst_keeps_its_device_spacing() {
     assert_eq!((s.frames, s.discarded_bytes, s.lost_frames, s.counter_resets), (11, 0, 0, 1));
     drop(slave);
 }
+
+/// At fast pacing a small feed fits the pty before any reader opens it: the emulator has
+/// finished, but has not delivered until a reader took every byte (stopping it earlier would
+/// lose them); once read, it has.
+#[test]
+fn a_fast_feed_is_delivered_only_once_a_reader_took_every_byte() {
+    let frames = feeds::busy_frames(8, 30, 0.0);
+    let config = EmulatorConfig { pacing: Pacing::AsFastAsPossible, ..Default::default() };
+    let emulator = Emulator::spawn(config, EmulatorFeed::default().with_eit(frames), FaultPlan::default()).unwrap();
+    assert!(emulator.wait_finished(LIMIT), "30 small frames fit the pty");
+    std::thread::sleep(Duration::from_millis(300));
+    assert!(!emulator.delivered(), "no reader yet: {:?}", emulator.stats(Device::Eit));
+    let path = emulator.path(Device::Eit).unwrap();
+    let mut eit = SerialReader::open(feeds::config(path), EitDecoder::new(8), Instant::now()).unwrap();
+    let mut counters = Vec::new();
+    feeds::read_n(&mut eit, 30, LIMIT, |r| counters.push(r.record.counter));
+    assert_eq!(counters, (0..30).collect::<Vec<u32>>());
+    let t0 = Instant::now();
+    while !emulator.delivered() {
+        assert!(t0.elapsed() < LIMIT, "never delivered: {:?}", emulator.stats(Device::Eit));
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    assert!(emulator.stats(Device::Eit).unwrap().delivered);
+    emulator.stop().unwrap();
+}

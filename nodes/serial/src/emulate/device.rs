@@ -20,7 +20,8 @@ use crate::encode::{device_time_ms, device_time_us, encode_eit_frame, encode_for
 const TICK: Duration = Duration::from_millis(20);
 /// How long a real-time board waits for room in a full pty before dropping the rest.
 const FULL_GIVE_UP: Duration = Duration::from_millis(200);
-/// How long an unplug waits for a reader to take the bytes already sent.
+/// How long an unplug, and a real-time board at the end of its feed, waits for a reader to take
+/// the bytes already sent.
 const DRAIN_TIMEOUT: Duration = Duration::from_secs(2);
 
 /// A sample a board can send.
@@ -66,6 +67,8 @@ pub(super) struct DeviceCounters {
     pub faults_applied: AtomicU64,
     pub unplugs: AtomicU64,
     pub finished: AtomicBool,
+    /// Finished, and a reader took every byte (or the wait for one ended).
+    pub delivered: AtomicBool,
 }
 
 pub(super) struct DeviceRun<T> {
@@ -105,6 +108,20 @@ impl<T: Sample> DeviceRun<T> {
     pub(super) fn run(mut self) -> Result<(), EmulateError> {
         let result = self.send_all();
         self.counters.finished.store(true, Ordering::Release);
+        if result.is_ok() {
+            // Bytes still in the pty when the emulator stops are lost to the reader: wait for it
+            // to take them, as long as it takes at fast pacing (which waits for the reader
+            // throughout), up to `DRAIN_TIMEOUT` in real time (a board would go on sending).
+            let limit = match self.pacing {
+                Pacing::RealTime => Some(DRAIN_TIMEOUT),
+                Pacing::AsFastAsPossible => None,
+            };
+            if let Err(e) = self.pty.wait_drained(limit, &self.stop) {
+                self.counters.delivered.store(true, Ordering::Release);
+                return Err(self.pty_error(e));
+            }
+        }
+        self.counters.delivered.store(true, Ordering::Release);
         while result.is_ok() && !self.stop.load(Ordering::Relaxed) {
             std::thread::sleep(TICK);
         }
@@ -171,7 +188,7 @@ impl<T: Sample> DeviceRun<T> {
                 match fault {
                     Fault::Unplug { down_s } => {
                         let began = Instant::now();
-                        self.pty.wait_drained(DRAIN_TIMEOUT, &stop).map_err(|e| self.pty_error(e))?;
+                        self.pty.wait_drained(Some(DRAIN_TIMEOUT), &stop).map_err(|e| self.pty_error(e))?;
                         self.pty.unplug().map_err(|e| self.pty_error(e))?;
                         c.unplugs.fetch_add(1, Ordering::Relaxed);
                         if !sleep_until(Instant::now() + secs(*down_s), &stop) {

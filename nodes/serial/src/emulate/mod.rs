@@ -110,6 +110,9 @@ pub struct DeviceStats {
     pub unplugs: u64,
     /// The feed is exhausted (the pty stays open until the emulator stops).
     pub finished: bool,
+    /// Finished, and a reader took every byte: at fast pacing only then; in real time also
+    /// once 2 s passed without (see [`Emulator::delivered`]).
+    pub delivered: bool,
 }
 
 struct DeviceHandle {
@@ -228,7 +231,17 @@ impl Emulator {
             faults_applied: c.faults_applied.load(Ordering::Relaxed),
             unplugs: c.unplugs.load(Ordering::Relaxed),
             finished: c.finished.load(Ordering::Acquire),
+            delivered: c.delivered.load(Ordering::Acquire),
         })
+    }
+
+    /// Whether every device has [`finished`](Emulator::finished) and its reader took every byte
+    /// sent (at fast pacing, however long that takes; in real time, or up to 2 s after the end).
+    /// Stopping the emulator closes the ptys, and what a reader had not taken yet is lost to it:
+    /// wait for this, not [`Emulator::finished`], before stopping an emulator a graph reads.
+    #[must_use]
+    pub fn delivered(&self) -> bool {
+        self.devices.iter().all(|d| d.counters.delivered.load(Ordering::Acquire))
     }
 
     /// Whether every device has sent its whole feed (or failed).

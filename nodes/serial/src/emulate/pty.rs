@@ -131,15 +131,16 @@ impl StablePty {
         Ok(Written::All)
     }
 
-    /// Waits until a reader has taken every written byte, `timeout` passed, or `stop` was raised.
+    /// Waits until a reader has taken every written byte, `timeout` (if any) passed, or `stop`
+    /// was raised.
     ///
     /// The kernel moves written bytes into the slave's input queue asynchronously, so an empty
     /// queue right after a write proves nothing: the queue must stay empty for `DRAIN_SETTLE`.
-    pub(super) fn wait_drained(&self, timeout: Duration, stop: &AtomicBool) -> io::Result<()> {
+    pub(super) fn wait_drained(&self, timeout: Option<Duration>, stop: &AtomicBool) -> io::Result<()> {
         let Some(pair) = self.pair.as_ref() else {
             return Ok(());
         };
-        let until = Instant::now() + timeout;
+        let until = timeout.map(|t| Instant::now() + t);
         let mut empty_since: Option<Instant> = None;
         loop {
             let mut queued: nix::libc::c_int = 0;
@@ -154,7 +155,7 @@ impl StablePty {
             } else {
                 empty_since = None;
             }
-            if now >= until || stop.load(Ordering::Relaxed) {
+            if until.is_some_and(|u| now >= u) || stop.load(Ordering::Relaxed) {
                 return Ok(());
             }
             std::thread::sleep(STOP_POLL / 4);

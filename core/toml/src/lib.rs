@@ -374,6 +374,32 @@ impl<V> Wrap<'_, V> {
 }
 
 /// A visit that deserializes nothing nested: any error is raised here, by the visitor.
+/// Invokes `$forward` on every `visit_*` method of serde's `Visitor` that takes one value
+/// (the scalars, chars and bytes), with its argument type.
+macro_rules! every_scalar_visit {
+    ($forward:ident) => {
+        $forward! {
+            visit_bool(bool);
+            visit_i8(i8);
+            visit_i16(i16);
+            visit_i32(i32);
+            visit_i64(i64);
+            visit_i128(i128);
+            visit_u8(u8);
+            visit_u16(u16);
+            visit_u32(u32);
+            visit_u64(u64);
+            visit_u128(u128);
+            visit_f32(f32);
+            visit_f64(f64);
+            visit_char(char);
+            visit_bytes(&[u8]);
+            visit_borrowed_bytes(&'de [u8]);
+            visit_byte_buf(Vec<u8>);
+        }
+    };
+}
+
 macro_rules! forward_visit {
     ($($method:ident($ty:ty);)*) => {$(
         fn $method<E: de::Error>(self, v: $ty) -> Result<Self::Value, E> {
@@ -391,25 +417,7 @@ impl<'de, V: Visitor<'de>> Visitor<'de> for Wrap<'_, V> {
         self.visitor.expecting(f)
     }
 
-    forward_visit! {
-        visit_bool(bool);
-        visit_i8(i8);
-        visit_i16(i16);
-        visit_i32(i32);
-        visit_i64(i64);
-        visit_i128(i128);
-        visit_u8(u8);
-        visit_u16(u16);
-        visit_u32(u32);
-        visit_u64(u64);
-        visit_u128(u128);
-        visit_f32(f32);
-        visit_f64(f64);
-        visit_char(char);
-        visit_bytes(&[u8]);
-        visit_borrowed_bytes(&'de [u8]);
-        visit_byte_buf(Vec<u8>);
-    }
+    every_scalar_visit!(forward_visit);
 
     fn visit_str<E: de::Error>(self, v: &str) -> Result<Self::Value, E> {
         self.record(|| v.to_owned());
@@ -561,25 +569,7 @@ impl<'de, V: Visitor<'de>> Visitor<'de> for Choice<'_, V> {
         self.visitor.visit_enum(de::value::MapAccessDeserializer::new(map))
     }
 
-    choice_visit! {
-        visit_bool(bool);
-        visit_i8(i8);
-        visit_i16(i16);
-        visit_i32(i32);
-        visit_i64(i64);
-        visit_i128(i128);
-        visit_u8(u8);
-        visit_u16(u16);
-        visit_u32(u32);
-        visit_u64(u64);
-        visit_u128(u128);
-        visit_f32(f32);
-        visit_f64(f64);
-        visit_char(char);
-        visit_bytes(&[u8]);
-        visit_borrowed_bytes(&'de [u8]);
-        visit_byte_buf(Vec<u8>);
-    }
+    every_scalar_visit!(choice_visit);
 
     fn visit_none<E: de::Error>(self) -> Result<Self::Value, E> {
         self.visitor.visit_none()

@@ -12,6 +12,11 @@
 //! - a `corrector` or `splitter` node downstream of it uses a calibration fitted on another
 //!   sensor (`provenance.sensor`; files before format 8 record none and are not checked).
 //!
+//! An `hdf5_logger` writes its own `sensor` param (default `paper-100mm`) into the recording's
+//! `sensor` attribute: it is held to the sources upstream of it the same way (their `truth`
+//! outputs count too, as the truth's coordinates are the sensor's), so a recording never names
+//! another sensor than the one its frames and truth come from.
+//!
 //! Sensors agree when they have the same geometry ([`SensorRef::same_geometry`]: size to 1 µm,
 //! electrode count, protocol), whatever their names. The recording is opened for its header
 //! only; of the scene only its `[sensor]` table is read (`Scene::read_sensor`), so a large
@@ -39,6 +44,7 @@ use skinflow_record::Recording;
 use skinflow_sim::Scene;
 
 use crate::correct::CorrectorParams;
+use crate::log::LoggerParams;
 use crate::payload::{EitFrame, SyncedFrame};
 use crate::reconstruct::{ReconstructorParams, load_sensor};
 use crate::replay::ReplayParams;
@@ -95,18 +101,28 @@ pub fn check_graph(spec: &GraphSpec) -> Result<(), GraphErrors> {
         others.insert(i, declared);
     }
     for (r, node) in spec.nodes.iter().enumerate() {
-        if node.kind != "reconstructor" {
-            continue;
-        }
-        let Ok(params) = node.params.parse::<ReconstructorParams>() else { continue };
-        let Ok(own) = load_sensor(params.sensor.as_deref(), &ctx(r)) else { continue };
+        // What the node does with its sensor, what a disagreement would spoil, and who it is.
+        let (sensor, does, spoils, who) = match node.kind.as_str() {
+            "reconstructor" => {
+                let Ok(params) = node.params.parse::<ReconstructorParams>() else { continue };
+                (params.sensor, "reconstructs on", "the images would be wrong", "the reconstructor")
+            }
+            "hdf5_logger" => {
+                let Ok(params) = node.params.parse::<LoggerParams>() else { continue };
+                let spoils = "the recording would name the wrong sensor (its frames and truth read against another \
+                              geometry)";
+                (params.sensor, "records as its `sensor` attribute", spoils, "the logger")
+            }
+            _ => continue,
+        };
+        let Ok(own) = load_sensor(sensor.as_deref(), &ctx(r)) else { continue };
         let own = sensor_ref(&own);
-        let own_desc = match &params.sensor {
+        let own_desc = match &sensor {
             Some(p) => format!("sensor {own} of {}", ctx(r).resolve(p).display()),
             None => format!("sensor {own}, the default (no `sensor` param)"),
         };
         let mut problems = Vec::new();
-        for s in upstream_sources(spec, r) {
+        for s in upstream_sources(spec, r, node.kind == "hdf5_logger") {
             let Some(other) = others.entry(s).or_insert_with(|| source_sensor(spec, s, &ctx(s))) else { continue };
             if own.same_geometry(&other.sensor) {
                 continue;
@@ -117,9 +133,9 @@ pub fn check_graph(spec: &GraphSpec) -> Result<(), GraphErrors> {
                     None => format!("sensor {}, the default (no `{param}` param)", other.sensor),
                 };
                 problems.push(format!(
-                    "reconstructs on {own_desc}, but its frames come from {} \"{}\" (a plugin kind), on {on}: the \
-                     images would be wrong; give the reconstructor `sensor = \"...\"` matching that sensor (or, \
-                     if the plugin's frames are of another, that sensor's file to its `{param}`)",
+                    "{does} {own_desc}, but its frames come from {} \"{}\" (a plugin kind), on {on}: {spoils}; give \
+                     {who} `sensor = \"...\"` matching that sensor (or, if the plugin's frames are of another, that \
+                     sensor's file to its `{param}`)",
                     spec.nodes[s].kind, spec.nodes[s].id
                 ));
                 continue;
@@ -129,15 +145,17 @@ pub fn check_graph(spec: &GraphSpec) -> Result<(), GraphErrors> {
                 _ => ("scene", "a file holding the scene's `[sensor]` table"),
             };
             problems.push(format!(
-                "reconstructs on {own_desc}, but its frames come from {} \"{}\", whose {what} {} was made on sensor {}: \
-                 the images would be wrong; give the reconstructor `sensor = \"...\"` matching the {what} ({fix})",
+                "{does} {own_desc}, but its frames come from {} \"{}\", whose {what} {} was made on sensor {}: \
+                 {spoils}; give {who} `sensor = \"...\"` matching the {what} ({fix})",
                 spec.nodes[s].kind,
                 spec.nodes[s].id,
                 other.file(),
                 other.sensor
             ));
         }
-        for c in downstream_calibrated(spec, r) {
+        // A logger applies no calibration.
+        let calibrated = if node.kind == "reconstructor" { downstream_calibrated(spec, r) } else { Vec::new() };
+        for c in calibrated {
             let Some(other) = others.entry(c).or_insert_with(|| calibration_sensor(spec, c, &ctx(c))) else { continue };
             if own.same_geometry(&other.sensor) {
                 continue;
@@ -167,7 +185,9 @@ pub fn check_graph(spec: &GraphSpec) -> Result<(), GraphErrors> {
 /// nodes declaring their sensor ([`sensor_param`]) whose output of EIT frames (`eit_frame`,
 /// `synced_frame`) does, directly or through other nodes (`sync`, ...), in node order. The
 /// search does not go on upstream of a node declaring its sensor: its frames are of that one.
-fn upstream_sources(spec: &GraphSpec, to: usize) -> Vec<usize> {
+/// With `truth`, a `replay`'s or `sim`'s `truth` output counts too (its coordinates are the
+/// sensor's: a logger records them).
+fn upstream_sources(spec: &GraphSpec, to: usize, truth: bool) -> Vec<usize> {
     let mut seen = vec![false; spec.nodes.len()];
     let mut stack = vec![to];
     let mut found = Vec::new();
@@ -180,7 +200,11 @@ fn upstream_sources(spec: &GraphSpec, to: usize) -> Vec<usize> {
                 port.is_some_and(|p| p.ty == EitFrame::TYPE || p.ty == SyncedFrame::TYPE)
             } else {
                 matches!(from.kind.as_str(), "replay" | "sim")
-                    && matches!(port.map(|p| p.name.as_ref()), Some("eit" | "reference"))
+                    && match port.map(|p| p.name.as_ref()) {
+                        Some("eit" | "reference") => true,
+                        Some("truth") => truth,
+                        _ => false,
+                    }
             };
             if frames {
                 found.push(e.from_node);
@@ -416,6 +440,37 @@ mod tests {
         // ... and refused straight.
         let g = sim + &recon + &edge("sim.eit", "sync.eit");
         assert!(errors(&d, &g).contains("frames come from sim \"sim\", whose scene DIR/small-scene.toml"));
+    }
+
+    /// A logger writes its `sensor` param (default `paper-100mm`) into the recording: a scene or
+    /// a recording of another sensor upstream, through any of its inputs, is refused at that
+    /// param (or its table) as for a reconstructor; the same sensor, or one of its geometry,
+    /// passes.
+    #[test]
+    fn a_logger_is_held_to_the_sensor_of_the_frames_it_records() {
+        let d = dir("logger");
+        let sim = node("sim", "sim", "scene = \"small-scene.toml\"");
+        let log = |params: &str| node("log", "hdf5_logger", &format!("path = \"out.h5\"{params}"));
+        let g = sim.clone() + &log("") + &edge("sim.eit", "log.eit");
+        let e = errors(&d, &g);
+        assert!(
+            e.starts_with(
+                "DIR/g.toml:5:1: node \"log\": param \"sensor\": records as its `sensor` attribute sensor \
+                 \"paper-100mm\" (100 x 100 mm, 16 electrodes, pairwise), the default (no `sensor` param), but its \
+                 frames come from sim \"sim\", whose scene DIR/small-scene.toml was made on sensor \"small-60mm\""
+            ),
+            "{e}"
+        );
+        assert!(
+            e.contains("the recording would name the wrong sensor") && e.contains("give the logger `sensor"),
+            "{e}"
+        );
+        // Through its truth input alone, likewise (the truth's coordinates are the sensor's).
+        let g = sim.clone() + &log("") + &edge("sim.truth", "log.truth");
+        assert!(errors(&d, &g).contains("node \"log\": param \"sensor\": records as its"), "{}", errors(&d, &g));
+        // Given the scene's sensor: accepted.
+        let g = sim + &log(", sensor = \"small.toml\"") + &edge("sim.eit", "log.eit");
+        assert_eq!(errors(&d, &g), "");
     }
 
     #[test]

@@ -725,30 +725,14 @@ fn bench_exits_2_on_an_invalid_graph_and_printing_commands_survive_a_closed_pipe
 #[test]
 fn run_with_its_output_closed_writes_its_files_and_names_what_it_did_not_print() {
     let d = workdir("run-closed-pipe");
-    let calib = fixture("../../graphs/calib/paper.toml");
-    let graph = format!(
-        "[graph]\nmode = \"lockstep\"\n\
-         [[node]]\nid = \"sim\"\nkind = \"sim\"\nparams = {{ scene = {:?}, pacing = \"fast\" }}\n\
-         [[node]]\nid = \"sync\"\nkind = \"sync\"\n\
-         [[node]]\nid = \"recon\"\nkind = \"reconstructor\"\n\
-         [[node]]\nid = \"seg\"\nkind = \"segmenter\"\n\
-         [[node]]\nid = \"split\"\nkind = \"splitter\"\n\
-         [[node]]\nid = \"force\"\nkind = \"corrector\"\nparams = {{ calibration = {calib:?} }}\n\
-         [[node]]\nid = \"compare\"\nkind = \"compare\"\ntrigger = \"aligned\"\nparams = {{ json = \"ab.json\" }}\n\
-         [[edge]]\nfrom = \"sim.eit\"\nto = \"sync.eit\"\n\
-         [[edge]]\nfrom = \"sim.pressure\"\nto = \"sync.pressure\"\n\
-         [[edge]]\nfrom = \"sim.truth\"\nto = \"sync.truth\"\n\
-         [[edge]]\nfrom = \"sync.frame\"\nto = \"recon.frame\"\n\
-         [[edge]]\nfrom = \"recon.image\"\nto = \"seg.image\"\n\
-         [[edge]]\nfrom = \"seg.contacts\"\nto = \"split.contacts\"\n\
-         [[edge]]\nfrom = \"split.split\"\nto = \"force.split\"\n\
-         [[edge]]\nfrom = \"force.forces\"\nto = \"compare.forces\"\n",
-        fixture("tiny-eval.toml")
-    );
-    std::fs::write(d.join("g.toml"), graph).unwrap();
+    simulate(&d, "tiny-eval.toml", "rec.h5");
+    let graph = pipeline_graph(&d, "rec.h5", "pneumatic-locaware");
+    let compare = "[[node]]\nid = \"compare\"\nkind = \"compare\"\ntrigger = \"aligned\"\nparams = { json = \"ab.json\" }\n\
+                   [[edge]]\nfrom = \"force.forces\"\nto = \"compare.forces\"\n";
+    std::fs::write(d.join(&graph), std::fs::read_to_string(d.join(&graph)).unwrap() + compare).unwrap();
     let mut child = spawn(
         std::process::Command::new(env!("CARGO_BIN_EXE_skinflow"))
-            .args(["run", "g.toml", "--stats-json", "stats.json"])
+            .args(["run", graph.as_str(), "--stats-json", "stats.json"])
             .current_dir(&d)
             .env("XDG_CACHE_HOME", d.join("cache"))
             .env("RUST_LOG", "warn")

@@ -175,7 +175,8 @@ fn an_edit_is_compared_with_the_running_graph_and_a_partial_edit_is_reported() {
 }
 
 /// A plugin library whose file changes is loaded again and the running nodes of its kinds are
-/// swapped to it; a file that is not a library is refused and the nodes keep running.
+/// swapped to it (a node of it that has ended is left, and does not stop the others); a file
+/// that is not a library is refused and the nodes keep running.
 #[test]
 fn a_rebuilt_plugin_is_reloaded_and_its_nodes_swapped() {
     let d = workdir("live", "plugin-reload");
@@ -188,7 +189,12 @@ fn a_rebuilt_plugin_is_reloaded_and_its_nodes_swapped() {
         graph("factor = 2", "out.csv")
             .replace("count = 1500", "count = 2000")
             .replace("kind = \"scale\"", "kind = \"fixture-scale\"")
-            .replacen("[[node]]", "[[plugin]]\npath = \"lib.so\"\n[[node]]", 1),
+            .replacen("[[node]]", "[[plugin]]\npath = \"lib.so\"\n[[node]]", 1)
+            // A source of the same library that has ended by the reload: nothing to swap there,
+            // and the library's other nodes are swapped all the same.
+            + "[[node]]\nid = \"board\"\nkind = \"fixture-eit\"\nparams = { frames = 3 }\n\
+               [[node]]\nid = \"sink\"\nkind = \"null\"\n\
+               [[edge]]\nfrom = \"board.eit\"\nto = \"sink.in\"\n",
     )
     .unwrap();
     let child = run_watched(&g, None);

@@ -183,6 +183,7 @@ fn failed_node(e: &skinflow_core::RunError) -> Option<&str> {
     match e {
         E::Start { node, .. } | E::Node { node, .. } | E::Stop { node, .. } | E::Swap { node, .. } => Some(node),
         E::SwapTimeout { node, .. } | E::Control { node, .. } | E::ControlTimeout { node, .. } => Some(node),
+        E::Ended { node, .. } => Some(node),
         E::UnknownNode(_) => None,
     }
 }

@@ -358,6 +358,12 @@ impl Live {
             Some(Err(format!("plugin {names} reloaded: {} (that node runs its previous code)", e.partly())))
         };
         for (id, kind, params) in now.iter().filter(|n| stale.contains(&&n.1)) {
+            // A node that runs no more (a source whose stream ended) has nothing to swap; the
+            // others of the library still get the new code.
+            if self.handle.node_ended(id).unwrap_or(false) {
+                tracing::info!(node = %id, "plugin reloaded: node not swapped, it runs no more");
+                continue;
+            }
             let Some(factory) = kinds.registry.get(kind).cloned() else {
                 return failed(swapped, format!("node \"{id}\": kind \"{kind}\" is no longer in the library"));
             };

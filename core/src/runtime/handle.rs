@@ -82,6 +82,12 @@ impl GraphHandle {
         &self.inner.ids
     }
 
+    /// Whether node `node` runs no more: a source whose stream ended, a node that failed, or
+    /// every node once the run is over. Its queued control work is then never run.
+    pub fn node_ended(&self, node: &str) -> Result<bool, RunError> {
+        Ok(self.inner.shared.slots[self.index(node)?].ended.load(SeqCst))
+    }
+
     fn index(&self, node: &str) -> Result<usize, RunError> {
         self.node_index(node).ok_or_else(|| RunError::UnknownNode(node.to_owned()))
     }
@@ -102,17 +108,37 @@ impl GraphHandle {
     }
 
     /// Sends a control command and waits at most `timeout` for the node's answer: its error
-    /// if it rejects the command. A node that is not called within `timeout` (the graph has
-    /// ended, a source blocked in a read) gives [`RunError::ControlTimeout`]; the command
-    /// stays queued and may still run.
+    /// if it rejects the command. A node that runs no more ([`GraphHandle::node_ended`], before
+    /// or while waiting) is answered at once with [`RunError::Ended`]. A node that is not called
+    /// within `timeout` (a source blocked in a read) gives [`RunError::ControlTimeout`]; the
+    /// command stays queued and may still run.
     pub fn control_wait(&self, node: &str, cmd: &str, timeout: Duration) -> Result<(), RunError> {
         let i = self.index(node)?;
+        let answer = |r: Result<(), NodeError>| {
+            r.map_err(|error| RunError::Control { node: node.to_owned(), command: cmd.to_owned(), error })
+        };
+        let ended = || RunError::Ended { node: node.to_owned(), command: cmd.to_owned() };
+        let slot = &self.inner.shared.slots[i];
+        if slot.ended.load(SeqCst) {
+            return Err(ended());
+        }
         let (tx, rx) = std::sync::mpsc::sync_channel(1);
         self.push(i, Control::Command(cmd.to_owned(), Some(tx)));
-        match rx.recv_timeout(timeout) {
-            Ok(Ok(())) => Ok(()),
-            Ok(Err(error)) => Err(RunError::Control { node: node.to_owned(), command: cmd.to_owned(), error }),
-            Err(_) => Err(RunError::ControlTimeout { node: node.to_owned(), command: cmd.to_owned(), timeout }),
+        let deadline = Instant::now() + timeout;
+        loop {
+            let now = Instant::now();
+            if now >= deadline {
+                return Err(RunError::ControlTimeout { node: node.to_owned(), command: cmd.to_owned(), timeout });
+            }
+            match rx.recv_timeout((deadline - now).min(Duration::from_millis(20))) {
+                Ok(r) => return answer(r),
+                Err(RecvTimeoutError::Disconnected) => return Err(ended()),
+                Err(RecvTimeoutError::Timeout) if slot.ended.load(SeqCst) => {
+                    // Answered just before it ended, or never will be.
+                    return rx.try_recv().map_or_else(|_| Err(ended()), answer);
+                }
+                Err(RecvTimeoutError::Timeout) => {}
+            }
         }
     }
 

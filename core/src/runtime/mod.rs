@@ -64,6 +64,10 @@ pub enum RunError {
         "node \"{node}\": control \"{command}\" got no answer within {timeout:?} (the node was not called: the graph may have ended); it stays queued"
     )]
     ControlTimeout { node: String, command: String, timeout: Duration },
+    #[error(
+        "node \"{node}\": control \"{command}\" not run: the node runs no more (a source whose stream ended, a node that failed, or the run is over)"
+    )]
+    Ended { node: String, command: String },
 }
 
 /// The result of a run that started.

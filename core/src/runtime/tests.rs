@@ -465,6 +465,36 @@ fn a_finished_source_is_not_swapped() {
     assert_eq!(h.stats().node("src").unwrap().swaps, 0);
 }
 
+/// A control command for a node that runs no more, while the rest of the graph runs on, is
+/// answered at once as not run (not after the timeout, nor at the end of the run).
+#[test]
+fn a_control_for_a_finished_source_is_answered_at_once() {
+    let reg = registry(&Arc::default());
+    let g = spec(
+        &reg,
+        "[[node]]\nid = \"src\"\nkind = \"counter\"\nparams = { count = 5 }\n\
+         [[node]]\nid = \"out\"\nkind = \"null\"\n\
+         [[node]]\nid = \"s\"\nkind = \"slow\"\nparams = { every_s = 0.01 }\n\
+         [[node]]\nid = \"out2\"\nkind = \"null\"\n\
+         [[edge]]\nfrom = \"src.out\"\nto = \"out.in\"\n\
+         [[edge]]\nfrom = \"s.out\"\nto = \"out2.in\"\n",
+    );
+    let running = RunningGraph::start(&g).unwrap();
+    let h = running.handle();
+    wait_for("the counter to end", || h.node_ended("src").unwrap());
+    assert!(!h.node_ended("s").unwrap(), "the paced source runs on");
+    // Answered before the timeout (at the timeout it would be a `ControlTimeout`).
+    match h.control_wait("src", "tare", Duration::from_secs(30)) {
+        Err(RunError::Ended { node, command }) => assert_eq!((node.as_str(), command.as_str()), ("src", "tare")),
+        other => panic!("expected `runs no more`, got {other:?}"),
+    }
+    assert!(!h.node_ended("s").unwrap(), "answered while the graph still ran");
+    assert!(matches!(h.node_ended("nope"), Err(RunError::UnknownNode(_))));
+    let stop = Arc::new(AtomicBool::new(true));
+    let r = running.wait(&RunOptions { stop: Some(stop), ..RunOptions::default() });
+    assert!(r.failures.is_empty(), "{:?}", r.failures);
+}
+
 #[test]
 fn deadline_and_restart_policy_change_while_the_graph_runs() {
     let reg = registry(&Arc::default());

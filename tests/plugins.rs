@@ -126,6 +126,40 @@ fn a_missing_plugin_file_names_the_path() {
     assert_eq!(e.trim().lines().count(), 1, "one line: {e}");
 }
 
+/// `check` opens, read-only, the file a plugin's `input-path` param names (as it opens a
+/// built-in node's recording or scene): a missing one or a directory is refused at the param,
+/// before any node starts; an existing file passes.
+#[test]
+fn a_plugin_input_file_that_cannot_be_read_is_refused_at_its_param() {
+    let d = workdir("input-path");
+    let graph = |path: &str| {
+        let g = format!(
+            "[[plugin]]\npath = {}\n\
+             [[node]]\nid = \"daq\"\nkind = \"csv-pressure\"\nparams = {{ path = {path:?} }}\n\
+             [[node]]\nid = \"out\"\nkind = \"null\"\n\
+             [[edge]]\nfrom = \"daq.pressure\"\nto = \"out.in\"\n",
+            quoted(&plugin("skinflow-plugin-csv-pressure"))
+        );
+        std::fs::write(d.join("g.toml"), g).unwrap();
+    };
+    std::fs::create_dir_all(d.join("adir")).unwrap();
+    for (path, cause) in
+        [("missing.csv", "cannot read: No such file or directory"), ("adir", "is a directory, not a file")]
+    {
+        graph(path);
+        for cmd in ["check", "run"] {
+            let out = skinflow(&d, &[cmd, "g.toml"]);
+            let err = stderr(&out);
+            assert_eq!(out.status.code(), Some(2), "{cmd} {path}: {err}");
+            let want = format!("g.toml:6:12: node \"daq\": param \"path\": {path}: {cause}");
+            assert!(err.starts_with(&want), "{cmd} {path}: {err}");
+        }
+    }
+    std::fs::write(d.join("p.csv"), "t_s,kpa\n0.0,1.0\n").unwrap();
+    graph("p.csv");
+    assert!(ok(&skinflow(&d, &["check", "g.toml"])).starts_with("g.toml: ok ("));
+}
+
 #[test]
 fn a_file_that_is_not_a_library_is_refused() {
     let d = workdir("garbage");

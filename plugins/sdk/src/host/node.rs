@@ -41,6 +41,7 @@
 
 use std::collections::BTreeSet;
 use std::ffi::c_void;
+use std::path::Path;
 use std::ptr::NonNull;
 use std::sync::{Arc, Mutex, PoisonError};
 use std::time::Instant;
@@ -57,6 +58,7 @@ use crate::abi::{
     SfFlushState, SfImport, SfMessage, SfPoll, SfPollState, SfState, SfStatus, SfStr, StopFn,
 };
 use crate::columns::{ColumnBuf, Columns};
+use crate::export::INPUT_PATH;
 
 /// The functions of one kind, copied out of the plugin's table.
 #[derive(Clone, Copy)]
@@ -168,6 +170,34 @@ impl NodeFactory for PluginFactory {
             SfStatus::PANIC => Err(to_err(format!("plugin {}: checking params {err}", self.0.origin()))),
             _ => Err(to_err(err)),
         }
+    }
+
+    /// Opens, read-only, each file an `input-path` (or `[input-path]`) param names, resolved
+    /// against the graph file's directory as the plugin is told to: a missing or unreadable
+    /// one is reported at the param by `skinflow check`, and `run` stops before any node starts
+    /// (its content is the plugin's business). `path` params may be written, so they are not
+    /// opened; `sensor` params are read by the graph's sensor check.
+    fn check_files(&self, params: &Params, ctx: &BuildContext) -> Result<(), ParamError> {
+        for doc in self.0.info.params.iter().filter(|d| d.ty == INPUT_PATH || d.ty == format!("[{INPUT_PATH}]")) {
+            let files: Vec<&str> = match params.table().get(doc.name.as_ref()) {
+                Some(toml::Value::String(f)) => vec![f.as_str()],
+                Some(toml::Value::Array(a)) => a.iter().filter_map(toml::Value::as_str).collect(),
+                _ => Vec::new(),
+            };
+            for f in files {
+                let path = ctx.resolve(Path::new(f));
+                let problem = match std::fs::metadata(&path) {
+                    Ok(m) if m.is_dir() => Some("is a directory, not a file".to_owned()),
+                    Ok(_) => std::fs::File::open(&path).err().map(|e| format!("cannot read: {e}")),
+                    Err(e) => Some(format!("cannot read: {e}")),
+                };
+                if let Some(problem) = problem {
+                    let e = ParamError::new(doc.name.as_ref(), format!("{}: {problem}", path.display()));
+                    return params.locate(Err(e));
+                }
+            }
+        }
+        Ok(())
     }
 
     fn build(&self, params: &Params, ctx: &BuildContext) -> Result<NodeImpl, NodeError> {

@@ -248,7 +248,7 @@ fn two_plugin_sinks_on_one_file_are_refused_naming_both_nodes() {
         &d,
         &format!(
             "g.toml:{}:12: node \"b\": param \"path\": writes ./forces.csv, which forces-csv \"a\" writes too (its \
-             `path` forces.csv, the same file): each would replace the other's output, whatever `overwrite` says; \
+             `path` forces.csv, the same file): each would replace the other's output; \
              give each node its own file",
             params_line(&graph, "b")
         ),
@@ -267,7 +267,7 @@ fn a_plugin_sink_over_the_recording_or_the_calibration_is_refused_and_both_are_k
         &d,
         &format!(
             "g.toml:{}:12: node \"csv\": param \"path\": writes rec.h5, the recording replay \"replay\" reads (its \
-             `path` rec.h5): the run would overwrite that input, whatever `overwrite` says, and what it holds would \
+             `path` rec.h5): the run would overwrite that input, and what it holds would \
              be lost; give `path` another file",
             params_line(&graph, "csv")
         ),
@@ -278,7 +278,7 @@ fn a_plugin_sink_over_the_recording_or_the_calibration_is_refused_and_both_are_k
         &format!(
             "g.toml:{}:12: node \"csv\": param \"path\": writes sub/../calib.toml, the calibration corrector \
              \"paper\" reads (its `calibration` calib.toml, the same file): the run would overwrite that input, \
-             whatever `overwrite` says, and what it holds would be lost; give `path` another file",
+             and what it holds would be lost; give `path` another file",
             params_line(&graph, "csv")
         ),
     );
@@ -306,7 +306,7 @@ fn a_plugin_sink_over_the_file_a_plugin_source_reads_is_refused() {
         &d,
         &format!(
             "g.toml:{}:12: node \"out\": param \"path\": writes p.csv, the file csv-pressure \"daq\" reads (its \
-             `path` p.csv): the run would overwrite that input, whatever `overwrite` says, and what it holds would be \
+             `path` p.csv): the run would overwrite that input, and what it holds would be \
              lost; give `path` another file",
             params_line(&graph, "out")
         ),

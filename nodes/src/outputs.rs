@@ -340,6 +340,12 @@ pub fn check_files(spec: &GraphSpec) -> Result<(), GraphErrors> {
     for (wi, w) in files.iter().enumerate() {
         let (Use::Writes, Some(n)) = (w.use_, w.node) else { continue };
         let writes = format!("writes {}", w.resolved.display());
+        // Said only to a kind that has the param (a plugin's sink may have none).
+        let ow = if spec.nodes[n].factory.info().params.iter().any(|p| p.name == "overwrite") {
+            ", whatever `overwrite` says"
+        } else {
+            ""
+        };
         let same = |f: &Named| {
             if f.resolved.as_os_str() == w.resolved.as_os_str() { "" } else { ", the same file" }
         };
@@ -360,7 +366,7 @@ pub fn check_files(spec: &GraphSpec) -> Result<(), GraphErrors> {
                         if o == n { "this node".to_owned() } else { format!("{} \"{}\"", other.kind, other.id) };
                     format!(
                         "{writes}, which {whose} writes too (its `{}` {}{}): each would replace the other's \
-                         output, whatever `overwrite` says; give each node its own file",
+                         output{ow}; give each node its own file",
                         f.param,
                         f.resolved.display(),
                         same(f)
@@ -369,14 +375,14 @@ pub fn check_files(spec: &GraphSpec) -> Result<(), GraphErrors> {
                 _ if !writes_over(w, &f.id) => continue,
                 (_, None) if f.param == "graph" => format!(
                     "{writes}, which is this graph's own file {}{}: the run would replace the graph with its \
-                     output, whatever `overwrite` says; give `{}` another file",
+                     output{ow}; give `{}` another file",
                     f.resolved.display(),
                     same(f),
                     w.param
                 ),
                 (_, None) => format!(
                     "{writes}, which is the plugin library {} this graph loads (`[[plugin]] path`){}: the run \
-                     would replace it, whatever `overwrite` says; give `{}` another file",
+                     would replace it{ow}; give `{}` another file",
                     f.resolved.display(),
                     same(f),
                     w.param
@@ -386,8 +392,8 @@ pub fn check_files(spec: &GraphSpec) -> Result<(), GraphErrors> {
                     let whose =
                         if o == n { "this node".to_owned() } else { format!("{} \"{}\"", other.kind, other.id) };
                     format!(
-                        "{writes}, the {} {whose} reads (its `{}` {}{}): the run would overwrite that input, \
-                         whatever `overwrite` says, and what it holds would be lost; give `{}` another file",
+                        "{writes}, the {} {whose} reads (its `{}` {}{}): the run would overwrite that input{ow}, \
+                         and what it holds would be lost; give `{}` another file",
                         what_is_read(&other.kind, &f.param),
                         f.param,
                         f.resolved.display(),
@@ -399,7 +405,7 @@ pub fn check_files(spec: &GraphSpec) -> Result<(), GraphErrors> {
                     let other = &spec.nodes[o];
                     format!(
                         "{writes}, which {} \"{}\" (a plugin kind) names in its `{}` {}{}: whether it reads or \
-                         writes that file, the run would replace it or have it replaced, whatever `overwrite` says; \
+                         writes that file, the run would replace it or have it replaced{ow}; \
                          give `{}` another file",
                         other.kind,
                         other.id,
@@ -642,7 +648,7 @@ mod tests {
         assert_eq!(
             errors(&text),
             "DIR/g.toml:8:12: node \"b\": param \"out\": writes DIR/sub/../x.csv, which p-files \"a\" writes too \
-             (its `out` DIR/x.csv, the same file): each would replace the other's output, whatever `overwrite` says; \
+             (its `out` DIR/x.csv, the same file): each would replace the other's output; \
              give each node its own file"
         );
         // One of an array's files, and one file twice in one array.
@@ -676,7 +682,7 @@ mod tests {
         assert_eq!(
             errors(&text),
             "DIR/g.toml:8:12: node \"csv\": param \"out\": writes DIR/rec.h5, the recording replay \"replay\" \
-             reads (its `path` DIR/rec.h5): the run would overwrite that input, whatever `overwrite` says, and what \
+             reads (its `path` DIR/rec.h5): the run would overwrite that input, and what \
              it holds would be lost; give `out` another file"
         );
         // The graph file; a plugin's input-path; a plugin's path (read or written).

@@ -9,5 +9,6 @@ mod outputs;
 mod plugin_sensors;
 mod plugins;
 mod segment;
+mod sink_swap;
 mod support;
 mod sync;

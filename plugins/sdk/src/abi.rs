@@ -116,7 +116,8 @@ pub struct SfPort {
 pub struct SfParam {
     pub name: SfStr,
     pub ty: SfStr,
-    /// Default as TOML text, empty when required.
+    /// Default as shown (TOML text, or `none` when unset means "not given"), empty when
+    /// required; display only.
     pub default: SfStr,
     pub doc: SfStr,
 }

@@ -115,7 +115,9 @@ pub struct ParamDecl {
     pub name: &'static str,
     /// One of [`PARAM_TYPES`], or `[T]` of one (checked by the host at load).
     pub ty: &'static str,
-    /// TOML text, empty when required.
+    /// The default as shown by `skinflow nodes` (TOML text such as `1.5`, or `none` when
+    /// unset means "not given"); empty when required. Display only: the host fills nothing in,
+    /// so the kind's `Params` must default it too (`#[serde(default)]`, an `Option`).
     pub default: &'static str,
     pub doc: &'static str,
 }
@@ -153,7 +155,8 @@ impl KindSpec {
     }
 
     /// A documented param: `ty` is one of [`PARAM_TYPES`] or `[T]` of one (the host refuses
-    /// the library otherwise), `default` TOML text (empty: required).
+    /// the library otherwise), `default` what `skinflow nodes` shows as the default (TOML text,
+    /// or `none`; empty: required; display only: default it in your `Params` too).
     ///
     /// A file the kind writes is an [`OUTPUT_PATH`] (`"output-path"`), one it only reads an
     /// [`INPUT_PATH`] (`"input-path"`): the graph checks then refuse an output of this node

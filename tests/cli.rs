@@ -1282,7 +1282,11 @@ fn a_reconstructor_of_another_sensor_than_its_recording_scene_or_calibration_is_
     // A 60 mm recording through a default (100 mm) reconstructor (the shipped calibration is of
     // the 100 mm sensor, or records none: either way not at fault).
     pipeline_graph(&d, "small.h5", "pneumatic-locaware");
-    let graph = std::fs::read_to_string(d.join("g.toml")).unwrap();
+    // Its logger records the recording's sensor (else it is refused too, for the same reason).
+    let graph = std::fs::read_to_string(d.join("g.toml"))
+        .unwrap()
+        .replace("params = { path = \"out.h5\", ", "params = { path = \"out.h5\", sensor = \"small-sensor.toml\", ");
+    assert!(graph.contains("sensor = \"small-sensor.toml\""), "{graph}");
     let err = refused_by_check(
         &graph,
         &[

@@ -8,6 +8,7 @@ mod live;
 mod outputs;
 mod plugin_sensors;
 mod plugins;
+mod recordings;
 mod segment;
 mod sink_swap;
 mod support;

@@ -45,6 +45,12 @@
 //! is refused at the switch, with the reason; a replacement with another `path` starts a new
 //! file from the swap on, the replaced one closes its own with every row it received.
 //!
+//! Truth rows are stored in `truth_max_contacts` columns (default 8, fixed when the file is
+//! created): a truth row with more contacts stops the graph with an error naming the param,
+//! the rows recorded so far kept. With rotation, each part's truth starts with the row in
+//! effect when the part starts (see `skinflow_record`'s docs), so each part alone gives every
+//! frame its truth.
+//!
 //! Images are logged at the size of the first image (the reconstructor's `image_nx` x
 //! `image_ny`); one recording holds one size. The logger's own `image_nx` / `image_ny` are
 //! optional: given, they must match the images (a mismatch stops the graph naming them), and
@@ -96,6 +102,13 @@ pub struct LoggerParams {
     pub image_ny: Option<usize>,
     #[serde(default = "default_deflate")]
     pub deflate_level: u8,
+    /// Columns C of `/truth/*`: the most contacts one truth row may have.
+    #[serde(default = "default_truth_max_contacts")]
+    pub truth_max_contacts: usize,
+}
+
+fn default_truth_max_contacts() -> usize {
+    8
 }
 
 fn default_flush() -> f64 {
@@ -129,6 +142,9 @@ impl NodeParams for LoggerParams {
         }
         if self.swmr && self.deflate_level > 0 {
             return Err(ParamError::new("deflate_level", SWMR_NEEDS_NO_DEFLATE));
+        }
+        if self.truth_max_contacts == 0 {
+            return Err(ParamError::new("truth_max_contacts", "must be >= 1 (got 0)"));
         }
         Ok(())
     }
@@ -216,10 +232,20 @@ fn io(path: &Path, e: impl std::fmt::Display) -> NodeError {
 }
 
 /// A writer error: those naming the file already are kept as they are, the others (an option
-/// out of range) get the file's path.
+/// out of range) get the file's path; a truth row wider than `truth_max_contacts` names the
+/// param.
 fn record_error(path: &Path, e: RecordError) -> NodeError {
     match e {
         RecordError::InvalidOption { .. } => io(path, e),
+        RecordError::TooManyTruthContacts { file, found, max } => NodeError::Param {
+            param: "truth_max_contacts".into(),
+            problem: format!(
+                "{}: /truth: a truth row has {found} contacts, more than truth_max_contacts = {max} (the columns \
+                 of the truth arrays, fixed when the file is created); set the logger's truth_max_contacts to \
+                 {found} or more",
+                file.display()
+            ),
+        },
         e => NodeError::other(e),
     }
 }
@@ -262,6 +288,7 @@ impl Logger {
         o.swmr = p.swmr;
         o.overwrite = p.overwrite;
         o.deflate_level = p.deflate_level;
+        o.truth_max_contacts = p.truth_max_contacts;
         o.streams = Streams {
             eit: false,
             pressure: false,
@@ -278,7 +305,7 @@ impl Logger {
             opts: Some(o),
             image_size: (p.image_nx, p.image_ny),
             writer: None,
-            truth_buf: Vec::with_capacity(16),
+            truth_buf: Vec::with_capacity(p.truth_max_contacts.clamp(16, 1024)),
             forces_buf: Vec::with_capacity(64),
             unlisted: Vec::new(),
             lane_strategy: Vec::new(),
@@ -613,6 +640,12 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
                 "u8",
                 "0",
                 "0-9, 0 uncompressed: a SIGKILL cannot corrupt an uncompressed file; compressed (about 2.3x smaller) a kill during a flush can leave a column unreadable; must be 0 with swmr = true",
+            ))
+            .param(ParamDoc::new(
+                "truth_max_contacts",
+                "usize",
+                "8",
+                "columns of /truth/* (>= 1): the most contacts one truth row may have; a row with more stops the graph naming this param",
             )),
         |p: LoggerParams, ctx| Ok(NodeImpl::Sink(Box::new(Logger::new(p, ctx)?))),
     ))
@@ -713,6 +746,33 @@ mod tests {
         let e = parse("path = \"r.h5\"\nswmr = true\ndeflate_level = 1").validate().unwrap_err();
         let text = e.to_string();
         assert!(text.contains("deflate_level") && text.contains("swmr = true"), "{text}");
+    }
+
+    /// `truth_max_contacts`: 8 by default, >= 1, given to the writer; a wider truth row is an
+    /// error naming the param.
+    #[test]
+    fn truth_max_contacts_defaults_to_8_and_a_wider_row_names_the_param() {
+        let parse = |t: &str| toml::from_str::<LoggerParams>(t).unwrap();
+        assert_eq!(parse("path = \"r.h5\"").truth_max_contacts, 8);
+        assert!(parse("path = \"r.h5\"\ntruth_max_contacts = 9").validate().is_ok());
+        let e = parse("path = \"r.h5\"\ntruth_max_contacts = 0").validate().unwrap_err().to_string();
+        assert!(e.contains("truth_max_contacts") && e.contains("must be >= 1 (got 0)"), "{e}");
+        let d = temp_dir("truth-columns");
+        let l = logger(&d, "path = \"rec.h5\"\ntruth_max_contacts = 9");
+        assert_eq!(l.opts.as_ref().unwrap().truth_max_contacts, 9);
+        let e = record_error(
+            &d.join("rec.h5"),
+            RecordError::TooManyTruthContacts { file: d.join("rec.h5"), found: 9, max: 8 },
+        );
+        assert_eq!(
+            e.to_string(),
+            format!(
+                "param \"truth_max_contacts\": {}: /truth: a truth row has 9 contacts, more than truth_max_contacts \
+                 = 8 (the columns of the truth arrays, fixed when the file is created); set the logger's \
+                 truth_max_contacts to 9 or more",
+                d.join("rec.h5").display()
+            )
+        );
     }
 
     #[test]

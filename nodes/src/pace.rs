@@ -4,7 +4,13 @@
 
 use skinflow_core::Context;
 
-/// A time, s, as a header's graph-clock ns (negative times clamp to 0).
+/// A time, s, as a header's graph-clock ns. The graph clock starts at 0 and a header cannot
+/// hold a time before it: negative times clamp to 0, so a caller makes sure its times are not
+/// negative where that would be wrong. `replay` refuses a recording with times before 0 when
+/// it is checked and built (`Recording::check_replay_times`); `sim`'s times start at 0; the
+/// serial sources stamp host receive times, and `serial_eit` the middle of a frame's
+/// acquisition (receive time minus half a frame period), which clamps to 0 for a frame that
+/// arrives in the first half period after the graph started.
 pub(crate) fn ns(t_s: f64) -> u64 {
     (t_s.max(0.0) * 1e9).round() as u64
 }

@@ -4,6 +4,16 @@
 //! when present, goes out first on `reference`. With `loop = true` the recording repeats,
 //! its times shifted so the clock keeps increasing.
 //!
+//! Times: messages are stamped with the recorded times, on the engine's clock, which starts at
+//! 0; a recording with a time before 0 in `/eit/t`, `/pressure/t` or `/truth/t` (the contract
+//! allows any monotonic clock) is refused, by `skinflow check` and when the node is built,
+//! naming the file, the dataset, the row and the value
+//! ([`skinflow_record::RecordError::NegativeTime`]): stamping them at 0 would give every
+//! such message the same time without a word. Pacing starts at the first EIT frame or pressure
+//! sample: truth rows before it (a rotated part starts with the row in effect at its start, at
+//! that row's own time, which may be long before) go out at once, just before it, with their
+//! recorded times.
+//!
 //! Hot swap: a replacement reading the same recording goes on where the running instance
 //! stopped (its read position, loop offset and sequence numbers), at its own `speed` from the
 //! last message sent, and with its own `loop`. A replacement reading another file (or the same
@@ -25,6 +35,7 @@ use skinflow_core::{
     BuildContext, Context, Header, KindInfo, Message, NodeError, NodeImpl, NodeParams, NodeState, Outputs, ParamDoc,
     ParamError, PortSpec, Recycler, Registry, Role, Source, SourcePoll, StateRefused, typed,
 };
+use skinflow_record::RecordError;
 use skinflow_record::read::Recording;
 
 use crate::pace::{Pacer, ns};
@@ -53,11 +64,12 @@ impl NodeParams for ReplayParams {
     }
 
     /// The recording is a skinflow recording ([`Recording::check_header`]: its errors name the
-    /// file and say whether it is missing, not HDF5, or not a skinflow recording). Its streams
-    /// are validated when the node opens it: reading them here would read a long recording
-    /// twice at every `run`.
+    /// file and say whether it is missing, not HDF5, or not a skinflow recording) whose streams
+    /// start at a time >= 0 ([`Recording::check_replayable`], which reads the first time of
+    /// each stream only). Its streams are validated when the node opens it: reading them here
+    /// would read a long recording twice at every `run`.
     fn check_files(&self, ctx: &BuildContext) -> Result<(), ParamError> {
-        Recording::check_header(ctx.resolve(&self.path)).map_err(|e| ParamError::new("path", e.to_string()))
+        Recording::check_replayable(ctx.resolve(&self.path)).map_err(|e| ParamError::new("path", e.to_string()))
     }
 }
 
@@ -82,8 +94,13 @@ pub struct Replay {
     repeat: bool,
     t_first: f64,
     span_s: f64,
+    /// How long the truth rows sent before the first EIT frame or pressure sample were
+    /// recorded before it (0 without such rows): a loop's next pass keeps their times after
+    /// the last ones sent.
+    lead_s: f64,
     pos: Position,
-    /// Paces recording times (availability time + offset) at `speed`, from `t_first`.
+    /// Paces recording times (availability time + `Position::pace_offset_s`) at `speed`, from
+    /// `t_first`.
     pacer: Pacer,
     frames: Recycler<EitFrame>,
 }
@@ -95,6 +112,9 @@ struct Position {
     next: usize,
     /// Added to recorded times on the current pass.
     offset_s: f64,
+    /// Added to availability times on the current pass, for pacing: `offset_s` without the
+    /// leading truth rows' `lead_s` per pass, which is not waited for.
+    pace_offset_s: f64,
     sent_reference: bool,
     pressure_seq: u64,
     truth_seq: u64,
@@ -123,7 +143,9 @@ pub(crate) fn median_period(t: &[f64], fallback: f64) -> f64 {
 
 impl Replay {
     /// `path`: the file `rec` was read from (a hot swap goes on only from the same file).
-    pub fn new(path: PathBuf, rec: Recording, speed: f64, repeat: bool) -> Replay {
+    /// Refuses a recording with a time before 0 ([`Recording::check_replay_times`]).
+    pub fn new(path: PathBuf, rec: Recording, speed: f64, repeat: bool) -> Result<Replay, RecordError> {
+        rec.check_replay_times()?;
         let mut order: Vec<(f64, u8, Item)> = Vec::new();
         if let Some(e) = &rec.eit {
             let half = 0.5 * median_period(&e.t_s, 1.0 / 1.3);
@@ -132,24 +154,51 @@ impl Replay {
         if let Some(p) = &rec.pressure {
             order.extend(p.t_s.iter().enumerate().map(|(i, t)| (*t, 1, Item::Pressure(i))));
         }
+        // Truth rows before the first frame or sample (a rotated part's row in effect) are due
+        // with it: pacing does not wait from their times.
+        let first_data = order.iter().map(|o| o.0).reduce(f64::min);
+        let mut lead_s = 0.0_f64;
         if let Some(tr) = &rec.truth {
-            order.extend(tr.t_s.iter().enumerate().map(|(i, t)| (*t, 0, Item::Truth(i))));
+            for (i, &t) in tr.t_s.iter().enumerate() {
+                let due = match first_data {
+                    Some(first) if t < first => {
+                        lead_s = lead_s.max(first - t);
+                        first
+                    }
+                    _ => t,
+                };
+                order.push((due, 0, Item::Truth(i)));
+            }
         }
         // Stable: each stream keeps its recorded order; ties go truth, pressure, EIT.
         order.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
         let t_first = order.first().map_or(0.0, |o| o.0);
         let span_s = order.last().map_or(0.0, |o| o.0) - t_first;
-        Replay {
+        Ok(Replay {
             path,
             order: order.into_iter().map(|(t, _, i)| (t, i)).collect(),
             rec: Arc::new(rec),
             repeat,
             t_first,
             span_s,
+            lead_s,
             pos: Position::default(),
             pacer: Pacer::new(speed, t_first),
             frames: Recycler::new(64, EitFrame::default),
-        }
+        })
+    }
+
+    /// How much later each pass of a loop is sent than the one before: one mean event interval
+    /// after this one ended.
+    fn pass_pace_step_s(&self) -> f64 {
+        self.span_s + self.span_s / self.order.len() as f64
+    }
+
+    /// How much later each pass's recorded times are than the one before's: as it is sent,
+    /// and `lead_s` more, so its leading truth rows, recorded that long before its first event,
+    /// come after this pass's last message too (a stream's times must not go back).
+    fn pass_step_s(&self) -> f64 {
+        self.pass_pace_step_s() + self.lead_s
     }
 
     /// Why this instance cannot go on from `s`, if it cannot.
@@ -193,13 +242,12 @@ impl Source for Replay {
                 return Ok(SourcePoll::Finished);
             }
             self.pos.next = 0;
-            // The next pass starts one mean event interval after this one ended.
-            self.pos.offset_s += self.span_s + self.span_s / self.order.len() as f64;
+            self.pos.offset_s += self.pass_step_s();
+            self.pos.pace_offset_s += self.pass_pace_step_s();
         }
         let (avail, item) = self.order[self.pos.next];
         self.pos.next += 1;
-        let r = avail + self.pos.offset_s;
-        if self.pacer.send_at(ctx, r).is_none() {
+        if self.pacer.send_at(ctx, avail + self.pos.pace_offset_s).is_none() {
             return Ok(SourcePoll::Finished);
         }
         let rec = &self.rec;
@@ -290,6 +338,7 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
         |p: ReplayParams, ctx| {
             let path = ctx.resolve(&p.path);
             let rec = Recording::open(&path).map_err(NodeError::other)?; // names the file
+            let rec_path = std::path::absolute(&path).unwrap_or(path.clone());
             let rows = rec.eit.as_ref().map_or(0, |e| e.len())
                 + rec.pressure.as_ref().map_or(0, |p| p.len())
                 + rec.truth.as_ref().map_or(0, |t| t.len());
@@ -300,12 +349,9 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
                     "the recording holds no EIT frame, pressure sample or truth row: the replay sends nothing"
                 );
             }
-            Ok(NodeImpl::Source(Box::new(Replay::new(
-                std::path::absolute(&path).unwrap_or(path),
-                rec,
-                p.speed,
-                p.repeat,
-            ))))
+            // Times before 0 are refused, naming the file as given.
+            let replay = Replay::new(rec_path, rec, p.speed, p.repeat).map_err(NodeError::other)?;
+            Ok(NodeImpl::Source(Box::new(replay)))
         },
     ))
 }
@@ -345,7 +391,7 @@ mod tests {
 
         // The refusal, as the engine gets it.
         let ctx = &mut Context::detached("replay", Mode::Lockstep);
-        let open = |p: &Path| Replay::new(p.to_path_buf(), Recording::open(p).unwrap(), 0.0, false);
+        let open = |p: &Path| Replay::new(p.to_path_buf(), Recording::open(p).unwrap(), 0.0, false).unwrap();
         let (mut old, mut new) = (open(&a), open(&b));
         let state = old.export_state(ctx).unwrap();
         let refused = new.import_state(ctx, state).unwrap_err();
@@ -363,16 +409,88 @@ mod tests {
         old.import_state(ctx, refused.state).expect("the running replay takes its own state back");
     }
 
+    /// A recording of truth rows at `truth_t` (one contact each) and pressure samples at
+    /// `pressure_t`, no EIT, in a fresh directory; returns its path.
+    fn truth_and_pressure(name: &str, truth_t: &[f64], pressure_t: &[f64]) -> std::path::PathBuf {
+        use skinflow_record::write::{RecordingWriter, Streams, TruthContact, WriterOptions};
+        let dir = std::env::temp_dir().join(format!("skinflow-nodes-{}-{name}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("rec.h5");
+        let mut o = WriterOptions::new(skinflow_eit::Sensor::paper_100mm().toml.clone());
+        o.streams = Streams { eit: false, pressure: true, truth: true, ..Streams::default() };
+        let mut w = RecordingWriter::create(&path, &o).unwrap();
+        let c = TruthContact { x_mm: 1.0, y_mm: 2.0, force_n: 3.0, diameter_mm: 10.0 };
+        for &t in truth_t {
+            w.append_truth(t, &[c]).unwrap();
+        }
+        for &t in pressure_t {
+            w.append_pressure(t, 1.0).unwrap();
+        }
+        w.close().unwrap();
+        path
+    }
+
+    /// Times before 0 are refused when the replay is built and by its file check, naming the
+    /// file, the dataset, the row and the value: stamped on the engine's clock, they all became 0.
+    #[test]
+    fn a_recording_with_times_before_0_is_refused() {
+        let rec = truth_and_pressure("negative", &[0.0], &[-1.5, -1.0, 0.5]);
+        let expected = format!(
+            "{}: /pressure/t[0] = -1.5 s: times before 0 cannot be replayed (the engine's clock starts at 0); shift \
+             the recording's clock: add 1.5 s or more to every time dataset (/eit/t, /pressure/t, /truth/t and the \
+             /derived ones)",
+            rec.display()
+        );
+        let Err(e) = Replay::new(rec.clone(), Recording::open(&rec).unwrap(), 0.0, false) else {
+            panic!("replayed times before 0")
+        };
+        assert_eq!(e.to_string(), expected);
+        let ctx = skinflow_core::BuildContext {
+            base_dir: rec.parent().unwrap().to_path_buf(),
+            mode: Mode::Lockstep,
+            node_id: "replay".into(),
+        };
+        let params: super::ReplayParams = toml::from_str("path = \"rec.h5\"").unwrap();
+        let e = skinflow_core::NodeParams::check_files(&params, &ctx).unwrap_err();
+        assert!(e.to_string().ends_with(&expected[expected.find(": /pressure").unwrap()..]), "{e}");
+    }
+
+    /// Truth rows recorded before the first pressure sample or EIT frame (a rotated part starts
+    /// with the row in effect, which may be much older) go out at once, just before it, with
+    /// their recorded times: pacing does not wait from them, and a loop's next pass still
+    /// sends its times after the last ones.
+    #[test]
+    fn truth_rows_before_the_first_sample_are_sent_with_it() {
+        let pressure: Vec<f64> = (0..10).map(|k| 10.0 + 0.1 * f64::from(k)).collect();
+        let rec = truth_and_pressure("lead", &[0.5, 10.45], &pressure);
+        let r = Replay::new(rec.clone(), Recording::open(&rec).unwrap(), 1.0, true).unwrap();
+        assert_eq!((r.t_first, r.lead_s), (10.0, 9.5));
+        assert!(
+            matches!(r.order[0], (10.0, super::Item::Truth(0))) && matches!(r.order[1].1, super::Item::Pressure(0))
+        );
+        assert_eq!(r.pacer.due_ns(10.0), 0, "the first sample is due at once");
+        let (sent, _) = run("replay", &params(&rec, ", speed = 0.0"), None);
+        let t_ns: Vec<(&str, u64)> = sent.iter().map(|&(stream, _, t_ns)| (stream, t_ns)).collect();
+        assert_eq!(&t_ns[..2], [("truth", 500_000_000), ("pressure", 10_000_000_000)]);
+        // Looping: the next pass's first truth row is stamped after this pass's last message,
+        // and its first sample is sent a mean event interval after that message, without
+        // waiting for the leading row's 9.5 s.
+        let (step, pace_step) = (r.pass_step_s(), r.pass_pace_step_s());
+        assert!(0.5 + step > 10.9, "{step}");
+        assert!((10.0 + pace_step - 10.9 - 0.9 / 12.0).abs() < 1e-9, "{pace_step}");
+    }
+
     #[test]
     fn the_replacement_paces_from_the_last_message_sent_at_its_own_speed() {
         let rec = recording("pace", 20);
         let ctx = &mut Context::detached("replay", Mode::Realtime);
-        let mut old = Replay::new(rec.clone(), Recording::open(&rec).unwrap(), 2.0, false);
+        let mut old = Replay::new(rec.clone(), Recording::open(&rec).unwrap(), 2.0, false).unwrap();
         // As if it had sent the message of recording time 1.2 s (lockstep: without waiting).
         old.pos.next = 30;
         let sent_ns = old.pacer.send_at(&Context::detached("replay", Mode::Lockstep), 1.2).unwrap();
         assert_eq!(sent_ns, old.pacer.due_ns(1.2));
-        let mut new = Replay::new(rec.clone(), Recording::open(&rec).unwrap(), 4.0, false);
+        let mut new = Replay::new(rec.clone(), Recording::open(&rec).unwrap(), 4.0, false).unwrap();
         let state = old.export_state(ctx).unwrap();
         assert_eq!(state.downcast_ref::<ReplayState>().unwrap().pacer.last(), Some((sent_ns, 1.2)));
         new.import_state(ctx, state).unwrap();

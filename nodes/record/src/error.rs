@@ -88,13 +88,26 @@ pub enum RecordError {
     /// A row handed to the writer has the wrong number of values.
     #[error("{}: {path}: row has {found} values, expected {expected}", file.display())]
     RowWidth { file: PathBuf, path: String, found: usize, expected: usize },
-    /// A truth row has more contacts than `truth_max_contacts` allows.
+    /// A truth row has more contacts than `truth_max_contacts` allows (the writer option
+    /// `WriterOptions::truth_max_contacts`, and the `hdf5_logger` param of that name).
     #[error(
-        "{}: /truth: row has {found} contacts, more than truth_max_contacts = {max} \
-         (hint: raise truth_max_contacts)",
+        "{}: /truth: row has {found} contacts, more than truth_max_contacts = {max}, the columns of the \
+         truth arrays, fixed when the file was created (hint: set truth_max_contacts to {found} or more)",
         file.display()
     )]
     TooManyTruthContacts { file: PathBuf, found: usize, max: usize },
+    /// A recording given to a replay holds a time before 0 in a stream the replay sends
+    /// (`/eit/t`, `/pressure/t`, `/truth/t`): the engine's clock, on which messages are
+    /// stamped, starts at 0. `earliest_s` is the earliest time of those streams (how far the
+    /// clock must be shifted).
+    #[error(
+        "{}: {path}[{row}] = {t_s} s: times before 0 cannot be replayed (the engine's clock starts at 0); \
+         shift the recording's clock: add {} s or more to every time dataset (/eit/t, /pressure/t, /truth/t \
+         and the /derived ones)",
+        file.display(),
+        -earliest_s
+    )]
+    NegativeTime { file: PathBuf, path: String, row: usize, t_s: f64, earliest_s: f64 },
     /// An append to a stream that was not declared in `WriterOptions::streams`.
     #[error("{}: {path}: stream was not declared in the writer options", file.display())]
     NotDeclared { file: PathBuf, path: String },

@@ -67,9 +67,14 @@
 //! before the first row appended after the current part reached `rotate_mb` MB (10^6 bytes, as
 //! measured after a flush) or before the first row whose time is `rotate_s` seconds or more after
 //! the part's first row. Each row is in exactly one part, and each part is a complete format-v1
-//! file with the same root attributes (plus `part`) and `/eit/reference` when set. The truth
-//! row in effect at the start of a part lives in the previous part. `rotate::recording_files`
-//! turns the path the writer was given into the list of files to replay in order.
+//! file with the same root attributes (plus `part`) and `/eit/reference` when set. Its truth
+//! starts with the row in effect when it starts (the last truth row appended before it, at
+//! that row's own time, which is before the part's other rows), so each part alone gives every
+//! frame its truth, and a part that starts while a load is held has no leading no-load period.
+//! That row is the one exception to "each row is in exactly one part": it repeats the previous
+//! part's last truth row, so a tool joining the parts into one stream drops the first truth row
+//! of every part but the first. `rotate::recording_files` turns the path the writer was
+//! given into the list of files to replay in order.
 //!
 //! # Reading
 //!

@@ -283,6 +283,39 @@ impl Recording {
         open_head(path.as_ref()).map(|head| head.sensor)
     }
 
+    /// [`Recording::check_header`], and that the streams a replay sends (`/eit/t`,
+    /// `/pressure/t`, `/truth/t`) start at a time >= 0 ([`RecordError::NegativeTime`]
+    /// otherwise), as cheaply: only the first time of each is read (a stream's first time is
+    /// its earliest, as [`Recording::open`] checks). A replay stamps its messages on the
+    /// engine's clock, which starts at 0: the check of `skinflow check`.
+    pub fn check_replayable(path: impl AsRef<Path>) -> Result<(), RecordError> {
+        let fpath = path.as_ref();
+        let head = open_head(fpath)?;
+        let mut firsts = Vec::with_capacity(REPLAYED_TIMES.len());
+        for t_path in REPLAYED_TIMES {
+            let group = &t_path[..t_path.rfind('/').unwrap_or(0)];
+            if head.file.link_exists(group)
+                && let Some(t0) = data::read_first(&head.file, fpath, t_path)?
+            {
+                firsts.push((t_path, t0));
+            }
+        }
+        first_negative(fpath, firsts.iter().map(|(path, t0)| (*path, std::slice::from_ref(t0))))
+    }
+
+    /// Refuses times before 0 in the streams a replay sends (`/eit/t`, `/pressure/t`,
+    /// `/truth/t`, checked in that order): [`RecordError::NegativeTime`] names the file, the
+    /// first dataset holding one, its first such row and value, and the earliest time of those
+    /// streams.
+    pub fn check_replay_times(&self) -> Result<(), RecordError> {
+        let streams = [
+            (layout::EIT_T, self.eit.as_ref().map(|s| &s.t_s[..])),
+            (layout::PRESSURE_T, self.pressure.as_ref().map(|s| &s.t_s[..])),
+            (layout::TRUTH_T, self.truth.as_ref().map(|s| &s.t_s[..])),
+        ];
+        first_negative(&self.path, streams.into_iter().filter_map(|(path, t)| Some((path, t?))))
+    }
+
     /// Opens and validates `path` (CONTRACTS.md section 2), then reads every stream.
     pub fn open(path: impl AsRef<Path>) -> Result<Recording, RecordError> {
         let fpath = path.as_ref();
@@ -336,6 +369,25 @@ impl Recording {
     fn missing(&self, path: &str) -> RecordError {
         RecordError::MissingStream { file: self.path.clone(), path: path.to_owned() }
     }
+}
+
+/// The time datasets of the streams a replay sends, in the order their times are checked.
+const REPLAYED_TIMES: [&str; 3] = [layout::EIT_T, layout::PRESSURE_T, layout::TRUTH_T];
+
+/// [`RecordError::NegativeTime`] for the first time < 0 of `streams` (dataset, times), in
+/// their order; `earliest_s` over all of them.
+fn first_negative<'a>(
+    fpath: &Path,
+    streams: impl Iterator<Item = (&'a str, &'a [f64])> + Clone,
+) -> Result<(), RecordError> {
+    let earliest_s = streams.clone().flat_map(|(_, t)| t.iter().copied()).fold(f64::INFINITY, f64::min);
+    for (path, t) in streams {
+        if let Some(row) = t.iter().position(|&t_s| t_s < 0.0) {
+            let (path, t_s) = (path.to_owned(), t[row]);
+            return Err(RecordError::NegativeTime { file: fpath.to_path_buf(), path, row, t_s, earliest_s });
+        }
+    }
+    Ok(())
 }
 
 /// Times of a stream must be finite and in time order (equal times allowed): the replay merges

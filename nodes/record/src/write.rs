@@ -4,7 +4,9 @@
 //! append; there is no thread inside). After each write the file is flushed, so a killed
 //! process leaves a file that opens with every row up to the last flush. Optional rotation
 //! starts a new part (`rotate::part_path`) before the row that crosses `rotate_mb` or
-//! `rotate_s`. Times are seconds on the recording clock, EIT values volts, pressure kPa.
+//! `rotate_s`; a new part's truth starts with the row in effect (the last truth row appended,
+//! at its own time), so each part alone gives every frame its truth. Times are seconds on the
+//! recording clock, EIT values volts, pressure kPa.
 
 mod column;
 pub(crate) mod create;
@@ -59,6 +61,11 @@ pub struct RecordingWriter {
     sync: Option<Table>,
     forces: Vec<Table>,
     reference: Option<Vec<f64>>,
+    /// Time of the last truth row appended, whose contacts are `last_truth`: the row in effect
+    /// when a new part starts, which is written again as that part's first truth row.
+    last_truth_t_s: Option<f64>,
+    /// Its contacts (capacity `truth_max_contacts` when truth is declared: no allocation per row).
+    last_truth: Vec<TruthContact>,
     swmr_started: bool,
     last_flush: Instant,
     part_start_t_s: Option<f64>,
@@ -118,6 +125,8 @@ impl RecordingWriter {
             part,
             file: None,
             reference: None,
+            last_truth_t_s: None,
+            last_truth: Vec::with_capacity(if s.truth { tc } else { 0 }),
             swmr_started: false,
             last_flush: Instant::now(),
             part_start_t_s: None,
@@ -205,12 +214,10 @@ impl RecordingWriter {
         }
         self.before_append(Slot::Truth, t_s)?;
         if let Some(table) = self.truth.as_mut() {
-            table.t.buf.push(t_s);
-            let fields: [fn(&TruthContact) -> f64; 4] = [|c| c.x_mm, |c| c.y_mm, |c| c.force_n, |c| c.diameter_mm];
-            for (col, field) in table.values.iter_mut().zip(fields) {
-                col.buf.extend(contacts.iter().map(field));
-                col.buf.extend(std::iter::repeat_n(f64::NAN, max - contacts.len()));
-            }
+            push_truth(table, max, t_s, contacts);
+            self.last_truth_t_s = Some(t_s);
+            self.last_truth.clear();
+            self.last_truth.extend_from_slice(contacts);
         }
         self.after_append(Slot::Truth)
     }
@@ -551,6 +558,13 @@ impl RecordingWriter {
         }
     }
 
+    /// Closes the current part and opens the next. The new part's truth starts with the row in
+    /// effect, the last one appended, at its own time (before the part's first row): the truth
+    /// of a frame is the last row at or before it (CONTRACTS.md section 2), so without it the
+    /// frames of a part that starts while a load is held would read as unloaded until the
+    /// next row, and the part's leading no-load period would run to it. That row does not
+    /// count as appended again (`WriterStats::truth_rows`), nor does its time start the part's
+    /// `rotate_s` span.
     fn rotate(&mut self) -> Result<(), RecordError> {
         self.flush()?;
         self.close_file()?;
@@ -558,7 +572,22 @@ impl RecordingWriter {
         let next = self.part.map_or(1, |p| p + 1);
         self.part = Some(next);
         self.path = part_path(&self.base, next);
-        self.open_part()
+        self.open_part()?;
+        if let (Some(table), Some(t_s)) = (self.truth.as_mut(), self.last_truth_t_s) {
+            push_truth(table, self.opts.truth_max_contacts, t_s, &self.last_truth);
+        }
+        Ok(())
+    }
+}
+
+/// Buffers one truth row of `table`: its time, and the contacts' values NaN-padded to `max`
+/// columns (at most `max` contacts, checked by the caller).
+fn push_truth(table: &mut Table, max: usize, t_s: f64, contacts: &[TruthContact]) {
+    table.t.buf.push(t_s);
+    let fields: [fn(&TruthContact) -> f64; 4] = [|c| c.x_mm, |c| c.y_mm, |c| c.force_n, |c| c.diameter_mm];
+    for (col, field) in table.values.iter_mut().zip(fields) {
+        col.buf.extend(contacts.iter().map(field));
+        col.buf.extend(std::iter::repeat_n(f64::NAN, max - contacts.len()));
     }
 }
 
@@ -624,6 +653,61 @@ mod tests {
         let second = Recording::open(part_path(&dir.join("rec.h5"), 2)).unwrap();
         let img = second.derived.image.expect("declared in the later part");
         assert_eq!((img.hw, img.t_s), ([3, 4], vec![1.5]));
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    /// A part that starts while a load is held starts with the truth row in effect, at its own
+    /// time, so each part alone gives every sample its truth and has no leading no-load period
+    /// under load; that row neither counts as appended again nor starts the part's `rotate_s`.
+    #[test]
+    fn a_new_part_starts_with_the_truth_row_in_effect() {
+        let dir = tempdir("carry-truth");
+        let mut opts = WriterOptions::new(PAPER_100MM_TOML);
+        opts.streams = Streams { eit: false, pressure: true, truth: true, ..Streams::default() };
+        opts.rotate_s = Some(1.0);
+        opts.truth_max_contacts = 2;
+        let press = TruthContact { x_mm: 10.0, y_mm: -5.0, force_n: 2.0, diameter_mm: 8.0 };
+        let mut w = RecordingWriter::create(dir.join("rec.h5"), &opts).unwrap();
+        // 10 Hz pressure over 3.5 s; no contact at 0, pressed from 0.5 s, released at 2.0 s (that
+        // row, appended before the sample of its time, is the first row of part 3).
+        for i in 0..35 {
+            let t = f64::from(i) / 10.0;
+            match i {
+                0 | 20 => w.append_truth(t, &[]).unwrap(),
+                5 => w.append_truth(t, &[press]).unwrap(),
+                _ => {}
+            }
+            w.append_pressure(t, f64::from(i)).unwrap();
+        }
+        let stats = w.close().unwrap();
+        assert_eq!((stats.parts, stats.truth_rows, stats.pressure_rows), (4, 3, 35));
+        assert_eq!(stats.rows_written, 35 + 3 + 3, "the three rows carried into parts 2 to 4 are written too");
+
+        let part = |k| Recording::open(part_path(&dir.join("rec.h5"), k)).unwrap();
+        let rows = |rec: &Recording| {
+            let t = rec.truth.as_ref().unwrap();
+            (0..t.len()).map(|i| (t.t_s[i], t.row(i).contacts().collect::<Vec<_>>())).collect::<Vec<_>>()
+        };
+        let (p1, p2, p3, p4) = (part(1), part(2), part(3), part(4));
+        assert_eq!(rows(&p1), [(0.0, vec![]), (0.5, vec![press])]);
+        assert_eq!(rows(&p2), [(0.5, vec![press])], "part 2 starts under load");
+        assert_eq!(rows(&p3), [(0.5, vec![press]), (2.0, vec![])]);
+        assert_eq!(rows(&p4), [(2.0, vec![])]);
+        // Each part holds its own second of samples: the carried row's time starts no span.
+        for (k, rec) in [&p1, &p2, &p3, &p4].into_iter().enumerate() {
+            let p = rec.pressure.as_ref().unwrap();
+            assert_eq!(p.t_s[0], k as f64, "part {}", k + 1);
+            // Every sample has its truth in the part alone: pressed from 0.5 s to 2.0 s.
+            let t = rec.truth.as_ref().unwrap();
+            for &ts in &p.t_s {
+                let loaded = t.row(t.index_at(ts).expect("a row in effect")).contact_count() == 1;
+                assert_eq!(loaded, (0.5..2.0).contains(&ts), "part {}: sample at {ts} s", k + 1);
+            }
+        }
+        assert_eq!(p2.pressure.as_ref().unwrap().len(), 10);
+        // Under load from its start, part 2 has no leading no-load period; part 4 is unloaded.
+        assert_eq!(p2.no_load_pressure_samples(2.0), 0..0);
+        assert_eq!(p4.no_load(2.0).source, crate::NoLoadSource::TruthWithoutContact);
         let _ = std::fs::remove_dir_all(&dir);
     }
 

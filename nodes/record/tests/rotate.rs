@@ -1,5 +1,7 @@
 //! Rotation by duration and by size: every row lands in exactly one part, in order, so the
-//! parts concatenated equal what was written (no gap, no duplicate at the boundaries).
+//! parts concatenated equal what was written (no gap, no duplicate at the boundaries), except
+//! the truth row in effect when a part starts, which that part starts with (at its own time)
+//! besides ending the part before: each part alone gives every frame its truth.
 
 use std::path::{Path, PathBuf};
 
@@ -56,7 +58,9 @@ fn write(base: &Path, opts: &WriterOptions, n: u64) -> Vec<PathBuf> {
     parts
 }
 
-/// Concatenates the parts and checks them against what `write` wrote.
+/// Concatenates the parts and checks them against what `write` wrote: the truth of every part
+/// but the first starts with the previous part's last row, dropped from the concatenation; in
+/// each part alone, every frame has the truth row written last at or before it.
 fn check_concatenation(parts: &[PathBuf], n: u64) {
     let (mut seq, mut p_kpa, mut truth_t) = (vec![], vec![], vec![]);
     let (mut sync_dp, mut settled, mut force_n, mut force_dp, mut flags) = (vec![], vec![], vec![], vec![], vec![]);
@@ -73,7 +77,24 @@ fn check_concatenation(parts: &[PathBuf], n: u64) {
         }
         seq.extend_from_slice(&eit.seq);
         p_kpa.extend_from_slice(&rec.pressure.as_ref().unwrap().kpa);
-        truth_t.extend_from_slice(&rec.truth.as_ref().unwrap().t_s);
+        let truth = rec.truth.as_ref().unwrap();
+        // Rows every 50 frames, contact at x = the frame's index: frame s has row s / 50 * 50,
+        // but a row appended after its frame's EIT row (as `write` does) may start the next
+        // part, which the part's last frame then lacks.
+        for (i, (&s, &t)) in eit.seq.iter().zip(&eit.t_s).enumerate() {
+            let row = truth.index_at(t).unwrap_or_else(|| panic!("part {k}: frame {s} has no truth row"));
+            let x = truth.row(row).x_mm[0];
+            let last_of_part = i + 1 == eit.len() && s % 50 == 0 && x == (s - 50.min(s)) as f64;
+            assert!(x == (s / 50 * 50) as f64 || last_of_part, "part {k}: frame {s} has the truth of frame {x}");
+        }
+        let carried = if k == 0 {
+            0
+        } else {
+            assert_eq!(Some(&truth.t_s[0]), truth_t.last(), "part {k} starts with the row in effect");
+            assert!(truth.t_s[0] < eit.t_s[0], "part {k}: the row in effect keeps its time");
+            1
+        };
+        truth_t.extend_from_slice(&truth.t_s[carried..]);
         if let Some(s) = &rec.derived.sync {
             assert_eq!(s.t_s, eit.t_s, "part {k}: a sync row per frame, in the same part");
             sync_dp.extend_from_slice(&s.dp_kpa);

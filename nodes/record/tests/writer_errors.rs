@@ -58,7 +58,15 @@ fn bad_rows_are_refused_and_the_file_stays_valid() {
     let e = w.append_pressure(0.0, 1.0).unwrap_err().to_string();
     assert_eq!(e, format!("{shown}: /pressure: stream was not declared in the writer options"));
     let c = TruthContact { x_mm: 0.0, y_mm: 0.0, force_n: 1.0, diameter_mm: 10.0 };
-    assert!(matches!(w.append_truth(0.0, &[c; 3]), Err(RecordError::TooManyTruthContacts { found: 3, max: 2, .. })));
+    let e = w.append_truth(0.0, &[c; 3]).unwrap_err();
+    assert!(matches!(e, RecordError::TooManyTruthContacts { found: 3, max: 2, .. }));
+    assert_eq!(
+        e.to_string(),
+        format!(
+            "{shown}: /truth: row has 3 contacts, more than truth_max_contacts = 2, the columns of the truth \
+             arrays, fixed when the file was created (hint: set truth_max_contacts to 3 or more)"
+        )
+    );
     assert!(w.append_eit(f64::NAN, 0, &[0.0; 120]).unwrap_err().to_string().contains("/eit/t: time NaN is not finite"));
     assert!(w.append_image(0.0, &[]).is_err() && w.append_forces(0, 0.0, &[]).is_err());
     let sync = SyncRow {

@@ -51,6 +51,17 @@ pub fn read<T: H5Type>(file: &File, fpath: &Path, path: &str, rank: usize) -> Re
     Ok(Data { values, shape })
 }
 
+/// The first value of a numeric 1-D dataset (`None` when it has no rows), reading that value
+/// only: for checks that must not read a long recording whole.
+pub fn read_first(file: &File, fpath: &Path, path: &str) -> Result<Option<f64>, RecordError> {
+    let ds = open(file, fpath, path, 1)?;
+    if ds.shape().first().is_none_or(|&n| n == 0) {
+        return Ok(None);
+    }
+    let first = ds.read_slice_1d::<f64, _>(0..1).map_err(|e| RecordError::hdf5(fpath, path, e))?;
+    Ok(first.first().copied())
+}
+
 /// Reads a numeric dataset of counts (`/eit/seq`) of the given rank. Stored as unsigned
 /// integers it is read as is; stored as floats (MATLAB) or signed integers (h5py's int64), every
 /// value must be a whole number >= 0 (exact below 2^53 as a float), else it is refused naming

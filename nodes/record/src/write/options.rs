@@ -209,7 +209,8 @@ pub struct WriterStats {
     pub sync_rows: u64,
     /// Summed over strategies.
     pub force_rows: u64,
-    /// Rows (all streams) written to a file and flushed: these survive a crash.
+    /// Rows (all streams) written to a file and flushed: these survive a crash. The truth row
+    /// a new part starts with (the one in effect) counts in each part it is written to.
     pub rows_written: u64,
     pub flushes: u64,
     /// Files written so far (1 without rotation).

@@ -1,0 +1,244 @@
+//! Whole-binary tests of recordings at the edges of the format: a clock with times before 0
+//! (refused by `check`, `run`, `eval` and `calibrate` instead of being stamped at 0), rotated
+//! logger parts that each start with the truth row in effect, and the logger's
+//! `truth_max_contacts`.
+
+use std::path::Path;
+
+use super::support::{fixture, hdf5_io, ok, read_recording, root, skinflow, stderr};
+
+/// A fresh work directory for one test of this module.
+fn workdir(test: &str) -> std::path::PathBuf {
+    super::support::workdir("recordings", test)
+}
+
+/// Copies recording `src` into `dst` with every time of `/eit`, `/pressure` and `/truth`
+/// moved by `by_s`, under [`hdf5_io`].
+fn shift_clock(src: &Path, dst: &Path, by_s: f64) {
+    hdf5_io(|| {
+        let rec = skinflow_record::Recording::open(src).unwrap();
+        let mut opts = skinflow_record::WriterOptions::new(rec.sensor_toml.clone());
+        opts.streams =
+            skinflow_record::Streams { eit: true, pressure: true, truth: true, ..skinflow_record::Streams::default() };
+        opts.truth_max_contacts = rec.truth.as_ref().unwrap().max_contacts;
+        let mut w = skinflow_record::RecordingWriter::create(dst, &opts).unwrap();
+        let eit = rec.eit.as_ref().unwrap();
+        for i in 0..eit.len() {
+            w.append_eit(eit.t_s[i] + by_s, eit.seq[i], eit.frame(i)).unwrap();
+        }
+        let p = rec.pressure.as_ref().unwrap();
+        for i in 0..p.len() {
+            w.append_pressure(p.t_s[i] + by_s, p.kpa[i]).unwrap();
+        }
+        let truth = rec.truth.as_ref().unwrap();
+        for i in 0..truth.len() {
+            let contacts: Vec<skinflow_record::TruthContact> = truth.row(i).contacts().collect();
+            w.append_truth(truth.t_s[i] + by_s, &contacts).unwrap();
+        }
+        w.close().unwrap();
+    });
+}
+
+/// A lockstep graph replaying `rec` into a `null` sink.
+fn replay_graph(d: &Path, name: &str, rec: &str) {
+    let graph = format!(
+        "[graph]\nmode = \"lockstep\"\n\
+         [[node]]\nid = \"replay\"\nkind = \"replay\"\nparams = {{ path = {rec:?}, speed = 0.0 }}\n\
+         [[node]]\nid = \"sink\"\nkind = \"null\"\n\
+         [[edge]]\nfrom = \"replay.eit\"\nto = \"sink.in\"\n"
+    );
+    std::fs::write(d.join(name), graph).unwrap();
+}
+
+/// A recording whose clock has times before 0 (the contract allows any monotonic clock, and
+/// `inspect` reads it) cannot be replayed: the engine stamps messages on its clock, which
+/// starts at 0, and clamping gave every such message the time 0 (eval scored 3.15 N RMSE
+/// instead of 0.05 N, without a word). `check`, `run`, `eval` and `calibrate` refuse it naming
+/// the file, the dataset, the row and the value.
+#[test]
+fn a_recording_with_times_before_0_is_refused_naming_the_first_one() {
+    let d = workdir("negative-times");
+    ok(&skinflow(&d, &["simulate", fixture("tiny-eval.toml").to_str().unwrap(), "--out", "rec.h5", "--seed", "3"]));
+    shift_clock(&d.join("rec.h5"), &d.join("shifted.h5"), -20.0);
+    let shifted = read_recording(d.join("shifted.h5"));
+    let eit_t0 = shifted.eit.as_ref().unwrap().t_s[0];
+    let earliest = [&shifted.eit.as_ref().unwrap().t_s, &shifted.pressure.as_ref().unwrap().t_s]
+        .into_iter()
+        .chain([&shifted.truth.as_ref().unwrap().t_s])
+        .map(|t| t[0])
+        .fold(f64::INFINITY, f64::min);
+    assert!(eit_t0 < 0.0 && earliest <= eit_t0);
+    let expected = format!(
+        "shifted.h5: /eit/t[0] = {eit_t0} s: times before 0 cannot be replayed (the engine's clock starts at 0); \
+         shift the recording's clock: add {} s or more to every time dataset (/eit/t, /pressure/t, /truth/t and the \
+         /derived ones)",
+        -earliest
+    );
+    // Read as any recording.
+    let text = ok(&skinflow(&d, &["inspect", "shifted.h5"]));
+    assert!(text.contains("/eit"), "{text}");
+
+    replay_graph(&d, "g.toml", "shifted.h5");
+    replay_graph(&d, "fine.toml", "rec.h5");
+    ok(&skinflow(&d, &["check", "fine.toml"]));
+    let out = skinflow(&d, &["check", "g.toml"]);
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(err.contains("node \"replay\"") && err.contains(&expected), "{err}");
+    let out = skinflow(&d, &["run", "g.toml"]);
+    let err = stderr(&out);
+    assert!(!out.status.success() && err.contains(&expected), "{err}");
+
+    let calib = root().join("graphs/calib/paper.toml");
+    for args in [
+        vec!["eval", "shifted.h5", "--calib", calib.to_str().unwrap(), "--json", "e.json"],
+        vec!["calibrate", "shifted.h5", "--out", "c.toml"],
+    ] {
+        let out = skinflow(&d, &args);
+        let err = stderr(&out);
+        assert!(!out.status.success(), "{args:?} succeeded: {err}");
+        assert!(err.contains(&expected), "{args:?}: {err}");
+        assert!(!d.join("e.json").exists() && !d.join("c.toml").exists(), "{args:?} wrote its output");
+    }
+    // The recording at its own clock (from 0) is evaluated.
+    ok(&skinflow(&d, &["eval", "rec.h5", "--calib", calib.to_str().unwrap()]));
+}
+
+/// A held press split across rotated logger parts: every part after the first starts with the
+/// truth row in effect when it started (the last one of the part before, at its own time), so
+/// each part alone gives every frame the truth the whole recording gives it, and a part that
+/// starts under load reads as loaded from its first frame.
+#[test]
+fn rotated_logger_parts_each_start_with_the_truth_row_in_effect() {
+    let d = workdir("rotated-truth");
+    let scene = "[scene]\nname = \"held\"\nprofile = \"paper\"\n\n\
+                 [[step]]\nrest_s = 2.0\n\n\
+                 [[step]]\nat_mm = [[10.0, -5.0]]\ndiameter_mm = 15.0\nforces_n = [4.0]\nhold_s = 4.0\nrest_s = 1.5\n";
+    std::fs::write(d.join("held.toml"), scene).unwrap();
+    let graph = "[graph]\nmode = \"lockstep\"\n\
+        [[node]]\nid = \"sim\"\nkind = \"sim\"\nparams = { scene = \"held.toml\", pacing = \"fast\", seed = 3 }\n\
+        [[node]]\nid = \"log\"\nkind = \"hdf5_logger\"\nparams = { path = \"rot.h5\", rotate_s = 1.0 }\n\
+        [[edge]]\nfrom = \"sim.eit\"\nto = \"log.eit\"\ncapacity = 1024\n\
+        [[edge]]\nfrom = \"sim.pressure\"\nto = \"log.pressure\"\ncapacity = 1024\n\
+        [[edge]]\nfrom = \"sim.truth\"\nto = \"log.truth\"\ncapacity = 1024\n";
+    std::fs::write(d.join("g.toml"), graph).unwrap();
+    ok(&skinflow(&d, &["run", "g.toml"]));
+    assert!(!d.join("rot.h5").exists(), "rotating: only the parts are written");
+    let parts = hdf5_io(|| skinflow_record::rotate::find_parts(&d.join("rot.h5"))).unwrap();
+    assert!(parts.len() >= 6, "7.5 s in 1 s parts gave {} parts", parts.len());
+    let recs: Vec<_> = parts.iter().map(read_recording).collect();
+
+    // The whole truth: the parts' rows joined, without each later part's first row, which
+    // repeats the last row of the part before.
+    let (mut t_all, mut rows_all) = (Vec::new(), Vec::new());
+    for (k, rec) in recs.iter().enumerate() {
+        let truth = rec.truth.as_ref().unwrap();
+        let rows: Vec<(f64, Vec<skinflow_record::TruthContact>)> =
+            (0..truth.len()).map(|i| (truth.t_s[i], truth.row(i).contacts().collect())).collect();
+        if k > 0 {
+            assert_eq!(
+                rows.first(),
+                t_all.last().map(|t: &f64| (*t, rows_all.last().cloned().unwrap())).as_ref(),
+                "part {} starts with the last truth row of part {k}",
+                k + 1
+            );
+        }
+        for (t, c) in rows.into_iter().skip(usize::from(k > 0)) {
+            t_all.push(t);
+            rows_all.push(c);
+        }
+    }
+    assert!(rows_all.iter().any(|c| c.len() == 1), "the press is in the truth");
+    let in_effect = |t: f64| t_all.partition_point(|&r| r <= t).checked_sub(1);
+
+    let mut under_load = 0;
+    for (k, rec) in recs.iter().enumerate() {
+        let truth = rec.truth.as_ref().unwrap();
+        let eit = rec.eit.as_ref().unwrap();
+        for &t in &eit.t_s {
+            let row = truth.index_at(t).unwrap_or_else(|| panic!("part {}: frame at {t} s has no truth", k + 1));
+            let whole = in_effect(t).unwrap();
+            assert_eq!(
+                (truth.t_s[row], truth.row(row).contacts().collect::<Vec<_>>()),
+                (t_all[whole], rows_all[whole].clone()),
+                "part {}: frame at {t} s",
+                k + 1
+            );
+        }
+        let starts_loaded = truth.row(0).contact_count() == 1 && eit.t_s.first().is_some_and(|&t| truth.t_s[0] < t);
+        if k > 0 && starts_loaded {
+            under_load += 1;
+            // No leading no-load period in a part that starts under load.
+            assert!(rec.no_load_eit_frames(2.0).is_empty(), "part {}", k + 1);
+        }
+        // `inspect` of the part alone: every frame covered.
+        let text = ok(&skinflow(&d, &["inspect", parts[k].to_str().unwrap()]));
+        let coverage = text.lines().find(|l| l.starts_with("truth:")).expect("a truth summary line");
+        assert!(coverage.ends_with("(100.0 %)") || eit.is_empty(), "part {}: {coverage}", k + 1);
+    }
+    assert!(under_load >= 2, "the 4 s hold spans at least two part starts ({under_load})");
+}
+
+/// The logger's truth arrays have `truth_max_contacts` columns (default 8): a 9-contact truth
+/// is logged with `truth_max_contacts = 9`, and stops a logger left at the default with an
+/// error naming the param; 0 is refused by `check`.
+#[test]
+fn the_logger_logs_as_many_truth_contacts_as_truth_max_contacts() {
+    let d = workdir("truth-columns");
+    let contacts: Vec<skinflow_record::TruthContact> = (0..9)
+        .map(|i| skinflow_record::TruthContact {
+            x_mm: -40.0 + 10.0 * f64::from(i),
+            y_mm: 0.0,
+            force_n: 1.0 + f64::from(i),
+            diameter_mm: 10.0,
+        })
+        .collect();
+    hdf5_io(|| {
+        let sensor = skinflow_sim::Scene::read_sensor(fixture("tiny-eval.toml")).unwrap();
+        let mut opts = skinflow_record::WriterOptions::new(sensor.toml.clone());
+        opts.streams = skinflow_record::Streams { eit: false, truth: true, ..skinflow_record::Streams::default() };
+        opts.truth_max_contacts = 9;
+        let mut w = skinflow_record::RecordingWriter::create(d.join("nine.h5"), &opts).unwrap();
+        for i in 0..20u32 {
+            let t = f64::from(i) * 0.1;
+            if i == 0 || i == 10 {
+                w.append_truth(t, if i == 0 { &[] } else { &contacts }).unwrap();
+            }
+            w.append_pressure(t, 0.0).unwrap();
+        }
+        w.close().unwrap();
+    });
+    let graph = |name: &str, extra: &str| {
+        let g = format!(
+            "[graph]\nmode = \"lockstep\"\n\
+             [[node]]\nid = \"replay\"\nkind = \"replay\"\nparams = {{ path = \"nine.h5\", speed = 0.0 }}\n\
+             [[node]]\nid = \"log\"\nkind = \"hdf5_logger\"\nparams = {{ path = \"{name}.h5\"{extra} }}\n\
+             [[edge]]\nfrom = \"replay.pressure\"\nto = \"log.pressure\"\n\
+             [[edge]]\nfrom = \"replay.truth\"\nto = \"log.truth\"\n"
+        );
+        std::fs::write(d.join(format!("{name}.toml")), g).unwrap();
+        format!("{name}.toml")
+    };
+    ok(&skinflow(&d, &["run", &graph("wide", ", truth_max_contacts = 9")]));
+    let rec = read_recording(d.join("wide.h5"));
+    let truth = rec.truth.as_ref().unwrap();
+    assert_eq!((truth.max_contacts, truth.len()), (9, 2));
+    assert_eq!(truth.row(1).contacts().collect::<Vec<_>>(), contacts);
+
+    let out = skinflow(&d, &["run", &graph("narrow", "")]);
+    let err = stderr(&out);
+    assert!(!out.status.success(), "{err}");
+    assert!(
+        err.contains(
+            "param \"truth_max_contacts\": ",
+        ) && err.contains(
+            "narrow.h5: /truth: a truth row has 9 contacts, more than truth_max_contacts = 8 (the columns of the truth \
+             arrays, fixed when the file is created); set the logger's truth_max_contacts to 9 or more"
+        ),
+        "{err}"
+    );
+    let out = skinflow(&d, &["check", &graph("zero", ", truth_max_contacts = 0")]);
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(err.contains("truth_max_contacts") && err.contains("must be >= 1 (got 0)"), "{err}");
+}

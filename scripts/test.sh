@@ -19,6 +19,9 @@ cargo test --workspace
 # their headers say (kept when present, so a developer's own out/ is not overwritten).
 [ -e out/multi.h5 ] || ./target/debug/skinflow simulate graphs/scenes/multi-contact.toml --out out/multi.h5
 [ -e out/reproduce/calib.toml ] || ./target/debug/skinflow reproduce --out out/reproduce
+# plugin-csv-in.toml reads the pressure CSV plugin-csv-out.toml writes (a plugin's input-path
+# file, which `check` opens too).
+[ -e out/plugin-pressure.csv ] || ./target/debug/skinflow run graphs/plugin-csv-out.toml > /dev/null
 for g in graphs/*.toml; do
   ./target/debug/skinflow check "$g"
 done

@@ -179,7 +179,8 @@ pub struct Summary {
     pub part: Option<i64>,
     /// Present streams: `/eit`, `/pressure`, `/truth`, then derived ones.
     pub streams: Vec<StreamSummary>,
-    /// From the earliest to the latest time of any stream.
+    /// From the earliest time of any stream (truth rows before the first EIT frame or pressure
+    /// sample aside: the state in effect when it began) to the latest.
     pub duration_s: f64,
     pub eit_gaps: Option<FrameGaps>,
     /// Time gaps of `/pressure` (a fixed-rate stream with no counter).
@@ -220,7 +221,18 @@ impl Summary {
         for f in &rec.derived.forces {
             streams.push(StreamSummary::of(&format!("/derived/forces/{}", f.name), &f.t_s));
         }
-        let first = streams.iter().filter_map(|s| s.first_t_s).fold(f64::INFINITY, f64::min);
+        // Truth rows before the first measurement (EIT or pressure) are the state in effect when
+        // it began (a rotated part starts with the row in effect, at that row's own time), not
+        // time recorded: they do not start the duration.
+        let measured = |s: &&StreamSummary| s.path == "/eit" || s.path == "/pressure";
+        let measured_first = streams.iter().filter(measured).filter_map(|s| s.first_t_s).fold(f64::INFINITY, f64::min);
+        let first = streams
+            .iter()
+            .filter_map(|s| {
+                let t = s.first_t_s?;
+                Some(if s.path == "/truth" && measured_first.is_finite() { t.max(measured_first) } else { t })
+            })
+            .fold(f64::INFINITY, f64::min);
         let last = streams.iter().filter_map(|s| s.last_t_s).fold(f64::NEG_INFINITY, f64::max);
         let truth = rec.truth.as_ref().map(|t| {
             let eit_t = rec.eit.as_ref().map_or(&[][..], |e| &e.t_s[..]);

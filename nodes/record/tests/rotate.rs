@@ -141,6 +141,12 @@ fn rotation_by_duration_splits_at_rotate_s() {
     // Part k starts with the first frame at or after k seconds: 100 frames per part.
     let firsts: Vec<f64> = parts.iter().map(|p| Recording::open(p).unwrap().eit.unwrap().t_s[0]).collect();
     assert_eq!(firsts, [0.0, 1.0, 2.0, 3.0]);
+    // `inspect`'s duration is each part's own span: the truth row a part starts with (0.5 s
+    // before it, for parts 2 and 3) does not lengthen it.
+    let durations: Vec<f64> = parts.iter().map(|p| skinflow_record::inspect(p).unwrap().duration_s).collect();
+    for (d, want) in durations.iter().zip([0.99, 0.99, 0.99, 0.49]) {
+        assert!((d - want).abs() < 1e-9, "{durations:?}");
+    }
     check_concatenation(&parts, 350);
 }
 

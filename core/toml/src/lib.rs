@@ -40,8 +40,9 @@
 //!   read exactly as toml's.
 //! - A choice (an enum) given a value of a type no variant takes (`pacing = 3`) is refused by
 //!   toml itself, before any visitor runs (`wanted string or table`; `toml::Value`'s reads
-//!   ``invalid type: unit variant, expected string only``). That error too gets the path of the
-//!   value, and the choices after toml's words: ``pacing: wanted string or table (one of
+//!   ``invalid type: unit variant, expected string only`` whatever the value is, and is said
+//!   as the text's here). That error too gets the path of the value, and the choices after
+//!   toml's words: ``pacing: wanted string or table (one of
 //!   `realtime`, `as-fast`)``, at the value's line and column (the wrapper names it inside
 //!   toml's scope, by asking for a newtype struct whose visitor then asks for the enum).
 //! - Any other error the wrapped deserializer raises itself, not through a visitor (toml's
@@ -549,7 +550,13 @@ impl<'de, V: Visitor<'de>> Visitor<'de> for Choice<'_, V> {
                 return e;
             }
             let message = e.to_string();
-            de::Error::custom(format_args!("{}: {}{}", ctx.path, message.trim_end(), OneOf(variants)))
+            // `toml::Value` says it got a unit variant, whatever it got: said as toml's text
+            // deserializer says it.
+            let message = match message.trim_end() {
+                TOML_VALUE_ENUM_REFUSAL => "wanted string or table",
+                m => m,
+            };
+            de::Error::custom(format_args!("{}: {message}{}", ctx.path, OneOf(variants)))
         })
     }
 
@@ -591,6 +598,10 @@ impl<'de, V: Visitor<'de>> Visitor<'de> for Choice<'_, V> {
         self.visitor.visit_enum(data)
     }
 }
+
+/// `toml::Value`'s refusal of a value no variant of a choice takes (toml 1.x), which names a
+/// unit variant whatever the value was.
+const TOML_VALUE_ENUM_REFUSAL: &str = "invalid type: unit variant, expected string only";
 
 /// The names of a choice's variants after a refusal of its value's type: ``(one of `a`, `b`)``.
 struct OneOf(&'static [&'static str]);

@@ -846,6 +846,29 @@ fn shipped_csv_graphs_write_and_replay_the_pipeline_exactly() {
     let fs = rec.derived.forces.iter().find(|f| f.name == "pneumatic-locaware").expect("forces logged");
     assert_eq!(fs.t_s.len() as u64, frames);
     let rows = csv_rows(&d.join("plugin-forces.csv"));
+    let frames_with_contacts = assert_forces_csv_is_the_log(&rows, fs);
+    assert!(frames_with_contacts > 5, "frames with contacts: {frames_with_contacts}");
+
+    // The pressure file through the plugin source in place of the simulated pressure.
+    let g = shipped_csv_graph(&d, "plugin-csv-in.toml", "");
+    let json = d.join("in.json");
+    ok(&skinflow(&d, &["run", g.to_str().unwrap(), "--stats-json", json.to_str().unwrap()]));
+    let report = stats(&json);
+    assert_eq!(count(&report, "daq", "msgs_out"), pressure.len() as u64, "every sample of the file");
+    let edge = report["edges"].as_array().unwrap().iter().find(|e| e["from"] == "daq.pressure").unwrap();
+    assert_eq!((edge["pushed"].as_u64(), edge["drops"].as_u64()), (Some(pressure.len() as u64), Some(0)));
+    assert_eq!(
+        std::fs::read_to_string(d.join("plugin-forces-replayed.csv")).unwrap(),
+        std::fs::read_to_string(d.join("plugin-forces.csv")).unwrap(),
+        "the replayed pressure gives the same forces"
+    );
+}
+
+/// Checks that the rows of a `forces-csv` file (parsed as numbers: t_s in column 1, the
+/// contact's index in 2, its force in 7) are, frame by frame and contact by contact, the forces
+/// an `hdf5_logger` recorded as `fs`, with no row twice and none of a frame the pipeline did
+/// not produce; returns how many frames had contacts.
+pub(super) fn assert_forces_csv_is_the_log(rows: &[Vec<f64>], fs: &skinflow_record::read::ForceStream) -> usize {
     let mut next = 0;
     let mut frames_with_contacts = 0;
     for (i, t) in fs.t_s.iter().enumerate() {
@@ -862,22 +885,8 @@ fn shipped_csv_graphs_write_and_replay_the_pipeline_exactly() {
         }
         frames_with_contacts += usize::from(!logged.is_empty());
     }
-    assert_eq!(next, rows.len(), "no row of a frame the pipeline did not produce");
-    assert!(frames_with_contacts > 5, "frames with contacts: {frames_with_contacts}");
-
-    // The pressure file through the plugin source in place of the simulated pressure.
-    let g = shipped_csv_graph(&d, "plugin-csv-in.toml", "");
-    let json = d.join("in.json");
-    ok(&skinflow(&d, &["run", g.to_str().unwrap(), "--stats-json", json.to_str().unwrap()]));
-    let report = stats(&json);
-    assert_eq!(count(&report, "daq", "msgs_out"), pressure.len() as u64, "every sample of the file");
-    let edge = report["edges"].as_array().unwrap().iter().find(|e| e["from"] == "daq.pressure").unwrap();
-    assert_eq!((edge["pushed"].as_u64(), edge["drops"].as_u64()), (Some(pressure.len() as u64), Some(0)));
-    assert_eq!(
-        std::fs::read_to_string(d.join("plugin-forces-replayed.csv")).unwrap(),
-        std::fs::read_to_string(d.join("plugin-forces.csv")).unwrap(),
-        "the replayed pressure gives the same forces"
-    );
+    assert_eq!(next, rows.len(), "no row twice, none of a frame the pipeline did not produce");
+    frames_with_contacts
 }
 
 // The run-time hooks: graphs run in this process (lockstep), with built libraries loaded into

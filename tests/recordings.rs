@@ -5,7 +5,7 @@
 
 use std::path::Path;
 
-use super::support::{fixture, hdf5_io, ok, read_recording, root, skinflow, stderr};
+use super::support::{fixture, hdf5_io, ok, read_recording, rewrite_recording, root, skinflow, stderr};
 
 /// A fresh work directory for one test of this module.
 fn workdir(test: &str) -> std::path::PathBuf {
@@ -13,30 +13,9 @@ fn workdir(test: &str) -> std::path::PathBuf {
 }
 
 /// Copies recording `src` into `dst` with every time of `/eit`, `/pressure` and `/truth`
-/// moved by `by_s`, under [`hdf5_io`].
+/// moved by `by_s`.
 fn shift_clock(src: &Path, dst: &Path, by_s: f64) {
-    hdf5_io(|| {
-        let rec = skinflow_record::Recording::open(src).unwrap();
-        let mut opts = skinflow_record::WriterOptions::new(rec.sensor_toml.clone());
-        opts.streams =
-            skinflow_record::Streams { eit: true, pressure: true, truth: true, ..skinflow_record::Streams::default() };
-        opts.truth_max_contacts = rec.truth.as_ref().unwrap().max_contacts;
-        let mut w = skinflow_record::RecordingWriter::create(dst, &opts).unwrap();
-        let eit = rec.eit.as_ref().unwrap();
-        for i in 0..eit.len() {
-            w.append_eit(eit.t_s[i] + by_s, eit.seq[i], eit.frame(i)).unwrap();
-        }
-        let p = rec.pressure.as_ref().unwrap();
-        for i in 0..p.len() {
-            w.append_pressure(p.t_s[i] + by_s, p.kpa[i]).unwrap();
-        }
-        let truth = rec.truth.as_ref().unwrap();
-        for i in 0..truth.len() {
-            let contacts: Vec<skinflow_record::TruthContact> = truth.row(i).contacts().collect();
-            w.append_truth(truth.t_s[i] + by_s, &contacts).unwrap();
-        }
-        w.close().unwrap();
-    });
+    rewrite_recording(src, dst, by_s, |_, t, kpa| Some((t, kpa)));
 }
 
 /// A lockstep graph replaying `rec` into a `null` sink.

@@ -275,19 +275,5 @@ fn a_rebuilt_csv_writers_library_swaps_its_sinks_without_losing_a_row() {
         .iter()
         .map(|l| l.split(',').map(|v| v.parse::<f64>().unwrap()).collect())
         .collect();
-    let mut next = 0;
-    for (i, t) in fs.t_s.iter().enumerate() {
-        let logged: Vec<f64> = fs.force_n[i * fs.max_contacts..(i + 1) * fs.max_contacts]
-            .iter()
-            .copied()
-            .filter(|f| !f.is_nan())
-            .collect();
-        let frame: Vec<&Vec<f64>> = rows[next..].iter().take_while(|r| (r[1] - t).abs() < 1e-9).collect();
-        next += frame.len();
-        assert_eq!(frame.len(), logged.len(), "frame at {t} s: one row per contact");
-        for (k, (row, f)) in frame.iter().zip(&logged).enumerate() {
-            assert_eq!((row[2], row[7]), (k as f64, *f), "frame at {t} s, contact {k}");
-        }
-    }
-    assert_eq!(next, rows.len(), "no row twice, none of a frame the pipeline did not produce");
+    super::plugins::assert_forces_csv_is_the_log(&rows, fs);
 }

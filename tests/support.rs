@@ -103,7 +103,18 @@ pub fn ok(out: &Output) -> String {
 /// Copies the EIT frames and truth of recording `src` into a new recording `dst`, with each
 /// pressure sample `(row, t_s, kpa)` mapped by `pressure` (`None` leaves it out), under
 /// [`hdf5_io`].
-pub fn rewrite_pressure(src: &Path, dst: &Path, mut pressure: impl FnMut(usize, f64, f64) -> Option<(f64, f64)>) {
+pub fn rewrite_pressure(src: &Path, dst: &Path, pressure: impl FnMut(usize, f64, f64) -> Option<(f64, f64)>) {
+    rewrite_recording(src, dst, 0.0, pressure);
+}
+
+/// [`rewrite_pressure`], and then every time of `/eit`, `/pressure` and `/truth` moved by
+/// `shift_s`.
+pub fn rewrite_recording(
+    src: &Path,
+    dst: &Path,
+    shift_s: f64,
+    mut pressure: impl FnMut(usize, f64, f64) -> Option<(f64, f64)>,
+) {
     hdf5_io(|| {
         let rec = skinflow_record::Recording::open(src).unwrap();
         let mut opts = skinflow_record::WriterOptions::new(rec.sensor_toml.clone());
@@ -113,19 +124,19 @@ pub fn rewrite_pressure(src: &Path, dst: &Path, mut pressure: impl FnMut(usize, 
         let mut w = skinflow_record::RecordingWriter::create(dst, &opts).unwrap();
         let eit = rec.eit.as_ref().unwrap();
         for i in 0..eit.len() {
-            w.append_eit(eit.t_s[i], eit.seq[i], eit.frame(i)).unwrap();
+            w.append_eit(eit.t_s[i] + shift_s, eit.seq[i], eit.frame(i)).unwrap();
         }
         let p = rec.pressure.as_ref().unwrap();
         for i in 0..p.len() {
             if let Some((t, kpa)) = pressure(i, p.t_s[i], p.kpa[i]) {
-                w.append_pressure(t, kpa).unwrap();
+                w.append_pressure(t + shift_s, kpa).unwrap();
             }
         }
         let truth = rec.truth.as_ref().unwrap();
         for i in 0..truth.len() {
             let row = truth.row(i);
             let contacts: Vec<skinflow_record::TruthContact> = row.contacts().collect();
-            w.append_truth(truth.t_s[i], &contacts).unwrap();
+            w.append_truth(truth.t_s[i] + shift_s, &contacts).unwrap();
         }
         w.close().unwrap();
     });

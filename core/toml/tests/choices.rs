@@ -11,25 +11,8 @@ use serde::de::value::{Error as ValueError, MapDeserializer};
 use toml::Spanned;
 use toml::de::DeTable;
 
-/// 1-based (line, column) of a byte offset.
-fn line_col(text: &str, offset: usize) -> (usize, usize) {
-    let before = &text[..offset];
-    let line = before.matches('\n').count() + 1;
-    let col = before.len() - before.rfind('\n').map_or(0, |i| i + 1) + 1;
-    (line, col)
-}
-
-/// The error's message and the (line, column) its span starts at, through the wrapper.
-fn fail<T: for<'de> Deserialize<'de> + std::fmt::Debug>(text: &str) -> (String, (usize, usize)) {
-    let e = skinflow_toml::from_str::<T>(text).expect_err("must be refused");
-    (e.message().to_owned(), line_col(text, e.span().expect("error has a span").start))
-}
-
-/// The same without the wrapper: toml's own.
-fn plain<T: for<'de> Deserialize<'de> + std::fmt::Debug>(text: &str) -> (String, (usize, usize)) {
-    let e = toml::from_str::<T>(text).expect_err("must be refused");
-    (e.message().to_owned(), line_col(text, e.span().expect("error has a span").start))
-}
+mod common;
+use common::{fail, line_col, plain};
 
 #[derive(Debug, Deserialize, PartialEq, Eq, PartialOrd, Ord, Clone, Copy)]
 #[serde(rename_all = "kebab-case")]

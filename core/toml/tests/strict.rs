@@ -7,26 +7,14 @@ use serde::de::IntoDeserializer;
 use toml::Spanned;
 use toml::de::DeTable;
 
+mod common;
+use common::{fail, line_col, plain};
+
 const TOO_LONG: &str = "expected an array of 2 elements, found 3";
 
 /// [`TOO_LONG`] about the value at key path `path`.
 fn too_long_at(path: &str) -> String {
     format!("{path}: {TOO_LONG}")
-}
-
-/// 1-based (line, column) of a byte offset.
-fn line_col(text: &str, offset: usize) -> (usize, usize) {
-    let before = &text[..offset];
-    let line = before.matches('\n').count() + 1;
-    let col = before.len() - before.rfind('\n').map_or(0, |i| i + 1) + 1;
-    (line, col)
-}
-
-/// The error's message and the (line, column) its span starts at.
-fn fail<T: for<'de> Deserialize<'de> + std::fmt::Debug>(text: &str) -> (String, (usize, usize)) {
-    let e = skinflow_toml::from_str::<T>(text).expect_err("must be refused");
-    let span = e.span().expect("error has a span");
-    (e.message().to_owned(), line_col(text, span.start))
 }
 
 #[derive(Debug, Deserialize, PartialEq)]
@@ -305,12 +293,6 @@ fn values_and_datetimes_kept_as_toml_still_work() {
 mod paths {
     use super::*;
     use std::collections::BTreeMap;
-
-    /// toml's own message for the same document, without the wrapper.
-    fn plain<T: for<'de> Deserialize<'de> + std::fmt::Debug>(text: &str) -> (String, (usize, usize)) {
-        let e = toml::from_str::<T>(text).expect_err("must be refused");
-        (e.message().to_owned(), line_col(text, e.span().expect("error has a span").start))
-    }
 
     #[derive(Debug, Deserialize)]
     #[allow(dead_code)]

@@ -106,7 +106,12 @@ enum Cmd {
         pipeline: cmd::pipeline::PipelineArgs,
     },
     /// Summarise a recording: streams, counts, duration, rates, gaps, truth coverage.
-    Inspect { recording: PathBuf },
+    Inspect {
+        recording: PathBuf,
+        /// Print only the TOML of the graph that wrote the recording (its `graph` attribute)
+        #[arg(long)]
+        graph: bool,
+    },
     /// Copy a recording whose last write was cut short (disk full, power loss, a killed logger),
     /// each table cut to the rows all its datasets hold; the input is never modified.
     Repair {
@@ -239,7 +244,7 @@ fn dispatch(cmd: Cmd) -> Result<ExitCode> {
         Cmd::Reproduce { out, scenes, seed, fit, pipeline } => {
             cmd::reproduce::run(&scenes, &out, seed, &fit.fit, &pipeline).map(|()| ExitCode::SUCCESS)
         }
-        Cmd::Inspect { recording } => cmd::inspect::run(&recording).map(|()| ExitCode::SUCCESS),
+        Cmd::Inspect { recording, graph } => cmd::inspect::run(&recording, graph).map(|()| ExitCode::SUCCESS),
         Cmd::Send { socket, requests } => cmd::send::run(&socket, &requests).map(|()| ExitCode::SUCCESS),
         Cmd::Repair { recording, out, overwrite } => {
             cmd::repair::run(&recording, &out, overwrite).map(|()| ExitCode::SUCCESS)

@@ -31,6 +31,13 @@ fn simulate_then_inspect_reports_streams_and_truth_coverage() {
     let (covered, frames) = covers.split_once('/').unwrap();
     assert!(frames.parse::<u32>().unwrap() > 0 && covered == frames, "{coverage}");
     assert!(coverage.ends_with("(100.0 %)"), "{coverage}");
+    // `simulate` names itself as the recording's graph, which `--graph` prints.
+    assert!(text.contains("graph:    1 line of TOML (`skinflow inspect --graph` prints it)"), "{text}");
+    let scene = fixture("tiny-eval.toml");
+    assert_eq!(
+        ok(&skinflow(&d, &["inspect", "rec.h5", "--graph"])),
+        format!("# skinflow simulate {} --seed 3\n", scene.display())
+    );
     // The recording was built under a hidden name and renamed when complete: nothing else stays.
     let names: Vec<String> =
         std::fs::read_dir(&d).unwrap().map(|e| e.unwrap().file_name().into_string().unwrap()).collect();
@@ -85,6 +92,18 @@ fn calibrate_then_eval_writes_the_contract_json() {
     // --fit takes the calibration knobs as TOML; the paper's fitting order on request.
     let seq = ok(&skinflow(&d, &["calibrate", "cal.h5", "--out", "seq.toml", "--fit", "f_fit = \"sequential\""]));
     assert!(seq.contains("pooled, the paper's order"), "{seq}");
+    // A ridge weight at the end of its grid is named: with a one-point grid, all four are.
+    let one = ok(&skinflow(&d, &["calibrate", "cal.h5", "--out", "one.toml", "--fit", "lambda_grid_rel = [10.0]"]));
+    for (layer, field, held) in [
+        ("pneumatic", "lambda_g", "gain field g(x, y) is held near 1"),
+        ("pneumatic", "lambda_b", "offset field b(x, y) is held near 0"),
+        ("EIT", "lambda_g", "gain field g(x, y) is held near 1"),
+        ("EIT", "lambda_b", "offset field b(x, y) is held near 0"),
+    ] {
+        let note = format!("note: {layer} {field} is the top of the grid (");
+        let line = one.lines().find(|l| l.starts_with(&note)).unwrap_or_else(|| panic!("no {note}:\n{one}"));
+        assert!(line.ends_with(&format!("the {held}, the data do not support more")), "{line}");
+    }
     let text = std::fs::read_to_string(d.join("seq.toml")).unwrap();
     assert!(text.contains("f_fit = \"sequential\"") && !text.contains("f_fit = \"joint\""), "{text}");
     let bad = skinflow(&d, &["calibrate", "cal.h5", "--out", "bad.toml", "--fit", "f_fit = \"sideways\""]);

@@ -408,3 +408,28 @@ fn a_live_swap_or_edit_onto_another_sensor_is_refused() {
     let recon = stats["nodes"].as_array().unwrap().iter().find(|n| n["id"] == "recon").unwrap();
     assert_eq!(recon["swaps"], 0, "{recon}");
 }
+
+/// A logger records the graph file it was built from (the root attribute `graph`): the
+/// started file's text, and for a logger that an edit brought in, the edited text.
+#[test]
+fn a_logger_records_the_graph_text_it_was_built_from() {
+    let d = workdir("live", "graph-attr");
+    simulate_input(&d);
+    let g = d.join("g.toml");
+    let sock = d.join("ctl.sock");
+    let started = replay_graph("2.0", "");
+    std::fs::write(&g, &started).unwrap();
+    let child = run_watched_with_stats(&d, &g, &sock);
+    wait_for_out(&sock, "replay", 20);
+    let edited = format!("# moved to rec2.h5\n{}", started.replace("rec.h5", "rec2.h5"));
+    std::fs::write(&g, &edited).unwrap();
+    let out = child.wait_with_output().unwrap();
+    let err = stderr(&out);
+    assert!(out.status.success() && err.contains("edit applied: swapped log\n"), "{err}");
+    let (first, second) = (read_recording(d.join("rec.h5")), read_recording(d.join("rec2.h5")));
+    assert_eq!(first.graph_toml.as_deref(), Some(started.as_str()));
+    assert_eq!(second.graph_toml.as_deref(), Some(edited.as_str()));
+    // The swap lost no frame: the two files hold the replayed recording's frames between them.
+    let frames = |r: &skinflow_record::Recording| r.eit.as_ref().map_or(0, |e| e.seq.len());
+    assert_eq!(frames(&first) + frames(&second), frames(&read_recording(d.join("in.h5"))));
+}

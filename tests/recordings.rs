@@ -1,7 +1,7 @@
 //! Whole-binary tests of recordings at the edges of the format: a clock with times before 0
 //! (refused by `check`, `run`, `eval` and `calibrate` instead of being stamped at 0), rotated
-//! logger parts that each start with the truth row in effect, and the logger's
-//! `truth_max_contacts`.
+//! logger parts that each start with the truth row in effect and carry the graph that wrote
+//! them, and the logger's `truth_max_contacts`.
 
 use std::path::Path;
 
@@ -106,6 +106,11 @@ fn rotated_logger_parts_each_start_with_the_truth_row_in_effect() {
     let parts = hdf5_io(|| skinflow_record::rotate::find_parts(&d.join("rot.h5"))).unwrap();
     assert!(parts.len() >= 6, "7.5 s in 1 s parts gave {} parts", parts.len());
     let recs: Vec<_> = parts.iter().map(read_recording).collect();
+    // Each part names the graph that wrote it (`inspect --graph` prints it).
+    for (part, rec) in parts.iter().zip(&recs) {
+        assert_eq!(rec.graph_toml.as_deref(), Some(graph), "{}", part.display());
+    }
+    assert_eq!(ok(&skinflow(&d, &["inspect", "--graph", parts[1].to_str().unwrap()])), graph);
 
     // The whole truth: the parts' rows joined, without each later part's first row, which
     // repeats the last row of the part before.
@@ -160,7 +165,8 @@ fn rotated_logger_parts_each_start_with_the_truth_row_in_effect() {
 
 /// The logger's truth arrays have `truth_max_contacts` columns (default 8): a 9-contact truth
 /// is logged with `truth_max_contacts = 9`, and stops a logger left at the default with an
-/// error naming the param; 0 is refused by `check`.
+/// error naming the param; 0 is refused by `check`. (The file written here carries no graph,
+/// which `inspect --graph` reports.)
 #[test]
 fn the_logger_logs_as_many_truth_contacts_as_truth_max_contacts() {
     let d = workdir("truth-columns");
@@ -216,6 +222,10 @@ fn the_logger_logs_as_many_truth_contacts_as_truth_max_contacts() {
         ),
         "{err}"
     );
+    // Written without a graph: `inspect --graph` says so, naming the file.
+    let out = skinflow(&d, &["inspect", "--graph", "nine.h5"]);
+    assert!(!out.status.success(), "{}", stderr(&out));
+    assert!(stderr(&out).contains("nine.h5: no `graph` attribute"), "{}", stderr(&out));
     let out = skinflow(&d, &["check", &graph("zero", ", truth_max_contacts = 0")]);
     let err = stderr(&out);
     assert_eq!(out.status.code(), Some(2), "{err}");

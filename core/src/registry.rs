@@ -103,9 +103,22 @@ pub struct BuildContext {
     pub base_dir: PathBuf,
     pub mode: Mode,
     pub node_id: String,
+    /// Text of the graph file the node is built from, as it read when the node was built (a
+    /// logger records it as provenance); `None` where a node is built without a graph.
+    pub graph_text: Option<Arc<str>>,
 }
 
 impl BuildContext {
+    /// A context without graph text (see [`BuildContext::with_graph_text`]).
+    pub fn new(base_dir: impl Into<PathBuf>, mode: Mode, node_id: impl Into<String>) -> BuildContext {
+        BuildContext { base_dir: base_dir.into(), mode, node_id: node_id.into(), graph_text: None }
+    }
+
+    pub fn with_graph_text(mut self, text: Arc<str>) -> BuildContext {
+        self.graph_text = Some(text);
+        self
+    }
+
     /// Resolves a path parameter relative to the graph file's directory.
     pub fn resolve(&self, p: &Path) -> PathBuf {
         if p.is_absolute() { p.to_path_buf() } else { self.base_dir.join(p) }
@@ -308,7 +321,7 @@ mod tests {
     }
 
     fn ctx(base_dir: &str) -> BuildContext {
-        BuildContext { base_dir: base_dir.into(), mode: Mode::Lockstep, node_id: "f".into() }
+        BuildContext::new(base_dir, Mode::Lockstep, "f")
     }
 
     #[test]

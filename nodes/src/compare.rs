@@ -742,7 +742,7 @@ mod tests {
 
     #[test]
     fn the_kind_builds_a_sink() {
-        let ctx = BuildContext { base_dir: ".".into(), mode: skinflow_core::Mode::Lockstep, node_id: "c".into() };
+        let ctx = BuildContext::new(".", skinflow_core::Mode::Lockstep, "c");
         let p = CompareParams {
             names: vec![],
             report_s: 1.0,

@@ -51,6 +51,10 @@
 //! effect when the part starts (see `skinflow_record`'s docs), so each part alone gives every
 //! frame its truth.
 //!
+//! The root attribute `graph` holds the text of the graph file the logger was built from, as
+//! it read then (for a logger that a graph edit brought in, the edited file): every part of a
+//! rotated recording carries it. A swap by control socket is not in it.
+//!
 //! Images are logged at the size of the first image (the reconstructor's `image_nx` x
 //! `image_ny`); one recording holds one size. The logger's own `image_nx` / `image_ny` are
 //! optional: given, they must match the images (a mismatch stops the graph naming them), and
@@ -282,6 +286,7 @@ impl Logger {
         let path = ctx.resolve(&p.path);
         let mut o = WriterOptions::new(sensor.toml.clone());
         o.software_version = concat!("skinflow ", env!("CARGO_PKG_VERSION")).to_owned();
+        o.graph_toml = ctx.graph_text.as_deref().map(str::to_owned);
         o.flush_interval_s = p.flush_interval_s;
         o.rotate_mb = p.rotate_mb;
         o.rotate_s = p.rotate_s;
@@ -659,7 +664,7 @@ mod tests {
 
     /// A logger of `params` (TOML) in a graph of directory `dir`.
     fn logger(dir: &Path, params: &str) -> Logger {
-        let ctx = BuildContext { base_dir: dir.to_path_buf(), mode: Mode::Lockstep, node_id: "log".into() };
+        let ctx = BuildContext::new(dir.to_path_buf(), Mode::Lockstep, "log");
         Logger::new(toml::from_str(params).unwrap(), &ctx).unwrap()
     }
 

@@ -300,7 +300,7 @@ fn named_files(spec: &GraphSpec) -> Vec<Named> {
         });
     }
     for (i, node) in spec.nodes.iter().enumerate() {
-        let ctx = BuildContext { base_dir: base_dir.clone(), mode: spec.mode, node_id: node.id.clone() };
+        let ctx = BuildContext::new(base_dir.clone(), spec.mode, node.id.clone());
         let table = node.params.table();
         let rotates = node.kind == "hdf5_logger" && (table.contains_key("rotate_mb") || table.contains_key("rotate_s"));
         for doc in node.factory.info().params.iter() {

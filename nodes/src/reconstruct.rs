@@ -718,11 +718,7 @@ mod tests {
             toml::Value::String(file.join("cache").display().to_string())
         ))
         .unwrap();
-        let ctx = skinflow_core::BuildContext {
-            base_dir: dir.clone(),
-            mode: skinflow_core::Mode::Lockstep,
-            node_id: "recon".into(),
-        };
+        let ctx = skinflow_core::BuildContext::new(dir.clone(), skinflow_core::Mode::Lockstep, "recon");
         let Err(NodeError::Param { param, problem }) = super::Reconstructor::new(&params, &ctx) else {
             panic!("expected a param error");
         };

@@ -446,11 +446,7 @@ mod tests {
             panic!("replayed times before 0")
         };
         assert_eq!(e.to_string(), expected);
-        let ctx = skinflow_core::BuildContext {
-            base_dir: rec.parent().unwrap().to_path_buf(),
-            mode: Mode::Lockstep,
-            node_id: "replay".into(),
-        };
+        let ctx = skinflow_core::BuildContext::new(rec.parent().unwrap().to_path_buf(), Mode::Lockstep, "replay");
         let params: super::ReplayParams = toml::from_str("path = \"rec.h5\"").unwrap();
         let e = skinflow_core::NodeParams::check_files(&params, &ctx).unwrap_err();
         assert!(e.to_string().ends_with(&expected[expected.find(": /pressure").unwrap()..]), "{e}");

@@ -64,7 +64,7 @@ pub fn check_graph(spec: &GraphSpec) -> Vec<String> {
     let mut warnings = Vec::new();
     for (c, node) in spec.nodes.iter().enumerate() {
         let Some(path) = calibration_path(spec, c) else { continue };
-        let ctx = BuildContext { base_dir: base_dir.clone(), mode: spec.mode, node_id: node.id.clone() };
+        let ctx = BuildContext::new(base_dir.clone(), spec.mode, node.id.clone());
         let file = ctx.resolve(&path);
         let recorded = read.entry(file.clone()).or_insert_with(|| Calibration::read(&file).ok()?.provenance.pipeline);
         let Some(recorded) = recorded.as_ref() else { continue };

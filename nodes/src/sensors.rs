@@ -81,8 +81,7 @@ impl Other {
 /// param (its `[[node]]` table when it has none), naming both nodes, sensors and the file.
 pub fn check_graph(spec: &GraphSpec) -> Result<(), GraphErrors> {
     let base_dir = spec.source.base_dir();
-    let ctx =
-        |i: usize| BuildContext { base_dir: base_dir.clone(), mode: spec.mode, node_id: spec.nodes[i].id.clone() };
+    let ctx = |i: usize| BuildContext::new(base_dir.clone(), spec.mode, spec.nodes[i].id.clone());
     // The sensor of each source or calibration node, read once (None: unreadable or none).
     let mut others: HashMap<usize, Option<Other>> = HashMap::new();
     let mut node_spans: Option<Vec<Range<usize>>> = None;

@@ -272,7 +272,7 @@ mod tests {
     fn a_calibration_refuses_frames_of_another_sensor_size() {
         let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../graphs/calib/paper.toml");
         let mut cal = Calibration::read(&path).unwrap();
-        let ctx = BuildContext { base_dir: "/graphs".into(), mode: Mode::Lockstep, node_id: "force".into() };
+        let ctx = BuildContext::new("/graphs", Mode::Lockstep, "force");
         cal.provenance.sensor = None;
         SensorGuard::new(&cal, Path::new("calib.toml"), &ctx).check("split", &image(60.0, 60.0)).unwrap();
         cal.provenance.sensor = Some(SensorRef {

@@ -10,7 +10,7 @@ use anyhow::{Context as _, Result, bail};
 use sha2::{Digest, Sha256};
 use skinflow_contact::CalibSample;
 use skinflow_contact::correct::{
-    CalibParams, Calibrated, FFit, PipelineSettings, Provenance, RecordingRef, SensorRef, calibrate,
+    CalibParams, Calibrated, CvGroups, FFit, PipelineSettings, Provenance, RecordingRef, SensorRef, calibrate,
 };
 use skinflow_nodes::payload::Contacts;
 
@@ -256,17 +256,50 @@ pub fn run(recordings: &[PathBuf], out: &Path, fit_toml: &str, args: &PipelineAr
         lam(cal.eit.locaware.lambda_g),
         lam(cal.eit.locaware.lambda_b),
     );
+    // A weight at the end of the grid: at the top, the field is held at its prior (the data
+    // do not support it); at the bottom, the grid may not reach the weight the data want.
+    let (lo, hi) = params.lambda_grid_rel.iter().fold((f64::INFINITY, 0.0f64), |(lo, hi), &l| (lo.min(l), hi.max(l)));
+    let at = |rel: f64, v: f64| (v - rel * t.samples as f64).abs() <= 1e-9 * v.abs();
+    for (name, field, v) in [
+        ("pneumatic", "lambda_g", cal.pneumatic.locaware.lambda_g),
+        ("pneumatic", "lambda_b", cal.pneumatic.locaware.lambda_b),
+        ("EIT", "lambda_g", cal.eit.locaware.lambda_g),
+        ("EIT", "lambda_b", cal.eit.locaware.lambda_b),
+    ] {
+        let Some(v) = v else { continue };
+        let what = if field == "lambda_g" {
+            "gain field g(x, y) is held near 1"
+        } else {
+            "offset field b(x, y) is held near 0"
+        };
+        if at(hi, v) {
+            println!("note: {name} {field} is the top of the grid ({v:.3e}): the {what}, the data do not support more");
+        } else if at(lo, v) {
+            println!(
+                "note: {name} {field} is the bottom of the grid ({v:.3e}): a smaller weight may fit better \
+                 (lambda_grid_rel in --fit)"
+            );
+        }
+    }
+    let sign = |v: f64| if v < 0.0 { '-' } else { '+' };
+    let folds = match params.cv_groups {
+        CvGroups::Sample => "sample",
+        CvGroups::Location => "location",
+    };
     for (name, la) in [("pneumatic", &cal.pneumatic.locaware), ("EIT", &cal.eit.locaware)] {
         let q = la.map.quadratic;
         println!(
-            "{name} location-aware f ({}): {:.4} + {:.4} s + {:.4} s^2; CV RMSE {} N",
+            "{name} location-aware f ({}): {:.4} {} {:.4} s {} {:.4} s^2; CV RMSE {} N (the ridge weights' inner CV, \
+             {folds} folds, f not held out: optimistic, see the held-out column below)",
             match la.f_fit {
                 FFit::Joint => "fitted jointly with g and b",
                 FFit::Sequential => "pooled, the paper's order",
             },
             q.a0,
-            q.a1,
-            q.a2,
+            sign(q.a1),
+            q.a1.abs(),
+            sign(q.a2),
+            q.a2.abs(),
             la.cv_rmse_n.map_or_else(|| "-".into(), |v| format!("{v:.3}")),
         );
     }

@@ -301,6 +301,8 @@ impl Live {
                 *running = want;
             }
         }
+        // Replacements record the edited file as their graph (a logger's `graph` attribute).
+        self.handle.set_graph_text(new.source.text.clone());
         let now = self.lock_nodes().clone();
         for (running, new_n) in now.iter().zip(&new.nodes) {
             if (&running.1, running.2.table()) != (&new_n.kind, new_n.params.table()) {

@@ -119,7 +119,8 @@ impl GraphSpec {
         let mut node_spans: Option<Vec<std::ops::Range<usize>>> = None;
         let mut errs = Vec::new();
         for (i, n) in self.nodes.iter().enumerate() {
-            let ctx = BuildContext { base_dir: base_dir.clone(), mode: self.mode, node_id: n.id.clone() };
+            let ctx =
+                BuildContext::new(base_dir.clone(), self.mode, n.id.clone()).with_graph_text(self.source.text.clone());
             let Err(e) = n.factory.check_files(&n.params, &ctx) else { continue };
             // An error naming no param is placed at the node's table, as at validation.
             let span = e

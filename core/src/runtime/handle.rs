@@ -23,10 +23,10 @@
 //! or a swap of a dead instance starts from scratch.
 
 use std::path::PathBuf;
-use std::sync::Arc;
 use std::sync::atomic::AtomicU8;
 use std::sync::atomic::Ordering::SeqCst;
 use std::sync::mpsc::{RecvTimeoutError, SyncSender};
+use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use super::RunError;
@@ -63,6 +63,8 @@ pub(crate) struct Inner {
     pub mode: Mode,
     pub t0: Instant,
     pub base_dir: PathBuf,
+    /// The graph text replacements are built with ([`GraphHandle::set_graph_text`]).
+    pub graph_text: Mutex<Arc<str>>,
 }
 
 /// Cheap to clone; `Send + Sync`.
@@ -140,6 +142,13 @@ impl GraphHandle {
                 Err(RecvTimeoutError::Timeout) => {}
             }
         }
+    }
+
+    /// Sets the graph text that replacements are built with from now on
+    /// ([`BuildContext::graph_text`]): the edited file's, when a graph edit is applied.
+    /// Initially the text of the graph the run started from.
+    pub fn set_graph_text(&self, text: Arc<str>) {
+        *self.inner.graph_text.lock().unwrap_or_else(std::sync::PoisonError::into_inner) = text;
     }
 
     /// Replaces a node by one built from `factory` and `params`. The replacement is built and
@@ -224,8 +233,8 @@ impl GraphHandle {
         factory.check(&params).map_err(|e| swap_err(e.to_string()))?;
         let wired: Vec<&str> = self.inner.wired[i].iter().map(String::as_str).collect();
         factory.check_wiring(&params, &Wiring::new(&wired)).map_err(|e| swap_err(e.to_string()))?;
-        let build =
-            BuildContext { base_dir: self.inner.base_dir.clone(), mode: self.inner.mode, node_id: node.to_owned() };
+        let text = self.inner.graph_text.lock().unwrap_or_else(std::sync::PoisonError::into_inner).clone();
+        let build = BuildContext::new(self.inner.base_dir.clone(), self.inner.mode, node).with_graph_text(text);
         // The input files the params name, as `check` and `run` open them before a run.
         factory.check_files(&params, &build).map_err(|e| swap_err(e.to_string()))?;
         let mut imp = factory.build(&params, &build).map_err(|e| swap_err(format!("build failed: {e}")))?;

@@ -117,7 +117,8 @@ impl RunningGraph {
         let mut imps: Vec<Option<NodeImpl>> = Vec::with_capacity(n);
         let mut recipes = Vec::with_capacity(n);
         for ns in &spec.nodes {
-            let build = BuildContext { base_dir: base_dir.clone(), mode: spec.mode, node_id: ns.id.clone() };
+            let build =
+                BuildContext::new(base_dir.clone(), spec.mode, ns.id.clone()).with_graph_text(spec.source.text.clone());
             let imp = ns.factory.build(&ns.params, &build).map_err(|error| RunError::Start {
                 node: ns.id.clone(),
                 kind: ns.kind.clone(),
@@ -248,6 +249,7 @@ impl RunningGraph {
             mode: spec.mode,
             t0,
             base_dir: spec.source.base_dir(),
+            graph_text: std::sync::Mutex::new(spec.source.text.clone()),
         });
         let mut g = RunningGraph {
             topo: spec.topo.clone(),

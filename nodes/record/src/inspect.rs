@@ -176,6 +176,8 @@ pub struct Summary {
     pub eit_width: usize,
     pub created: Option<String>,
     pub software_version: Option<String>,
+    /// Lines of the root attribute `graph` (the graph that wrote the file), when present.
+    pub graph_lines: Option<usize>,
     pub part: Option<i64>,
     /// Present streams: `/eit`, `/pressure`, `/truth`, then derived ones.
     pub streams: Vec<StreamSummary>,
@@ -256,6 +258,7 @@ impl Summary {
             eit_width: rec.sensor.measurement_count(),
             created: rec.created.clone(),
             software_version: rec.software_version.clone(),
+            graph_lines: rec.graph_toml.as_ref().map(|g| g.lines().count()),
             part: rec.part,
             streams,
             duration_s: if last >= first { last - first } else { 0.0 },
@@ -298,6 +301,15 @@ impl fmt::Display for Summary {
         writeln!(f, "sensor:   {} ({}, M = {})", self.sensor_name, self.protocol, self.eit_width)?;
         writeln!(f, "created:  {}", self.created.as_deref().unwrap_or("-"))?;
         writeln!(f, "software: {}", self.software_version.as_deref().unwrap_or("-"))?;
+        match self.graph_lines {
+            Some(n) => writeln!(
+                f,
+                "graph:    {n} line{} of TOML (`skinflow inspect --graph` prints {})",
+                if n == 1 { "" } else { "s" },
+                if n == 1 { "it" } else { "them" }
+            )?,
+            None => writeln!(f, "graph:    -")?,
+        }
         if let Some(part) = self.part {
             writeln!(f, "part:     {part}")?;
         }
@@ -403,6 +415,7 @@ mod tests {
             eit_width: 120,
             created: None,
             software_version: None,
+            graph_lines: None,
             part: None,
             streams,
             duration_s: 0.0,

@@ -130,7 +130,7 @@ mod tests {
         let mut r = Registry::new();
         register(&mut r).unwrap();
         let params = Params::from_toml(&format!("port = \"/dev/null\"\n{params}")).unwrap();
-        let ctx = BuildContext { base_dir: PathBuf::new(), mode: Mode::Lockstep, node_id: "lc".into() };
+        let ctx = BuildContext::new(PathBuf::new(), Mode::Lockstep, "lc");
         match r.get(kind).unwrap().build(&params, &ctx).unwrap() {
             NodeImpl::Source(n) => n,
             _ => unreachable!("{kind} is a source"),

@@ -109,7 +109,7 @@ fn registry() -> Registry {
 
 fn plugin_node() -> Box<dyn Processor> {
     let reg = registry();
-    let ctx = BuildContext { base_dir: ".".into(), mode: Mode::Lockstep, node_id: "noop".into() };
+    let ctx = BuildContext::new(".", Mode::Lockstep, "noop");
     match reg.get("bench-noop").expect("registered").build(&Params::empty(), &ctx) {
         Ok(NodeImpl::Processor(p)) => p,
         _ => panic!("plugin kind did not build a processor"),

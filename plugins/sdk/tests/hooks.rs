@@ -185,7 +185,7 @@ fn factory(table: &SfPlugin, lib: &str, kind: &str) -> PluginFactory {
 
 /// A node `id` of `kind` of `table` loaded from `lib`, with `params`.
 fn node(table: &SfPlugin, lib: &str, kind: &str, params: &str) -> NodeImpl {
-    let ctx = BuildContext { base_dir: ".".into(), mode: Mode::Lockstep, node_id: "n".into() };
+    let ctx = BuildContext::new(".", Mode::Lockstep, "n");
     factory(table, lib, kind).build(&Params::from_toml(params).unwrap(), &ctx).expect("builds")
 }
 

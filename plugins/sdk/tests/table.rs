@@ -199,7 +199,7 @@ fn build(params: &str) -> Result<NodeImpl, String> {
     let f = reg.get("test-add").unwrap();
     let p = Params::from_toml(params).unwrap();
     f.check(&p).map_err(|e| e.to_string())?;
-    let ctx = BuildContext { base_dir: ".".into(), mode: Mode::Lockstep, node_id: "add".into() };
+    let ctx = BuildContext::new(".", Mode::Lockstep, "add");
     f.build(&p, &ctx).map_err(|e| e.to_string())
 }
 

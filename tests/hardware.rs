@@ -361,3 +361,39 @@ fn an_interrupted_simulate_leaves_no_file() {
     assert!(err.contains("--out huge.h5: the scene's recording needs at least ") && err.contains("GB free"), "{err}");
     assert!(!d.join("huge.h5").exists());
 }
+
+/// A board's frame width (`serial_eit`'s `measurements`) is held to the sensor of the nodes
+/// its frames reach: `check` refuses a 16-value board feeding a logger and a reconstructor of
+/// the 120-value default sensor, at their lines (a run used to die at the first frame).
+#[test]
+fn check_holds_a_boards_frame_width_to_the_sensor_downstream() {
+    let d = workdir("board-width");
+    let graph = |measurements: u32| {
+        format!(
+            "[[node]]\nid = \"eit\"\nkind = \"serial_eit\"\nparams = {{ port = \"/dev/ttyUSB9\", measurements = {measurements} }}\n\
+             [[node]]\nid = \"log\"\nkind = \"hdf5_logger\"\nparams = {{ path = \"rec.h5\" }}\n\
+             [[node]]\nid = \"recon\"\nkind = \"reconstructor\"\n\
+             [[node]]\nid = \"sink\"\nkind = \"null\"\n\
+             [[node]]\nid = \"pressure\"\nkind = \"serial_pressure\"\nparams = {{ port = \"/dev/ttyUSB8\" }}\n\
+             [[node]]\nid = \"sync\"\nkind = \"sync\"\n\
+             [[edge]]\nfrom = \"eit.eit\"\nto = \"log.eit\"\n\
+             [[edge]]\nfrom = \"eit.eit\"\nto = \"sync.eit\"\n\
+             [[edge]]\nfrom = \"pressure.pressure\"\nto = \"sync.pressure\"\n\
+             [[edge]]\nfrom = \"sync.frame\"\nto = \"recon.frame\"\n\
+             [[edge]]\nfrom = \"recon.image\"\nto = \"sink.in\"\n"
+        )
+    };
+    std::fs::write(d.join("narrow.toml"), graph(16)).unwrap();
+    std::fs::write(d.join("paper.toml"), graph(120)).unwrap();
+    ok(&skinflow(&d, &["check", "paper.toml"]));
+    let out = skinflow(&d, &["check", "narrow.toml"]);
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    for (line, node) in [(5, "log"), (9, "recon")] {
+        let at = format!("narrow.toml:{line}:1: node \"{node}\": ");
+        let problem = "whose frames are 120 values wide, but its frames come from serial_eit \"eit\", whose \
+                       `measurements` = 16: every frame would be refused when the run gets it; set the board's \
+                       `measurements` to 120";
+        assert!(err.lines().any(|l| l.contains(&at) && l.contains(problem)), "{node}:\n{err}");
+    }
+}

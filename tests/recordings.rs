@@ -231,3 +231,82 @@ fn the_logger_logs_as_many_truth_contacts_as_truth_max_contacts() {
     assert_eq!(out.status.code(), Some(2), "{err}");
     assert!(err.contains("truth_max_contacts") && err.contains("must be >= 1 (got 0)"), "{err}");
 }
+
+/// A rotating logger run again over its own path: without `overwrite` it is refused at start
+/// naming part 1; with it, the earlier, longer run's parts go, so the parts readers join are
+/// this run's alone (they used to be joined to the earlier run's later parts).
+#[test]
+fn a_rotated_recording_run_again_replaces_every_earlier_part() {
+    let d = workdir("rotated-again");
+    let scene = |hold_s: f64| {
+        format!(
+            "[scene]\nname = \"held\"\nprofile = \"paper\"\n\n[[step]]\nrest_s = 2.0\n\n\
+             [[step]]\nat_mm = [[10.0, -5.0]]\ndiameter_mm = 15.0\nforces_n = [4.0]\nhold_s = {hold_s}\nrest_s = 1.5\n"
+        )
+    };
+    std::fs::write(d.join("long.toml"), scene(4.0)).unwrap();
+    std::fs::write(d.join("short.toml"), scene(0.5)).unwrap();
+    let graph = |scene: &str, overwrite: bool| {
+        let name = format!("g-{scene}-{overwrite}.toml");
+        let g = format!(
+            "[graph]\nmode = \"lockstep\"\n\
+             [[node]]\nid = \"sim\"\nkind = \"sim\"\nparams = {{ scene = \"{scene}.toml\", pacing = \"fast\", seed = 3 }}\n\
+             [[node]]\nid = \"log\"\nkind = \"hdf5_logger\"\nparams = {{ path = \"rot.h5\", rotate_s = 1.0, overwrite = {overwrite} }}\n\
+             [[edge]]\nfrom = \"sim.eit\"\nto = \"log.eit\"\ncapacity = 1024\n\
+             [[edge]]\nfrom = \"sim.pressure\"\nto = \"log.pressure\"\ncapacity = 1024\n"
+        );
+        std::fs::write(d.join(&name), g).unwrap();
+        name
+    };
+    let parts = || hdf5_io(|| skinflow_record::rotate::find_parts(&d.join("rot.h5"))).unwrap();
+    ok(&skinflow(&d, &["run", &graph("long", false)]));
+    let long = parts().len();
+
+    let out = skinflow(&d, &["run", &graph("short", false)]);
+    let err = stderr(&out);
+    assert!(!out.status.success(), "{err}");
+    assert!(err.contains("rot-0001.h5: exists: part 1 of a rotated recording at this path"), "{err}");
+    assert_eq!(parts().len(), long, "a refused run touches no part");
+
+    ok(&skinflow(&d, &["run", &graph("short", true)]));
+    let short = parts();
+    assert!(short.len() < long, "{} parts after {long}", short.len());
+    // The joined parts are one run: its EIT frames, in order, ending with the short scene.
+    let mut t = Vec::new();
+    for p in &short {
+        t.extend(read_recording(p).eit.unwrap().t_s);
+    }
+    assert!(t.windows(2).all(|w| w[0] < w[1]), "{t:?}");
+    assert!(*t.last().unwrap() < 6.0, "the short scene lasts about 5 s, the joined parts end at {t:?}");
+}
+
+/// A logger no message reaches writes no file and says so, also when a file of an earlier run
+/// is at its path (which would otherwise pass for this run's recording).
+#[test]
+fn a_logger_that_gets_no_message_says_nothing_was_recorded() {
+    let d = workdir("no-message");
+    hdf5_io(|| {
+        let sensor = skinflow_sim::Scene::read_sensor(fixture("tiny-eval.toml")).unwrap();
+        let mut opts = skinflow_record::WriterOptions::new(sensor.toml.clone());
+        opts.streams = skinflow_record::Streams { eit: false, pressure: true, ..skinflow_record::Streams::default() };
+        let mut w = skinflow_record::RecordingWriter::create(d.join("pressure-only.h5"), &opts).unwrap();
+        for i in 0..20u32 {
+            w.append_pressure(f64::from(i) * 0.05, 0.0).unwrap();
+        }
+        w.close().unwrap();
+    });
+    let g = "[graph]\nmode = \"lockstep\"\n\
+             [[node]]\nid = \"replay\"\nkind = \"replay\"\nparams = { path = \"pressure-only.h5\", speed = 0.0 }\n\
+             [[node]]\nid = \"log\"\nkind = \"hdf5_logger\"\nparams = { path = \"eit.h5\", overwrite = true }\n\
+             [[edge]]\nfrom = \"replay.eit\"\nto = \"log.eit\"\n";
+    std::fs::write(d.join("g.toml"), g).unwrap();
+    for earlier in [false, true] {
+        let out = skinflow(&d, &["run", "g.toml"]);
+        let err = stderr(&out);
+        assert!(out.status.success(), "{err}");
+        assert!(err.contains("no message arrived: nothing recorded, no file written"), "{err}");
+        assert_eq!(err.contains("the recording already at this path is from before this run"), earlier, "{err}");
+        assert_eq!(d.join("eit.h5").exists(), earlier);
+        std::fs::copy(d.join("pressure-only.h5"), d.join("eit.h5")).unwrap();
+    }
+}

@@ -45,6 +45,13 @@
 //! is refused at the switch, with the reason; a replacement with another `path` starts a new
 //! file from the swap on, the replaced one closes its own with every row it received.
 //!
+//! The file is created at the first message (which streams it holds is known then): a run in
+//! which no message reaches the logger writes no file, and says so at stop, also when an
+//! earlier recording at the path (kept with `overwrite = true`) is left as it was. With
+//! rotation, an earlier recording at the path (the file or its parts `-0001`, ...) is refused
+//! at start, or with `overwrite = true` removed with all its parts when the first part is
+//! created: parts of an earlier, longer run would otherwise be read as part of this one.
+//!
 //! Truth rows are stored in `truth_max_contacts` columns (default 8, fixed when the file is
 //! created): a truth row with more contacts stops the graph with an error naming the param,
 //! the rows recorded so far kept. With rotation, each part's truth starts with the row in
@@ -362,9 +369,19 @@ impl Sink for Logger {
         if self.other_writer(&open_files(), &key(&self.path)) {
             return Err(io(&self.path, BEING_WRITTEN));
         }
-        let overwrite = self.opts.as_ref().is_some_and(|o| o.overwrite);
+        let opts = self.opts.as_ref();
+        let overwrite = opts.is_some_and(|o| o.overwrite);
         if self.path.exists() && !overwrite {
             return Err(io(&self.path, "exists (set overwrite = true to replace it)"));
+        }
+        // Rotating: an earlier run's parts would be read as part of this recording (the writer
+        // removes them with `overwrite`, see `RecordingWriter::create`).
+        let part1 = skinflow_record::rotate::part_path(&self.path, 1);
+        if opts.is_some_and(|o| o.rotate_mb.is_some() || o.rotate_s.is_some()) && part1.exists() && !overwrite {
+            return Err(io(
+                &part1,
+                "exists: part 1 of a rotated recording at this path (set overwrite = true to replace it with all its parts)",
+            ));
         }
         Ok(())
     }
@@ -478,6 +495,17 @@ impl Sink for Logger {
                 strategy = %strategy,
                 frames,
                 "force frames not logged: strategy not in `strategies`"
+            );
+        }
+        if self.writer.is_none() && self.opts.is_some() {
+            // Created at the first message: none came, so no file was written, and one already
+            // at the path (an earlier run's, with `overwrite = true`) must not pass for this run's.
+            let earlier = self.path.exists() || skinflow_record::rotate::part_path(&self.path, 1).exists();
+            tracing::warn!(
+                node = ctx.id(),
+                path = %self.path.display(),
+                "no message arrived: nothing recorded, no file written{}",
+                if earlier { " (the recording already at this path is from before this run, left as it was)" } else { "" }
             );
         }
         if let Some(w) = self.writer.take() {

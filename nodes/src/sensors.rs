@@ -25,9 +25,10 @@
 //! plugin's own checks): an unreadable or invalid sensor file, or a value that is not a string,
 //! is an error located at the param, whether or not the node feeds a reconstructor.
 //!
-//! A source that does not say its sensor is not checked: a `serial_eit` board (its frames are
-//! `measurements` values wide, whatever the sensor) or a plugin kind without a `sensor` param.
-//! A reconstructor drops their frames of another sensor's width when it runs.
+//! A `serial_eit` board says no sensor, only its frames' width (`measurements`): that width is
+//! held to the sensor's measurement count (a reconstructor would drop, a logger refuse, every
+//! frame of another width). A plugin kind without a `sensor` param is not checked; a
+//! reconstructor drops its frames of another sensor's width when it runs.
 
 use std::collections::HashMap;
 use std::ops::Range;
@@ -114,14 +115,28 @@ pub fn check_graph(spec: &GraphSpec) -> Result<(), GraphErrors> {
             }
             _ => continue,
         };
-        let Ok(own) = load_sensor(sensor.as_deref(), &ctx(r)) else { continue };
-        let own = sensor_ref(&own);
+        let Ok(own_sensor) = load_sensor(sensor.as_deref(), &ctx(r)) else { continue };
+        let own = sensor_ref(&own_sensor);
         let own_desc = match &sensor {
             Some(p) => format!("sensor {own} of {}", ctx(r).resolve(p).display()),
             None => format!("sensor {own}, the default (no `sensor` param)"),
         };
         let mut problems = Vec::new();
         for s in upstream_sources(spec, r, node.kind == "hdf5_logger") {
+            if spec.nodes[s].kind == "serial_eit" {
+                // A board says no sensor, only how wide its frames are.
+                let Ok(board) = spec.nodes[s].params.parse::<crate::serial::EitParams>() else { continue };
+                let m = own_sensor.measurement_count();
+                if board.measurements != m {
+                    problems.push(format!(
+                        "{does} {own_desc}, whose frames are {m} values wide, but its frames come from serial_eit \
+                         \"{}\", whose `measurements` = {}: every frame would be refused when the run gets it; set \
+                         the board's `measurements` to {m}, or give {who} `sensor = \"...\"` of the board's sensor",
+                        spec.nodes[s].id, board.measurements
+                    ));
+                }
+                continue;
+            }
             let Some(other) = others.entry(s).or_insert_with(|| source_sensor(spec, s, &ctx(s))) else { continue };
             if own.same_geometry(&other.sensor) {
                 continue;
@@ -180,7 +195,8 @@ pub fn check_graph(spec: &GraphSpec) -> Result<(), GraphErrors> {
     Err(GraphErrors(errs))
 }
 
-/// The `replay` and `sim` nodes whose `eit` or `reference` output reaches node `to`, and the
+/// The `replay` and `sim` nodes whose `eit` or `reference` output reaches node `to` (and the
+/// `serial_eit` nodes whose `eit` does), and the
 /// nodes declaring their sensor ([`sensor_param`]) whose output of EIT frames (`eit_frame`,
 /// `synced_frame`) does, directly or through other nodes (`sync`, ...), in node order. The
 /// search does not go on upstream of a node declaring its sensor: its frames are of that one.
@@ -198,12 +214,11 @@ fn upstream_sources(spec: &GraphSpec, to: usize, truth: bool) -> Vec<usize> {
             let frames = if declares {
                 port.is_some_and(|p| p.ty == EitFrame::TYPE || p.ty == SyncedFrame::TYPE)
             } else {
-                matches!(from.kind.as_str(), "replay" | "sim")
-                    && match port.map(|p| p.name.as_ref()) {
-                        Some("eit" | "reference") => true,
-                        Some("truth") => truth,
-                        _ => false,
-                    }
+                match (from.kind.as_str(), port.map(|p| p.name.as_ref())) {
+                    ("replay" | "sim", Some("eit" | "reference")) | ("serial_eit", Some("eit")) => true,
+                    ("replay" | "sim", Some("truth")) => truth,
+                    _ => false,
+                }
             };
             if frames {
                 found.push(e.from_node);

@@ -185,6 +185,9 @@ pub struct Summary {
     /// sample aside: the state in effect when it began) to the latest.
     pub duration_s: f64,
     pub eit_gaps: Option<FrameGaps>,
+    /// Time gaps of `/eit`: they show frames lost where the counter does not (a board restart
+    /// starts its counter again, and the source numbers on).
+    pub eit_time_gaps: Option<TimeGaps>,
     /// Time gaps of `/pressure` (a fixed-rate stream with no counter).
     pub pressure_gaps: Option<TimeGaps>,
     pub truth: Option<TruthCoverage>,
@@ -246,6 +249,10 @@ impl Summary {
                 eit_frames: eit_t.len(),
             }
         });
+        let eit_time_gaps = rec.eit.as_ref().and_then(|e| {
+            let median = streams.iter().find(|s| s.path == "/eit").and_then(|s| s.median_period_s);
+            TimeGaps::of(&e.t_s, median)
+        });
         let pressure_gaps = rec.pressure.as_ref().and_then(|p| {
             let median = streams.iter().find(|s| s.path == "/pressure").and_then(|s| s.median_period_s);
             TimeGaps::of(&p.t_s, median)
@@ -263,6 +270,7 @@ impl Summary {
             streams,
             duration_s: if last >= first { last - first } else { 0.0 },
             eit_gaps: rec.eit.as_ref().map(|e| FrameGaps::of(&e.seq)),
+            eit_time_gaps,
             pressure_gaps,
             truth,
             has_reference: rec.reference.is_some(),
@@ -348,6 +356,17 @@ impl fmt::Display for Summary {
             if g.non_increasing > 0 {
                 write!(f, ", {} repeated or backward counters", g.non_increasing)?;
             }
+            if let Some(t) = self.eit_time_gaps.filter(|t| t.missing > g.lost_frames) {
+                write!(
+                    f,
+                    "; the times show more: {} gaps over 1.5 periods ({:.1} ms), ~{} frames missing, largest {:.3} s \
+                     (a board restart starts its counter again)",
+                    t.gaps,
+                    t.median_period_s * 1e3,
+                    t.missing,
+                    t.largest_s
+                )?;
+            }
             writeln!(f)?;
         }
         if let Some(g) = &self.pressure_gaps {
@@ -420,6 +439,7 @@ mod tests {
             streams,
             duration_s: 0.0,
             eit_gaps: None,
+            eit_time_gaps: None,
             pressure_gaps,
             truth: None,
             has_reference: false,
@@ -464,5 +484,30 @@ mod tests {
         let even: Vec<f64> = (0..10).map(|k| 0.05 * k as f64).collect();
         assert_eq!(TimeGaps::of(&even, Some(0.05)).map(|g| (g.gaps, g.missing)), Some((0, 0)));
         assert_eq!(TimeGaps::of(&[1.0; 5], Some(0.0)), None);
+    }
+
+    /// A board that restarted: its counter starts again and the source numbers on, so the
+    /// counter shows no gap; the times do, and the line says so.
+    #[test]
+    fn eit_frames_lost_at_a_restart_show_in_the_times() {
+        let mut t: Vec<f64> = (0..8).map(|k| 0.769 * f64::from(k)).collect();
+        t.extend((0..4).map(|k| 0.769 * f64::from(14 + k)));
+        let seq: Vec<u64> = (1..=12).collect();
+        let s = StreamSummary::of("/eit", &t);
+        let mut sum = summary(vec![s.clone()], None);
+        sum.eit_gaps = Some(FrameGaps::of(&seq));
+        sum.eit_time_gaps = TimeGaps::of(&t, s.median_period_s);
+        let text = sum.to_string();
+        assert!(
+            text.contains(
+                "eit gaps: 0 gaps, 0 frames lost; the times show more: 1 gaps over 1.5 periods (769.0 ms), ~6 frames \
+                 missing, largest 5.383 s (a board restart starts its counter again)"
+            ),
+            "{text}"
+        );
+        // When the counter already shows the loss, the times add nothing.
+        let counted: Vec<u64> = (1..=8).chain(15..=18).collect();
+        sum.eit_gaps = Some(FrameGaps::of(&counted));
+        assert!(sum.to_string().contains("eit gaps: 1 gaps, 6 frames lost, largest 6\n"), "{}", sum);
     }
 }

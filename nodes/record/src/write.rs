@@ -73,14 +73,46 @@ pub struct RecordingWriter {
     stats: WriterStats,
 }
 
+/// Before a rotated recording of `base` starts: what readers would take for it must go. They
+/// read `base` itself when it exists, else its parts from `-0001` up to the first missing one
+/// ([`crate::rotate::recording_files`]), so a part of an earlier, longer run left behind the
+/// new parts would be joined to them. With `overwrite` those files are removed (the whole
+/// earlier recording is replaced, as `overwrite` replaces one file); without it, their
+/// existence is an error naming the first.
+fn clear_rotated(base: &Path, overwrite: bool) -> Result<(), RecordError> {
+    let mut stale = crate::rotate::find_parts(base)?;
+    if std::fs::symlink_metadata(base).is_ok() {
+        stale.insert(0, base.to_path_buf());
+    }
+    let Some(first) = stale.first() else { return Ok(()) };
+    if !overwrite {
+        let what = if first == base { "a recording" } else { "part 1 of a rotated recording" };
+        return Err(RecordError::Io {
+            path: first.clone(),
+            source: std::io::Error::new(
+                std::io::ErrorKind::AlreadyExists,
+                format!("exists ({what} at this path; set overwrite to replace it with all its parts)"),
+            ),
+        });
+    }
+    for p in &stale {
+        std::fs::remove_file(p).map_err(|source| RecordError::Io { path: p.clone(), source })?;
+    }
+    Ok(())
+}
+
 impl RecordingWriter {
     /// Validates the options and creates the file (or its first part `rec-0001.h5` when
-    /// rotating) with every declared dataset, empty.
+    /// rotating) with every declared dataset, empty. When rotating, an earlier recording at
+    /// `path` (the file itself, or its parts) is refused, or removed with `overwrite`.
     pub fn create(path: impl AsRef<Path>, opts: &WriterOptions) -> Result<RecordingWriter, RecordError> {
         let eit_width = opts.validate()?;
         let base = path.as_ref().to_path_buf();
         let rotating = opts.rotate_mb.is_some() || opts.rotate_s.is_some();
         let part = rotating.then_some(1);
+        if rotating {
+            clear_rotated(&base, opts.overwrite)?;
+        }
         let s = &opts.streams;
         let rows = opts.chunk_rows;
         let (tc, dc) = (opts.truth_max_contacts, opts.derived_max_contacts);
@@ -653,6 +685,43 @@ mod tests {
         let second = Recording::open(part_path(&dir.join("rec.h5"), 2)).unwrap();
         let img = second.derived.image.expect("declared in the later part");
         assert_eq!((img.hw, img.t_s), ([3, 4], vec![1.5]));
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    /// A rotated recording over an earlier one: the earlier file at the base path, or its parts,
+    /// would be read instead of or joined to the new parts. Refused without `overwrite`,
+    /// removed with it (parts beyond a gap are not read, and are left).
+    #[test]
+    fn a_rotated_recording_refuses_or_removes_what_readers_would_take_for_it() {
+        let dir = tempdir("rotate-over");
+        let base = dir.join("rec.h5");
+        let mut opts = WriterOptions::new(PAPER_100MM_TOML);
+        opts.streams = Streams { pressure: true, ..Streams::default() };
+        let touch = |p: &Path| std::fs::write(p, b"earlier").unwrap();
+        touch(&base);
+        for k in [1, 2, 3, 5] {
+            touch(&part_path(&base, k));
+        }
+        opts.rotate_s = Some(1.0);
+        let e = RecordingWriter::create(&base, &opts).err().unwrap().to_string();
+        assert_eq!(
+            e,
+            format!(
+                "{}: exists (a recording at this path; set overwrite to replace it with all its parts)",
+                base.display()
+            )
+        );
+        std::fs::remove_file(&base).unwrap();
+        let e = RecordingWriter::create(&base, &opts).err().unwrap().to_string();
+        assert!(e.contains("rec-0001.h5: exists (part 1 of a rotated recording at this path;"), "{e}");
+        touch(&base);
+        opts.overwrite = true;
+        let mut w = RecordingWriter::create(&base, &opts).unwrap();
+        w.append_pressure(0.0, 1.0).unwrap();
+        assert_eq!(w.close().unwrap().parts, 1);
+        assert!(!base.exists() && !part_path(&base, 2).exists() && !part_path(&base, 3).exists());
+        assert_eq!(Recording::open(part_path(&base, 1)).unwrap().pressure.unwrap().kpa, [1.0]);
+        assert_eq!(std::fs::read(part_path(&base, 5)).unwrap(), b"earlier");
         let _ = std::fs::remove_dir_all(&dir);
     }
 

@@ -31,4 +31,4 @@ pub use port::PortSpec;
 pub use recycle::Recycler;
 pub use registry::{BuildContext, KindInfo, NodeFactory, NodeParams, ParamDoc, Registry, Role, Wiring, typed};
 pub use runtime::{GraphHandle, RunError, RunOptions, RunReport, RunningGraph, run};
-pub use stats::StatsReport;
+pub use stats::{Counter, StatsReport};

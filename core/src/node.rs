@@ -353,6 +353,14 @@ impl Context {
         self.stats.discarded.fetch_add(n, Ordering::Relaxed);
     }
 
+    /// The node's own counter `name` (registered on first use, a cold path: keep the handle),
+    /// shown in the run report (`counters` in `--stats-json` and control-socket `stats`, and
+    /// a line per node in the table when above 0). For what only the node knows: a serial
+    /// link's disconnects, CRC errors, device restarts. Names are short snake_case words.
+    pub fn counter(&self, name: &str) -> crate::stats::Counter {
+        self.stats.counter(name)
+    }
+
     /// Messages counted with [`Context::count_discarded`] so far (by this node's instances).
     pub fn discarded(&self) -> u64 {
         self.stats.discarded.load(Ordering::Relaxed)

@@ -1,8 +1,10 @@
 //! Run statistics: lock-free counters and latency histograms updated on the hot path, and the
 //! report printed at the end of `skinflow run` and written with `--stats-json`.
 
+use std::collections::BTreeMap;
 use std::fmt;
 use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering::Relaxed};
+use std::sync::{Arc, Mutex};
 
 use serde::Serialize;
 
@@ -134,6 +136,43 @@ pub struct NodeStats {
     pub discarded: AtomicU64,
     /// Wall time per call.
     pub latency: Histogram,
+    /// The node's own named counters ([`crate::Context::counter`]), in the order first asked
+    /// for: what only the node knows (a serial link's disconnects, CRC errors, ...).
+    pub counters: Mutex<Vec<(String, Counter)>>,
+}
+
+/// A node's own named counter ([`crate::Context::counter`]): a shared atomic, so the node sets
+/// or adds without a lock and the statistics read it at any time. Its instances share it
+/// (a restarted or hot-swapped node goes on counting under the same name).
+#[derive(Debug, Clone, Default)]
+pub struct Counter(Arc<AtomicU64>);
+
+impl Counter {
+    pub fn add(&self, n: u64) {
+        self.0.fetch_add(n, Relaxed);
+    }
+
+    /// Sets the value: for a count the node keeps itself (cumulative, never decreasing).
+    pub fn set(&self, v: u64) {
+        self.0.store(v, Relaxed);
+    }
+
+    pub fn get(&self) -> u64 {
+        self.0.load(Relaxed)
+    }
+}
+
+impl NodeStats {
+    /// The counter named `name`, registered on first use.
+    pub fn counter(&self, name: &str) -> Counter {
+        let mut counters = self.counters.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+        if let Some((_, c)) = counters.iter().find(|(n, _)| n == name) {
+            return c.clone();
+        }
+        let c = Counter::default();
+        counters.push((name.to_owned(), c.clone()));
+        c
+    }
 }
 
 /// Counters of one edge.
@@ -184,6 +223,9 @@ pub struct NodeReport {
     pub discarded: u64,
     /// Drops on its input edges (all causes) plus the messages it discarded.
     pub drops: u64,
+    /// The node's own counters ([`crate::Context::counter`]), by name; the table shows those
+    /// above 0.
+    pub counters: BTreeMap<String, u64>,
 }
 
 /// One edge's line in the report.
@@ -234,6 +276,13 @@ impl NodeReport {
             max_queue_depth: inputs.iter().map(|e| e.max_depth.load(Relaxed)).max().unwrap_or(0),
             discarded,
             drops: inputs.iter().map(|e| e.drops()).sum::<u64>() + discarded,
+            counters: s
+                .counters
+                .lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner)
+                .iter()
+                .map(|(n, c)| (n.clone(), c.get()))
+                .collect(),
         }
     }
 }
@@ -313,6 +362,18 @@ impl fmt::Display for StatsReport {
                     e.dropped_coalesced,
                     e.undelivered
                 )?;
+            }
+        }
+        let counting: Vec<(&NodeReport, Vec<String>)> = self
+            .nodes
+            .iter()
+            .map(|n| (n, n.counters.iter().filter(|(_, v)| **v > 0).map(|(k, v)| format!("{k} {v}")).collect()))
+            .filter(|(_, c): &(_, Vec<String>)| !c.is_empty())
+            .collect();
+        if !counting.is_empty() {
+            writeln!(f, "node counters:")?;
+            for (n, c) in counting {
+                writeln!(f, "  {} ({}): {}", n.id, n.kind, c.join(", "))?;
             }
         }
         let discarding: Vec<&NodeReport> = self.nodes.iter().filter(|n| n.discarded > 0).collect();

@@ -61,10 +61,14 @@ struct Hold {
     p: HoldParams,
     held: VecDeque<Message>,
     calls: u64,
+    /// Its own counter `inputs_seen` (shared by its instances), taken at start.
+    seen: Option<crate::Counter>,
 }
 
 impl Processor for Hold {
-    fn start(&mut self, _ctx: &mut Context) -> Result<(), NodeError> {
+    fn start(&mut self, ctx: &mut Context) -> Result<(), NodeError> {
+        self.seen = Some(ctx.counter("inputs_seen"));
+        ctx.counter("never_counted");
         if self.p.start_fails {
             return Err(NodeError::msg("hold: start failed"));
         }
@@ -73,6 +77,9 @@ impl Processor for Hold {
 
     fn process(&mut self, _ctx: &mut Context, inputs: &Inputs, out: &mut Outputs) -> Result<(), NodeError> {
         self.calls += 1;
+        if let Some(seen) = &self.seen {
+            seen.add(inputs.get(0).map_or(0, |_| 1));
+        }
         if self.calls == self.p.panic_at {
             panic!("hold: call {}", self.calls);
         }
@@ -249,7 +256,7 @@ fn registry(stops: &Arc<AtomicU64>) -> Registry {
         KindInfo::new("hold", Role::Processor, "test: holds its last `by` inputs, panics on call `panic_at`")
             .input(PortSpec::input::<Count>("in", "the value"))
             .output(count()),
-        |p: HoldParams, _| Ok(NodeImpl::Processor(Box::new(Hold { p, held: VecDeque::new(), calls: 0 }))),
+        |p: HoldParams, _| Ok(NodeImpl::Processor(Box::new(Hold { p, held: VecDeque::new(), calls: 0, seen: None }))),
     ))
     .unwrap();
     r.register(typed(
@@ -320,6 +327,12 @@ fn what_a_restarted_instance_held_when_it_panicked_is_counted_as_discarded() {
     // the panic's); the third takes the last 2 inputs and flushes them.
     assert_eq!((h.msgs_in, h.msgs_out, h.panics, h.restarts), (12, 4, 2, 2));
     assert_eq!(h.discarded, 6, "the 3 messages each panicked instance held");
+    // A node's own counter goes on across its instances; one at 0 is reported, not shown.
+    let counters: Vec<(&str, u64)> = h.counters.iter().map(|(k, v)| (k.as_str(), *v)).collect();
+    assert_eq!(counters, [("inputs_seen", 12), ("never_counted", 0)]);
+    let table = r.stats.to_string();
+    assert!(table.contains("node counters:\n  h (hold): inputs_seen 12\n"), "{table}");
+    assert!(!table.contains("never_counted"), "{table}");
 }
 
 #[test]

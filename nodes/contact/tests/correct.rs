@@ -485,6 +485,33 @@ fn no_load_and_negative_drift_give_zero_force() {
     assert_eq!(eit.estimate(&contact(0.0, 0.0, 0.0), 1.0).force_n, 0.0);
 }
 
+/// Between no load and the calibrated range (0 < dP < signal_min) the map continues linearly
+/// down from the range's bottom: the force rises with dP from 0 N, never negative (a negative
+/// model force is clamped to 0 N and flagged), and every such reading is flagged below range.
+#[test]
+fn small_pressure_below_the_range_is_monotone_non_negative_and_flagged() {
+    let cal = fitted();
+    for kind in [StrategyKind::PneumaticNoCal, StrategyKind::PneumaticLocAware, StrategyKind::PneumaticAreaAware] {
+        let s = Strategy::new(&cal, kind);
+        let lo = match kind {
+            StrategyKind::PneumaticLocAware => cal.pneumatic.locaware.map.signal_min,
+            _ => cal.pneumatic.map.signal_min,
+        };
+        assert!(lo > 0.0, "{kind:?}: the calibrated range starts above no load");
+        let c = contact(-12.0, 8.0, 100.0);
+        let mut prev = 0.0;
+        for i in 1..=200 {
+            let dp = lo * f64::from(i) / 200.0;
+            let e = s.estimate(&c, dp);
+            assert!(e.force_n >= 0.0 && e.force_n >= prev - 1e-12, "{kind:?} at dp {dp}: {} after {prev}", e.force_n);
+            assert_eq!(e.flags.below_range, i < 200, "{kind:?} at dp {dp}");
+            assert_eq!(e.flags.negative_clamped, e.force_n == 0.0, "{kind:?} at dp {dp}: {:?}", e.flags);
+            assert!(!e.flags.no_load, "{kind:?} at dp {dp}: a positive dP is a load");
+            prev = e.force_n;
+        }
+    }
+}
+
 #[test]
 fn large_pressure_extrapolates_monotonically_and_is_flagged() {
     let cal = fitted();

@@ -19,6 +19,11 @@
 //! ```
 //! Input: `image` (image). Output: `contacts` (contacts).
 //!
+//! Counters in the run report: `pressed_without_contact` (settled frames after the no-load
+//! period whose pressure change is over 5 pressure-noise SDs but whose image gave no contact:
+//! a press the EIT layer did not place, whose force no contact carries; warned at the first),
+//! `components_dropped` (beyond `max_contacts`), `ghosts_removed` (sidelobe regions).
+//!
 //! Hot swap: the replacement takes over the no-load noise peaks and derives its floor from
 //! them with its own `floor` and `floor_over_noise` (after the no-load period no new peaks come).
 
@@ -27,8 +32,8 @@ use std::time::Instant;
 use serde::Deserialize;
 use skinflow_contact::{Contacts as ContactBuf, ImageGrid, SegmentParams, Segmenter as SegmentMath};
 use skinflow_core::{
-    Context, Inputs, KindInfo, Message, NodeError, NodeImpl, NodeParams, NodeState, Outputs, ParamDoc, ParamError,
-    PortSpec, Processor, Recycler, Registry, Role, StateRefused, typed,
+    Context, Counter, Inputs, KindInfo, Message, NodeError, NodeImpl, NodeParams, NodeState, Outputs, ParamDoc,
+    ParamError, PortSpec, Processor, Recycler, Registry, Role, StateRefused, typed,
 };
 
 use crate::payload::{Contacts, Image};
@@ -146,7 +151,26 @@ pub struct Segmenter {
     unsolved: u64,
     /// Frames with two or more contacts but no point spread (crosstalk pass skipped).
     no_spread: u64,
+    /// The node's counters in the run report (taken at the first image).
+    counts: Option<Counts>,
 }
+
+/// The segmenter's counters in the run report ([`Context::counter`]); shared by its instances.
+struct Counts {
+    /// Settled frames after the no-load period whose pressure change stands out of the
+    /// pressure noise ([`PRESSED_SIGMAS`]) but whose image gave no contact: a press the EIT
+    /// layer did not place (a touch below the floor, an over-regularised image), whose force
+    /// no contact carries.
+    pressed_without_contact: Counter,
+    /// Components beyond `max_contacts`, dropped.
+    components_dropped: Counter,
+    /// Regions removed as another contact's sidelobe.
+    ghosts_removed: Counter,
+    warned_unplaced: bool,
+}
+
+/// A settled frame's pressure change this many pressure-noise SDs above 0 is a press.
+const PRESSED_SIGMAS: f64 = 5.0;
 
 impl Segmenter {
     pub fn new(p: &SegmenterParams) -> Segmenter {
@@ -162,6 +186,7 @@ impl Segmenter {
             ghosts: 0,
             unsolved: 0,
             no_spread: 0,
+            counts: None,
         }
     }
 }
@@ -217,10 +242,12 @@ impl Processor for Segmenter {
         let input_error =
             |e: skinflow_contact::SegmentError| NodeError::Input { port: "image".into(), problem: e.to_string() };
         let crosstalk = self.params.ghost_share > 0.0 || self.params.deblend;
+        let mut ghosts = 0;
         match (&image.spread, crosstalk) {
             (Some(spread), true) => {
                 let o = seg.segment_with_spread(&image.pixels, spread.0.as_ref(), buf).map_err(input_error)?;
-                self.ghosts += o.ghosts as u64;
+                ghosts = o.ghosts as u64;
+                self.ghosts += ghosts;
                 self.unsolved += u64::from(!o.solved);
             }
             _ => {
@@ -238,6 +265,31 @@ impl Processor for Segmenter {
         }
         self.dropped_components += buf.dropped as u64;
         let found = buf.as_slice();
+        let counts = self.counts.get_or_insert_with(|| Counts {
+            pressed_without_contact: ctx.counter("pressed_without_contact"),
+            components_dropped: ctx.counter("components_dropped"),
+            ghosts_removed: ctx.counter("ghosts_removed"),
+            warned_unplaced: false,
+        });
+        counts.components_dropped.add(buf.dropped as u64);
+        counts.ghosts_removed.add(ghosts);
+        let src = &image.src;
+        let pressed = !src.no_load && src.settled && src.dp_kpa > PRESSED_SIGMAS * src.noise_kpa;
+        if pressed && found.is_empty() {
+            counts.pressed_without_contact.add(1);
+            if !std::mem::replace(&mut counts.warned_unplaced, true) {
+                tracing::warn!(
+                    node = ctx.id(),
+                    t_s = m.header.t_ns as f64 * 1e-9,
+                    dp_kpa = src.dp_kpa,
+                    noise_kpa = src.noise_kpa,
+                    floor = self.params.floor,
+                    "a settled press (dP over {PRESSED_SIGMAS} pressure-noise SDs) with no contact in its image: a \
+                     touch below the segmentation floor, or an image regularised too hard; no contact carries its \
+                     force (counted as pressed_without_contact)"
+                );
+            }
+        }
         let ns = t0.elapsed().as_nanos() as u64;
         let payload = self.ring.fill(|c| {
             c.image = image;

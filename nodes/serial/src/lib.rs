@@ -14,8 +14,8 @@ pub mod error;
 pub mod read;
 
 pub use decode::{
-    Decode, DecodeStats, EitDecoder, EitFrame, ForceDecoder, ForceReading, PressureDecoder, PressureReading, Step,
-    StreamMismatch, decode_all,
+    Decode, DecodeStats, EitDecoder, EitFrame, ForceDecoder, ForceReading, Hint, PeriodMedian, PressureDecoder,
+    PressureReading, Step, StreamMismatch, decode_all,
 };
 pub use emulate::{
     Device, DeviceStats, EmulateError, Emulator, EmulatorConfig, EmulatorFeed, Fault, FaultPlan, Pacing, TimedForce,

@@ -277,3 +277,26 @@ fn a_fast_feed_is_delivered_only_once_a_reader_took_every_byte() {
     assert!(emulator.stats(Device::Eit).unwrap().delivered);
     emulator.stop().unwrap();
 }
+
+/// EIT frames at 9600 baud through a bridge-like pty (16-byte pieces at the wire rate): a
+/// 494-byte frame is 0.51 s on the wire. Each reading's stamp is bounded by the read of its
+/// first byte, which came before the read that completed it. The skew is printed, not asserted
+/// (no timing assertions); the exact stamps are proven in `read::timer`'s unit tests.
+#[test]
+fn frames_slow_on_the_wire_are_stamped_by_their_first_byte() {
+    let frames = feeds::busy_frames(120, 3, 0.6);
+    let config = EmulatorConfig { pacing: Pacing::Wire { baud: 9600 }, ..Default::default() };
+    let emulator = Emulator::spawn(config, EmulatorFeed::default().with_eit(frames), FaultPlan::default()).unwrap();
+    let path = emulator.path(Device::Eit).unwrap();
+    let mut eit = SerialReader::open(feeds::config(path), EitDecoder::new(120), Instant::now()).unwrap();
+    let mut got = Vec::new();
+    feeds::read_n(&mut eit, 3, LIMIT, |r| got.push((r.record.counter, r.t_s, r.first_host_t_s, r.host_t_s)));
+    assert_eq!(got.iter().map(|g| g.0).collect::<Vec<_>>(), vec![0, 1, 2]);
+    for &(counter, t_s, first, host) in &got {
+        assert!(t_s <= first && first <= host, "frame {counter}: t_s {t_s}, first byte read {first}, completed {host}");
+        eprintln!("frame {counter}: completed {:.3} s after its stamp", host - t_s);
+    }
+    // 31 pieces over 0.51 s per frame: the reader saw each frame over several reads.
+    assert!(got.iter().any(|&(_, _, first, host)| first < host), "{got:?}");
+    assert!(eit.link_stats().bytes >= 3 * 494);
+}

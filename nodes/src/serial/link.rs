@@ -25,7 +25,7 @@ use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
 use skinflow_core::{Context, NodeError};
-use skinflow_serial::{Alert, Counters, Decode, LinkMonitor, Reading, SerialError, SerialReader};
+use skinflow_serial::{Alert, Counters, Decode, Hint, LinkMonitor, Reading, SerialError, SerialReader};
 
 use super::PortParams;
 
@@ -75,6 +75,9 @@ struct Watch {
     opened: Instant,
     /// `Decode::records_lost` already counted as the node's discarded messages.
     counted_lost: u64,
+    /// Records the node estimates a device restart hid (`Port::count_lost_at_restart`),
+    /// counted as discarded too.
+    lost_at_restarts: u64,
     /// The link was closed (pending records counted, summary logged): a second close is a no-op.
     closed: bool,
 }
@@ -92,7 +95,10 @@ impl<D: Decode> Link<D> {
         let (d, l) = (reader.decode_stats(), reader.link_stats());
         let port = reader.path();
         let now_s = watch.opened.elapsed().as_secs_f64();
-        watch.monitor.observe(now_s, d, &l, |alert| log_alert::<D>(ctx, port, alert, Counters { decode: d, link: &l }));
+        let hint = Hinted(reader.decoder().hint());
+        watch.monitor.observe(now_s, d, &l, |alert| {
+            log_alert::<D>(ctx, port, alert, Counters { decode: d, link: &l }, hint);
+        });
     }
 
     /// The link ends (stop, or closed at a hot swap): a last look, the records still pending
@@ -106,11 +112,24 @@ impl<D: Decode> Link<D> {
         if pending > 0 {
             ctx.count_discarded(pending);
         }
-        report(ctx, &self.reader, self.watch.opened.elapsed().as_secs_f64());
+        report(ctx, &self.reader, &self.watch);
     }
 }
 
-fn log_alert<D: Decode>(ctx: &Context, port: &Path, alert: Alert, counters: Counters<'_>) {
+/// A decoder's hint as " (hint: ...)" after a warning, or nothing.
+#[derive(Debug, Clone, Copy)]
+struct Hinted(Option<Hint>);
+
+impl std::fmt::Display for Hinted {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match &self.0 {
+            Some(hint) => write!(f, " (hint: {hint})"),
+            None => Ok(()),
+        }
+    }
+}
+
+fn log_alert<D: Decode>(ctx: &Context, port: &Path, alert: Alert, counters: Counters<'_>, hint: Hinted) {
     let (node, port) = (ctx.id(), port.display());
     let record = D::RECORD_NAME;
     match alert {
@@ -119,7 +138,7 @@ fn log_alert<D: Decode>(ctx: &Context, port: &Path, alert: Alert, counters: Coun
             tracing::warn!(
                 node,
                 "{port}: {bytes} bytes ({discarded} discarded) and no valid {record} in {for_s:.1} s {when}: \
-                 wrong device, baud rate or protocol? ({counters})"
+                 wrong device, baud rate or protocol? ({counters}){hint}"
             );
         }
         Alert::Silent { for_s, since_open: true, .. } => tracing::warn!(
@@ -139,9 +158,9 @@ fn log_alert<D: Decode>(ctx: &Context, port: &Path, alert: Alert, counters: Coun
         Alert::Restarted { restarts } => tracing::warn!(
             node,
             "{port}: the device restarted (its counter or clock went back; restart {restarts}): {record}s it sent \
-             around the restart cannot be counted ({counters})"
+             around the restart are not in these counters ({counters})"
         ),
-        Alert::Problems => tracing::warn!(node, "{port}: {record}s lost or rejected so far: {counters}"),
+        Alert::Problems => tracing::warn!(node, "{port}: {record}s lost or rejected so far: {counters}{hint}"),
     }
 }
 
@@ -231,6 +250,7 @@ impl<D: Decode> Port<D> {
             monitor: LinkMonitor::new(p.stall_after_s.unwrap_or(NO_RECORD_WINDOW_S)),
             opened: Instant::now(),
             counted_lost: 0,
+            lost_at_restarts: 0,
             closed: false,
         };
         self.link = Some(Link { reader, watch, _claim: Claim { device: self.settings.device.clone() } });
@@ -277,6 +297,24 @@ impl<D: Decode> Port<D> {
         }
     }
 
+    /// The device's record period as its clock measures it, s (`Decode::measured_period_s`);
+    /// `None` before a few records or without an open link.
+    pub(crate) fn measured_period_s(&self) -> Option<f64> {
+        self.link.as_ref()?.reader.decoder().measured_period_s()
+    }
+
+    /// `n` records the node estimates a device restart hid (the decoder cannot count them):
+    /// counted as the node's discarded messages and listed in the summary at close.
+    pub(crate) fn count_lost_at_restart(&mut self, ctx: &Context, n: u64) {
+        if n == 0 {
+            return;
+        }
+        ctx.count_discarded(n);
+        if let Some(link) = self.link.as_mut() {
+            link.watch.lost_at_restarts += n;
+        }
+    }
+
     /// At stop: counts the records still pending as discarded and logs the link's counters (a
     /// warning when anything was lost or nothing decoded).
     pub(crate) fn report(&mut self, ctx: &Context) {
@@ -286,23 +324,30 @@ impl<D: Decode> Port<D> {
     }
 }
 
-/// The summary at close: every nonzero counter, as a warning when anything was lost, went wrong
-/// on the link, or no record decoded at all.
-fn report<D: Decode>(ctx: &Context, r: &SerialReader<D>, open_s: f64) {
+/// The summary at close: every nonzero counter (and the records the node estimated restarts
+/// hid), as a warning when anything was lost, went wrong on the link, or no record decoded at
+/// all; with the decoder's hint, if any.
+fn report<D: Decode>(ctx: &Context, r: &SerialReader<D>, watch: &Watch) {
+    let open_s = watch.opened.elapsed().as_secs_f64();
     let (d, l) = (r.decode_stats(), r.link_stats());
     let counters = Counters { decode: d, link: &l };
     let (node, port, record) = (ctx.id(), r.path().display(), D::RECORD_NAME);
+    let hint = Hinted(r.decoder().hint());
+    let restarts = match watch.lost_at_restarts {
+        0 => String::new(),
+        n => format!(" lost_at_restarts={n}"),
+    };
     if d.frames == 0 && l.bytes > 0 {
         tracing::warn!(
             node,
             "{port}: serial link closed: {} bytes and no valid {record} in {open_s:.1} s: wrong device, baud rate \
-             or protocol? ({counters})",
+             or protocol? ({counters}){hint}",
             l.bytes
         );
     } else if d.frames == 0 {
         tracing::warn!(node, "{port}: serial link closed: no byte received in {open_s:.1} s ({counters})");
-    } else if counters.lossy() {
-        tracing::warn!(node, "{port}: serial link closed: {counters}");
+    } else if counters.lossy() || watch.lost_at_restarts > 0 {
+        tracing::warn!(node, "{port}: serial link closed: {counters}{restarts}{hint}");
     } else {
         tracing::info!(node, "{port}: serial link closed: {counters}");
     }
@@ -316,7 +361,7 @@ mod tests {
         TimedFrame,
     };
 
-    use super::{Port, held};
+    use super::{Hinted, Port, held};
     use crate::serial::{EitParams, LoadcellParams, PortParams};
 
     fn params(toml_text: &str) -> PortParams {
@@ -412,5 +457,13 @@ mod tests {
         port.report(&ctx);
         assert_eq!(ctx.discarded(), 3, "closing twice counts nothing twice");
         emulator.stop().unwrap();
+    }
+
+    /// The decoder's hint goes after a warning as " (hint: ...)", or nothing is added.
+    #[test]
+    fn a_hint_is_appended_to_a_warning_only_when_there_is_one() {
+        assert_eq!(Hinted(None).to_string(), "");
+        let hint = skinflow_serial::Hint::CrcByteOrder { swapped: 5, crc_errors: 5 };
+        assert!(Hinted(Some(hint)).to_string().starts_with(" (hint: CRC byte order? 5 of 5"));
     }
 }

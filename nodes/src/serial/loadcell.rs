@@ -1,5 +1,11 @@
 //! `serial_loadcell`: a load cell's force lines as truth rows at the rig's indenter position,
 //! which the control command `at X_MM Y_MM [DIAMETER_MM]` moves.
+//!
+//! Each reading is multiplied by `scale` (default 1; -1 flips the sign), then compared with
+//! `contact_threshold_n`. A reading below `-contact_threshold_n` is no contact like any other
+//! below the threshold, but it means the gauge's sign is reversed or it was not tared (a whole
+//! calibration would record as unloaded): the first one is warned about, naming the value and
+//! `scale`, and their count is in the summary at stop.
 
 use skinflow_core::{Context, Header, Message, NodeError, NodeState, Outputs, Source, SourcePoll, StateRefused};
 use skinflow_serial::ForceDecoder;
@@ -31,19 +37,46 @@ struct LoadcellState {
     from_params: Position,
 }
 
-/// What a load cell hands over in a hot swap: its port, its reading count and its position.
+/// What a load cell hands over in a hot swap: its port, its reading count, its negative
+/// readings and its position.
 struct LoadcellHandover {
     port: PortHandover<ForceDecoder>,
     seq: u64,
+    negatives: Negatives,
     position: LoadcellState,
+}
+
+/// Readings below `-contact_threshold_n` (after `scale`): a reversed sign or a missing tare.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Negatives {
+    count: u64,
+    /// The most negative one, N.
+    min_n: f64,
+}
+
+impl Negatives {
+    const NONE: Negatives = Negatives { count: 0, min_n: 0.0 };
+
+    /// Notes reading `f` (N); true when it is the first one below `-threshold_n`.
+    fn note(&mut self, f: f64, threshold_n: f64) -> bool {
+        if f >= -threshold_n {
+            return false;
+        }
+        self.count += 1;
+        self.min_n = self.min_n.min(f);
+        self.count == 1
+    }
 }
 
 pub struct SerialLoadcell {
     p: PortParams,
     /// Below this force a reading is "no contact", N.
     contact_threshold_n: f64,
+    /// Multiplier on every reading (-1 flips the sign).
+    scale: f64,
     port: Port<ForceDecoder>,
     seq: u64,
+    negatives: Negatives,
     /// The position the params give.
     from_params: Position,
     /// The position readings are truth at: the params', then the last `at`'s.
@@ -58,11 +91,30 @@ impl SerialLoadcell {
         SerialLoadcell {
             p,
             contact_threshold_n: params.contact_threshold_n,
+            scale: params.scale,
             port,
             seq: 0,
+            negatives: Negatives::NONE,
             from_params,
             at: from_params,
         }
+    }
+}
+
+impl SerialLoadcell {
+    /// The truth of a reading printed as `raw_n`: its contacts (one at the indenter, or none
+    /// below the threshold), the force after `scale`, and whether it is the first reading below
+    /// `-contact_threshold_n` (counted).
+    fn truth_of(&mut self, raw_n: f64) -> (Vec<TruthContact>, f64, bool) {
+        let f = raw_n * self.scale;
+        let first_negative = self.negatives.note(f, self.contact_threshold_n);
+        let Position { x_mm, y_mm, diameter_mm } = self.at;
+        let contacts = if f >= self.contact_threshold_n {
+            vec![TruthContact { x_mm, y_mm, force_n: f, diameter_mm }]
+        } else {
+            Vec::new()
+        };
+        (contacts, f, first_negative)
     }
 }
 
@@ -74,19 +126,36 @@ impl Source for SerialLoadcell {
     fn poll(&mut self, ctx: &mut Context, out: &mut Outputs) -> Result<SourcePoll, NodeError> {
         let Some(r) = self.port.next(&self.p, ctx)? else { return Ok(SourcePoll::Idle) };
         self.seq += 1;
-        let f = r.record.force_n;
-        let Position { x_mm, y_mm, diameter_mm } = self.at;
-        let contacts = if f >= self.contact_threshold_n {
-            vec![TruthContact { x_mm, y_mm, force_n: f, diameter_mm }]
-        } else {
-            Vec::new()
-        };
+        let (contacts, f, first_negative) = self.truth_of(r.record.force_n);
+        if first_negative {
+            tracing::warn!(
+                node = ctx.id(),
+                "{}: reading {f} N (param `scale` = {}) is below -contact_threshold_n (-{} N), recorded as no \
+                 contact: is the gauge's sign reversed (set param `scale = -1.0`, or the gauge so that compression \
+                 prints positive) or was it not tared? (warned once; the count is in the summary at stop)",
+                self.p.port.display(),
+                self.scale,
+                self.contact_threshold_n
+            );
+        }
         out.send(0, Message::new(Header { seq: self.seq, t_ns: ns(r.t_s), origin: ctx.index() }, Truth { contacts }))?;
         Ok(SourcePoll::Emitted)
     }
 
     fn stop(&mut self, ctx: &mut Context) -> Result<(), NodeError> {
         self.port.report(ctx);
+        let Negatives { count, min_n } = self.negatives;
+        if count > 0 {
+            tracing::warn!(
+                node = ctx.id(),
+                "{}: {count} of {} readings were below -contact_threshold_n (-{} N; most negative {min_n} N) and \
+                 recorded as no contact: sign reversed (param `scale`, now {}) or gauge not tared?",
+                self.p.port.display(),
+                self.seq,
+                self.contact_threshold_n,
+                self.scale
+            );
+        }
         Ok(())
     }
 
@@ -102,7 +171,12 @@ impl Source for SerialLoadcell {
     /// The port, the reading count, and the indenter position now and the one the params gave.
     fn export_state(&mut self, _ctx: &mut Context) -> Option<NodeState> {
         let position = LoadcellState { current: self.at, from_params: self.from_params };
-        Some(Box::new(LoadcellHandover { port: self.port.hand_over(), seq: self.seq, position }))
+        Some(Box::new(LoadcellHandover {
+            port: self.port.hand_over(),
+            seq: self.seq,
+            negatives: self.negatives,
+            position,
+        }))
     }
 
     /// Takes the port over (see `link.rs`) and goes on at the replaced instance's
@@ -112,6 +186,7 @@ impl Source for SerialLoadcell {
         let h = state.downcast::<LoadcellHandover>().map_err(|s| StateRefused::new(s, "not a load cell's state"))?;
         self.port.take_over(ctx, h.port);
         self.seq = h.seq;
+        self.negatives = h.negatives;
         let s = h.position;
         let Position { x_mm, y_mm, diameter_mm } = s.current;
         if s.from_params == self.from_params {
@@ -157,7 +232,9 @@ mod tests {
     use skinflow_core::{Context, Mode, Source};
 
     use super::super::tests::build;
-    use super::{LoadcellHandover, LoadcellState, Position, parse_at};
+    use super::{LoadcellHandover, LoadcellState, Negatives, Position, SerialLoadcell, parse_at};
+    use crate::payload::TruthContact;
+    use crate::serial::LoadcellParams;
 
     fn loadcell(params: &str) -> Box<dyn Source> {
         build("serial_loadcell", params)
@@ -242,5 +319,36 @@ mod tests {
         }
         let e = parse_at("move 1 2", 15.0).unwrap_err().to_string();
         assert!(e.contains("unknown control command \"move 1 2\" (known: at X_MM Y_MM [DIAMETER_MM])"), "{e}");
+    }
+
+    /// A gauge with its sign reversed: every press reads negative. Each is counted, the first
+    /// reported (`note` returns true once), the most negative kept; readings within the
+    /// threshold of 0 (noise, a small tare drift) are not.
+    #[test]
+    fn negative_readings_are_counted_and_the_first_is_reported() {
+        let mut n = Negatives::NONE;
+        let firsts: Vec<bool> = [0.01, -0.04, -0.05, -2.0, -12.5, -3.0, 4.0].iter().map(|&f| n.note(f, 0.05)).collect();
+        assert_eq!(firsts, [false, false, false, true, false, false, false]);
+        assert_eq!(n, Negatives { count: 3, min_n: -12.5 });
+    }
+
+    /// A gauge that prints compression negative: as printed, a press is no contact (and
+    /// counted); with `scale = -1` it is a contact of the pressed force.
+    #[test]
+    fn scale_flips_a_reversed_gauge_and_negatives_are_counted_without_it() {
+        let params = |extra: &str| {
+            skinflow_toml::from_str::<LoadcellParams>(&format!("port = \"/dev/null\"\nx_mm = 3.0\n{extra}")).unwrap()
+        };
+        let mut as_printed = SerialLoadcell::new(params(""));
+        let (contacts, f, first) = as_printed.truth_of(-2.5);
+        assert_eq!((contacts.len(), f, first), (0, -2.5, true));
+        assert!(!as_printed.truth_of(-1.0).2, "reported once");
+        assert_eq!(as_printed.negatives, Negatives { count: 2, min_n: -2.5 });
+
+        let mut flipped = SerialLoadcell::new(params("scale = -1.0"));
+        let (contacts, f, first) = flipped.truth_of(-2.5);
+        assert_eq!((f, first), (2.5, false));
+        assert_eq!(contacts, vec![TruthContact { x_mm: 3.0, y_mm: 0.0, force_n: 2.5, diameter_mm: 15.0 }]);
+        assert_eq!(flipped.negatives, Negatives::NONE);
     }
 }

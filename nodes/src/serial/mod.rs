@@ -8,13 +8,16 @@
 //! backoff when the device disappears. A port missing at start stops the graph before any data
 //! flows.
 //!
-//! EIT frames are stamped at the middle of their acquisition window: reception time minus
-//! `frame_period_s / 2` (the board sends a frame when its acquisition ends). `/eit/seq` is the
-//! device counter unwrapped to 64 bits; after a device restart (the counter goes back) it goes
-//! on at +1, so it always increases and a gap in it means lost frames. The load cell
-//! becomes a truth row with one contact at the rig's position (`x_mm`, `y_mm`,
-//! `diameter_mm`), or an empty row below `contact_threshold_n`; the control command
-//! `at X_MM Y_MM [DIAMETER_MM]` moves that position while the graph runs.
+//! EIT frames are stamped at the middle of their acquisition window: send time minus half the
+//! window, `frame_period_s` (the board sends a frame when its acquisition ends), warned about
+//! when the board's measured period differs (`eit.rs`). `/eit/seq` is the device counter
+//! unwrapped to 64 bits; after a device restart (the counter goes back) it jumps by the frames
+//! the outage hid (estimated from the host-time gap), so it always increases and a gap in it
+//! means lost frames. The load cell becomes a truth row with one contact at the rig's position
+//! (`x_mm`, `y_mm`, `diameter_mm`), or an empty row below `contact_threshold_n`, readings
+//! multiplied by `scale` first (readings below `-contact_threshold_n` are warned about: a
+//! reversed sign or a missing tare); the control command `at X_MM Y_MM [DIAMETER_MM]` moves
+//! that position while the graph runs.
 //!
 //! Hot swap: a serial source hands its open port to its replacement when the port and its
 //! settings stay the same (the reader goes on with its buffered bytes and counters; no reading
@@ -81,7 +84,12 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
         )
         .output(PortSpec::output::<EitFrame>("eit", "EIT frames, volts"))
         .param(ParamDoc::new("measurements", "usize", "120", "values per frame, as the board sends them (1..=65535)"))
-        .param(ParamDoc::new("frame_period_s", "f64", "0.769", "acquisition window, s")),
+        .param(ParamDoc::new(
+            "frame_period_s",
+            "f64",
+            "0.769",
+            "the board's acquisition window, s (its frame period when it acquires back to back); stamps are moved back by half of it; warned about when the board's measured period differs by > 20 %",
+        )),
         |p: EitParams, _| Ok(NodeImpl::Source(Box::new(SerialEit::new(p)?))),
     ))?;
     r.register(typed(
@@ -112,7 +120,13 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
         .param(ParamDoc::new("x_mm", "f64", "0", "indenter position"))
         .param(ParamDoc::new("y_mm", "f64", "0", "indenter position"))
         .param(ParamDoc::new("diameter_mm", "f64", "15", "indenter diameter"))
-        .param(ParamDoc::new("contact_threshold_n", "f64", "0.05", "below this: no contact")),
+        .param(ParamDoc::new("contact_threshold_n", "f64", "0.05", "below this (after `scale`), N: no contact"))
+        .param(ParamDoc::new(
+            "scale",
+            "f64",
+            "1.0",
+            "multiplier on every reading, not 0: -1 flips a gauge that prints compression negative",
+        )),
         |p: LoadcellParams, _| Ok(NodeImpl::Source(Box::new(SerialLoadcell::new(p)))),
     ))
 }
@@ -173,8 +187,8 @@ mod tests {
             ("serial_pressure", &["period_ms = 10", "max_jump_ms = 500"], "`period_ms`, `max_jump_ms`"),
             (
                 "serial_loadcell",
-                &["x_mm = 1.0", "y_mm = -2.0", "diameter_mm = 99.0", "contact_threshold_n = 3.0"],
-                "`x_mm`, `y_mm`, `diameter_mm`, `contact_threshold_n`",
+                &["x_mm = 1.0", "y_mm = -2.0", "diameter_mm = 99.0", "contact_threshold_n = 3.0", "scale = -1.0"],
+                "`x_mm`, `y_mm`, `diameter_mm`, `contact_threshold_n`, `scale`",
             ),
         ];
         for (kind, _, own) in kinds {
@@ -220,6 +234,8 @@ mod tests {
         assert_eq!(e, "param \"measurements\": must be in 1..=65535 (got 0)");
         let e = check("serial_loadcell", "x_mm = nan").unwrap_err();
         assert_eq!(e, "param \"x_mm\": must be finite (got NaN)");
+        let e = check("serial_loadcell", "scale = 0.0").unwrap_err();
+        assert_eq!(e, "param \"scale\": must not be 0 (1: as printed, -1: sign flipped)");
     }
 
     #[test]

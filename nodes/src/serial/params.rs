@@ -153,9 +153,13 @@ serial_params! {
         /// The indenter's diameter, mm.
         #[serde(default = "default_diameter")]
         diameter_mm: f64,
-        /// Below this force the row says "no contact", N.
+        /// Below this force the row says "no contact", N (after `scale`).
         #[serde(default = "default_threshold")]
         contact_threshold_n: f64,
+        /// Multiplier applied to every reading (default 1; -1 flips the sign of a gauge that
+        /// prints compression negative; any other factor converts a gauge's scale), not 0.
+        #[serde(default = "default_scale")]
+        scale: f64,
     }
 }
 
@@ -211,6 +215,9 @@ fn default_diameter() -> f64 {
 }
 fn default_threshold() -> f64 {
     0.05
+}
+fn default_scale() -> f64 {
+    1.0
 }
 
 /// A serial crate's parameter error as a node parameter error (its message names the
@@ -334,6 +341,11 @@ impl NodeParams for LoadcellParams {
         finite("x_mm", self.x_mm)?;
         finite("y_mm", self.y_mm)?;
         positive("diameter_mm", self.diameter_mm)?;
-        non_negative("contact_threshold_n", self.contact_threshold_n)
+        non_negative("contact_threshold_n", self.contact_threshold_n)?;
+        finite("scale", self.scale)?;
+        if self.scale == 0.0 {
+            return Err(ParamError::new("scale", "must not be 0 (1: as printed, -1: sign flipped)"));
+        }
+        Ok(())
     }
 }

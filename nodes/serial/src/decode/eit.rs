@@ -9,7 +9,7 @@
 //! step forward by less than half their range (2^31 frames; 2^31 µs, 35.8 min) for the frame to
 //! continue the same run.
 
-use super::{Decode, DecodeStats, DiscardRun, Step, StreamMismatch};
+use super::{Decode, DecodeStats, DiscardRun, Hint, PeriodMedian, Step, StreamMismatch};
 use crate::crc16::crc16;
 use crate::encode::{EIT_HEADER_LEN, EIT_MAX_MEASUREMENTS, EIT_SYNC, eit_frame_len};
 use crate::error::ParamError;
@@ -75,6 +75,8 @@ pub struct EitDecoder {
     rejected: u64,
     /// Last wrong measurement count seen and how many headers in a row carried it.
     wrong_count: Option<(u16, u32)>,
+    /// Device time per frame between frames of one run (clock step / counter step).
+    period: PeriodMedian,
     run: DiscardRun,
     stats: DecodeStats,
 }
@@ -119,6 +121,7 @@ impl EitDecoder {
             restarted: false,
             rejected: 0,
             wrong_count: None,
+            period: PeriodMedian::default(),
             run: DiscardRun::default(),
             stats: DecodeStats::default(),
         })
@@ -191,9 +194,14 @@ impl EitDecoder {
                     self.accept();
                     return true;
                 }
-                // A complete header of the right width inside the candidate means the candidate
-                // lost bytes and ran into the next frame; otherwise its bytes were altered.
-                if (2..=len - EIT_HEADER_LEN).any(|p| self.header_at(p)) {
+                // A CRC written big-endian: the frame is rejected (the protocol is little-endian)
+                // but counted apart, so the warning can say so. A complete header of the right
+                // width inside the candidate means the candidate lost bytes and ran into the
+                // next frame; otherwise its bytes were altered.
+                if crc16(&self.buf[EIT_SYNC.len()..crc_at]) == sent.swap_bytes() {
+                    self.stats.crc_errors += 1;
+                    self.stats.crc_byte_swapped += 1;
+                } else if (2..=len - EIT_HEADER_LEN).any(|p| self.header_at(p)) {
                     self.stats.torn_frames += 1;
                 } else {
                     self.stats.crc_errors += 1;
@@ -228,6 +236,7 @@ impl EitDecoder {
             } else {
                 // The gap includes the rejected candidates (they were frames of this run).
                 self.stats.lost_frames += u64::from(d - 1);
+                self.period.push(f64::from(time_us.wrapping_sub(last_time)) * 1e-6 / f64::from(d));
             }
         }
         self.rejected = 0;
@@ -333,6 +342,21 @@ impl Decode for EitDecoder {
         Some(self.device_t_s)
     }
 
+    /// A frame's bytes are contiguous in the stream and end with the step's last byte.
+    fn record_span(&self) -> usize {
+        self.frame_len
+    }
+
+    /// Median device time per frame over frames of one run.
+    fn measured_period_s(&self) -> Option<f64> {
+        self.period.median_s()
+    }
+
+    fn hint(&self) -> Option<Hint> {
+        let s = &self.stats;
+        (s.crc_byte_swapped > 0).then_some(Hint::CrcByteOrder { swapped: s.crc_byte_swapped, crc_errors: s.crc_errors })
+    }
+
     fn rejected_pending(&self) -> u64 {
         self.rejected
     }
@@ -342,7 +366,7 @@ impl Decode for EitDecoder {
 mod tests {
     use super::*;
     use crate::decode::decode_all;
-    use crate::encode::encode_eit_frame;
+    use crate::encode::{eit_frame_len, encode_eit_frame};
 
     const M: usize = 4;
 
@@ -504,6 +528,61 @@ mod tests {
         assert_eq!(decode(&mut d, &frame(1, 0.0)).len(), 1);
         let s = d.stats();
         assert_eq!((s.torn_frames, s.discarded_bytes, s.frames), (1, 9, 1));
+    }
+
+    /// Firmware that writes the CRC big-endian: every frame fails, counted apart and hinted.
+    #[test]
+    fn a_byte_swapped_crc_is_counted_and_hinted() {
+        let mut d = EitDecoder::new(M);
+        let mut stream = Vec::new();
+        for c in 0..3 {
+            let mut f = frame(c, 1.0);
+            let n = f.len();
+            f.swap(n - 2, n - 1);
+            stream.extend(f);
+        }
+        let mut bad = frame(3, 1.0);
+        let n = bad.len();
+        bad[n - 1] ^= 0x01;
+        stream.extend(bad);
+        assert!(decode(&mut d, &stream).is_empty());
+        let s = d.stats();
+        assert_eq!((s.crc_errors, s.crc_byte_swapped), (4, 3));
+        let hint = d.hint().expect("a hint").to_string();
+        assert!(hint.starts_with("CRC byte order? 3 of 4 CRC failures"), "{hint}");
+        assert_eq!(EitDecoder::new(M).hint(), None);
+    }
+
+    /// A big-endian header: its count field reads 0x0400 for M = 4; the mismatch names it.
+    #[test]
+    fn a_big_endian_count_is_proven_and_reported_as_big_endian() {
+        let mut d = EitDecoder::new(M);
+        let mut stream = Vec::new();
+        for c in 0..3 {
+            let mut f = frame(c, 1.0);
+            f.swap(10, 11);
+            stream.extend(f);
+        }
+        assert!(decode(&mut d, &stream).is_empty());
+        let m = d.mismatch().expect("proven");
+        assert_eq!(m, StreamMismatch::MeasurementCount { expected: M, got: 0x0400 });
+        assert!(m.to_string().contains("looks big-endian"), "{m}");
+    }
+
+    /// Steps are per frame and within a run; a restart keeps the steps measured before it (the
+    /// board's period does not change with a restart, and `serial_eit` needs it right then).
+    #[test]
+    fn the_period_is_measured_per_frame_within_a_run() {
+        let mut d = EitDecoder::new(M);
+        // 0.1 s per frame, frame 3 lost (a 0.2 s step over 2 frames): 3 steps.
+        steps(&mut d, &[0u32, 1, 2, 4].map(|c| (c, c * 100_000)));
+        assert_eq!(d.measured_period_s(), None, "3 steps");
+        // A restart (no step), then one step in the new run.
+        steps(&mut d, &[(0, 5_000), (1, 105_000)]);
+        assert_eq!(d.measured_period_s(), None, "4 steps");
+        steps(&mut d, &[(2, 205_000)]);
+        assert!((d.measured_period_s().unwrap() - 0.1).abs() < 1e-12);
+        assert_eq!(d.record_span(), eit_frame_len(M));
     }
 
     #[test]

@@ -8,11 +8,15 @@
 
 mod eit;
 mod force;
+mod hint;
 mod line;
+mod period;
 mod pressure;
 
 pub use eit::{EitDecoder, EitFrame};
 pub use force::{ForceDecoder, ForceReading};
+pub use hint::Hint;
+pub use period::PeriodMedian;
 pub use pressure::{DEFAULT_MAX_JUMP_MS, PressureDecoder, PressureReading};
 
 /// What one [`Decode::step`] did.
@@ -35,6 +39,9 @@ pub struct DecodeStats {
     pub resyncs: u64,
     /// EIT: complete candidates whose CRC did not match (corrupted on the wire).
     pub crc_errors: u64,
+    /// EIT: of `crc_errors`, the candidates whose CRC matches with its two bytes swapped: the
+    /// board writes its CRC big-endian (the protocol is little-endian).
+    pub crc_byte_swapped: u64,
     /// EIT: candidates cut short, either a new frame header starts inside a CRC-failed candidate
     /// (bytes were dropped) or a partial frame was discarded by [`Decode::reset`] (disconnect).
     pub torn_frames: u64,
@@ -51,6 +58,12 @@ pub struct DecodeStats {
     pub length_mismatches: u64,
     /// Line protocols: lines that could not be parsed, or exceeded the maximum line length.
     pub bad_lines: u64,
+    /// Line protocols: of `bad_lines`, the lines that grew past the maximum length (64 bytes)
+    /// without a line end (`\r`, `\n` or `\r\n`), counted when they pass it.
+    pub long_lines: u64,
+    /// Load cell: of `bad_lines`, the lines of a number in another unit than N (`kgf`, `lbf`,
+    /// ...): the gauge is set to another unit.
+    pub wrong_unit_lines: u64,
 }
 
 /// A configuration error the stream itself proves, e.g. the board sends another frame width.
@@ -97,6 +110,25 @@ pub trait Decode: Clone {
 
     /// A configuration mismatch the stream has proven, if any (default: none detectable).
     fn mismatch(&self) -> Option<StreamMismatch> {
+        None
+    }
+
+    /// Bytes of the stream from the first byte of the record completed by the last `step` to
+    /// its last byte (the last one that step consumed), inclusive; the reader time-stamps a
+    /// record by the read that brought its first byte. Default 1: only its end is known.
+    fn record_span(&self) -> usize {
+        1
+    }
+
+    /// The device's record period as its own clock measures it ([`PeriodMedian`]), s, once a
+    /// few records arrived; `None` for protocols without a device clock (default).
+    fn measured_period_s(&self) -> Option<f64> {
+        None
+    }
+
+    /// What the counters suggest is misconfigured (a byte order, a unit, line ends, a period
+    /// param), for the warnings; default none.
+    fn hint(&self) -> Option<Hint> {
         None
     }
 

@@ -9,8 +9,9 @@
 //! rejected since the last accepted one (among them the held first line of the new run) count as
 //! lost too. A wrong digit that keeps the time plausible is undetectable.
 
+use super::line::MAX_LINE_LEN;
 use super::line::{LineSplitter, parse_finite};
-use super::{Decode, DecodeStats, Step};
+use super::{Decode, DecodeStats, Hint, PeriodMedian, Step};
 use crate::error::ParamError;
 
 /// Default largest forward time step accepted without confirmation, ms (200 periods at 20 Hz).
@@ -45,6 +46,9 @@ pub struct PressureDecoder {
     epoch_ms: u64,
     /// `bad_lines` when the last line was accepted (the lines rejected since are pending).
     bad_at_accept: u64,
+    /// Device-time steps between accepted lines of one run, s (not per sample: a step over a
+    /// lost line is two periods, and a board at another rate shows here).
+    steps: PeriodMedian,
 }
 
 /// `clone_from` reuses the line buffer (see `EitDecoder`'s `Clone`).
@@ -92,6 +96,7 @@ impl PressureDecoder {
             rebase: false,
             epoch_ms: 0,
             bad_at_accept: 0,
+            steps: PeriodMedian::default(),
         })
     }
 }
@@ -121,6 +126,7 @@ impl PressureDecoder {
                     self.epoch_ms += 1 << 32;
                 }
                 let d = t_ms.wrapping_sub(last);
+                self.steps.push(f64::from(d) * 1e-3);
                 if let Some(p) = self.period_ms
                     && 2 * u64::from(d) > 3 * u64::from(p)
                 {
@@ -197,6 +203,30 @@ impl Decode for PressureDecoder {
 
     fn device_time_s(&self) -> Option<f64> {
         Some(self.reading.device_t_s)
+    }
+
+    fn record_span(&self) -> usize {
+        self.lines.span()
+    }
+
+    /// Median device-time step between lines of one run.
+    fn measured_period_s(&self) -> Option<f64> {
+        self.steps.median_s()
+    }
+
+    /// Lines that never end; or steps consistently a multiple (>= 2) of `period_ms`, which
+    /// count as lost samples each: the board runs slower than `period_ms` says.
+    fn hint(&self) -> Option<Hint> {
+        let s = &self.lines.stats;
+        if s.long_lines > 0 {
+            return Some(Hint::LongLines { long_lines: s.long_lines, max_len: MAX_LINE_LEN });
+        }
+        let period_ms = self.period_ms?;
+        let measured_ms = self.steps.median_s()? * 1e3;
+        let ratio = measured_ms / f64::from(period_ms);
+        let near_integer = (ratio - ratio.round()).abs() <= 0.1;
+        (s.lost_frames > 0 && ratio.round() >= 2.0 && near_integer && self.steps.consistent(0.1))
+            .then_some(Hint::PeriodMultiple { measured_ms, period_ms })
     }
 
     /// With a period, the gaps (`lost_frames`); without, every bad line (no gap to place it in).
@@ -320,5 +350,26 @@ mod tests {
     fn zero_period_is_rejected() {
         assert!(PressureDecoder::try_new(Some(0)).is_err());
         assert!(PressureDecoder::with_max_jump(None, 0).is_err());
+    }
+
+    /// A 1 Hz board read with the default `period_ms = 50`: every step counts 19 lost samples,
+    /// and the hint says `period_ms` may be wrong, with the measured period.
+    #[test]
+    fn a_board_slower_than_period_ms_is_hinted() {
+        let mut d = PressureDecoder::try_new(Some(50)).unwrap();
+        let lines: String = (0..9).map(|k| format!("{},1.0\r\n", 1000 * k)).collect();
+        decode(&mut d, lines.as_bytes());
+        assert_eq!(d.stats().lost_frames, 8 * 19);
+        assert_eq!(d.measured_period_s(), Some(1.0));
+        let hint = d.hint().expect("a hint").to_string();
+        assert!(hint.contains("consistently 1000 ms, about 20 x param `period_ms` (50 ms)"), "{hint}");
+
+        // A 20 Hz board with a few lost lines: gaps, but not consistent ones; no hint.
+        let mut d = PressureDecoder::try_new(Some(50)).unwrap();
+        decode(&mut d, b"0,1\n50,1\n150,1\n200,1\n250,1\n350,1\n400,1\n450,1\n");
+        assert_eq!((d.stats().lost_frames, d.hint()), (2, None));
+        // CR-only line ends work here too.
+        let mut d = PressureDecoder::try_new(Some(50)).unwrap();
+        assert_eq!(decode(&mut d, b"0,1.5\r50,2.5\r"), vec![(0, 1.5), (50, 2.5)]);
     }
 }

@@ -23,6 +23,8 @@ const FULL_GIVE_UP: Duration = Duration::from_millis(200);
 /// How long an unplug, and a real-time board at the end of its feed, waits for a reader to take
 /// the bytes already sent.
 const DRAIN_TIMEOUT: Duration = Duration::from_secs(2);
+/// Bytes per write of [`Pacing::Wire`].
+const WIRE_PIECE: usize = 16;
 
 /// A sample a board can send.
 pub(super) trait Sample {
@@ -113,7 +115,7 @@ impl<T: Sample> DeviceRun<T> {
             // to take them, as long as it takes at fast pacing (which waits for the reader
             // throughout), up to `DRAIN_TIMEOUT` in real time (a board would go on sending).
             let limit = match self.pacing {
-                Pacing::RealTime => Some(DRAIN_TIMEOUT),
+                Pacing::RealTime | Pacing::Wire { .. } => Some(DRAIN_TIMEOUT),
                 Pacing::AsFastAsPossible => None,
             };
             if let Err(e) = self.pty.wait_drained(limit, &self.stop) {
@@ -137,8 +139,8 @@ impl<T: Sample> DeviceRun<T> {
     /// no more; fast pacing waits for the reader.
     fn send(&mut self, bytes: &[u8]) -> Result<bool, EmulateError> {
         let give_up = match self.pacing {
-            Pacing::RealTime if self.overflowing => Some(Duration::ZERO),
-            Pacing::RealTime => Some(FULL_GIVE_UP),
+            Pacing::RealTime | Pacing::Wire { .. } if self.overflowing => Some(Duration::ZERO),
+            Pacing::RealTime | Pacing::Wire { .. } => Some(FULL_GIVE_UP),
             Pacing::AsFastAsPossible => None,
         };
         let written = self.pty.write(bytes, &self.stop, give_up).map_err(|e| self.pty_error(e))?;
@@ -158,6 +160,22 @@ impl<T: Sample> DeviceRun<T> {
         Ok(true)
     }
 
+    /// Sends a record: at once, or for [`Pacing::Wire`] in pieces at the wire rate (the pause
+    /// before each piece is its bytes' wire time); false when the emulator is stopping.
+    fn send_record(&mut self, record: &[u8]) -> Result<bool, EmulateError> {
+        let Pacing::Wire { baud } = self.pacing else { return self.send(record) };
+        let start = Instant::now();
+        let byte_s = 10.0 / f64::from(baud.max(1));
+        let mut sent = 0;
+        for piece in record.chunks(WIRE_PIECE) {
+            sent += piece.len();
+            if !sleep_until(start + secs(sent as f64 * byte_s), &self.stop) || !self.send(piece)? {
+                return Ok(false);
+            }
+        }
+        Ok(true)
+    }
+
     fn send_all(&mut self) -> Result<(), EmulateError> {
         let start = Instant::now();
         let mut t0_s = None;
@@ -170,7 +188,7 @@ impl<T: Sample> DeviceRun<T> {
         let faults = std::mem::take(&mut self.faults);
         let mut index = 0usize;
         while let Some(sample) = self.samples.next() {
-            if let Pacing::RealTime = self.pacing {
+            if let Pacing::RealTime | Pacing::Wire { .. } = self.pacing {
                 let t0_s = *t0_s.get_or_insert(sample.t_s());
                 if !sleep_until(start + secs(sample.t_s() - t0_s) + paused, &stop) {
                     return Ok(());
@@ -214,7 +232,7 @@ impl<T: Sample> DeviceRun<T> {
                 }
             }
             if send {
-                if !self.send(&record)? {
+                if !self.send_record(&record)? {
                     return Ok(());
                 }
                 c.records_sent.fetch_add(1, Ordering::Relaxed);

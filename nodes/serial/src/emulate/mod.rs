@@ -62,6 +62,10 @@ pub enum Pacing {
     RealTime,
     /// Back to back, as fast as the reader takes the bytes (tests).
     AsFastAsPossible,
+    /// At the samples' own times like `RealTime`, each record's bytes spread over its wire time
+    /// at `baud` (10 bits per byte, 8N1), in pieces of 16 bytes as a UART bridge hands them
+    /// over: a 494-byte EIT frame takes 0.51 s at 9600 baud.
+    Wire { baud: u32 },
 }
 
 /// Emulator settings.

@@ -6,23 +6,28 @@
 //! decoder (a partial record counts as torn) and reopens the same path on the [`Backoff`]
 //! schedule, keeping what the device sent meanwhile. [`SerialReader::poll_next`] blocks until a
 //! record or the deadline; each [`Reading`] carries `host_t_s`, seconds since the caller's
-//! `origin` at the read that completed the record, and `t_s`, the time the record was sent as
-//! far as its device time tells ([`ClockMap`]). [`LinkMonitor`] turns the counters into alerts.
+//! `origin` at the read that completed the record, `first_host_t_s` at the read that brought
+//! its first byte, and `t_s`, the time the record was sent as far as its device time tells
+//! (`stamp::ClockMap`, bounded by first bytes: `timer`). [`LinkMonitor`] turns the counters
+//! into alerts.
 
+mod arrival;
 mod backoff;
 mod monitor;
 mod stamp;
+mod timer;
 
 use std::io::{ErrorKind, Read};
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
+pub use arrival::REMEMBERED_READS;
 pub use backoff::Backoff;
 pub use monitor::{Alert, Counters, LinkMonitor};
 use serialport::{ClearBuffer, SerialPort};
 pub use serialport::{DataBits, FlowControl, Parity, StopBits};
-use stamp::ClockMap;
 pub use stamp::MAX_DRIFT;
+use timer::RecordTimer;
 
 use crate::decode::{Decode, DecodeStats, EitDecoder, ForceDecoder, PressureDecoder, StreamMismatch};
 use crate::error::ParamError;
@@ -124,7 +129,19 @@ pub enum SerialError {
 
 impl std::fmt::Display for StreamMismatch {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self {
+        match *self {
+            // A big-endian header: the count's two bytes swapped give the configured count.
+            Self::MeasurementCount { expected, got }
+                if u16::try_from(got).is_ok_and(|g| usize::from(g.swap_bytes()) == expected) =>
+            {
+                write!(
+                    f,
+                    "eit frame headers carry measurement count {got} ({got:#06x}), which is the configured {expected} \
+                     with its bytes swapped: the header looks big-endian, and the protocol is little-endian (hint: \
+                     the firmware must write counter, time, count, values and CRC least significant byte first; \
+                     PROTOCOLS.md section 1)"
+                )
+            }
             Self::MeasurementCount { expected, got } => write!(
                 f,
                 "eit frames carry {got} measurements, configured for {expected} (hint: set param `measurements` \
@@ -156,9 +173,12 @@ pub struct LinkStats {
 pub struct Reading<R> {
     /// Seconds since the reader's origin when the read that completed the record returned.
     pub host_t_s: f64,
+    /// Seconds since the reader's origin when the read that returned the record's first byte
+    /// returned: earlier than `host_t_s` by about the record's wire time on a slow UART link.
+    pub first_host_t_s: f64,
     /// When the device sent the record, seconds since the reader's origin: its device time on
-    /// the host clock ([`ClockMap`]) for records that carry one, else `host_t_s`. At most
-    /// `host_t_s`; records that arrived in one read keep their device spacing.
+    /// the host clock (`ClockMap`) for records that carry one, else `first_host_t_s`. At most
+    /// `first_host_t_s`; records that arrived in one read keep their device spacing.
     pub t_s: f64,
     /// The decoded record.
     pub record: R,
@@ -182,15 +202,10 @@ pub struct SerialReader<D: Decode> {
     last_rx: Instant,
     stalled: bool,
     backoff: Backoff,
-    clock: ClockMap,
-    /// For timed decoders: a copy of the decoder that decodes each read ahead (buffers reused).
-    shadow: Option<D>,
-    /// Per record the current read completes, in order: the device time of the last record of
-    /// the read in its device run (see `look_ahead`); `ahead_len` filled, `ahead_next` the next
-    /// record's. Capacity: every record takes at least 2 bytes.
-    ahead: Box<[f64]>,
-    ahead_len: usize,
-    ahead_next: usize,
+    /// First-byte read times and device-time stamps of the records.
+    timer: RecordTimer<D>,
+    /// Stream position (bytes read before it) of `rx[0]`.
+    rx_base: u64,
     link: LinkStats,
 }
 
@@ -257,11 +272,8 @@ impl<D: Decode> SerialReader<D> {
             rx_t_s: 0.0,
             last_rx: now,
             stalled: false,
-            clock: ClockMap::new(),
-            shadow: D::TIMED.then(|| decoder.clone()),
-            ahead: vec![0.0; if D::TIMED { RX_BUF_LEN / 2 } else { 0 }].into_boxed_slice(),
-            ahead_len: 0,
-            ahead_next: 0,
+            timer: RecordTimer::new(&decoder, RX_BUF_LEN),
+            rx_base: 0,
             decoder,
             link,
         })
@@ -295,19 +307,6 @@ impl<D: Decode> SerialReader<D> {
     #[must_use]
     pub fn decoder(&self) -> &D {
         &self.decoder
-    }
-
-    /// Decodes the read just stored in `rx` with a copy of the decoder (the real pass will find
-    /// the same records: decoding is deterministic) and notes, for each record it completes, the
-    /// device time of the last record of the read that is in the same device run (device time
-    /// not going back). That record was sent before the read returned, so each record's stamp
-    /// is bounded by it (`ClockMap::stamp`). Allocation-free: the copy reuses its buffers.
-    fn look_ahead(&mut self) {
-        self.ahead_len = 0;
-        self.ahead_next = 0;
-        let Some(shadow) = self.shadow.as_mut() else { return };
-        shadow.clone_from(&self.decoder);
-        self.ahead_len = run_tails(shadow, &self.rx[self.rx_start..self.rx_end], &mut self.ahead);
     }
 
     fn disconnect(&mut self, now: Instant) {
@@ -379,7 +378,8 @@ impl<D: Decode> SerialReader<D> {
                     self.last_rx = at;
                     self.stalled = false;
                     self.link.bytes += n as u64;
-                    self.look_ahead();
+                    self.rx_base = self.timer.end();
+                    self.timer.on_read(&self.decoder, &self.rx[..n], self.rx_t_s);
                 }
                 Err(e) if matches!(e.kind(), ErrorKind::TimedOut | ErrorKind::Interrupted | ErrorKind::WouldBlock) => {
                     let at = Instant::now();
@@ -391,45 +391,16 @@ impl<D: Decode> SerialReader<D> {
                 Err(_) => self.disconnect(Instant::now()),
             }
         }
-        // Records that arrived in one read get their device spacing back (see `stamp`).
-        let t_s = match self.decoder.device_time_s() {
-            Some(device_s) => {
-                let tail_s = self.ahead.get(self.ahead_next).filter(|_| self.ahead_next < self.ahead_len);
-                self.ahead_next += 1;
-                self.clock.stamp(self.rx_t_s, device_s, tail_s.copied().unwrap_or(device_s))
-            }
-            None => self.rx_t_s,
-        };
-        Ok(Some(Reading { host_t_s: self.rx_t_s, t_s, record: self.decoder.record() }))
+        // Stamped by the read of the record's first byte; records that arrived in one read get
+        // their device spacing back (see `timer`).
+        let times = self.timer.stamp(&self.decoder, self.rx_base + self.rx_start as u64);
+        Ok(Some(Reading {
+            host_t_s: self.rx_t_s,
+            first_host_t_s: times.first_read_s,
+            t_s: times.t_s,
+            record: self.decoder.record(),
+        }))
     }
-}
-
-/// Decodes `bytes` with `decoder` and writes to `tails`, for each record completed (up to
-/// `tails.len()`), the device time of the last record of `bytes` in the same device run (the run
-/// ends where device time goes back: a restart). Returns how many were written.
-fn run_tails<D: Decode>(decoder: &mut D, mut bytes: &[u8], tails: &mut [f64]) -> usize {
-    let mut len = 0;
-    while !bytes.is_empty() {
-        let step = decoder.step(bytes);
-        bytes = &bytes[step.consumed..];
-        if step.complete
-            && let Some(t) = decoder.device_time_s()
-            && len < tails.len()
-        {
-            tails[len] = t;
-            len += 1;
-        }
-    }
-    // Backwards: each entry becomes the device time its run ends at.
-    let (mut next, mut next_tail) = (f64::NAN, f64::NAN);
-    for t in tails[..len].iter_mut().rev() {
-        let own = *t;
-        if next >= own {
-            *t = next_tail;
-        }
-        (next, next_tail) = (own, *t);
-    }
-    len
 }
 
 impl<D: Decode + std::fmt::Debug> std::fmt::Debug for SerialReader<D> {
@@ -445,36 +416,14 @@ impl<D: Decode + std::fmt::Debug> std::fmt::Debug for SerialReader<D> {
 
 #[cfg(test)]
 mod tests {
-    use super::run_tails;
-    use crate::decode::{EitDecoder, PressureDecoder};
-    use crate::encode::encode_eit_frame;
+    use crate::decode::StreamMismatch;
 
     #[test]
-    fn each_record_of_a_read_is_bounded_by_the_last_one_of_its_device_run() {
-        // The reader's decoder holds a partial line ("10") from the last read; the copy starts
-        // from its state. The read: that line's end, two more lines, the board's restart (time
-        // back to 20 ms) and two lines of the new run.
-        let mut reader = PressureDecoder::try_new(Some(50)).unwrap();
-        crate::decode::decode_all(&mut reader, b"1000,0.5\n10", |_| {});
-        let mut copy = PressureDecoder::try_new(Some(50)).unwrap();
-        copy.clone_from(&reader);
-        let mut tails = [0.0; 8];
-        let n = run_tails(&mut copy, b"50,0.5\n1100,0.5\n1150,0.5\n20,0.1\n70,0.1\n120,0.1\n", &mut tails);
-        // 1050, 1100, 1150; 20 is held (a restart must be confirmed), 70 confirms it, then 120.
-        assert_eq!(n, 5);
-        let (old_run, new_run) = (1150.0 * 1e-3, 120.0 * 1e-3);
-        assert_eq!(tails[..n], [old_run, old_run, old_run, new_run, new_run]);
-    }
-
-    #[test]
-    fn more_records_than_room_are_left_out_and_eit_frames_count_too() {
-        let mut bytes = Vec::new();
-        for c in 0..4u32 {
-            encode_eit_frame(&mut bytes, c, 1000 * c, &[0.25; 3]);
-        }
-        let mut tails = [0.0; 3];
-        assert_eq!(run_tails(&mut EitDecoder::new(3), &bytes, &mut tails), 3);
-        // The fourth frame did not fit; the three noted end their run at the third.
-        assert_eq!(tails, [2e-3, 2e-3, 2e-3]);
+    fn a_byte_swapped_measurement_count_is_called_big_endian_not_a_width_to_set() {
+        let be = StreamMismatch::MeasurementCount { expected: 120, got: 30720 }.to_string();
+        assert!(be.contains("looks big-endian") && be.contains("little-endian"), "{be}");
+        assert!(!be.contains("set param `measurements`"), "{be}");
+        let other = StreamMismatch::MeasurementCount { expected: 120, got: 16 }.to_string();
+        assert!(other.contains("set param `measurements` to 16"), "{other}");
     }
 }

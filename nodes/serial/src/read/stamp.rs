@@ -1,28 +1,32 @@
-//! Host time stamps from device time: records that arrive together get the times they were sent.
+//! Host time stamps from device time: records get the times they were sent.
 //!
 //! One `read()` returns every byte the port buffered, so records that piled up (a reader starved
 //! for a moment, the bytes a device sent while its port was being reopened) would all get the
-//! time of that read. For records that carry a device time (EIT frames, pressure lines),
-//! [`ClockMap`] maps the device clock onto the host clock instead:
+//! time of that read; and a record that takes long on the wire (a 494-byte EIT frame is ~0.5 s
+//! at 9600 baud) completes long after it was sent. For records that carry a device time (EIT
+//! frames, pressure lines), [`ClockMap`] maps the device clock onto the host clock instead:
 //!
-//! - the offset `host - device` is estimated as the smallest `read time - device time` seen, i.e.
-//!   from the records that arrived with the least delay (a record is never received before it is
-//!   sent, so every record bounds the offset from above). The reader decodes each read ahead, so
-//!   a record's bound is taken from the last record of its read (and of its device run): the
-//!   tightest one that read gives;
-//! - a record's time is its device time plus that offset, so never later than its read time, and
-//!   a burst keeps the device's spacing;
+//! - the offset `host - device` is estimated as the smallest `first-byte read time - device
+//!   time` seen: a record's first byte is never received before the record is sent (its device
+//!   time), so every record bounds the offset from above, and the read that returned its FIRST
+//!   byte (`arrival.rs`) bounds it tighter than the read that completed it by the record's wire
+//!   time. The reader decodes each read ahead, so a record's bound is also taken from the later
+//!   records of its read (and of its device run), the tightest that read gives (`timer.rs`);
+//! - a record's time is its device time plus that offset, so never later than the read of its
+//!   first byte, and a burst keeps the device's spacing;
 //! - the offset may grow by at most [`MAX_DRIFT`] per second of device time between records, so
 //!   a device clock slower than the host's is followed (the smallest delay seen long ago would
 //!   otherwise pin the estimate);
-//! - the map re-anchors on that bound (the last record of the read gets its read time, the
-//!   records before it their device spacing back from it) when the device clock did not advance
-//!   (a device restart, a stuck clock) or when the record arrived more than [`MAX_BACKLOG_S`]
-//!   later than the map predicts (a clock that does not match the host's);
+//! - the map re-anchors on that bound when the device clock did not advance (a device restart,
+//!   a stuck clock) or when the record arrived more than [`MAX_BACKLOG_S`] later than the map
+//!   predicts (a clock that does not match the host's);
 //! - stamps never decrease, across restarts too.
 //!
-//! Limit: the delay of the least delayed record is not known; stamps are late by that much (the
-//! transmission time of a record, plus USB or pty latency), the same as read time stamps.
+//! Limit: the delay of the least delayed first byte is not known; stamps are late by that much:
+//! the firmware's time from stamping to sending, one byte's wire time (1.04 ms at 9600 baud,
+//! 0.09 ms at 115200), a UART bridge's latency timer (FTDI default 16 ms, CP210x and CH340 a
+//! few ms), USB polling (1 ms) and the host's wake-up. A record whose first byte arrives
+//! together with the end of the previous one (back-to-back records) is bounded by that read.
 
 /// Largest growth of the estimated offset per second of device time. Crystal clocks disagree by
 /// about 1e-4; 1e-2 also follows a poor RC oscillator. Between two records that arrive with the
@@ -52,14 +56,13 @@ impl ClockMap {
         Self::default()
     }
 
-    /// The host time of a record sent at `device_s` (device clock) and returned by a read at
-    /// `read_s` (host clock), where `tail_s` is the device time of the last record of that read
-    /// in the same device run (`device_s` itself when it is the last, or unknown): at most
-    /// `read_s`, and never before an earlier record's stamp.
-    pub fn stamp(&mut self, read_s: f64, device_s: f64, tail_s: f64) -> f64 {
-        // The last record of the read was sent at or before the read: so was this one, its
-        // device spacing earlier.
-        let bound = read_s - tail_s.max(device_s);
+    /// The host time of a record sent at `device_s` (device clock) whose first byte was returned
+    /// by a read at `first_read_s` (host clock), where `bound_s` is the tightest offset bound the
+    /// records of its read in the same device run give (at most `first_read_s - device_s`, its
+    /// own): at most `first_read_s`, and never before an earlier record's stamp.
+    pub fn stamp(&mut self, first_read_s: f64, device_s: f64, bound_s: f64) -> f64 {
+        let own = first_read_s - device_s;
+        let bound = bound_s.min(own);
         let offset = match self.offset_s {
             Some(o) if device_s > self.last_device_s => {
                 let grown = o + MAX_DRIFT * (device_s - self.last_device_s);
@@ -77,9 +80,9 @@ impl ClockMap {
         };
         self.offset_s = Some(offset);
         self.last_device_s = device_s;
-        // `offset <= bound`, so this is at most `read_s`; for the last record at the bound it
-        // is `read_s` exactly (the sum would round).
-        let stamp = if offset >= bound && tail_s <= device_s { read_s } else { (device_s + offset).min(read_s) };
+        // `offset <= own`, so this is at most `first_read_s`; at its own bound it is
+        // `first_read_s` exactly (the sum would round).
+        let stamp = if offset >= own { first_read_s } else { (device_s + offset).min(first_read_s) };
         let stamp = stamp.max(self.last_stamp_s);
         self.last_stamp_s = stamp;
         stamp
@@ -96,19 +99,25 @@ impl ClockMap {
 mod tests {
     use super::*;
 
+    /// `stamp` as the reader calls it for a read at `read_s` of whole records, `tail_s` the
+    /// device time of the last record of the read in the same run.
+    fn tail(m: &mut ClockMap, read_s: f64, device_s: f64, tail_s: f64) -> f64 {
+        m.stamp(read_s, device_s, read_s - tail_s.max(device_s))
+    }
+
     #[test]
     fn a_burst_keeps_the_device_spacing_once_anchored() {
         let mut m = ClockMap::new();
         // Device clock 1000 s ahead of the host; records every 50 ms, 2 ms transmission delay.
         let stamps: Vec<f64> = (0..4)
-            .map(|k| m.stamp(10.0 + 0.05 * k as f64 + 0.002, 1010.0 + 0.05 * k as f64, 1010.0 + 0.05 * k as f64))
+            .map(|k| tail(&mut m, 10.0 + 0.05 * k as f64 + 0.002, 1010.0 + 0.05 * k as f64, 1010.0 + 0.05 * k as f64))
             .collect();
         for (k, s) in stamps.iter().enumerate() {
             assert!((s - (10.002 + 0.05 * k as f64)).abs() < 1e-9, "{k}: {s}");
         }
         // The reader starved: the next five records come back in one read at 10.6 s.
         // The reader decoded the read ahead: the last record of the burst was sent at 1010.40.
-        let burst: Vec<f64> = (4..9).map(|k| m.stamp(10.6, 1010.0 + 0.05 * k as f64, 1010.4)).collect();
+        let burst: Vec<f64> = (4..9).map(|k| tail(&mut m, 10.6, 1010.0 + 0.05 * k as f64, 1010.4)).collect();
         for (i, s) in burst.iter().enumerate() {
             let k = (i + 4) as f64;
             let drift = MAX_DRIFT * 0.05 * (i + 1) as f64;
@@ -122,20 +131,20 @@ mod tests {
     #[test]
     fn the_backlog_of_a_restarted_device_is_spread_back_from_the_last_record_of_its_read() {
         let mut m = ClockMap::new();
-        m.stamp(1.0, 500.0, 500.0);
-        m.stamp(1.5, 500.5, 500.5);
+        tail(&mut m, 1.0, 500.0, 500.0);
+        tail(&mut m, 1.5, 500.5, 500.5);
         // The board restarted while unplugged; the port reopens at 9.0 s and one read returns
         // the five lines it sent since (device times 0.1 .. 0.5 s).
-        let burst: Vec<f64> = (1..=5).map(|k| m.stamp(9.0, 0.1 * k as f64, 0.5)).collect();
+        let burst: Vec<f64> = (1..=5).map(|k| tail(&mut m, 9.0, 0.1 * k as f64, 0.5)).collect();
         for (k, s) in burst.iter().enumerate() {
             assert!((s - (8.6 + 0.1 * k as f64)).abs() < 1e-9, "record {k}: {s}");
         }
         assert_eq!(burst[4], 9.0, "the last record of the read is stamped at the read");
         assert_eq!(m.anchors(), 2);
         // Stamps never go back, even from a tail that says a record is older than the last one.
-        let s = m.stamp(9.05, 0.01, 0.01);
+        let s = tail(&mut m, 9.05, 0.01, 0.01);
         assert_eq!(s, 9.05);
-        let s = m.stamp(9.06, 0.02, 30.0);
+        let s = tail(&mut m, 9.06, 0.02, 30.0);
         assert!(s >= 9.05, "{s}");
     }
 
@@ -143,15 +152,15 @@ mod tests {
     fn the_offset_follows_the_least_delayed_record_and_never_stamps_after_the_read() {
         let mut m = ClockMap::new();
         // The first record arrived 300 ms late; the next on time: the estimate moves down to it.
-        assert_eq!(m.stamp(5.3, 100.0, 100.0), 5.3);
-        let s = m.stamp(5.51, 100.5, 100.5);
+        assert_eq!(tail(&mut m, 5.3, 100.0, 100.0), 5.3);
+        let s = tail(&mut m, 5.51, 100.5, 100.5);
         assert!((s - 5.51).abs() < 1e-12, "{s}");
         // Later records never get a time after their read, whatever the jitter.
         let mut last = s;
         for (k, delay) in [0.004, 0.0, 0.03, 0.001, 0.2, 0.0].iter().enumerate() {
             let device = 101.0 + 0.5 * k as f64;
             let read = device - 95.0 + delay;
-            let s = m.stamp(read, device, device);
+            let s = tail(&mut m, read, device, device);
             assert!(s <= read && s >= last, "record {k}: stamp {s}, read {read}, last {last}");
             last = s;
         }
@@ -164,7 +173,7 @@ mod tests {
         let mut worst: f64 = 0.0;
         for k in 0..2000 {
             let host_sent = 0.05 * k as f64;
-            let s = m.stamp(host_sent + 0.001, host_sent * 0.995, host_sent * 0.995);
+            let s = tail(&mut m, host_sent + 0.001, host_sent * 0.995, host_sent * 0.995);
             worst = worst.max((s - host_sent).abs());
         }
         assert!(worst <= 0.001 + 1e-9, "worst error {worst}");
@@ -174,19 +183,19 @@ mod tests {
     #[test]
     fn a_restart_a_stuck_clock_or_a_clock_far_off_reanchors() {
         let mut m = ClockMap::new();
-        m.stamp(1.0, 500.0, 500.0);
-        m.stamp(1.5, 500.5, 500.5);
+        tail(&mut m, 1.0, 500.0, 500.0);
+        tail(&mut m, 1.5, 500.5, 500.5);
         // Restart: device time back to 0.2 s; stamped at its read.
-        assert_eq!(m.stamp(9.0, 0.2, 0.2), 9.0);
+        assert_eq!(tail(&mut m, 9.0, 0.2, 0.2), 9.0);
         assert_eq!(m.anchors(), 2);
         // A stuck clock: the same device time again.
-        assert_eq!(m.stamp(9.5, 0.2, 0.2), 9.5);
+        assert_eq!(tail(&mut m, 9.5, 0.2, 0.2), 9.5);
         assert_eq!(m.anchors(), 3);
         // 20 s later by the host than the device clock says: not a backlog.
-        assert_eq!(m.stamp(30.0, 0.7, 0.7), 30.0);
+        assert_eq!(tail(&mut m, 30.0, 0.7, 0.7), 30.0);
         assert_eq!(m.anchors(), 4);
         // The new anchor holds: a record 0.5 s later by both clocks.
-        assert!((m.stamp(30.5, 1.2, 1.2) - 30.5).abs() < 1e-12);
+        assert!((tail(&mut m, 30.5, 1.2, 1.2) - 30.5).abs() < 1e-12);
         assert_eq!(m.anchors(), 4);
     }
 }

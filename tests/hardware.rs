@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use super::support::{bin, ok, root, skinflow, spawn, status, stderr};
+use super::support::{bin, ok, root, skinflow, spawn, status, stderr, text};
 
 /// A fresh work directory for one test of this module.
 fn workdir(test: &str) -> PathBuf {
@@ -219,6 +219,22 @@ fn a_wrong_device_a_silent_board_and_a_board_restart_are_reported() {
     };
     assert_eq!((node("eit", "msgs_out"), node("eit", "discarded")), (19, 1));
     assert_eq!((node("wrong", "msgs_out"), node("mute", "msgs_out")), (0, 0));
+    // The link counters are in the statistics too (JSON and table), not only in the log.
+    let counter = |id: &str, name: &str| {
+        let n = stats["nodes"].as_array().unwrap().iter().find(|n| n["id"] == id).unwrap();
+        n["counters"][name].as_u64().unwrap_or_else(|| panic!("{id}: no counter {name}: {n}"))
+    };
+    let eit_counters =
+        ["crc_errors", "lost_frames", "counter_resets", "disconnects", "lost_at_restarts"].map(|c| counter("eit", c));
+    assert_eq!(eit_counters, [1, 1, 1, 0, 0]);
+    assert_eq!(counter("wrong", "discarded_bytes"), lines.len() as u64);
+    let table = text(&out.stdout);
+    assert!(
+        table.contains(
+            "  eit (serial_eit): counter_resets 1, crc_errors 1, discarded_bytes 494, lost_frames 1, resyncs 1"
+        ),
+        "{table}"
+    );
 }
 
 /// The graph of the SIGKILL tests: a fast simulation logged with a 0.2 s flush interval.

@@ -80,6 +80,43 @@ struct Watch {
     lost_at_restarts: u64,
     /// The link was closed (pending records counted, summary logged): a second close is a no-op.
     closed: bool,
+    /// The link's counters as published in the run statistics (taken at the first look).
+    published: Option<Published>,
+}
+
+/// The link's counters in the run statistics ([`Context::counter`]): each a node counter
+/// named as in the summary at close, advanced by what this link added since the last look, so
+/// a node whose link was replaced (a hot swap onto another port) goes on counting.
+struct Published {
+    counters: Vec<(skinflow_core::Counter, u64)>,
+}
+
+/// The link counters a node publishes, by name: what went wrong on the wire and on the port
+/// (the bytes read and the records decoded are not: `out` counts the records).
+fn link_counters(
+    d: &skinflow_serial::DecodeStats,
+    l: &skinflow_serial::LinkStats,
+    w: &Watch,
+) -> [(&'static str, u64); 17] {
+    [
+        ("lost_frames", d.lost_frames),
+        ("lost_at_restarts", w.lost_at_restarts),
+        ("counter_resets", d.counter_resets),
+        ("crc_errors", d.crc_errors),
+        ("crc_byte_swapped", d.crc_byte_swapped),
+        ("torn_frames", d.torn_frames),
+        ("length_mismatches", d.length_mismatches),
+        ("bad_lines", d.bad_lines),
+        ("long_lines", d.long_lines),
+        ("wrong_unit_lines", d.wrong_unit_lines),
+        ("discarded_bytes", d.discarded_bytes),
+        ("resyncs", d.resyncs),
+        ("disconnects", l.disconnects),
+        ("reconnects", l.reconnects),
+        ("failed_attempts", l.failed_attempts),
+        ("stalls", l.stalls),
+        ("cleared_bytes", l.cleared_bytes),
+    ]
 }
 
 impl<D: Decode> Link<D> {
@@ -99,6 +136,16 @@ impl<D: Decode> Link<D> {
         watch.monitor.observe(now_s, d, &l, |alert| {
             log_alert::<D>(ctx, port, alert, Counters { decode: d, link: &l }, hint);
         });
+        let now = link_counters(d, &l, watch);
+        let published = watch.published.get_or_insert_with(|| Published {
+            counters: now.iter().map(|(name, _)| (ctx.counter(name), 0)).collect(),
+        });
+        for ((counter, seen), (_, v)) in published.counters.iter_mut().zip(now) {
+            if v > *seen {
+                counter.add(v - *seen);
+                *seen = v;
+            }
+        }
     }
 
     /// The link ends (stop, or closed at a hot swap): a last look, the records still pending
@@ -252,6 +299,7 @@ impl<D: Decode> Port<D> {
             counted_lost: 0,
             lost_at_restarts: 0,
             closed: false,
+            published: None,
         };
         self.link = Some(Link { reader, watch, _claim: Claim { device: self.settings.device.clone() } });
         Ok(())

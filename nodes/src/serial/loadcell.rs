@@ -126,13 +126,17 @@ impl Source for SerialLoadcell {
     fn poll(&mut self, ctx: &mut Context, out: &mut Outputs) -> Result<SourcePoll, NodeError> {
         let Some(r) = self.port.next(&self.p, ctx)? else { return Ok(SourcePoll::Idle) };
         self.seq += 1;
+        let before = self.negatives.count;
         let (contacts, f, first_negative) = self.truth_of(r.record.force_n);
+        if self.negatives.count > before {
+            ctx.counter("negative_readings").add(self.negatives.count - before);
+        }
         if first_negative {
             tracing::warn!(
                 node = ctx.id(),
                 "{}: reading {f} N (param `scale` = {}) is below -contact_threshold_n (-{} N), recorded as no \
                  contact: is the gauge's sign reversed (set param `scale = -1.0`, or the gauge so that compression \
-                 prints positive) or was it not tared? (warned once; the count is in the summary at stop)",
+                 prints positive) or was it not tared? (warned once; counted as negative_readings in the run statistics)",
                 self.p.port.display(),
                 self.scale,
                 self.contact_threshold_n

@@ -22,6 +22,9 @@ pub(crate) struct EdgeShared {
     pub spec: EdgeSpec,
     /// Set by a producer that found this (block) edge full; the consumer wakes it after a pop.
     pub producer_waiting: AtomicBool,
+    /// Set once the producer will push no more (a source whose stream ended), after its last
+    /// push: an aligned consumer then knows an empty queue stays empty.
+    pub producer_ended: AtomicBool,
     pub stats: EdgeStats,
 }
 
@@ -50,7 +53,12 @@ pub(crate) struct EdgeRx {
 
 /// Creates both ends of an edge.
 pub(crate) fn edge(spec: EdgeSpec) -> (EdgeTx, EdgeRx) {
-    let shared = Arc::new(EdgeShared { producer_waiting: AtomicBool::new(false), stats: EdgeStats::default(), spec });
+    let shared = Arc::new(EdgeShared {
+        producer_waiting: AtomicBool::new(false),
+        producer_ended: AtomicBool::new(false),
+        stats: EdgeStats::default(),
+        spec,
+    });
     let cap = shared.spec.capacity.max(1);
     let (tx, rx) = match shared.spec.policy {
         Policy::Block => {

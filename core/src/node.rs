@@ -339,7 +339,18 @@ impl Context {
         self.stop.load(Ordering::Acquire)
     }
 
-    /// Asks to be called again although no new input arrived (e.g. more buffered output).
+    /// Asks to be called again although no new input arrived (e.g. more buffered output: one
+    /// message per output port per call, so a node with a backlog emits one and asks again).
+    ///
+    /// The next call comes once this call's outputs are published and there is room on the
+    /// node's `block` outputs. A rerun never makes the trigger take inputs it would not take
+    /// otherwise: if the trigger is satisfied then (`any`: an input has a message; `aligned`:
+    /// every input's head aligns; `periodic`: a tick is due), the call takes its inputs as
+    /// usual; if not, the node is called with no inputs (an `aligned` node never sees part of
+    /// a set, a `periodic` node's inputs wait for its next tick). The request holds for one
+    /// call: ask again in that call to be called again. A request made by a call that panics
+    /// is dropped with the panicked instance. In [`Processor::flush`] it asks for another
+    /// flush call. A node that never stops asking is stopped at the shutdown's drain timeout.
     pub fn request_rerun(&mut self) {
         self.rerun = true;
     }

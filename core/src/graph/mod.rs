@@ -28,6 +28,10 @@ pub const DEFAULT_CAPACITY: usize = 64;
 /// starts, so a mistyped capacity would otherwise abort the run on a failed allocation.
 pub const MAX_CAPACITY: usize = 1 << 20;
 
+/// The shortest `period_ms` of a periodic trigger (10 µs): shorter ones are refused at
+/// validation (the timer could not keep them, and one below a nanosecond would be zero).
+pub const MIN_PERIOD_MS: f64 = 0.01;
+
 /// When a processor or sink runs.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Trigger {

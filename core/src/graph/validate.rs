@@ -521,10 +521,17 @@ fn trigger_of(n: &NodeEntry) -> Result<Trigger, (Option<Range<usize>>, String)> 
             }
             match &n.period_ms {
                 None => Err((None, "trigger = \"periodic\" needs period_ms".into())),
-                Some(p) if p.get_ref().is_finite() && *p.get_ref() > 0.0 => {
+                Some(p) if p.get_ref().is_finite() && *p.get_ref() >= super::MIN_PERIOD_MS => {
                     Ok(Trigger::Periodic { period: Duration::from_secs_f64(*p.get_ref() / 1e3) })
                 }
-                Some(p) => Err((Some(p.span()), format!("period_ms must be finite and > 0 (got {})", p.get_ref()))),
+                Some(p) => Err((
+                    Some(p.span()),
+                    format!(
+                        "period_ms must be finite and at least {} ms (the shortest period the timer keeps; got {})",
+                        super::MIN_PERIOD_MS,
+                        p.get_ref()
+                    ),
+                )),
             }
         }
     }

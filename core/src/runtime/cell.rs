@@ -67,6 +67,12 @@ pub(crate) struct Cell {
     pub dead: bool,
     /// A periodic tick is pending.
     pub tick: bool,
+    /// Set by [`Cell::ready`]: the trigger is satisfied, so the next call takes its inputs.
+    /// A call made only because the node asked to be rerun takes none.
+    pub armed: bool,
+    /// Per input: the warning that it ended (its producer finished, its queue is empty) and
+    /// that the aligned trigger drops the other inputs' messages was given.
+    pub ended_warned: Vec<bool>,
 }
 
 pub(crate) fn panic_message(p: Box<dyn std::any::Any + Send>) -> String {
@@ -133,14 +139,21 @@ impl Cell {
         m
     }
 
-    /// Whether the processor or sink may fire now. May discard unalignable heads (counted).
+    /// Whether the processor or sink may fire now: its trigger is satisfied (the call then
+    /// takes inputs per the trigger), or it asked to be rerun (a call that takes only what
+    /// the trigger would take anyway: none when the trigger is not satisfied; see
+    /// [`Context::request_rerun`]). May discard unalignable heads (counted).
     pub fn ready(&mut self, n: &dyn Notify) -> bool {
         if self.dead || !self.outputs_have_space() {
+            self.armed = false;
             return false;
         }
-        if self.ctx.rerun {
-            return true;
-        }
+        self.armed = self.triggered(n);
+        self.armed || self.ctx.rerun
+    }
+
+    /// Whether the trigger is satisfied. May discard unalignable heads (counted).
+    fn triggered(&mut self, n: &dyn Notify) -> bool {
         match self.trigger {
             Trigger::Any => self.inputs.iter_mut().any(|rx| rx.peek().is_some()),
             Trigger::Periodic { .. } => self.tick,
@@ -150,8 +163,12 @@ impl Cell {
                 }
                 let mut lo = (u64::MAX, 0usize);
                 let mut hi = 0u64;
+                let mut empty = None;
                 for (i, rx) in self.inputs.iter_mut().enumerate() {
-                    let Some(h) = rx.peek() else { return false };
+                    let Some(h) = rx.peek() else {
+                        empty = Some(i);
+                        break;
+                    };
                     let key = match self.trigger {
                         Trigger::AlignedSeq => h.header.seq,
                         _ => h.header.t_ns,
@@ -160,6 +177,12 @@ impl Cell {
                         lo = (key, i);
                     }
                     hi = hi.max(key);
+                }
+                if let Some(i) = empty {
+                    if self.input_ended(i) {
+                        self.drop_unalignable(i, n);
+                    }
+                    return false;
                 }
                 let aligned = match self.trigger {
                     Trigger::AlignedWindow { window_ns } => hi - lo.0 <= window_ns,
@@ -176,8 +199,58 @@ impl Cell {
         }
     }
 
+    /// Whether input `i` will never have a message again: its producer ended (a source whose
+    /// stream ended) and its queue is empty. The flag is set after the producer's last push,
+    /// so the queue is looked at again once it is seen.
+    fn input_ended(&mut self, i: usize) -> bool {
+        let rx = &mut self.inputs[i];
+        rx.shared.producer_ended.load(SeqCst) && rx.peek().is_none()
+    }
+
+    /// Input `ended` of an aligned node will never have a message again: what the other
+    /// inputs hold can never be aligned. Drops it, counted as `dropped_unaligned` (and frees
+    /// their producers, which would otherwise wait on a full `block` edge forever); says so
+    /// once per ended input.
+    fn drop_unalignable(&mut self, ended: usize, n: &dyn Notify) {
+        let mut dropped = 0u64;
+        for j in 0..self.inputs.len() {
+            if j == ended {
+                continue;
+            }
+            let mut k = 0;
+            while self.take(j, n).is_some() {
+                k += 1;
+            }
+            bump(&self.inputs[j].shared.stats.dropped_unaligned, k);
+            dropped += k;
+        }
+        if dropped > 0 && !std::mem::replace(&mut self.ended_warned[ended], true) {
+            tracing::warn!(
+                node = %self.ctx.id,
+                input = %self.inputs[ended].shared.spec.to,
+                from = %self.inputs[ended].shared.spec.from,
+                "aligned input ended (its producer finished and its queue is empty): the messages on the other inputs can never be aligned and are dropped (counted as dropped_unaligned)"
+            );
+        }
+    }
+
+    /// This node produces no more (a source whose stream ended): marks its output edges so
+    /// aligned consumers know an empty input stays empty, and wakes the consumers to look.
+    pub fn close_outputs(&self, n: &dyn Notify) {
+        for tx in self.outputs.iter().flatten() {
+            if !tx.shared.producer_ended.swap(true, SeqCst) {
+                n.notify(tx.shared.spec.to_node);
+            }
+        }
+    }
+
     /// Fills `in_io` per the trigger. Returns the number of messages taken.
     fn select_inputs(&mut self, n: &dyn Notify) -> u64 {
+        // A rerun call whose trigger is not satisfied takes nothing (and leaves a periodic
+        // node's tick for its next tick call).
+        if !std::mem::take(&mut self.armed) {
+            return 0;
+        }
         match self.trigger {
             Trigger::Any => {
                 let mut best: Option<(u64, usize)> = None;
@@ -296,6 +369,11 @@ impl Cell {
             }
             Err(p) => {
                 bump(&st.panics, 1);
+                // The inputs the call took die with it: counted as discarded by the node.
+                // (What it sent before panicking is not published: see `after_panic`.)
+                if let Some(k) = taken.filter(|&k| k > 0) {
+                    self.ctx.count_discarded(k);
+                }
                 let msg = panic_message(p);
                 tracing::error!(node = %self.ctx.id, "panicked: {msg}");
                 (self.after_panic(msg), false)
@@ -309,13 +387,17 @@ impl Cell {
     ///
     /// The panicked instance is stopped before it is dropped, so what it held is counted as
     /// discarded (its `stop` counts it: a plugin reports what it held even after the panic;
-    /// a built-in node whose state the panic left inconsistent may count less, never
-    /// silently more). Without a restart, or when the rebuild fails, it stays as the node's
-    /// dead instance and is stopped, and counts, at the end of the run.
+    /// a built-in node whose state the panic left inconsistent may count less). The inputs
+    /// the panicked call took were counted as discarded by [`Cell::call`] (an instance that
+    /// had stored one before panicking counts it again in its `stop`: a count may then be
+    /// high, never silently low). Without a restart, or when the rebuild fails, it stays as
+    /// the node's dead instance and is stopped, and counts, at the end of the run.
     fn after_panic(&mut self, msg: String) -> Fired {
         for slot in &mut self.out_io.slots {
             *slot = None; // outputs of a panicked call are not trusted
         }
+        // A rerun asked by the panicked instance is not the restarted one's (nor a dead one's).
+        self.ctx.rerun = false;
         if self.restart == Restart::Always {
             let r = &self.recipe;
             match r.factory.build(&r.params, &r.build).and_then(|mut imp| {
@@ -362,15 +444,16 @@ impl Cell {
     /// its loop ends; lockstep after its last pass, before the end-of-stream flush): the
     /// source is stopped under `catch_unwind` (an error or a panic in its `stop` fails the
     /// graph as "stop failed: ..." or "stop panicked: ..."), never called again, its slot
-    /// marked ended, and the control work queued for it refused. The caller puts the cell back
-    /// in its slot.
-    pub fn end_source(&mut self, shared: &Shared, node: usize) {
+    /// marked ended, its output edges closed ([`Cell::close_outputs`]), and the control work
+    /// queued for it refused. The caller puts the cell back in its slot.
+    pub fn end_source(&mut self, shared: &Shared, node: usize, n: &dyn Notify) {
         match stop_caught(&mut self.imp, &mut self.ctx) {
             Ok(()) => {}
             Err(StopFailure::Error(e)) => shared.fail(node, NodeError::msg(format!("stop failed: {e}"))),
             Err(StopFailure::Panic(msg)) => shared.fail(node, NodeError::msg(format!("stop panicked: {msg}"))),
         }
         self.dead = true; // stopped: never run again
+        self.close_outputs(n);
         let slot = &shared.slots[node];
         slot.ended.store(true, SeqCst);
         // Queued before `ended` was set: answered now rather than left waiting for the run's end.

@@ -15,6 +15,7 @@
 use std::time::Instant;
 
 use super::cell::{Cell, Flushed};
+use super::drain_timeout_error;
 use super::lockstep::{Dirty, drain};
 use super::pool::{Exec, Shared};
 use crate::graph::Trigger;
@@ -25,7 +26,9 @@ use crate::node::NodeImpl;
 pub(crate) fn flush_all(shared: &Shared, cells: &mut [Box<Cell>], topo: &[usize], deadline: Instant) {
     let order: Vec<usize> = topo.iter().copied().filter(|&i| shared.slots[i].exec != Exec::Source).collect();
     let n = Dirty::new(cells.len());
-    settle(shared, cells, &order, &n);
+    if !settle(shared, cells, &order, &n, deadline) {
+        return;
+    }
     for &i in &order {
         shared.run_controls(i, &mut cells[i]);
         if cells[i].dead || !matches!(cells[i].imp, NodeImpl::Processor(_)) {
@@ -37,10 +40,13 @@ pub(crate) fn flush_all(shared: &Shared, cells: &mut [Box<Cell>], topo: &[usize]
                     node = %cells[i].ctx.id(),
                     "end-of-stream flush stopped at the shutdown deadline; nodes not flushed count what they hold"
                 );
+                shared.fail(i, drain_timeout_error());
                 return;
             }
             if !cells[i].outputs_have_space() {
-                settle(shared, cells, &order, &n);
+                if !settle(shared, cells, &order, &n, deadline) {
+                    return;
+                }
                 if !cells[i].outputs_have_space() {
                     // The consumers cannot take more (dead, or waiting for an input that
                     // will never come): what the node still holds is counted at its stop.
@@ -49,7 +55,9 @@ pub(crate) fn flush_all(shared: &Shared, cells: &mut [Box<Cell>], topo: &[usize]
                 }
             }
             let outcome = cells[i].flush(&n);
-            settle(shared, cells, &order, &n);
+            if !settle(shared, cells, &order, &n, deadline) {
+                return;
+            }
             match outcome {
                 Flushed::More => continue,
                 Flushed::Done => break,
@@ -63,13 +71,22 @@ pub(crate) fn flush_all(shared: &Shared, cells: &mut [Box<Cell>], topo: &[usize]
 }
 
 /// Runs every node that is ready until none is. A periodic node with queued input gets a tick
-/// (its timer no longer runs), so flushed messages reach periodic consumers too.
-fn settle(shared: &Shared, cells: &mut [Box<Cell>], order: &[usize], n: &Dirty) {
+/// (its timer no longer runs), so flushed messages reach periodic consumers too. False when
+/// the deadline passed first (a node that never stops asking to rerun): it fails the run,
+/// and the flush ends there.
+fn settle(shared: &Shared, cells: &mut [Box<Cell>], order: &[usize], n: &Dirty, deadline: Instant) -> bool {
     for &i in order {
         let c = &mut cells[i];
         if matches!(c.trigger, Trigger::Periodic { .. }) && c.inputs.iter().any(|rx| rx.pending() > 0) {
             c.tick = true;
         }
     }
-    drain(shared, cells, order, n);
+    match drain(shared, cells, order, n, deadline) {
+        Ok(()) => true,
+        Err(i) => {
+            tracing::warn!(node = %cells[i].ctx.id(), "end-of-stream flush stopped at the shutdown deadline: the node was still being called");
+            shared.fail(i, drain_timeout_error());
+            false
+        }
+    }
 }

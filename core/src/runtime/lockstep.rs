@@ -4,14 +4,20 @@
 //! races: the same inputs give bit-identical outputs run to run. When the sources are done
 //! (finished, or a stop was requested) the sources are stopped and every processor is flushed
 //! ([`super::flush`]), still on this thread and in a fixed order.
+//!
+//! A source whose stream ended closes its output edges: an aligned consumer then drops (counted
+//! as unaligned) what can no longer be aligned instead of holding it, so the other sources are
+//! not blocked forever (as in real time). A step, and the final drain and flush, are bounded by
+//! the drain timeout: a node still being called then (one that never stops asking to rerun)
+//! fails the run instead of hanging it.
 
 use std::cell::Cell as StdCell;
 use std::sync::atomic::AtomicBool;
 use std::sync::atomic::Ordering::SeqCst;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
-use super::DRAIN_TIMEOUT;
 use super::cell::{Cell, Fired, Notify};
+use super::drain_timeout_error;
 use super::pool::{Exec, Shared};
 use crate::error::NodeError;
 use crate::graph::Trigger;
@@ -34,13 +40,23 @@ impl Notify for Dirty {
     }
 }
 
-pub(crate) fn run(shared: &Shared, topo: &[usize], external_stop: &AtomicBool, until: Option<Instant>) {
+/// Runs the graph to its end. `drain_timeout` bounds each step's processing, and the final
+/// drain and flush together: a node still being called then (one that never stops asking to
+/// rerun) fails the run, no node is called again and nothing is flushed.
+pub(crate) fn run(
+    shared: &Shared,
+    topo: &[usize],
+    external_stop: &AtomicBool,
+    until: Option<Instant>,
+    drain_timeout: Duration,
+) {
     let mut cells: Vec<Box<Cell>> =
         shared.slots.iter().map(|s| s.cell.take().expect("cells are in their slots before a lockstep run")).collect();
     let sources: Vec<usize> = topo.iter().copied().filter(|&i| shared.slots[i].exec == Exec::Source).collect();
     let others: Vec<usize> = topo.iter().copied().filter(|&i| shared.slots[i].exec != Exec::Source).collect();
     let mut finished = vec![false; cells.len()];
     let n = Dirty::new(cells.len());
+    let mut stuck = None;
     loop {
         if external_stop.load(SeqCst) || shared.stop.load(SeqCst) || until.is_some_and(|t| Instant::now() >= t) {
             break;
@@ -66,6 +82,8 @@ pub(crate) fn run(shared: &Shared, topo: &[usize], external_stop: &AtomicBool, u
             }
             if finished[s] {
                 shared.slots[s].ended.store(true, SeqCst);
+                // Aligned consumers may now know that an empty input stays empty.
+                cell.close_outputs(&n);
             }
         }
         for &i in &others {
@@ -73,7 +91,10 @@ pub(crate) fn run(shared: &Shared, topo: &[usize], external_stop: &AtomicBool, u
                 cells[i].tick = true;
             }
         }
-        drain(shared, &mut cells, &others, &n);
+        if let Err(i) = drain(shared, &mut cells, &others, &n, Instant::now() + drain_timeout) {
+            stuck = Some(i);
+            break;
+        }
         if sources.iter().all(|&s| finished[s]) {
             break;
         }
@@ -88,19 +109,45 @@ pub(crate) fn run(shared: &Shared, topo: &[usize], external_stop: &AtomicBool, u
         }
     }
     // Final pass: whatever is queued and can run, runs (also after a stop request).
-    drain(shared, &mut cells, &others, &n);
-    for &s in &sources {
-        cells[s].end_source(shared, s);
+    let deadline = Instant::now() + drain_timeout;
+    if stuck.is_none()
+        && let Err(i) = drain(shared, &mut cells, &others, &n, deadline)
+    {
+        stuck = Some(i);
     }
-    // End of stream: what processors still buffer goes downstream before anything stops.
-    super::flush::flush_all(shared, &mut cells, topo, Instant::now() + DRAIN_TIMEOUT);
+    for &s in &sources {
+        cells[s].end_source(shared, s, &n);
+    }
+    match stuck {
+        // End of stream: what processors still buffer goes downstream before anything stops.
+        None => super::flush::flush_all(shared, &mut cells, topo, deadline),
+        Some(i) => {
+            tracing::warn!(
+                node = %cells[i].ctx.id(),
+                "still running after {drain_timeout:?}; stopping anyway (processors are not flushed)"
+            );
+            shared.fail(i, drain_timeout_error());
+        }
+    }
     for (slot, cell) in shared.slots.iter().zip(cells) {
         slot.cell.store(Some(cell));
     }
 }
 
-/// Runs the nodes of `order` (in that order, repeatedly) until none is ready.
-pub(crate) fn drain(shared: &Shared, cells: &mut [Box<Cell>], order: &[usize], n: &Dirty) {
+/// Calls between two looks at the clock in [`drain`].
+const CALLS_PER_CLOCK_CHECK: u32 = 256;
+
+/// Runs the nodes of `order` (in that order, repeatedly) until none is ready. `Err(node)`:
+/// `deadline` passed while `node` was still being called (it stays ready: a node that never
+/// stops asking to rerun); nothing more is called.
+pub(crate) fn drain(
+    shared: &Shared,
+    cells: &mut [Box<Cell>],
+    order: &[usize],
+    n: &Dirty,
+    deadline: Instant,
+) -> Result<(), usize> {
+    let mut calls = 0u32;
     loop {
         let mut any = false;
         for &i in order {
@@ -111,15 +158,21 @@ pub(crate) fn drain(shared: &Shared, cells: &mut [Box<Cell>], order: &[usize], n
             }
             while cell.ready(n) {
                 any = true;
+                calls += 1;
+                if calls.is_multiple_of(CALLS_PER_CLOCK_CHECK) && Instant::now() >= deadline {
+                    n.0[i].set(true); // still ready
+                    return Err(i);
+                }
                 if let Fired::Fatal(e) = cell.fire(n) {
                     shared.fail(i, e);
                 }
+                shared.run_controls(i, cell);
             }
         }
         // Done when nothing ran and nothing was woken meanwhile (an aligned trigger that
         // discards a head can free room for its producer without running).
         if !any && !order.iter().any(|&i| n.0[i].get()) {
-            return;
+            return Ok(());
         }
     }
 }

@@ -38,8 +38,19 @@ use crate::stats::{NodeStats, StatsReport};
 
 /// Longest the shutdown waits for queues to drain and processors to flush before it counts
 /// what is left as undelivered (or discarded, by the nodes holding it) and stops the nodes
-/// anyway (a node that never stops asking to rerun).
+/// anyway (a node that never stops asking to rerun). Once it has passed no node is called
+/// again: workers and node threads exit, `wait` returns, and the run's failures name the
+/// nodes still running or queued then.
 pub(crate) const DRAIN_TIMEOUT: Duration = Duration::from_secs(30);
+
+/// The failure a node still running or queued when the drain timeout passed is reported with.
+pub(crate) fn drain_timeout_error() -> NodeError {
+    NodeError::msg(
+        "still running when the drain timeout passed (a node that never stops asking to be rerun, or one too slow \
+         for its backlog): stopped without the end-of-stream flush, what it held counted as discarded and its \
+         queued input as undelivered",
+    )
+}
 
 /// Why a run did not go as planned.
 #[derive(Debug, thiserror::Error)]
@@ -97,6 +108,8 @@ pub struct RunningGraph {
     timer: Option<JoinHandle<()>>,
     timer_stop: Arc<AtomicBool>,
     handle: GraphHandle,
+    /// [`DRAIN_TIMEOUT`], shorter in tests.
+    drain_timeout: Duration,
 }
 
 /// Builds, starts and runs a graph to its end; the convenience form of [`RunningGraph`].
@@ -153,6 +166,7 @@ impl RunningGraph {
         let mut stats = Vec::with_capacity(n);
         for (i, (ns, (outs, mut ins))) in spec.nodes.iter().zip(txs.into_iter().zip(rxs)).enumerate() {
             ins.sort_by_key(|(port, _)| *port); // stable: lanes keep file order
+            let n_inputs = ins.len();
             let port_of: Vec<usize> = ins.iter().map(|(p, _)| *p).collect();
             let connected: Vec<bool> = outs.iter().map(|v| !v.is_empty()).collect();
             let st = Arc::new(NodeStats::default());
@@ -171,6 +185,8 @@ impl RunningGraph {
                 stats: st,
                 dead: false,
                 tick: false,
+                armed: false,
+                ended_warned: vec![false; n_inputs],
             }));
         }
 
@@ -260,6 +276,7 @@ impl RunningGraph {
             timer_stop: Arc::new(AtomicBool::new(false)),
             shared,
             handle,
+            drain_timeout: DRAIN_TIMEOUT,
         };
         if spec.mode == Mode::Realtime {
             g.spawn_threads(spec, locals, parkers);
@@ -323,6 +340,12 @@ impl RunningGraph {
         }
     }
 
+    /// Sets the shutdown's drain timeout (default [`DRAIN_TIMEOUT`]); for tests.
+    #[cfg(test)]
+    pub(crate) fn set_drain_timeout(&mut self, timeout: Duration) {
+        self.drain_timeout = timeout;
+    }
+
     /// Index of a node by id.
     pub fn node_index(&self, id: &str) -> Option<usize> {
         self.handle.node_index(id)
@@ -360,7 +383,7 @@ impl RunningGraph {
         let never = AtomicBool::new(false);
         let external = opts.stop.as_deref().unwrap_or(&never);
         if self.mode == Mode::Lockstep {
-            lockstep::run(&self.shared, &self.topo, external, until);
+            lockstep::run(&self.shared, &self.topo, external, until, self.drain_timeout);
         } else {
             self.wait_sources(external, until);
             self.drain();
@@ -405,19 +428,28 @@ impl RunningGraph {
                 self.shared.notify_external(i);
             }
         }
-        let deadline = Instant::now() + DRAIN_TIMEOUT;
+        let timeout = self.drain_timeout;
+        let deadline = Instant::now() + timeout;
         let drained = loop {
             if self.shared.active.load(SeqCst) == 0 {
                 break true;
             }
             if Instant::now() >= deadline {
-                tracing::warn!(
-                    "queues did not drain within {DRAIN_TIMEOUT:?}; stopping anyway (processors are not flushed)"
-                );
+                tracing::warn!("queues did not drain within {timeout:?}; stopping anyway (processors are not flushed)");
                 break false;
             }
             std::thread::sleep(Duration::from_millis(1));
         };
+        if !drained {
+            // The nodes still queued or running (looked at before they are told to stop).
+            for (i, slot) in self.shared.slots.iter().enumerate() {
+                if slot.exec != Exec::Source && slot.state.load(SeqCst) != IDLE {
+                    self.shared.fail(i, drain_timeout_error());
+                }
+            }
+        }
+        // Workers and node threads exit, also in the middle of a node's activation: no node
+        // is called again (a node that never stops asking to rerun included).
         self.shared.shutdown.store(true, SeqCst);
         for s in &self.shared.sleepers {
             s.unparker.unpark();
@@ -514,18 +546,31 @@ impl Drop for RunningGraph {
     }
 }
 
+/// Shortest period the timer keeps (validation refuses shorter ones, see
+/// [`crate::graph::MIN_PERIOD_MS`]): a zero period would never let it move on.
+pub(crate) const MIN_TIMER_PERIOD: Duration = Duration::from_micros(1);
+
+/// The first tick time after `now` on the grid `next + k * period` (`next <= now`), in one
+/// step however many periods were missed: missed ticks are not made up (one tick pending is
+/// what a periodic node sees anyway).
+pub(crate) fn next_tick(next: Instant, now: Instant, period: Duration) -> Instant {
+    let period = period.max(MIN_TIMER_PERIOD);
+    let late = now.saturating_duration_since(next).as_nanos();
+    let skip = late / period.as_nanos() + 1; // whole periods, to the first one after `now`
+    let ahead = period.as_nanos().saturating_mul(skip);
+    next + Duration::from_nanos(u64::try_from(ahead).unwrap_or(u64::MAX).min(u64::MAX / 4))
+}
+
 fn timer_loop(shared: &Shared, periodic: &[(usize, Duration)], stop: &AtomicBool) {
     let start = Instant::now();
-    let mut next: Vec<Instant> = periodic.iter().map(|(_, p)| start + *p).collect();
+    let mut next: Vec<Instant> = periodic.iter().map(|(_, p)| start + (*p).max(MIN_TIMER_PERIOD)).collect();
     while !stop.load(SeqCst) {
         let now = Instant::now();
         for (k, &(i, period)) in periodic.iter().enumerate() {
             if now >= next[k] {
                 shared.slots[i].tick.store(true, SeqCst);
                 shared.notify_external(i);
-                while next[k] <= now {
-                    next[k] += period;
-                }
+                next[k] = next_tick(next[k], now, period);
             }
         }
         let wake = next.iter().min().copied().unwrap_or(now + Duration::from_millis(50));

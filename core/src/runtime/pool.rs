@@ -9,7 +9,7 @@
 
 use std::cell::Cell as StdCell;
 use std::sync::Arc;
-use std::sync::atomic::Ordering::SeqCst;
+use std::sync::atomic::Ordering::{Relaxed, SeqCst};
 use std::sync::atomic::{AtomicBool, AtomicU8, AtomicUsize};
 use std::thread::Thread;
 use std::time::Duration;
@@ -109,7 +109,8 @@ pub(crate) struct Shared {
     pub active: AtomicUsize,
     /// Sources stop polling (the contexts' stop flag).
     pub stop: Arc<AtomicBool>,
-    /// Workers and dedicated threads exit.
+    /// Workers and dedicated threads exit (the queues drained, or the drain timeout passed:
+    /// a running node then makes no further call).
     pub shutdown: AtomicBool,
     pub failures: std::sync::Mutex<Vec<(usize, NodeError)>>,
     /// The kind each node runs now, updated when a swap is installed (not when it is asked).
@@ -197,7 +198,10 @@ impl Shared {
         }
     }
 
-    /// Runs a queued node until it is not ready, its budget is spent, or it is notified no more.
+    /// Runs a queued node until it is not ready, its budget is spent, it is notified no more,
+    /// or the shutdown's drain timeout passed ([`Shared::shutdown`] set while it runs). Its
+    /// control work (commands, a swap, a policy) is applied before every call, so a node that
+    /// stays ready (a dedicated node has no budget) still runs it between two calls.
     pub fn execute(&self, node: usize, n: &dyn Notify, budget: usize) {
         let slot = &self.slots[node];
         slot.state.store(RUNNING, SeqCst);
@@ -208,11 +212,12 @@ impl Shared {
             if take_flag(&slot.tick) {
                 cell.tick = true;
             }
-            while left > 0 && cell.ready(n) {
+            while left > 0 && !self.shutdown.load(Relaxed) && cell.ready(n) {
                 left -= 1;
                 if let Fired::Fatal(e) = cell.fire(n) {
                     self.fail(node, e);
                 }
+                self.run_controls(node, &mut cell);
             }
             slot.cell.store(Some(cell));
             if left == 0 {
@@ -277,13 +282,15 @@ impl Notify for WorkerNotify<'_> {
 pub(crate) fn worker_loop(shared: &Shared, idx: usize, local: Worker<usize>, parker: Parker) {
     let n = WorkerNotify { shared, local: &local, lifo: StdCell::new(None) };
     loop {
+        // Set once the queues drained, or when the drain timeout passed: then nodes may still
+        // be queued (one that never stops asking to rerun), and are left so.
+        if shared.shutdown.load(SeqCst) {
+            return;
+        }
         let next = n.lifo.take().or_else(|| local.pop()).or_else(|| steal(shared));
         if let Some(node) = next {
             shared.execute(node, &n, BUDGET);
             continue;
-        }
-        if shared.shutdown.load(SeqCst) {
-            return;
         }
         shared.sleepers[idx].sleeping.store(true, SeqCst);
         if !shared.injector.is_empty() || shared.stealers.iter().any(|s| !s.is_empty()) {
@@ -315,10 +322,10 @@ fn steal(shared: &Shared) -> Option<usize> {
 pub(crate) fn dedicated_loop(shared: &Shared, node: usize) {
     let n = ExternalNotify(shared);
     loop {
-        if shared.slots[node].state.load(SeqCst) == QUEUED {
-            shared.execute(node, &n, usize::MAX);
-        } else if shared.shutdown.load(SeqCst) {
+        if shared.shutdown.load(SeqCst) {
             return;
+        } else if shared.slots[node].state.load(SeqCst) == QUEUED {
+            shared.execute(node, &n, usize::MAX);
         } else {
             std::thread::park_timeout(IDLE_PARK);
         }
@@ -349,6 +356,6 @@ pub(crate) fn source_loop(shared: &Shared, node: usize) {
             }
         }
     }
-    cell.end_source(shared, node);
+    cell.end_source(shared, node, &n);
     slot.cell.store(Some(cell));
 }

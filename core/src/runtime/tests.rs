@@ -1,4 +1,5 @@
-//! The runtime's own tests: what a panicking instance held is counted; a swap counts (and
+//! The runtime's own tests: what a panicking instance held, and the input of the call that
+//! panicked, are counted; a swap counts (and
 //! shows its kind) only once installed, is answered with a replacement's refusal, and never
 //! runs when its node does not, and is refused when an input file its params name is not
 //! there; deadline and restart policy change while the graph runs; a
@@ -323,10 +324,11 @@ fn what_a_restarted_instance_held_when_it_panicked_is_counted_as_discarded() {
     let r = held_at_panic("always");
     assert!(r.failures.is_empty(), "{:?}", r.failures);
     let h = node(&r, "h");
-    // Two instances each emit 1 and hold 3 when their 5th call panics (that call's input is
-    // the panic's); the third takes the last 2 inputs and flushes them.
+    // Two instances each emit 1 and hold 3 when their 5th call panics; that call's input dies
+    // with it; the third takes the last 2 inputs and flushes them. 12 in = 4 out + 8 discarded.
     assert_eq!((h.msgs_in, h.msgs_out, h.panics, h.restarts), (12, 4, 2, 2));
-    assert_eq!(h.discarded, 6, "the 3 messages each panicked instance held");
+    assert_eq!(h.discarded, 8, "the 3 messages each panicked instance held, and each panicked call's input");
+    assert_eq!(h.msgs_in, h.msgs_out + h.discarded, "every input accounted for");
     // A node's own counter goes on across its instances; one at 0 is reported, not shown.
     let counters: Vec<(&str, u64)> = h.counters.iter().map(|(k, v)| (k.as_str(), *v)).collect();
     assert_eq!(counters, [("inputs_seen", 12), ("never_counted", 0)]);
@@ -341,7 +343,8 @@ fn what_a_dead_instance_held_is_counted_at_the_end_of_the_run() {
     assert_eq!(r.failures.len(), 1, "{:?}", r.failures);
     let h = node(&r, "h");
     assert_eq!((h.msgs_in, h.msgs_out, h.panics, h.restarts), (5, 1, 1, 0));
-    assert_eq!(h.discarded, 3, "the 3 messages the panicked instance held");
+    assert_eq!(h.discarded, 4, "the 3 messages the panicked instance held, and its panicked call's input");
+    assert_eq!(h.msgs_in, h.msgs_out + h.discarded, "every input it took accounted for");
 }
 
 /// The rows `collect` wrote.
@@ -627,7 +630,7 @@ fn a_stop_that_panics_is_logged_for_a_replaced_instance_and_reported_at_the_end_
         }
         let h = node(&r, "h");
         assert_eq!((h.msgs_in, h.msgs_out, h.panics, h.restarts), (12, 4, 2, 2), "{mode}");
-        assert_eq!(h.discarded, 6, "{mode}: counted before the stops panicked");
+        assert_eq!(h.discarded, 8, "{mode}: counted before the stops panicked (and the panicked calls' inputs)");
     }
 }
 
@@ -729,4 +732,332 @@ fn a_swap_whose_input_file_is_missing_is_refused_naming_the_param_and_the_node_g
     let r = running.wait(&RunOptions { stop: Some(Arc::new(AtomicBool::new(true))), ..RunOptions::default() });
     assert!(r.failures.is_empty(), "{:?}", r.failures);
     assert_eq!(node(&r, "h").swaps, 1);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Reruns and triggers, the drain timeout, periodic periods, aligned inputs that end, control
+// work on busy dedicated nodes. Every run that could hang on a regression runs under a
+// watchdog ([`within`]): the test fails after a generous bound instead of hanging.
+mod engine_bounds {
+    use super::*;
+    use std::sync::Mutex;
+
+    #[derive(Deserialize)]
+    #[serde(deny_unknown_fields)]
+    struct BusyParams {
+        #[serde(default)]
+        busy_us: u64,
+    }
+    impl NodeParams for BusyParams {}
+
+    /// The (a, b) sequence numbers of each call of a `pairs` node that took inputs.
+    type Log = Arc<Mutex<Vec<(Option<u64>, Option<u64>)>>>;
+
+    /// Aligned on (a, b): queues both messages of each set and emits one per call, asking to
+    /// be rerun while it holds more (the shape of `sync` or `lag` with a backlog). Records the
+    /// inputs of every call that took any; flushes what it still holds at end of stream.
+    struct Pairs {
+        log: Log,
+        queued: VecDeque<Message>,
+        empty_calls: Arc<AtomicU64>,
+    }
+    impl Processor for Pairs {
+        fn process(&mut self, ctx: &mut Context, inputs: &Inputs, out: &mut Outputs) -> Result<(), NodeError> {
+            let (a, b) = (inputs.get(0), inputs.get(1));
+            if a.is_some() || b.is_some() {
+                self.log.lock().unwrap().push((a.map(|m| m.header.seq), b.map(|m| m.header.seq)));
+            } else {
+                self.empty_calls.fetch_add(1, SeqCst);
+            }
+            self.queued.extend(a.cloned());
+            self.queued.extend(b.cloned());
+            if let Some(m) = self.queued.pop_front() {
+                out.send(0, m)?;
+            }
+            if !self.queued.is_empty() {
+                ctx.request_rerun();
+            }
+            Ok(())
+        }
+        fn flush(&mut self, ctx: &mut Context, out: &mut Outputs) -> Result<(), NodeError> {
+            if let Some(m) = self.queued.pop_front() {
+                out.send(0, m)?;
+            }
+            if !self.queued.is_empty() {
+                ctx.request_rerun();
+            }
+            Ok(())
+        }
+        fn stop(&mut self, ctx: &mut Context) -> Result<(), NodeError> {
+            ctx.count_discarded(self.queued.len() as u64);
+            Ok(())
+        }
+    }
+
+    /// Asks to be rerun forever once it saw an input (the node bug the drain timeout is for).
+    struct Spin {
+        seen: bool,
+    }
+    impl Processor for Spin {
+        fn process(&mut self, ctx: &mut Context, inputs: &Inputs, _out: &mut Outputs) -> Result<(), NodeError> {
+            self.seen |= !inputs.is_empty();
+            if self.seen {
+                ctx.request_rerun();
+            }
+            Ok(())
+        }
+    }
+
+    /// Busy-waits `busy_us` per call, passes its input on, accepts every control command.
+    struct Busy {
+        d: Duration,
+    }
+    impl Processor for Busy {
+        fn process(&mut self, _ctx: &mut Context, inputs: &Inputs, out: &mut Outputs) -> Result<(), NodeError> {
+            let t0 = Instant::now();
+            while t0.elapsed() < self.d {
+                std::hint::spin_loop();
+            }
+            if let Some(m) = inputs.get(0) {
+                out.send(0, m.clone())?;
+            }
+            Ok(())
+        }
+        fn control(&mut self, _ctx: &mut Context, _cmd: &str) -> Result<(), NodeError> {
+            Ok(())
+        }
+    }
+
+    fn reg(log: &Log, empty_calls: &Arc<AtomicU64>) -> Registry {
+        let mut r = registry(&Arc::default());
+        let count = || PortSpec::output::<Count>("out", "the value");
+        let (log, empty_calls) = (log.clone(), empty_calls.clone());
+        r.register(typed(
+            KindInfo::new("pairs", Role::Processor, "test: aligned pairs, one output per call")
+                .input(PortSpec::input::<Count>("a", "a"))
+                .input(PortSpec::input::<Count>("b", "b"))
+                .output(count()),
+            move |_: BusyParams, _| {
+                Ok(NodeImpl::Processor(Box::new(Pairs {
+                    log: log.clone(),
+                    queued: VecDeque::new(),
+                    empty_calls: empty_calls.clone(),
+                })))
+            },
+        ))
+        .unwrap();
+        r.register(typed(
+            KindInfo::new("spin", Role::Processor, "test: reruns forever")
+                .input(PortSpec::input::<Count>("in", "in"))
+                .output(count()),
+            |_: BusyParams, _| Ok(NodeImpl::Processor(Box::new(Spin { seen: false }))),
+        ))
+        .unwrap();
+        r.register(typed(
+            KindInfo::new("busy", Role::Processor, "test: slow pass-through")
+                .input(PortSpec::input::<Count>("in", "in"))
+                .output(count()),
+            |p: BusyParams, _| Ok(NodeImpl::Processor(Box::new(Busy { d: Duration::from_micros(p.busy_us) }))),
+        ))
+        .unwrap();
+        r
+    }
+
+    /// How long a run that should end is given before the test fails (not an assertion on
+    /// speed: every run here ends in well under a second).
+    const WATCHDOG: Duration = Duration::from_secs(120);
+
+    /// Runs `f` on another thread; fails the test (instead of hanging) when it has not
+    /// returned within [`WATCHDOG`].
+    fn within<T: Send + 'static>(what: &str, f: impl FnOnce() -> T + Send + 'static) -> T {
+        let (tx, rx) = std::sync::mpsc::channel();
+        std::thread::spawn(move || {
+            let _ = tx.send(f());
+        });
+        match rx.recv_timeout(WATCHDOG) {
+            Ok(r) => r,
+            Err(_) => panic!("{what}: did not return within {WATCHDOG:?}"),
+        }
+    }
+
+    fn edge_to<'a>(r: &'a RunReport, to: &str) -> &'a crate::stats::EdgeReport {
+        r.stats.edges.iter().find(|e| e.to == to).unwrap()
+    }
+
+    #[test]
+    fn a_rerun_call_takes_only_what_the_aligned_trigger_would_take_and_loses_nothing() {
+        for mode in ["lockstep", "realtime"] {
+            let log: Log = Arc::default();
+            let empty_calls = Arc::new(AtomicU64::new(0));
+            let r = reg(&log, &empty_calls);
+            // b's stream lags a's by one message (released at end of stream by `lag`'s
+            // flush), so `p` often has a backlog and a rerun while a's next head waits.
+            let g = spec(
+                &r,
+                &format!(
+                    "[graph]\nmode = \"{mode}\"\n\
+                     [[node]]\nid = \"sa\"\nkind = \"counter\"\nparams = {{ count = 10 }}\n\
+                     [[node]]\nid = \"sb\"\nkind = \"counter\"\nparams = {{ count = 10 }}\n\
+                     [[node]]\nid = \"lag\"\nkind = \"lag\"\nparams = {{ by = 1 }}\n\
+                     [[node]]\nid = \"p\"\nkind = \"pairs\"\ntrigger = \"aligned\"\n\
+                     [[node]]\nid = \"out\"\nkind = \"null\"\n\
+                     [[edge]]\nfrom = \"sa.out\"\nto = \"p.a\"\n\
+                     [[edge]]\nfrom = \"sb.out\"\nto = \"lag.in\"\n\
+                     [[edge]]\nfrom = \"lag.out\"\nto = \"p.b\"\n\
+                     [[edge]]\nfrom = \"p.out\"\nto = \"out.in\"\n"
+                ),
+            );
+            let rep = within(mode, move || crate::runtime::run(&g, &RunOptions::default()).unwrap());
+            assert!(rep.failures.is_empty(), "{mode}: {:?}", rep.failures);
+            let calls = log.lock().unwrap().clone();
+            let expected: Vec<_> = (0..10).map(|k| (Some(k), Some(k))).collect();
+            assert_eq!(calls, expected, "{mode}: every call that took inputs took one aligned set");
+            assert!(empty_calls.load(SeqCst) > 0, "{mode}: the reruns were calls without inputs");
+            assert_eq!(rep.stats.total_drops(), 0, "{mode}: nothing dropped");
+            let p = node(&rep, "p");
+            assert_eq!((p.msgs_in, p.msgs_out, p.discarded), (20, 20, 0), "{mode}");
+            assert_eq!(node(&rep, "out").msgs_in, 20, "{mode}");
+        }
+    }
+
+    #[test]
+    fn a_node_that_never_stops_asking_to_rerun_is_stopped_at_the_drain_timeout_and_reported() {
+        for (mode, thread) in [("lockstep", ""), ("realtime", "pool"), ("realtime", "dedicated")] {
+            let r = reg(&Arc::default(), &Arc::default());
+            let (workers, placement) = match thread {
+                "" => (String::new(), String::new()),
+                t => ("workers = 2\n".to_owned(), format!("thread = \"{t}\"\n")),
+            };
+            let g = spec(
+                &r,
+                &format!(
+                    "[graph]\nmode = \"{mode}\"\n{workers}\
+                     [[node]]\nid = \"src\"\nkind = \"counter\"\nparams = {{ count = 1 }}\n\
+                     [[node]]\nid = \"s\"\nkind = \"spin\"\n{placement}\
+                     [[node]]\nid = \"out\"\nkind = \"null\"\n\
+                     [[edge]]\nfrom = \"src.out\"\nto = \"s.in\"\n\
+                     [[edge]]\nfrom = \"s.out\"\nto = \"out.in\"\n"
+                ),
+            );
+            let what = format!("{mode}, {thread}");
+            let rep = within(&what, move || {
+                let mut running = RunningGraph::start(&g).unwrap();
+                running.set_drain_timeout(Duration::from_millis(200));
+                running.wait(&RunOptions::default())
+            });
+            match rep.failures.as_slice() {
+                [RunError::Node { node, error }] => {
+                    assert_eq!(node, "s", "{what}");
+                    assert!(error.to_string().contains("drain timeout"), "{what}: {error}");
+                }
+                other => panic!("{what}: expected the spinning node's failure, got {other:?}"),
+            }
+            assert_eq!(node(&rep, "s").msgs_in, 1, "{what}");
+        }
+    }
+
+    #[test]
+    fn a_period_below_the_minimum_is_refused_naming_the_param_and_the_minimum() {
+        let r = reg(&Arc::default(), &Arc::default());
+        let text = |period: &str| {
+            format!(
+                "[[node]]\nid = \"src\"\nkind = \"counter\"\nparams = {{ count = 1 }}\n\
+                 [[node]]\nid = \"s\"\nkind = \"scale\"\ntrigger = \"periodic\"\nperiod_ms = {period}\n\
+                 [[node]]\nid = \"out\"\nkind = \"null\"\n\
+                 [[edge]]\nfrom = \"src.out\"\nto = \"s.in\"\n\
+                 [[edge]]\nfrom = \"s.out\"\nto = \"out.in\"\n"
+            )
+        };
+        for tiny in ["0.0000001", "0.009"] {
+            let e =
+                GraphSpec::parse(SourceFile::new("<runtime-test>", text(tiny).as_str()), &r).err().expect("refused");
+            let e = e.to_string();
+            assert!(e.contains("node \"s\"") && e.contains("period_ms") && e.contains("at least 0.01 ms"), "{e}");
+        }
+        // The minimum itself runs, and the run ends.
+        let g = spec(&r, &text("0.01"));
+        let rep =
+            within("a run at the minimum period", move || crate::runtime::run(&g, &RunOptions::default()).unwrap());
+        assert!(rep.failures.is_empty(), "{:?}", rep.failures);
+        assert_eq!(node(&rep, "s").msgs_in, 1);
+    }
+
+    #[test]
+    fn the_timer_skips_missed_periods_in_one_step_however_short_the_period() {
+        let t = Instant::now();
+        let late = t + Duration::from_secs(3600);
+        for period in [Duration::ZERO, Duration::from_nanos(1), Duration::from_micros(10), Duration::from_millis(7)] {
+            let next = super::super::next_tick(t, late, period);
+            let step = period.max(super::super::MIN_TIMER_PERIOD);
+            assert!(next > late && next <= late + step, "{period:?}: {:?} after", next - late);
+            // On the grid: a whole number of periods after the missed tick.
+            assert_eq!((next - t).as_nanos() % step.as_nanos(), 0, "{period:?}");
+        }
+        let on_time = super::super::next_tick(t, t, Duration::from_millis(5));
+        assert_eq!(on_time - t, Duration::from_millis(5));
+    }
+
+    #[test]
+    fn an_aligned_join_drops_what_can_no_longer_align_once_an_input_has_ended() {
+        for mode in ["lockstep", "realtime"] {
+            let r = reg(&Arc::default(), &Arc::default());
+            let g = spec(
+                &r,
+                &format!(
+                    "[graph]\nmode = \"{mode}\"\n\
+                     [[node]]\nid = \"a\"\nkind = \"counter\"\nparams = {{ count = 100 }}\n\
+                     [[node]]\nid = \"b\"\nkind = \"counter\"\nparams = {{ count = 5 }}\n\
+                     [[node]]\nid = \"sum\"\nkind = \"sum\"\ntrigger = \"aligned\"\n\
+                     [[node]]\nid = \"out\"\nkind = \"null\"\n\
+                     [[edge]]\nfrom = \"a.out\"\nto = \"sum.a\"\ncapacity = 4\n\
+                     [[edge]]\nfrom = \"b.out\"\nto = \"sum.b\"\ncapacity = 4\n\
+                     [[edge]]\nfrom = \"sum.out\"\nto = \"out.in\"\n"
+                ),
+            );
+            let rep = within(mode, move || crate::runtime::run(&g, &RunOptions::default()).unwrap());
+            assert!(rep.failures.is_empty(), "{mode}: {:?}", rep.failures);
+            let sum = node(&rep, "sum");
+            assert_eq!((sum.calls, sum.msgs_out), (5, 5), "{mode}: the five aligned pairs");
+            let a = edge_to(&rep, "sum.a");
+            assert_eq!((a.pushed, a.dropped_unaligned, a.undelivered), (100, 95, 0), "{mode}");
+            assert_eq!(edge_to(&rep, "sum.b").drops, 0, "{mode}");
+        }
+    }
+
+    #[test]
+    fn a_busy_dedicated_node_runs_controls_and_swaps_between_two_calls() {
+        for thread in ["pool", "dedicated"] {
+            let r = reg(&Arc::default(), &Arc::default());
+            let busy = r.get("busy").unwrap().clone();
+            let g = spec(
+                &r,
+                &format!(
+                    "[graph]\nworkers = 1\n\
+                     [[node]]\nid = \"src\"\nkind = \"counter\"\nparams = {{ count = 1000000 }}\n\
+                     [[node]]\nid = \"p\"\nkind = \"busy\"\nthread = \"{thread}\"\nparams = {{ busy_us = 300 }}\n\
+                     [[node]]\nid = \"out\"\nkind = \"null\"\n\
+                     [[edge]]\nfrom = \"src.out\"\nto = \"p.in\"\n\
+                     [[edge]]\nfrom = \"p.out\"\nto = \"out.in\"\n"
+                ),
+            );
+            let rep = within(thread, move || {
+                let running = RunningGraph::start(&g).unwrap();
+                let h = running.handle();
+                wait_for("p running", || h.stats().node("p").unwrap().calls > 100);
+                // Generous bounds: a regression fails here rather than hangs.
+                let control = h.control_wait("p", "x", Duration::from_secs(30));
+                let swap = h.swap_wait("p", busy, Params::from_toml("busy_us = 100").unwrap(), Duration::from_secs(30));
+                let still_busy = h.stats().node("p").unwrap().calls < 1_000_000;
+                let stop = Arc::new(AtomicBool::new(true));
+                let rep = running.wait(&RunOptions { stop: Some(stop), ..Default::default() });
+                (control, swap, still_busy, rep)
+            });
+            let (control, swap, still_busy, rep) = rep;
+            assert!(control.is_ok(), "{thread}: {control:?}");
+            assert!(swap.is_ok(), "{thread}: {swap:?}");
+            assert!(still_busy, "{thread}: the node was still busy (ready) when both were applied");
+            assert!(rep.failures.is_empty(), "{thread}: {:?}", rep.failures);
+            assert_eq!(node(&rep, "p").swaps, 1, "{thread}");
+        }
+    }
 }

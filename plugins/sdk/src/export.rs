@@ -1288,9 +1288,10 @@ mod tests {
         assert!(r.failures.is_empty(), "{:?}", r.failures);
         let n = lag(&r);
         // Each instance emits 4 of its 9 good calls' inputs and holds 5 when its 10th panics;
-        // the third instance gets no input. The 2 inputs of the panicking calls are the panics.
+        // the third instance gets no input. The 2 inputs of the panicking calls are discarded
+        // too: 20 in = 8 out + 12 discarded.
         assert_eq!((n.msgs_in, n.msgs_out, n.panics, n.restarts), (20, 8, 2, 2));
-        assert_eq!(n.discarded, 10, "the 5 messages each panicked instance held");
+        assert_eq!(n.discarded, 12, "the 5 messages each panicked instance held, and each panicking call's input");
     }
 
     #[test]
@@ -1299,6 +1300,7 @@ mod tests {
         assert_eq!(r.failures.len(), 1, "{:?}", r.failures);
         let n = lag(&r);
         assert_eq!((n.msgs_in, n.msgs_out, n.panics, n.restarts), (10, 4, 1, 0));
-        assert_eq!(n.discarded, 5, "the 5 messages the panicked instance held");
+        // 10 in = 4 out + 6 discarded.
+        assert_eq!(n.discarded, 6, "the 5 messages the panicked instance held, and the panicking call's input");
     }
 }

@@ -413,3 +413,32 @@ fn check_holds_a_boards_frame_width_to_the_sensor_downstream() {
         assert!(err.lines().any(|l| l.contains(&at) && l.contains(problem)), "{node}:\n{err}");
     }
 }
+
+/// A load-cell rig's indenter position (`x_mm`, `y_mm`) is held to the sensor of the logger
+/// recording its truth: `check` refuses a rig at (99, 0) mm on the 100 mm skin, at the logger
+/// (its truth would be a contact off the skin).
+#[test]
+fn check_holds_a_rigs_position_to_the_sensor_of_its_logger() {
+    let d = workdir("rig-position");
+    let graph = |x_mm: f64| {
+        format!(
+            "[[node]]\nid = \"rig\"\nkind = \"serial_loadcell\"\nparams = {{ port = \"/dev/ttyUSB7\", x_mm = {x_mm:?}, y_mm = -10.0 }}\n\
+             [[node]]\nid = \"log\"\nkind = \"hdf5_logger\"\nparams = {{ path = \"rec.h5\" }}\n\
+             [[edge]]\nfrom = \"rig.truth\"\nto = \"log.truth\"\n"
+        )
+    };
+    std::fs::write(d.join("on.toml"), graph(45.0)).unwrap();
+    std::fs::write(d.join("off.toml"), graph(99.0)).unwrap();
+    ok(&skinflow(&d, &["check", "on.toml"]));
+    let out = skinflow(&d, &["check", "off.toml"]);
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("off.toml:5:1: node \"log\": ")
+            && err.contains(
+                "100 x 100 mm (x in [-50, 50], y in [-50, 50] mm), but its truth comes from serial_loadcell \"rig\", \
+                 whose indenter is at (99, -10) mm, off the sensor"
+            ),
+        "{err}"
+    );
+}

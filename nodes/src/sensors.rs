@@ -25,6 +25,8 @@
 //! plugin's own checks): an unreadable or invalid sensor file, or a value that is not a string,
 //! is an error located at the param, whether or not the node feeds a reconstructor.
 //!
+//! A `serial_loadcell` rig's indenter position (`x_mm`, `y_mm`; its `at` command at run time is
+//! not checked here) must lie on the sensor of a logger recording its truth.
 //! A `serial_eit` board says no sensor, only its frames' width (`measurements`): that width is
 //! held to the sensor's measurement count (a reconstructor would drop, a logger refuse, every
 //! frame of another width). A plugin kind without a `sensor` param is not checked; a
@@ -123,6 +125,20 @@ pub fn check_graph(spec: &GraphSpec) -> Result<(), GraphErrors> {
         };
         let mut problems = Vec::new();
         for s in upstream_sources(spec, r, node.kind == "hdf5_logger") {
+            if spec.nodes[s].kind == "serial_loadcell" {
+                // A rig says where its indenter presses: on the sensor, or its truth is no contact of it.
+                let Ok(rig) = spec.nodes[s].params.parse::<crate::serial::LoadcellParams>() else { continue };
+                let (hw, hh) = (0.5 * own_sensor.width_mm, 0.5 * own_sensor.height_mm);
+                if rig.x_mm.abs() > hw || rig.y_mm.abs() > hh {
+                    problems.push(format!(
+                        "{does} {own_desc}, {} x {} mm (x in [{}, {hw}], y in [{}, {hh}] mm), but its truth comes from \
+                         serial_loadcell \"{}\", whose indenter is at ({}, {}) mm, off the sensor: {spoils}; set the \
+                         rig's `x_mm` / `y_mm` to where it presses on the skin (centre origin, CONTRACTS.md section 1)",
+                        own_sensor.width_mm, own_sensor.height_mm, -hw, -hh, spec.nodes[s].id, rig.x_mm, rig.y_mm
+                    ));
+                }
+                continue;
+            }
             if spec.nodes[s].kind == "serial_eit" {
                 // A board says no sensor, only how wide its frames are.
                 let Ok(board) = spec.nodes[s].params.parse::<crate::serial::EitParams>() else { continue };
@@ -200,7 +216,7 @@ pub fn check_graph(spec: &GraphSpec) -> Result<(), GraphErrors> {
 /// nodes declaring their sensor ([`sensor_param`]) whose output of EIT frames (`eit_frame`,
 /// `synced_frame`) does, directly or through other nodes (`sync`, ...), in node order. The
 /// search does not go on upstream of a node declaring its sensor: its frames are of that one.
-/// With `truth`, a `replay`'s or `sim`'s `truth` output counts too (its coordinates are the
+/// With `truth`, a `replay`'s, `sim`'s or `serial_loadcell`'s `truth` output counts too (its coordinates are the
 /// sensor's: a logger records them).
 fn upstream_sources(spec: &GraphSpec, to: usize, truth: bool) -> Vec<usize> {
     let mut seen = vec![false; spec.nodes.len()];
@@ -216,7 +232,7 @@ fn upstream_sources(spec: &GraphSpec, to: usize, truth: bool) -> Vec<usize> {
             } else {
                 match (from.kind.as_str(), port.map(|p| p.name.as_ref())) {
                     ("replay" | "sim", Some("eit" | "reference")) | ("serial_eit", Some("eit")) => true,
-                    ("replay" | "sim", Some("truth")) => truth,
+                    ("replay" | "sim" | "serial_loadcell", Some("truth")) => truth,
                     _ => false,
                 }
             };

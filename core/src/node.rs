@@ -152,6 +152,9 @@ pub trait Processor: Send {
     /// stop request (Ctrl-C, a duration limit): data already received is still emitted, within
     /// the shutdown's drain timeout. Not called on a dead instance (panicked, failed) or when
     /// the drain timed out: `stop` then counts what is left with [`Context::count_discarded`].
+    /// This may come mid-run, once every input of a (non-periodic) processor has ended while
+    /// other branches of the graph go on: the node is flushed there, never called again, and
+    /// its outputs are closed, so consumers downstream know that no more comes from it.
     /// Default: nothing buffered, nothing to emit.
     fn flush(&mut self, _ctx: &mut Context, _out: &mut Outputs) -> Result<(), NodeError> {
         Ok(())

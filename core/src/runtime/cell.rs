@@ -51,6 +51,21 @@ pub(crate) enum Flushed {
     Fatal(NodeError),
 }
 
+/// Where a processor is in its end of stream, which it may reach before the run's end: once
+/// every input has ended (its producer finished, its queue is empty) it is flushed and its
+/// outputs are closed, so an aligned consumer downstream knows that an empty input stays
+/// empty (as it does for a source's outputs). Periodic processors are left open until the
+/// run's end: a tick may emit without input.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Eos {
+    /// Inputs may still bring messages.
+    Open,
+    /// Every input has ended: the next calls are flush calls.
+    Flushing,
+    /// Flushed, outputs closed: never called again, nor flushed at the run's end.
+    Closed,
+}
+
 pub(crate) struct Cell {
     pub imp: NodeImpl,
     pub ctx: Context,
@@ -73,6 +88,8 @@ pub(crate) struct Cell {
     /// Per input: the warning that it ended (its producer finished, its queue is empty) and
     /// that the aligned trigger drops the other inputs' messages was given.
     pub ended_warned: Vec<bool>,
+    /// The processor's own end of stream (see [`Eos`]).
+    pub eos: Eos,
 }
 
 pub(crate) fn panic_message(p: Box<dyn std::any::Any + Send>) -> String {
@@ -149,7 +166,22 @@ impl Cell {
             return false;
         }
         self.armed = self.triggered(n);
-        self.armed || self.ctx.rerun
+        if self.armed || self.ctx.rerun {
+            return true;
+        }
+        if self.eos == Eos::Open && self.inputs_all_ended() {
+            self.eos = Eos::Flushing;
+        }
+        self.eos == Eos::Flushing
+    }
+
+    /// Whether this is a processor that will never receive a message again: every input
+    /// ended. Periodic processors never count as such (see [`Eos`]).
+    fn inputs_all_ended(&mut self) -> bool {
+        matches!(self.imp, NodeImpl::Processor(_))
+            && !matches!(self.trigger, Trigger::Periodic { .. })
+            && !self.inputs.is_empty()
+            && (0..self.inputs.len()).all(|i| self.input_ended(i))
     }
 
     /// Whether the trigger is satisfied. May discard unalignable heads (counted).
@@ -295,8 +327,21 @@ impl Cell {
         }
     }
 
-    /// Runs one call of a processor/sink (`ready` returned true) or a source poll.
+    /// Runs one call of a processor/sink (`ready` returned true) or a source poll; or, for a
+    /// processor whose inputs have all ended, one flush call, closing its outputs once it has
+    /// nothing more to flush.
     pub fn fire(&mut self, n: &dyn Notify) -> Fired {
+        if self.eos == Eos::Flushing && !self.armed && !self.ctx.rerun {
+            return match self.flush(n) {
+                Flushed::More => Fired::Ok,
+                Flushed::Done => {
+                    self.eos = Eos::Closed;
+                    self.close_outputs(n);
+                    Fired::Ok
+                }
+                Flushed::Fatal(e) => Fired::Fatal(e),
+            };
+        }
         let taken = if matches!(self.imp, NodeImpl::Source(_)) { 0 } else { self.select_inputs(n) };
         self.call(n, Some(taken), |imp, ctx, in_io, out_io| match imp {
             NodeImpl::Source(s) => s.poll(ctx, out_io),
@@ -309,7 +354,7 @@ impl Cell {
     /// Runs one end-of-stream flush call of a processor (see [`crate::Processor::flush`]) and
     /// publishes what it emitted. The caller makes sure there is room on the outputs.
     pub fn flush(&mut self, n: &dyn Notify) -> Flushed {
-        if self.dead || !matches!(self.imp, NodeImpl::Processor(_)) {
+        if self.dead || self.eos == Eos::Closed || !matches!(self.imp, NodeImpl::Processor(_)) {
             return Flushed::Done;
         }
         let (fired, ok) =
@@ -482,6 +527,16 @@ impl Cell {
     /// new deadline and restart policy, between calls.
     pub fn control(&mut self, c: Control, shared: &Shared) {
         match c {
+            // A dead instance (panicked without restart, failed) is not called again, not
+            // even for a command: the graph is stopping, the answer says why.
+            Control::Command(cmd, reply) if self.dead => {
+                tracing::warn!(node = %self.ctx.id, "control \"{cmd}\" not run: the node is dead");
+                if let Some(tx) = reply {
+                    let _ = tx.try_send(Err(NodeError::msg(
+                        "not run: the node is dead (it panicked without a restart, or failed); the graph is stopping",
+                    )));
+                }
+            }
             Control::Command(cmd, reply) => {
                 let result = match catch_unwind(AssertUnwindSafe(|| self.imp.control(&mut self.ctx, &cmd))) {
                     Ok(result) => result,

@@ -1,6 +1,11 @@
 //! End of stream, for both executors: every processor emits what it still buffers
 //! ([`crate::Processor::flush`]) before any node is stopped, so nothing it received is lost.
 //!
+//! A processor whose inputs have all ended is flushed mid-run, where it runs, and its outputs
+//! closed ([`super::cell::Eos`]); what this phase flushes is every processor not yet flushed
+//! so (periodic ones, those downstream of one, and all of them after a stop request that came
+//! before the sources' own end).
+//!
 //! It runs on one thread that owns every cell, once no source produces any more and the
 //! queues have drained (lockstep: after its last pass; pool: after the workers have drained
 //! the queues and exited). Processors are flushed in topological order. Before a node's flush

@@ -187,6 +187,7 @@ impl RunningGraph {
                 tick: false,
                 armed: false,
                 ended_warned: vec![false; n_inputs],
+                eos: cell::Eos::Open,
             }));
         }
 

@@ -105,11 +105,12 @@ impl Processor for Hold {
         Ok(())
     }
 
-    /// `panic` panics; anything else is applied.
-    fn control(&mut self, _ctx: &mut Context, cmd: &str) -> Result<(), NodeError> {
+    /// `panic` panics; anything else is applied and counted (`commands_run`).
+    fn control(&mut self, ctx: &mut Context, cmd: &str) -> Result<(), NodeError> {
         if cmd == "panic" {
             panic!("hold: control");
         }
+        ctx.counter("commands_run").add(1);
         Ok(())
     }
 
@@ -681,6 +682,34 @@ fn a_control_command_that_panics_is_counted_and_the_restart_policy_applies() {
 }
 
 #[test]
+fn a_command_queued_behind_a_fatal_panic_is_not_run_on_the_dead_instance() {
+    let reg = registry(&Arc::default());
+    // Lockstep runs in `wait`: both commands are queued before the node's first call, and
+    // applied one after the other there.
+    let g = spec(
+        &reg,
+        "[graph]\nmode = \"lockstep\"\n\
+         [[node]]\nid = \"src\"\nkind = \"counter\"\nparams = { count = 10 }\n\
+         [[node]]\nid = \"h\"\nkind = \"hold\"\nrestart = \"never\"\nparams = { by = 1 }\n\
+         [[node]]\nid = \"out\"\nkind = \"null\"\n\
+         [[edge]]\nfrom = \"src.out\"\nto = \"h.in\"\n\
+         [[edge]]\nfrom = \"h.out\"\nto = \"out.in\"\n",
+    );
+    let running = RunningGraph::start(&g).unwrap();
+    running.control("h", "panic").unwrap();
+    running.control("h", "tare").unwrap();
+    let r = running.wait(&RunOptions::default());
+    let h = node(&r, "h");
+    assert_eq!(h.panics, 1);
+    assert_eq!(h.counters.get("commands_run").copied().unwrap_or(0), 0, "the dead instance ran a command");
+    assert!(
+        matches!(r.failures.as_slice(), [RunError::Node { node, error: NodeError::Panic(m) }] if node == "h" && m == "hold: control"),
+        "{:?}",
+        r.failures
+    );
+}
+
+#[test]
 fn when_a_start_fails_the_nodes_already_started_are_stopped_and_a_stop_that_panics_is_caught() {
     for mode in ["lockstep", "realtime"] {
         let reg = registry(&Arc::default());
@@ -1021,6 +1050,41 @@ mod engine_bounds {
             let a = edge_to(&rep, "sum.a");
             assert_eq!((a.pushed, a.dropped_unaligned, a.undelivered), (100, 95, 0), "{mode}");
             assert_eq!(edge_to(&rep, "sum.b").drops, 0, "{mode}");
+        }
+    }
+
+    #[test]
+    fn an_aligned_join_fed_through_a_processor_drops_what_can_no_longer_align_once_it_has_flushed() {
+        // b ends after 5 messages; `lag` holds its last one until its own end of stream, which
+        // comes when its input has ended (not at the run's end): it flushes, closes its output,
+        // and `sum` then knows its b input stays empty. Before, `sum` waited for b forever:
+        // a lockstep run reported a deadlock, a real-time one hung with `a` blocked.
+        for mode in ["lockstep", "realtime"] {
+            let r = reg(&Arc::default(), &Arc::default());
+            let g = spec(
+                &r,
+                &format!(
+                    "[graph]\nmode = \"{mode}\"\n\
+                     [[node]]\nid = \"a\"\nkind = \"counter\"\nparams = {{ count = 10000 }}\n\
+                     [[node]]\nid = \"b\"\nkind = \"counter\"\nparams = {{ count = 5 }}\n\
+                     [[node]]\nid = \"lag\"\nkind = \"lag\"\nparams = {{ by = 1 }}\n\
+                     [[node]]\nid = \"sum\"\nkind = \"sum\"\ntrigger = \"aligned\"\n\
+                     [[node]]\nid = \"out\"\nkind = \"null\"\n\
+                     [[edge]]\nfrom = \"a.out\"\nto = \"sum.a\"\ncapacity = 4\n\
+                     [[edge]]\nfrom = \"b.out\"\nto = \"lag.in\"\n\
+                     [[edge]]\nfrom = \"lag.out\"\nto = \"sum.b\"\ncapacity = 4\n\
+                     [[edge]]\nfrom = \"sum.out\"\nto = \"out.in\"\n"
+                ),
+            );
+            let rep = within(mode, move || crate::runtime::run(&g, &RunOptions::default()).unwrap());
+            assert!(rep.failures.is_empty(), "{mode}: {:?}", rep.failures);
+            let lag = node(&rep, "lag");
+            assert_eq!((lag.msgs_in, lag.msgs_out, lag.flushes, lag.discarded), (5, 5, 1, 0), "{mode}");
+            let sum = node(&rep, "sum");
+            assert_eq!((sum.calls, sum.msgs_out), (5, 5), "{mode}: the five aligned pairs");
+            let a = edge_to(&rep, "sum.a");
+            assert_eq!((a.pushed, a.dropped_unaligned, a.undelivered), (10000, 9995, 0), "{mode}");
+            assert_eq!(node(&rep, "out").msgs_in, 5, "{mode}");
         }
     }
 

@@ -134,8 +134,28 @@ pub(crate) struct NodeEntry {
 #[derive(Debug, Deserialize)]
 pub(crate) struct LooseFile {
     #[serde(default)]
-    pub node: Vec<Spanned<BTreeMap<Spanned<String>, Spanned<toml::Value>>>>,
+    pub node: Vec<Spanned<LooseTable>>,
 }
+
+/// A table read without its schema: every key and value with its span.
+pub(crate) type LooseTable = BTreeMap<Spanned<String>, Spanned<toml::Value>>;
+
+/// The whole file read without its schema: each section with its span, so
+/// that a section at fault can be set aside and the rest of the file checked
+/// (`validate::parse_file` reports every schema error, not only the first).
+#[derive(Debug, Deserialize)]
+pub(crate) struct LooseSections {
+    pub graph: Option<Spanned<LooseTable>>,
+    #[serde(default)]
+    pub plugin: Vec<Spanned<LooseTable>>,
+    #[serde(default)]
+    pub node: Vec<Spanned<LooseTable>>,
+    #[serde(default)]
+    pub edge: Vec<Spanned<LooseTable>>,
+}
+
+/// The sections [`LooseSections`] reads; any other top-level key is one the schema lacks.
+pub(crate) const SECTIONS: [&str; 4] = ["graph", "plugin", "node", "edge"];
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]

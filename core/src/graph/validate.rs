@@ -3,7 +3,7 @@
 //! devices named in params: input files are opened by [`GraphSpec::check_files`] and when
 //! nodes are built, devices only when nodes are built.
 
-use std::collections::{BTreeMap, HashMap};
+use std::collections::HashMap;
 use std::ops::Range;
 use std::path::PathBuf;
 use std::time::Duration;
@@ -11,7 +11,9 @@ use std::time::Duration;
 use toml::Spanned;
 
 use super::error::{GraphError, GraphErrorKind as K, GraphErrors};
-use super::file::{AlignBy, GraphFile, LooseFile, NodeEntry, ThreadMode, TriggerKind};
+use super::file::{
+    AlignBy, GraphFile, LooseFile, LooseSections, LooseTable, NodeEntry, SECTIONS, ThreadMode, TriggerKind,
+};
 use super::source::SourceFile;
 use super::{DEFAULT_CAPACITY, EdgeSpec, GraphSpec, MAX_CAPACITY, NodeSpec, Trigger, connected_inputs};
 use crate::node::Mode;
@@ -19,12 +21,63 @@ use crate::params::Params;
 use crate::registry::Wiring;
 use crate::registry::{Registry, Role};
 
+/// Most schema errors one file reports (each found by setting the sections at fault aside).
+const MAX_SCHEMA_ERRORS: usize = 20;
+
+/// The file read into its schema; or every schema error in it, in file order: after an
+/// error, the section that holds it (a `[[node]]`, `[[edge]]`, `[graph]` or `[[plugin]]`
+/// table, or a top-level key) is blanked out, keeping every other byte where it was, and the
+/// rest of the file is read again. A file that is not TOML reports its first syntax error.
 fn parse_file(src: &SourceFile) -> Result<GraphFile, GraphErrors> {
-    skinflow_toml::from_str::<GraphFile>(&src.text).map_err(|e| GraphErrors(vec![schema_error(src, &e)]))
+    let mut errors = Vec::new();
+    let mut masked = src.clone();
+    loop {
+        let e = match skinflow_toml::from_str::<GraphFile>(&masked.text) {
+            Ok(file) if errors.is_empty() => return Ok(file),
+            Ok(_) => break,
+            Err(e) => e,
+        };
+        errors.push(schema_error(&masked, &e));
+        if errors.len() >= MAX_SCHEMA_ERRORS {
+            break;
+        }
+        let Some(at) = e.span().map(|s| s.start) else { break };
+        let Some(text) = blank_section_at(&masked.text, at) else { break };
+        masked = SourceFile::new(src.path.clone(), text);
+    }
+    errors.sort_by_key(|e| (e.line, e.col));
+    Err(GraphErrors(errors))
+}
+
+/// `text` with the section holding byte `at` turned into spaces (line ends kept, so every
+/// other line and column stays where it was); `None` when `text` is not TOML, no section
+/// holds `at`, or the result would not be TOML (then what follows could not be trusted).
+fn blank_section_at(text: &str, at: usize) -> Option<String> {
+    let file: LooseSections = toml::from_str(text).ok()?;
+    let tables = file.graph.iter().chain(&file.plugin).chain(&file.node).chain(&file.edge);
+    let mut range = tables.map(extent).find(|r| r.contains(&at));
+    if range.is_none() {
+        let top: LooseTable = toml::from_str(text).ok()?;
+        range = top
+            .iter()
+            .filter(|(k, _)| !SECTIONS.contains(&k.get_ref().as_str()))
+            .map(|(k, v)| k.span().start..v.span().end)
+            .find(|r| r.contains(&at));
+    }
+    let range = range?;
+    let mut out = String::with_capacity(text.len());
+    for (i, c) in text.char_indices() {
+        if range.contains(&i) && c != '\n' && c != '\r' {
+            out.extend(std::iter::repeat_n(' ', c.len_utf8()));
+        } else {
+            out.push(c);
+        }
+    }
+    toml::from_str::<toml::Table>(&out).ok().map(|_| out)
 }
 
 /// A `[[node]]` table as written: keys and values with their spans.
-type LooseNode = BTreeMap<Spanned<String>, Spanned<toml::Value>>;
+type LooseNode = LooseTable;
 
 /// The error for a file that is not TOML or does not fit the schema. One inside a `[[node]]`
 /// table names the node (or says why its id cannot) and the key whose value is wrong.
@@ -76,7 +129,7 @@ fn node_table_at(src: &SourceFile, at: usize) -> Option<LooseNode> {
 
 /// The bytes a `[[node]]` table covers: its header (the span of the table itself) to its
 /// last key or value.
-fn extent(node: &Spanned<LooseNode>) -> Range<usize> {
+fn extent(node: &Spanned<LooseTable>) -> Range<usize> {
     let parts = node.get_ref().iter().flat_map(|(k, v)| [k.span(), v.span()]);
     parts.fold(node.span(), |all, s| all.start.min(s.start)..all.end.max(s.end))
 }

@@ -6,8 +6,9 @@
 //! recording's `/eit/reference` (the `reference` input), else the mean of the first
 //! `reference_frames` no-load frames (per channel, over its finite values, so a channel dead
 //! from the start does not hold it back), else a `tare` command (the next frame). Channels that
-//! are NaN, at the rail or at 0 V, in the frame or in the reference, and every channel of a
-//! dead electrode, are masked with a matrix for the reduced set; each image carries the count
+//! are NaN, at the rail or at 0 V, in the frame or in the reference, stuck (bit-identical for
+//! `mask.stuck_frames` frames while most channels change: a frozen ADC path), and every
+//! channel of a dead electrode, are masked with a matrix for the reduced set; each image carries the count
 //! (`masked_channels`), and a change of the set is logged with its causes.
 //! Math: `skinflow_eit`.
 //!
@@ -565,7 +566,12 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
         .param(ParamDoc::new("precision", "string", "\"f64\"", "f64 | f32 matrix"))
         .param(ParamDoc::new("mesh", "table", "{ elements = 4000 }", "reconstruction mesh"))
         .param(ParamDoc::new("cem", "table", "none", "complete electrode model constants"))
-        .param(ParamDoc::new("mask", "table", "none", "saturation_v, dead_electrode_fraction, zero_fraction"))
+        .param(ParamDoc::new(
+            "mask",
+            "table",
+            "none",
+            "saturation_v, dead_electrode_fraction, zero_fraction, stuck_frames (0: no stuck-channel check)",
+        ))
         .param(ParamDoc::new("elements", "bool", "false", "also output per-element values"))
         .param(ParamDoc::new(
             "point_spread_mm",

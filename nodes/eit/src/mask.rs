@@ -9,6 +9,13 @@
 //! An electrode is dead when at least `dead_electrode_fraction` of the channels that use it (as
 //! drive or sense) are bad; then every channel using it is excluded, also the ones that still
 //! look valid (their drive or sense path runs through a broken contact).
+//!
+//! A channel is stuck when its value has not changed, bit for bit, for `stuck_frames`
+//! consecutive frames while most channels did change ([`StuckTracker`]): a frozen ADC or
+//! multiplexer path. Its reading no longer follows the skin, so its difference from the
+//! reference would image as a fixed artefact; it is excluded like a bad one until it changes.
+//! A frame where most channels did not change either (a noiseless or quantised board at rest)
+//! flags none.
 
 use crate::error::{EitError, check_positive, invalid};
 use crate::sensor::Measurement;
@@ -29,11 +36,15 @@ pub struct MaskParams {
     /// below the smallest of the adjacent protocol (9.5e-5 V against a median of 2.3 mV), so
     /// no healthy channel of either is masked.
     pub zero_fraction: f64,
+    /// Frames a channel's value must stay bit-identical, while most channels change, to be
+    /// taken as stuck; 0 turns the check off. The default 10 is 8 s at the paper board's
+    /// 1.3 frames/s; a channel with any noise above the ADC's step never repeats that long.
+    pub stuck_frames: usize,
 }
 
 impl Default for MaskParams {
     fn default() -> Self {
-        MaskParams { saturation_v: 2.0, dead_electrode_fraction: 0.5, zero_fraction: 1e-3 }
+        MaskParams { saturation_v: 2.0, dead_electrode_fraction: 0.5, zero_fraction: 1e-3, stuck_frames: 10 }
     }
 }
 
@@ -108,11 +119,58 @@ pub struct BadCounts {
     pub saturated: usize,
     /// At or below the zero floor (0 V).
     pub near_zero: usize,
+    /// Stuck at one value (frame side only; see [`StuckTracker`]).
+    pub stuck: usize,
 }
 
 impl BadCounts {
     pub fn total(&self) -> usize {
-        self.non_finite + self.saturated + self.near_zero
+        self.non_finite + self.saturated + self.near_zero + self.stuck
+    }
+}
+
+/// Per channel, the frames its value has stayed bit-identical: which channels are stuck
+/// (see the module doc). Fed every frame in time order; allocates nothing after `new`.
+#[derive(Debug, Clone)]
+pub struct StuckTracker {
+    last: Vec<f64>,
+    /// Frames since the channel last changed (0: it changed in the last frame, or no frame yet).
+    unchanged: Vec<u32>,
+    /// `stuck[k]` after the last `update`.
+    stuck: Vec<bool>,
+    frames: usize,
+}
+
+impl StuckTracker {
+    pub fn new(channels: usize, frames: usize) -> StuckTracker {
+        StuckTracker {
+            last: vec![f64::NAN; channels],
+            unchanged: vec![0; channels],
+            stuck: vec![false; channels],
+            frames,
+        }
+    }
+
+    /// Takes frame `v` (as wide as the tracker): updates each channel's unchanged count and
+    /// which channels are stuck. A channel is stuck when it has not changed for `frames`
+    /// frames and fewer than half the channels have been as still (then the board as a whole
+    /// is not at rest). NaN never repeats (it is masked as non-finite anyway).
+    pub fn update(&mut self, v: &[f64]) {
+        for ((last, n), &x) in self.last.iter_mut().zip(&mut self.unchanged).zip(v) {
+            *n = if x.to_bits() == last.to_bits() && !x.is_nan() { n.saturating_add(1) } else { 0 };
+            *last = x;
+        }
+        let limit = u32::try_from(self.frames).unwrap_or(u32::MAX);
+        let still = self.unchanged.iter().filter(|&&n| n >= limit).count();
+        let on = self.frames > 0 && 2 * still < self.unchanged.len();
+        for (s, &n) in self.stuck.iter_mut().zip(&self.unchanged) {
+            *s = on && n >= limit;
+        }
+    }
+
+    /// `stuck[k]`: channel k is stuck (after the last [`StuckTracker::update`]).
+    pub fn stuck(&self) -> &[bool] {
+        &self.stuck
     }
 }
 
@@ -164,11 +222,13 @@ pub fn zero_floor(v: &[f64], params: &MaskParams, scratch: &mut [f64]) -> f64 {
 }
 
 /// Fills `out` (sized by `ChannelMask::none`) from frame `v` and the reference `v_ref` it is
-/// differenced against (none while there is none yet): a channel bad on either side is
-/// excluded (see the module doc). `scratch` holds at least `v.len()` values. Allocates nothing.
+/// differenced against (none while there is none yet): a channel bad on either side, or
+/// `stuck` (empty: none), is excluded (see the module doc). `scratch` holds at least
+/// `v.len()` values. Allocates nothing.
 pub fn detect_into(
     v: &[f64],
     v_ref: Option<&[f64]>,
+    stuck: &[bool],
     measurements: &[Measurement],
     params: &MaskParams,
     scratch: &mut [f64],
@@ -177,7 +237,11 @@ pub fn detect_into(
     let floor = zero_floor(v_ref.unwrap_or(v), params, scratch);
     let mut causes = MaskCauses { zero_floor_v: floor, ..MaskCauses::default() };
     for (k, (x, &val)) in out.excluded.iter_mut().zip(v).enumerate() {
-        let in_frame = classify(val, params, floor, &mut causes.frame);
+        let in_frame = classify(val, params, floor, &mut causes.frame)
+            || (stuck.get(k).copied().unwrap_or(false) && {
+                causes.frame.stuck += 1;
+                true
+            });
         // A reference shorter than the frame has no usable value there.
         let in_ref = v_ref
             .is_some_and(|r| classify(r.get(k).copied().unwrap_or(f64::NAN), params, floor, &mut causes.reference));
@@ -212,7 +276,7 @@ mod tests {
         let ms = protocol_measurements(Protocol::Pairwise, 16);
         let mut mask = ChannelMask::none(ms.len(), 16);
         let mut scratch = vec![0.0; ms.len()];
-        let causes = detect_into(v, v_ref, &ms, &MaskParams::default(), &mut scratch, &mut mask);
+        let causes = detect_into(v, v_ref, &[], &ms, &MaskParams::default(), &mut scratch, &mut mask);
         (mask, causes)
     }
 
@@ -240,7 +304,7 @@ mod tests {
             m.excluded[40] = true;
             m
         });
-        assert_eq!(causes.frame, BadCounts { non_finite: 1, saturated: 1 + 14, near_zero: 0 });
+        assert_eq!(causes.frame, BadCounts { non_finite: 1, saturated: 1 + 14, near_zero: 0, stuck: 0 });
         assert_eq!((causes.reference.total(), causes.via_dead_electrode), (0, 1));
     }
 
@@ -262,8 +326,8 @@ mod tests {
         r[5] = 0.0;
         let (mask, causes) = detect(&v, Some(&r));
         assert_eq!(mask.excluded_channels(), vec![5, 6, 50, 51, 52]);
-        assert_eq!(causes.frame, BadCounts { non_finite: 0, saturated: 0, near_zero: 2 });
-        assert_eq!(causes.reference, BadCounts { non_finite: 1, saturated: 1, near_zero: 2 });
+        assert_eq!(causes.frame, BadCounts { non_finite: 0, saturated: 0, near_zero: 2, stuck: 0 });
+        assert_eq!(causes.reference, BadCounts { non_finite: 1, saturated: 1, near_zero: 2, stuck: 0 });
         // The median of the reference's 118 finite channels below the rail, two of them 0 V.
         assert!(causes.zero_floor_v > 2.5e-4 && causes.zero_floor_v < 2.7e-4, "{}", causes.zero_floor_v);
         // No reference: the frame's own median sets the floor.
@@ -279,5 +343,76 @@ mod tests {
         assert_eq!(zero_floor(&[f64::NAN, 0.3, -0.5, 9.0], &p, &mut scratch), 1e-3 * 0.5);
         let bad = MaskParams { zero_fraction: 1.0, ..p };
         assert!(bad.validate().unwrap_err().to_string().contains("zero_fraction"));
+    }
+
+    /// Frame `i` of a noisy board: every channel moves every frame (a fixed-seed LCG), but
+    /// channel `frozen` holds 0.25 V from frame `from` on.
+    fn noisy(i: u64, n: usize, frozen: usize, from: u64) -> Vec<f64> {
+        (0..n)
+            .map(|k| {
+                if k == frozen && i >= from {
+                    return 0.25;
+                }
+                let mut x = (i * 1000 + k as u64).wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                x ^= x >> 33;
+                0.3 + 1e-4 * ((x % 1000) as f64 / 1000.0 - 0.5)
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_channel_frozen_while_the_others_move_is_stuck_after_stuck_frames_and_free_once_it_moves() {
+        let (n, frames) = (120, 10);
+        let mut t = StuckTracker::new(n, frames);
+        // Frozen from frame 5: unchanged for 1, 2, ... frames from frame 6 on.
+        for i in 0..5 + frames as u64 {
+            t.update(&noisy(i, n, 7, 5));
+            assert!(t.stuck().iter().all(|&s| !s), "frame {i}: too early");
+        }
+        t.update(&noisy(15, n, 7, 5));
+        assert_eq!((0..n).filter(|&k| t.stuck()[k]).collect::<Vec<_>>(), vec![7]);
+        // Through the mask: excluded, counted as stuck on the frame side.
+        let ms = protocol_measurements(Protocol::Pairwise, 16);
+        let (mut mask, mut scratch) = (ChannelMask::none(n, 16), vec![0.0; n]);
+        let v = noisy(15, n, 7, 5);
+        let causes = detect_into(&v, Some(&v), t.stuck(), &ms, &MaskParams::default(), &mut scratch, &mut mask);
+        assert_eq!((mask.excluded_channels(), causes.frame.stuck, causes.frame.total()), (vec![7], 1, 1));
+        // It moves again: free at once.
+        t.update(&noisy(16, n, 99, 0));
+        assert!(t.stuck().iter().all(|&s| !s));
+    }
+
+    #[test]
+    fn a_board_at_rest_or_the_check_turned_off_flags_nothing() {
+        let n = 120;
+        // Noiseless and still: every channel repeats, none is singled out.
+        let mut t = StuckTracker::new(n, 10);
+        for _ in 0..50 {
+            t.update(&vec![0.3; n]);
+        }
+        assert!(t.stuck().iter().all(|&s| !s));
+        // Half the channels still (a quantised board with half its channels below one step):
+        // not "most channels moved", so none is flagged.
+        let mut t = StuckTracker::new(n, 10);
+        for i in 0..50 {
+            let mut v = noisy(i, n, usize::MAX, 0);
+            v[..n / 2].fill(0.3);
+            t.update(&v);
+        }
+        assert!(t.stuck().iter().all(|&s| !s));
+        // stuck_frames = 0: off.
+        let mut t = StuckTracker::new(n, 0);
+        for i in 0..50 {
+            t.update(&noisy(i, n, 7, 0));
+        }
+        assert!(t.stuck().iter().all(|&s| !s));
+        // NaN never counts as repeating.
+        let mut t = StuckTracker::new(n, 2);
+        for i in 0..10 {
+            let mut v = noisy(i, n, usize::MAX, 0);
+            v[3] = f64::NAN;
+            t.update(&v);
+        }
+        assert!(!t.stuck()[3]);
     }
 }

@@ -13,7 +13,7 @@ use crate::error::{EitError, check_positive, invalid};
 use crate::forward::CemParams;
 use crate::image::{ImageGrid, SUBSAMPLES};
 use crate::lambda::{LambdaChoice, gcv};
-use crate::mask::{ChannelMask, MaskCauses, MaskParams, detect_into};
+use crate::mask::{ChannelMask, MaskCauses, MaskParams, StuckTracker, detect_into};
 use crate::mesh::MeshParams;
 use crate::noser::{DualSystem, Prior};
 use crate::precompute::{DifferenceMode, Folded, Model};
@@ -153,6 +153,8 @@ pub struct Reconstructor {
     dv: Vec<f64>,
     /// Scratch for the mask's zero floor (a median), so detection allocates nothing.
     mask_scratch: Vec<f64>,
+    /// Which channels are stuck, from the frames `detect_mask_into` was given.
+    stuck: StuckTracker,
     dv32: Vec<f32>,
     image32: Vec<f32>,
     info: ReconInfo,
@@ -178,6 +180,7 @@ impl Reconstructor {
             by_mask: HashMap::new(),
             dv: vec![0.0; m],
             mask_scratch: vec![0.0; m],
+            stuck: StuckTracker::new(m, params.mask.stuck_frames),
             dv32: vec![0.0; m],
             image32: vec![0.0; params.image_nx * params.image_ny],
             info: ReconInfo {
@@ -345,7 +348,9 @@ impl Reconstructor {
 
     /// Detects the bad channels of frame `v` and of the reference `v_ref` it will be
     /// differenced against (none before there is one) into `out` (sized like `mask()`), and
-    /// says why; allocates nothing. A channel bad on either side is excluded (`mask`).
+    /// says why; allocates nothing. A channel bad on either side is excluded (`mask`), and so
+    /// is a channel stuck over the frames given so far (`mask::StuckTracker`): give every
+    /// frame, in time order.
     pub fn detect_mask_into(
         &mut self,
         v: &[f64],
@@ -366,7 +371,16 @@ impl Reconstructor {
             let expected = self.mask.dead.len();
             return Err(EitError::Length { what: "dead electrode mask", expected, got: out.dead.len() });
         }
-        Ok(detect_into(v, v_ref, &self.measurements, &self.params.mask, &mut self.mask_scratch, out))
+        self.stuck.update(v);
+        Ok(detect_into(
+            v,
+            v_ref,
+            self.stuck.stuck(),
+            &self.measurements,
+            &self.params.mask,
+            &mut self.mask_scratch,
+            out,
+        ))
     }
 
     /// Switches to the matrix for `mask` (computed or loaded once per distinct mask). Returns

@@ -161,7 +161,7 @@ impl Cell {
     /// the trigger would take anyway: none when the trigger is not satisfied; see
     /// [`Context::request_rerun`]). May discard unalignable heads (counted).
     pub fn ready(&mut self, n: &dyn Notify) -> bool {
-        if self.dead || !self.outputs_have_space() {
+        if self.dead || self.eos == Eos::Closed || !self.outputs_have_space() {
             self.armed = false;
             return false;
         }
@@ -331,7 +331,9 @@ impl Cell {
     /// processor whose inputs have all ended, one flush call, closing its outputs once it has
     /// nothing more to flush.
     pub fn fire(&mut self, n: &dyn Notify) -> Fired {
-        if self.eos == Eos::Flushing && !self.armed && !self.ctx.rerun {
+        // A rerun asked meanwhile (by a control, a swap's state hand-over) is a flush rerun:
+        // a processor whose inputs have ended is never processed again.
+        if self.eos == Eos::Flushing && !self.armed {
             return match self.flush(n) {
                 Flushed::More => Fired::Ok,
                 Flushed::Done => {

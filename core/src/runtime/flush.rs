@@ -1,10 +1,11 @@
 //! End of stream, for both executors: every processor emits what it still buffers
 //! ([`crate::Processor::flush`]) before any node is stopped, so nothing it received is lost.
 //!
-//! A processor whose inputs have all ended is flushed mid-run, where it runs, and its outputs
-//! closed ([`super::cell::Eos`]); what this phase flushes is every processor not yet flushed
-//! so (periodic ones, those downstream of one, and all of them after a stop request that came
-//! before the sources' own end).
+//! A processor whose inputs have all ended is flushed where it runs, as soon as they have
+//! (mid-run, or in the drain after a stop request, when the stopped sources close their
+//! outputs), and its outputs closed ([`super::cell::Eos`]). This phase flushes the processors
+//! not flushed so: periodic ones, those downstream of one, those the drain did not get to.
+//! Each processor is flushed once: one flushed here is not called again.
 //!
 //! It runs on one thread that owns every cell, once no source produces any more and the
 //! queues have drained (lockstep: after its last pass; pool: after the workers have drained
@@ -19,7 +20,7 @@
 
 use std::time::Instant;
 
-use super::cell::{Cell, Flushed};
+use super::cell::{Cell, Eos, Flushed};
 use super::drain_timeout_error;
 use super::lockstep::{Dirty, drain};
 use super::pool::{Exec, Shared};
@@ -36,8 +37,10 @@ pub(crate) fn flush_all(shared: &Shared, cells: &mut [Box<Cell>], topo: &[usize]
     }
     for &i in &order {
         shared.run_controls(i, &mut cells[i]);
-        if cells[i].dead || !matches!(cells[i].imp, NodeImpl::Processor(_)) {
-            continue; // a dead instance's state is not trusted; a sink's `stop` is its flush
+        if cells[i].dead || cells[i].eos == Eos::Closed || !matches!(cells[i].imp, NodeImpl::Processor(_)) {
+            // A dead instance's state is not trusted; a sink's `stop` is its flush; a Closed
+            // processor was flushed mid-run.
+            continue;
         }
         loop {
             if Instant::now() >= deadline {
@@ -65,7 +68,13 @@ pub(crate) fn flush_all(shared: &Shared, cells: &mut [Box<Cell>], topo: &[usize]
             }
             match outcome {
                 Flushed::More => continue,
-                Flushed::Done => break,
+                Flushed::Done => {
+                    // Flushed once, never called again: what still reaches it (from a producer
+                    // upstream that had no room when it was visited and went on later) stays
+                    // on its inputs, counted as undelivered, rather than being flushed twice.
+                    cells[i].eos = Eos::Closed;
+                    break;
+                }
                 Flushed::Fatal(e) => {
                     shared.fail(i, e);
                     break;

@@ -1089,6 +1089,95 @@ mod engine_bounds {
     }
 
     #[test]
+    fn a_processor_flushed_at_the_end_of_the_run_is_flushed_once_even_if_input_reaches_it_later() {
+        // `u` has no room when the end-of-run flush visits it (`d` waits for the periodic
+        // `p`); `i`, downstream of `u`, is flushed then. Once `p` is flushed `u` goes on and
+        // ends; what it then sends `i` stays on `i`'s input, counted as undelivered: `i` is
+        // never flushed a second time (a node emitting a trailer would emit it twice).
+        for mode in ["lockstep", "realtime"] {
+            let r = reg(&Arc::default(), &Arc::default());
+            let g = spec(
+                &r,
+                &format!(
+                    "[graph]\nmode = \"{mode}\"\n\
+                     [[node]]\nid = \"s\"\nkind = \"counter\"\nparams = {{ count = 4 }}\n\
+                     [[node]]\nid = \"u\"\nkind = \"lag\"\nparams = {{ by = 1 }}\n\
+                     [[node]]\nid = \"i\"\nkind = \"lag\"\nparams = {{ by = 1 }}\n\
+                     [[node]]\nid = \"p\"\nkind = \"lag\"\ntrigger = \"periodic\"\nperiod_ms = 1\nparams = {{ by = 5 }}\n\
+                     [[node]]\nid = \"d\"\nkind = \"sum\"\ntrigger = \"aligned\"\n\
+                     [[node]]\nid = \"out\"\nkind = \"null\"\n\
+                     [[edge]]\nfrom = \"s.out\"\nto = \"u.in\"\n\
+                     [[edge]]\nfrom = \"s.out\"\nto = \"p.in\"\n\
+                     [[edge]]\nfrom = \"u.out\"\nto = \"i.in\"\n\
+                     [[edge]]\nfrom = \"u.out\"\nto = \"d.a\"\ncapacity = 1\n\
+                     [[edge]]\nfrom = \"p.out\"\nto = \"d.b\"\n\
+                     [[edge]]\nfrom = \"i.out\"\nto = \"out.in\"\n\
+                     [[edge]]\nfrom = \"d.out\"\nto = \"out.in\"\n"
+                ),
+            );
+            let rep = within(mode, move || crate::runtime::run(&g, &RunOptions::default()).unwrap());
+            assert!(rep.failures.is_empty(), "{mode}: {:?}", rep.failures);
+            // `lag` with `by = 1` holds one message: one flush call per flush.
+            for id in ["u", "i"] {
+                assert!(node(&rep, id).flushes <= 1, "{mode}: {id} flushed {} times", node(&rep, id).flushes);
+            }
+            // Nothing lost uncounted: what `i` took it emitted or counted at its stop, and
+            // what it did not take is counted on its input.
+            let (i, e) = (node(&rep, "i"), edge_to(&rep, "i.in"));
+            assert_eq!(e.pushed, i.msgs_in + e.undelivered, "{mode}: {e:?}");
+            assert_eq!(i.msgs_in, i.msgs_out + i.discarded, "{mode}");
+        }
+    }
+
+    /// Emits one message per call (with or without input); its `control` asks to be rerun.
+    struct Kick;
+    impl Processor for Kick {
+        fn process(&mut self, ctx: &mut Context, _inputs: &Inputs, out: &mut Outputs) -> Result<(), NodeError> {
+            out.send(0, Message::new(Header { seq: 99, t_ns: 0, origin: ctx.index() }, Count(99)))
+        }
+        fn control(&mut self, ctx: &mut Context, _cmd: &str) -> Result<(), NodeError> {
+            ctx.request_rerun();
+            Ok(())
+        }
+    }
+
+    #[test]
+    fn a_processor_flushed_mid_run_is_not_called_again_even_when_a_control_asks_for_a_rerun() {
+        let mut r = reg(&Arc::default(), &Arc::default());
+        r.register(typed(
+            KindInfo::new("kick", Role::Processor, "test: emits per call, a control asks for a rerun")
+                .input(PortSpec::input::<Count>("in", "in"))
+                .output(PortSpec::output::<Count>("out", "the value")),
+            |_: BusyParams, _| Ok(NodeImpl::Processor(Box::new(Kick))),
+        ))
+        .unwrap();
+        let g = spec(
+            &r,
+            "[graph]\nmode = \"realtime\"\n\
+             [[node]]\nid = \"e\"\nkind = \"ends\"\nparams = { count = 1 }\n\
+             [[node]]\nid = \"live\"\nkind = \"slow\"\nparams = { every_s = 0.01 }\n\
+             [[node]]\nid = \"k\"\nkind = \"kick\"\n\
+             [[node]]\nid = \"out\"\nkind = \"null\"\n\
+             [[edge]]\nfrom = \"e.out\"\nto = \"k.in\"\n\
+             [[edge]]\nfrom = \"k.out\"\nto = \"out.in\"\n\
+             [[edge]]\nfrom = \"live.out\"\nto = \"out.in\"\n",
+        );
+        let (before, after, rep) = within("kick", move || {
+            let running = RunningGraph::start(&g).unwrap();
+            let h = running.handle();
+            wait_for("k flushed mid-run", || h.stats().node("k").unwrap().flushes == 1);
+            let before = h.stats().node("k").unwrap().calls;
+            h.control_wait("k", "kick", Duration::from_secs(30)).unwrap();
+            let after = h.stats().node("k").unwrap().calls;
+            let rep = running.wait(&RunOptions { stop: Some(Arc::new(AtomicBool::new(true))), ..Default::default() });
+            (before, after, rep)
+        });
+        assert_eq!((before, after), (1, 1), "a processor flushed mid-run was called again");
+        let k = node(&rep, "k");
+        assert_eq!((k.calls, k.msgs_out, k.flushes), (1, 1, 1));
+    }
+
+    #[test]
     fn a_busy_dedicated_node_runs_controls_and_swaps_between_two_calls() {
         for thread in ["pool", "dedicated"] {
             let r = reg(&Arc::default(), &Arc::default());

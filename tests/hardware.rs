@@ -1,14 +1,14 @@
 //! Whole-binary tests of the hardware path and of crash safety: a full graph (serial sources ->
 //! sync -> pipeline -> logger) against `skinflow emulate` over real pseudo-terminals, boards
-//! that send the wrong thing, nothing, or restart (ptys the test writes), and a logging
-//! `skinflow run` killed with SIGKILL.
+//! that send the wrong thing, nothing, or restart (ptys the test writes, and the emulator's
+//! `restart` fault), and a logging `skinflow run` killed with SIGKILL.
 
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use super::support::{bin, ok, root, skinflow, spawn, status, stderr, text};
+use super::support::{bin, ok, read_recording, root, skinflow, spawn, status, stderr, text};
 
 /// A fresh work directory for one test of this module.
 fn workdir(test: &str) -> PathBuf {
@@ -235,6 +235,151 @@ fn a_wrong_device_a_silent_board_and_a_board_restart_are_reported() {
         ),
         "{table}"
     );
+}
+
+/// A board at 10 frames/s pressed once, for [`an_emulated_board_restart_is_reported_and_its_hidden_frames_counted`]:
+/// 5 s of rest give the graph time to open the ports before the restarts.
+const RESTART_SCENE: &str = "[scene]\nname = \"restart\"\nprofile = \"paper\"\n[rates]\neit_fps = 10.0\n\
+    [[step]]\nrest_s = 5.0\n\
+    [[step]]\nat_mm = [[0.0, 0.0]]\ndiameter_mm = 10.0\nforces_n = [4.0]\nhold_frames = 5\nrest_s = 1.0\n";
+
+/// The number before `what` in the emulator's "emulating SCENE: N EIT frames, P pressure
+/// samples, ..." line.
+fn emulated(stderr: &str, what: &str) -> usize {
+    let line = stderr.lines().find(|l| l.starts_with("emulating")).unwrap_or_else(|| panic!("no counts:\n{stderr}"));
+    let before = line.split(what).next().filter(|b| b.len() < line.len()).unwrap_or_else(|| panic!("{line}"));
+    before.split_whitespace().last().and_then(|n| n.parse().ok()).unwrap_or_else(|| panic!("{line}"))
+}
+
+/// `skinflow emulate --fault eit:50:restart=0.3 --fault pressure:90:restart=0.3`, in real time:
+/// each board goes silent for 0.3 s, then sends on from counter 0 (EIT) and with its clock from
+/// 0 (both), as firmware after a reset, on the same port. A graph of the two serial sources and
+/// a logger reads them. The EIT source reports the restart (`counter_resets`), numbers the frames
+/// after it on from `/eit/seq` by the frames the outage held (estimated from the host-time
+/// gap: `round(gap / period) - 1`, here at least 2 as the silence alone is 3 periods) plus one,
+/// and counts those as `lost_at_restarts` and as its discarded messages: the recording's seq
+/// gap is exactly what was counted. Every frame sent is recorded, the new run's to the end. The
+/// pressure source reports its restart too; the new run's first line, held because its time
+/// went back, is counted as lost. Waits are for conditions, bounded; deterministic (fixed seed,
+/// no assertion on speed).
+#[test]
+fn an_emulated_board_restart_is_reported_and_its_hidden_frames_counted() {
+    const EIT_AT: usize = 50;
+    const PRESSURE_AT: usize = 90;
+    const PERIOD_S: f64 = 0.1;
+    let d = workdir("restart");
+    std::fs::write(d.join("scene.toml"), RESTART_SCENE).unwrap();
+    let mut emu = spawn(
+        Command::new(bin())
+            .args(["emulate", "scene.toml", "--seed", "3", "--dir", "emu", "--devices", "eit,pressure"])
+            .args([
+                "--fault",
+                &format!("eit:{EIT_AT}:restart=0.3"),
+                "--fault",
+                &format!("pressure:{PRESSURE_AT}:restart=0.3"),
+            ])
+            .current_dir(&d)
+            .env("RUST_LOG", "warn")
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped()),
+    );
+    let mut lines = BufReader::new(emu.stdout.take().unwrap()).lines();
+    let mut paths = std::collections::HashMap::new();
+    while paths.len() < 2 {
+        let l = lines.next().expect("emulator output").unwrap();
+        let (dev, p) = l.split_once(' ').unwrap();
+        paths.insert(dev.to_owned(), p.to_owned());
+    }
+    // The emulator sends from its start: keep what it sent before the graph opened the ports.
+    let keep = "clear_input_at_open = false";
+    let graph = format!(
+        "[[node]]\nid = \"eit\"\nkind = \"serial_eit\"\nparams = {{ port = {:?}, frame_period_s = {PERIOD_S}, {keep} }}\n\
+         [[node]]\nid = \"pressure\"\nkind = \"serial_pressure\"\nparams = {{ port = {:?}, {keep} }}\n\
+         [[node]]\nid = \"log\"\nkind = \"hdf5_logger\"\nparams = {{ path = \"restart.h5\" }}\n\
+         [[edge]]\nfrom = \"eit.eit\"\nto = \"log.eit\"\ncapacity = 4096\n\
+         [[edge]]\nfrom = \"pressure.pressure\"\nto = \"log.pressure\"\ncapacity = 4096\n",
+        paths["eit"], paths["pressure"]
+    );
+    std::fs::write(d.join("g.toml"), graph).unwrap();
+    let run = spawn(
+        Command::new(bin())
+            .args(["run", "g.toml", "--for", "1000", "--stats-json", "stats.json", "--control", "ctl.sock"])
+            .current_dir(&d)
+            .env("RUST_LOG", "warn")
+            .env("XDG_CACHE_HOME", d.join("cache"))
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped()),
+    );
+    // The emulator ends once its scene is sent and read (real rates: about 7 s).
+    let emu_out = emu.wait_with_output().unwrap();
+    let emu_err = stderr(&emu_out);
+    assert!(emu_out.status.success(), "{emu_err}");
+    let (frames, samples) = (emulated(&emu_err, "EIT frames"), emulated(&emu_err, "pressure samples"));
+    assert!(frames > EIT_AT + 5 && samples > PRESSURE_AT + 5, "{emu_err}");
+    for device in ["eit", "pressure"] {
+        let line = emu_err.lines().find(|l| l.starts_with(&format!("{device}: DeviceStats"))).expect("device stats");
+        assert!(line.contains("restarts: 1,"), "{line}");
+    }
+    // Wait until the sources have put out every record they will (the pressure board's first
+    // line after its restart is lost), then stop the graph.
+    let out_of = |stats: &serde_json::Value, id: &str| {
+        stats["nodes"].as_array().unwrap().iter().find(|n| n["id"] == id).map_or(0, |n| n["msgs_out"].as_u64().unwrap())
+    };
+    let t0 = Instant::now();
+    loop {
+        let reply = skinflow(&d, &["send", "ctl.sock", r#"{"cmd":"stats"}"#]);
+        let reply: serde_json::Value = serde_json::from_str(ok(&reply).trim()).unwrap();
+        let (eit, pressure) = (out_of(&reply["stats"], "eit"), out_of(&reply["stats"], "pressure"));
+        if eit == frames as u64 && pressure == samples as u64 - 1 {
+            break;
+        }
+        assert!(t0.elapsed() < Duration::from_secs(60), "{eit} of {frames} frames, {pressure} of {samples} lines");
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    status(Command::new("kill").args(["-INT", &run.id().to_string()]));
+    let out = run.wait_with_output().unwrap();
+    let err = stderr(&out);
+    assert!(out.status.success(), "{err}");
+
+    let stats: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(d.join("stats.json")).unwrap()).unwrap();
+    let node = |id: &str| stats["nodes"].as_array().unwrap().iter().find(|n| n["id"] == id).unwrap().clone();
+    let counter = |id: &str, name: &str| {
+        node(id)["counters"][name].as_u64().unwrap_or_else(|| panic!("{id}: no counter {name}: {}", node(id)))
+    };
+    // The EIT source: one restart, no frame lost on the wire, the frames the outage held counted.
+    let hidden = counter("eit", "lost_at_restarts");
+    assert!(hidden >= 2, "a 0.3 s silence after a 0.1 s period holds at least 2 frames, counted {hidden}");
+    // The port stays through a restart: never reopened (the emulator's end closes it, a
+    // disconnect after the last frame, so `disconnects` is not 0).
+    assert_eq!(
+        ["counter_resets", "lost_frames", "crc_errors", "torn_frames", "reconnects"].map(|c| counter("eit", c)),
+        [1, 0, 0, 0, 0]
+    );
+    assert_eq!(
+        (node("eit")["msgs_out"].as_u64(), node("eit")["discarded"].as_u64()),
+        (Some(frames as u64), Some(hidden))
+    );
+    // The pressure source: one restart, the held first line of the new run lost and counted.
+    assert_eq!(["counter_resets", "lost_frames", "bad_lines"].map(|c| counter("pressure", c)), [1, 1, 1]);
+    assert_eq!(node("pressure")["discarded"].as_u64(), Some(1));
+    let said = |id: &str, what: &str| logged(&err, id).iter().any(|l| l.contains(what));
+    assert!(said("eit", "the device restarted") && said("pressure", "the device restarted"), "{err}");
+    assert!(said("eit", &format!("/eit/seq jumps by {}", hidden + 1)), "{err}");
+
+    // The recording: every frame, seq on by `hidden + 1` at the restart and then by 1 to the
+    // end, the jump being the host-time gap in periods (the stamps' half windows are equal).
+    let rec = read_recording(d.join("restart.h5"));
+    let eit = rec.eit.expect("/eit");
+    assert_eq!(eit.len(), frames);
+    let want: Vec<u64> = (0..EIT_AT as u64).chain((EIT_AT as u64 + hidden..).take(frames - EIT_AT)).collect();
+    assert_eq!(eit.seq, want);
+    let gap_periods = (eit.t_s[EIT_AT] - eit.t_s[EIT_AT - 1]) / PERIOD_S;
+    eprintln!("restart after a 0.3 s silence: a gap of {gap_periods:.2} periods, /eit/seq + {}", hidden + 1);
+    assert_eq!(gap_periods.round() as u64 - 1, hidden, "gap of {gap_periods:.2} periods");
+    assert_eq!(rec.pressure.expect("/pressure").len(), samples - 1);
+    let summary = inspect(&d, "restart.h5");
+    assert!(summary.contains(&format!("eit gaps: 1 gaps, {hidden} frames lost, largest {hidden}\n")), "{summary}");
 }
 
 /// The graph of the SIGKILL tests: a fast simulation logged with a 0.2 s flush interval.

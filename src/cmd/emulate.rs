@@ -26,7 +26,11 @@ pub struct EmulateArgs {
     /// Directory for the stable device links (default: a fresh temporary directory).
     #[arg(long)]
     pub dir: Option<PathBuf>,
-    /// Inject a fault: device:index:kind[=value], e.g. eit:10:crc, eit:20:unplug=0.5.
+    /// Inject a fault before the record at index (0-based, per device): device:index:kind[=S].
+    /// Kinds: garbage, crc (eit), drop, truncate, skip, unplug=S (gone S seconds, back at the
+    /// same path), stall=S (silent S seconds), restart=S (eit, pressure: the board resets,
+    /// silent S seconds, then goes on with its frame counter and clock from 0, as firmware
+    /// after a reset). E.g. eit:10:crc, eit:20:unplug=0.5, eit:30:restart=2.
     #[arg(long = "fault")]
     pub faults: Vec<String>,
     /// The devices to serve, comma-separated (with --fast, only those a graph reads: an
@@ -81,11 +85,12 @@ pub fn feed(scene_path: &Path, seed: u64) -> Result<(Vec<TimedFrame>, Vec<TimedP
 }
 
 /// Parses `--fault device:index:kind[=value]`, e.g. `eit:10:crc`, `eit:20:unplug=0.5`,
-/// `pressure:5:garbage`, `loadcell:3:stall=2`.
+/// `pressure:5:garbage`, `loadcell:3:stall=2`, `eit:30:restart=2`.
 fn parse_fault(s: &str) -> Result<(Device, usize, Fault)> {
     let bad = || {
         anyhow::anyhow!(
-            "--fault \"{s}\": expected device:index:kind[=value] (kinds: garbage, crc, drop, truncate, skip, unplug=S, stall=S)"
+            "--fault \"{s}\": expected device:index:kind[=value] (kinds: garbage, crc, drop, truncate, skip, unplug=S, \
+             stall=S, restart=S)"
         )
     };
     let mut it = s.splitn(3, ':');
@@ -102,6 +107,7 @@ fn parse_fault(s: &str) -> Result<(Device, usize, Fault)> {
         "skip" => Fault::Skip,
         "unplug" => Fault::Unplug { down_s: secs()? },
         "stall" => Fault::Stall { silent_s: secs()? },
+        "restart" => Fault::Restart { down_s: secs()? },
         _ => return Err(bad()),
     };
     Ok((device, index, fault))
@@ -147,6 +153,9 @@ pub fn run(scene: &Path, options: EmulateArgs, stop: Arc<AtomicBool>) -> Result<
             Device::Pressure => plan.pressure.push((index, fault)),
             Device::Loadcell => plan.loadcell.push((index, fault)),
         }
+        // A fault the device cannot have (crc or restart on the load cell), or a silence out of
+        // range: the faults before it passed, so this one is at fault.
+        plan.validate().map_err(|e| anyhow::anyhow!("--fault \"{f}\": {e}"))?;
     }
     eprintln!("simulating {} (seed {seed}) before the devices open...", scene.display());
     let t0 = std::time::Instant::now();
@@ -215,6 +224,49 @@ pub fn run(scene: &Path, options: EmulateArgs, stop: Arc<AtomicBool>) -> Result<
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_restart_fault_parses_with_its_silence() {
+        let (device, index, fault) = parse_fault("eit:30:restart=0.3").unwrap();
+        assert_eq!((device, index, fault), (Device::Eit, 30, Fault::Restart { down_s: 0.3 }));
+        let (device, _, fault) = parse_fault("pressure:4:restart=2").unwrap();
+        assert_eq!((device, fault), (Device::Pressure, Fault::Restart { down_s: 2.0 }));
+        for bad in ["eit:30:restart", "eit:30:restart=soon"] {
+            let e = parse_fault(bad).unwrap_err().to_string();
+            assert!(e.contains(&format!("--fault \"{bad}\"")) && e.contains("restart=S"), "{e}");
+        }
+    }
+
+    /// Refused before the scene is even read (it does not exist here), naming the argument.
+    #[test]
+    fn a_fault_a_device_cannot_have_is_refused_before_the_simulation() {
+        let refused = |fault: &str| {
+            let args = EmulateArgs {
+                seed: 1,
+                fast: false,
+                dir: None,
+                faults: vec!["eit:2:crc".into(), fault.into()],
+                devices: "eit,pressure,loadcell".into(),
+                loadcell_hz: None,
+            };
+            run(Path::new("no-such-scene.toml"), args, Arc::new(AtomicBool::new(false))).unwrap_err().to_string()
+        };
+        let e = refused("loadcell:4:restart=1");
+        assert!(
+            e.starts_with(
+                "--fault \"loadcell:4:restart=1\": fault plan: loadcell record 4: fault restart applies to boards \
+                 with a frame counter or clock"
+            ),
+            "{e}"
+        );
+        let e = refused("pressure:1:crc");
+        assert!(
+            e.starts_with("--fault \"pressure:1:crc\": fault plan: pressure record 1: fault crc applies to"),
+            "{e}"
+        );
+        let e = refused("eit:3:restart=-1");
+        assert!(e.starts_with("--fault \"eit:3:restart=-1\": fault plan: eit record 3: param \"down_s\""), "{e}");
+    }
 
     #[test]
     fn a_continuous_gauge_repeats_the_force_in_effect() {

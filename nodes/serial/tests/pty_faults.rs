@@ -136,6 +136,72 @@ fn stalled_device_counts_a_stall_and_loses_nothing() {
     assert_eq!(reader.decode_stats().lost_frames, 0);
 }
 
+/// A board restart (`Fault::Restart`): silent for `down_s` with the port open, then a new run,
+/// the EIT counter from 0 and both boards' clocks counted from the reset (`down_s` at the first
+/// record), as firmware after a reset. The decoders see a restart, not a gap: the EIT frame
+/// after it is flagged and nothing counts as lost; the pressure board's first line of the new
+/// run is held (its time went back) and, once the next confirms the restart, counted as lost.
+#[test]
+fn a_board_restart_starts_counter_and_clock_again_after_a_silence() {
+    let (n, at, down_s) = (30usize, 12usize, 0.3);
+    let faults = FaultPlan {
+        eit: vec![(at, Fault::Restart { down_s })],
+        pressure: vec![(at, Fault::Restart { down_s })],
+        ..Default::default()
+    };
+    let feed = EmulatorFeed::default().with_eit(feeds::plain_frames(M, n)).with_pressure(feeds::pressures(n, 0.05));
+    let emulator = Emulator::spawn(fast(), feed, faults).unwrap();
+    let origin = Instant::now();
+
+    let mut eit =
+        SerialReader::open(feeds::config(emulator.path(Device::Eit).unwrap()), EitDecoder::new(M), origin).unwrap();
+    // (counter, device time µs, restarted, first byte's read, completing read) of each frame.
+    // By count, not until idle: the pressure board, unread meanwhile, waits at its restart for
+    // its reader to take what it sent, so the emulator does not finish before both are read.
+    let mut frames = Vec::new();
+    feeds::read_n(&mut eit, n, LIMIT, |r| {
+        let f = r.record;
+        frames.push((f.counter, f.device_time_us, f.restarted, r.first_host_t_s, r.host_t_s));
+    });
+    assert_eq!(frames.len(), n, "every frame arrives");
+    let counters: Vec<u32> = frames.iter().map(|f| f.0).collect();
+    let want: Vec<u32> = (0..at as u32).chain(0..(n - at) as u32).collect();
+    assert_eq!(counters, want, "the counter starts again from 0");
+    for (i, f) in frames.iter().enumerate() {
+        // plain_frames: frame i at i * 256 µs; after the reset, `down_s` then the same spacing.
+        let us = if i < at { 256 * i as u32 } else { 300_000 + 256 * (i - at) as u32 };
+        assert_eq!(f.1, us, "frame {i}: device time");
+        assert_eq!(f.2, i == at, "frame {i}: only the first of the new run is flagged restarted");
+    }
+    let s = *eit.decode_stats();
+    assert_eq!((s.frames, s.counter_resets, s.lost_frames, s.discarded_bytes), (n as u64, 1, 0, 0));
+    assert_eq!(eit.link_stats().disconnects, 0, "the port stays open through a restart");
+    // At fast pacing the board lets the reader take what it sent before the reset, so the
+    // silence lies between the last frame's read and the next one's first byte (a lower bound
+    // the fault guarantees, not a speed).
+    let silent_s = frames[at].3 - frames[at - 1].4;
+    assert!(silent_s >= down_s, "silent {silent_s:.3} s, at least {down_s} s expected");
+
+    let mut pressure = SerialReader::open(
+        feeds::config(emulator.path(Device::Pressure).unwrap()),
+        PressureDecoder::try_new(Some(50)).unwrap(),
+        origin,
+    )
+    .unwrap();
+    let mut times = Vec::new();
+    feeds::read_n(&mut pressure, n - 1, LIMIT, |r| times.push(r.record.device_time_ms));
+    // 0, 50, ... 550 ms, then millis() since the reset: 300 (held, then lost), 350, 400, ...
+    let want: Vec<u32> = (0..at as u32).map(|i| 50 * i).chain((1..(n - at) as u32).map(|k| 300 + 50 * k)).collect();
+    assert_eq!(times, want);
+    let s = *pressure.decode_stats();
+    assert_eq!((s.counter_resets, s.bad_lines, s.lost_frames), (1, 1, 1));
+    assert!(emulator.wait_finished(LIMIT), "both feeds sent");
+    for device in [Device::Eit, Device::Pressure] {
+        let stats = emulator.stats(device).unwrap();
+        assert_eq!((stats.restarts, stats.records_sent, stats.faults_applied), (1, n as u64, 1), "{device}");
+    }
+}
+
 #[test]
 fn line_faults_are_counted_and_resynced() {
     let n = 50;
@@ -213,4 +279,9 @@ fn crc_fault_on_a_line_device_is_rejected_at_spawn() {
     let faults = FaultPlan { pressure: vec![(1, Fault::CorruptCrc)], ..Default::default() };
     let err = Emulator::spawn(fast(), feed, faults).unwrap_err();
     assert!(err.to_string().contains("pressure record 1"), "{err}");
+    // A load cell prints no counter or clock to start again: a restart is refused too.
+    let feed = EmulatorFeed::default().with_loadcell(feeds::forces(3, 0.05));
+    let faults = FaultPlan { loadcell: vec![(2, Fault::Restart { down_s: 0.3 })], ..Default::default() };
+    let err = Emulator::spawn(fast(), feed, faults).unwrap_err().to_string();
+    assert!(err.contains("loadcell record 2: fault restart applies to boards with a frame counter or clock"), "{err}");
 }

@@ -7,7 +7,9 @@
 //! calibration would record as unloaded): the first one is warned about, naming the value and
 //! `scale`, and their count is in the summary at stop.
 
-use skinflow_core::{Context, Header, Message, NodeError, NodeState, Outputs, Source, SourcePoll, StateRefused};
+use skinflow_core::{
+    Context, Counter, Header, Message, NodeError, NodeState, Outputs, Source, SourcePoll, StateRefused,
+};
 use skinflow_serial::ForceDecoder;
 
 use super::link::{Port, PortHandover};
@@ -77,6 +79,8 @@ pub struct SerialLoadcell {
     port: Port<ForceDecoder>,
     seq: u64,
     negatives: Negatives,
+    /// The run statistics' `negative_readings`, taken at start (no look-up per reading).
+    negative_readings: Counter,
     /// The position the params give.
     from_params: Position,
     /// The position readings are truth at: the params', then the last `at`'s.
@@ -95,6 +99,8 @@ impl SerialLoadcell {
             port,
             seq: 0,
             negatives: Negatives::NONE,
+            // Replaced at start by the node's own counter; the engine polls only after start.
+            negative_readings: Counter::default(),
             from_params,
             at: from_params,
         }
@@ -120,6 +126,8 @@ impl SerialLoadcell {
 
 impl Source for SerialLoadcell {
     fn start(&mut self, ctx: &mut Context) -> Result<(), NodeError> {
+        // Shared by the node's instances: a replacement (hot swap, restart) goes on counting.
+        self.negative_readings = ctx.counter("negative_readings");
         self.port.start(&self.p, ctx)
     }
 
@@ -129,7 +137,7 @@ impl Source for SerialLoadcell {
         let before = self.negatives.count;
         let (contacts, f, first_negative) = self.truth_of(r.record.force_n);
         if self.negatives.count > before {
-            ctx.counter("negative_readings").add(self.negatives.count - before);
+            self.negative_readings.add(self.negatives.count - before);
         }
         if first_negative {
             tracing::warn!(

@@ -1,7 +1,9 @@
 //! One emulated board: a thread that paces its samples, applies its faults and writes its pty.
 //!
 //! Real-time pacing sends sample k at `start + (t_k - t_0) + pauses`, where pauses are the
-//! time spent unplugged or stalled so far (a pause delays the rest of the stream, drops nothing).
+//! time spent unplugged, stalled or restarting so far (a pause delays the rest of the stream,
+//! drops nothing). A board numbers and times its records from its power-up (the feed's times)
+//! or, after a [`Fault::Restart`], from its last reset (see [`BoardRun`]).
 //! When the feed ends the pty stays open until the emulator stops, so readers can drain it.
 //! In real time, bytes a full pty (no reader) does not take are dropped and counted, as a
 //! board's transmit buffer would; fast pacing waits for the reader instead.
@@ -29,15 +31,17 @@ const WIRE_PIECE: usize = 16;
 /// A sample a board can send.
 pub(super) trait Sample {
     fn t_s(&self) -> f64;
-    fn encode(&self, counter: u32, out: &mut Vec<u8>);
+    /// Appends the sample's wire bytes, with the board's frame `counter` and its clock reading
+    /// `device_t_s` (s) where the protocol carries them.
+    fn encode(&self, counter: u32, device_t_s: f64, out: &mut Vec<u8>);
 }
 
 impl Sample for TimedFrame {
     fn t_s(&self) -> f64 {
         self.t_s
     }
-    fn encode(&self, counter: u32, out: &mut Vec<u8>) {
-        encode_eit_frame(out, counter, device_time_us(self.t_s), &self.volts);
+    fn encode(&self, counter: u32, device_t_s: f64, out: &mut Vec<u8>) {
+        encode_eit_frame(out, counter, device_time_us(device_t_s), &self.volts);
     }
 }
 
@@ -45,8 +49,8 @@ impl Sample for TimedPressure {
     fn t_s(&self) -> f64 {
         self.t_s
     }
-    fn encode(&self, _: u32, out: &mut Vec<u8>) {
-        encode_pressure_line(out, device_time_ms(self.t_s), self.kpa);
+    fn encode(&self, _: u32, device_t_s: f64, out: &mut Vec<u8>) {
+        encode_pressure_line(out, device_time_ms(device_t_s), self.kpa);
     }
 }
 
@@ -54,8 +58,44 @@ impl Sample for TimedForce {
     fn t_s(&self) -> f64 {
         self.t_s
     }
-    fn encode(&self, _: u32, out: &mut Vec<u8>) {
+    fn encode(&self, _: u32, _: f64, out: &mut Vec<u8>) {
         encode_force_line(out, self.force_n);
+    }
+}
+
+/// The board's current run, since power-up or its last [`Fault::Restart`]: what its frame
+/// counter and its clock read at each record.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct BoardRun {
+    /// Feed index of the run's first record.
+    first_index: usize,
+    /// Frame counter of that record.
+    first_counter: u32,
+    /// Feed time and device time of that record, s; `None` since power-up, when the device
+    /// time is the feed time.
+    clock: Option<(f64, f64)>,
+}
+
+impl BoardRun {
+    /// From power-up: the configured first counter, device time = feed time.
+    fn power_up(first_counter: u32) -> Self {
+        Self { first_index: 0, first_counter, clock: None }
+    }
+
+    /// After a reset that kept the board silent `down_s` before the record at `index`, sent at
+    /// feed time `t_s`: counter from 0, clock from the reset.
+    fn after_reset(index: usize, t_s: f64, down_s: f64) -> Self {
+        Self { first_index: index, first_counter: 0, clock: Some((t_s, down_s)) }
+    }
+
+    /// The frame counter of the record at `index` (wrapping u32).
+    fn counter(&self, index: usize) -> u32 {
+        self.first_counter.wrapping_add(index.wrapping_sub(self.first_index) as u32)
+    }
+
+    /// The device time of a record at feed time `t_s`, s.
+    fn device_t_s(&self, t_s: f64) -> f64 {
+        self.clock.map_or(t_s, |(t0_s, d0_s)| d0_s + (t_s - t0_s))
     }
 }
 
@@ -68,6 +108,7 @@ pub(super) struct DeviceCounters {
     pub bytes_dropped: AtomicU64,
     pub faults_applied: AtomicU64,
     pub unplugs: AtomicU64,
+    pub restarts: AtomicU64,
     pub finished: AtomicBool,
     /// Finished, and a reader took every byte (or the wait for one ended).
     pub delivered: AtomicBool,
@@ -187,6 +228,7 @@ impl<T: Sample> DeviceRun<T> {
         // Taken out so garbage bytes can be borrowed while `send` borrows `self`.
         let faults = std::mem::take(&mut self.faults);
         let mut index = 0usize;
+        let mut run = BoardRun::power_up(self.first_counter);
         while let Some(sample) = self.samples.next() {
             if let Pacing::RealTime | Pacing::Wire { .. } = self.pacing {
                 let t0_s = *t0_s.get_or_insert(sample.t_s());
@@ -196,12 +238,13 @@ impl<T: Sample> DeviceRun<T> {
             } else if stop.load(Ordering::Relaxed) {
                 return Ok(());
             }
-            record.clear();
-            sample.encode(self.first_counter.wrapping_add(index as u32), &mut record);
-            let mut send = true;
-            // Sorted by index, so the faults of this record are next in line.
-            while let Some((_, fault)) = faults.get(next_fault).filter(|(at, _)| *at == index) {
-                next_fault += 1;
+            // Sorted by index, so the faults of this record are next in line. Link faults and
+            // garbage happen first, in order (a restart decides the record's counter and time),
+            // then the record is encoded and its byte faults applied, in order.
+            let here = next_fault
+                ..faults[next_fault..].iter().position(|(at, _)| *at != index).map_or(faults.len(), |p| next_fault + p);
+            next_fault = here.end;
+            for (_, fault) in &faults[here.clone()] {
                 c.faults_applied.fetch_add(1, Ordering::Relaxed);
                 match fault {
                     Fault::Unplug { down_s } => {
@@ -223,13 +266,38 @@ impl<T: Sample> DeviceRun<T> {
                         }
                         paused += began.elapsed();
                     }
+                    Fault::Restart { down_s } => {
+                        let began = Instant::now();
+                        // Fast pacing waits for the reader throughout: let it take what was
+                        // sent, so the silence reaches it as one.
+                        if self.pacing == Pacing::AsFastAsPossible {
+                            self.pty.wait_drained(None, &stop).map_err(|e| self.pty_error(e))?;
+                        }
+                        c.restarts.fetch_add(1, Ordering::Relaxed);
+                        if !sleep_until(Instant::now() + secs(*down_s), &stop) {
+                            return Ok(());
+                        }
+                        paused += began.elapsed();
+                        run = BoardRun::after_reset(index, sample.t_s(), *down_s);
+                    }
                     Fault::Garbage(bytes) => {
                         if !self.send(bytes)? {
                             return Ok(());
                         }
                     }
-                    byte_fault => send &= corrupt(&mut record, byte_fault),
+                    // Byte faults: applied to the record once it is encoded, below.
+                    Fault::DropBytes { .. }
+                    | Fault::CorruptCrc
+                    | Fault::FlipBits { .. }
+                    | Fault::Truncate { .. }
+                    | Fault::Skip => {}
                 }
+            }
+            record.clear();
+            sample.encode(run.counter(index), run.device_t_s(sample.t_s()), &mut record);
+            let mut send = true;
+            for (_, fault) in &faults[here] {
+                send &= corrupt(&mut record, fault);
             }
             if send {
                 if !self.send_record(&record)? {
@@ -242,5 +310,22 @@ impl<T: Sample> DeviceRun<T> {
             index += 1;
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::BoardRun;
+
+    /// Firmware after a reset: counter from 0, clock from the reset (the silence included).
+    #[test]
+    fn a_reset_numbers_and_times_records_from_zero() {
+        let up = BoardRun::power_up(0xFFFF_FFFE);
+        assert_eq!((up.counter(0), up.counter(3)), (0xFFFF_FFFE, 1), "wraps as the u32 counter does");
+        assert_eq!(up.device_t_s(12.5), 12.5, "since power-up the device time is the feed time");
+        let reset = BoardRun::after_reset(7, 5.0, 0.3);
+        assert_eq!((reset.counter(7), reset.counter(9)), (0, 2));
+        assert_eq!(reset.device_t_s(5.0), 0.3);
+        assert!((reset.device_t_s(5.769) - 1.069).abs() < 1e-12);
     }
 }

@@ -1,8 +1,8 @@
 //! Fault injection: what goes wrong, and at which record of which device.
 //!
 //! Faults are keyed by the 0-based index of the record in the device's feed. Link faults
-//! (unplug, stall) and garbage happen before that record is sent; byte faults change that
-//! record's encoding. Offsets wrap around the record's length, so one plan fits any width.
+//! (unplug, stall, restart) and garbage happen before that record is sent; byte faults change
+//! that record's encoding. Offsets wrap around the record's length, so one plan fits any width.
 
 use super::Device;
 use crate::error::ParamError;
@@ -27,6 +27,14 @@ pub enum Fault {
     Unplug { down_s: f64 },
     /// Before the record, the device is silent for `silent_s` seconds; the port stays.
     Stall { silent_s: f64 },
+    /// Boards with a frame counter or a clock (EIT, pressure): before the record, the board
+    /// resets and is silent for `down_s` seconds while it boots (the port stays, as behind a
+    /// UART bridge); then it goes on with this record as the first of a new run, as firmware
+    /// does after a reset: EIT counter from 0, and device time (EIT µs, pressure `millis()`)
+    /// counted from the reset, so this record's is `down_s` and later ones advance with the
+    /// feed. At fast pacing the board first waits for the reader to take what it sent, so the
+    /// reader sees the silence (in real time a reader that keeps up does).
+    Restart { down_s: f64 },
 }
 
 impl Fault {
@@ -43,8 +51,17 @@ impl Fault {
             }
         };
         match self {
-            Self::CorruptCrc if device != Device::Eit => Err(FaultError::NotApplicable { device, index }),
-            Self::Unplug { down_s } => seconds("down_s", *down_s),
+            Self::CorruptCrc if device != Device::Eit => {
+                Err(FaultError::NotApplicable { device, index, fault: "crc", applies_to: "the eit board only" })
+            }
+            Self::Restart { .. } if device == Device::Loadcell => Err(FaultError::NotApplicable {
+                device,
+                index,
+                fault: "restart",
+                applies_to: "boards with a frame counter or clock (eit, pressure); a load cell's lines carry neither: \
+                             use stall",
+            }),
+            Self::Unplug { down_s } | Self::Restart { down_s } => seconds("down_s", *down_s),
             Self::Stall { silent_s } => seconds("silent_s", *silent_s),
             _ => Ok(()),
         }
@@ -63,12 +80,31 @@ pub struct FaultPlan {
     pub loadcell: Vec<(usize, Fault)>,
 }
 
+impl FaultPlan {
+    /// Checks every fault against its device (as [`crate::Emulator::spawn`] does), so a caller
+    /// can refuse a plan before it prepares the feeds.
+    ///
+    /// # Errors
+    /// The first fault that does not apply to its device or has a parameter out of range.
+    pub fn validate(&self) -> Result<(), FaultError> {
+        let devices =
+            [(Device::Eit, &self.eit), (Device::Pressure, &self.pressure), (Device::Loadcell, &self.loadcell)];
+        for (device, faults) in devices {
+            for (index, fault) in faults {
+                fault.validate(device, *index)?;
+            }
+        }
+        Ok(())
+    }
+}
+
 /// A fault plan that cannot be carried out.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum FaultError {
-    /// The fault does not exist for this protocol (a CRC on an ASCII line).
-    #[error("fault plan: {device} record {index}: fault applies to the eit board only")]
-    NotApplicable { device: Device, index: usize },
+    /// The fault does not exist for this protocol (a CRC on an ASCII line, a restart of a
+    /// load cell, whose lines carry no counter or clock).
+    #[error("fault plan: {device} record {index}: fault {fault} applies to {applies_to}")]
+    NotApplicable { device: Device, index: usize, fault: &'static str, applies_to: &'static str },
     /// A fault parameter is out of range.
     #[error("fault plan: {device} record {index}: {source}")]
     Param { device: Device, index: usize, source: ParamError },
@@ -89,7 +125,7 @@ pub(super) fn corrupt(record: &mut Vec<u8>, fault: &Fault) -> bool {
         Fault::FlipBits { offset, mask } => record[offset % len] ^= mask,
         Fault::Truncate { keep } => record.truncate(keep),
         Fault::Skip => return false,
-        Fault::Garbage(_) | Fault::Unplug { .. } | Fault::Stall { .. } => {}
+        Fault::Garbage(_) | Fault::Unplug { .. } | Fault::Stall { .. } | Fault::Restart { .. } => {}
     }
     true
 }
@@ -114,10 +150,27 @@ mod tests {
 
     #[test]
     fn crc_fault_on_a_line_protocol_is_rejected() {
-        assert_eq!(
-            Fault::CorruptCrc.validate(Device::Pressure, 3),
-            Err(FaultError::NotApplicable { device: Device::Pressure, index: 3 })
-        );
+        let e = Fault::CorruptCrc.validate(Device::Pressure, 3).unwrap_err();
+        assert!(matches!(e, FaultError::NotApplicable { device: Device::Pressure, index: 3, .. }), "{e:?}");
+        assert_eq!(e.to_string(), "fault plan: pressure record 3: fault crc applies to the eit board only");
         assert!(Fault::Unplug { down_s: f64::NAN }.validate(Device::Eit, 0).is_err());
+    }
+
+    /// A restart needs a counter or a clock to start again: the load cell has neither. Its
+    /// silence is a duration like the other link faults'.
+    #[test]
+    fn a_restart_applies_to_boards_with_a_counter_or_clock() {
+        let restart = Fault::Restart { down_s: 0.3 };
+        assert_eq!(restart.validate(Device::Eit, 4), Ok(()));
+        assert_eq!(restart.validate(Device::Pressure, 4), Ok(()));
+        let e = restart.validate(Device::Loadcell, 4).unwrap_err().to_string();
+        assert!(
+            e.starts_with("fault plan: loadcell record 4: fault restart applies to boards with a frame counter"),
+            "{e}"
+        );
+        let e = Fault::Restart { down_s: -1.0 }.validate(Device::Eit, 2).unwrap_err().to_string();
+        assert!(e.contains("eit record 2") && e.contains("down_s"), "{e}");
+        let plan = FaultPlan { loadcell: vec![(4, restart)], ..FaultPlan::default() };
+        assert!(matches!(plan.validate(), Err(FaultError::NotApplicable { device: Device::Loadcell, index: 4, .. })));
     }
 }

@@ -112,6 +112,8 @@ pub struct DeviceStats {
     pub faults_applied: u64,
     /// Unplug and replug cycles.
     pub unplugs: u64,
+    /// Board restarts ([`Fault::Restart`]) carried out.
+    pub restarts: u64,
     /// The feed is exhausted (the pty stays open until the emulator stops).
     pub finished: bool,
     /// Finished, and a reader took every byte: at fast pacing only then; in real time also
@@ -234,6 +236,7 @@ impl Emulator {
             bytes_dropped: c.bytes_dropped.load(Ordering::Relaxed),
             faults_applied: c.faults_applied.load(Ordering::Relaxed),
             unplugs: c.unplugs.load(Ordering::Relaxed),
+            restarts: c.restarts.load(Ordering::Relaxed),
             finished: c.finished.load(Ordering::Acquire),
             delivered: c.delivered.load(Ordering::Acquire),
         })

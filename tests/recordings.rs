@@ -1,7 +1,7 @@
 //! Whole-binary tests of recordings at the edges of the format: a clock with times before 0
 //! (refused by `check`, `run`, `eval` and `calibrate` instead of being stamped at 0), rotated
 //! logger parts that each start with the truth row in effect and carry the graph that wrote
-//! them, and the logger's `truth_max_contacts`.
+//! them, the logger's `truth_max_contacts`, and `/eit/reference` kept through replay -> logger.
 
 use std::path::Path;
 
@@ -309,4 +309,164 @@ fn a_logger_that_gets_no_message_says_nothing_was_recorded() {
         assert_eq!(d.join("eit.h5").exists(), earlier);
         std::fs::copy(d.join("pressure-only.h5"), d.join("eit.h5")).unwrap();
     }
+}
+
+/// Writes a small recording with `/eit/reference` of sensor `sensor_toml` (a sensor file, or
+/// a scene for the default sensor) at `path`: 40 EIT frames 50 ms apart and 100 pressure
+/// samples 20 ms apart, values from a fixed-seed generator. Returns the reference, whose
+/// values use every bit of their mantissa (a copy that is not bit-identical shows).
+fn recording_with_reference(path: &Path, sensor_file: &Path) -> Vec<f64> {
+    hdf5_io(|| {
+        let sensor = skinflow_sim::Scene::read_sensor(sensor_file).unwrap();
+        let mut opts = skinflow_record::WriterOptions::new(sensor.toml.clone());
+        opts.streams = skinflow_record::Streams::default(); // EIT and pressure
+        let mut w = skinflow_record::RecordingWriter::create(path, &opts).unwrap();
+        // xorshift64, fixed seed: uniform in [0, 1) with 53 random bits.
+        let mut x: u64 = 0x2545_f491_4f6c_dd1d;
+        let mut next = move || {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            (x >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let reference: Vec<f64> = (0..sensor.measurement_count()).map(|_| 0.5 + next()).collect();
+        w.set_reference(&reference).unwrap();
+        for i in 0..40u32 {
+            let v: Vec<f64> = reference.iter().map(|r| r + 1e-3 * next()).collect();
+            w.append_eit(0.025 + 0.05 * f64::from(i), u64::from(i), &v).unwrap();
+        }
+        for i in 0..100u32 {
+            w.append_pressure(0.01 + 0.02 * f64::from(i), 0.1 * next()).unwrap();
+        }
+        w.close().unwrap();
+        reference
+    })
+}
+
+/// A graph replaying `rec` as fast as possible into a logger writing `out` with `log_params`
+/// (appended to its params), its `reference` input wired when `reference`; lockstep unless
+/// `realtime`.
+fn relog_graph(rec: &str, out: &str, log_params: &str, reference: bool, realtime: bool) -> String {
+    let mode = if realtime { "" } else { "mode = \"lockstep\"\n" };
+    let mut g = format!(
+        "[graph]\n{mode}\
+         [[node]]\nid = \"replay\"\nkind = \"replay\"\nparams = {{ path = {rec:?}, speed = 0.0 }}\n\
+         [[node]]\nid = \"log\"\nkind = \"hdf5_logger\"\nparams = {{ path = {out:?}{log_params} }}\n\
+         [[edge]]\nfrom = \"replay.eit\"\nto = \"log.eit\"\n\
+         [[edge]]\nfrom = \"replay.pressure\"\nto = \"log.pressure\"\n"
+    );
+    if reference {
+        g.push_str("[[edge]]\nfrom = \"replay.reference\"\nto = \"log.reference\"\n");
+    }
+    g
+}
+
+/// Whether two time columns agree to the engine's clock resolution (1 ns: a replay stamps
+/// its messages in whole nanoseconds).
+fn same_times(a: &[f64], b: &[f64]) -> bool {
+    a.len() == b.len() && a.iter().zip(b).all(|(x, y)| (x - y).abs() <= 1e-9)
+}
+
+/// Whether two frames hold the same values bit for bit.
+fn same_bits(a: &[f64], b: &[f64]) -> bool {
+    a.len() == b.len() && a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits())
+}
+
+/// A recording with `/eit/reference` replayed into a logger with its `reference` input wired
+/// keeps the reference, bit-identical, in the new file (with and without SWMR, in lockstep and
+/// in real time) and in every part of a rotated one; its frames are all there. Before the
+/// logger had the input the graph was refused (and a graph without it lost the reference).
+#[test]
+fn a_replayed_reference_is_logged_again_bit_identical() {
+    let d = workdir("relog-reference");
+    let reference = recording_with_reference(&d.join("ref.h5"), &fixture("tiny-eval.toml"));
+    let original = read_recording(d.join("ref.h5"));
+    let frames = original.eit.as_ref().unwrap();
+    for (name, params, realtime) in [
+        ("plain", "", false),
+        ("swmr", ", swmr = true", false),
+        ("realtime-swmr", ", swmr = true", true),
+        ("rotated", ", rotate_s = 0.5", false),
+        ("rotated-swmr", ", rotate_s = 0.5, swmr = true", false),
+    ] {
+        let out = format!("{name}.h5");
+        std::fs::write(d.join(format!("{name}.toml")), relog_graph("ref.h5", &out, params, true, realtime)).unwrap();
+        let run = skinflow(&d, &["run", &format!("{name}.toml")]);
+        ok(&run);
+        let err = stderr(&run);
+        assert!(!err.contains("reference"), "{name}: a warning about the reference: {err}");
+        let files = hdf5_io(|| skinflow_record::rotate::recording_files(&d.join(&out))).unwrap();
+        assert_eq!(files.len() > 1, name.starts_with("rotated"), "{name}: {files:?}");
+        let mut t = Vec::new();
+        let mut v = Vec::new();
+        for f in &files {
+            let rec = read_recording(f);
+            let stored = rec.reference.as_deref().unwrap_or_else(|| panic!("{}: no /eit/reference", f.display()));
+            assert!(same_bits(stored, &reference), "{}: /eit/reference differs from the original's", f.display());
+            let eit = rec.eit.unwrap();
+            t.extend(eit.t_s.iter().copied());
+            v.extend((0..eit.len()).flat_map(|i| eit.frame(i).to_vec()));
+        }
+        assert!(same_times(&t, &frames.t_s), "{name}: every frame, in order: {t:?}");
+        let original: Vec<f64> = (0..frames.len()).flat_map(|i| frames.frame(i).to_vec()).collect();
+        assert!(same_bits(&v, &original), "{name}: the frames' values");
+    }
+    // `inspect` names the reference of the copy.
+    let text = ok(&skinflow(&d, &["inspect", "plain.h5"]));
+    assert!(text.contains("reference: /eit/reference"), "{text}");
+}
+
+/// A logger whose `reference` input is not wired writes no `/eit/reference`, as before,
+/// however the recording replayed has one; its rows are the same.
+#[test]
+fn a_logger_without_its_reference_input_writes_no_reference() {
+    let d = workdir("relog-no-reference");
+    recording_with_reference(&d.join("ref.h5"), &fixture("tiny-eval.toml"));
+    std::fs::write(d.join("g.toml"), relog_graph("ref.h5", "out.h5", "", false, false)).unwrap();
+    ok(&skinflow(&d, &["run", "g.toml"]));
+    let (original, copy) = (read_recording(d.join("ref.h5")), read_recording(d.join("out.h5")));
+    assert!(copy.reference.is_none());
+    assert!(same_times(&copy.eit.unwrap().t_s, &original.eit.unwrap().t_s));
+    assert_eq!(copy.pressure.unwrap().kpa, original.pressure.unwrap().kpa);
+}
+
+/// A reference of another width than the logger's frames is refused: here a recording of
+/// the default sensor (120 values) whose reference goes to a logger of a 12-electrode sensor
+/// (66 values) while its frames come from a recording of that sensor. `check`, and `run`
+/// before any node starts, refuse it naming the logger, its sensor and the replay the
+/// reference comes from; no file is written. (A source that reaches the logger's `reference`
+/// unchecked is refused when its frame arrives, naming the port and both widths: the unit
+/// tests of `skinflow_nodes::log`.)
+#[test]
+fn a_reference_of_another_sensor_is_refused_before_the_run() {
+    let d = workdir("relog-reference-width");
+    let small = "[sensor]\nname = \"small\"\nwidth_mm = 100.0\nheight_mm = 100.0\nelectrodes_per_side = 3\n\
+                 electrode_length_mm = 5.0\nprotocol = \"pairwise\"\n";
+    std::fs::write(d.join("small.toml"), small).unwrap();
+    recording_with_reference(&d.join("ref.h5"), &fixture("tiny-eval.toml"));
+    let small_reference = recording_with_reference(&d.join("small.h5"), &d.join("small.toml"));
+    assert_eq!(small_reference.len(), 66);
+    let g = "[graph]\nmode = \"lockstep\"\n\
+             [[node]]\nid = \"frames\"\nkind = \"replay\"\nparams = { path = \"small.h5\", speed = 0.0 }\n\
+             [[node]]\nid = \"ref\"\nkind = \"replay\"\nparams = { path = \"ref.h5\", speed = 0.0 }\n\
+             [[node]]\nid = \"log\"\nkind = \"hdf5_logger\"\nparams = { path = \"out.h5\", sensor = \"small.toml\" }\n\
+             [[edge]]\nfrom = \"frames.eit\"\nto = \"log.eit\"\n\
+             [[edge]]\nfrom = \"ref.reference\"\nto = \"log.reference\"\n";
+    std::fs::write(d.join("g.toml"), g).unwrap();
+    for cmd in ["check", "run"] {
+        let out = skinflow(&d, &[cmd, "g.toml"]);
+        let err = stderr(&out);
+        assert!(!out.status.success(), "{cmd}: {err}");
+        assert!(
+            err.contains("node \"log\": param \"sensor\": records as its `sensor` attribute sensor")
+                && err.contains("but its frames come from replay \"ref\", whose recording")
+                && !err.contains("replay \"frames\""),
+            "{cmd}: {err}"
+        );
+        assert!(!d.join("out.h5").exists(), "{cmd}");
+    }
+    // The same graph with the reference of the logger's own sensor runs and stores it.
+    std::fs::write(d.join("ok.toml"), g.replace("ref.h5", "small.h5")).unwrap();
+    ok(&skinflow(&d, &["run", "ok.toml"]));
+    assert!(same_bits(read_recording(d.join("out.h5")).reference.as_deref().unwrap(), &small_reference));
 }

@@ -13,7 +13,7 @@
 //! params = { path = "../out/run.h5", flush_interval_s = 1.0, strategies = ["pneumatic-locaware"] }
 //! ```
 //! Inputs (all optional): `eit`, `pressure`, `truth`, `image`, `contacts`, `forces` (multi),
-//! `sync` (the `sync` node's frames).
+//! `sync` (the `sync` node's frames), `reference` (the no-load EIT frame, below).
 //!
 //! `strategies` is required exactly when `forces` is connected: graph validation
 //! (`skinflow check`, and before a run starts) refuses a logger with `forces` connected and no
@@ -62,6 +62,33 @@
 //! it read then (for a logger that a graph edit brought in, the edited file): every part of a
 //! rotated recording carries it. A swap by control socket is not in it.
 //!
+//! `reference` takes the no-load frame a `replay` sends on its own `reference` output (once, at
+//! its start, when its recording has `/eit/reference`; the message type the reconstructor's
+//! `reference` input takes) and stores it as `/eit/reference` (CONTRACTS.md section 2: readers
+//! then use it instead of the leading no-load frames), in every part of a rotated recording. So
+//! a graph that replays a recording and logs it again (to trim, convert or re-log it) keeps the
+//! reference; wire `replay.reference` to `log.reference` for that (`graphs/soak.toml` does).
+//! Not connected, nothing changes: no `/eit/reference` is written. It needs `eit` connected
+//! (readers ignore a reference without frames; refused at load), and its width must be the
+//! frames' width M, the logger's `sensor`'s measurement count: another width stops the graph
+//! with an error naming the port, both widths and the file, the rows recorded so far kept
+//! (graph checks refuse a replay of another sensor's recording before that). One recording
+//! holds one reference: the first that arrives is kept; the same frame again is ignored, and a
+//! different one is not stored (it would claim that the frames recorded before it were imaged
+//! against it): it is warned about once and counted as discarded (`discarded` in the run
+//! report), with the total at stop. A reference arriving after a rotation is stored from the
+//! current part on, with a warning naming the parts that have none.
+//!
+//! SWMR: the writer starts SWMR mode at the first write of rows to the file (the first flush:
+//! `flush_interval_s` after the file was created, a full chunk of a stream, or stop), and a
+//! SWMR file cannot get a new dataset after that. A replay sends its reference before its
+//! first frame, and the file is created at the first message, so the reference is stored
+//! before any flush. One arriving later (a source that sends it after its first frames, past a
+//! flush) cannot be stored: it is warned about, naming the file and the cause, and counted as
+//! discarded; every row is recorded as without it. The dataset is not created empty ahead of
+//! time: a file whose reference never came (a recording without one, a killed run) would hold a
+//! placeholder that readers take for the no-load frame.
+//!
 //! Images are logged at the size of the first image (the reconstructor's `image_nx` x
 //! `image_ny`); one recording holds one size. The logger's own `image_nx` / `image_ny` are
 //! optional: given, they must match the images (a mismatch stops the graph naming them), and
@@ -76,7 +103,7 @@ use serde::Deserialize;
 use skinflow_contact::correct::ForceFlags;
 use skinflow_core::params::positive;
 use skinflow_core::{
-    BuildContext, Context, Inputs, KindInfo, NodeError, NodeImpl, NodeParams, NodeState, ParamDoc, ParamError,
+    BuildContext, Context, Inputs, KindInfo, Message, NodeError, NodeImpl, NodeParams, NodeState, ParamDoc, ParamError,
     PortSpec, Registry, Role, Sink, StateRefused, Wiring, typed,
 };
 use skinflow_record::error::RecordError;
@@ -160,8 +187,9 @@ impl NodeParams for LoggerParams {
         Ok(())
     }
 
-    /// What the graph's edges make required: `strategies` with `forces` connected, and the
-    /// image size with `swmr = true` and `image` connected. Checked at load (`skinflow check`).
+    /// What the graph's edges make required: `strategies` with `forces` connected, the image
+    /// size with `swmr = true` and `image` connected, and `eit` with `reference` connected.
+    /// Checked at load (`skinflow check`).
     fn validate_wiring(&self, wiring: &Wiring<'_>) -> Result<(), ParamError> {
         if wiring.has_input("forces") && self.strategies.is_empty() {
             return Err(ParamError::new(
@@ -172,6 +200,10 @@ impl NodeParams for LoggerParams {
         if self.swmr && wiring.has_input("image") && (self.image_nx.is_none() || self.image_ny.is_none()) {
             let param = if self.image_nx.is_none() { "image_nx" } else { "image_ny" };
             return Err(ParamError::new(param, SWMR_NEEDS_IMAGE_SIZE));
+        }
+        if wiring.has_input("reference") && !wiring.has_input("eit") {
+            let problem = format!("input \"reference\": {REFERENCE_NEEDS_EIT}");
+            return Err(ParamError { param: None, problem, span: None });
         }
         Ok(())
     }
@@ -196,6 +228,7 @@ const IMAGE: usize = 3;
 const CONTACTS: usize = 4;
 const FORCES: usize = 5;
 const SYNC: usize = 6;
+const REFERENCE: usize = 7;
 
 pub struct Logger {
     path: PathBuf,
@@ -211,6 +244,12 @@ pub struct Logger {
     unlisted: Vec<(String, u64)>,
     /// Per `forces` edge (lane): the logged strategy (its writer index) it delivered last.
     lane_strategy: Vec<Option<usize>>,
+    /// The logger's sensor, for messages: `"name" (protocol)`.
+    sensor_desc: String,
+    /// The `/eit/reference` stored (the first reference that arrived and was written).
+    reference: Option<Vec<f64>>,
+    /// References received and not stored: a later, different one, or one too late for SWMR.
+    references_discarded: u64,
 }
 
 /// The recordings this process's loggers are writing: (absolute path, logger id).
@@ -290,6 +329,7 @@ impl Logger {
 
     pub fn new(p: LoggerParams, ctx: &BuildContext) -> Result<Logger, NodeError> {
         let sensor = load_sensor(p.sensor.as_deref(), ctx)?;
+        let sensor_desc = format!("\"{}\" ({})", sensor.name, sensor.protocol.name());
         let path = ctx.resolve(&p.path);
         let mut o = WriterOptions::new(sensor.toml.clone());
         o.software_version = concat!("skinflow ", env!("CARGO_PKG_VERSION")).to_owned();
@@ -321,6 +361,9 @@ impl Logger {
             forces_buf: Vec::with_capacity(64),
             unlisted: Vec::new(),
             lane_strategy: Vec::new(),
+            sensor_desc,
+            reference: None,
+            references_discarded: 0,
         })
     }
 
@@ -329,6 +372,9 @@ impl Logger {
         if self.writer.is_none() {
             let mut o = self.opts.take().expect("options kept until the writer exists");
             o.streams.eit = inputs.lanes(EIT) > 0;
+            if inputs.lanes(REFERENCE) > 0 && !o.streams.eit {
+                return Err(NodeError::Input { port: "reference".into(), problem: REFERENCE_NEEDS_EIT.into() }.fatal());
+            }
             o.streams.pressure = inputs.lanes(PRESSURE) > 0;
             o.streams.truth = inputs.lanes(TRUTH) > 0;
             if inputs.lanes(IMAGE) == 0 {
@@ -358,7 +404,91 @@ impl Logger {
         }
         Ok(())
     }
+
+    /// A message on `reference`: stored as `/eit/reference` when it is the first (see the module
+    /// docs); a width other than the frames' stops the graph; a later, different one, or one
+    /// arriving after SWMR writing started, is warned about and counted as discarded.
+    fn take_reference(&mut self, ctx: &Context, m: &Message) -> Result<(), NodeError> {
+        let Some(f) = m.get::<EitFrame>() else { return Ok(()) };
+        let w = self.writer.as_mut().expect("created at the first message");
+        let width = w.eit_width();
+        if f.v.len() != width {
+            let problem = format!(
+                "a reference frame of {} values, but {} has {width} values per EIT frame (the logger's sensor {}): \
+                 /eit/reference [M] must have the frames' width M; nothing of it was written; give the logger \
+                 `sensor = \"...\"` of the sensor the reference comes from",
+                f.v.len(),
+                w.current_path().display(),
+                self.sensor_desc
+            );
+            return Err(NodeError::Input { port: "reference".into(), problem }.fatal());
+        }
+        if let Some(kept) = &self.reference {
+            if same_bits(kept, &f.v) {
+                return Ok(()); // the stored reference again
+            }
+            ctx.count_discarded(1);
+            self.references_discarded += 1;
+            if self.references_discarded == 1 {
+                let largest = kept.iter().zip(&f.v).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+                tracing::warn!(
+                    node = ctx.id(),
+                    port = "reference",
+                    path = %w.current_path().display(),
+                    largest_difference_v = largest,
+                    "a different reference frame arrived: not stored, /eit/reference keeps the first (one recording \
+                     holds one reference); counted as discarded (warned once, the total at stop)"
+                );
+            }
+            return Ok(());
+        }
+        match w.set_reference(&f.v) {
+            Ok(()) => {
+                let parts = w.stats().parts;
+                if parts > 1 {
+                    let earlier =
+                        if parts == 2 { "part 1 has".to_owned() } else { format!("parts 1-{} have", parts - 1) };
+                    tracing::warn!(
+                        node = ctx.id(),
+                        port = "reference",
+                        path = %w.current_path().display(),
+                        "/eit/reference stored from part {parts} on: it arrived after the recording rotated, and {earlier} \
+                         none (readers of those parts use their leading no-load frames)"
+                    );
+                }
+                tracing::debug!(node = ctx.id(), path = %w.current_path().display(), "/eit/reference stored");
+                self.reference = Some(f.v.clone());
+                Ok(())
+            }
+            Err(RecordError::ReferenceAfterSwmr { file }) => {
+                ctx.count_discarded(1);
+                self.references_discarded += 1;
+                tracing::warn!(
+                    node = ctx.id(),
+                    port = "reference",
+                    path = %file.display(),
+                    "{}",
+                    REFERENCE_AFTER_SWMR
+                );
+                Ok(())
+            }
+            Err(e) => Err(record_error(&self.path, e).fatal()),
+        }
+    }
 }
+
+/// Whether two frames hold the same values, bit for bit (NaN included).
+fn same_bits(a: &[f64], b: &[f64]) -> bool {
+    a.len() == b.len() && a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits())
+}
+
+const REFERENCE_NEEDS_EIT: &str = "needs `eit` connected too: /eit/reference is the no-load frame of the \
+     recording's EIT frames, and readers ignore it in a recording without them";
+
+const REFERENCE_AFTER_SWMR: &str = "/eit/reference not stored: the reference arrived after SWMR writing started \
+     (at the first flush of rows), and a SWMR file cannot get a new dataset; counted as discarded, every row is \
+     recorded as without it, and readers use the recording's leading no-load frames; send the reference before \
+     the first flush (a replay sends it first), or log with swmr = false";
 
 impl Sink for Logger {
     fn start(&mut self, _ctx: &mut Context) -> Result<(), NodeError> {
@@ -390,6 +520,9 @@ impl Sink for Logger {
         let path = self.path.clone();
         let fatal = |e: RecordError| record_error(&path, e).fatal();
         self.ensure_writer(inputs)?;
+        if let Some(m) = inputs.get(REFERENCE) {
+            self.take_reference(ctx, m)?;
+        }
         let Logger { writer, truth_buf, forces_buf, unlisted, lane_strategy, image_size, .. } = self;
         let w = writer.as_mut().expect("ensured above");
         if let Some(m) = inputs.get(EIT)
@@ -495,6 +628,15 @@ impl Sink for Logger {
                 strategy = %strategy,
                 frames,
                 "force frames not logged: strategy not in `strategies`"
+            );
+        }
+        if self.references_discarded > 0 {
+            tracing::warn!(
+                node = ctx.id(),
+                path = %self.path.display(),
+                references = self.references_discarded,
+                stored = self.reference.is_some(),
+                "reference frames not stored in /eit/reference (counted as discarded)"
             );
         }
         if self.writer.is_none() && self.opts.is_some() {
@@ -638,6 +780,13 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
             .input(PortSpec::input::<Contacts>("contacts", "segmented contacts").optional())
             .input(PortSpec::input::<Forces>("forces", "per-strategy forces").optional().multi())
             .input(PortSpec::input::<SyncedFrame>("sync", "the sync node's frames (pressure judgement)").optional())
+            .input(
+                PortSpec::input::<EitFrame>(
+                    "reference",
+                    "the no-load EIT frame (a replay's `reference`), stored as /eit/reference; needs `eit`; the first is kept",
+                )
+                .optional(),
+            )
             .param(ParamDoc::new("path", "path", "", "output file (relative to the graph file)"))
             .param(ParamDoc::new(
                 "sensor",
@@ -806,6 +955,200 @@ mod tests {
                 d.join("rec.h5").display()
             )
         );
+    }
+
+    /// Params of `reference_script`: one EIT frame of `width` values at 1 ms, `pressure` samples
+    /// 1 ms apart after it, then one reference frame per entry of `references` (its width, and
+    /// the first of its values, the k-th being `first + k * 1e-3`).
+    #[derive(Debug, Deserialize)]
+    #[serde(deny_unknown_fields)]
+    struct ReferenceScript {
+        width: usize,
+        pressure: u64,
+        references: Vec<ScriptedReference>,
+    }
+
+    #[derive(Debug, Deserialize)]
+    #[serde(deny_unknown_fields)]
+    struct ScriptedReference {
+        width: usize,
+        first: f64,
+    }
+
+    impl NodeParams for ReferenceScript {}
+
+    /// A source sending its (output port, message) pairs, one per poll.
+    struct Scripted(std::vec::IntoIter<(usize, Message)>);
+
+    impl skinflow_core::Source for Scripted {
+        fn poll(
+            &mut self,
+            _ctx: &mut Context,
+            out: &mut skinflow_core::Outputs,
+        ) -> Result<skinflow_core::SourcePoll, NodeError> {
+            match self.0.next() {
+                Some((port, m)) => {
+                    out.send(port, m)?;
+                    Ok(skinflow_core::SourcePoll::Emitted)
+                }
+                None => Ok(skinflow_core::SourcePoll::Finished),
+            }
+        }
+    }
+
+    /// The reference frame `r` of a script.
+    fn reference_values(r: &ScriptedReference) -> Vec<f64> {
+        (0..r.width).map(|k| r.first + k as f64 * 1e-3).collect()
+    }
+
+    fn script_registry() -> Registry {
+        let mut r = crate::registry();
+        r.register(typed(
+            KindInfo::new("reference_script", Role::Source, "scripted EIT frame, pressure and reference frames")
+                .output(PortSpec::output::<EitFrame>("eit", "frames"))
+                .output(PortSpec::output::<PressureSample>("pressure", "samples"))
+                .output(PortSpec::output::<EitFrame>("reference", "reference frames")),
+            |p: ReferenceScript, _| {
+                let header = |i: u64| skinflow_core::Header { seq: i, t_ns: (i + 1) * 1_000_000, origin: 0 };
+                let mut script = vec![(EIT, Message::new(header(0), EitFrame { v: vec![0.25; p.width] }))];
+                for i in 1..=p.pressure {
+                    script.push((PRESSURE, Message::new(header(i), PressureSample { kpa: i as f64 })));
+                }
+                for (k, r) in p.references.iter().enumerate() {
+                    let h = header(p.pressure + 1 + k as u64);
+                    script.push((2, Message::new(h, EitFrame { v: reference_values(r) })));
+                }
+                Ok(NodeImpl::Source(Box::new(Scripted(script.into_iter()))))
+            },
+        ))
+        .unwrap();
+        r
+    }
+
+    /// Runs `reference_script` with `script` params into a logger writing `dir/rec.h5` with
+    /// `log_params`, in lockstep; `reference` says whether the script's `reference` is wired.
+    fn run_script(dir: &Path, script: &str, log_params: &str, reference: bool) -> skinflow_core::RunReport {
+        let mut graph = format!(
+            "[graph]\nmode = \"lockstep\"\n\
+             [[node]]\nid = \"src\"\nkind = \"reference_script\"\nparams = {{ {script} }}\n\
+             [[node]]\nid = \"log\"\nkind = \"hdf5_logger\"\nparams = {{ path = \"rec.h5\"{log_params} }}\n\
+             [[edge]]\nfrom = \"src.eit\"\nto = \"log.eit\"\n\
+             [[edge]]\nfrom = \"src.pressure\"\nto = \"log.pressure\"\n"
+        );
+        if reference {
+            graph.push_str("[[edge]]\nfrom = \"src.reference\"\nto = \"log.reference\"\n");
+        }
+        let file = skinflow_core::graph::SourceFile::new(dir.join("graph.toml"), graph);
+        let spec = skinflow_core::GraphSpec::parse(file, &script_registry()).unwrap();
+        skinflow_core::run(&spec, &skinflow_core::RunOptions::default()).unwrap()
+    }
+
+    fn failures(report: &skinflow_core::RunReport) -> Vec<String> {
+        report.failures.iter().map(ToString::to_string).collect()
+    }
+
+    fn discarded(report: &skinflow_core::RunReport) -> u64 {
+        report.stats.node("log").unwrap().discarded
+    }
+
+    fn width() -> usize {
+        skinflow_eit::Sensor::paper_100mm().measurement_count()
+    }
+
+    /// The first reference is stored bit for bit; the same frame again is ignored; a different
+    /// one is not stored and is counted as discarded. Unconnected, nothing is stored.
+    #[test]
+    fn the_first_reference_is_stored_and_a_different_later_one_discarded() {
+        let m = width();
+        let (a, b) = (ScriptedReference { width: m, first: 0.1 }, ScriptedReference { width: m, first: 0.2 });
+        let refs = |rs: &[&ScriptedReference]| {
+            let list: Vec<String> =
+                rs.iter().map(|r| format!("{{ width = {}, first = {:?} }}", r.width, r.first)).collect();
+            format!("width = {m}, pressure = 3, references = [{}]", list.join(", "))
+        };
+        let d = temp_dir("reference-first");
+        let report = run_script(&d, &refs(&[&a, &a, &b, &a]), "", true);
+        assert_eq!(failures(&report), Vec::<String>::new());
+        assert_eq!(discarded(&report), 1, "the different one only");
+        let rec = skinflow_record::Recording::open(d.join("rec.h5")).unwrap();
+        let stored = rec.reference.as_ref().expect("stored");
+        assert!(same_bits(stored, &reference_values(&a)), "{stored:?}");
+        assert_eq!((rec.eit.unwrap().len(), rec.pressure.unwrap().len()), (1, 3));
+
+        let d = temp_dir("reference-unconnected");
+        let report = run_script(&d, &refs(&[&a]), "", false);
+        assert_eq!((failures(&report), discarded(&report)), (Vec::<String>::new(), 0));
+        let rec = skinflow_record::Recording::open(d.join("rec.h5")).unwrap();
+        assert!(rec.reference.is_none());
+    }
+
+    /// A reference of another width than the frames' stops the graph naming the port, both
+    /// widths, the file and the sensor; the rows before it are kept.
+    #[test]
+    fn a_reference_of_another_width_stops_the_graph_naming_port_and_widths() {
+        let m = width();
+        let d = temp_dir("reference-width");
+        let script = format!("width = {m}, pressure = 2, references = [{{ width = {}, first = 0.1 }}]", m - 1);
+        let report = run_script(&d, &script, "", true);
+        let file = d.join("rec.h5");
+        assert_eq!(
+            failures(&report),
+            [format!(
+                "node \"log\": input \"reference\": a reference frame of {} values, but {} has {m} values per EIT \
+                 frame (the logger's sensor \"paper-100mm\" ({})): /eit/reference [M] must have the frames' width \
+                 M; nothing of it was written; give the logger `sensor = \"...\"` of the sensor the reference \
+                 comes from",
+                m - 1,
+                file.display(),
+                skinflow_eit::Sensor::paper_100mm().protocol.name()
+            )]
+        );
+        let rec = skinflow_record::Recording::open(&file).unwrap();
+        assert!(rec.reference.is_none());
+        assert_eq!((rec.eit.unwrap().len(), rec.pressure.unwrap().len()), (1, 2), "the rows before it kept");
+    }
+
+    /// With SWMR, a reference arriving after the first write of rows (here a full chunk of
+    /// pressure samples, 1024 rows) cannot be stored: counted as discarded, every row kept.
+    /// Without SWMR the same late reference is stored.
+    #[test]
+    fn a_reference_after_swmr_started_is_discarded_and_no_row_lost() {
+        let m = width();
+        let script = format!("width = {m}, pressure = 1100, references = [{{ width = {m}, first = 0.1 }}]");
+        let d = temp_dir("reference-swmr-late");
+        let report = run_script(&d, &script, ", swmr = true", true);
+        assert_eq!((failures(&report), discarded(&report)), (Vec::<String>::new(), 1));
+        let rec = skinflow_record::Recording::open(d.join("rec.h5")).unwrap();
+        assert!(rec.reference.is_none());
+        assert_eq!((rec.eit.unwrap().len(), rec.pressure.unwrap().len()), (1, 1100));
+
+        let d = temp_dir("reference-late");
+        let report = run_script(&d, &script, "", true);
+        assert_eq!((failures(&report), discarded(&report)), (Vec::<String>::new(), 0));
+        let rec = skinflow_record::Recording::open(d.join("rec.h5")).unwrap();
+        let stored = rec.reference.expect("stored without SWMR");
+        assert!(same_bits(&stored, &reference_values(&ScriptedReference { width: m, first: 0.1 })));
+        assert_eq!(rec.pressure.unwrap().len(), 1100);
+    }
+
+    /// `reference` without `eit` is refused at load, located at the logger.
+    #[test]
+    fn a_reference_without_eit_is_refused_at_load() {
+        let d = temp_dir("reference-no-eit");
+        let graph = format!(
+            "[graph]\nmode = \"lockstep\"\n\
+             [[node]]\nid = \"src\"\nkind = \"reference_script\"\n\
+             params = {{ width = {}, pressure = 1, references = [] }}\n\
+             [[node]]\nid = \"log\"\nkind = \"hdf5_logger\"\nparams = {{ path = \"rec.h5\" }}\n\
+             [[edge]]\nfrom = \"src.pressure\"\nto = \"log.pressure\"\n\
+             [[edge]]\nfrom = \"src.reference\"\nto = \"log.reference\"\n",
+            width()
+        );
+        let file = skinflow_core::graph::SourceFile::new(d.join("graph.toml"), graph);
+        let Err(e) = skinflow_core::GraphSpec::parse(file, &script_registry()) else { panic!("accepted") };
+        let e = e.to_string();
+        assert!(e.contains(&format!("node \"log\": input \"reference\": {REFERENCE_NEEDS_EIT}")), "{e}");
+        assert!(!d.join("rec.h5").exists());
     }
 
     #[test]

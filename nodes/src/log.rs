@@ -77,7 +77,9 @@
 //! different one is not stored (it would claim that the frames recorded before it were imaged
 //! against it): it is warned about once and counted as discarded (`discarded` in the run
 //! report), with the total at stop. A reference arriving after a rotation is stored from the
-//! current part on, with a warning naming the parts that have none.
+//! current part on, with a warning naming the parts that have none. A logger hot-swapped onto
+//! another file (a `--watch` edit of its `path`) stores the reference its predecessor stored,
+//! when its own `reference` input is connected (a replay sends it only once, at its start).
 //!
 //! SWMR: the writer starts SWMR mode at the first write of rows to the file (the first flush:
 //! `flush_interval_s` after the file was created, a full chunk of a stream, or stop), and a
@@ -250,6 +252,9 @@ pub struct Logger {
     reference: Option<Vec<f64>>,
     /// References received and not stored: a later, different one, or one too late for SWMR.
     references_discarded: u64,
+    /// The reference a hot-swapped predecessor stored, stored in this logger's file at its
+    /// first message (when its `reference` input is connected).
+    inherited_reference: Option<Vec<f64>>,
 }
 
 /// The recordings this process's loggers are writing: (absolute path, logger id).
@@ -275,6 +280,9 @@ struct LoggerState {
     id: u64,
     path: PathBuf,
     writing: bool,
+    /// The `/eit/reference` the running logger stored: a replacement writing a new file
+    /// stores it too (a replay sends its reference only once, at its start).
+    reference: Option<Vec<f64>>,
 }
 
 fn io(path: &Path, e: impl std::fmt::Display) -> NodeError {
@@ -364,6 +372,7 @@ impl Logger {
             sensor_desc,
             reference: None,
             references_discarded: 0,
+            inherited_reference: None,
         })
     }
 
@@ -410,27 +419,50 @@ impl Logger {
     /// arriving after SWMR writing started, is warned about and counted as discarded.
     fn take_reference(&mut self, ctx: &Context, m: &Message) -> Result<(), NodeError> {
         let Some(f) = m.get::<EitFrame>() else { return Ok(()) };
+        self.store_reference(ctx, &f.v)
+    }
+
+    /// Stores the reference a hot-swapped predecessor stored (see `inherited_reference`); one
+    /// of another width (the replacement has another sensor) is warned about and counted as
+    /// discarded rather than stopping the graph.
+    fn store_inherited_reference(&mut self, ctx: &Context, v: &[f64]) -> Result<(), NodeError> {
+        let width = self.writer.as_ref().expect("created at the first message").eit_width();
+        if v.len() != width {
+            ctx.count_discarded(1);
+            self.references_discarded += 1;
+            tracing::warn!(
+                node = ctx.id(),
+                port = "reference",
+                "the reference the replaced logger stored has {} values, this logger's frames {width}: not stored",
+                v.len()
+            );
+            return Ok(());
+        }
+        self.store_reference(ctx, v)
+    }
+
+    fn store_reference(&mut self, ctx: &Context, v: &[f64]) -> Result<(), NodeError> {
         let w = self.writer.as_mut().expect("created at the first message");
         let width = w.eit_width();
-        if f.v.len() != width {
+        if v.len() != width {
             let problem = format!(
                 "a reference frame of {} values, but {} has {width} values per EIT frame (the logger's sensor {}): \
                  /eit/reference [M] must have the frames' width M; nothing of it was written; give the logger \
                  `sensor = \"...\"` of the sensor the reference comes from",
-                f.v.len(),
+                v.len(),
                 w.current_path().display(),
                 self.sensor_desc
             );
             return Err(NodeError::Input { port: "reference".into(), problem }.fatal());
         }
         if let Some(kept) = &self.reference {
-            if same_bits(kept, &f.v) {
+            if same_bits(kept, v) {
                 return Ok(()); // the stored reference again
             }
             ctx.count_discarded(1);
             self.references_discarded += 1;
             if self.references_discarded == 1 {
-                let largest = kept.iter().zip(&f.v).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+                let largest = kept.iter().zip(v).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
                 tracing::warn!(
                     node = ctx.id(),
                     port = "reference",
@@ -442,7 +474,7 @@ impl Logger {
             }
             return Ok(());
         }
-        match w.set_reference(&f.v) {
+        match w.set_reference(v) {
             Ok(()) => {
                 let parts = w.stats().parts;
                 if parts > 1 {
@@ -457,7 +489,7 @@ impl Logger {
                     );
                 }
                 tracing::debug!(node = ctx.id(), path = %w.current_path().display(), "/eit/reference stored");
-                self.reference = Some(f.v.clone());
+                self.reference = Some(v.to_vec());
                 Ok(())
             }
             Err(RecordError::ReferenceAfterSwmr { file }) => {
@@ -520,6 +552,11 @@ impl Sink for Logger {
         let path = self.path.clone();
         let fatal = |e: RecordError| record_error(&path, e).fatal();
         self.ensure_writer(inputs)?;
+        if let Some(v) = self.inherited_reference.take()
+            && inputs.lanes(REFERENCE) > 0
+        {
+            self.store_inherited_reference(ctx, &v)?;
+        }
         if let Some(m) = inputs.get(REFERENCE) {
             self.take_reference(ctx, m)?;
         }
@@ -664,7 +701,12 @@ impl Sink for Logger {
     }
 
     fn export_state(&mut self, _ctx: &mut Context) -> Option<NodeState> {
-        Some(Box::new(LoggerState { id: self.id, path: key(&self.path), writing: self.writer.is_some() }))
+        Some(Box::new(LoggerState {
+            id: self.id,
+            path: key(&self.path),
+            writing: self.writer.is_some(),
+            reference: self.reference.clone(),
+        }))
     }
 
     /// Refuses the swap when the running logger writes the file this one would write;
@@ -675,6 +717,7 @@ impl Sink for Logger {
             let why = format!("{}: {BEING_WRITTEN}", self.path.display());
             return Err(StateRefused::refuse_swap(s, why));
         }
+        self.inherited_reference = s.reference;
         Ok(())
     }
 }
@@ -859,16 +902,16 @@ mod tests {
         let old = logger(&d, "path = \"rec.h5\"");
         let mut same = logger(&d, "path = \"rec.h5\"\noverwrite = true\nflush_interval_s = 0.5");
         // Writing: the replacement would truncate it.
-        let writing = LoggerState { id: old.id, path: key(&d.join("rec.h5")), writing: true };
+        let writing = LoggerState { id: old.id, path: key(&d.join("rec.h5")), writing: true, reference: None };
         let refused = same.import_state(ctx, Box::new(writing)).unwrap_err();
         assert!(refused.swap_refused);
         assert_eq!(refused.reason, format!("{}: {BEING_WRITTEN}", d.join("rec.h5").display()));
         // Its own state back, a file not started yet, or another file: nothing to refuse.
         let mut old = old;
         old.import_state(ctx, refused.state).unwrap();
-        let idle = LoggerState { id: old.id, path: key(&d.join("rec.h5")), writing: false };
+        let idle = LoggerState { id: old.id, path: key(&d.join("rec.h5")), writing: false, reference: None };
         same.import_state(ctx, Box::new(idle)).unwrap();
-        let other = LoggerState { id: old.id, path: key(&d.join("other.h5")), writing: true };
+        let other = LoggerState { id: old.id, path: key(&d.join("other.h5")), writing: true, reference: None };
         same.import_state(ctx, Box::new(other)).unwrap();
     }
 
@@ -1053,6 +1096,91 @@ mod tests {
 
     fn width() -> usize {
         skinflow_eit::Sensor::paper_100mm().measurement_count()
+    }
+
+    /// Set by the swap test to let `gated_script` send its second frame.
+    static GATE: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+    #[derive(Debug, Deserialize)]
+    #[serde(deny_unknown_fields)]
+    struct GatedParams {}
+
+    impl NodeParams for GatedParams {}
+
+    /// Sends a reference frame and an EIT frame, waits for [`GATE`], then sends a second EIT
+    /// frame and ends.
+    struct Gated {
+        sent: usize,
+        width: usize,
+    }
+
+    impl skinflow_core::Source for Gated {
+        fn poll(
+            &mut self,
+            _ctx: &mut Context,
+            out: &mut skinflow_core::Outputs,
+        ) -> Result<skinflow_core::SourcePoll, NodeError> {
+            let header = |i: u64| skinflow_core::Header { seq: i, t_ns: (i + 1) * 1_000_000, origin: 0 };
+            let r = ScriptedReference { width: self.width, first: 0.1 };
+            let (port, m) = match self.sent {
+                0 => (2, Message::new(header(0), EitFrame { v: reference_values(&r) })),
+                1 => (EIT, Message::new(header(1), EitFrame { v: vec![0.25; self.width] })),
+                2 if !GATE.load(std::sync::atomic::Ordering::SeqCst) => {
+                    std::thread::sleep(std::time::Duration::from_millis(1));
+                    return Ok(skinflow_core::SourcePoll::Idle);
+                }
+                2 => (EIT, Message::new(header(2), EitFrame { v: vec![0.26; self.width] })),
+                _ => return Ok(skinflow_core::SourcePoll::Finished),
+            };
+            out.send(port, m)?;
+            self.sent += 1;
+            Ok(skinflow_core::SourcePoll::Emitted)
+        }
+    }
+
+    /// A logger hot-swapped onto another file (a `--watch` edit of its `path`) stores the
+    /// reference its predecessor stored: a replay sends it only once, at its start.
+    #[test]
+    fn a_logger_swapped_onto_another_file_stores_the_reference_its_predecessor_stored() {
+        let m = width();
+        let mut reg = script_registry();
+        reg.register(typed(
+            KindInfo::new("gated_script", Role::Source, "reference, frame, gate, frame")
+                .output(PortSpec::output::<EitFrame>("eit", "frames"))
+                .output(PortSpec::output::<PressureSample>("pressure", "samples"))
+                .output(PortSpec::output::<EitFrame>("reference", "reference frames")),
+            move |_: GatedParams, _| Ok(NodeImpl::Source(Box::new(Gated { sent: 0, width: m }))),
+        ))
+        .unwrap();
+        let d = temp_dir("reference-swap");
+        let (a, b) = (d.join("a.h5"), d.join("b.h5"));
+        let graph = format!(
+            "[[node]]\nid = \"src\"\nkind = \"gated_script\"\n\
+             [[node]]\nid = \"log\"\nkind = \"hdf5_logger\"\nparams = {{ path = {a:?} }}\n\
+             [[edge]]\nfrom = \"src.eit\"\nto = \"log.eit\"\n\
+             [[edge]]\nfrom = \"src.reference\"\nto = \"log.reference\"\n"
+        );
+        let file = skinflow_core::graph::SourceFile::new(d.join("graph.toml"), graph);
+        let spec = skinflow_core::GraphSpec::parse(file, &reg).unwrap();
+        let running = skinflow_core::RunningGraph::start(&spec).unwrap();
+        let t0 = std::time::Instant::now();
+        while running.stats().node("log").unwrap().msgs_in < 2 {
+            assert!(t0.elapsed() < std::time::Duration::from_secs(60), "the logger never got its first two messages");
+            std::thread::sleep(std::time::Duration::from_millis(5));
+        }
+        let logger = reg.get("hdf5_logger").unwrap().clone();
+        let params = skinflow_core::Params::from_toml(&format!("path = {b:?}")).unwrap();
+        running.handle().swap_wait("log", logger, params, std::time::Duration::from_secs(60)).unwrap();
+        GATE.store(true, std::sync::atomic::Ordering::SeqCst);
+        let report = running.wait(&skinflow_core::RunOptions::default());
+        assert_eq!((failures(&report), discarded(&report)), (Vec::<String>::new(), 0));
+        let want = reference_values(&ScriptedReference { width: m, first: 0.1 });
+        for (path, frames) in [(&a, 1), (&b, 1)] {
+            let rec = skinflow_record::Recording::open(path).unwrap();
+            let stored = rec.reference.as_ref().unwrap_or_else(|| panic!("{}: no /eit/reference", path.display()));
+            assert!(same_bits(stored, &want), "{}", path.display());
+            assert_eq!(rec.eit.unwrap().len(), frames, "{}", path.display());
+        }
     }
 
     /// The first reference is stored bit for bit; the same frame again is ignored; a different

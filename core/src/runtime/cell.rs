@@ -571,7 +571,15 @@ impl Cell {
                     return;
                 }
                 let reply = s.reply.take();
-                let result = self.install(s, shared);
+                let result = if self.eos == Eos::Closed {
+                    // Never called again: a replacement would hold what it took over, unflushed.
+                    self.stop_replaced(&mut s.imp, "a swap's replacement never installed");
+                    Err("not installed: the node has flushed and closed its outputs (every input of it ended); the node \
+                         kept its kind"
+                        .to_owned())
+                } else {
+                    self.install(s, shared)
+                };
                 if let Err(why) = &result {
                     tracing::warn!(node = %self.ctx.id, "hot swap refused: {why}");
                 }

@@ -1178,6 +1178,40 @@ mod engine_bounds {
     }
 
     #[test]
+    fn a_swap_into_a_processor_flushed_mid_run_is_refused_saying_why() {
+        let r = reg(&Arc::default(), &Arc::default());
+        let busy = r.get("busy").unwrap().clone();
+        let g = spec(
+            &r,
+            "[graph]\nmode = \"realtime\"\n\
+             [[node]]\nid = \"e\"\nkind = \"ends\"\nparams = { count = 1 }\n\
+             [[node]]\nid = \"live\"\nkind = \"slow\"\nparams = { every_s = 0.01 }\n\
+             [[node]]\nid = \"p\"\nkind = \"busy\"\n\
+             [[node]]\nid = \"out\"\nkind = \"null\"\n\
+             [[edge]]\nfrom = \"e.out\"\nto = \"p.in\"\n\
+             [[edge]]\nfrom = \"p.out\"\nto = \"out.in\"\n\
+             [[edge]]\nfrom = \"live.out\"\nto = \"out.in\"\n",
+        );
+        let (swap, rep) = within("swap into a flushed node", move || {
+            let running = RunningGraph::start(&g).unwrap();
+            let h = running.handle();
+            wait_for("p flushed mid-run", || h.stats().node("p").unwrap().flushes == 1);
+            let swap = h.swap_wait("p", busy, Params::from_toml("busy_us = 1").unwrap(), Duration::from_secs(30));
+            let rep = running.wait(&RunOptions { stop: Some(Arc::new(AtomicBool::new(true))), ..Default::default() });
+            (swap, rep)
+        });
+        match swap {
+            Err(RunError::Swap { node, problem }) => {
+                assert_eq!(node, "p");
+                assert!(problem.contains("has flushed and closed its outputs"), "{problem}");
+            }
+            other => panic!("expected the refusal, got {other:?}"),
+        }
+        assert!(rep.failures.is_empty(), "{:?}", rep.failures);
+        assert_eq!(node(&rep, "p").swaps, 0);
+    }
+
+    #[test]
     fn a_busy_dedicated_node_runs_controls_and_swaps_between_two_calls() {
         for thread in ["pool", "dedicated"] {
             let r = reg(&Arc::default(), &Arc::default());

@@ -76,9 +76,6 @@ fn blank_section_at(text: &str, at: usize) -> Option<String> {
     toml::from_str::<toml::Table>(&out).ok().map(|_| out)
 }
 
-/// A `[[node]]` table as written: keys and values with their spans.
-type LooseNode = LooseTable;
-
 /// The error for a file that is not TOML or does not fit the schema. One inside a `[[node]]`
 /// table names the node (or says why its id cannot) and the key whose value is wrong.
 fn schema_error(src: &SourceFile, e: &toml::de::Error) -> GraphError {
@@ -122,7 +119,7 @@ fn within_node(cause: &str) -> (String, bool) {
 }
 
 /// The `[[node]]` table holding byte `at` of the file, if the file is valid TOML.
-fn node_table_at(src: &SourceFile, at: usize) -> Option<LooseNode> {
+fn node_table_at(src: &SourceFile, at: usize) -> Option<LooseTable> {
     let file: LooseFile = toml::from_str(&src.text).ok()?;
     file.node.into_iter().find(|n| extent(n).contains(&at)).map(Spanned::into_inner)
 }
@@ -174,7 +171,7 @@ fn key_at(text: &str, at: usize) -> Option<String> {
 }
 
 /// The id that names a `[[node]]` table, or why it cannot.
-fn node_name(table: &LooseNode) -> Result<String, String> {
+fn node_name(table: &LooseTable) -> Result<String, String> {
     match table.iter().find(|(k, _)| k.get_ref() == "id").map(|(_, v)| v.get_ref()) {
         None => Err("without an id".into()),
         Some(toml::Value::String(id)) if valid_id(id) => Ok(id.clone()),

@@ -237,11 +237,11 @@ pub fn detect_into(
     let floor = zero_floor(v_ref.unwrap_or(v), params, scratch);
     let mut causes = MaskCauses { zero_floor_v: floor, ..MaskCauses::default() };
     for (k, (x, &val)) in out.excluded.iter_mut().zip(v).enumerate() {
-        let in_frame = classify(val, params, floor, &mut causes.frame)
-            || (stuck.get(k).copied().unwrap_or(false) && {
-                causes.frame.stuck += 1;
-                true
-            });
+        let mut in_frame = classify(val, params, floor, &mut causes.frame);
+        if !in_frame && stuck.get(k).copied().unwrap_or(false) {
+            causes.frame.stuck += 1;
+            in_frame = true;
+        }
         // A reference shorter than the frame has no usable value there.
         let in_ref = v_ref
             .is_some_and(|r| classify(r.get(k).copied().unwrap_or(f64::NAN), params, floor, &mut causes.reference));

@@ -17,9 +17,11 @@
 //! - the offset may grow by at most [`MAX_DRIFT`] per second of device time between records, so
 //!   a device clock slower than the host's is followed (the smallest delay seen long ago would
 //!   otherwise pin the estimate);
-//! - the map re-anchors on that bound when the device clock did not advance (a device restart,
-//!   a stuck clock) or when the record arrived more than [`MAX_BACKLOG_S`] later than the map
-//!   predicts (a clock that does not match the host's);
+//! - the map re-anchors on that bound when the decoder saw the device restart (its counter or
+//!   clock went back: the new run's clock says nothing about the old run's, even when it reads
+//!   ahead of it, as a clock counting from a reset does after a long reboot), when the device
+//!   clock did not advance (a stuck clock) or when the record arrived more than
+//!   [`MAX_BACKLOG_S`] later than the map predicts (a clock that does not match the host's);
 //! - stamps never decrease, across restarts too.
 //!
 //! Limit: the delay of the least delayed first byte is not known; stamps are late by that much:
@@ -59,12 +61,13 @@ impl ClockMap {
     /// The host time of a record sent at `device_s` (device clock) whose first byte was returned
     /// by a read at `first_read_s` (host clock), where `bound_s` is the tightest offset bound the
     /// records of its read in the same device run give (at most `first_read_s - device_s`, its
-    /// own): at most `first_read_s`, and never before an earlier record's stamp.
-    pub fn stamp(&mut self, first_read_s: f64, device_s: f64, bound_s: f64) -> f64 {
+    /// own), and `new_run` whether the decoder found it the first record of a new device run
+    /// (a restart): at most `first_read_s`, and never before an earlier record's stamp.
+    pub fn stamp(&mut self, first_read_s: f64, device_s: f64, bound_s: f64, new_run: bool) -> f64 {
         let own = first_read_s - device_s;
         let bound = bound_s.min(own);
         let offset = match self.offset_s {
-            Some(o) if device_s > self.last_device_s => {
+            Some(o) if device_s > self.last_device_s && !new_run => {
                 let grown = o + MAX_DRIFT * (device_s - self.last_device_s);
                 if bound - grown > MAX_BACKLOG_S {
                     self.anchors += 1;
@@ -102,7 +105,7 @@ mod tests {
     /// `stamp` as the reader calls it for a read at `read_s` of whole records, `tail_s` the
     /// device time of the last record of the read in the same run.
     fn tail(m: &mut ClockMap, read_s: f64, device_s: f64, tail_s: f64) -> f64 {
-        m.stamp(read_s, device_s, read_s - tail_s.max(device_s))
+        m.stamp(read_s, device_s, read_s - tail_s.max(device_s), false)
     }
 
     #[test]
@@ -197,5 +200,24 @@ mod tests {
         // The new anchor holds: a record 0.5 s later by both clocks.
         assert!((tail(&mut m, 30.5, 1.2, 1.2) - 30.5).abs() < 1e-12);
         assert_eq!(m.anchors(), 4);
+    }
+
+    /// A board that ran 0.5 s, then rebooted for 6 s with its clock counting from the reset:
+    /// its first record of the new run reads 6.0 s, ahead of the old run's 0.5 s. Predicted from
+    /// the old anchor (and its drift allowance) it would be stamped 0.55 s early, by about the old
+    /// run's length (within `MAX_BACKLOG_S`, so not caught as a backlog); told of the restart,
+    /// the map stamps it at its read.
+    #[test]
+    fn a_restart_whose_clock_reads_ahead_of_the_old_run_reanchors_too() {
+        let mut m = ClockMap::new();
+        tail(&mut m, 10.0, 0.0, 0.0);
+        tail(&mut m, 10.5, 0.5, 0.5);
+        let unflagged = m.clone().stamp(16.6, 6.0, 16.6 - 6.0, false);
+        assert!((unflagged - 16.055).abs() < 1e-9, "{unflagged}");
+        assert_eq!(m.stamp(16.6, 6.0, 16.6 - 6.0, true), 16.6);
+        assert_eq!(m.anchors(), 2);
+        // The new run continues from the new anchor.
+        assert!((tail(&mut m, 16.7, 6.1, 6.1) - 16.7).abs() < 1e-12);
+        assert_eq!(m.anchors(), 2);
     }
 }

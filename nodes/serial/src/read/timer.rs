@@ -31,6 +31,9 @@ pub(super) struct RecordTimer<D: Decode> {
     bounds: Box<[f64]>,
     len: usize,
     next: usize,
+    /// The decoder's `counter_resets` at the last record stamped: a record that raised it
+    /// starts a new device run, which the clock map anchors afresh.
+    resets: u64,
 }
 
 impl<D: Decode> RecordTimer<D> {
@@ -43,6 +46,7 @@ impl<D: Decode> RecordTimer<D> {
             bounds: vec![0.0; if D::TIMED { rx_len } else { 0 }].into_boxed_slice(),
             len: 0,
             next: 0,
+            resets: decoder.stats().counter_resets,
         }
     }
 
@@ -72,7 +76,10 @@ impl<D: Decode> RecordTimer<D> {
             Some(device_s) => {
                 let bound = self.bounds[..self.len].get(self.next).copied().unwrap_or(first_read_s - device_s);
                 self.next += 1;
-                self.clock.stamp(first_read_s, device_s, bound)
+                let resets = decoder.stats().counter_resets;
+                let new_run = resets > self.resets;
+                self.resets = resets;
+                self.clock.stamp(first_read_s, device_s, bound, new_run)
             }
             None => first_read_s,
         };
@@ -88,14 +95,15 @@ fn first_pos(end_pos: u64, span: usize) -> u64 {
 /// Decodes `bytes` (starting at stream position `base`) with `decoder` and writes to `bounds`,
 /// for each record completed (up to `bounds.len()`), the tightest offset bound
 /// `first-byte read time - device time` of the records from it to the last of `bytes` in the
-/// same device run (the run ends where device time goes back: a restart). Returns how many were
-/// written.
+/// same device run (the run ends where the decoder counts a restart or device time goes back).
+/// Returns how many were written.
 fn run_bounds<D: Decode>(decoder: &mut D, bytes: &[u8], base: u64, arrivals: &Arrivals, bounds: &mut [f64]) -> usize {
     // First pass: (device time, own bound) per record, in pairs; runs are closed backwards.
     let mut len = 0;
     let mut at = 0usize;
     let mut rest = bytes;
     while !rest.is_empty() {
+        let resets = decoder.stats().counter_resets;
         let step = decoder.step(rest);
         rest = &rest[step.consumed..];
         at += step.consumed;
@@ -104,7 +112,10 @@ fn run_bounds<D: Decode>(decoder: &mut D, bytes: &[u8], base: u64, arrivals: &Ar
             && 2 * len + 1 < bounds.len()
         {
             let first = first_pos(base + at as u64, decoder.record_span());
-            bounds[2 * len] = device_s;
+            // The first record of a new run is noted at device time -inf, so that no record
+            // before it counts as its run (the backward pass compares device times).
+            let new_run = decoder.stats().counter_resets > resets;
+            bounds[2 * len] = if new_run { f64::NEG_INFINITY } else { device_s };
             bounds[2 * len + 1] = arrivals.read_time_of(first) - device_s;
             len += 1;
         }
@@ -113,7 +124,8 @@ fn run_bounds<D: Decode>(decoder: &mut D, bytes: &[u8], base: u64, arrivals: &Ar
     let (mut next_device, mut next_bound) = (f64::NAN, f64::NAN);
     for k in (0..len).rev() {
         let (device_s, own) = (bounds[2 * k], bounds[2 * k + 1]);
-        let bound = if next_device >= device_s { own.min(next_bound) } else { own };
+        let same_run = next_device > f64::NEG_INFINITY && next_device >= device_s;
+        let bound = if same_run { own.min(next_bound) } else { own };
         bounds[2 * k + 1] = bound;
         (next_device, next_bound) = (device_s, bound);
     }
@@ -228,6 +240,39 @@ mod tests {
         assert_eq!(n, 5);
         let (old_run, new_run) = (2.0 - 1150.0 * 1e-3, 2.0 - 120.0 * 1e-3);
         assert_eq!(bounds[..n], [1.0 - 1050.0 * 1e-3, old_run, old_run, new_run, new_run]);
+    }
+
+    /// A board whose clock counts from its reset, rebooting for longer than its first run
+    /// lasted: the new run's clock reads ahead of the old run's. Its frames, read together with
+    /// the old run's last one, are stamped from their own run, not predicted from the old one.
+    #[test]
+    fn a_restart_whose_clock_reads_ahead_starts_a_new_run_in_a_read_and_in_the_map() {
+        let frame = |c: u32, device_s: f64| {
+            let mut b = Vec::new();
+            encode_eit_frame(&mut b, c, (device_s * 1e6).round() as u32, &[0.25; 3]);
+            b
+        };
+        // Old run: counters 0..=2 every 0.25 s from device 0, read 2 ms after each was sent at
+        // host 10.0 + device time. Then 6 s of reboot: the new run's counter 0 at device 6.0 is
+        // sent at host 16.75, and counter 1 at 6.25 at 17.0.
+        let mut reads = vec![(frame(0, 0.0), 10.002), (frame(1, 0.25), 10.252)];
+        // The reader starved: the old run's last frame and the new run's two come in one read.
+        let mut burst = frame(2, 0.5);
+        burst.extend(frame(0, 6.0));
+        burst.extend(frame(1, 6.25));
+        reads.push((burst, 17.002));
+        let mut decoder = EitDecoder::new(3);
+        let got = stamp_reads(&mut decoder, &reads);
+        assert_eq!(decoder.stats().counter_resets, 1);
+        let stamps: Vec<f64> = got.iter().map(|(_, t)| t.t_s).collect();
+        assert_eq!(stamps.len(), 5);
+        // The old run keeps its anchor (its late frame drifts by at most `MAX_DRIFT` x 0.25 s);
+        // the new run is anchored by its own last record of the read (17.002 - 6.25), so its
+        // first frame is 0.25 s before it. Each is stamped about 2 ms after it was sent; without
+        // the restart the new run's first frame came out 0.69 s early.
+        for (got, want) in stamps.iter().zip([10.002, 10.252, 10.502, 16.752, 17.002]) {
+            assert!((got - want).abs() <= 0.25 * super::super::stamp::MAX_DRIFT + 1e-9, "{stamps:?}");
+        }
     }
 
     #[test]

@@ -76,14 +76,19 @@ fn every_recorded_frame_is_synced_and_a_frame_without_pressure_is_flagged() {
     assert!(err.contains("cut.h5: 3 frames without pressure") && err.contains("were not evaluated"), "{err}");
 }
 
-/// A copy of recording `src` without its truth: EIT frames, their no-load reference and the
-/// pressure only (a session recorded without a load cell), under [`hdf5_io`].
-fn copy_without_truth(src: &Path, dst: &Path) {
+/// A copy of recording `src` with its EIT frames, their no-load reference and its pressure,
+/// and of its truth the rows from the first whose index `keep_from` gives (`None`: no truth at
+/// all, a session recorded without a load cell), under [`hdf5_io`].
+fn copy_recording(src: &Path, dst: &Path, keep_from: impl Fn(&skinflow_record::TruthStream) -> Option<usize>) {
     use skinflow_record::{Recording, RecordingWriter, Streams, WriterOptions};
     hdf5_io(|| {
         let rec = Recording::open(src).unwrap();
+        let truth = rec.truth.as_ref().and_then(|t| keep_from(t).map(|from| (t, from)));
         let mut opts = WriterOptions::new(rec.sensor_toml.clone());
-        opts.streams = Streams { eit: true, pressure: true, truth: false, ..Streams::default() };
+        opts.streams = Streams { eit: true, pressure: true, truth: truth.is_some(), ..Streams::default() };
+        if let Some((t, _)) = truth {
+            opts.truth_max_contacts = t.max_contacts;
+        }
         let mut w = RecordingWriter::create(dst, &opts).unwrap();
         let eit = rec.eit.as_ref().unwrap();
         for i in 0..eit.len() {
@@ -96,8 +101,20 @@ fn copy_without_truth(src: &Path, dst: &Path) {
         for i in 0..p.len() {
             w.append_pressure(p.t_s[i], p.kpa[i]).unwrap();
         }
+        if let Some((t, from)) = truth {
+            for i in from..t.len() {
+                let contacts: Vec<_> = t.row(i).contacts().collect();
+                w.append_truth(t.t_s[i], &contacts).unwrap();
+            }
+        }
         w.close().unwrap();
     });
+}
+
+/// A copy of recording `src` without its truth: EIT frames, their no-load reference and the
+/// pressure only (a session recorded without a load cell), under [`hdf5_io`].
+fn copy_without_truth(src: &Path, dst: &Path) {
+    copy_recording(src, dst, |_| None);
 }
 
 /// `graphs/ab-replay.toml` on a recording without truth (its truth edge wired, nothing on
@@ -137,4 +154,35 @@ fn a_recording_without_truth_is_tared_by_time_and_its_lanes_compared() {
     assert!(lanes[0]["disagreement_rmse_n"].is_null(), "{report}");
     assert!(lanes[1]["disagreement_rmse_n"].as_f64().is_some_and(|x| x.is_finite() && x > 0.0), "{report}");
     assert!(table.contains("| sensitivity-compensated |"), "{table}");
+}
+
+/// A recording whose truth starts at the first press (a writer that logs truth rows from the
+/// first contact on, not an empty row at the start): its no-load period still lasts until that
+/// press (CONTRACTS.md section 2), so `eval` evaluates the same frames with the same result as
+/// on the recording with the leading empty row. Before, the replay sent that first row at its
+/// time, 4 s in, and `sync` had taken the truth input for silent after `tare_s` (2 s): the
+/// frames between were evaluated, and P0 and the EIT reference came from the first 2 s only.
+#[test]
+fn truth_recorded_from_the_first_press_on_keeps_the_no_load_period_until_that_press() {
+    let d = super::support::workdir("sync", "late-truth");
+    ok(&skinflow(&d, &["simulate", fixture("tiny-eval.toml").to_str().unwrap(), "--out", "rec.h5", "--seed", "3"]));
+    let first_contact = |t: &skinflow_record::TruthStream| (0..t.len()).find(|&i| t.row(i).contacts().next().is_some());
+    copy_recording(&d.join("rec.h5"), &d.join("late.h5"), first_contact);
+    let truth = read_recording(d.join("late.h5")).truth.unwrap();
+    assert!(truth.t_s[0] > 3.9 && truth.row(0).contacts().next().is_some(), "{:?}", truth.t_s);
+    let calib = super::support::root().join("graphs/calib/paper.toml");
+    let eval = |rec: &str, json: &str| {
+        let out = skinflow(&d, &["eval", rec, "--calib", calib.to_str().unwrap(), "--json", json]);
+        ok(&out);
+        let err = stderr(&out);
+        assert!(!err.contains("no truth row arrived") && !err.contains("no-load frame"), "{rec}: {err}");
+        let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(d.join(json)).unwrap()).unwrap();
+        v
+    };
+    let (whole, late) = (eval("rec.h5", "whole.json"), eval("late.h5", "late.json"));
+    assert_eq!(late["frames"], whole["frames"]);
+    assert_eq!(late["localization"], whole["localization"]);
+    for (name, s) in whole["strategies"].as_object().unwrap() {
+        assert_eq!(late["strategies"][name]["rmse_n"], s["rmse_n"], "{name}");
+    }
 }

@@ -12,7 +12,9 @@
 //! such message the same time without a word. Pacing starts at the first EIT frame or pressure
 //! sample: truth rows before it (a rotated part starts with the row in effect at its start, at
 //! that row's own time, which may be long before) go out at once, just before it, with their
-//! recorded times.
+//! recorded times. So does the first truth row when it is recorded later (a writer that logs
+//! truth from the first press on): a consumer such as `sync` knows from the start that the
+//! recording has truth.
 //!
 //! Hot swap: a replacement reading the same recording goes on where the running instance
 //! stopped (its read position, loop offset and sequence numbers), at its own `speed` from the
@@ -155,7 +157,11 @@ impl Replay {
             order.extend(p.t_s.iter().enumerate().map(|(i, t)| (*t, 1, Item::Pressure(i))));
         }
         // Truth rows before the first frame or sample (a rotated part's row in effect) are due
-        // with it: pacing does not wait from their times.
+        // with it: pacing does not wait from their times. So is the first truth row whatever
+        // its time: it tells `sync` at once that the recording has truth, whose no-load period
+        // then lasts until the first contact (CONTRACTS.md section 2) even when the first row
+        // is recorded seconds after the first sample (a writer that logs truth from the first
+        // press), where `sync` would otherwise take the truth input for silent after `tare_s`.
         let first_data = order.iter().map(|o| o.0).reduce(f64::min);
         let mut lead_s = 0.0_f64;
         if let Some(tr) = &rec.truth {
@@ -165,6 +171,7 @@ impl Replay {
                         lead_s = lead_s.max(first - t);
                         first
                     }
+                    Some(first) if i == 0 => first,
                     _ => t,
                 };
                 order.push((due, 0, Item::Truth(i)));
@@ -429,6 +436,25 @@ mod tests {
         }
         w.close().unwrap();
         path
+    }
+
+    /// A first truth row recorded after the first sample (truth logged from the first press on)
+    /// goes out before it, with its recorded time; the later rows keep their place.
+    #[test]
+    fn the_first_truth_row_goes_out_first_even_when_recorded_later() {
+        let pressure: Vec<f64> = (0..10).map(|k| 0.1 * f64::from(k)).collect();
+        let rec = truth_and_pressure("late-truth", &[0.55, 0.75], &pressure);
+        let r = Replay::new(rec.clone(), Recording::open(&rec).unwrap(), 1.0, false).unwrap();
+        assert_eq!((r.t_first, r.lead_s), (0.0, 0.0));
+        let items: Vec<String> = r.order.iter().map(|(t, i)| format!("{t}:{i:?}")).collect();
+        assert_eq!(items[0], "0:Truth(0)", "{items:?}");
+        assert_eq!(items[1], "0:Pressure(0)", "{items:?}");
+        let second = r.order.iter().position(|(_, i)| matches!(i, super::Item::Truth(1))).unwrap();
+        assert!(matches!(r.order[second - 1].1, super::Item::Pressure(7)), "{items:?}");
+        let (sent, _) = run("replay", &params(&rec, ", speed = 0.0"), None);
+        let truth_ns: Vec<u64> = sent.iter().filter(|s| s.0 == "truth").map(|s| s.2).collect();
+        assert_eq!(truth_ns, [550_000_000, 750_000_000], "sent with their recorded times");
+        assert_eq!(sent[0].0, "truth");
     }
 
     /// Times before 0 are refused when the replay is built and by its file check, naming the

@@ -373,8 +373,10 @@ impl Compare {
 
     /// Accounts lane `i`'s forces of one frame: scored against the truth, or without truth
     /// against the reference lane's forces of the frame (`reference`; placeholders are no
-    /// reference). No-load frames and placeholders for a frame without pressure are counted
-    /// and skipped. Returns whether the lane was compared with the reference lane.
+    /// reference). No-load frames and frames without pressure are counted and skipped, in
+    /// every lane alike (as `eval` does: the lanes are judged on the same frames; an EIT lane
+    /// has no placeholder to tell it), and so are a lane's own placeholders. Returns whether
+    /// the lane was compared with the reference lane.
     fn account(&mut self, i: usize, f: &Forces, reference: Option<&Forces>) -> bool {
         let synced = &f.split.contacts.image.src;
         let unscored = self.scored == ScoredFrames::Settled && !synced.settled;
@@ -384,7 +386,7 @@ impl Compare {
             lane.no_load_frames += 1;
             return false;
         }
-        if f.without_pressure() {
+        if !synced.has_pressure() || f.without_pressure() {
             lane.no_pressure_frames += 1;
             return false;
         }
@@ -866,6 +868,33 @@ mod tests {
         let r = c.reports();
         assert_eq!((r[0].frames, r[0].no_pressure_frames, r[1].frames), (0, 1, 1));
         assert!(r[1].disagreement_rmse_n.is_nan());
+    }
+
+    /// The reviewer's case: a frame whose window got no pressure (NaN dP) is left out of every
+    /// lane, an EIT lane too (it sets no placeholder flag), and so is such a frame with no
+    /// contact (no force to carry a flag): the lanes are scored on the same frames, as in `eval`.
+    #[test]
+    fn a_frame_without_pressure_is_left_out_of_every_lane() {
+        let without_pressure = |mut f: Forces| {
+            let mut split = (*f.split).clone();
+            let mut contacts = (*split.contacts).clone();
+            let mut image = (*contacts.image).clone();
+            image.src = Arc::new(SyncedFrame { dp_kpa: f64::NAN, ..(*image.src).clone() });
+            contacts.image = Arc::new(image);
+            split.contacts = Arc::new(contacts);
+            f.split = Arc::new(split);
+            f
+        };
+        let truth = [(0.0, 0.0, 2.0)];
+        let mut c = compare();
+        let eit = without_pressure(forces("eit", &[(0.0, 0.0, 2.5)], Some(&truth)));
+        let none = without_pressure(forces("pneumatic", &[], Some(&truth)));
+        c.account(0, &eit, None);
+        c.account(1, &none, None);
+        let r = c.reports();
+        for l in &r {
+            assert_eq!((l.frames, l.no_pressure_frames, l.scored_frames, l.missed), (0, 1, 0, 0), "{}", l.name);
+        }
     }
 
     #[test]

@@ -3,15 +3,20 @@
 //!
 //! Theory: a frame stamped `t` (middle of acquisition) with period `T` gets the mean of the
 //! pressure samples in `[t - T/2, t + T/2)` (CONTRACTS.md section 2). `T` is `frame_period_s`
-//! or the median of the observed frame intervals. A frame is emitted as soon as no later
-//! pressure sample can fall into its window (the newest sample is within one pressure period
-//! of the window's end), without waiting when no pressure is connected, and in any case once
-//! more than three frames are pending. Before the first truth row with a contact, a frame
+//! or the median of the last 15 frame intervals, each divided by its `seq` step (frames lost on
+//! the link widen a gap, not the window). A frame is emitted as soon as no later pressure
+//! sample can fall into its window (the newest sample is within one pressure period of the
+//! window's end; that period is the median of the recent sample intervals, so a gap in the
+//! pressure stream does not stretch it), without waiting when no pressure is connected, and in
+//! any case once three frames are pending. Before the first truth row with a contact, a frame
 //! also waits until some input (or a newer frame) shows time past its window's end, so a first
 //! contact stamped inside the window cannot be missed. P0 is the mean pressure of the leading no-load period: before the
 //! first truth row with a contact, or without truth the first `tare_s` seconds after the earliest time seen on either input (a device clock need not start at 0). A frame is a
 //! no-load frame (an EIT reference candidate) only when its whole window lies in that period; a `tare`
-//! control command re-tares from the last `tare_window_s` seconds of pressure.
+//! control command re-tares from the last `tare_window_s` seconds of pressure, for every frame
+//! whose window ends after that window began (a frame still pending from before keeps the P0 it
+//! was acquired under). Frames past the no-load period with pressure samples but no P0 (no
+//! sample came in that period: a pressure board that started late) are warned about at the first.
 //!
 //! A connected truth input that delivers nothing (a recording without truth replayed through a
 //! graph that wires it): when no truth row at all has arrived by the end of those first `tare_s`
@@ -153,7 +158,10 @@ struct WithoutPressure {
 struct SyncState {
     /// (t_s, kPa), time order.
     pressure: VecDeque<(f64, f64)>,
+    /// The pressure board's sample period, s: the median of `pressure_intervals`.
     pressure_period_s: Option<f64>,
+    /// Recent positive intervals between pressure samples, s.
+    pressure_intervals: VecDeque<f64>,
     /// (t_s, row), time order; the first is the row in effect for the oldest pending frame.
     truth: VecDeque<(f64, Arc<Truth>)>,
     /// Time of the first truth row with a contact: the no-load period ends there.
@@ -178,8 +186,16 @@ struct SyncState {
     p0_fixed: Option<f64>,
     /// Noise SD measured over the tare window of a `tare` command, kPa.
     noise_fixed: Option<f64>,
+    /// The last `tare` command's window start, s, with P0 and the noise before it: for the
+    /// frames still pending then whose window ended before it.
+    before_tare: Option<(f64, f64, Option<f64>)>,
+    /// Frames with samples but no P0 past the no-load period were warned about.
+    warned_no_tare: bool,
     pending: VecDeque<(Header, Arc<EitFrame>)>,
     last_frame_s: Option<f64>,
+    /// The last frame's `seq` (the board's frame number): intervals are divided by its steps.
+    last_seq: Option<u64>,
+    /// Recent frame intervals per frame period (over lost frames: divided by the `seq` step).
     intervals: VecDeque<f64>,
     /// The acquisition window T in use, s: `frame_period_s`, else the median of `intervals`
     /// (updated per frame, read per pressure sample).
@@ -201,6 +217,7 @@ impl Sync {
                 p0_recent: VecDeque::with_capacity(P0_RECENT + 1),
                 pending: VecDeque::with_capacity(MAX_PENDING + 2),
                 intervals: VecDeque::with_capacity(PERIOD_HISTORY + 1),
+                pressure_intervals: VecDeque::with_capacity(PERIOD_HISTORY + 1),
                 period_s,
                 ..SyncState::default()
             },
@@ -219,10 +236,7 @@ impl Sync {
         if let Some(t) = self.p.frame_period_s {
             self.st.period_s = t;
         } else if !self.st.intervals.is_empty() {
-            self.scratch.clear();
-            self.scratch.extend(self.st.intervals.iter().copied());
-            self.scratch.sort_by(f64::total_cmp);
-            self.st.period_s = self.scratch[self.scratch.len() / 2];
+            self.st.period_s = median(&mut self.scratch, &self.st.intervals);
         }
     }
 
@@ -296,6 +310,16 @@ impl Sync {
         })
     }
 
+    /// P0 and the noise for a frame whose window ends (exclusive) at `end_s`: those before the
+    /// last `tare` command for a frame acquired wholly before its window (still pending when it
+    /// came: the tare may remove a drift step that came after it), else the current ones.
+    fn p0_noise_for(&self, end_s: f64) -> (f64, Option<f64>) {
+        match self.st.before_tare {
+            Some((from_s, p0, noise)) if end_s <= from_s => (p0, noise),
+            _ => (self.p0(), self.noise_kpa()),
+        }
+    }
+
     /// The sensor's noise SD, kPa: of the no-load samples, or of a `tare` command's window;
     /// `None` with fewer than [`MIN_NOISE_SAMPLES`] such samples.
     fn noise_kpa(&self) -> Option<f64> {
@@ -313,8 +337,15 @@ impl Sync {
         if let Some(&(last, _)) = self.st.pressure.back() {
             let dt = t_s - last;
             if dt > 0.0 {
-                // A smoothed period estimate; the first interval seeds it.
-                self.st.pressure_period_s = Some(self.st.pressure_period_s.map_or(dt, |p| 0.9 * p + 0.1 * dt));
+                // The median of the recent intervals: a gap in the stream (the board dropped
+                // out for seconds) is one interval among 15, not a period that takes dozens of
+                // samples to shrink back, during which frames would be judged complete with
+                // part of their window still to come.
+                self.st.pressure_intervals.push_back(dt);
+                if self.st.pressure_intervals.len() > PERIOD_HISTORY {
+                    self.st.pressure_intervals.pop_front();
+                }
+                self.st.pressure_period_s = Some(median(&mut self.scratch, &self.st.pressure_intervals));
             }
         }
         if self.st.p0_fixed.is_none() && self.in_no_load(t_s) && kpa.is_finite() {
@@ -351,21 +382,26 @@ impl Sync {
     fn on_frame(&mut self, h: Header, f: Arc<EitFrame>) {
         let t = h.t_s();
         self.saw(t);
+        // The interval per frame period: `seq` numbers the frames the board sent (`/eit/seq`),
+        // so a gap of lost frames spans several periods, not one longer window. A `seq` that
+        // does not advance (a writer that does not count frames) counts as one step.
+        let steps = match self.st.last_seq {
+            Some(last) if h.seq > last => h.seq - last,
+            _ => 1,
+        };
         if let Some(last) = self.st.last_frame_s
             && t > last
         {
-            self.st.intervals.push_back(t - last);
+            self.st.intervals.push_back((t - last) / steps as f64);
             if self.st.intervals.len() > PERIOD_HISTORY {
                 self.st.intervals.pop_front();
             }
             if self.p.frame_period_s.is_none() {
-                self.scratch.clear();
-                self.scratch.extend(self.st.intervals.iter().copied());
-                self.scratch.sort_by(f64::total_cmp);
-                self.st.period_s = self.scratch[self.scratch.len() / 2];
+                self.st.period_s = median(&mut self.scratch, &self.st.intervals);
             }
         }
         self.st.last_frame_s = Some(t);
+        self.st.last_seq = Some(h.seq);
         self.st.pending.push_back((h, f));
     }
 
@@ -404,7 +440,7 @@ impl Sync {
         let (n, mean, sd) = mean_sd(
             self.st.pressure.iter().filter(|&&(tp, kpa)| tp >= lo && tp < hi && kpa.is_finite()).map(|&(_, k)| k),
         );
-        let noise = self.noise_kpa();
+        let (p0, noise) = self.p0_noise_for(hi);
         let settled = noise.is_some_and(|noise| {
             let threshold = (self.p.settle_factor * noise).max(self.p.settle_floor_kpa);
             sd <= threshold
@@ -423,13 +459,22 @@ impl Sync {
         // The whole window must precede the first contact: a frame whose acquisition saw the
         // first press begin would put part of that contact into the EIT reference.
         let no_load = self.window_in_no_load(hi);
-        let p0 = self.p0();
         let dp_kpa = mean - p0;
         if !dp_kpa.is_finite() {
             if n == 0 {
                 self.without_pressure.no_sample += 1;
             } else {
                 self.without_pressure.no_tare += 1;
+                if !no_load && !self.st.warned_no_tare {
+                    // Past the no-load period with samples but no P0: none came in that period
+                    // (a pressure board that started late); nothing else would say so until stop.
+                    self.st.warned_no_tare = true;
+                    tracing::warn!(
+                        node = ctx.id(),
+                        frame_t_s = t,
+                        "frames have pressure samples but no P0: no pressure sample arrived in the leading                          no-load period (did the pressure board start late?); their dP is unknown until a `tare`                          command is sent with the skin unloaded"
+                    );
+                }
             }
         }
         let payload = self.ring.fill(|s| {
@@ -469,6 +514,7 @@ impl Sync {
             );
         }
         tracing::info!(p0_kpa = p0, samples = n, noise_kpa = noise, "sync: re-tared P0");
+        self.st.before_tare = Some((from, self.p0(), self.noise_kpa()));
         self.st.p0_fixed = Some(p0);
         self.st.noise_fixed = noise.or(self.st.noise_fixed);
         Ok(())
@@ -576,6 +622,15 @@ impl Processor for Sync {
         }
         Ok(())
     }
+}
+
+/// The median (upper middle) of `values`, non-empty, sorted in `scratch` (no allocation when
+/// its capacity holds them).
+fn median(scratch: &mut Vec<f64>, values: &VecDeque<f64>) -> f64 {
+    scratch.clear();
+    scratch.extend(values.iter().copied());
+    scratch.sort_by(f64::total_cmp);
+    scratch[scratch.len() / 2]
 }
 
 /// Count, mean and sample SD (two passes) of `samples`; the mean is NaN without samples and
@@ -700,6 +755,62 @@ mod tests {
         assert!((s.tare_end_s() - 502.0).abs() < 1e-9, "{}", s.tare_end_s());
     }
 
+    fn frame(s: &mut Sync, seq: u64, t_s: f64) {
+        s.on_frame(Header { seq, t_ns: (t_s * 1e9).round() as u64, origin: 0 }, Arc::new(EitFrame { v: vec![1.0] }));
+    }
+
+    /// The reviewer's case: a link that loses every other frame for a while. The window T stays
+    /// the board's period (intervals divided by their `seq` step), not twice it, so frames do
+    /// not average over (and share) each other's pressure samples.
+    #[test]
+    fn frames_lost_on_the_link_do_not_widen_the_window() {
+        let mut s = sync();
+        let period = 0.769;
+        let mut seq = 0;
+        for _ in 0..5 {
+            frame(&mut s, seq, period * seq as f64);
+            seq += 1;
+        }
+        // Every other frame lost for 20 frames: only even seqs arrive.
+        for _ in 0..20 {
+            seq += 1;
+            frame(&mut s, seq, period * seq as f64);
+            seq += 1;
+        }
+        assert!((s.st.period_s - period).abs() < 1e-9, "T = {}", s.st.period_s);
+        // A writer whose seq does not count frames: its intervals are taken as they are.
+        let mut s = sync();
+        for k in 0..5 {
+            frame(&mut s, 0, 0.5 * f64::from(k));
+        }
+        assert!((s.st.period_s - 0.5).abs() < 1e-9, "T = {}", s.st.period_s);
+    }
+
+    /// The reviewer's case: the pressure board drops out for 5 s. The pressure period stays the
+    /// board's (a median), so a frame waiting for pressure after the gap is not judged complete
+    /// while most of its window is still to come.
+    #[test]
+    fn a_gap_in_the_pressure_stream_does_not_close_windows_early() {
+        let mut s = sync();
+        s.truth_connected = false;
+        for i in 0..200 {
+            s.on_pressure(0.05 * f64::from(i), 0.3);
+        }
+        // Nothing from 9.95 s to 15 s, then samples again at 20 Hz.
+        for i in 0..4 {
+            s.on_pressure(15.0 + 0.05 * f64::from(i), 0.3);
+        }
+        assert!((s.st.pressure_period_s.unwrap() - 0.05).abs() < 1e-9, "{:?}", s.st.pressure_period_s);
+        // A frame whose window [14.72, 15.48) got 4 of its 10 samples is not complete (with a
+        // smoothed period that counted the gap, about 0.42 s now, it was).
+        frame(&mut s, 0, 15.1);
+        assert!(!s.oldest_complete(), "the window is open until about 15.48 s");
+        for i in 4..20 {
+            s.on_pressure(15.0 + 0.05 * f64::from(i), 0.3);
+        }
+        assert!(s.oldest_complete());
+    }
+
     fn contact_row() -> Arc<Truth> {
         Arc::new(Truth { contacts: vec![TruthContact { x_mm: 0.0, y_mm: 0.0, force_n: 1.0, diameter_mm: 15.0 }] })
     }
@@ -782,5 +893,35 @@ mod tests {
         s.tare().unwrap();
         assert!((s.p0() - 0.505).abs() < 1e-12);
         assert!((s.noise_kpa().unwrap() - sd(&samples)).abs() < 1e-12);
+    }
+
+    /// The reviewer's case: a `tare` taken to remove a drift step applies to the frames
+    /// acquired after its window began, not to those still pending from before the step.
+    #[test]
+    fn a_tare_does_not_reach_back_to_frames_acquired_before_its_window() {
+        let mut s = sync();
+        s.truth_connected = false;
+        // 2 s at 0.30 kPa (P0), 2 s loaded at 0.80, then the unloaded skin has drifted to 0.40.
+        for i in 0..120 {
+            let t = 0.05 * f64::from(i);
+            s.on_pressure(
+                t,
+                if i < 40 {
+                    0.30
+                } else if i < 80 {
+                    0.80
+                } else {
+                    0.40
+                },
+            );
+        }
+        let before = (s.p0(), s.noise_kpa());
+        assert!((before.0 - 0.30).abs() < 1e-12);
+        s.tare().unwrap();
+        // Its window: the last tare_window_s = 1 s, from 4.95 s.
+        assert!((s.p0() - 0.40).abs() < 1e-12);
+        let loaded_frame_end = 3.9;
+        assert_eq!(s.p0_noise_for(loaded_frame_end), before, "a frame of the loaded period keeps the old P0");
+        assert_eq!(s.p0_noise_for(5.2), (s.p0(), s.noise_kpa()));
     }
 }

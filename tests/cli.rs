@@ -234,6 +234,19 @@ fn calibrate_pools_several_recordings_and_names_each_in_the_provenance() {
     assert!(!clobber.status.success() && stderr(&clobber).contains("is the recording b.h5"), "{}", stderr(&clobber));
 }
 
+/// Two indentations with the same truth (a protocol that presses each place twice, released in
+/// between) are two calibration samples: the release ends the first hold, even though its frames
+/// are left out before the holds are averaged (they had been averaged into one).
+#[test]
+fn calibrate_keeps_repeated_indentations_apart() {
+    let d = workdir("repeated-presses");
+    simulate(&d, "repeated-presses.toml", "rp.h5");
+    let out = ok(&skinflow(&d, &["calibrate", "rp.h5", "--out", "rp.toml"]));
+    let line = out.lines().find(|l| l.starts_with("samples: ")).unwrap_or_else(|| panic!("no samples line:\n{out}"));
+    // 4 places x 2 presses.
+    assert!(line.contains("-> 8 used (0 rejected) at 4 locations"), "{line}");
+}
+
 /// `eval A.h5 B.h5` pools the two recordings into one report: its counts are the sums of the
 /// two alone and its RMSEs their pooled root mean squares; the JSON names both; each CSV row
 /// names its recording; the same recording twice is refused.

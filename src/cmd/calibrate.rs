@@ -34,10 +34,21 @@ pub struct LeftOut {
 }
 
 /// Calibration samples: one per settled, loaded single-contact frame with a detection and a
-/// known pressure change; and the loaded frames left out, by cause.
-pub fn samples(rows: &[Vec<skinflow_core::Message>], settled: &Settled) -> (Vec<CalibSample>, LeftOut) {
+/// known pressure change; and the loaded frames left out, by cause. Each sample carries its
+/// hold number ([`CalibSample::hold`], from `first_hold` on): a loaded frame not used (a
+/// release, a ramp, another contact count, no pressure or no detection) ends the hold, so
+/// repeated indentations with the same truth are averaged one by one, never into one sample.
+pub fn samples(
+    rows: &[Vec<skinflow_core::Message>],
+    settled: &Settled,
+    first_hold: u64,
+) -> (Vec<CalibSample>, LeftOut) {
     let mut out = Vec::new();
     let mut left = LeftOut::default();
+    let mut hold = first_hold;
+    // Whether the last loaded frame was used: a frame left out between two used ones
+    // starts a new hold.
+    let mut in_hold = false;
     for row in rows {
         let Some(m) = row.first() else { continue };
         let Some(c) = m.get::<Contacts>() else { continue };
@@ -45,21 +56,28 @@ pub fn samples(rows: &[Vec<skinflow_core::Message>], settled: &Settled) -> (Vec<
         if synced.no_load {
             continue;
         }
-        if !synced.has_pressure() {
-            left.without_pressure += 1;
+        let used = 'used: {
+            if !synced.has_pressure() {
+                left.without_pressure += 1;
+                break 'used None;
+            }
+            if !settled.is_settled(m.header.t_s(), synced) {
+                left.unsettled += 1;
+                break 'used None;
+            }
+            let Some(truth) = synced.truth.as_ref().filter(|t| t.contacts.len() == 1) else { break 'used None };
+            // The strongest detection is the indenter; weaker ones are artefacts.
+            let best = c.contacts.iter().max_by(|a, b| a.sum.total_cmp(&b.sum));
+            best.map(|best| (truth.contacts[0], best))
+        };
+        let Some((t, best)) = used else {
+            in_hold = false;
             continue;
+        };
+        if !in_hold {
+            hold += 1;
+            in_hold = true;
         }
-        if !settled.is_settled(m.header.t_s(), synced) {
-            left.unsettled += 1;
-            continue;
-        }
-        let Some(truth) = synced.truth.as_ref() else { continue };
-        if truth.contacts.len() != 1 {
-            continue;
-        }
-        let t = truth.contacts[0];
-        // The strongest detection is the indenter; weaker ones are artefacts.
-        let Some(best) = c.contacts.iter().max_by(|a, b| a.sum.total_cmp(&b.sum)) else { continue };
         out.push(CalibSample {
             x_mm: best.x_mm,
             y_mm: best.y_mm,
@@ -70,6 +88,7 @@ pub fn samples(rows: &[Vec<skinflow_core::Message>], settled: &Settled) -> (Vec<
             cond_sum: best.sum,
             area_mm2: best.area_mm2,
             diameter_mm: t.diameter_mm,
+            hold,
         });
     }
     (out, left)
@@ -170,9 +189,11 @@ pub fn distinct(recordings: &[PathBuf], what: &str) -> Result<Vec<RecordingRef>>
 pub fn collect(recordings: &[PathBuf], args: &PipelineArgs) -> Result<(Vec<CalibSample>, Provenance)> {
     let sensor = check_recordings(recordings)?;
     let refs = distinct(recordings, "samples")?;
-    let mut all = Vec::new();
+    let mut all: Vec<CalibSample> = Vec::new();
     for recording in recordings {
-        let samples = collect_one(recording, args)?;
+        // Hold numbers go on across recordings: the next one's first hold is another press.
+        let first_hold = all.last().map_or(0, |s| s.hold);
+        let samples = collect_one(recording, args, first_hold)?;
         if recordings.len() > 1 {
             eprintln!("{}: {} calibration samples", recording.display(), samples.len());
         }
@@ -192,9 +213,9 @@ pub fn collect(recordings: &[PathBuf], args: &PipelineArgs) -> Result<(Vec<Calib
 }
 
 /// The calibration samples of one recording (see [`samples`]); refused when there are none.
-fn collect_one(recording: &Path, args: &PipelineArgs) -> Result<Vec<CalibSample>> {
+fn collect_one(recording: &Path, args: &PipelineArgs, first_hold: u64) -> Result<Vec<CalibSample>> {
     let (rows, settled) = args.run(recording, |_| ())?;
-    let (samples, left) = samples(&rows, &settled);
+    let (samples, left) = samples(&rows, &settled, first_hold);
     let without_pressure = left.without_pressure;
     if without_pressure > 0 {
         eprintln!(

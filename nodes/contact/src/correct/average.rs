@@ -1,7 +1,8 @@
 //! Averaging the frames of a hold (the paper's 6-frame means) and grouping true locations.
 //!
-//! A hold is a run of consecutive frames whose truth (x, y, force, diameter) is identical; its
-//! frames are averaged into one [`CalibSample`] and their spread is reported. A frame with a
+//! A hold is a run of consecutive frames whose truth (x, y, force, diameter) and hold number
+//! ([`CalibSample::hold`]: the source breaks it where the load was released or changed) are
+//! identical; its frames are averaged into one [`CalibSample`] and their spread is reported. A frame with a
 //! non-finite measurement (centroid, dP, C, area) is left out of its hold's mean and counted, so
 //! one bad frame does not cost the whole hold. Locations are
 //! true positions clustered greedily within a tolerance (mm).
@@ -25,10 +26,11 @@ fn finite(s: &CalibSample) -> bool {
     [s.x_mm, s.y_mm, s.dp_kpa, s.cond_sum, s.area_mm2].iter().all(|v| v.is_finite())
 }
 
-/// Averages runs of consecutive frames with identical truth (x, y, force, diameter).
+/// Averages runs of consecutive frames with identical truth (x, y, force, diameter) and hold.
 pub fn average_holds(frames: &[CalibSample]) -> Holds {
     let same = |a: &CalibSample, b: &CalibSample| {
-        a.true_x_mm == b.true_x_mm
+        a.hold == b.hold
+            && a.true_x_mm == b.true_x_mm
             && a.true_y_mm == b.true_y_mm
             && a.force_n == b.force_n
             && a.diameter_mm == b.diameter_mm
@@ -102,6 +104,7 @@ mod tests {
             cond_sum: 1.0,
             area_mm2: 1.0,
             diameter_mm: 15.0,
+            hold: 0,
         }
     }
 
@@ -114,6 +117,17 @@ mod tests {
         assert_eq!(dp, [2.0, 5.0, 7.0]);
         // SDs: sqrt(2), 0, 0 -> mean sqrt(2) / 3.
         assert!((h.sd_dp_kpa - 2f64.sqrt() / 3.0).abs() < 1e-12);
+    }
+
+    /// The reviewer's case: two indentations with the same truth, the release between them
+    /// filtered out before averaging, are two samples when their holds differ.
+    #[test]
+    fn identical_truth_in_two_holds_is_two_samples() {
+        let mut frames = [frame(0.0, 1.0, 1.0), frame(0.0, 1.0, 3.0), frame(0.0, 1.0, 5.0), frame(0.0, 1.0, 7.0)];
+        frames[2].hold = 1;
+        frames[3].hold = 1;
+        let dp: Vec<f64> = average_holds(&frames).samples.iter().map(|s| s.dp_kpa).collect();
+        assert_eq!(dp, [2.0, 6.0]);
     }
 
     #[test]

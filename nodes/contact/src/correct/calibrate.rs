@@ -55,6 +55,11 @@ pub struct CalibSample {
     pub area_mm2: f64,
     /// Indenter diameter, mm.
     pub diameter_mm: f64,
+    /// The hold the frame was acquired in, as its source numbers them (0 if it does not):
+    /// consecutive frames are averaged together only with identical truth and the same hold,
+    /// so two indentations with the same truth (a repeated protocol, the next recording) stay
+    /// two samples.
+    pub hold: u64,
 }
 
 impl CalibSample {

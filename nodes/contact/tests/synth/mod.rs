@@ -65,6 +65,7 @@ pub fn frames_at(
                     cond_sum: cond_of(f, tx, ty) * (1.0 + 0.02 * n.sample(&mut rng)),
                     area_mm2: 300.0 + 20.0 * f,
                     diameter_mm: 15.0,
+                    hold: 0,
                 });
             }
         }
@@ -129,6 +130,7 @@ pub fn segmented_frames() -> Vec<CalibSample> {
                         cond_sum: c.sum,
                         area_mm2: c.area_mm2,
                         diameter_mm: 15.0,
+                        hold: 0,
                     });
                 }
             }

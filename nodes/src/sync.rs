@@ -44,6 +44,11 @@
 //! pressure* (`SyncedFrame::has_pressure`), never read as zero load downstream. Both causes are
 //! counted and reported at stop.
 //!
+//! Frames out of time order (a source that does not deliver in order; the built-in ones do):
+//! a frame older than the last one received takes its place among the frames still pending,
+//! or, when a newer frame was already emitted (its window's samples and its truth are gone),
+//! is dropped and counted as discarded; the first is warned about, both are counted at stop.
+//!
 //! End of stream: once its inputs are done the engine flushes the node, which emits every
 //! frame still pending, in order, with the samples its window got (a stream's last one or two
 //! frames are always pending: no later sample closes their window). A frame the node could not
@@ -144,6 +149,8 @@ pub struct Sync {
     /// Frames emitted without a known pressure change (NaN dP), by cause: no sample in the
     /// window, or samples but no P0 yet. Reported at stop.
     without_pressure: WithoutPressure,
+    /// Frames that arrived older than the last one. Reported at stop.
+    out_of_order: OutOfOrder,
 }
 
 /// Counts of frames emitted with an unknown pressure change.
@@ -151,6 +158,23 @@ pub struct Sync {
 struct WithoutPressure {
     no_sample: u64,
     no_tare: u64,
+}
+
+/// How a frame was taken in ([`Sync::on_frame`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum FrameIn {
+    InOrder,
+    /// Older than the last frame received: put in its place among the pending frames.
+    Reordered,
+    /// Older than a frame already emitted: dropped.
+    TooLate,
+}
+
+/// Frames that arrived out of time order, by outcome. Reported at stop.
+#[derive(Debug, Default, Clone, Copy, PartialEq, Eq)]
+struct OutOfOrder {
+    reordered: u64,
+    dropped: u64,
 }
 
 /// The stream state of a `sync` node: moved whole to a replacement at a hot swap.
@@ -193,6 +217,8 @@ struct SyncState {
     warned_no_tare: bool,
     pending: VecDeque<(Header, Arc<EitFrame>)>,
     last_frame_s: Option<f64>,
+    /// The time of the last frame emitted: an out-of-order frame older than it is dropped.
+    last_emitted_s: Option<f64>,
     /// The last frame's `seq` (the board's frame number): intervals are divided by its steps.
     last_seq: Option<u64>,
     /// Recent frame intervals per frame period (over lost frames: divided by the `seq` step).
@@ -222,6 +248,7 @@ impl Sync {
                 ..SyncState::default()
             },
             without_pressure: WithoutPressure::default(),
+            out_of_order: OutOfOrder::default(),
         }
     }
 
@@ -379,9 +406,21 @@ impl Sync {
         self.st.truth.push_back((t_s, row));
     }
 
-    fn on_frame(&mut self, h: Header, f: Arc<EitFrame>) {
+    /// Takes a frame in: pending in time order. A frame older than the last one received
+    /// (a source that delivers out of order) is put in its place among the pending frames
+    /// when no newer frame was emitted yet; else its pressure samples and truth are already
+    /// gone, and it is dropped (the caller counts it).
+    fn on_frame(&mut self, h: Header, f: Arc<EitFrame>) -> FrameIn {
         let t = h.t_s();
         self.saw(t);
+        if self.st.last_frame_s.is_some_and(|last| t < last) {
+            if self.st.last_emitted_s.is_some_and(|e| t < e) {
+                return FrameIn::TooLate;
+            }
+            let at = self.st.pending.iter().position(|(p, _)| p.t_s() > t).unwrap_or(self.st.pending.len());
+            self.st.pending.insert(at, (h, f));
+            return FrameIn::Reordered;
+        }
         // The interval per frame period: `seq` numbers the frames the board sent (`/eit/seq`),
         // so a gap of lost frames spans several periods, not one longer window. A `seq` that
         // does not advance (a writer that does not count frames) counts as one step.
@@ -403,6 +442,7 @@ impl Sync {
         self.st.last_frame_s = Some(t);
         self.st.last_seq = Some(h.seq);
         self.st.pending.push_back((h, f));
+        FrameIn::InOrder
     }
 
     /// Whether the oldest pending frame's window can receive no more samples.
@@ -435,6 +475,7 @@ impl Sync {
     fn emit_oldest(&mut self, ctx: &Context, out: &mut Outputs) -> Result<(), NodeError> {
         let (h, frame) = self.st.pending.pop_front().expect("called with a pending frame");
         let t = h.t_s();
+        self.st.last_emitted_s = Some(t);
         let half = 0.5 * self.st.period_s;
         let (lo, hi) = (t - half, t + half);
         let (n, mean, sd) = mean_sd(
@@ -541,7 +582,24 @@ impl Processor for Sync {
             let f = m
                 .arc::<EitFrame>()
                 .ok_or(NodeError::Input { port: "eit".into(), problem: "not an EIT frame".into() })?;
-            self.on_frame(m.header, f);
+            let first = self.out_of_order == OutOfOrder::default();
+            match self.on_frame(m.header, f) {
+                FrameIn::InOrder => {}
+                FrameIn::Reordered => self.out_of_order.reordered += 1,
+                FrameIn::TooLate => {
+                    self.out_of_order.dropped += 1;
+                    ctx.count_discarded(1);
+                }
+            }
+            if first && self.out_of_order != OutOfOrder::default() {
+                tracing::warn!(
+                    node = ctx.id(),
+                    frame_t_s = m.header.t_s(),
+                    "an EIT frame arrived older than the last one (its source delivers out of time order): put in \
+                     its place while newer frames wait, dropped (counted as discarded) once a newer one was emitted; \
+                     counts at stop"
+                );
+            }
         }
         self.log_truth_absent(ctx, was_absent);
         if self.oldest_complete() {
@@ -611,6 +669,10 @@ impl Processor for Sync {
                 before_the_tare = no_tare,
                 "frames without pressure (NaN dP, flagged downstream, not no-load frames)"
             );
+        }
+        let OutOfOrder { reordered, dropped } = self.out_of_order;
+        if reordered + dropped > 0 {
+            tracing::warn!(node = ctx.id(), reordered, dropped, "EIT frames that arrived out of time order");
         }
         let n = self.st.pending.len();
         if n > 0 {
@@ -757,6 +819,24 @@ mod tests {
 
     fn frame(s: &mut Sync, seq: u64, t_s: f64) {
         s.on_frame(Header { seq, t_ns: (t_s * 1e9).round() as u64, origin: 0 }, Arc::new(EitFrame { v: vec![1.0] }));
+    }
+
+    /// The reviewer's case: a frame that arrives after a newer one is put in its place while
+    /// that one waits, and dropped (for the caller to count) once a newer one went out, rather
+    /// than being emitted with a pruned window and the newer frame's truth.
+    #[test]
+    fn a_frame_out_of_time_order_is_put_in_place_or_dropped() {
+        let mut s = sync();
+        s.pressure_connected = false;
+        s.truth_connected = false;
+        assert_eq!(s.on_frame(Header { seq: 1, t_ns: 2_000_000_000, origin: 0 }, Arc::default()), FrameIn::InOrder);
+        assert_eq!(s.on_frame(Header { seq: 0, t_ns: 1_500_000_000, origin: 0 }, Arc::default()), FrameIn::Reordered);
+        let order: Vec<u64> = s.st.pending.iter().map(|(h, _)| h.seq).collect();
+        assert_eq!(order, [0, 1]);
+        assert_eq!(s.st.last_frame_s, Some(2.0), "the newest time stays the newest");
+        s.st.last_emitted_s = Some(2.0);
+        assert_eq!(s.on_frame(Header { seq: 2, t_ns: 1_900_000_000, origin: 0 }, Arc::default()), FrameIn::TooLate);
+        assert_eq!(s.st.pending.len(), 2);
     }
 
     /// The reviewer's case: a link that loses every other frame for a while. The window T stays

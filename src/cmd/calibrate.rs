@@ -35,9 +35,10 @@ pub struct LeftOut {
 
 /// Calibration samples: one per settled, loaded single-contact frame with a detection and a
 /// known pressure change; and the loaded frames left out, by cause. Each sample carries its
-/// hold number ([`CalibSample::hold`], from `first_hold` on): a loaded frame not used (a
-/// release, a ramp, another contact count, no pressure or no detection) ends the hold, so
+/// hold number ([`CalibSample::hold`], from `first_hold` on): a frame acquired while the load
+/// changed (not settled) or under another contact count (a release: none) ends the hold, so
 /// repeated indentations with the same truth are averaged one by one, never into one sample.
+/// A frame of a hold left out for its own reasons (no pressure sample, no detection) does not.
 pub fn samples(
     rows: &[Vec<skinflow_core::Message>],
     settled: &Settled,
@@ -46,8 +47,7 @@ pub fn samples(
     let mut out = Vec::new();
     let mut left = LeftOut::default();
     let mut hold = first_hold;
-    // Whether the last loaded frame was used: a frame left out between two used ones
-    // starts a new hold.
+    // Whether the hold of the last sample goes on: a load change or release ends it.
     let mut in_hold = false;
     for row in rows {
         let Some(m) = row.first() else { continue };
@@ -56,24 +56,22 @@ pub fn samples(
         if synced.no_load {
             continue;
         }
-        let used = 'used: {
-            if !synced.has_pressure() {
-                left.without_pressure += 1;
-                break 'used None;
-            }
-            if !settled.is_settled(m.header.t_s(), synced) {
-                left.unsettled += 1;
-                break 'used None;
-            }
-            let Some(truth) = synced.truth.as_ref().filter(|t| t.contacts.len() == 1) else { break 'used None };
-            // The strongest detection is the indenter; weaker ones are artefacts.
-            let best = c.contacts.iter().max_by(|a, b| a.sum.total_cmp(&b.sum));
-            best.map(|best| (truth.contacts[0], best))
-        };
-        let Some((t, best)) = used else {
+        if !synced.has_pressure() {
+            left.without_pressure += 1;
+            continue;
+        }
+        if !settled.is_settled(m.header.t_s(), synced) {
+            left.unsettled += 1;
+            in_hold = false;
+            continue;
+        }
+        let Some(truth) = synced.truth.as_ref().filter(|t| t.contacts.len() == 1) else {
             in_hold = false;
             continue;
         };
+        let t = truth.contacts[0];
+        // The strongest detection is the indenter; weaker ones are artefacts.
+        let Some(best) = c.contacts.iter().max_by(|a, b| a.sum.total_cmp(&b.sum)) else { continue };
         if !in_hold {
             hold += 1;
             in_hold = true;

@@ -361,7 +361,10 @@ fn run(
         Err(code) => return Ok(code),
     };
     let duration = match for_s {
-        Some(s) if s.is_finite() && s > 0.0 => Some(Duration::from_secs_f64(s)),
+        Some(s) if s.is_finite() && s > 0.0 => match Duration::try_from_secs_f64(s) {
+            Ok(d) => Some(d),
+            Err(_) => bail!("--for {s}: too long for a duration (at most {:e} s)", Duration::MAX.as_secs_f64()),
+        },
         Some(s) => bail!("--for must be a positive number of seconds (got {s})"),
         None => None,
     };

@@ -266,6 +266,31 @@ fn a_node_that_fails_to_start_stops_the_run_naming_node_and_cause() {
     assert!(!text(&out.stdout).contains("p99 us"), "no statistics: nothing ran");
 }
 
+/// `--for` longer than a `Duration` holds is refused naming the flag; one the clock cannot add
+/// to now (1e19 s) is no limit: the run goes to the end of its sources, statistics and all
+/// (both had panicked, the second with the graph running and its recording unflushed).
+#[test]
+fn a_for_beyond_the_clock_is_refused_or_no_limit_never_a_panic() {
+    let dir = temp_dir("for-huge");
+    let out_csv = dir.join("out.csv");
+    let graph = write(
+        &dir,
+        "g.toml",
+        &format!(
+            "[[node]]\nid = \"c\"\nkind = \"counter\"\nparams = {{ count = 50, rate_hz = 1000.0 }}\n[[node]]\nid = \"sink\"\nkind = \"collect\"\nparams = {{ path = \"{}\" }}\n[[edge]]\nfrom = \"c.out\"\nto = \"sink.in\"\n",
+            out_csv.display()
+        ),
+    );
+    let out = run_to_end(skinflow().arg("run").arg(&graph).args(["--for", "1e20"]));
+    let err = text(&out.stderr);
+    assert!(!out.status.success() && err.contains("--for 100000000000000000000: too long for a duration"), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+    let out = run_to_end(skinflow().arg("run").arg(&graph).args(["--for", "1e19"]));
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert_eq!(rows(&out_csv).len(), 50);
+    assert!(text(&out.stdout).contains("p99 us"), "statistics printed");
+}
+
 #[test]
 fn a_panicking_node_is_named_and_the_run_ends() {
     let dir = temp_dir("panic");

@@ -32,6 +32,10 @@ pub const MAX_CAPACITY: usize = 1 << 20;
 /// validation (the timer could not keep them, and one below a nanosecond would be zero).
 pub const MIN_PERIOD_MS: f64 = 0.01;
 
+/// The longest `period_ms` of a periodic trigger (one day): longer ones are refused at
+/// validation rather than overflowing the timer's clock arithmetic.
+pub const MAX_PERIOD_MS: f64 = 86_400_000.0;
+
 /// When a processor or sink runs.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Trigger {

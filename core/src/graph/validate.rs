@@ -571,15 +571,18 @@ fn trigger_of(n: &NodeEntry) -> Result<Trigger, (Option<Range<usize>>, String)> 
             }
             match &n.period_ms {
                 None => Err((None, "trigger = \"periodic\" needs period_ms".into())),
-                Some(p) if p.get_ref().is_finite() && *p.get_ref() >= super::MIN_PERIOD_MS => {
+                Some(p) if (super::MIN_PERIOD_MS..=super::MAX_PERIOD_MS).contains(p.get_ref()) => {
                     Ok(Trigger::Periodic { period: Duration::from_secs_f64(*p.get_ref() / 1e3) })
                 }
                 Some(p) => Err((
                     Some(p.span()),
                     format!(
-                        "period_ms must be finite and at least {} ms (the shortest period the timer keeps; got {})",
+                        "period_ms must be at least {} ms (the shortest period the timer keeps) and at most {} ms \
+                         (one day); got {}",
                         super::MIN_PERIOD_MS,
-                        p.get_ref()
+                        super::MAX_PERIOD_MS,
+                        // Huge values in exponent form, not 300 digits.
+                        if p.get_ref().abs() >= 1e15 { format!("{:e}", p.get_ref()) } else { p.get_ref().to_string() }
                     ),
                 )),
             }

@@ -380,7 +380,8 @@ impl RunningGraph {
     /// Runs until the sources end, the stop flag is set, the duration passes or a node fails;
     /// then drains, stops every node and reports.
     pub fn wait(mut self, opts: &RunOptions) -> RunReport {
-        let until = opts.duration.map(|d| Instant::now() + d);
+        // A duration beyond what the clock can represent is no limit.
+        let until = opts.duration.and_then(|d| Instant::now().checked_add(d));
         let never = AtomicBool::new(false);
         let external = opts.stop.as_deref().unwrap_or(&never);
         if self.mode == Mode::Lockstep {

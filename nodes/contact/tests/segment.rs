@@ -233,6 +233,28 @@ fn set_floor_matches_a_segmenter_built_with_that_floor() {
     assert!(seg.set_floor(0.0).is_err() && seg.set_floor(f64::NAN).is_err());
 }
 
+/// A mistyped `max_contacts` (1e8 in the audit) is refused at load naming the param, instead
+/// of aborting the run on a 192 GB allocation in the sidelobe pass.
+#[test]
+fn max_contacts_is_bounded_at_load() {
+    for (n, ok) in [(0, false), (1, true), (256, true), (257, false), (100_000_000, false)] {
+        let params = SegmentParams { max_contacts: n, ..SegmentParams::with_floor(0.05) };
+        match Segmenter::new(grid(), &params) {
+            Ok(_) => assert!(ok, "{n} accepted"),
+            Err(e) => {
+                assert!(!ok, "{n} refused: {e}");
+                assert_eq!(
+                    e.to_string(),
+                    format!(
+                        "segment: param \"max_contacts\": must be in [1, 256] (the buffers are sized for it at load) \
+                         (got {n})"
+                    )
+                );
+            }
+        }
+    }
+}
+
 #[test]
 fn weak_regions_without_separation_are_refused_not_ignored() {
     let params = SegmentParams { separation: 0.0, ..SegmentParams::with_floor(0.05) };

@@ -25,7 +25,7 @@ pub struct MeshParams {
     /// Minimum angle the refinement enforces, degrees, in (0, 33]. Ruppert's refinement is
     /// guaranteed to end below about 20.7 degrees and ends in practice up to about 33.
     pub min_angle_deg: f64,
-    /// Edge length on the electrodes relative to the interior edge length, in (0, 1].
+    /// Edge length on the electrodes relative to the interior edge length, in [0.01, 1].
     pub electrode_size_ratio: f64,
     /// Growth of the boundary edge length with the distance from the nearest electrode, mm per mm.
     pub grading: f64,
@@ -43,6 +43,11 @@ impl Default for MeshParams {
     }
 }
 
+/// The smallest `electrode_size_ratio`: finer electrode edges make a boundary of more nodes
+/// than the interior has (1e-3 already fails the angle refinement; 1e-9 asked for billions of
+/// boundary nodes and ran out of memory).
+pub const MIN_ELECTRODE_SIZE_RATIO: f64 = 0.01;
+
 impl MeshParams {
     /// Checks every field; called by `Mesh::generate`.
     pub fn validate(&self) -> Result<(), EitError> {
@@ -57,9 +62,11 @@ impl MeshParams {
                 format!("must be <= 33 for the refinement to end (got {})", self.min_angle_deg),
             ));
         }
-        check_positive("electrode_size_ratio", self.electrode_size_ratio)?;
-        if self.electrode_size_ratio > 1.0 {
-            return Err(invalid("electrode_size_ratio", format!("must be <= 1 (got {})", self.electrode_size_ratio)));
+        if !(MIN_ELECTRODE_SIZE_RATIO..=1.0).contains(&self.electrode_size_ratio) {
+            return Err(invalid(
+                "electrode_size_ratio",
+                format!("must be in [{MIN_ELECTRODE_SIZE_RATIO}, 1] (got {})", self.electrode_size_ratio),
+            ));
         }
         check_positive("grading", self.grading)
     }
@@ -197,8 +204,10 @@ fn segment_distance(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> (f64, f64) {
     (((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2)).sqrt(), t)
 }
 
-/// Boundary nodes counter-clockwise from the bottom-left corner, graded by the size function.
-fn boundary_nodes(sensor: &Sensor, params: &MeshParams, h_max: f64) -> Vec<[f64; 2]> {
+/// Boundary nodes counter-clockwise from the bottom-left corner, graded by the size function;
+/// refused (naming the params) when the boundary alone would need more nodes than the mesh's
+/// triangle count, before any is made.
+fn boundary_nodes(sensor: &Sensor, params: &MeshParams, h_max: f64) -> Result<Vec<[f64; 2]>, EitError> {
     let (hx, hy) = sensor.half_extents_mm();
     let min_el = sensor.electrodes.iter().map(|e| e.length_mm()).fold(f64::INFINITY, f64::min);
     // At least one edge per electrode; coarse meshes (a few hundred elements) need that freedom.
@@ -236,7 +245,18 @@ fn boundary_nodes(sensor: &Sensor, params: &MeshParams, h_max: f64) -> Vec<[f64;
             for k in 0..SAMPLES {
                 cum[k + 1] = cum[k] + ds / size(at(s0 + (k as f64 + 0.5) * ds));
             }
-            let nseg = cum[SAMPLES].round().max(1.0) as usize;
+            let nseg = cum[SAMPLES].round().max(1.0);
+            if out.len() as f64 + nseg > params.elements as f64 {
+                return Err(invalid(
+                    "electrode_size_ratio",
+                    format!(
+                        "the sensor's boundary alone would need more than {} nodes (elements) at electrode_size_ratio \
+                         = {} and grading = {}: raise them or the element count",
+                        params.elements, params.electrode_size_ratio, params.grading
+                    ),
+                ));
+            }
+            let nseg = nseg as usize;
             for j in 1..nseg {
                 let goal = cum[SAMPLES] * j as f64 / nseg as f64;
                 let k = cum.partition_point(|&c| c < goal).clamp(1, SAMPLES);
@@ -245,11 +265,11 @@ fn boundary_nodes(sensor: &Sensor, params: &MeshParams, h_max: f64) -> Vec<[f64;
             }
         }
     }
-    out
+    Ok(out)
 }
 
 fn triangulate(sensor: &Sensor, params: &MeshParams, h_max: f64) -> Result<Mesh, EitError> {
-    let boundary = boundary_nodes(sensor, params, h_max);
+    let boundary = boundary_nodes(sensor, params, h_max)?;
     let mut cdt = ConstrainedDelaunayTriangulation::<Point2<f64>>::new();
     let mut handles = Vec::with_capacity(boundary.len());
     for p in &boundary {
@@ -387,5 +407,24 @@ mod tests {
         assert!(e.to_string().contains("min_angle_deg"), "{e}");
         let e = MeshParams { grading: f64::NAN, ..Default::default() }.validate().unwrap_err();
         assert!(e.to_string().contains("grading"), "{e}");
+        // The audit's runaway: 1e-9 had meshing take memory without bound.
+        let e = MeshParams { electrode_size_ratio: 1e-9, ..Default::default() }.validate().unwrap_err();
+        assert!(e.to_string().contains("electrode_size_ratio") && e.to_string().contains("[0.01, 1]"), "{e}");
+    }
+
+    /// A boundary finer than the mesh is big (few elements, electrode edges at the smallest
+    /// ratio, a grading that barely coarsens) is refused before any node is made.
+    #[test]
+    fn a_boundary_needing_more_nodes_than_the_mesh_has_is_refused() {
+        let s = Sensor::paper_100mm();
+        let p = MeshParams { elements: 20, electrode_size_ratio: 0.01, grading: 1e-6, ..Default::default() };
+        let e = Mesh::generate(&s, &p).unwrap_err().to_string();
+        assert!(
+            e.contains("electrode_size_ratio") && e.contains("boundary alone would need more than 20 nodes"),
+            "{e}"
+        );
+        // The same ratio with the default mesh (4000 elements) is fine.
+        let p = MeshParams { electrode_size_ratio: 0.01, ..Default::default() };
+        assert!(Mesh::generate(&s, &p).is_ok());
     }
 }

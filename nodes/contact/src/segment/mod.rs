@@ -91,6 +91,11 @@ fn default_max_contacts() -> usize {
     8
 }
 
+/// The largest `max_contacts`: buffers of the segmenter and the sidelobe pass are sized for
+/// it when the node is built, so a mistyped value is refused rather than aborting the run on
+/// an allocation (EIT cannot tell apart anywhere near this many contacts on one skin).
+pub const MAX_CONTACTS_LIMIT: usize = 256;
+
 impl SegmentParams {
     /// Paper defaults with the given absolute floor.
     pub fn with_floor(floor: f64) -> Self {
@@ -147,8 +152,12 @@ impl SegmentParams {
                 got: self.ghost_share,
             });
         }
-        if self.max_contacts == 0 {
-            return Err(SegmentError::Param { name: "max_contacts", expected: ">= 1", got: 0.0 });
+        if !(1..=MAX_CONTACTS_LIMIT).contains(&self.max_contacts) {
+            return Err(SegmentError::Param {
+                name: "max_contacts",
+                expected: "in [1, 256] (the buffers are sized for it at load)",
+                got: self.max_contacts as f64,
+            });
         }
         Ok(())
     }

@@ -133,6 +133,14 @@ fn calibrate_then_eval_writes_the_contract_json() {
     assert!(v["resolution"].get("res50_pct").is_some());
     let rmse = v["strategies"]["pneumatic-locaware"]["rmse_n"].as_f64().unwrap();
     assert!(rmse.is_finite() && rmse >= 0.0);
+    // `--json /dev/stdout` goes to this process's standard output after the tables, which
+    // stay (it had replaced a redirected stdout's file, losing them).
+    let both = ok(&skinflow(&d, &["eval", "test.h5", "--calib", "calib.toml", "--json", "/dev/stdout"]));
+    let at = both.find("{").unwrap_or_else(|| panic!("no JSON on stdout:\n{both}"));
+    assert!(both[..at].contains("Pneumatic-LocAware"), "{both}");
+    let json_end = both.rfind('}').unwrap();
+    let piped: serde_json::Value = serde_json::from_str(&both[at..=json_end]).unwrap();
+    assert_eq!(piped["frames"], v["frames"]);
 
     // The per-contact table: one row per matched, missed and spurious contact, as counted in
     // the JSON, and one force column per strategy.

@@ -20,10 +20,15 @@ pub fn same_file(a: &Path, b: &Path) -> bool {
 /// an existing HDF5 file (most likely a recording) with text: a mistyped `--out` or `--json`
 /// must not cost a session's data. Commands that write recordings, and replace one only when
 /// asked (`--overwrite`), use [`check_recording_outputs`].
+///
+/// A text output may be a stream: this process's standard output or error by name
+/// (`/dev/stdout`, `/proc/self/fd/1`, ...), or an existing file that is no regular one (a
+/// device such as `/dev/null`, a FIFO, a socket): [`write_file`] writes those in place.
 pub fn check_outputs(inputs: &[(&str, &Path)], outputs: &[(&str, &Path)]) -> Result<()> {
-    check_recording_outputs(inputs, outputs)?;
+    check(inputs, outputs, true)?;
     for &(flag, out) in outputs {
-        if skinflow_record::read::hdf5_signature(out) == Some(true) {
+        // Not read from a stream: opening a FIFO for reading waits for a writer.
+        if !is_stream(out) && skinflow_record::read::hdf5_signature(out) == Some(true) {
             bail!(
                 "{flag} {}: is an HDF5 file (a recording?); refusing to replace it with this command's text output",
                 out.display()
@@ -34,9 +39,48 @@ pub fn check_outputs(inputs: &[(&str, &Path)], outputs: &[(&str, &Path)]) -> Res
 }
 
 /// As [`check_outputs`], without refusing an existing HDF5 output: for `simulate` and
-/// `repair`, which write recordings and refuse any existing `--out` unless `--overwrite`.
+/// `repair`, which write recordings and refuse any existing `--out` unless `--overwrite`. A
+/// recording is a file: an output that is a stream (a device, a FIFO, standard output) is
+/// refused, never replaced.
 pub fn check_recording_outputs(inputs: &[(&str, &Path)], outputs: &[(&str, &Path)]) -> Result<()> {
+    check(inputs, outputs, false)
+}
+
+/// Which standard stream of this process `path` names, if any (by name: `/dev/stdout`,
+/// `/dev/fd/1`, `/proc/self/fd/1`, and the same for 2).
+fn std_stream(path: &Path) -> Option<u8> {
+    match path.to_str()? {
+        "/dev/stdout" | "/dev/fd/1" | "/proc/self/fd/1" => Some(1),
+        "/dev/stderr" | "/dev/fd/2" | "/proc/self/fd/2" => Some(2),
+        _ => None,
+    }
+}
+
+/// Whether `path` is written in place rather than replaced: a standard stream of this
+/// process, or an existing file that is neither regular nor a directory (a device, a FIFO, a
+/// socket, a terminal).
+fn is_stream(path: &Path) -> bool {
+    std_stream(path).is_some() || std::fs::metadata(path).is_ok_and(|m| !m.is_file() && !m.is_dir())
+}
+
+fn check(inputs: &[(&str, &Path)], outputs: &[(&str, &Path)], streams: bool) -> Result<()> {
     for (k, &(flag, out)) in outputs.iter().enumerate() {
+        if is_stream(out) {
+            if !streams {
+                bail!(
+                    "{flag} {}: is not a regular file (a device, a FIFO or a standard stream); a recording is \
+                     written to a file",
+                    out.display()
+                );
+            }
+            // Nothing to create or replace: only the other outputs may not name it too.
+            for &(other, path) in &outputs[..k] {
+                if out == path {
+                    bail!("{flag} {} and {other} {} name the same file", out.display(), path.display());
+                }
+            }
+            continue;
+        }
         for &(name, input) in inputs {
             if same_file(out, input) {
                 bail!("{flag} {}: is the {name} {}; refusing to overwrite an input", out.display(), input.display());
@@ -116,7 +160,23 @@ pub fn check_output_dir(flag: &str, dir: &Path) -> Result<()> {
 /// Writes `bytes` to `path` (through a symbolic link to its target) under a hidden name in
 /// its directory, then renames it over `path`: an existing file is replaced only by a whole new
 /// one, never left half-written. `what` names the file in errors (`--json out.json`).
+///
+/// A stream ([`check_outputs`]) is written in place: this process's standard output or error
+/// through its own handle (so `--json /dev/stdout > file` keeps what was printed before), a
+/// device or FIFO opened for writing, never replaced by a regular file.
 pub fn write_file(what: &str, path: &Path, bytes: &[u8]) -> Result<()> {
+    use std::io::Write;
+    let in_place = match std_stream(path) {
+        Some(1) => Some(std::io::stdout().lock().write_all(bytes).and_then(|()| std::io::stdout().flush())),
+        Some(_) => Some(std::io::stderr().lock().write_all(bytes)),
+        None if is_stream(path) => {
+            Some(std::fs::OpenOptions::new().write(true).open(path).and_then(|mut f| f.write_all(bytes)))
+        }
+        None => None,
+    };
+    if let Some(written) = in_place {
+        return written.map_err(|e| anyhow::anyhow!("{what}: cannot write: {e}"));
+    }
     let is_link = std::fs::symlink_metadata(path).is_ok_and(|m| m.file_type().is_symlink());
     let target =
         if is_link { std::fs::canonicalize(path).unwrap_or_else(|_| path.to_path_buf()) } else { path.to_path_buf() };
@@ -231,6 +291,40 @@ mod tests {
         let e = write_file("--json x", &d.join("missing/x.json"), b"{}").unwrap_err().to_string();
         assert!(e.starts_with("--json x: cannot write: "), "{e}");
         assert_eq!(std::fs::read_dir(&d).unwrap().count(), 2, "no staging file is left");
+        let _ = std::fs::remove_dir_all(&d);
+    }
+
+    /// The audit's cases: a device or FIFO given as a text output is written in place, never
+    /// replaced by a regular file (`--json /dev/null` had replaced /dev/null as root), the
+    /// checks do not open a FIFO for reading (they hung), and a recording output refuses it.
+    #[test]
+    fn a_device_or_fifo_output_is_written_in_place_and_refused_for_a_recording() {
+        use std::os::unix::fs::FileTypeExt;
+        let d = std::env::temp_dir().join(format!("skinflow-paths-stream-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        std::fs::create_dir_all(&d).unwrap();
+        let fifo = d.join("out.json");
+        assert!(std::process::Command::new("mkfifo").arg(&fifo).status().unwrap().success());
+        check_outputs(&[], &[("--json", &fifo)]).unwrap();
+        let reader = {
+            let fifo = fifo.clone();
+            std::thread::spawn(move || std::fs::read_to_string(fifo).unwrap())
+        };
+        write_file("--json out.json", &fifo, b"{\"ok\": 1}").unwrap();
+        assert_eq!(reader.join().unwrap(), "{\"ok\": 1}");
+        assert!(std::fs::metadata(&fifo).unwrap().file_type().is_fifo(), "still a FIFO");
+        let e = check_recording_outputs(&[], &[("--out", &fifo)]).unwrap_err().to_string();
+        assert!(e.contains("is not a regular file") && e.contains("a recording is written to a file"), "{e}");
+        // A device: written (and discarded) in place; one that fails says why.
+        let null = Path::new("/dev/null");
+        check_outputs(&[], &[("--json", null)]).unwrap();
+        write_file("--json /dev/null", null, b"{}").unwrap();
+        assert!(std::fs::metadata(null).unwrap().file_type().is_char_device());
+        if Path::new("/dev/full").exists() {
+            let e = write_file("--json /dev/full", Path::new("/dev/full"), b"{}").unwrap_err().to_string();
+            assert!(e.starts_with("--json /dev/full: cannot write: "), "{e}");
+        }
+        assert_eq!(std::fs::read_dir(&d).unwrap().count(), 1, "no staging file is left");
         let _ = std::fs::remove_dir_all(&d);
     }
 }

@@ -528,6 +528,37 @@ fn a_dead_electrode_is_masked_and_contacts_are_still_found_and_weighed() {
     assert!(loc / after as f64 <= 4.4, "mean localization after the fault {} mm", loc / after as f64);
 }
 
+/// Electrode 6 reads its rail in the first no-load frame only, then recovers (the reviewer's
+/// case): its values are left out of the reference's mean as the mask would leave them out of
+/// an image, so the presses come out as on the healthy skin. Averaged in, they had pulled 15
+/// channels to a value under the rail, never masked: every press was missed.
+#[test]
+fn an_electrode_dead_in_one_no_load_frame_does_not_spoil_the_reference() {
+    let d = workdir("dead-at-start");
+    let scene = std::fs::read_to_string(fixture("dead-electrode.toml")).unwrap();
+    let (healthy, _) = scene.split_once("[[fault]]").unwrap();
+    std::fs::write(d.join("healthy.toml"), healthy).unwrap();
+    let early = scene.replace("from_s = 35.0", "from_s = 0.0\nuntil_s = 1.0");
+    assert_ne!(early, scene);
+    std::fs::write(d.join("early.toml"), early).unwrap();
+    let calib = root().join("graphs/calib/paper.toml");
+    let eval = |name: &str| -> serde_json::Value {
+        let scene = format!("{name}.toml");
+        let rec = format!("{name}.h5");
+        ok(&skinflow(&d, &["simulate", &scene, "--out", &rec, "--seed", "3"]));
+        let json = format!("{name}.json");
+        ok(&skinflow(&d, &["eval", &rec, "--calib", calib.to_str().unwrap(), "--json", &json]));
+        serde_json::from_str(&std::fs::read_to_string(d.join(json)).unwrap()).unwrap()
+    };
+    let (early, healthy) = (eval("early"), eval("healthy"));
+    let matched = healthy["localization"]["matched"].as_u64().unwrap();
+    assert!(matched >= 24, "{healthy}");
+    assert_eq!(early["localization"]["matched"], matched, "{early}");
+    assert_eq!(early["localization"]["spurious"], 0, "{early}");
+    let rmse = |v: &serde_json::Value| v["strategies"]["pneumatic-locaware"]["rmse_n"].as_f64().unwrap();
+    assert!((rmse(&early) - rmse(&healthy)).abs() < 0.05, "{} vs {}", rmse(&early), rmse(&healthy));
+}
+
 /// Replays `rec` through sync, reconstructor, segmenter, splitter and corrector in lockstep,
 /// logging the derived streams to `out.h5`; checks that nothing was dropped and every recorded
 /// frame went through every stage. Returns the frame count and the log's path.

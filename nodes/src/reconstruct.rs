@@ -293,7 +293,8 @@ impl Reconstructor {
         let mask = math.mask().clone();
         Ok(Reconstructor {
             tracker: ReferenceTracker::new(m, p.reference_frames)
-                .map_err(|e| NodeError::Param { param: "reference_frames".into(), problem: e.to_string() })?,
+                .map_err(|e| NodeError::Param { param: "reference_frames".into(), problem: e.to_string() })?
+                .with_mask(math.mask_params()),
             tare_pending: false,
             elements: p.elements,
             mask_scratch: mask.clone(),

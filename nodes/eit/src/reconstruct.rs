@@ -346,6 +346,11 @@ impl Reconstructor {
         &self.mask
     }
 
+    /// The channel mask's thresholds (`[mask]`).
+    pub fn mask_params(&self) -> &MaskParams {
+        &self.params.mask
+    }
+
     /// Detects the bad channels of frame `v` and of the reference `v_ref` it will be
     /// differenced against (none before there is one) into `out` (sized like `mask()`), and
     /// says why; allocates nothing. A channel bad on either side is excluded (`mask`), and so

@@ -5,11 +5,16 @@
 //! if the no-load period ends first (`finish`). The mean is taken per channel over that
 //! channel's finite values, so one dead channel (NaN in every frame) does not hold the
 //! reference back: it forms from the other channels, and the dead one is left non-finite there
-//! for the channel mask to exclude (`mask::detect_into` checks the reference too). Only a
-//! frame with no finite value at all is not averaged (counted in `skipped`). Allocation
+//! for the channel mask to exclude (`mask::detect_into` checks the reference too). With the
+//! mask's thresholds given ([`ReferenceTracker::with_mask`]), a value the mask calls bad in its
+//! frame (at the rail, or at 0 V: an electrode dead for a moment of the no-load period) is left
+//! out of its channel's mean the same way: averaged in, one rail frame of six would pull the
+//! channel to a value the mask accepts, and every later frame would image the difference. Only
+//! a frame with no usable value at all is not averaged (counted in `skipped`). Allocation
 //! happens at construction only.
 
 use crate::error::EitError;
+use crate::mask::{MaskParams, zero_floor};
 
 /// Where the current reference came from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -36,9 +41,15 @@ pub struct ReferenceTracker {
     seen: usize,
     /// Frames not averaged because they held no finite value.
     pub skipped: usize,
-    /// Frames averaged with some channels left out (non-finite there).
+    /// Frames averaged with some channels left out (non-finite or, with the mask's
+    /// thresholds, bad there).
     pub partial: usize,
     source: ReferenceSource,
+    /// The mask's thresholds: values bad by them are left out of the mean (none: only
+    /// non-finite ones are).
+    mask: Option<MaskParams>,
+    /// For the zero floor's median (M values).
+    scratch: Vec<f64>,
 }
 
 impl ReferenceTracker {
@@ -56,7 +67,19 @@ impl ReferenceTracker {
             skipped: 0,
             partial: 0,
             source: ReferenceSource::None,
+            mask: None,
+            scratch: Vec::new(),
         })
+    }
+
+    /// Leaves out of the mean, per frame and channel, the values the channel mask with these
+    /// thresholds calls bad in that frame (non-finite, at or beyond `saturation_v`, at or
+    /// below its zero floor), not only the non-finite ones.
+    #[must_use]
+    pub fn with_mask(mut self, params: &MaskParams) -> ReferenceTracker {
+        self.scratch = vec![0.0; self.reference.len()];
+        self.mask = Some(params.clone());
+        self
     }
 
     /// A tracker whose reference is a recorded frame.
@@ -70,6 +93,8 @@ impl ReferenceTracker {
             skipped: 0,
             partial: 0,
             source: ReferenceSource::Recorded,
+            mask: None,
+            scratch: Vec::new(),
         }
     }
 
@@ -87,13 +112,18 @@ impl ReferenceTracker {
         if self.source != ReferenceSource::None {
             return Ok(true);
         }
-        if !frame.iter().any(|v| v.is_finite()) {
+        let (saturation_v, floor) = match &self.mask {
+            Some(p) => (p.saturation_v, zero_floor(frame, p, &mut self.scratch)),
+            None => (f64::INFINITY, f64::NEG_INFINITY),
+        };
+        let usable = |v: f64| v.is_finite() && v.abs() < saturation_v && v.abs() > floor;
+        if !frame.iter().any(|&v| usable(v)) {
             self.skipped += 1;
             return Ok(false);
         }
         let mut left_out = false;
         for (((s, c), r), &v) in self.sum.iter_mut().zip(&mut self.count).zip(&mut self.reference).zip(frame) {
-            if v.is_finite() {
+            if usable(v) {
                 *s += v;
                 *c += 1;
                 *r = *s / f64::from(*c);
@@ -219,6 +249,33 @@ mod tests {
             (ReferenceSource::MeanOfFirst { frames: 3 }, 0, 3, 1)
         );
         assert_eq!(r.running_mean(), None, "complete: the running mean is no longer offered");
+    }
+
+    /// The reviewer's case: an electrode reading its rail (or 0 V) in one of six no-load
+    /// frames. Averaged in, its channels came out near 0.9 V, under the 2 V rail the mask
+    /// checks, so they were never masked and imaged a -75 % change once it recovered. With the
+    /// mask's thresholds those values are left out, as NaN ones are.
+    #[test]
+    fn values_the_mask_calls_bad_are_left_out_of_the_mean() {
+        let params = MaskParams::default();
+        for bad in [5.0, 0.0, -5.0] {
+            let mut r = ReferenceTracker::new(4, 6).unwrap().with_mask(&params);
+            let mut plain = ReferenceTracker::new(4, 6).unwrap();
+            for k in 0..6 {
+                let frame = [0.3, if k == 0 { bad } else { 0.31 }, 0.2, 0.25];
+                r.accumulate(&frame).unwrap();
+                plain.accumulate(&frame).unwrap();
+            }
+            let v = r.reference().unwrap();
+            assert!((v[1] - 0.31).abs() < 1e-12, "rail {bad}: {v:?}");
+            assert_eq!((r.partial, r.skipped), (1, 0));
+            let p = plain.reference().unwrap()[1];
+            assert!((p - (bad + 5.0 * 0.31) / 6.0).abs() < 1e-12, "without the thresholds it is averaged in: {p}");
+        }
+        // A frame with no usable value is skipped whole.
+        let mut r = ReferenceTracker::new(2, 2).unwrap().with_mask(&params);
+        assert!(!r.accumulate(&[5.0, 0.0]).unwrap());
+        assert_eq!(r.skipped, 1);
     }
 
     #[test]

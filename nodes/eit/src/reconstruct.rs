@@ -22,9 +22,11 @@ use crate::spread::{PointSpread, SpreadBasis};
 use faer::linalg::matmul::matmul;
 use faer::{Accum, Mat, MatMut, MatRef, Par};
 use serde::Deserialize;
-use std::collections::HashMap;
 use std::path::PathBuf;
 use std::sync::Arc;
+
+/// Matrices of channel sets kept in memory (~10 MB each at the default mesh and image).
+pub const MATRICES_KEPT: usize = 6;
 
 /// Arithmetic of the per-frame product.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
@@ -149,7 +151,8 @@ pub struct Reconstructor {
     spread_basis: Option<SpreadBasis>,
     active: Arc<Folded>,
     mask: ChannelMask,
-    by_mask: HashMap<Vec<bool>, Arc<Folded>>,
+    /// Matrices of recent channel sets, most recent first, at most [`MATRICES_KEPT`].
+    by_mask: Vec<(Vec<bool>, Arc<Folded>)>,
     dv: Vec<f64>,
     /// Scratch for the mask's zero floor (a median), so detection allocates nothing.
     mask_scratch: Vec<f64>,
@@ -177,7 +180,7 @@ impl Reconstructor {
             spread_basis: None,
             active: Arc::new(Folded::from_parts(m, Vec::new(), Vec::new(), 0)),
             mask: mask.clone(),
-            by_mask: HashMap::new(),
+            by_mask: Vec::new(),
             dv: vec![0.0; m],
             mask_scratch: vec![0.0; m],
             stuck: StuckTracker::new(m, params.mask.stuck_frames),
@@ -265,11 +268,19 @@ impl Reconstructor {
         Ok(self.spread_basis.as_ref().expect("built above"))
     }
 
-    /// The folded matrix for `mask`: from memory, the disk cache, or computed.
+    /// The folded matrix for `mask`: from memory, the disk cache, or computed. Memory keeps the
+    /// [`MATRICES_KEPT`] most recently used sets, and the disk cache only the matrix of the
+    /// full channel set: a flaky channel makes a new set on most frames, and every one kept
+    /// would cost ~10 MB of memory and of disk for the run and after it. Another set costs one
+    /// fold when it comes back (tens of ms).
     fn folded_for(&mut self, mask: &ChannelMask) -> Result<Arc<Folded>, EitError> {
-        if let Some(f) = self.by_mask.get(&mask.excluded) {
-            return Ok(f.clone());
+        if let Some(k) = self.by_mask.iter().position(|(m, _)| *m == mask.excluded) {
+            let hit = self.by_mask.remove(k);
+            let f = hit.1.clone();
+            self.by_mask.insert(0, hit);
+            return Ok(f);
         }
+        let full_set = !mask.excluded.iter().any(|&x| x);
         let key = cache::key_of(&self.cache_description(&mask.excluded));
         let cached = match &self.params.cache_dir {
             Some(dir) => cache::load(dir, &key)?,
@@ -283,7 +294,7 @@ impl Reconstructor {
             None => {
                 let (prior, lambda) = (self.params.prior, self.params.lambda);
                 let f = self.model()?.fold(&prior, lambda, &mask.excluded)?;
-                if let Some(dir) = &self.params.cache_dir {
+                if let Some(dir) = self.params.cache_dir.as_ref().filter(|_| full_set) {
                     cache::store(dir, &key, &f)?;
                     self.info.cache = CacheStatus::Stored;
                 }
@@ -291,7 +302,8 @@ impl Reconstructor {
             }
         };
         let f = Arc::new(folded);
-        self.by_mask.insert(mask.excluded.clone(), f.clone());
+        self.by_mask.insert(0, (mask.excluded.clone(), f.clone()));
+        self.by_mask.truncate(MATRICES_KEPT);
         Ok(f)
     }
 
@@ -314,6 +326,11 @@ impl Reconstructor {
     pub fn point_spread(&mut self, radius_mm: f64) -> Result<PointSpread, EitError> {
         let active = self.active.clone();
         self.spread_basis()?.spread(&active, radius_mm)
+    }
+
+    /// Matrices of channel sets held in memory (at most [`MATRICES_KEPT`]).
+    pub fn matrices_in_memory(&self) -> usize {
+        self.by_mask.len()
     }
 
     pub fn info(&self) -> &ReconInfo {

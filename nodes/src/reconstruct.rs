@@ -341,12 +341,14 @@ impl Reconstructor {
 }
 
 /// What a replaced reconstructor hands to its replacement: everything it learned about the
-/// reference frame (volts, independent of the matrix).
+/// reference frame (volts, independent of the matrix) and which channels are frozen.
 struct ReferenceState {
     channels: usize,
     tracker: ReferenceTracker,
     tare_pending: bool,
     reported: EitRef,
+    /// How long each channel has stood still: a frozen one stays masked across the swap.
+    stuck: skinflow_eit::mask::StuckTracker,
 }
 
 /// The active matrix's point spread, or none when `radius_mm` is 0.
@@ -517,6 +519,7 @@ impl Processor for Reconstructor {
             tracker: self.tracker.clone(),
             tare_pending: self.tare_pending,
             reported: self.reported,
+            stuck: self.math.stuck_tracker().clone(),
         }))
     }
 
@@ -539,6 +542,7 @@ impl Processor for Reconstructor {
         self.tracker.set_wanted(wanted);
         self.tare_pending = s.tare_pending;
         self.reported = s.reported;
+        self.math.take_over_stuck(&s.stuck);
         tracing::info!(node = ctx.id(), source = ?self.reported, "EIT reference state taken over (hot swap)");
         Ok(())
     }

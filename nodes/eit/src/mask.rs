@@ -172,6 +172,17 @@ impl StuckTracker {
     pub fn stuck(&self) -> &[bool] {
         &self.stuck
     }
+
+    /// Channels tracked.
+    pub fn channels(&self) -> usize {
+        self.unchanged.len()
+    }
+
+    /// Changes how many unchanged frames make a channel stuck (0: off), from the next
+    /// [`StuckTracker::update`] on; the counts so far are kept.
+    pub fn set_frames(&mut self, frames: usize) {
+        self.frames = frames;
+    }
 }
 
 /// Why `detect_into` excluded what it did, for logs and reports. A channel bad in both the

@@ -328,6 +328,26 @@ impl Reconstructor {
         self.spread_basis()?.spread(&active, radius_mm)
     }
 
+    /// Which channels have stood still for how long (`mask::StuckTracker`): what a replacement
+    /// takes over in a hot swap ([`Reconstructor::take_over_stuck`]).
+    pub fn stuck_tracker(&self) -> &StuckTracker {
+        &self.stuck
+    }
+
+    /// Goes on from a replaced instance's stuck-channel history (the same channel count, else
+    /// it is ignored and false returned), with this instance's `mask.stuck_frames`: a channel
+    /// known to be frozen stays masked across the swap rather than for `stuck_frames` more
+    /// frames.
+    pub fn take_over_stuck(&mut self, from: &StuckTracker) -> bool {
+        if from.channels() != self.stuck.channels() {
+            return false;
+        }
+        let frames = self.params.mask.stuck_frames;
+        self.stuck = from.clone();
+        self.stuck.set_frames(frames);
+        true
+    }
+
     /// Matrices of channel sets held in memory (at most [`MATRICES_KEPT`]).
     pub fn matrices_in_memory(&self) -> usize {
         self.by_mask.len()

@@ -335,6 +335,18 @@ fn a_channel_stuck_after_the_reference_is_masked_after_stuck_frames_repeats_and_
     assert!(err_masked < 0.05 * err_unmasked, "masked {err_masked:e} against unmasked {err_unmasked:e}");
     let (p, value) = peak_against(&mut r, last, v_ref);
     assert!(value < 0.0 && dist(p, c) <= 5.0, "masked: peak {value} at {p:?}");
+
+    // A hot swap: the replacement takes over the stuck history, so the frozen channel stays
+    // masked from its first frame (it had been back in use for stuck_frames frames).
+    let mut next = recon(ReconParams::default());
+    let mut fresh = recon(ReconParams::default());
+    assert!(next.take_over_stuck(r.stuck_tracker()));
+    let mut v = last.clone();
+    v[0] *= 1.0 + 1e-4;
+    next.detect_mask_into(&v, Some(v_ref), &mut mask).unwrap();
+    assert_eq!(mask.excluded_channels(), [40]);
+    fresh.detect_mask_into(&v, Some(v_ref), &mut mask).unwrap();
+    assert_eq!(mask.excluded_count(), 0, "without the history the frozen channel is back in use");
 }
 
 #[test]

@@ -21,7 +21,7 @@ use std::path::{Path, PathBuf};
 
 use hdf5::file::LibraryVersion;
 use hdf5::types::{TypeDescriptor, VarLenUnicode};
-use hdf5::{Dataset, File, LocationType};
+use hdf5::{Dataset, File, Hyperslab, LocationType, SliceOrIndex};
 use ndarray::{ArrayD, IxDyn};
 
 use crate::error::{RecordError, SchemaProblem};
@@ -71,6 +71,10 @@ pub fn repair(input: &Path, output: &Path, overwrite: bool) -> Result<RepairRepo
     // The root attributes are copied as they are: one the reader refuses (a missing or invalid
     // sensor) is refused here, before anything is written.
     Recording::check_header(input)?;
+    // HDF5's object copy crashes (not fails) on some damage, e.g. a chunk B-tree node that is
+    // corrupt or lies past the end of the file: every object is read first, before anything is
+    // written, and an unreadable one refuses the file naming it and HDF5's cause.
+    check_readable(&src, input)?;
     // Copies keep each object's format version: a file written in SWMR mode holds 1.10-format
     // datasets, which a file bounded to the 1.8 formats cannot take. New objects (the root
     // attributes) get the earliest format, so a 1.8-format input stays readable by HDF5 1.8.
@@ -118,6 +122,79 @@ fn still_refused(input: &Path, staging: &Path, cuts: &[TableCut], e: RecordError
     let e = e.to_string();
     let why = e.strip_prefix(&format!("{}: ", staging.display())).unwrap_or(&e);
     RecordError::NotRepairable { file: input.to_path_buf(), reason: format!("{cut}, it is still refused ({why})") }
+}
+
+/// Rows read at once when checking a dataset (bounds the memory of the check).
+const CHECK_BLOCK_VALUES: usize = 1 << 20;
+
+/// Reads every dataset below the root of `src` (through every group), so that no object HDF5
+/// cannot read is handed to its object copy: numeric datasets (all the format has) are read in
+/// full, in blocks of rows; of other datasets the chunk index is walked. The first one that
+/// fails is named with HDF5's cause.
+fn check_readable(src: &File, input: &Path) -> Result<(), RecordError> {
+    let root = src.as_group().map_err(|e| RecordError::hdf5(input, "/", e))?;
+    let mut pending = std::collections::VecDeque::from([(String::new(), root)]);
+    while let Some((prefix, group)) = pending.pop_front() {
+        let here = if prefix.is_empty() { "/" } else { prefix.as_str() };
+        let names = group.member_names().map_err(|e| unreadable(input, here, &e.to_string()))?;
+        for name in names {
+            let path = format!("{prefix}/{name}");
+            let fail = |e: hdf5::Error| unreadable(input, &path, &e.to_string());
+            match group.loc_type_by_name(&name).map_err(fail)? {
+                LocationType::Group => pending.push_back((path.clone(), group.group(&name).map_err(fail)?)),
+                LocationType::Dataset => check_dataset(&group.dataset(&name).map_err(fail)?, input, &path)?,
+                _ => {}
+            }
+        }
+    }
+    Ok(())
+}
+
+/// See [`check_readable`].
+fn check_dataset(ds: &Dataset, input: &Path, path: &str) -> Result<(), RecordError> {
+    let fail = |e: hdf5::Error| unreadable(input, path, &e.to_string());
+    let numeric = matches!(
+        ds.dtype().and_then(|t| t.to_descriptor()).map_err(fail)?,
+        TypeDescriptor::Integer(_) | TypeDescriptor::Unsigned(_) | TypeDescriptor::Float(_)
+    );
+    let shape = ds.shape();
+    if !numeric {
+        // No conversion to read them by; their chunk index at least is checked.
+        if let Some(n) = ds.num_chunks()
+            && (0..n).any(|i| ds.chunk_info(i).is_none())
+        {
+            return Err(unreadable(input, path, "its chunk index cannot be read"));
+        }
+        return Ok(());
+    }
+    if shape.is_empty() {
+        return ds.read_scalar::<f64>().map(|_| ()).map_err(fail);
+    }
+    let width: usize = shape[1..].iter().product();
+    let rows = shape[0];
+    if width == 0 || rows == 0 {
+        return Ok(());
+    }
+    let block = (CHECK_BLOCK_VALUES / width).max(1);
+    let mut start = 0;
+    while start < rows {
+        let end = rows.min(start + block);
+        let mut selection = vec![SliceOrIndex::from(start..end)];
+        selection.extend(shape[1..].iter().map(|_| SliceOrIndex::from(..)));
+        ds.read_slice::<f64, _, IxDyn>(Hyperslab::from(selection)).map_err(fail)?;
+        start = end;
+    }
+    Ok(())
+}
+
+fn unreadable(input: &Path, path: &str, cause: &str) -> RecordError {
+    RecordError::NotRepairable {
+        file: input.to_path_buf(),
+        reason: format!(
+            "{path}: HDF5 cannot read it ({cause}); the file is damaged in a way no cut of rows can mend \
+             (nothing was written)"
+        ),
+    }
 }
 
 /// Copies the root attributes and objects of `src` into `dst` (open under the hidden name

@@ -546,8 +546,37 @@ impl RecordingWriter {
         Ok(())
     }
 
+    /// Creates the current part under its hidden name ([`create::staging_path`]), writes its
+    /// structure (root attributes, every declared dataset, empty) and flushes it, then gives it
+    /// its name ([`publish`]; with `name_at_close`, at close). If any of that fails (a full
+    /// disk at the first flush, say) the part is closed, its staging file removed and nothing
+    /// is named: an earlier file at the path (kept with `overwrite` until the publish) stays as
+    /// it was, and the error names the file and HDF5's cause.
     fn open_part(&mut self) -> Result<(), RecordError> {
         let file = create_file(&self.path, self.opts.swmr, self.opts.overwrite)?;
+        let built = self.build_part(file);
+        if built.is_err() {
+            self.abandon_part();
+        }
+        built
+    }
+
+    /// Closes the part being built without naming it and removes its staging file (errors
+    /// ignored: the caller reports the failure that led here).
+    fn abandon_part(&mut self) {
+        for table in self.all_tables_mut() {
+            table.detach();
+        }
+        if let Some(file) = self.file.take() {
+            // HDF5 may fail to write what it still holds (the disk that failed the flush):
+            // the file is removed anyway.
+            let _ = file.close();
+        }
+        let _ = std::fs::remove_file(create::staging_path(&self.path));
+    }
+
+    /// See [`RecordingWriter::open_part`].
+    fn build_part(&mut self, file: File) -> Result<(), RecordError> {
         let created = self.opts.created.clone().unwrap_or_else(|| iso8601_utc(SystemTime::now()));
         let attrs = RootAttrs {
             sensor_toml: &self.opts.sensor_toml,
@@ -556,20 +585,13 @@ impl RecordingWriter {
             software_version: &self.opts.software_version,
             part: self.part,
         };
+        // Held by the writer from here on, so a failure below closes it (`abandon_part`).
+        self.file = Some(file.clone());
         write_root_attrs(&file, &self.path, &attrs)?;
         let storage = Storage { deflate_level: self.opts.deflate_level };
         let path = self.path.clone();
-        for table in self.all_tables_mut() {
-            let paths: Vec<String> = table.paths().map(str::to_owned).collect();
-            for p in &paths {
-                ensure_parent_groups(&file, &path, p)?;
-            }
-            table.create(&file, storage)?;
-        }
-        if let Some(reference) = self.reference.as_ref() {
-            write_reference(&file, &path, reference)?;
-        }
-        self.file = Some(file);
+        self.create_datasets(&file, &path, storage)?;
+        drop(file);
         self.swmr_started = false;
         self.part_start_t_s = None;
         self.rotate_due = false;
@@ -578,6 +600,21 @@ impl RecordingWriter {
         // once complete with `name_at_close`.
         self.flush_file()?;
         if self.opts.name_at_close { Ok(()) } else { publish(&self.path, self.opts.overwrite) }
+    }
+
+    /// Creates every declared dataset (and the reference frame) in the new part `file`.
+    fn create_datasets(&mut self, file: &File, path: &Path, storage: Storage) -> Result<(), RecordError> {
+        for table in self.all_tables_mut() {
+            let paths: Vec<String> = table.paths().map(str::to_owned).collect();
+            for p in &paths {
+                ensure_parent_groups(file, path, p)?;
+            }
+            table.create(file, storage)?;
+        }
+        if let Some(reference) = self.reference.as_ref() {
+            write_reference(file, path, reference)?;
+        }
+        Ok(())
     }
 
     fn close_file(&mut self) -> Result<(), RecordError> {

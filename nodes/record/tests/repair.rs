@@ -278,3 +278,56 @@ fn outputs_are_never_clobbered_and_other_files_are_refused() {
     assert!(!dir.join("z.h5").exists() && !err.contains(".partial"), "{err}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A damaged file (here a chunk B-tree node whose signature is overwritten, as a disk or a
+/// transfer may leave it) is refused naming the file, the dataset and HDF5's cause, before
+/// anything is written: HDF5's object copy crashes the process on such a file (a segfault, not
+/// an error), so `repair` reads every object before it copies one.
+#[test]
+fn a_damaged_chunk_index_is_refused_naming_the_dataset_and_nothing_is_written() {
+    let dir = tempdir("damaged");
+    let whole = dir.join("whole.h5");
+    write_whole(&whole);
+    let clean = bytes(&whole);
+    // Version 1 B-tree nodes of chunk indexes: "TREE", then node type 1 (groups use type 0).
+    let nodes: Vec<usize> = clean.windows(5).enumerate().filter(|(_, w)| w == b"TREE\x01").map(|(i, _)| i).collect();
+    assert!(nodes.len() >= 10, "every dataset of the recording is chunked: {} chunk indexes", nodes.len());
+    let datasets = [
+        "/eit/t",
+        "/eit/seq",
+        "/eit/v",
+        "/pressure/t",
+        "/pressure/kpa",
+        "/truth/t",
+        "/truth/x_mm",
+        "/derived/forces/pneumatic-locaware/t",
+        "/derived/forces/pneumatic-locaware/force_n",
+    ];
+    for (k, at) in nodes.into_iter().enumerate() {
+        let input = dir.join(format!("damaged-{k}.h5"));
+        let mut damaged = clean.clone();
+        damaged[at..at + 4].copy_from_slice(b"XXXX");
+        std::fs::write(&input, &damaged).unwrap();
+        // The dataset whose index this is: the one HDF5 can no longer read.
+        let file = hdf5::File::open(&input).unwrap();
+        let broken: Vec<&str> =
+            datasets.iter().copied().filter(|p| file.dataset(p).unwrap().read_raw::<f64>().is_err()).collect();
+        drop(file);
+
+        let out = dir.join(format!("fixed-{k}.h5"));
+        let err = repair(&input, &out, false).unwrap_err().to_string();
+        assert!(err.starts_with(&format!("{}: cannot be repaired: /", input.display())), "{err}");
+        assert!(err.contains("HDF5 cannot read it (") && err.contains("B-tree signature"), "{err}");
+        if let [one] = broken[..] {
+            assert!(err.contains(&format!("repaired: {one}: HDF5")), "{one}: {err}");
+        }
+        assert_eq!(bytes(&input), damaged, "the input is never modified");
+        let left: Vec<_> = std::fs::read_dir(&dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .filter(|n| n.starts_with('.') || n.starts_with("fixed"))
+            .collect();
+        assert!(left.is_empty(), "no output and no staging file: {left:?}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}

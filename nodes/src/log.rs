@@ -147,6 +147,9 @@ pub struct LoggerParams {
     pub truth_max_contacts: usize,
 }
 
+/// The most truth columns a logger takes (a mistyped 1e12 had aborted the run allocating them).
+const MAX_TRUTH_CONTACTS: usize = 1024;
+
 fn default_truth_max_contacts() -> usize {
     8
 }
@@ -183,8 +186,26 @@ impl NodeParams for LoggerParams {
         if self.swmr && self.deflate_level > 0 {
             return Err(ParamError::new("deflate_level", SWMR_NEEDS_NO_DEFLATE));
         }
-        if self.truth_max_contacts == 0 {
-            return Err(ParamError::new("truth_max_contacts", "must be >= 1 (got 0)"));
+        if !(1..=MAX_TRUTH_CONTACTS).contains(&self.truth_max_contacts) {
+            return Err(ParamError::new(
+                "truth_max_contacts",
+                format!(
+                    "must be in [1, {MAX_TRUTH_CONTACTS}] (the truth arrays' columns, buffered per row; got {})",
+                    self.truth_max_contacts
+                ),
+            ));
+        }
+        if let Some((i, name)) =
+            self.strategies.iter().enumerate().find(|(i, name)| self.strategies[..*i].contains(name))
+        {
+            return Err(ParamError::new(
+                "strategies",
+                format!(
+                    "\"{name}\" is listed twice (entries {} and {})",
+                    self.strategies[..i].iter().position(|n| n == name).unwrap_or(0) + 1,
+                    i + 1
+                ),
+            ));
         }
         Ok(())
     }
@@ -981,7 +1002,11 @@ mod tests {
         assert_eq!(parse("path = \"r.h5\"").truth_max_contacts, 8);
         assert!(parse("path = \"r.h5\"\ntruth_max_contacts = 9").validate().is_ok());
         let e = parse("path = \"r.h5\"\ntruth_max_contacts = 0").validate().unwrap_err().to_string();
-        assert!(e.contains("truth_max_contacts") && e.contains("must be >= 1 (got 0)"), "{e}");
+        assert!(e.contains("truth_max_contacts") && e.contains("must be in [1, 1024]") && e.ends_with("got 0)"), "{e}");
+        let e = parse("path = \"r.h5\"\ntruth_max_contacts = 1000000000000").validate().unwrap_err().to_string();
+        assert!(e.contains("truth_max_contacts") && e.ends_with("got 1000000000000)"), "{e}");
+        let e = parse("path = \"r.h5\"\nstrategies = [\"a\", \"b\", \"a\"]").validate().unwrap_err().to_string();
+        assert!(e.contains("strategies") && e.contains("\"a\" is listed twice (entries 1 and 3)"), "{e}");
         let d = temp_dir("truth-columns");
         let l = logger(&d, "path = \"rec.h5\"\ntruth_max_contacts = 9");
         assert_eq!(l.opts.as_ref().unwrap().truth_max_contacts, 9);

@@ -186,3 +186,29 @@ fn truth_recorded_from_the_first_press_on_keeps_the_no_load_period_until_that_pr
         assert_eq!(late["strategies"][name]["rmse_n"], s["rmse_n"], "{name}");
     }
 }
+
+/// Pressure samples that are not finite numbers (a board sending `inf` or `nan`) are left out
+/// of every window and of P0, as before, but no longer silently: `sync` warns at the first and
+/// counts them at stop, and `eval` shows both.
+#[test]
+fn non_finite_pressure_samples_are_counted_not_dropped_silently() {
+    let d = super::support::workdir("sync", "non-finite");
+    ok(&skinflow(&d, &["simulate", fixture("tiny-eval.toml").to_str().unwrap(), "--out", "rec.h5", "--seed", "3"]));
+    let mut bad = 0;
+    rewrite_pressure(&d.join("rec.h5"), &d.join("inf.h5"), |i, t, kpa| {
+        let inf = i % 40 == 7;
+        bad += usize::from(inf);
+        Some((t, if inf { f64::INFINITY } else { kpa }))
+    });
+    assert!(bad > 5);
+    let calib = super::support::root().join("graphs/calib/paper.toml");
+    let out = skinflow(&d, &["eval", "inf.h5", "--calib", calib.to_str().unwrap()]);
+    ok(&out);
+    let err = stderr(&out);
+    assert!(err.contains("a pressure sample is not a finite number") && err.contains("kpa=inf"), "{err}");
+    let line = err
+        .lines()
+        .find(|l| l.contains("pressure samples that were not finite numbers"))
+        .unwrap_or_else(|| panic!("{err}"));
+    assert!(line.contains(&format!("samples={bad}")), "{line}");
+}

@@ -151,6 +151,9 @@ pub struct Sync {
     without_pressure: WithoutPressure,
     /// Frames that arrived older than the last one. Reported at stop.
     out_of_order: OutOfOrder,
+    /// Pressure samples that were NaN or infinite (a board sending `nan`/`inf`): left out of
+    /// every window and of P0, warned about at the first, counted at stop.
+    non_finite_pressure: u64,
 }
 
 /// Counts of frames emitted with an unknown pressure change.
@@ -249,6 +252,7 @@ impl Sync {
             },
             without_pressure: WithoutPressure::default(),
             out_of_order: OutOfOrder::default(),
+            non_finite_pressure: 0,
         }
     }
 
@@ -571,6 +575,18 @@ impl Processor for Sync {
             let s = m
                 .get::<PressureSample>()
                 .ok_or(NodeError::Input { port: "pressure".into(), problem: "not a pressure sample".into() })?;
+            if !s.kpa.is_finite() {
+                if self.non_finite_pressure == 0 {
+                    tracing::warn!(
+                        node = ctx.id(),
+                        t_s = m.header.t_s(),
+                        kpa = s.kpa,
+                        "a pressure sample is not a finite number: left out of its frame's window and of P0 (counted; \
+                         the count is reported at stop)"
+                    );
+                }
+                self.non_finite_pressure += 1;
+            }
             self.on_pressure(m.header.t_s(), s.kpa);
         }
         if let Some(m) = inputs.get(TRUTH) {
@@ -668,6 +684,13 @@ impl Processor for Sync {
                 no_sample_in_window = no_sample,
                 before_the_tare = no_tare,
                 "frames without pressure (NaN dP, flagged downstream, not no-load frames)"
+            );
+        }
+        if self.non_finite_pressure > 0 {
+            tracing::warn!(
+                node = ctx.id(),
+                samples = self.non_finite_pressure,
+                "pressure samples that were not finite numbers (left out of every window and of P0)"
             );
         }
         let OutOfOrder { reordered, dropped } = self.out_of_order;

@@ -559,6 +559,43 @@ fn an_electrode_dead_in_one_no_load_frame_does_not_spoil_the_reference() {
     assert!((rmse(&early) - rmse(&healthy)).abs() < 0.05, "{} vs {}", rmse(&early), rmse(&healthy));
 }
 
+/// A recorded `/eit/reference` with no usable channel (all 0 V) is not used: the reference is
+/// learned from the no-load frames and the presses are found (every frame was dropped). A
+/// recording of which no frame can be imaged (every value 0 V: a dead board) is said to be
+/// that, not to "start under load" as the warning had it.
+#[test]
+fn an_unusable_recorded_reference_is_replaced_and_unimaged_frames_are_named() {
+    let d = workdir("unusable-reference");
+    simulate(&d, "tiny-eval.toml", "rec.h5");
+    let zero_dataset = |name: &str, dataset: &str| {
+        std::fs::copy(d.join("rec.h5"), d.join(name)).unwrap();
+        hdf5_io(|| {
+            let file = hdf5::File::open_rw(d.join(name)).unwrap();
+            let ds = file.dataset(dataset).unwrap();
+            let n = ds.read_raw::<f64>().unwrap().len();
+            ds.write_raw(&vec![0.0; n]).unwrap();
+        });
+    };
+    // A simulated recording has no /eit/reference: an all-0 V one is added.
+    std::fs::copy(d.join("rec.h5"), d.join("ref0.h5")).unwrap();
+    hdf5_io(|| {
+        let file = hdf5::File::open_rw(d.join("ref0.h5")).unwrap();
+        let m = file.dataset("/eit/v").unwrap().shape()[1];
+        file.new_dataset::<f64>().shape([m]).create("/eit/reference").unwrap().write_raw(&vec![0.0; m]).unwrap();
+    });
+    zero_dataset("v0.h5", "/eit/v");
+    let calib = root().join("graphs/calib/paper.toml");
+    let eval = |rec: &str| skinflow(&d, &["eval", rec, "--calib", calib.to_str().unwrap(), "--json", "e.json"]);
+    let out = eval("ref0.h5");
+    ok(&out);
+    assert!(stderr(&out).contains("the recorded reference frame has no usable channel"), "{}", stderr(&out));
+    let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(d.join("e.json")).unwrap()).unwrap();
+    assert!(v["localization"]["matched"].as_u64().unwrap() > 0, "{v}");
+    let err = stderr(&eval("v0.h5"));
+    assert!(err.contains("v0.h5: warning: ") && err.contains("EIT frames were not imaged"), "{err}");
+    assert!(!err.contains("starts under load"), "{err}");
+}
+
 /// Replays `rec` through sync, reconstructor, segmenter, splitter and corrector in lockstep,
 /// logging the derived streams to `out.h5`; checks that nothing was dropped and every recorded
 /// frame went through every stage. Returns the frame count and the log's path.
@@ -1281,6 +1318,16 @@ fn recordings_of_another_sensor_and_files_that_are_no_calibration_are_refused() 
     refused(&d, &["calibrate", "cal.h5", "small.h5", "--out", "c.toml"], &pooled);
     refused(&d, &["eval", "cal.h5", "small.h5", "--calib", "calib.toml"], &pooled);
     assert!(!d.join("e.json").exists() && !d.join("c.toml").exists());
+    // Calibrating alone on the small sensor's recording: the reconstructor would image it on
+    // the default sensor (it did, without a word, and labelled the fit with the recording's
+    // sensor); refused as `check` refuses such a graph, naming the flag that fixes it.
+    refused(
+        &d,
+        &["calibrate", "small.h5", "--out", "c.toml"],
+        &format!("was made on sensor {small}: the images would be wrong"),
+    );
+    refused(&d, &["calibrate", "small.h5", "--out", "c.toml"], "(here: --recon 'sensor = \"FILE\"'");
+    assert!(!d.join("c.toml").exists());
 
     std::fs::write(d.join("empty.toml"), "").unwrap();
     for (file, want) in [
@@ -1311,8 +1358,15 @@ fn recordings_of_another_sensor_and_files_that_are_no_calibration_are_refused() 
     assert!(err.starts_with("error: negative.h5: /truth/force_n: row "), "{err}");
     assert!(err.contains("is not a finite force >= 0 N, but /truth/x_mm holds a contact there"), "{err}");
     set_forces("zero.h5", |_| 0.0);
-    refused(&d, &["calibrate", "zero.h5", "--out", "c.toml"], "zero.h5: calibrate: 0 usable samples (of ");
-    let err = stderr(&skinflow(&d, &["calibrate", "zero.h5", "--out", "c.toml"]));
+    std::fs::write(d.join("small-sensor.toml"), "[sensor]\nname = \"small-60mm\"\nwidth_mm = 60.0\nheight_mm = 60.0\n")
+        .unwrap();
+    let on_small = "sensor = \"small-sensor.toml\"";
+    refused(
+        &d,
+        &["calibrate", "zero.h5", "--out", "c.toml", "--recon", on_small],
+        "zero.h5: calibrate: 0 usable samples (of ",
+    );
+    let err = stderr(&skinflow(&d, &["calibrate", "zero.h5", "--out", "c.toml", "--recon", on_small]));
     assert!(err.contains("F <= 0"), "{err}");
     assert!(!d.join("c.toml").exists());
 }
@@ -1421,7 +1475,8 @@ fn a_simulation_that_cannot_be_set_up_is_refused_saying_its_cause_once() {
          [model]\nmesh_min_elements = 100\nmesh_max_elements = 100\n[[step]]\nrest_s = 2.0\n",
     )
     .unwrap();
-    let cause = "mesh: refinement did not reach 25 degrees";
+    // A 10 um tall sensor: its boundary alone needs more nodes than the mesh may have.
+    let cause = "the sensor's boundary alone would need more than 100 nodes (elements)";
     let err = refused(&d, &["simulate", "thin.toml", "--out", "thin.h5"], cause);
     assert!(err.contains("thin.toml: preparing the simulation: scene \"thin\": eit channel: "), "{err}");
     assert_eq!(err.matches(cause).count(), 1, "{err}");

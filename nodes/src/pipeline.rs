@@ -334,6 +334,9 @@ impl PipelineSpec {
     fn run_with(&self, reg: &Registry, captured: &Captured) -> Result<Vec<Vec<Message>>, PipelineError> {
         let src = SourceFile::new("<pipeline>", self.graph_toml());
         let spec = GraphSpec::parse(src, reg).map_err(|e| PipelineError::before_run(e.to_string()))?;
+        // As `skinflow check` and `run` do: a reconstructor on another sensor than the
+        // recording's would make wrong images without a word.
+        crate::sensors::check_graph(&spec).map_err(|e| PipelineError::before_run(e.to_string()))?;
         let report = skinflow_core::run(&spec, &RunOptions::default())
             .map_err(|e| PipelineError::before_run(self.in_lanes(failed_node(&e), e.to_string())))?;
         let stats = report.stats;

@@ -390,6 +390,22 @@ impl Reconstructor {
             .get::<EitFrame>()
             .ok_or(NodeError::Input { port: "reference".into(), problem: "not an EIT frame".into() })?;
         self.check_width("reference", &f.v)?;
+        // A recorded reference with no channel the mask would use (all NaN, at the rail or at
+        // 0 V) would mask every channel of every frame: no image at all. It is not used; the
+        // reference is learned from the no-load frames, as without one.
+        let mask = self.math.mask_params();
+        let mut scratch = vec![0.0; f.v.len()];
+        let floor = skinflow_eit::mask::zero_floor(&f.v, mask, &mut scratch);
+        let usable = f.v.iter().filter(|v| v.is_finite() && v.abs() < mask.saturation_v && v.abs() > floor).count();
+        if usable == 0 {
+            tracing::warn!(
+                node = ctx.id(),
+                channels = f.v.len(),
+                "the recorded reference frame has no usable channel (each is NaN, at the rail or at 0 V): not used; \
+                 the reference is learned from the no-load frames instead"
+            );
+            return Ok(());
+        }
         self.tracker = ReferenceTracker::from_reference(&f.v);
         self.report_reference(ctx);
         Ok(())
@@ -483,17 +499,18 @@ impl Reconstructor {
 
 impl Processor for Reconstructor {
     fn process(&mut self, ctx: &mut Context, inputs: &Inputs, out: &mut Outputs) -> Result<(), NodeError> {
-        if let Some(m) = inputs.get(1) {
-            self.take_reference(ctx, m)?;
-        }
-        let Some(m) = inputs.get(0) else { return Ok(()) };
+        // A reference refused (another width) is the call's error, but only after the frame
+        // of the same call is imaged: it is not lost with it.
+        let reference = inputs.get(1).map_or(Ok(()), |m| self.take_reference(ctx, m));
+        let Some(m) = inputs.get(0) else { return reference };
         match self.image_of(ctx, m) {
-            Ok(image) => out.send(0, Message::from_arc(m.header, image)),
+            Ok(image) => out.send(0, Message::from_arc(m.header, image))?,
             // The engine logs every error a node returns: only the first such frame is one, the
             // rest are counted as discarded (a line per frame while a board is dead, else).
-            Err(cause @ NodeError::Input { .. }) => self.dropped.record(ctx, ctx.now_ns(), cause),
-            Err(e) => Err(e),
+            Err(cause @ NodeError::Input { .. }) => self.dropped.record(ctx, ctx.now_ns(), cause)?,
+            Err(e) => return Err(e),
         }
+        reference
     }
 
     fn stop(&mut self, ctx: &mut Context) -> Result<(), NodeError> {

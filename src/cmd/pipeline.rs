@@ -166,7 +166,13 @@ impl PipelineArgs {
                     recording.display()
                 );
             }
-            anyhow::anyhow!("{}: pipeline: {e}", recording.display())
+            // The graph is generated: its reconstructor's params are `--recon`.
+            let hint = if e.to_string().contains("node \"recon\": param \"sensor\"") {
+                " (here: --recon 'sensor = \"FILE\"', a sensor TOML file)"
+            } else {
+                ""
+            };
+            anyhow::anyhow!("{}: pipeline: {e}{hint}", recording.display())
         })?;
         Ok((rows, settled))
     }
@@ -212,6 +218,10 @@ pub struct Settled {
     half_period_s: f64,
     /// The reconstructor's `reference_frames` (see [`Settled::warn_short_no_load`]).
     reference_frames: usize,
+    /// EIT frames the recording holds, and how many of them lie in its no-load period: to
+    /// tell a recording that starts under load from one whose frames were not imaged.
+    recorded_frames: usize,
+    recorded_no_load_frames: usize,
     pub all_frames: bool,
     pub by: SettledBy,
 }
@@ -227,6 +237,8 @@ impl Settled {
             half_period_s: 0.5 * period,
             reference_frames: parse_params::<skinflow_nodes::reconstruct::ReconstructorParams>("--recon", &args.recon)
                 .map_or(10, |p| p.reference_frames),
+            recorded_frames: eit_t.len(),
+            recorded_no_load_frames: rec.no_load_eit_frames(skinflow_record::DEFAULT_TARE_S).len(),
             all_frames: args.all_frames,
             by: args.settled_by,
         }
@@ -260,9 +272,26 @@ impl Settled {
     /// the recording starts under load, as a calibration session resumed after a stop can:
     /// then the reference and P0 hold that load, and every force and image is off by it.
     pub fn warn_short_no_load<'a>(&self, recording: &Path, synced: impl IntoIterator<Item = &'a SyncedFrame>) {
-        let no_load = synced.into_iter().filter(|s| s.no_load).count();
+        let (mut imaged, mut no_load) = (0, 0);
+        for s in synced {
+            imaged += 1;
+            no_load += usize::from(s.no_load);
+        }
         let seconds = |n: usize| 2.0 * self.half_period_s * n as f64;
-        if no_load == 0 {
+        if imaged < self.recorded_frames && no_load < self.recorded_no_load_frames.min(self.reference_frames) {
+            // Frames the reconstructor could make no image of (its warnings above say why: a
+            // dead board, an unusable reference, another sensor's width): not a short rest.
+            eprintln!(
+                "{}: warning: {} of its {} EIT frames were not imaged ({} of its {} no-load frames were): the \
+                 reconstructor dropped them, for the cause its warnings above give (a dead board, an unusable \
+                 /eit/reference, frames of another sensor's width)",
+                recording.display(),
+                self.recorded_frames - imaged,
+                self.recorded_frames,
+                no_load,
+                self.recorded_no_load_frames
+            );
+        } else if no_load == 0 {
             eprintln!(
                 "{}: warning: the recording starts under load (no EIT frame before the first contact): the EIT \
                  reference and the pressure tare come from loaded frames, so forces and images are off by that \
@@ -393,6 +422,8 @@ mod tests {
             change_t: load_changes(&truth(&rows)),
             half_period_s: 0.5 / 1.3,
             reference_frames: 10,
+            recorded_frames: 40,
+            recorded_no_load_frames: 0,
             all_frames: false,
             by: SettledBy::Truth,
         };

@@ -403,7 +403,14 @@ mod tests {
         for (params, expected) in [
             ("floor = 0.0", "param \"floor\": must be finite and > 0 (got 0)"),
             ("radius_frac = 0.5", "param \"radius_frac\": must be finite and in [0, 0.5) (got 0.5)"),
-            ("max_contacts = 0", "param \"max_contacts\": must be >= 1 (got 0)"),
+            (
+                "max_contacts = 0",
+                "param \"max_contacts\": must be in [1, 256] (the buffers are sized for it at load) (got 0)",
+            ),
+            (
+                "max_contacts = 100000000",
+                "param \"max_contacts\": must be in [1, 256] (the buffers are sized for it at load) (got 100000000)",
+            ),
             (
                 "separation = 0.0",
                 "param \"weak_peak\": must be 0 when separation = 0 (the paper's segmentation sets both to 0) (got 0.15)",

@@ -596,6 +596,31 @@ fn an_unusable_recorded_reference_is_replaced_and_unimaged_frames_are_named() {
     assert!(!err.contains("starts under load"), "{err}");
 }
 
+/// Truth in the wrong units (positions in µm, forces in mN: an external writer's mistake) is
+/// accepted as before, but said: contacts off the sensor, wider than it or above 1000 N are
+/// counted in a warning; the simulated truth draws none.
+#[test]
+fn truth_no_indenter_can_make_is_warned_about() {
+    let d = workdir("implausible-truth");
+    simulate(&d, "tiny-eval.toml", "rec.h5");
+    std::fs::copy(d.join("rec.h5"), d.join("um.h5")).unwrap();
+    hdf5_io(|| {
+        let file = hdf5::File::open_rw(d.join("um.h5")).unwrap();
+        for (name, factor) in [("/truth/x_mm", 1000.0), ("/truth/force_n", 1000.0)] {
+            let ds = file.dataset(name).unwrap();
+            let v: Vec<f64> = ds.read_raw::<f64>().unwrap().iter().map(|x| x * factor).collect();
+            ds.write_raw(&v).unwrap();
+        }
+    });
+    let calib = root().join("graphs/calib/paper.toml");
+    let eval = |rec: &str| stderr(&skinflow(&d, &["eval", rec, "--calib", calib.to_str().unwrap()]));
+    let err = eval("um.h5");
+    let warned = |what: &str| err.lines().filter(|l| l.starts_with("um.h5: warning: ") && l.contains(what)).count();
+    assert_eq!(warned("lie wholly off the sensor (100 x 100 mm, centred on 0)"), 1, "{err}");
+    assert_eq!(warned("press harder than 1000 N"), 1, "{err}");
+    assert!(!eval("rec.h5").contains("true contacts in /truth"));
+}
+
 /// Replays `rec` through sync, reconstructor, segmenter, splitter and corrector in lockstep,
 /// logging the derived streams to `out.h5`; checks that nothing was dropped and every recorded
 /// frame went through every stage. Returns the frame count and the log's path.

@@ -149,6 +149,7 @@ impl PipelineArgs {
         configure: impl FnOnce(&mut PipelineSpec),
     ) -> Result<(Vec<Vec<Message>>, Settled)> {
         let rec = require_truth(recording)?;
+        warn_implausible_truth(recording, &rec);
         let settled = Settled::of(&rec, self);
         drop(rec);
         let mut spec = self.spec(recording.to_path_buf());
@@ -198,6 +199,47 @@ pub fn require_truth(path: &Path) -> Result<Recording> {
         );
     }
     Ok(rec)
+}
+
+/// Truth forces above this are taken for a unit error (mN written as N, say), N.
+const IMPLAUSIBLE_FORCE_N: f64 = 1000.0;
+
+/// Warns about true contacts no indenter on this sensor can make, which an external writer's
+/// unit error (cm or µm for mm, mN for N) gives: centred off the sensor by more than their
+/// radius, wider than the sensor, or above [`IMPLAUSIBLE_FORCE_N`]. They are kept (the reader
+/// accepts any finite, positive values).
+fn warn_implausible_truth(path: &Path, rec: &Recording) {
+    let (Some(truth), sensor) = (rec.truth.as_ref(), &rec.sensor) else { return };
+    let (hx, hy) = (0.5 * sensor.width_mm, 0.5 * sensor.height_mm);
+    let (mut off, mut wide, mut heavy, mut total) = (0usize, 0usize, 0usize, 0usize);
+    for i in 0..truth.len() {
+        for c in truth.row(i).contacts() {
+            total += 1;
+            let r = 0.5 * c.diameter_mm;
+            off += usize::from(c.x_mm.abs() > hx + r || c.y_mm.abs() > hy + r);
+            wide += usize::from(c.diameter_mm > sensor.width_mm.max(sensor.height_mm));
+            heavy += usize::from(c.force_n > IMPLAUSIBLE_FORCE_N);
+        }
+    }
+    for (n, what) in [
+        (
+            off,
+            format!(
+                "lie wholly off the sensor ({} x {} mm, centred on 0): they can match no detection",
+                sensor.width_mm, sensor.height_mm
+            ),
+        ),
+        (wide, "are wider than the sensor".to_owned()),
+        (heavy, format!("press harder than {IMPLAUSIBLE_FORCE_N} N")),
+    ] {
+        if n > 0 {
+            eprintln!(
+                "{}: warning: {n} of the {total} true contacts in /truth {what}; a unit error in the truth (mm and \
+                 N expected)?",
+                path.display()
+            );
+        }
+    }
 }
 
 /// Which frames have a single true load: the times the true load changed and the EIT frame

@@ -128,15 +128,24 @@ fn check_space(sim: &Simulator, eit: bool, pressure: bool, out: &Path) -> Result
     let Some(free) = free_bytes(dir) else { return Ok(()) };
     if need > free as f64 {
         anyhow::bail!(
-            "--out {}: the scene's recording needs at least {:.2} GB ({frames} EIT frames, {samples} pressure samples \
-             over {duration_s} s), but {} has {:.2} GB free",
+            "--out {}: the scene's recording needs at least {} ({frames} EIT frames, {samples} pressure samples \
+             over {duration_s} s), but {} has {} free",
             out.display(),
-            need / 1e9,
+            size(need),
             dir.display(),
-            free as f64 / 1e9
+            size(free as f64)
         );
     }
     Ok(())
+}
+
+/// A byte count in the unit that shows it (GB, MB or kB, 2 decimals).
+fn size(bytes: f64) -> String {
+    match bytes {
+        b if b >= 1e9 => format!("{:.2} GB", b / 1e9),
+        b if b >= 1e6 => format!("{:.2} MB", b / 1e6),
+        b => format!("{:.2} kB", b / 1e3),
+    }
 }
 
 /// Bytes an unprivileged process may still write in the file system holding `dir` (None when
@@ -144,4 +153,16 @@ fn check_space(sim: &Simulator, eit: bool, pressure: bool, out: &Path) -> Result
 fn free_bytes(dir: &Path) -> Option<u64> {
     let st = nix::sys::statvfs::statvfs(dir).ok()?;
     Some((st.blocks_available() as u64).saturating_mul(st.fragment_size() as u64))
+}
+
+#[cfg(test)]
+mod tests {
+    /// The audit's case: a small disk read "needs at least 0.00 GB ... has 0.00 GB free".
+    #[test]
+    fn sizes_are_shown_in_the_unit_that_shows_them() {
+        assert_eq!(super::size(2.5e9), "2.50 GB");
+        assert_eq!(super::size(3.2e7), "32.00 MB");
+        assert_eq!(super::size(131_072.0), "131.07 kB");
+        assert_eq!(super::size(0.0), "0.00 kB");
+    }
 }

@@ -169,6 +169,8 @@ fn a_file_that_is_not_a_library_is_refused() {
     assert!(!o.status.success());
     let e = stderr(&o);
     assert!(e.contains(&format!("plugin {}: not a loadable library", bad.display())), "{e}");
+    // The loader's reason, not only "dlopen failed"; under the user's path, not the host's copy.
+    assert!(e.contains(&format!("dlopen failed: {}: ", bad.display())), "{e}");
 }
 
 #[test]

@@ -106,9 +106,17 @@ fn open_copy(path: &Path) -> Result<libloading::Library, PluginError> {
     let lib = unsafe { libloading::Library::new(&to) };
     // The mapping outlives the file: removing the copy now leaves nothing behind.
     let _ = std::fs::remove_file(&to);
-    lib.map_err(|e| PluginError::Open {
-        path: path.to_path_buf(),
-        cause: e.to_string().replace(&*to.to_string_lossy(), &path.to_string_lossy()),
+    lib.map_err(|e| {
+        // libloading says "dlopen failed" and keeps the loader's reason (an invalid ELF header,
+        // a missing dependency) as the error's source.
+        let cause = match std::error::Error::source(&e) {
+            Some(reason) => format!("{e}: {reason}"),
+            None => e.to_string(),
+        };
+        PluginError::Open {
+            path: path.to_path_buf(),
+            cause: cause.replace(&*to.to_string_lossy(), &path.to_string_lossy()),
+        }
     })
 }
 

@@ -1251,6 +1251,12 @@ fn outputs_that_cannot_be_created_are_refused_before_any_work() {
         assert_eq!(listing(&d), before, "{args:?}: nothing written");
     }
     assert_eq!(std::fs::read_to_string(d.join("afile")).unwrap(), "a file");
+    // A figure that cannot be written (here a directory holds its name) names `--plots`, and
+    // the figures before it are kept.
+    std::fs::create_dir_all(d.join("plots/fields.png")).unwrap();
+    let err = refused(&d, &["eval", "rec.h5", "--calib", calib, "--plots", "plots"], "--plots plots: ");
+    assert!(err.contains("fields.png: cannot draw plot"), "{err}");
+    assert!(d.join("plots/predicted_vs_true.png").is_file());
 }
 
 /// `--recon`, `--segment` and `--sync` values out of range, and a bad `--fit`, are refused

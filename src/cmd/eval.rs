@@ -386,20 +386,27 @@ fn write_plots(dir: &Path, calib: &Path, o: &EvalOutcome, args: &PipelineArgs) -
     std::fs::create_dir_all(dir).with_context(|| format!("--plots {}: cannot create", dir.display()))?;
     let cal = Calibration::read(calib).map_err(anyhow::Error::msg)?;
     let p = |name: &str| -> PathBuf { dir.join(name) };
-    plots::predicted_vs_true(&p("predicted_vs_true.png"), &o.evaluator).map_err(anyhow::Error::msg)?;
-    plots::fields(&p("fields.png"), &cal).map_err(anyhow::Error::msg)?;
+    // A figure that fails (a full disk) leaves no truncated PNG behind, and names the flag.
+    let drawn = |path: PathBuf, result: Result<(), plots::PlotError>| -> Result<()> {
+        result.map_err(|e| {
+            let _ = std::fs::remove_file(&path);
+            anyhow::anyhow!("--plots {}: {e}", dir.display())
+        })
+    };
+    drawn(p("predicted_vs_true.png"), plots::predicted_vs_true(&p("predicted_vs_true.png"), &o.evaluator))?;
+    drawn(p("fields.png"), plots::fields(&p("fields.png"), &cal))?;
     if let Some((img, truth)) = &o.example {
         let grid = ImageGrid::centred(img.width, img.height, img.width_mm, img.height_mm);
         let (hx, hy) = (img.width_mm / 2.0, img.height_mm / 2.0);
-        plots::localization_map(&p("localization.png"), &o.evaluator, (-hx, hx, -hy, hy))
-            .map_err(anyhow::Error::msg)?;
+        let map = p("localization.png");
+        drawn(map.clone(), plots::localization_map(&map, &o.evaluator, (-hx, hx, -hy, hy)))?;
         let seg_params: skinflow_nodes::segment::SegmenterParams =
             skinflow_toml::from_str(&args.segment).map_err(|e| anyhow::anyhow!("--segment: {e}"))?;
         let mut seg = Segmenter::new(grid, &seg_params.math()).map_err(anyhow::Error::msg)?;
         let mut found = seg.new_contacts();
         seg.segment_into(&img.pixels, &mut found).map_err(anyhow::Error::msg)?;
-        plots::conductivity(&p("conductivity.png"), &img.pixels, &grid, seg.labels(), found.as_slice(), truth)
-            .map_err(anyhow::Error::msg)?;
+        let image = p("conductivity.png");
+        drawn(image.clone(), plots::conductivity(&image, &img.pixels, &grid, seg.labels(), found.as_slice(), truth))?;
     }
     eprintln!("plots written to {}", dir.display());
     Ok(())

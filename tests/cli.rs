@@ -621,6 +621,24 @@ fn truth_no_indenter_can_make_is_warned_about() {
     assert!(!eval("rec.h5").contains("true contacts in /truth"));
 }
 
+/// A calibration whose force map falls over its signal range (a hand edit, a sign slip) loads
+/// as before, but `eval` says which map, since every force of it comes out the same.
+#[test]
+fn a_force_map_that_does_not_rise_is_warned_about() {
+    let d = workdir("flat-map");
+    simulate(&d, "tiny-eval.toml", "rec.h5");
+    let paper = std::fs::read_to_string(root().join("graphs/calib/paper.toml")).unwrap();
+    let a1 = paper.lines().find(|l| l.starts_with("a1 = ")).unwrap();
+    let falling = paper.replacen(a1, &format!("a1 = -{}", &a1[5..]), 1);
+    assert_ne!(falling, paper);
+    std::fs::write(d.join("falling.toml"), falling).unwrap();
+    let err = stderr(&skinflow(&d, &["eval", "rec.h5", "--calib", "falling.toml"]));
+    assert!(err.contains("--calib falling.toml: warning: pneumatic.map: the force does not rise"), "{err}");
+    let err =
+        stderr(&skinflow(&d, &["eval", "rec.h5", "--calib", root().join("graphs/calib/paper.toml").to_str().unwrap()]));
+    assert!(!err.contains("does not rise"), "{err}");
+}
+
 /// Replays `rec` through sync, reconstructor, segmenter, splitter and corrector in lockstep,
 /// logging the derived streams to `out.h5`; checks that nothing was dropped and every recorded
 /// frame went through every stage. Returns the frame count and the log's path.

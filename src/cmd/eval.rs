@@ -379,7 +379,15 @@ pub fn check_calibration(calib: &Path) -> Result<Calibration> {
         let why = if calib.exists() { "is not a file" } else { "does not exist" };
         anyhow::bail!("--calib {}: {why} (pass a calibration from `skinflow calibrate`)", calib.display());
     }
-    Calibration::read(calib).map_err(|e| anyhow::anyhow!("--calib: {e}"))
+    let cal = Calibration::read(calib).map_err(|e| anyhow::anyhow!("--calib: {e}"))?;
+    for name in cal.flat_maps() {
+        eprintln!(
+            "--calib {}: warning: {name}: the force does not rise over its calibrated signal range, so every \
+             contact of the strategies using it gets the same force (0 N where it clamps)",
+            calib.display()
+        );
+    }
+    Ok(cal)
 }
 
 fn write_plots(dir: &Path, calib: &Path, o: &EvalOutcome, args: &PipelineArgs) -> Result<()> {

@@ -232,6 +232,24 @@ impl Sensor {
         if electrodes.len() < 3 {
             return Err(invalid("electrode", format!("at least 3 electrodes are needed (got {})", electrodes.len())));
         }
+        if let Some((i, j)) = overlapping(&electrodes, hw, hh) {
+            let (a, b) = (&electrodes[i], &electrodes[j]);
+            return Err(invalid(
+                format!("electrode[{j}]"),
+                format!(
+                    "from ({}, {}) to ({}, {}) mm overlaps electrode[{i}] from ({}, {}) to ({}, {}) mm: two \
+                     electrodes on one stretch of boundary are one contact, not two",
+                    b.start_mm[0],
+                    b.start_mm[1],
+                    b.end_mm[0],
+                    b.end_mm[1],
+                    a.start_mm[0],
+                    a.start_mm[1],
+                    a.end_mm[0],
+                    a.end_mm[1]
+                ),
+            ));
+        }
         if s.protocol == Protocol::Adjacent && electrodes.len() < 4 {
             return Err(invalid("protocol", "adjacent needs at least 4 electrodes"));
         }
@@ -336,6 +354,36 @@ fn on_boundary(p: [f64; 2], hw: f64, hh: f64) -> bool {
     inside && ((p[0].abs() - hw).abs() <= t || (p[1].abs() - hh).abs() <= t)
 }
 
+/// The first pair of electrodes (`i < j`) that share more than [`ON_BOUNDARY_TOL_MM`] of
+/// boundary: each as its interval of the perimeter, measured counter-clockwise from the
+/// bottom-left corner along the side both its ends are on.
+fn overlapping(electrodes: &[Electrode], hw: f64, hh: f64) -> Option<(usize, usize)> {
+    let (w, h) = (2.0 * hw, 2.0 * hh);
+    let along = |side: usize, p: [f64; 2]| match side {
+        0 => p[0] + hw,
+        1 => w + p[1] + hh,
+        2 => w + h + hw - p[0],
+        _ => 2.0 * w + h + hh - p[1],
+    };
+    let interval = |e: &Electrode| {
+        let (a, b) = (sides(e.start_mm, hw, hh), sides(e.end_mm, hw, hh));
+        let side = (0..4).find(|&k| a[k] && b[k])?;
+        let (s0, s1) = (along(side, e.start_mm), along(side, e.end_mm));
+        Some((s0.min(s1), s0.max(s1)))
+    };
+    let spans: Vec<Option<(f64, f64)>> = electrodes.iter().map(interval).collect();
+    for j in 0..spans.len() {
+        for i in 0..j {
+            if let (Some(a), Some(b)) = (spans[i], spans[j])
+                && a.1.min(b.1) - a.0.max(b.0) > ON_BOUNDARY_TOL_MM
+            {
+                return Some((i, j));
+            }
+        }
+    }
+    None
+}
+
 /// Which sides point `p` is on: bottom, right, top, left (a corner is on two).
 fn sides(p: [f64; 2], hw: f64, hh: f64) -> [bool; 4] {
     let t = ON_BOUNDARY_TOL_MM;
@@ -399,6 +447,43 @@ mod tests {
         assert!(e.to_string().contains("not on the boundary"), "{e}");
         let e = Sensor::from_toml("[sensor]\nheight_mm = 1e62\n").unwrap_err().to_string();
         assert_eq!(e, "sensor: height_mm: must be at most 1e6 mm (1 km; the mesher's range) (got 1e62)");
+    }
+
+    /// The audit's case: two electrodes on one stretch of boundary (a copy-paste in a sensor
+    /// file) are refused naming both; touching at an end, or meeting at a corner, is allowed.
+    #[test]
+    fn overlapping_electrodes_are_refused() {
+        let with = |second: &str| {
+            Sensor::from_toml(&format!(
+                "[sensor]
+[[sensor.electrode]]
+start_mm = [-50.0, -50.0]
+end_mm = [-40.0, -50.0]
+                 [[sensor.electrode]]
+{second}
+                 [[sensor.electrode]]
+start_mm = [50.0, 10.0]
+end_mm = [50.0, 20.0]
+"
+            ))
+        };
+        for second in [
+            "start_mm = [-50.0, -50.0]
+end_mm = [-40.0, -50.0]",
+            "start_mm = [-35.0, -50.0]
+end_mm = [-45.0, -50.0]",
+        ] {
+            let e = with(second).unwrap_err().to_string();
+            assert!(e.starts_with("sensor: electrode[1]: from ") && e.contains("overlaps electrode[0]"), "{e}");
+        }
+        for second in [
+            "start_mm = [-40.0, -50.0]
+end_mm = [-30.0, -50.0]",
+            "start_mm = [-50.0, -50.0]
+end_mm = [-50.0, -40.0]",
+        ] {
+            assert!(with(second).is_ok(), "{second}");
+        }
     }
 
     /// A corner is on both of its sides: an electrode from it runs along either, never to

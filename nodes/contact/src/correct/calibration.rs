@@ -389,6 +389,23 @@ impl Calibration {
 
     /// Checks the values the per-frame math divides by or exponentiates: a hand-edited file
     /// must fail here, at load, rather than give NaN forces (or no split) later.
+    /// The signal-to-force maps whose force does not rise over their calibrated signal range
+    /// (`SignalMap::rises`), by name: loaded (a calibration may hold one of a layer it could
+    /// not fit), but every force of such a strategy is the same, so readers warn.
+    pub fn flat_maps(&self) -> Vec<&'static str> {
+        [
+            ("pneumatic.map", &self.pneumatic.map),
+            ("pneumatic.locaware.map", &self.pneumatic.locaware.map),
+            ("eit.map", &self.eit.map),
+            ("eit.locaware.map", &self.eit.locaware.map),
+            ("area_aware.fields.map", &self.area_aware.fields.map),
+        ]
+        .into_iter()
+        .filter(|(_, m)| !m.rises())
+        .map(|(name, _)| name)
+        .collect()
+    }
+
     pub fn validate(&self) -> Result<(), String> {
         let (w, h) = self.region.span_mm();
         if ![self.region.x_min_mm, self.region.y_min_mm, w, h].iter().all(|v| v.is_finite()) || w <= 0.0 || h <= 0.0 {

@@ -51,6 +51,13 @@ impl SignalMap {
         if self.inside(s) > q.at(s) { 0.0 } else { q.slope(s).max(0.0) }
     }
 
+    /// Whether the force rises over the calibrated range (`f(signal_max) > f(signal_min)`; a
+    /// range of one signal counts as rising): a map that stays flat or falls gives every
+    /// contact the same force (0 N once it clamps).
+    pub fn rises(&self) -> bool {
+        self.signal_max <= self.signal_min || self.inside(self.signal_max) > self.inside(self.signal_min)
+    }
+
     /// Force for signal `s` and whether it was extrapolated.
     pub fn eval(&self, s: f64) -> (f64, Range) {
         let (lo, hi) = (self.signal_min, self.signal_max);
@@ -70,6 +77,17 @@ mod tests {
 
     fn map(a0: f64, a1: f64, a2: f64) -> SignalMap {
         SignalMap { quadratic: Quadratic { a0, a1, a2 }, signal_min: 1.0, signal_max: 3.0 }
+    }
+
+    /// The audit's maps: falling (a1 < 0) and flat (a1 = a2 = 0) do not rise; fitted shapes,
+    /// a bent-over concave one included, and a one-signal range do.
+    #[test]
+    fn a_map_that_stays_flat_or_falls_does_not_rise() {
+        assert!(!map(0.0, -6.87, 0.0).rises());
+        assert!(!map(2.0, 0.0, 0.0).rises());
+        assert!(map(0.0, 1.0, 0.0).rises() && map(0.0, 2.0, -0.4).rises() && map(-1.0, 0.5, 0.2).rises());
+        let single = SignalMap { signal_min: 2.0, signal_max: 2.0, ..map(2.0, 0.0, 0.0) };
+        assert!(single.rises());
     }
 
     fn assert_monotone(m: &SignalMap) {

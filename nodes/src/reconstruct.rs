@@ -396,8 +396,7 @@ impl Reconstructor {
         let mask = self.math.mask_params();
         let mut scratch = vec![0.0; f.v.len()];
         let floor = skinflow_eit::mask::zero_floor(&f.v, mask, &mut scratch);
-        let usable = f.v.iter().filter(|v| v.is_finite() && v.abs() < mask.saturation_v && v.abs() > floor).count();
-        if usable == 0 {
+        if !f.v.iter().any(|&v| skinflow_eit::mask::usable(v, mask, floor)) {
             tracing::warn!(
                 node = ctx.id(),
                 channels = f.v.len(),

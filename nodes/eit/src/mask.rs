@@ -201,6 +201,12 @@ fn uses_any(m: &Measurement, dead: &[bool]) -> bool {
     dead[m.drive.0] || dead[m.drive.1] || dead[m.sense.0] || dead[m.sense.1]
 }
 
+/// Whether the mask uses value `x` (with the frame's or reference's zero floor): finite, below
+/// the rail, above the zero floor; [`classify`] counts why it does not.
+pub fn usable(x: f64, params: &MaskParams, zero_floor: f64) -> bool {
+    x.is_finite() && x.abs() < params.saturation_v && x.abs() > zero_floor
+}
+
 /// Counts `x` into `counts` when bad; returns whether it is.
 fn classify(x: f64, params: &MaskParams, zero_floor: f64, counts: &mut BadCounts) -> bool {
     if !x.is_finite() {

@@ -14,7 +14,7 @@
 //! happens at construction only.
 
 use crate::error::EitError;
-use crate::mask::{MaskParams, zero_floor};
+use crate::mask::{MaskParams, usable, zero_floor};
 
 /// Where the current reference came from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -112,11 +112,11 @@ impl ReferenceTracker {
         if self.source != ReferenceSource::None {
             return Ok(true);
         }
-        let (saturation_v, floor) = match &self.mask {
-            Some(p) => (p.saturation_v, zero_floor(frame, p, &mut self.scratch)),
-            None => (f64::INFINITY, f64::NEG_INFINITY),
+        let floor = self.mask.as_ref().map(|p| zero_floor(frame, p, &mut self.scratch));
+        let usable = |v: f64| match (&self.mask, floor) {
+            (Some(p), Some(floor)) => usable(v, p, floor),
+            _ => v.is_finite(),
         };
-        let usable = |v: f64| v.is_finite() && v.abs() < saturation_v && v.abs() > floor;
         if !frame.iter().any(|&v| usable(v)) {
             self.skipped += 1;
             return Ok(false);

@@ -8,6 +8,11 @@ bash scripts/setup.sh
 # A one-shot run gains nothing from incremental caches, which would roughly double the disk
 # the build takes (see the debug-info note in Cargo.toml).
 export CARGO_INCREMENTAL=0
+# Disk again: a CI machine ran out of it while linking the tests (the build took 2.7 GB, most of
+# it test binaries). Linked without debug info they are half the size; a failing assertion
+# still names its file and line, and a backtrace its functions (not their lines). Each crate's
+# tests are also one binary (autotests = false in its Cargo.toml), not one per file.
+export CARGO_PROFILE_DEV_STRIP=debuginfo
 # The shipped graphs load the example plugins from target/debug/ and the checks below run
 # ./target/debug/skinflow: build there, whatever target directory the caller's shell sets.
 unset CARGO_TARGET_DIR

@@ -2,8 +2,7 @@
 //! restarted when the graph says `restart = "always"`; a node that fails to build or start
 //! stops the run before any data flows, naming the node and the cause.
 
-#[path = "support/kinds.rs"]
-mod kinds;
+use crate::kinds;
 
 use std::sync::atomic::Ordering::SeqCst;
 use std::time::Duration;

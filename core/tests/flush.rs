@@ -6,8 +6,7 @@
 //!
 //! No assertion depends on timing: counts are compared with what the source reports it sent.
 
-#[path = "support/kinds.rs"]
-mod kinds;
+use crate::kinds;
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering::SeqCst};

@@ -5,8 +5,7 @@
 //! No assertion depends on timing: where a race could matter, a `gate` node holds the
 //! consumer until the test has seen the producer's state.
 
-#[path = "support/kinds.rs"]
-mod kinds;
+use crate::kinds;
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering::SeqCst};

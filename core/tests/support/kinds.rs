@@ -1,4 +1,5 @@
-//! Test-only node kinds and helpers shared by the run and fault tests (included with `#[path]`).
+//! Test-only node kinds and helpers shared by the run and fault tests: the `kinds` module of
+//! tests.rs (trace.rs, a binary of its own, includes it with `#[path]`).
 //!
 //! | kind | role | does |
 //! |---|---|---|

@@ -11,7 +11,7 @@ use serde::de::value::{Error as ValueError, MapDeserializer};
 use toml::Spanned;
 use toml::de::DeTable;
 
-mod common;
+use crate::common;
 use common::{fail, line_col, plain};
 
 #[derive(Debug, Deserialize, PartialEq, Eq, PartialOrd, Ord, Clone, Copy)]

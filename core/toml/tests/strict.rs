@@ -7,7 +7,7 @@ use serde::de::IntoDeserializer;
 use toml::Spanned;
 use toml::de::DeTable;
 
-mod common;
+use crate::common;
 use common::{fail, line_col, plain};
 
 const TOO_LONG: &str = "expected an array of 2 elements, found 3";

@@ -3,7 +3,7 @@
 //! signals, and the gauge the joint fit leaves free. Each must be refused, fall back, or be
 //! cleaned, with a warning, and never give forces out of range.
 
-mod synth;
+use crate::synth;
 
 use skinflow_contact::correct::average_holds;
 use skinflow_contact::correct::calibrate::{CalibParams, CalibSample, CalibWarning, CalibrateError, calibrate};

@@ -1,6 +1,6 @@
 //! Calibration fit, strategies and guards on synthetic data with known nonuniformity.
 
-mod synth;
+use crate::synth;
 
 use skinflow_contact::correct::average_holds;
 use skinflow_contact::correct::calibrate::{CalibParams, CalibSample, CalibWarning, calibrate};

@@ -1,7 +1,7 @@
 //! The whole chain on synthetic frames, as the lead's nodes and `eval` run it: segment ->
 //! split -> correct -> evaluate (and plot), plus the hard cases of issue 5.
 
-mod synth;
+use crate::synth;
 
 use skinflow_contact::correct::calibrate::{CalibParams, calibrate};
 use skinflow_contact::correct::calibration::{Calibration, Provenance};

@@ -6,7 +6,7 @@ use skinflow_eit::sensor::PAPER_100MM_TOML;
 use skinflow_record::{RecordError, Recording, RecordingWriter, WriterOptions, inspect};
 
 fn tempdir(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("skinflow-record-{name}-{}", std::process::id()));
+    let dir = std::env::temp_dir().join(format!("skinflow-record-corrupt-{name}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
     dir

@@ -10,7 +10,7 @@ use skinflow_record::rotate::{find_parts, part_path, recording_files};
 use skinflow_record::{ForceRow, Recording, RecordingWriter, Streams, SyncRow, TruthContact, WriterOptions};
 
 fn tempdir(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("skinflow-record-{name}-{}", std::process::id()));
+    let dir = std::env::temp_dir().join(format!("skinflow-record-rotate-{name}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
     dir

@@ -175,7 +175,7 @@ fn every_stream_reads_back_bit_exact() {
 }
 
 fn tempdir(name: &str) -> std::path::PathBuf {
-    let dir = std::env::temp_dir().join(format!("skinflow-record-{name}-{}", std::process::id()));
+    let dir = std::env::temp_dir().join(format!("skinflow-record-roundtrip-{name}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
     dir

@@ -11,7 +11,7 @@ use skinflow_record::{
 
 /// An empty directory of its own for one test.
 fn fresh_dir(test: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("skinflow-record-{test}-{}", std::process::id()));
+    let dir = std::env::temp_dir().join(format!("skinflow-record-schema-{test}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
     dir

@@ -4,7 +4,7 @@ use skinflow_eit::sensor::PAPER_100MM_TOML;
 use skinflow_record::{RecordError, Recording, RecordingWriter, Streams, SyncRow, TruthContact, WriterOptions};
 
 fn tempdir(name: &str) -> std::path::PathBuf {
-    let dir = std::env::temp_dir().join(format!("skinflow-record-{name}-{}", std::process::id()));
+    let dir = std::env::temp_dir().join(format!("skinflow-record-writer_errors-{name}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
     dir

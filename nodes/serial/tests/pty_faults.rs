@@ -1,7 +1,7 @@
 //! Fault injection through real pseudo-terminals: no panic, exact counters, no mis-assembled
 //! record, and recovery after unplug and replug.
 
-mod feeds;
+use crate::feeds;
 
 use std::time::{Duration, Instant};
 

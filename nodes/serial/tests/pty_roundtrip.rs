@@ -1,6 +1,6 @@
 //! Emulator -> pseudo-terminal -> reader, clean streams: every record arrives intact, in order.
 
-mod feeds;
+use crate::feeds;
 
 use std::time::{Duration, Instant};
 

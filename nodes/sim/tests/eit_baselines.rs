@@ -10,13 +10,13 @@
 //! a change on either side that moves these figures shows up here.
 //!
 //! Ignored by default: it reconstructs ~2,300 frames and precomputes a reconstruction matrix,
-//! minutes in a debug build. Run: `cargo test --release -p skinflow-sim --test eit_baselines -- --ignored`.
+//! minutes in a debug build. Run: `cargo test --release -p skinflow-sim --test tests -- eit_baselines --ignored`.
 
 #[path = "../examples/baselines.rs"]
 mod baselines;
 
 #[test]
-#[ignore = "release-only: cargo test --release -p skinflow-sim --test eit_baselines -- --ignored"]
+#[ignore = "release-only: cargo test --release -p skinflow-sim --test tests -- eit_baselines --ignored"]
 fn paper_profile_eit_baselines_are_pinned() {
     let f = baselines::measure(1, &[]);
     let (loc_mean, loc_sd) = f.localisation_mm;

@@ -9,7 +9,7 @@
 //! flush once its input left the host's window of retained inputs (an error, and the rest
 //! counted as discarded; within the window it can, `tests/provenance.rs`).
 
-mod common;
+use crate::common;
 
 use std::collections::VecDeque;
 use std::path::{Path, PathBuf};

@@ -8,7 +8,7 @@
 //! emitted by its replacement with their provenance. Built libraries (the example plugins, a
 //! swap between two loads of one library) are run in the workspace's tests/plugins.rs.
 
-mod common;
+use crate::common;
 
 use std::collections::VecDeque;
 use std::panic::{AssertUnwindSafe, catch_unwind};

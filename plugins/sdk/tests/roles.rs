@@ -5,7 +5,7 @@
 //! counted and its panics handled by the restart policy. Built libraries are run in the
 //! workspace's tests/plugins.rs.
 
-mod common;
+use crate::common;
 
 use std::collections::HashMap;
 use std::path::Path;

@@ -1,4 +1,5 @@
-//! Tests of the FEM forward model and the NOSER reconstruction: one test binary, one module per subject.
+//! Tests of the FEM forward model and the NOSER reconstruction: one test binary, one module per
+//! subject.
 
 mod forward;
 mod noser;

@@ -1337,7 +1337,8 @@ fn out_of_range_flags_and_bad_scenes_are_refused_before_any_work() {
 }
 
 /// A calibration names the sensor it was fitted on; `eval` refuses a recording of another
-/// sensor with it, and `calibrate` and `eval` refuse to pool recordings of two sensors. A
+/// sensor with it, and `calibrate` and `eval` refuse to pool recordings of two sensors; a
+/// recording of another sensor than the default is imaged on its own. A
 /// file that is no calibration is named as such, and a calibration whose samples were all
 /// rejected says which recording and why.
 #[test]
@@ -1352,7 +1353,7 @@ fn recordings_of_another_sensor_and_files_that_are_no_calibration_are_refused() 
     let scene = "[scene]\nname = \"small\"\nprofile = \"paper\"\n\
         [sensor]\nname = \"small-60mm\"\nwidth_mm = 60.0\nheight_mm = 60.0\n\
         [[step]]\nrest_s = 4.0\n\
-        [[step]]\nat_mm = [[-10.0, 10.0]]\ndiameter_mm = 10.0\nforces_n = [3.0, 6.0]\nhold_frames = 3\nrest_s = 0.5\n";
+        [[step]]\nat_mm = [[-10.0, 10.0]]\ndiameter_mm = 10.0\nforces_n = [2.0, 4.0, 6.0, 8.0]\nhold_frames = 3\nrest_s = 0.5\n";
     std::fs::write(d.join("small.toml"), scene).unwrap();
     ok(&skinflow(&d, &["simulate", "small.toml", "--out", "small.h5"]));
     let small = "\"small-60mm\" (60 x 60 mm, 16 electrodes, pairwise)";
@@ -1367,16 +1368,29 @@ fn recordings_of_another_sensor_and_files_that_are_no_calibration_are_refused() 
     refused(&d, &["calibrate", "cal.h5", "small.h5", "--out", "c.toml"], &pooled);
     refused(&d, &["eval", "cal.h5", "small.h5", "--calib", "calib.toml"], &pooled);
     assert!(!d.join("e.json").exists() && !d.join("c.toml").exists());
-    // Calibrating alone on the small sensor's recording: the reconstructor would image it on
-    // the default sensor (it did, without a word, and labelled the fit with the recording's
-    // sensor); refused as `check` refuses such a graph, naming the flag that fixes it.
-    refused(
-        &d,
-        &["calibrate", "small.h5", "--out", "c.toml"],
-        &format!("was made on sensor {small}: the images would be wrong"),
-    );
-    refused(&d, &["calibrate", "small.h5", "--out", "c.toml"], "(here: --recon 'sensor = \"FILE\"'");
-    assert!(!d.join("c.toml").exists());
+    // Calibrating alone on the small sensor's recording: imaged on the recording's own sensor
+    // (its `sensor` attribute, saved in the cache for the generated graph's reconstructor),
+    // not the default one, and said so; `eval` does the same with that calibration.
+    let out = skinflow(&d, &["calibrate", "small.h5", "--out", "own.toml"]);
+    ok(&out);
+    let note = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert!(note.contains(&format!("small.h5: imaged on the recording's own sensor {small}")), "{note}");
+    let saved: Vec<_> =
+        std::fs::read_dir(d.join("cache/skinflow/sensors")).unwrap().map(|e| e.unwrap().path()).collect();
+    assert_eq!(saved.len(), 1, "{saved:?}");
+    assert!(note.contains(&saved[0].display().to_string()), "{note}");
+    let description: toml::Table = std::fs::read_to_string(&saved[0]).unwrap().parse().unwrap();
+    assert_eq!(description["sensor"]["width_mm"].as_float(), Some(60.0));
+    let calib: toml::Table = std::fs::read_to_string(d.join("own.toml")).unwrap().parse().unwrap();
+    assert_eq!(calib["provenance"]["sensor"]["name"].as_str(), Some("small-60mm"), "{calib:?}");
+    ok(&skinflow(&d, &["eval", "small.h5", "--calib", "own.toml"]));
+    // A sensor named in --recon is used as given: another one than the recording's is refused
+    // as `check` refuses such a graph, naming the flag.
+    std::fs::write(d.join("wide.toml"), "[sensor]\nname = \"wide\"\nwidth_mm = 150.0\nheight_mm = 150.0\n").unwrap();
+    let other = ["calibrate", "small.h5", "--out", "w.toml", "--recon", "sensor = \"wide.toml\""];
+    refused(&d, &other, &format!("was made on sensor {small}: the images would be wrong"));
+    refused(&d, &other, "(here: --recon 'sensor = \"FILE\"'");
+    assert!(!d.join("w.toml").exists());
 
     std::fs::write(d.join("empty.toml"), "").unwrap();
     for (file, want) in [

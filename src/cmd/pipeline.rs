@@ -151,8 +151,10 @@ impl PipelineArgs {
         let rec = require_truth(recording)?;
         warn_implausible_truth(recording, &rec);
         let settled = Settled::of(&rec, self);
+        let recon = self.recon_for(&rec)?;
         drop(rec);
         let mut spec = self.spec(recording.to_path_buf());
+        spec.reconstructor = recon;
         configure(&mut spec);
         if self.print_graph {
             println!("{}", spec.graph_toml());
@@ -176,6 +178,60 @@ impl PipelineArgs {
             anyhow::anyhow!("{}: pipeline: {e}{hint}", recording.display())
         })?;
         Ok((rows, settled))
+    }
+}
+
+impl PipelineArgs {
+    /// The reconstructor params for `rec`: `--recon` as given when it names a sensor, or when
+    /// the recording's sensor has the default's geometry; otherwise `--recon` with `sensor` set
+    /// to the recording's own description (its `sensor` attribute, the text the logger wrote).
+    /// A reconstructor's `sensor` names a file, so the description is saved in the cache
+    /// directory under its content hash (`sensors/NAME-HASH.toml`): the same recording always
+    /// names the same file, and a `--print-graph` graph runs as printed.
+    fn recon_for(&self, rec: &Recording) -> Result<String> {
+        use sha2::{Digest, Sha256};
+        use skinflow_nodes::sensors::sensor_ref;
+        let params = parse_params::<skinflow_nodes::reconstruct::ReconstructorParams>("--recon", &self.recon)?;
+        let default = sensor_ref(&skinflow_eit::Sensor::paper_100mm());
+        if params.sensor.is_some() || sensor_ref(&rec.sensor).same_geometry(&default) {
+            return Ok(self.recon.clone());
+        }
+        let hash: String =
+            Sha256::digest(rec.sensor_toml.as_bytes()).iter().take(8).map(|b| format!("{b:02x}")).collect();
+        let name: String =
+            rec.sensor.name.chars().map(|c| if c.is_ascii_alphanumeric() || c == '-' { c } else { '_' }).collect();
+        let dir = skinflow_nodes::reconstruct::default_cache_dir().join("sensors");
+        let file = dir.join(format!("{name}-{hash}.toml"));
+        if std::fs::read_to_string(&file).ok().as_deref() != Some(rec.sensor_toml.as_str()) {
+            let saved = (|| {
+                std::fs::create_dir_all(&dir)?;
+                // Written aside and renamed: a run beside this one never reads half a file.
+                let part = dir.join(format!(".{name}-{hash}.toml.{}.partial", std::process::id()));
+                std::fs::write(&part, &rec.sensor_toml)?;
+                std::fs::rename(&part, &file)
+            })();
+            saved.map_err(|e| {
+                anyhow::anyhow!(
+                    "{}: recorded on sensor {}, whose description could not be saved as {} for the reconstructor \
+                     ({e}); pass it yourself: --recon 'sensor = \"FILE\"'",
+                    rec.path.display(),
+                    sensor_ref(&rec.sensor),
+                    file.display()
+                )
+            })?;
+        }
+        let Some(text) = file.to_str() else {
+            bail!("{}: the cache directory's path is not UTF-8; pass --recon 'sensor = \"FILE\"'", file.display())
+        };
+        eprintln!(
+            "note: {}: imaged on the recording's own sensor {} (its `sensor` attribute, saved as {}); \
+             --recon 'sensor = \"FILE\"' sets another",
+            rec.path.display(),
+            sensor_ref(&rec.sensor),
+            file.display()
+        );
+        let sensor = format!("sensor = {}", toml::Value::String(text.to_owned()));
+        Ok(if self.recon.trim().is_empty() { sensor } else { format!("{}, {sensor}", self.recon) })
     }
 }
 

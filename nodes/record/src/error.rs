@@ -45,6 +45,12 @@ pub enum SchemaProblem {
     NotIncreasing { row: usize, t_s: f64, previous_s: f64 },
     #[error("has element type {found}, expected a number")]
     NotNumericData { found: String },
+    /// A time dataset stored as integers: most likely milliseconds or ticks, not seconds.
+    #[error(
+        "has element type {found}: times are f64 seconds (an integer count of milliseconds or device ticks \
+         read as seconds would be 1000x or more off); write them as floats in seconds"
+    )]
+    IntegerTimes { found: String },
     /// A counter (`/eit/seq`) stored as floats or signed integers (MATLAB writes doubles)
     /// holds a value that is no count: fractional, negative or beyond 2^53.
     #[error("row {row}: {value} is not a whole number >= 0 (a count)")]

@@ -2,8 +2,9 @@
 //!
 //! `RecordingWriter` (module `write`) appends rows of the declared streams and writes them a
 //! chunk at a time, flushing at least every `flush_interval_s`, rotating parts by size or time.
-//! `Recording::open` (module `read`) validates a file from any writer (skinflow, h5py, MATLAB)
-//! and loads its streams; `Recording::events` (module `replay`) merges them in time order;
+//! `Recording::open` (module `read`) validates a file from any writer (skinflow, h5py, MATLAB:
+//! any numeric element type, but times must be floats, as integer times are most likely
+//! milliseconds or ticks) and loads its streams; `Recording::events` (module `replay`) merges them in time order;
 //! `Recording::no_load` (module `tare`) finds the leading no-load period; `inspect` summarises;
 //! `repair` salvages a file whose last write was cut short.
 //! Plain library: no engine types; the `hdf5_logger` and `replay` nodes wrap it.

@@ -414,7 +414,7 @@ fn read_eit(file: &File, fpath: &Path, sensor: &Sensor) -> Result<Option<EitStre
     if !file.link_exists("/eit") {
         return Ok(None);
     }
-    let t = data::read::<f64>(file, fpath, layout::EIT_T, 1)?;
+    let t = data::read_times(file, fpath, layout::EIT_T)?;
     let seq = data::read_counts(file, fpath, layout::EIT_SEQ, 1)?;
     let v = data::read::<f64>(file, fpath, layout::EIT_V, 2)?;
     data::expect_rows(fpath, layout::EIT_SEQ, &seq, layout::EIT_T, t.rows())?;
@@ -433,7 +433,7 @@ fn read_pressure(file: &File, fpath: &Path) -> Result<Option<PressureStream>, Re
     if !file.link_exists("/pressure") {
         return Ok(None);
     }
-    let t = data::read::<f64>(file, fpath, layout::PRESSURE_T, 1)?;
+    let t = data::read_times(file, fpath, layout::PRESSURE_T)?;
     let kpa = data::read::<f64>(file, fpath, layout::PRESSURE_KPA, 1)?;
     data::expect_rows(fpath, layout::PRESSURE_KPA, &kpa, layout::PRESSURE_T, t.rows())?;
     check_times(fpath, layout::PRESSURE_T, &t.values)?;
@@ -444,7 +444,7 @@ fn read_truth(file: &File, fpath: &Path) -> Result<Option<TruthStream>, RecordEr
     if !file.link_exists("/truth") {
         return Ok(None);
     }
-    let t = data::read::<f64>(file, fpath, layout::TRUTH_T, 1)?;
+    let t = data::read_times(file, fpath, layout::TRUTH_T)?;
     let x = data::read::<f64>(file, fpath, layout::TRUTH_X_MM, 2)?;
     data::expect_rows(fpath, layout::TRUTH_X_MM, &x, layout::TRUTH_T, t.rows())?;
     check_times(fpath, layout::TRUTH_T, &t.values)?;

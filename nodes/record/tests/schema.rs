@@ -123,6 +123,25 @@ fn every_violation_is_refused_with_file_path_and_problem() {
             SchemaProblem::NotACount { row: 0, value: -1.0 },
         ),
         (
+            "eit/t in integer milliseconds",
+            |f| {
+                f.unlink("/eit/t").unwrap();
+                let t_ms: Vec<i64> = (0..10).map(|i| i * 100).collect();
+                f.new_dataset_builder().with_data(&t_ms[..]).create("/eit/t").unwrap();
+            },
+            "/eit/t",
+            SchemaProblem::IntegerTimes { found: "int64".into() },
+        ),
+        (
+            "truth/t as unsigned integers",
+            |f| {
+                f.unlink("/truth/t").unwrap();
+                f.new_dataset_builder().with_data(&[0u32, 1][..]).create("/truth/t").unwrap();
+            },
+            "/truth/t",
+            SchemaProblem::IntegerTimes { found: "uint32".into() },
+        ),
+        (
             "pressure/kpa longer",
             |f| replace_dataset(f, "/pressure/kpa", &[0.0; 11], &[11]),
             "/pressure/kpa",

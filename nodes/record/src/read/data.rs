@@ -1,6 +1,7 @@
 //! Numeric datasets as flat row-major vectors, with their shape checked against the format.
 //! Any integer or float element type is accepted and converted by HDF5 (h5py writes int64
-//! counters, MATLAB doubles); counters must hold whole values >= 0 ([`read_counts`]).
+//! counters, MATLAB doubles); counters must hold whole values >= 0 ([`read_counts`]), and times
+//! must be floats ([`read_times`]).
 
 use std::path::Path;
 
@@ -51,10 +52,31 @@ pub fn read<T: H5Type>(file: &File, fpath: &Path, path: &str, rank: usize) -> Re
     Ok(Data { values, shape })
 }
 
-/// The first value of a numeric 1-D dataset (`None` when it has no rows), reading that value
-/// only: for checks that must not read a long recording whole.
-pub fn read_first(file: &File, fpath: &Path, path: &str) -> Result<Option<f64>, RecordError> {
+/// Opens a 1-D time dataset (`/eit/t`, `/pressure/t`, `/truth/t`), refusing one stored as
+/// integers: the format's times are f64 seconds (CONTRACTS.md), and integer times are most
+/// likely milliseconds or device ticks, which read as seconds would be 1000x or more off
+/// without a word.
+fn open_times(file: &File, fpath: &Path, path: &str) -> Result<Dataset, RecordError> {
     let ds = open(file, fpath, path, 1)?;
+    let desc = ds.dtype().and_then(|t| t.to_descriptor()).map_err(|e| RecordError::hdf5(fpath, path, e))?;
+    match desc {
+        TypeDescriptor::Float(_) => Ok(ds),
+        other => Err(RecordError::schema(fpath, path, SchemaProblem::IntegerTimes { found: other.to_string() })),
+    }
+}
+
+/// Reads a time dataset (f64 seconds; see [`open_times`]).
+pub fn read_times(file: &File, fpath: &Path, path: &str) -> Result<Data<f64>, RecordError> {
+    let ds = open_times(file, fpath, path)?;
+    let shape = ds.shape();
+    let values = ds.read_raw::<f64>().map_err(|e| RecordError::hdf5(fpath, path, e))?;
+    Ok(Data { values, shape })
+}
+
+/// The first value of a time dataset (`None` when it has no rows), reading that value only:
+/// for checks that must not read a long recording whole.
+pub fn read_first(file: &File, fpath: &Path, path: &str) -> Result<Option<f64>, RecordError> {
+    let ds = open_times(file, fpath, path)?;
     if ds.shape().first().is_none_or(|&n| n == 0) {
         return Ok(None);
     }

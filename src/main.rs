@@ -329,9 +329,12 @@ fn load(path: &Path, inputs: InputFiles) -> Result<Result<GraphSpec, ExitCode>> 
     let checked = GraphSpec::load(path, &reg).and_then(|spec| match inputs {
         // The files the nodes read, the sensors they name, and the files the nodes write
         // (`skinflow_nodes::check_graph_files`). Last, a warning for each calibration applied on another image scale than it was
-        // fitted on (`skinflow_nodes::scale`).
+        // fitted on (`skinflow_nodes::scale`), and for each corrector whose force map does not rise.
         InputFiles::Check => skinflow_nodes::check_graph_files(&spec).map(|()| {
             for w in skinflow_nodes::scale::check_graph(&spec) {
+                eprintln!("warning: {}: {w}", path.display());
+            }
+            for w in skinflow_nodes::correct::flat_map_warnings(&spec) {
                 eprintln!("warning: {}: {w}", path.display());
             }
             spec

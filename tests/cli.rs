@@ -622,7 +622,8 @@ fn truth_no_indenter_can_make_is_warned_about() {
 }
 
 /// A calibration whose force map falls over its signal range (a hand edit, a sign slip) loads
-/// as before, but `eval` says which map, since every force of it comes out the same.
+/// as before, but `eval` says which map, since every force of it comes out the same, and
+/// `check` says which corrector of a graph applies it.
 #[test]
 fn a_force_map_that_does_not_rise_is_warned_about() {
     let d = workdir("flat-map");
@@ -637,6 +638,34 @@ fn a_force_map_that_does_not_rise_is_warned_about() {
     let err =
         stderr(&skinflow(&d, &["eval", "rec.h5", "--calib", root().join("graphs/calib/paper.toml").to_str().unwrap()]));
     assert!(!err.contains("does not rise"), "{err}");
+    // In a graph, `check` (and `run`) name each corrector whose strategy applies the falling
+    // map, and no other: pneumatic-nocal applies pneumatic.map, pneumatic-locaware its own.
+    let graph = "[graph]\nname = \"flat\"\nmode = \"lockstep\"\n\
+        [[node]]\nid = \"replay\"\nkind = \"replay\"\nparams = { path = \"rec.h5\", speed = 0.0 }\n\
+        [[node]]\nid = \"sync\"\nkind = \"sync\"\n[[node]]\nid = \"recon\"\nkind = \"reconstructor\"\n\
+        [[node]]\nid = \"segment\"\nkind = \"segmenter\"\n[[node]]\nid = \"split\"\nkind = \"splitter\"\n\
+        [[node]]\nid = \"nocal\"\nkind = \"corrector\"\n\
+        params = { strategy = \"pneumatic-nocal\", calibration = \"falling.toml\", name = \"a\" }\n\
+        [[node]]\nid = \"locaware\"\nkind = \"corrector\"\n\
+        params = { strategy = \"pneumatic-locaware\", calibration = \"falling.toml\", name = \"b\" }\n\
+        [[node]]\nid = \"sink\"\nkind = \"null\"\n\
+        [[edge]]\nfrom = \"replay.eit\"\nto = \"sync.eit\"\n[[edge]]\nfrom = \"replay.pressure\"\nto = \"sync.pressure\"\n\
+        [[edge]]\nfrom = \"sync.frame\"\nto = \"recon.frame\"\n[[edge]]\nfrom = \"recon.image\"\nto = \"segment.image\"\n\
+        [[edge]]\nfrom = \"segment.contacts\"\nto = \"split.contacts\"\n\
+        [[edge]]\nfrom = \"split.split\"\nto = \"nocal.split\"\n[[edge]]\nfrom = \"split.split\"\nto = \"locaware.split\"\n\
+        [[edge]]\nfrom = \"nocal.forces\"\nto = \"sink.in\"\n[[edge]]\nfrom = \"locaware.forces\"\nto = \"sink.in\"\n";
+    std::fs::write(d.join("flat.toml"), graph).unwrap();
+    let out = skinflow(&d, &["check", "flat.toml"]);
+    ok(&out);
+    let err = stderr(&out);
+    let warned: Vec<&str> = err.lines().filter(|l| l.contains("does not rise")).collect();
+    assert_eq!(warned.len(), 1, "{err}");
+    assert!(
+        warned[0].starts_with(
+            "warning: flat.toml: node \"nocal\": strategy pneumatic-nocal applies pneumatic.map of calibration "
+        ),
+        "{err}"
+    );
 }
 
 /// Replays `rec` through sync, reconstructor, segmenter, splitter and corrector in lockstep,

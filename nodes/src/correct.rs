@@ -23,7 +23,8 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use serde::Deserialize;
-use skinflow_contact::{ForceEstimate, Strategy, StrategyKind};
+use skinflow_contact::{Calibration, ForceEstimate, Strategy, StrategyKind};
+use skinflow_core::graph::{GraphSpec, NodeSpec};
 use skinflow_core::{
     BuildContext, Context, Inputs, KindInfo, Message, NodeError, NodeImpl, NodeParams, Outputs, ParamDoc, ParamError,
     PortSpec, Processor, Recycler, Registry, Role, typed,
@@ -182,6 +183,30 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
             })))
         },
     ))
+}
+
+/// One warning per `corrector` of `spec` whose strategy applies a signal-to-force map that
+/// does not rise over its calibrated range ([`Strategy::flat_map`]: a hand edit, a sign slip, a
+/// layer the calibration could not fit): every contact it sees gets the same force. The map
+/// loads (a calibration may hold one for a strategy no graph uses), so `skinflow check` and
+/// `run` warn naming the node, the map and the file; `eval` warns about its `--calib` itself.
+/// Params or files that do not read are skipped: `check_files` reports them.
+pub fn flat_map_warnings(spec: &GraphSpec) -> Vec<String> {
+    let base_dir = spec.source.base_dir();
+    let warning = |node: &NodeSpec| {
+        let p = node.params.parse::<CorrectorParams>().ok()?;
+        let kind = kind_of(&p.strategy).ok()?;
+        let file = BuildContext::new(base_dir.clone(), spec.mode, node.id.clone()).resolve(&p.calibration);
+        let map = Strategy::new(&Calibration::read(&file).ok()?, kind).flat_map()?;
+        Some(format!(
+            "node \"{}\": strategy {} applies {map} of calibration {}, whose force does not rise over its \
+             calibrated signal range: every contact gets the same force (0 N where it clamps)",
+            node.id,
+            p.strategy,
+            file.display()
+        ))
+    };
+    spec.nodes.iter().filter(|n| n.kind == "corrector").filter_map(warning).collect()
 }
 
 #[cfg(test)]

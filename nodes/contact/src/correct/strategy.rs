@@ -205,6 +205,23 @@ impl Strategy {
         self.kind
     }
 
+    /// The calibration's signal-to-force map this strategy applies, by its key in the file
+    /// (as [`Calibration::flat_maps`] names it), when that map does not rise over its
+    /// calibrated range: every contact then gets the same force. `None` when it rises, and for
+    /// the forward strategies, which apply the forward model instead.
+    pub fn flat_map(&self) -> Option<&'static str> {
+        if self.forward.is_some() || self.map.rises() {
+            return None;
+        }
+        Some(match self.kind {
+            StrategyKind::EitNoCal => "eit.map",
+            StrategyKind::EitLocAware => "eit.locaware.map",
+            StrategyKind::PneumaticNoCal => "pneumatic.map",
+            StrategyKind::PneumaticAreaAware => "area_aware.fields.map",
+            _ => "pneumatic.locaware.map",
+        })
+    }
+
     /// The splitter this strategy shares dP with.
     pub fn splitter(&self) -> &Splitter {
         &self.splitter

@@ -354,7 +354,7 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
         .output(PortSpec::output::<Contacts>("contacts", "centroid (mm), conductivity sum, area (mm^2) per contact"))
         .param(ParamDoc::new("floor", "f64", "0.0002", "smallest floor on the conductivity decrease, S/m"))
         .param(ParamDoc::new("floor_over_noise", "f64", "2.5", "floor >= this x the no-load images' peak decrease"))
-        .param(ParamDoc::new("radius_frac", "f64", "0.02", "disk radius / image size"))
+        .param(ParamDoc::new("radius_frac", "f64", "0.02", "cleanup disk radius / the image's larger side (round in mm)"))
         .param(ParamDoc::new("max_contacts", "usize", "8", "most contacts per frame"))
         .param(ParamDoc::new(
             "separation",

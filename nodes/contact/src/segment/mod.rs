@@ -5,7 +5,8 @@
 //! to [0, 1] over the image, Otsu threshold, keep pixels with `d_norm >= t*` AND `d >= floor`
 //! (absolute floor, image units, so noise alone never makes a contact; the image's range must
 //! reach it too, so a uniform offset is no contact either), opening then closing
-//! with a disk of radius `radius_frac * max(width, height)` pixels, 8-connected components,
+//! with a disk of radius `radius_frac` times the image's larger side (round in mm: on pixels
+//! that are not square it spans more pixels along the finer axis), 8-connected components,
 //! components split at deep saddles when `separation > 0` ([`separate`]; the paper keeps
 //! plain components, `separation = 0`), and per component the intensity-weighted centroid (mm), the decrease sum `C` (image units
 //! summed over ROI pixels, weights `max(d, 0)`), area (mm^2) and peak decrease. Pixel grid
@@ -347,11 +348,18 @@ impl Segmenter {
         grid.validate()?;
         params.validate()?;
         let n = grid.len();
-        let radius_px = params.radius_frac * grid.width.max(grid.height) as f64;
+        // Round in mm: `radius_frac` of the image's larger side. On square pixels that is the
+        // fraction of the larger pixel count (computed so, as before, to the last bit).
+        let disk = if grid.dx_mm() == grid.dy_mm() {
+            Disk::new(params.radius_frac * grid.width.max(grid.height) as f64)
+        } else {
+            let side_mm = (grid.x_max_mm - grid.x_min_mm).max(grid.y_max_mm - grid.y_min_mm);
+            Disk::in_mm(params.radius_frac * side_mm, grid.dx_mm(), grid.dy_mm())
+        };
         Ok(Self {
             grid,
             params: params.clone(),
-            disk: Disk::new(radius_px),
+            disk,
             hist: Box::new([0; otsu::BINS]),
             lanes: Box::new([[0; otsu::BINS]; 4]),
             mask: vec![0; n],

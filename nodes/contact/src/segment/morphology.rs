@@ -28,6 +28,28 @@ impl Disk {
         Self { offsets }
     }
 
+    /// A disk of `radius_mm` on pixels of pitch `dx_mm` by `dy_mm`: round in millimetres, so
+    /// on pixels that are not square it spans a different number of pixels in x and in y
+    /// (every offset with `(dx dx_mm)^2 + (dy dy_mm)^2 <= radius_mm^2`). On square pixels it
+    /// is [`Disk::new`] of the radius in pixels.
+    pub fn in_mm(radius_mm: f64, dx_mm: f64, dy_mm: f64) -> Self {
+        if dx_mm == dy_mm {
+            return Self::new(radius_mm / dx_mm);
+        }
+        let r = radius_mm.max(0.0);
+        let (nx, ny) = ((r / dx_mm).floor() as isize, (r / dy_mm).floor() as isize);
+        let mut offsets = Vec::new();
+        for dy in -ny..=ny {
+            for dx in -nx..=nx {
+                let (x, y) = (dx as f64 * dx_mm, dy as f64 * dy_mm);
+                if x * x + y * y <= r * r {
+                    offsets.push((dx, dy));
+                }
+            }
+        }
+        Self { offsets }
+    }
+
     /// The offsets, centre included.
     pub fn offsets(&self) -> &[(isize, isize)] {
         &self.offsets
@@ -109,6 +131,22 @@ mod tests {
         assert_eq!(d.offsets().len(), 5);
         assert_eq!(Disk::new(0.5).offsets(), &[(0, 0)]);
         assert_eq!(Disk::new(1.5).offsets().len(), 9);
+    }
+
+    #[test]
+    fn a_disk_in_mm_is_round_in_mm_on_pixels_that_are_not_square() {
+        // 3 mm on 1 x 2 mm pixels: 3 pixels each way in x, 1 in y (2 mm; 4 mm is beyond).
+        let d = Disk::in_mm(3.0, 1.0, 2.0);
+        let span = |f: fn(&(isize, isize)) -> isize| d.offsets().iter().map(f).max().unwrap();
+        assert_eq!((span(|o| o.0), span(|o| o.1)), (3, 1));
+        for &(dx, dy) in d.offsets() {
+            assert!(((dx as f64).powi(2) + (2.0 * dy as f64).powi(2)) <= 9.0);
+        }
+        // Every offset within 3 mm is there: (2, 1) is sqrt(8) mm away, (3, 1) sqrt(13).
+        assert!(d.offsets().contains(&(2, 1)) && !d.offsets().contains(&(3, 1)));
+        assert_eq!(d.offsets().len(), 7 + 2 * 5);
+        // Square pixels: the disk of the radius in pixels.
+        assert_eq!(Disk::in_mm(2.56, 2.0, 2.0).offsets(), Disk::new(1.28).offsets());
     }
 
     #[test]

@@ -140,6 +140,11 @@ fn plugin_lanes_are_evaluated_beside_the_built_in_ones() {
     }
     // The predicted-against-true plot has a panel per lane (it is drawn at all).
     assert!(d.join("plots/predicted_vs_true.png").is_file());
+    // And the others: the fields, the localization map and a frame's regions (drawn as the
+    // pipeline's segmenter cut them, `segment::segment_image`).
+    for png in ["fields.png", "localization.png", "conductivity.png"] {
+        assert!(d.join("plots").join(png).is_file(), "{png}");
+    }
     // The printed graph: the libraries, the plugin kinds, one node per distinct splitter.
     assert!(out.contains("[[plugin]]\npath = "), "{out}");
     assert_eq!(out.matches("kind = \"peak-weighted-splitter\"").count(), 2, "{out}");

@@ -377,7 +377,7 @@ mod tests {
         let c = Contact { x_mm: 1.0, y_mm: 2.0, sum: 3.0, area_mm2: 4.0, peak: 5.0, label: 1 };
         let msg = Message::new(
             Header { seq: 9, t_ns: 90, origin: 0 },
-            Contacts { image, contacts: vec![c, c], dropped: 0, compute_ns: 0 },
+            Contacts { image, contacts: vec![c, c], dropped: 0, floor: 0.0, compute_ns: 0 },
         );
         let mut buf = ColumnBuf::new();
         let mut codec = (codecs().get(Contacts::TYPE).expect("registered"))();
@@ -479,7 +479,7 @@ mod tests {
         let src = Arc::new(SyncedFrame { dp_kpa: frame_dp, ..SyncedFrame::default() });
         let image = Arc::new(Image { src, ..Image::default() });
         let c = |i: usize| Contact { x_mm: i as f64, y_mm: 0.0, sum: 1.0, area_mm2: 1.0, peak: 1.0, label: 1 };
-        let cs = Contacts { image, contacts: (0..n).map(c).collect(), dropped: 0, compute_ns: 0 };
+        let cs = Contacts { image, contacts: (0..n).map(c).collect(), dropped: 0, floor: 0.0, compute_ns: 0 };
         Message::new(Header { seq, t_ns: seq * 10, origin: 1 }, cs)
     }
 

@@ -713,6 +713,7 @@ mod tests {
             image,
             contacts: det.iter().map(|&(x, y, _)| contact(x, y)).collect(),
             dropped: 0,
+            floor: 0.0,
             compute_ns: 20_000,
         });
         let split = Arc::new(Split { contacts, dp_kpa: vec![1.0; det.len()], ..Split::default() });

@@ -151,6 +151,9 @@ pub struct Contacts {
     /// Regions of this image found beyond the segmenter's `max_contacts` and not reported
     /// (the weakest ones); the frame's pressure change is then shared over `contacts` only.
     pub dropped: u32,
+    /// The segmentation floor this image was cut at (image units: the segmenter's `floor`, or
+    /// the no-load noise's when higher); 0 where unknown (contacts from a plugin).
+    pub floor: f64,
     pub compute_ns: u64,
 }
 

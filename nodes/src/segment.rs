@@ -30,7 +30,7 @@
 use std::time::Instant;
 
 use serde::Deserialize;
-use skinflow_contact::{Contacts as ContactBuf, ImageGrid, SegmentParams, Segmenter as SegmentMath};
+use skinflow_contact::{Contacts as ContactBuf, CrosstalkOutcome, ImageGrid, SegmentParams, Segmenter as SegmentMath};
 use skinflow_core::{
     Context, Counter, Inputs, KindInfo, Message, NodeError, NodeImpl, NodeParams, NodeState, Outputs, ParamDoc,
     ParamError, PortSpec, Processor, Recycler, Registry, Role, StateRefused, typed,
@@ -191,6 +191,27 @@ impl Segmenter {
     }
 }
 
+/// Whether `params` ask for the crosstalk pass (sidelobe removal or deblending).
+fn crosstalk_on(params: &SegmentParams) -> bool {
+    params.ghost_share > 0.0 || params.deblend
+}
+
+/// Segments `image` into `buf` as the node does, with `seg` built on `params` (whose floor is
+/// the one in effect: [`Contacts::floor`] of the node's output for that image): with the
+/// crosstalk pass when `params` ask for it and the image carries a point spread (its outcome
+/// returned), else plainly (`None`). `eval --plots` redraws a frame's regions with it.
+pub fn segment_image(
+    seg: &mut SegmentMath,
+    params: &SegmentParams,
+    image: &Image,
+    buf: &mut ContactBuf,
+) -> Result<Option<CrosstalkOutcome>, skinflow_contact::SegmentError> {
+    match (&image.spread, crosstalk_on(params)) {
+        (Some(spread), true) => seg.segment_with_spread(&image.pixels, spread.0.as_ref(), buf).map(Some),
+        _ => seg.segment_into(&image.pixels, buf).map(|()| None),
+    }
+}
+
 /// What a replaced segmenter hands to its replacement.
 struct NoiseState {
     noise_peaks: Vec<f64>,
@@ -241,17 +262,15 @@ impl Processor for Segmenter {
         let (_, seg, buf) = self.math.as_mut().expect("set above");
         let input_error =
             |e: skinflow_contact::SegmentError| NodeError::Input { port: "image".into(), problem: e.to_string() };
-        let crosstalk = self.params.ghost_share > 0.0 || self.params.deblend;
+        let crosstalk = crosstalk_on(&self.params);
         let mut ghosts = 0;
-        match (&image.spread, crosstalk) {
-            (Some(spread), true) => {
-                let o = seg.segment_with_spread(&image.pixels, spread.0.as_ref(), buf).map_err(input_error)?;
+        match segment_image(seg, &self.params, &image, buf).map_err(input_error)? {
+            Some(o) => {
                 ghosts = o.ghosts as u64;
                 self.ghosts += ghosts;
                 self.unsolved += u64::from(!o.solved);
             }
-            _ => {
-                seg.segment_into(&image.pixels, buf).map_err(input_error)?;
+            None => {
                 if crosstalk && buf.len() > 1 {
                     if self.no_spread == 0 {
                         tracing::warn!(
@@ -296,6 +315,7 @@ impl Processor for Segmenter {
             c.contacts.clear();
             c.contacts.extend_from_slice(found);
             c.dropped = u32::try_from(buf.dropped).unwrap_or(u32::MAX);
+            c.floor = self.params.floor;
             c.compute_ns = ns;
         });
         out.send(0, Message::from_arc(m.header, payload))

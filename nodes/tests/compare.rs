@@ -79,6 +79,7 @@ fn contacts(seq: u64) -> Contacts {
         image: Arc::new(image),
         contacts: vec![contact(-20.0, 1.0), contact(20.0, 3.0)],
         dropped: 0,
+        floor: 0.0,
         compute_ns: 0,
     }
 }

@@ -117,6 +117,35 @@ fn swapped_nodes_keep_their_state_and_outputs_equal_an_unswapped_run() {
     assert!(!swapped.last().unwrap().image.elements.is_empty(), "the replacement's params apply");
 }
 
+/// `segment::segment_image` at the floor a frame's contacts carry gives those contacts again:
+/// what `eval --plots` draws is what the pipeline evaluated (the floor adapts to the no-load
+/// noise, and the crosstalk pass runs on the reconstructor's point spread).
+#[test]
+fn an_image_segmented_again_at_its_floor_gives_the_same_contacts() {
+    use skinflow_contact::{ImageGrid, SegmentParams, Segmenter};
+    let base = run(&[]);
+    let defaults: skinflow_nodes::segment::SegmenterParams = toml::from_str("").unwrap();
+    let mut compared = 0;
+    for (i, c) in base.iter().enumerate().filter(|(_, c)| !c.contacts.is_empty()) {
+        assert!(c.floor >= defaults.floor, "frame {i}: floor {} below the param", c.floor);
+        assert!(c.image.spread.is_some(), "frame {i}: the crosstalk pass has a point spread");
+        let img = &c.image;
+        let grid = ImageGrid::centred(img.width, img.height, img.width_mm, img.height_mm);
+        let params = SegmentParams { floor: c.floor, ..defaults.math() };
+        let mut seg = Segmenter::new(grid, &params).unwrap();
+        let mut again = seg.new_contacts();
+        skinflow_nodes::segment::segment_image(&mut seg, &params, img, &mut again).unwrap();
+        let key =
+            |k: &[skinflow_contact::Contact]| k.iter().map(|k| (k.x_mm, k.y_mm, k.sum, k.area_mm2)).collect::<Vec<_>>();
+        assert_eq!(key(again.as_slice()), key(&c.contacts), "frame {i}");
+        compared += 1;
+    }
+    assert!(compared >= 4, "{compared} frames with contacts");
+    // The floor in effect is the no-load noise's, above the param: a segmentation at the param
+    // alone (what the figure used before) is another one.
+    assert!(base.iter().any(|c| c.floor > defaults.floor), "the floor followed the no-load noise");
+}
+
 #[test]
 fn a_new_lambda_keeps_the_no_load_reference() {
     let swapped = run(&[("recon", recon_params(", lambda = 0.05"))]);

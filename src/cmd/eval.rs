@@ -10,8 +10,8 @@ use std::sync::Arc;
 use anyhow::{Context as _, Result, bail};
 use skinflow_contact::eval::metrics::{FrameInput, TruthContact, resolution};
 use skinflow_contact::eval::{Evaluator, plots};
-use skinflow_contact::{Calibration, ImageGrid, Segmenter};
-use skinflow_nodes::payload::{Forces, Image};
+use skinflow_contact::{Calibration, ImageGrid, SegmentParams, Segmenter};
+use skinflow_nodes::payload::{Contacts, Forces};
 
 use super::pipeline::{PipelineArgs, SettledBy};
 
@@ -36,8 +36,9 @@ pub const LANES: [(&str, &str, &str, &str); 9] = [
     ("pneumatic-forward-balance", "force-balance", "pneumatic-forward", "Pneumatic-Forward, force-balance split"),
 ];
 
-/// An image with the true contact centres of its frame, mm.
-pub type Example = (Arc<Image>, Vec<(f64, f64)>);
+/// The segmenter's output of a frame (its image, contacts and floor) with the true contact
+/// centres of that frame, mm.
+pub type Example = (Arc<Contacts>, Vec<(f64, f64)>);
 
 pub struct EvalOutcome {
     pub evaluator: Evaluator,
@@ -182,7 +183,7 @@ fn evaluate_one(
         }
         let better = example.as_ref().is_none_or(|(_, t)| truth.len() > t.len());
         if better && !contacts.contacts.is_empty() {
-            *example = Some((contacts.image.clone(), truth.iter().map(|t| (t.x_mm, t.y_mm)).collect()));
+            *example = Some((Arc::clone(contacts), truth.iter().map(|t| (t.x_mm, t.y_mm)).collect()));
         }
     }
     if transitions > 0 {
@@ -403,16 +404,21 @@ fn write_plots(dir: &Path, calib: &Path, o: &EvalOutcome, args: &PipelineArgs) -
     };
     drawn(p("predicted_vs_true.png"), plots::predicted_vs_true(&p("predicted_vs_true.png"), &o.evaluator))?;
     drawn(p("fields.png"), plots::fields(&p("fields.png"), &cal))?;
-    if let Some((img, truth)) = &o.example {
+    if let Some((contacts, truth)) = &o.example {
+        let img = &contacts.image;
         let grid = ImageGrid::centred(img.width, img.height, img.width_mm, img.height_mm);
         let (hx, hy) = (img.width_mm / 2.0, img.height_mm / 2.0);
         let map = p("localization.png");
         drawn(map.clone(), plots::localization_map(&map, &o.evaluator, (-hx, hx, -hy, hy)))?;
+        // The frame's regions as the pipeline's segmenter cut them: at the floor it used (the
+        // no-load noise's, when higher than `floor`) and through its crosstalk pass, so the
+        // figure shows the contacts that were evaluated.
         let seg_params: skinflow_nodes::segment::SegmenterParams =
             skinflow_toml::from_str(&args.segment).map_err(|e| anyhow::anyhow!("--segment: {e}"))?;
-        let mut seg = Segmenter::new(grid, &seg_params.math()).map_err(anyhow::Error::msg)?;
+        let params = SegmentParams { floor: contacts.floor, ..seg_params.math() };
+        let mut seg = Segmenter::new(grid, &params).map_err(anyhow::Error::msg)?;
         let mut found = seg.new_contacts();
-        seg.segment_into(&img.pixels, &mut found).map_err(anyhow::Error::msg)?;
+        skinflow_nodes::segment::segment_image(&mut seg, &params, img, &mut found).map_err(anyhow::Error::msg)?;
         let image = p("conductivity.png");
         drawn(image.clone(), plots::conductivity(&image, &img.pixels, &grid, seg.labels(), found.as_slice(), truth))?;
     }

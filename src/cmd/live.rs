@@ -531,18 +531,15 @@ fn reply(live: &Live, line: &str) -> Value {
                         "unknown kind \"{k}\" (a plugin's kinds are those of the libraries the graph file names; \
                          `skinflow nodes --plugin LIB` lists a library's)"
                     )),
-                    Some(f) => {
-                        let params = req.get("params").cloned().unwrap_or(json!({}));
-                        match toml::Table::try_from(params) {
-                            Ok(t) => {
-                                let params = Params::from_table(t);
-                                live.check_swap(n, &f, k, &params)
-                                    .and_then(|()| live.swap(n, f, k, params))
-                                    .map(|()| json!({}))
-                            }
-                            Err(e) => Err(format!("params: {e}")),
+                    Some(f) => match swap_params(req.get("params")) {
+                        Ok(t) => {
+                            let params = Params::from_table(t);
+                            live.check_swap(n, &f, k, &params)
+                                .and_then(|()| live.swap(n, f, k, params))
+                                .map(|()| json!({}))
                         }
-                    }
+                        Err(e) => Err(format!("params: {e}")),
+                    },
                 }
             }
             _ => Err("\"swap\" needs \"node\" and \"kind\"".into()),
@@ -624,6 +621,36 @@ pub fn control_socket(
     })
 }
 
+/// A swap request's `params` as the TOML table a node's params are: a JSON object (absent:
+/// none). What TOML cannot hold is named with where it is: a value that is not an object, or
+/// a `null` anywhere in it (TOML has no null: leave the key out for its default).
+fn swap_params(params: Option<&Value>) -> Result<toml::Table, String> {
+    fn find_null(v: &Value, path: &str) -> Option<String> {
+        match v {
+            Value::Null => Some(path.to_owned()),
+            Value::Array(a) => a.iter().enumerate().find_map(|(i, x)| find_null(x, &format!("{path}[{i}]"))),
+            Value::Object(o) => o.iter().find_map(|(k, x)| find_null(x, &format!("{path}.{k}"))),
+            _ => None,
+        }
+    }
+    let Some(params) = params else { return Ok(toml::Table::new()) };
+    let kind = match params {
+        Value::Object(_) => None,
+        Value::Null => Some("null"),
+        Value::Bool(_) => Some("a boolean"),
+        Value::Number(_) => Some("a number"),
+        Value::String(_) => Some("a string"),
+        Value::Array(_) => Some("an array"),
+    };
+    if let Some(kind) = kind {
+        return Err(format!("must be a JSON object of the kind's params, e.g. {{\"lambda\": 0.05}} (got {kind})"));
+    }
+    if let Some(at) = find_null(params, "params") {
+        return Err(format!("{at} is null, which TOML cannot hold: leave the key out for its default"));
+    }
+    toml::Table::try_from(params.clone()).map_err(|e| e.to_string())
+}
+
 #[cfg(test)]
 mod tests {
     use serde::Deserialize;
@@ -658,6 +685,28 @@ mod tests {
     /// A rebuilt library's kinds are checked with what they declare now: a param that was a
     /// string and now names a file the kind writes (here the graph's own file) is refused before
     /// any node is swapped; a kind of a library not reloaded keeps what it started with.
+    #[test]
+    fn swap_params_name_what_toml_cannot_hold() {
+        assert_eq!(swap_params(None).unwrap(), toml::Table::new());
+        let t = swap_params(Some(&json!({"lambda": 0.05, "mesh": {"elements": 3000}}))).unwrap();
+        assert_eq!(t["mesh"]["elements"].as_integer(), Some(3000));
+        for (v, want) in [
+            (json!(5), "must be a JSON object of the kind's params, e.g. {\"lambda\": 0.05} (got a number)"),
+            (
+                json!("lambda = 0.05"),
+                "must be a JSON object of the kind's params, e.g. {\"lambda\": 0.05} (got a string)",
+            ),
+            (json!([1, 2]), "must be a JSON object of the kind's params, e.g. {\"lambda\": 0.05} (got an array)"),
+            (
+                json!({"mesh": {"elements": null}}),
+                "params.mesh.elements is null, which TOML cannot hold: leave the key out for its default",
+            ),
+            (json!({"a": [1, null]}), "params.a[1] is null, which TOML cannot hold: leave the key out for its default"),
+        ] {
+            assert_eq!(swap_params(Some(&v)).unwrap_err(), want, "{v}");
+        }
+    }
+
     #[test]
     fn a_reloaded_librarys_kinds_are_checked_with_their_new_params() {
         let base = std::env::temp_dir().join("skinflow-live-unit-nonexistent");

@@ -154,12 +154,22 @@ pub enum RecordError {
     )]
     Truncated { file: PathBuf, len: u64, expected: Option<u64> },
     /// An HDF5 file that is not a skinflow recording (no `format` attribute on its root).
+    /// `streams` names the recording groups it holds all the same (`/eit`, `/pressure`,
+    /// `/truth`): then it looks like one whose root attributes were left out or damaged.
     #[error(
-        "{}: an HDF5 file, but not a skinflow recording (its root has no `format` attribute; \
+        "{}: an HDF5 file, but not a skinflow recording (its root has no `format` attribute{}; \
          CONTRACTS.md section 2)",
-        file.display()
+        file.display(),
+        if streams.is_empty() {
+            String::new()
+        } else {
+            format!(
+                ", yet it holds {}: a writer that left the root attributes out, or a damaged root header",
+                streams.join(", ")
+            )
+        }
     )]
-    NotARecording { file: PathBuf },
+    NotARecording { file: PathBuf, streams: Vec<String> },
     /// A file system operation failed (file not found, listing rotated parts).
     #[error("{}: {source}", path.display())]
     Io {

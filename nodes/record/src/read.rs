@@ -228,8 +228,14 @@ pub fn hdf5_signature(path: &Path) -> Option<bool> {
 /// format, a missing or invalid version and a newer one; returns the version.
 pub(crate) fn check_format(file: &File, fpath: &Path) -> Result<i64, RecordError> {
     let root = |name: &str| format!("/ attr {name}");
-    let format = attr::read_string(file, fpath, layout::ATTR_FORMAT)?
-        .ok_or_else(|| RecordError::NotARecording { file: fpath.to_path_buf() })?;
+    let format = attr::read_string(file, fpath, layout::ATTR_FORMAT)?.ok_or_else(|| RecordError::NotARecording {
+        file: fpath.to_path_buf(),
+        streams: ["/eit", "/pressure", "/truth"]
+            .into_iter()
+            .filter(|g| file.link_exists(g))
+            .map(str::to_owned)
+            .collect(),
+    })?;
     if format != FORMAT {
         let problem = SchemaProblem::WrongFormat { found: format };
         return Err(RecordError::schema(fpath, &root(layout::ATTR_FORMAT), problem));

@@ -264,6 +264,25 @@ fn every_violation_is_refused_with_file_path_and_problem() {
     hdf5::File::open_rw(&file).unwrap().delete_attr("format").unwrap();
     let msg = Recording::open(&file).unwrap_err().to_string();
     assert!(msg.starts_with(&format!("{}: an HDF5 file, but not a skinflow recording", file.display())), "{msg}");
+    // It holds the streams all the same: said, as a recording whose root lost its attributes.
+    assert!(
+        msg.contains(
+            "no `format` attribute, yet it holds /eit, /pressure, /truth: a writer that left the root attributes \
+             out, or a damaged root header"
+        ),
+        "{msg}"
+    );
+    // An HDF5 file with none of them is just not a recording.
+    let other = dir.join("other.h5");
+    hdf5::File::create(&other).unwrap().create_group("images").unwrap();
+    let msg = Recording::open(&other).unwrap_err().to_string();
+    assert_eq!(
+        msg,
+        format!(
+            "{}: an HDF5 file, but not a skinflow recording (its root has no `format` attribute; CONTRACTS.md section 2)",
+            other.display()
+        )
+    );
 }
 
 #[test]

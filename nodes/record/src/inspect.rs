@@ -299,7 +299,13 @@ impl Summary {
 }
 
 fn opt(x: Option<f64>, unit: &str) -> String {
-    x.map_or_else(|| "-".to_owned(), |v| format!("{v:.3}{unit}"))
+    x.map_or_else(|| "-".to_owned(), |v| format!("{}{unit}", num(v)))
+}
+
+/// `v` with 3 decimals, or in scientific notation beyond 1e9 (a time in ns or a corrupt
+/// stamp written as seconds would otherwise print a few hundred digits).
+fn num(v: f64) -> String {
+    if v.abs() < 1e9 { format!("{v:.3}") } else { format!("{v:.3e}") }
 }
 
 impl fmt::Display for Summary {
@@ -321,7 +327,7 @@ impl fmt::Display for Summary {
         if let Some(part) = self.part {
             writeln!(f, "part:     {part}")?;
         }
-        writeln!(f, "duration: {:.3} s", self.duration_s)?;
+        writeln!(f, "duration: {} s", num(self.duration_s))?;
         // Strategy names make `/derived/forces/<name>` as long as the user likes.
         let w = self.streams.iter().map(|s| s.path.len()).max().unwrap_or(0).max(20);
         writeln!(f, "{:<w$} {:>9} {:>11} {:>11} {:>11} {:>12}", "stream", "rows", "first", "last", "rate", "period")?;
@@ -359,12 +365,12 @@ impl fmt::Display for Summary {
             if let Some(t) = self.eit_time_gaps.filter(|t| t.missing > g.lost_frames) {
                 write!(
                     f,
-                    "; the times show more: {} gaps over 1.5 periods ({:.1} ms), ~{} frames missing, largest {:.3} s \
+                    "; the times show more: {} gaps over 1.5 periods ({:.1} ms), ~{} frames missing, largest {} s \
                      (a board restart starts its counter again)",
                     t.gaps,
                     t.median_period_s * 1e3,
                     t.missing,
-                    t.largest_s
+                    num(t.largest_s)
                 )?;
             }
             writeln!(f)?;
@@ -378,7 +384,7 @@ impl fmt::Display for Summary {
                 g.missing
             )?;
             if g.gaps > 0 {
-                write!(f, ", largest {:.3} s", g.largest_s)?;
+                write!(f, ", largest {} s", num(g.largest_s))?;
             }
             writeln!(f)?;
         }
@@ -422,6 +428,15 @@ impl fmt::Display for Summary {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn huge_numbers_print_in_scientific_notation() {
+        assert_eq!(
+            (super::num(65.9), super::num(-0.0005), super::num(999_999_999.0)),
+            ("65.900".into(), "-0.001".into(), "999999999.000".into())
+        );
+        assert_eq!((super::num(1e300), super::num(-2.5e12)), ("1.000e300".into(), "-2.500e12".into()));
+    }
+
     use super::*;
 
     /// A summary with only `streams` and the pressure gaps, for the text.

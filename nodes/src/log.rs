@@ -234,6 +234,9 @@ impl NodeParams for LoggerParams {
     /// The sensor file, read as the node reads it when built. The output `path` is not
     /// touched here: the logger checks it when it starts.
     fn check_files(&self, ctx: &BuildContext) -> Result<(), ParamError> {
+        if let Some(why) = crate::output::not_a_file(&ctx.resolve(&self.path)) {
+            return Err(ParamError::new("path", format!("{}: {why}", self.path.display())));
+        }
         self.sensor.as_deref().map_or(Ok(()), |p| check_sensor("sensor", p, ctx).map(drop))
     }
 }
@@ -546,7 +549,7 @@ const REFERENCE_AFTER_SWMR: &str = "/eit/reference not stored: the reference arr
 impl Sink for Logger {
     fn start(&mut self, _ctx: &mut Context) -> Result<(), NodeError> {
         // Fail before any data flows when the file cannot be created.
-        if let Some(why) = crate::output::unwritable(&self.path) {
+        if let Some(why) = crate::output::unwritable(&self.path).or_else(|| crate::output::not_a_file(&self.path)) {
             return Err(io(&self.path, why));
         }
         if self.other_writer(&open_files(), &key(&self.path)) {
@@ -934,6 +937,30 @@ mod tests {
         same.import_state(ctx, Box::new(idle)).unwrap();
         let other = LoggerState { id: old.id, path: key(&d.join("other.h5")), writing: true, reference: None };
         same.import_state(ctx, Box::new(other)).unwrap();
+    }
+
+    /// A recording is renamed over its path: a FIFO or a device there would be replaced by a
+    /// regular file (`path = "/dev/null", overwrite = true` replaced the machine's /dev/null).
+    /// Refused at `check` and at start, overwrite or not, and the FIFO is left as it was.
+    #[test]
+    fn a_logger_refuses_a_path_that_is_a_fifo_or_a_device_overwrite_or_not() {
+        use std::os::unix::fs::FileTypeExt;
+        let d = temp_dir("fifo");
+        let status = std::process::Command::new("mkfifo").arg(d.join("pipe")).status().unwrap();
+        assert!(status.success());
+        let ctx = BuildContext::new(d.clone(), Mode::Lockstep, "log");
+        for params in ["path = \"pipe\"\noverwrite = true", "path = \"pipe\"", "path = \"/dev/null\"\noverwrite = true"]
+        {
+            let p: LoggerParams = toml::from_str(params).unwrap();
+            let e = p.check_files(&ctx).unwrap_err();
+            assert_eq!(e.param.as_deref(), Some("path"), "{params}");
+            assert!(e.problem.contains(": is a FIFO: ") || e.problem.contains(": is a device: "), "{params}: {e}");
+            let mut node = logger(&d, params);
+            let e = node.start(&mut Context::detached("log", Mode::Lockstep)).unwrap_err().to_string();
+            assert!(e.contains("a recording is a file of its own"), "{params}: {e}");
+        }
+        assert!(std::fs::metadata(d.join("pipe")).unwrap().file_type().is_fifo(), "still a FIFO");
+        assert!(std::fs::metadata("/dev/null").unwrap().file_type().is_char_device());
     }
 
     #[test]

@@ -16,9 +16,39 @@ pub fn unwritable(path: &Path) -> Option<String> {
     }
 }
 
+/// Why a file written aside and renamed over `path` (a recording) cannot go there: `path`
+/// exists and is neither a regular file nor a directory (a device, a FIFO, a socket), which the
+/// rename would replace (`/dev/null` became a regular file that way). `None` otherwise.
+pub fn not_a_file(path: &Path) -> Option<String> {
+    let m = std::fs::metadata(path).ok().filter(|m| !m.is_file() && !m.is_dir())?;
+    use std::os::unix::fs::FileTypeExt;
+    let t = m.file_type();
+    let what = if t.is_char_device() || t.is_block_device() {
+        "a device"
+    } else if t.is_fifo() {
+        "a FIFO"
+    } else if t.is_socket() {
+        "a socket"
+    } else {
+        "not a regular file"
+    };
+    Some(format!(
+        "is {what}: a recording is a file of its own, written aside and renamed over its path, which would \
+         replace it (overwrite or not); choose a file path"
+    ))
+}
+
 #[cfg(test)]
 mod tests {
-    use super::unwritable;
+    use super::{not_a_file, unwritable};
+
+    #[test]
+    fn a_device_is_not_a_file_to_replace() {
+        let e = not_a_file(std::path::Path::new("/dev/null")).unwrap();
+        assert!(e.starts_with("is a device: a recording is a file of its own"), "{e}");
+        assert_eq!(not_a_file(&std::env::temp_dir()), None, "a directory is unwritable's case");
+        assert_eq!(not_a_file(std::path::Path::new("no-such-file.h5")), None);
+    }
 
     #[test]
     fn a_missing_directory_or_a_directory_is_unwritable() {

@@ -54,6 +54,12 @@ pub(crate) fn create_file_within(
     if !overwrite && std::fs::symlink_metadata(path).is_ok() {
         return Err(exists(path));
     }
+    // The staging file is renamed over `path` (`publish`): never over a device, FIFO or socket.
+    if std::fs::metadata(path).is_ok_and(|m| !m.is_file()) {
+        let why = "is not a regular file (a device, a FIFO, a socket or a directory), which the finished recording \
+                   would replace; choose a file path";
+        return Err(RecordError::hdf5(path, "/", hdf5::Error::from(why.to_string())));
+    }
     let mut builder = File::with_options();
     builder.with_fapl(|fapl| fapl.libver_bounds(low, high));
     builder.create(staging_path(path)).map_err(|e| RecordError::hdf5(path, "/", e))

@@ -200,7 +200,17 @@ struct LagParams {
     by: usize,
 }
 
-impl NodeParams for LagParams {}
+/// Most messages a `lag` holds back (its buffer is allocated when it is built).
+const MAX_LAG: usize = 1 << 20;
+
+impl NodeParams for LagParams {
+    fn validate(&self) -> Result<(), ParamError> {
+        if self.by > MAX_LAG {
+            return Err(ParamError::new("by", format!("must be <= {MAX_LAG} messages (got {})", self.by)));
+        }
+        Ok(())
+    }
+}
 
 /// Emits each message once `by` newer ones have arrived, so it always holds the last `by`:
 /// the shape of a node that buffers (a window, a reorder buffer). At end of stream its flush

@@ -28,6 +28,10 @@ pub const DEFAULT_CAPACITY: usize = 64;
 /// starts, so a mistyped capacity would otherwise abort the run on a failed allocation.
 pub const MAX_CAPACITY: usize = 1 << 20;
 
+/// Most worker threads a realtime graph may ask for (`[graph] workers`): more than the cores
+/// only contend, and thousands of threads took a 50-message graph minutes to end.
+pub const MAX_WORKERS: usize = 256;
+
 /// The shortest `period_ms` of a periodic trigger (10 µs): shorter ones are refused at
 /// validation (the timer could not keep them, and one below a nanosecond would be zero).
 pub const MIN_PERIOD_MS: f64 = 0.01;

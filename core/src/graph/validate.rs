@@ -15,7 +15,7 @@ use super::file::{
     AlignBy, GraphFile, LooseFile, LooseSections, LooseTable, NodeEntry, SECTIONS, ThreadMode, TriggerKind,
 };
 use super::source::SourceFile;
-use super::{DEFAULT_CAPACITY, EdgeSpec, GraphSpec, MAX_CAPACITY, NodeSpec, Trigger, connected_inputs};
+use super::{DEFAULT_CAPACITY, EdgeSpec, GraphSpec, MAX_CAPACITY, MAX_WORKERS, NodeSpec, Trigger, connected_inputs};
 use crate::node::Mode;
 use crate::params::{ParamError, Params};
 use crate::registry::Wiring;
@@ -431,6 +431,12 @@ pub(super) fn validate(src: SourceFile, registry: &Registry) -> Result<GraphSpec
     }
     if let (Mode::Lockstep, Some(w)) = (file.graph.mode, &file.graph.workers) {
         err(Some(w.span()), None, K::Option(lockstep_ignores("workers")));
+    } else if let Some(w) = file.graph.workers.as_ref().filter(|w| *w.get_ref() > MAX_WORKERS) {
+        err(
+            Some(w.span()),
+            None,
+            K::Option(format!("[graph] workers must be <= {MAX_WORKERS} (got {}); 0 is one per core", w.get_ref())),
+        );
     }
 
     if !errs.is_empty() {

@@ -60,9 +60,10 @@ fn open_pair(link: &Path) -> io::Result<PtyPair> {
     let flags = OFlag::from_bits_truncate(fcntl(&pty.master, FcntlArg::F_GETFL)?);
     fcntl(&pty.master, FcntlArg::F_SETFL(flags | OFlag::O_NONBLOCK))?;
     let slave_path = nix::unistd::ttyname(&pty.slave)?;
-    let mut tmp = link.as_os_str().to_owned();
-    tmp.push(".new");
-    let tmp = PathBuf::from(tmp);
+    // Made aside under a name of this process's own (a user's `eit.new` is not ours to remove)
+    // and renamed over the link, so a reader never finds the link missing.
+    let name = link.file_name().map_or_else(Default::default, |n| n.to_string_lossy().into_owned());
+    let tmp = link.with_file_name(format!(".{name}.{}.new", std::process::id()));
     let _ = std::fs::remove_file(&tmp);
     std::os::unix::fs::symlink(&slave_path, &tmp)?;
     std::fs::rename(&tmp, link)?;
@@ -167,5 +168,27 @@ impl Drop for StablePty {
     fn drop(&mut self) {
         // Best effort: the link may already be gone (unplugged, or removed by the user).
         let _ = std::fs::remove_file(&self.link);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::StablePty;
+
+    /// The link is made aside under a name of the process's own: a user's `eit.new` beside it
+    /// was removed before.
+    #[test]
+    fn publishing_a_link_leaves_a_users_file_named_like_its_temporary_alone() {
+        let d = std::env::temp_dir().join(format!("skinflow-pty-new-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        std::fs::create_dir_all(&d).unwrap();
+        std::fs::write(d.join("eit.new"), "notes").unwrap();
+        let pty = StablePty::create(d.join("eit")).unwrap();
+        assert!(std::fs::symlink_metadata(d.join("eit")).unwrap().file_type().is_symlink());
+        assert_eq!(std::fs::read_to_string(d.join("eit.new")).unwrap(), "notes");
+        let left: Vec<_> = std::fs::read_dir(&d).unwrap().map(|e| e.unwrap().file_name()).collect();
+        assert_eq!(left.len(), 2, "no temporary left: {left:?}");
+        drop(pty);
+        std::fs::remove_dir_all(&d).unwrap();
     }
 }

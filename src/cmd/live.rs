@@ -502,6 +502,9 @@ fn reply(live: &Live, line: &str) -> Value {
         Ok(v) => v,
         Err(e) => return json!({"ok": false, "error": format!("not JSON: {e}")}),
     };
+    if let Err(e) = check_request(&req) {
+        return json!({"ok": false, "error": e});
+    }
     let s = |k: &str| req.get(k).and_then(Value::as_str);
     let result: Result<Value, String> = match s("cmd") {
         Some("stats") => match s("node") {
@@ -576,6 +579,15 @@ fn serve(stream: UnixStream, live: Arc<Live>) {
 pub fn bind_control_socket(path: &Path) -> Result<UnixListener> {
     match std::fs::symlink_metadata(path) {
         Ok(m) if m.file_type().is_socket() => {
+            // Replaced only when stale: a socket something still listens on is another run's,
+            // whose commands (a stage script's `at` and `tare`) would come here instead.
+            if UnixStream::connect(path).is_ok() {
+                bail!(
+                    "{}: --control: another process serves this socket (a running graph's --control?); \
+                     choose another path, or stop that run first",
+                    path.display()
+                );
+            }
             std::fs::remove_file(path).with_context(|| format!("{}: cannot replace the old socket", path.display()))?;
         }
         Ok(m) => bail!(
@@ -619,6 +631,41 @@ pub fn control_socket(
         }
         let _ = std::fs::remove_file(&path);
     })
+}
+
+/// The keys each command takes (`cmd` first); `params` is the only one that is no string.
+const REQUEST_KEYS: [(&str, &[&str]); 4] = [
+    ("stats", &["cmd", "node"]),
+    ("tare", &["cmd", "node"]),
+    ("control", &["cmd", "node", "command"]),
+    ("swap", &["cmd", "node", "kind", "params"]),
+];
+
+/// Refuses a request that is no object, whose `cmd` is no string, or that has a key its command
+/// does not take or a string key of another type: a misspelt `"parms"` had swapped a node to
+/// its default params with `{"ok": true}`, and `"node": 123` had answered the whole graph's
+/// statistics. An unknown `cmd` is left to the caller (which lists the commands).
+fn check_request(req: &Value) -> Result<(), String> {
+    let Some(obj) = req.as_object() else {
+        return Err(format!("a request is a JSON object, e.g. {{\"cmd\": \"stats\"}} (got {req})"));
+    };
+    let cmd = match obj.get("cmd") {
+        None => return Err("missing \"cmd\"".into()),
+        Some(Value::String(c)) => c.as_str(),
+        Some(other) => {
+            return Err(format!("\"cmd\" must be a string, one of stats, tare, control, swap (got {other})"));
+        }
+    };
+    let Some((_, keys)) = REQUEST_KEYS.iter().find(|(c, _)| *c == cmd) else { return Ok(()) };
+    for (k, v) in obj {
+        if !keys.contains(&k.as_str()) {
+            return Err(format!("unknown key \"{k}\" (known for {cmd}: {})", keys.join(", ")));
+        }
+        if k != "params" && !v.is_string() {
+            return Err(format!("\"{k}\" must be a string (got {v})"));
+        }
+    }
+    Ok(())
 }
 
 /// A swap request's `params` as the TOML table a node's params are: a JSON object (absent:
@@ -685,6 +732,49 @@ mod tests {
     /// A rebuilt library's kinds are checked with what they declare now: a param that was a
     /// string and now names a file the kind writes (here the graph's own file) is refused before
     /// any node is swapped; a kind of a library not reloaded keeps what it started with.
+    #[test]
+    fn a_socket_another_process_serves_is_not_taken_over_and_a_stale_one_is_replaced() {
+        let d = std::env::temp_dir().join(format!("skinflow-live-sock-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        std::fs::create_dir_all(&d).unwrap();
+        let sock = d.join("c.sock");
+        let serving = UnixListener::bind(&sock).unwrap();
+        let e = bind_control_socket(&sock).unwrap_err().to_string();
+        assert!(e.ends_with("--control: another process serves this socket (a running graph's --control?); choose another path, or stop that run first"), "{e}");
+        assert!(UnixStream::connect(&sock).is_ok(), "still the first one's");
+        drop(serving); // the file stays, nobody listens: stale
+        let _mine = bind_control_socket(&sock).unwrap();
+        std::fs::remove_dir_all(&d).unwrap();
+    }
+
+    #[test]
+    fn requests_with_unknown_keys_or_mistyped_ones_are_refused() {
+        let refused = |v: Value| check_request(&v).unwrap_err();
+        assert_eq!(
+            refused(json!({"cmd": "swap", "node": "d", "kind": "scale", "parms": {"factor": 5}})),
+            "unknown key \"parms\" (known for swap: cmd, node, kind, params)"
+        );
+        assert_eq!(
+            refused(json!({"cmd": "tare", "node": "d", "comand": "x"})),
+            "unknown key \"comand\" (known for tare: cmd, node)"
+        );
+        assert_eq!(refused(json!({"cmd": "stats", "node": 123})), "\"node\" must be a string (got 123)");
+        assert_eq!(
+            refused(json!({"cmd": 123})),
+            "\"cmd\" must be a string, one of stats, tare, control, swap (got 123)"
+        );
+        assert_eq!(refused(json!([])), "a request is a JSON object, e.g. {\"cmd\": \"stats\"} (got [])");
+        assert_eq!(refused(json!({})), "missing \"cmd\"");
+        for ok in [
+            json!({"cmd": "stats"}),
+            json!({"cmd": "control", "node": "cell", "command": "at 1 2"}),
+            json!({"cmd": "swap", "node": "d", "kind": "scale", "params": {"factor": 5}}),
+            json!({"cmd": "reload"}),
+        ] {
+            assert_eq!(check_request(&ok), Ok(()), "{ok}");
+        }
+    }
+
     #[test]
     fn swap_params_name_what_toml_cannot_hold() {
         assert_eq!(swap_params(None).unwrap(), toml::Table::new());

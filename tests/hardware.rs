@@ -587,3 +587,40 @@ fn check_holds_a_rigs_position_to_the_sensor_of_its_logger() {
         "{err}"
     );
 }
+
+/// The load cell's `at X Y [D]` over the control socket is held to the rule its params are:
+/// a position off the sensor of the logger recording its truth, or an indenter wider than
+/// that sensor, is refused naming the command and why (it had been recorded as truth off the
+/// skin with `ok: true`); a position on the skin is taken.
+#[test]
+fn the_load_cells_at_command_is_held_to_the_sensor_of_its_logger() {
+    let d = workdir("rig-at");
+    let _cell = Board::new(&d.join("cell"));
+    let graph = "[[node]]\nid = \"rig\"\nkind = \"serial_loadcell\"\nparams = { port = \"cell\", x_mm = 0.0, y_mm = 0.0 }\n\
+                 [[node]]\nid = \"log\"\nkind = \"hdf5_logger\"\nparams = { path = \"rec.h5\" }\n\
+                 [[edge]]\nfrom = \"rig.truth\"\nto = \"log.truth\"\n";
+    std::fs::write(d.join("g.toml"), graph).unwrap();
+    let mut run = spawn(
+        Command::new(bin())
+            .args(["run", "g.toml", "--control", "c.sock"])
+            .current_dir(&d)
+            .env("RUST_LOG", "warn")
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped()),
+    );
+    let t0 = Instant::now();
+    while !d.join("c.sock").exists() {
+        assert!(t0.elapsed() < Duration::from_secs(20), "no control socket");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let at = |command: &str| {
+        skinflow(&d, &["send", "c.sock", &format!(r#"{{"cmd":"control","node":"rig","command":"{command}"}}"#)])
+    };
+    let off = stderr(&at("at 500 500"));
+    assert!(off.contains("control command \"at 500 500\" refused: ") && off.contains("off the sensor"), "{off}");
+    let wide = stderr(&at("at 10 10 1e9"));
+    assert!(wide.contains("wider than the sensor"), "{wide}");
+    ok(&at("at 10 -10 8"));
+    let _ = nix::sys::signal::kill(nix::unistd::Pid::from_raw(run.id() as i32), nix::sys::signal::Signal::SIGINT);
+    assert!(run.wait().unwrap().success());
+}

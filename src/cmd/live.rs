@@ -253,6 +253,36 @@ impl Live {
         check_swapped_graph(&spec, &self.extra_outputs)
     }
 
+    /// Refuses a load cell's `at X Y [D]` that the graph's checks would refuse as the rig's
+    /// params (`x_mm`, `y_mm`, `diameter_mm`): a position off the sensor of the logger that
+    /// records its truth, an indenter wider than it. Checked as a swap to those params is
+    /// ([`Live::check_swap`]). Other commands, and an `at` the node cannot parse (it says
+    /// why), go to the node.
+    fn check_control(&self, node: &str, command: &str) -> Result<(), String> {
+        let Some((_, kind, params)) = self.lock_nodes().iter().find(|n| n.0 == node).cloned() else { return Ok(()) };
+        let mut words = command.split_whitespace();
+        if kind != "serial_loadcell" || words.next() != Some("at") {
+            return Ok(());
+        }
+        let numbers: Option<Vec<f64>> = words.map(|w| w.parse::<f64>().ok().filter(|v| v.is_finite())).collect();
+        let mut table = params.table().clone();
+        match numbers.as_deref() {
+            Some(&[x, y]) => {
+                table.insert("x_mm".into(), x.into());
+                table.insert("y_mm".into(), y.into());
+            }
+            Some(&[x, y, d]) if d > 0.0 => {
+                table.insert("x_mm".into(), x.into());
+                table.insert("y_mm".into(), y.into());
+                table.insert("diameter_mm".into(), d.into());
+            }
+            _ => return Ok(()),
+        }
+        let Some(factory) = self.lock_kinds().registry.get(&kind).cloned() else { return Ok(()) };
+        self.check_swap(node, &factory, &kind, &Params::from_table(table))
+            .map_err(|e| format!("control command \"{command}\" refused: {e}"))
+    }
+
     /// Applies one validated edit: checks the structure and what only a restart can change are
     /// unchanged, sets the deadlines and restart policies that changed, and swaps the nodes
     /// whose kind or params differ from what runs now.
@@ -521,9 +551,9 @@ fn reply(live: &Live, line: &str) -> Value {
             None => Err("\"tare\" needs \"node\"".into()),
         },
         Some("control") => match (s("node"), s("command")) {
-            (Some(n), Some(c)) => {
+            (Some(n), Some(c)) => live.check_control(n, c).and_then(|()| {
                 handle.control_wait(n, c, CONTROL_REPLY_TIMEOUT).map(|()| json!({})).map_err(|e| e.to_string())
-            }
+            }),
             _ => Err("\"control\" needs \"node\" and \"command\"".into()),
         },
         Some("swap") => match (s("node"), s("kind")) {

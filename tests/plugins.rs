@@ -124,6 +124,14 @@ fn a_missing_plugin_file_names_the_path() {
     let at = format!("{}:6:8: plugin {}: file not found", g.display(), missing.display());
     assert!(e.starts_with(&at), "{e}");
     assert_eq!(e.trim().lines().count(), 1, "one line: {e}");
+    // A directory or a device is said to be one, not "not found".
+    for (path, what) in
+        [(d.clone(), "is a directory, not a library"), (PathBuf::from("/dev/null"), "is not a regular file")]
+    {
+        let g = toy_graph(&d, std::slice::from_ref(&path), "", "never");
+        let e = stderr(&skinflow(&d, &["check", g.to_str().unwrap()]));
+        assert!(e.contains(&format!("plugin {}: {what}", path.display())), "{e}");
+    }
 }
 
 /// `check` opens, read-only, the file a plugin's `input-path` param names (as it opens a

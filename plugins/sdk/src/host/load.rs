@@ -20,8 +20,9 @@ use crate::export::{PARAM_TYPES, SENSOR, is_param_type};
 /// Why a plugin could not be loaded. Every message names the library's path.
 #[derive(Debug, thiserror::Error)]
 pub enum PluginError {
-    #[error("plugin {}: file not found", path.display())]
-    Missing { path: PathBuf },
+    /// `what`: "file not found", "is a directory", "is not a regular file (a device, a FIFO)".
+    #[error("plugin {}: {what}", path.display())]
+    Missing { path: PathBuf, what: &'static str },
     #[error("plugin {}: cannot copy it to {}: {source}", path.display(), to.display())]
     Copy { path: PathBuf, to: PathBuf, source: std::io::Error },
     #[error("plugin {}: not a loadable library: {cause}", path.display())]
@@ -50,7 +51,7 @@ impl PluginError {
     /// The library the error is about, as the caller named it.
     pub fn path(&self) -> &Path {
         match self {
-            PluginError::Missing { path }
+            PluginError::Missing { path, .. }
             | PluginError::Copy { path, .. }
             | PluginError::Open { path, .. }
             | PluginError::NotAPlugin { path }
@@ -387,7 +388,12 @@ unsafe fn table_ref<'a>(path: &Path, table: *const SfPlugin) -> Result<&'a SfPlu
 /// Loads the plugin at `path` and registers its kinds (all or none).
 pub fn load(path: &Path, registry: &mut Registry, codecs: &Codecs) -> Result<Loaded, PluginError> {
     if !path.is_file() {
-        return Err(PluginError::Missing { path: path.to_path_buf() });
+        let what = match std::fs::metadata(path) {
+            Err(_) => "file not found",
+            Ok(m) if m.is_dir() => "is a directory, not a library",
+            Ok(_) => "is not a regular file (a device or a FIFO), not a library",
+        };
+        return Err(PluginError::Missing { path: path.to_path_buf(), what });
     }
     let lib = open_copy(path)?;
     // SAFETY: the symbol, when present, is the SDK's entry point with this signature (the

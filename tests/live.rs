@@ -75,6 +75,20 @@ fn watch_swaps_edited_nodes_and_the_control_socket_answers() {
     assert!(e.contains("\"f\"") && e.contains("bogus") && e.contains("not supported"), "{e}");
     let tare = ask(&sock, r#"{"cmd": "tare", "node": "f"}"#);
     assert_eq!(tare["ok"], false, "scale has no tare: {tare}");
+    // A param of the wrong type: the refusal is one line, naming the param.
+    let typed = ask(&sock, r#"{"cmd": "swap", "node": "f", "kind": "scale", "params": {"factor": "x"}}"#);
+    let e = typed["error"].as_str().unwrap();
+    assert!(typed["ok"] == false && e.contains("factor") && !e.contains('\n'), "{typed}");
+    // A line that is not UTF-8 is answered, and the connection goes on to the next request.
+    {
+        let mut s = UnixStream::connect(&sock).unwrap();
+        s.write_all(b"\xff\xfe garbage\n{\"cmd\": \"stats\"}\n").unwrap();
+        let mut lines = BufReader::new(s).lines();
+        let first: serde_json::Value = serde_json::from_str(&lines.next().unwrap().unwrap()).unwrap();
+        assert!(first["ok"] == false && first["error"].as_str().unwrap().starts_with("not UTF-8 text"), "{first}");
+        let second: serde_json::Value = serde_json::from_str(&lines.next().unwrap().unwrap()).unwrap();
+        assert_eq!(second["ok"], true, "{second}");
+    }
     // `skinflow send`, the scripts' client: one reply line per request, failing on the first
     // that is not ok (the requests after it are not sent).
     let s = sock.to_str().unwrap();

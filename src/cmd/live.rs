@@ -586,18 +586,23 @@ fn reply(live: &Live, line: &str) -> Value {
             Value::Object(m)
         }
         Ok(v) => json!({"ok": true, "stats": v}),
-        Err(e) => json!({"ok": false, "error": e}),
+        // One line: a params error from the TOML parser spans several (`in `factor``).
+        Err(e) => {
+            json!({"ok": false, "error": e.lines().map(str::trim).filter(|l| !l.is_empty()).collect::<Vec<_>>().join(" ")})
+        }
     }
 }
 
 fn serve(stream: UnixStream, live: Arc<Live>) {
     let Ok(mut out) = stream.try_clone() else { return };
-    for line in BufReader::new(stream).lines() {
-        let Ok(line) = line else { return };
-        if line.trim().is_empty() {
-            continue;
-        }
-        let r = reply(&live, &line);
+    for line in BufReader::new(stream).split(b'\n') {
+        let Ok(bytes) = line else { return };
+        // A line that is not UTF-8 gets its reply too, and the connection goes on.
+        let r = match std::str::from_utf8(&bytes) {
+            Ok(line) if line.trim().is_empty() => continue,
+            Ok(line) => reply(&live, line),
+            Err(e) => json!({"ok": false, "error": format!("not UTF-8 text: {e}")}),
+        };
         if writeln!(out, "{r}").is_err() {
             return;
         }

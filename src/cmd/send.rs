@@ -26,7 +26,15 @@ pub fn run(socket: &Path, requests: &[String]) -> Result<()> {
         }
         writeln!(writer, "{line}").with_context(|| format!("{s}: sending {line}"))?;
         let reply = match replies.next() {
-            Some(r) => r.with_context(|| format!("{s}: no reply to {line} within {} s", REPLY_TIMEOUT.as_secs()))?,
+            Some(Err(e)) if matches!(e.kind(), std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut) => {
+                bail!("{s}: no reply to {line} within {} s", REPLY_TIMEOUT.as_secs())
+            }
+            // A reset is the graph's end (or its socket's) while the request was in flight.
+            Some(Err(e)) => bail!(
+                "{s}: the connection ended before a reply to {line} ({e}): the graph ended or closed its socket; \
+                 whether the request was applied is not known (ask {{\"cmd\": \"stats\"}} of a graph still running)"
+            ),
+            Some(Ok(r)) => r,
             None => bail!("{s}: the graph closed the connection before replying to {line}"),
         };
         // A closed standard output (`skinflow send ... | head -c 300`) ends the session quietly:

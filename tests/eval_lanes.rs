@@ -216,7 +216,7 @@ fn refused_lanes_name_the_lane_and_the_cause_before_any_work() {
         (vec![], r#"name = "x" split = "force-balance""#, "not a TOML table body"),
         (vec![], r#"name = "x", colour = "red""#, "unknown field `colour`"),
         (vec![], r#"split = "force-balance""#, "missing field `name`"),
-        (vec![], r#"name = "a b""#, "use letters, digits"),
+        (vec![], r#"name = "a b""#, "use ASCII letters, digits"),
         // Params the kind refuses, found when the graph is checked: named by the lane too.
         (
             vec!["--plugin", &split_weighted],

@@ -15,9 +15,10 @@ pub enum GraphErrorKind {
     UnknownKind { kind: String, known: String },
     #[error("{0}")]
     Param(String),
-    #[error("duplicate node id \"{0}\"")]
-    DuplicateId(String),
-    #[error("invalid node id \"{0}\": use letters, digits, '_' and '-' (the '.' separates node and port)")]
+    /// The id, and the line of the node that has it first.
+    #[error("duplicate node id \"{0}\" (first at line {1}): edges to \"{0}\" go to that node")]
+    DuplicateId(String, usize),
+    #[error("invalid node id \"{0}\": use ASCII letters, digits, '_' and '-' (the '.' separates node and port)")]
     BadId(String),
     #[error("\"{0}\" is not a port reference: write \"node.port\"")]
     BadPortRef(String),

@@ -218,8 +218,9 @@ pub(super) fn validate(src: SourceFile, registry: &Registry) -> Result<GraphSpec
         let id = n.id.get_ref().clone();
         if !valid_id(&id) {
             err(Some(n.id.span()), None, K::BadId(id.clone()));
-        } else if by_id.contains_key(&id) {
-            err(Some(n.id.span()), None, K::DuplicateId(id.clone()));
+        } else if let Some(&first) = by_id.get(&id) {
+            let (line, _) = src.line_col(file.node[first].get_ref().id.span().start);
+            err(Some(n.id.span()), None, K::DuplicateId(id.clone(), line));
         } else {
             by_id.insert(id.clone(), i);
         }

@@ -207,7 +207,7 @@ fn resolve_lane(text: &str, registry: &Registry, calib: &Path, earlier: &[ExtraL
     })?;
     let name = arg.name;
     if !valid_name(&name) {
-        bail!("name \"{name}\": use letters, digits, '_' and '-'");
+        bail!("name \"{name}\": use ASCII letters, digits, '_' and '-'");
     }
     if LANES.iter().any(|(n, ..)| *n == name) {
         let builtin: Vec<&str> = LANES.iter().map(|(n, ..)| *n).collect();

@@ -102,13 +102,15 @@ fn existing_files_are_not_overwritten_unless_asked() {
     let opts = WriterOptions { overwrite: true, ..opts };
     RecordingWriter::create(&path, &opts).unwrap().close().unwrap();
     assert!(Recording::open(&path).unwrap().eit.unwrap().is_empty());
-    // A FIFO is never replaced, overwrite or not: the finished recording is renamed over its path.
-    let fifo = dir.join("pipe");
-    assert!(std::process::Command::new("mkfifo").arg(&fifo).status().unwrap().success());
-    let err = RecordingWriter::create(&fifo, &opts).err().expect("a FIFO refused");
+    // A socket (as a FIFO or a device) is never replaced, overwrite or not: the finished
+    // recording is renamed over its path. (Made in-process: a child spawned here would hold
+    // the other tests' HDF5 file locks while it runs.)
+    let sock = dir.join("sock");
+    let _listener = std::os::unix::net::UnixListener::bind(&sock).unwrap();
+    let err = RecordingWriter::create(&sock, &opts).err().expect("a socket refused");
     assert!(err.to_string().contains("is not a regular file"), "{err}");
     use std::os::unix::fs::FileTypeExt;
-    assert!(std::fs::metadata(&fifo).unwrap().file_type().is_fifo());
+    assert!(std::fs::metadata(&sock).unwrap().file_type().is_socket());
 }
 
 #[test]

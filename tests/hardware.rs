@@ -600,14 +600,22 @@ fn the_load_cells_at_command_is_held_to_the_sensor_of_its_logger() {
                  [[node]]\nid = \"log\"\nkind = \"hdf5_logger\"\nparams = { path = \"rec.h5\" }\n\
                  [[edge]]\nfrom = \"rig.truth\"\nto = \"log.truth\"\n";
     std::fs::write(d.join("g.toml"), graph).unwrap();
-    let mut run = spawn(
+    /// The run, killed if the test fails before it is stopped (it would run on).
+    struct Run(std::process::Child);
+    impl Drop for Run {
+        fn drop(&mut self) {
+            let _ = self.0.kill();
+            let _ = self.0.wait();
+        }
+    }
+    let mut run = Run(spawn(
         Command::new(bin())
             .args(["run", "g.toml", "--control", "c.sock"])
             .current_dir(&d)
             .env("RUST_LOG", "warn")
             .stdout(Stdio::null())
-            .stderr(Stdio::piped()),
-    );
+            .stderr(Stdio::null()),
+    ));
     let t0 = Instant::now();
     while !d.join("c.sock").exists() {
         assert!(t0.elapsed() < Duration::from_secs(20), "no control socket");
@@ -621,6 +629,6 @@ fn the_load_cells_at_command_is_held_to_the_sensor_of_its_logger() {
     let wide = stderr(&at("at 10 10 1e9"));
     assert!(wide.contains("wider than the sensor"), "{wide}");
     ok(&at("at 10 -10 8"));
-    let _ = nix::sys::signal::kill(nix::unistd::Pid::from_raw(run.id() as i32), nix::sys::signal::Signal::SIGINT);
-    assert!(run.wait().unwrap().success());
+    let _ = nix::sys::signal::kill(nix::unistd::Pid::from_raw(run.0.id() as i32), nix::sys::signal::Signal::SIGINT);
+    assert!(run.0.wait().unwrap().success());
 }

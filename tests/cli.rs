@@ -1321,7 +1321,7 @@ fn out_of_range_flags_and_bad_scenes_are_refused_before_any_work() {
     let cases: [(&[&str], &str); 7] = [
         (
             &["calibrate", "rec.h5", "--out", "c.toml", "--recon", "lambda = -1"],
-            "--recon 'lambda = -1': parameter \"lambda\": must be finite and > 0",
+            "--recon 'lambda = -1': param \"lambda\": must be finite and > 0",
         ),
         (
             &["calibrate", "rec.h5", "--out", "c.toml", "--segment", "floor = 0"],
@@ -1333,7 +1333,7 @@ fn out_of_range_flags_and_bad_scenes_are_refused_before_any_work() {
         ),
         (
             &["eval", "rec.h5", "--calib", calib, "--recon", "mesh = { elements = 0 }"],
-            "--recon 'mesh = { elements = 0 }': parameter \"elements\": must be in",
+            "--recon 'mesh = { elements = 0 }': param \"mesh\": elements: must be in",
         ),
         (
             &["calibrate", "rec.h5", "--out", "c.toml", "--fit", "holdout_folds = -1"],
@@ -1341,7 +1341,7 @@ fn out_of_range_flags_and_bad_scenes_are_refused_before_any_work() {
         ),
         (
             &["reproduce", "--out", "r", "--scenes", scenes, "--recon", "lambda = -1"],
-            "--recon 'lambda = -1': parameter \"lambda\"",
+            "--recon 'lambda = -1': param \"lambda\"",
         ),
         (
             &["reproduce", "--out", "r", "--scenes", scenes, "--fit", "holdout_folds = 1"],

@@ -148,11 +148,7 @@ impl NodeParams for ReconstructorParams {
         // A sensor file is read by `check_files` (and when the node is built); check against
         // the default here.
         if self.sensor.is_none() {
-            self.recon().validate(&Sensor::paper_100mm()).map_err(|e| ParamError {
-                param: None,
-                problem: e.to_string(),
-                span: None,
-            })?;
+            self.recon().validate(&Sensor::paper_100mm()).map_err(|e| self.param_error(e))?;
         }
         Ok(())
     }
@@ -162,7 +158,31 @@ impl NodeParams for ReconstructorParams {
     fn check_files(&self, ctx: &BuildContext) -> Result<(), ParamError> {
         let Some(path) = &self.sensor else { return Ok(()) };
         let sensor = check_sensor("sensor", path, ctx)?;
-        self.recon().validate(&sensor).map_err(|e| ParamError { param: None, problem: e.to_string(), span: None })
+        self.recon().validate(&sensor).map_err(|e| self.param_error(e))
+    }
+}
+
+impl ReconstructorParams {
+    /// A reconstruction error as the error of the param (top-level key) it is about, so
+    /// `check` locates it at that key's value; the math's own name for it leads the problem
+    /// where it differs (`image size`, `prior.p`). An error of no param (the sensor's) names
+    /// none, and is located at the node.
+    fn param_error(&self, e: EitError) -> ParamError {
+        let EitError::InvalidParam { param, problem } = &e else {
+            return ParamError { param: None, problem: e.to_string(), span: None };
+        };
+        let key = match *param {
+            "image size" if !(1..=4096).contains(&self.recon().image_nx) => "image_nx",
+            "image size" => "image_ny",
+            "lambda" | "lambda sweep" => "lambda",
+            "prior.epsilon" | "prior.p" => "prior",
+            "elements" => "mesh",
+            "reference_frames" => "reference_frames",
+            "dead_electrode_fraction" | "zero_fraction" => "mask",
+            _ => return ParamError { param: None, problem: e.to_string(), span: None },
+        };
+        let problem = if *param == key { problem.clone() } else { format!("{param}: {problem}") };
+        ParamError::new(key, problem)
     }
 }
 
@@ -731,6 +751,24 @@ mod tests {
     }
 
     const DEAD: usize = 60;
+
+    /// A reconstruction param out of range is the error of its own key, so `check` locates it
+    /// at the value (it was located at the node, as the math's "image size").
+    #[test]
+    fn out_of_range_math_params_are_errors_of_their_keys() {
+        use skinflow_core::NodeParams;
+        for (body, key, problem) in [
+            ("image_nx = 0", "image_nx", "image size: must be in [1, 4096] per side (got 0 x 64)"),
+            ("image_ny = 5000", "image_ny", "image size: must be in [1, 4096] per side (got 64 x 5000)"),
+            ("lambda = 0.0", "lambda", "must be finite and > 0 (got 0)"),
+            ("prior = { noser = { p = -1.0 } }", "prior", "prior.p: "),
+        ] {
+            let p: super::ReconstructorParams = toml::from_str(body).unwrap();
+            let e = p.validate().unwrap_err();
+            assert_eq!(e.param.as_deref(), Some(key), "{body}: {e}");
+            assert!(e.problem.starts_with(problem), "{body}: {e}");
+        }
+    }
 
     /// A cache directory that cannot be made (under a regular file) is `cache_dir`'s error,
     /// naming the directory and the way out, not an unknown "reconstruction" param's.

@@ -1412,7 +1412,8 @@ fn recordings_of_another_sensor_and_files_that_are_no_calibration_are_refused() 
     assert_eq!(description["sensor"]["width_mm"].as_float(), Some(60.0));
     let calib: toml::Table = std::fs::read_to_string(d.join("own.toml")).unwrap().parse().unwrap();
     assert_eq!(calib["provenance"]["sensor"]["name"].as_str(), Some("small-60mm"), "{calib:?}");
-    ok(&skinflow(&d, &["eval", "small.h5", "--calib", "own.toml"]));
+    // A --recon body that ends in a comma (TOML allows it) gets the sensor once.
+    ok(&skinflow(&d, &["eval", "small.h5", "--calib", "own.toml", "--recon", "lambda = 0.1,"]));
     // A sensor named in --recon is used as given: another one than the recording's is refused
     // as `check` refuses such a graph, naming the flag.
     std::fs::write(d.join("wide.toml"), "[sensor]\nname = \"wide\"\nwidth_mm = 150.0\nheight_mm = 150.0\n").unwrap();

@@ -172,8 +172,11 @@ impl ReconstructorParams {
             return ParamError { param: None, problem: e.to_string(), span: None };
         };
         let key = match *param {
+            // Out of range on one side, or too large a matrix in all: the side at fault, else
+            // the one written.
             "image size" if !(1..=4096).contains(&self.recon().image_nx) => "image_nx",
-            "image size" => "image_ny",
+            "image size" if !(1..=4096).contains(&self.recon().image_ny) || self.image_nx.is_none() => "image_ny",
+            "image size" => "image_nx",
             "lambda" | "lambda sweep" => "lambda",
             "prior.epsilon" | "prior.p" => "prior",
             "elements" => "mesh",
@@ -760,6 +763,7 @@ mod tests {
         for (body, key, problem) in [
             ("image_nx = 0", "image_nx", "image size: must be in [1, 4096] per side (got 0 x 64)"),
             ("image_ny = 5000", "image_ny", "image size: must be in [1, 4096] per side (got 64 x 5000)"),
+            ("image_nx = 4096\nimage_ny = 4096", "image_nx", "image size: "),
             ("lambda = 0.0", "lambda", "must be finite and > 0 (got 0)"),
             ("prior = { noser = { p = -1.0 } }", "prior", "prior.p: "),
         ] {

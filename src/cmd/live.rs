@@ -616,12 +616,19 @@ pub fn bind_control_socket(path: &Path) -> Result<UnixListener> {
         Ok(m) if m.file_type().is_socket() => {
             // Replaced only when stale: a socket something still listens on is another run's,
             // whose commands (a stage script's `at` and `tare`) would come here instead.
-            if UnixStream::connect(path).is_ok() {
-                bail!(
+            // Only a refused connection says nobody listens; any other failure (no permission)
+            // leaves the socket alone.
+            match UnixStream::connect(path) {
+                Err(e) if e.kind() == std::io::ErrorKind::ConnectionRefused => {}
+                Err(e) => bail!(
+                    "{}: --control: cannot tell whether another process serves this socket ({e}); choose another path",
+                    path.display()
+                ),
+                Ok(_) => bail!(
                     "{}: --control: another process serves this socket (a running graph's --control?); \
                      choose another path, or stop that run first",
                     path.display()
-                );
+                ),
             }
             std::fs::remove_file(path).with_context(|| format!("{}: cannot replace the old socket", path.display()))?;
         }
@@ -764,9 +771,7 @@ mod tests {
         r
     }
 
-    /// A rebuilt library's kinds are checked with what they declare now: a param that was a
-    /// string and now names a file the kind writes (here the graph's own file) is refused before
-    /// any node is swapped; a kind of a library not reloaded keeps what it started with.
+    /// A socket a process listens on is another run's: refused; once nobody listens, stale.
     #[test]
     fn a_socket_another_process_serves_is_not_taken_over_and_a_stale_one_is_replaced() {
         let d = std::env::temp_dir().join(format!("skinflow-live-sock-{}", std::process::id()));
@@ -832,6 +837,9 @@ mod tests {
         }
     }
 
+    /// A rebuilt library's kinds are checked with what they declare now: a param that was a
+    /// string and now names a file the kind writes (here the graph's own file) is refused before
+    /// any node is swapped; a kind of a library not reloaded keeps what it started with.
     #[test]
     fn a_reloaded_librarys_kinds_are_checked_with_their_new_params() {
         let base = std::env::temp_dir().join("skinflow-live-unit-nonexistent");

@@ -200,16 +200,20 @@ impl PipelineArgs {
             Sha256::digest(rec.sensor_toml.as_bytes()).iter().take(8).map(|b| format!("{b:02x}")).collect();
         let name: String =
             rec.sensor.name.chars().map(|c| if c.is_ascii_alphanumeric() || c == '-' { c } else { '_' }).collect();
-        let dir = skinflow_nodes::reconstruct::default_cache_dir().join("sensors");
+        // The matrix cache `--recon` names, else the default one; absolute, so a printed graph
+        // runs from any directory.
+        let cache = params.cache_dir.clone().unwrap_or_else(skinflow_nodes::reconstruct::default_cache_dir);
+        let dir = std::path::absolute(cache.join("sensors")).unwrap_or_else(|_| cache.join("sensors"));
         let file = dir.join(format!("{name}-{hash}.toml"));
         if std::fs::read_to_string(&file).ok().as_deref() != Some(rec.sensor_toml.as_str()) {
-            let saved = (|| {
-                std::fs::create_dir_all(&dir)?;
-                // Written aside and renamed: a run beside this one never reads half a file.
-                let part = dir.join(format!(".{name}-{hash}.toml.{}.partial", std::process::id()));
-                std::fs::write(&part, &rec.sensor_toml)?;
-                std::fs::rename(&part, &file)
-            })();
+            // Written aside and renamed: a run beside this one never reads half a file.
+            let part = dir.join(format!(".{name}-{hash}.toml.{}.partial", std::process::id()));
+            let saved = std::fs::create_dir_all(&dir)
+                .and_then(|()| std::fs::write(&part, &rec.sensor_toml))
+                .and_then(|()| std::fs::rename(&part, &file))
+                .inspect_err(|_| {
+                    let _ = std::fs::remove_file(&part);
+                });
             saved.map_err(|e| {
                 anyhow::anyhow!(
                     "{}: recorded on sensor {}, whose description could not be saved as {} for the reconstructor \
@@ -231,7 +235,9 @@ impl PipelineArgs {
             file.display()
         );
         let sensor = format!("sensor = {}", toml::Value::String(text.to_owned()));
-        Ok(if self.recon.trim().is_empty() { sensor } else { format!("{}, {sensor}", self.recon) })
+        // A body may end in a comma (TOML 1.1 allows one in inline tables): one, not two.
+        let body = self.recon.trim().trim_end_matches(',').trim_end();
+        Ok(if body.is_empty() { sensor } else { format!("{body}, {sensor}") })
     }
 }
 

@@ -169,7 +169,8 @@ pub fn localization_map(path: &Path, eval: &Evaluator, extent_mm: (f64, f64, f64
 }
 
 /// A conductivity-change image with ROI outlines (black), centroids (x) and true centres (o).
-/// `labels` is [`crate::Segmenter::labels`] of the same frame (may be empty: no outlines).
+/// `labels` is [`crate::Segmenter::labels`] of the same frame (may be empty: no outlines); only
+/// the regions of `contacts` (by [`Contact::label`]) are outlined.
 pub fn conductivity(
     path: &Path,
     image: &[f64],
@@ -200,10 +201,14 @@ pub fn conductivity(
         .draw_series((0..grid.len()).map(|p| Rectangle::new(cell(p), diverging(0.5 + 0.5 * image[p] / vmax).filled())))
         .map_err(|x| e(&x))?;
     if labels.len() == grid.len() {
+        // Only the regions that are contacts: a sidelobe the crosstalk pass removed, or a region
+        // beyond `max_contacts`, keeps its label but was not evaluated.
+        let kept = |l: u32| contacts.iter().any(|k| k.label == l);
         let boundary = |p: usize| {
             let (c, r) = (p % grid.width, p / grid.width);
             let l = labels[p];
             l != 0
+                && kept(l)
                 && (c == 0
                     || r == 0
                     || c + 1 == grid.width

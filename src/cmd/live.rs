@@ -260,23 +260,14 @@ impl Live {
     /// why), go to the node.
     fn check_control(&self, node: &str, command: &str) -> Result<(), String> {
         let Some((_, kind, params)) = self.lock_nodes().iter().find(|n| n.0 == node).cloned() else { return Ok(()) };
-        let mut words = command.split_whitespace();
-        if kind != "serial_loadcell" || words.next() != Some("at") {
+        if kind != "serial_loadcell" {
             return Ok(());
         }
-        let numbers: Option<Vec<f64>> = words.map(|w| w.parse::<f64>().ok().filter(|v| v.is_finite())).collect();
+        let Ok(rig) = params.parse::<skinflow_nodes::serial::LoadcellParams>() else { return Ok(()) };
+        let Ok((x, y, d)) = skinflow_nodes::serial::parse_at(command, rig.diameter_mm) else { return Ok(()) };
         let mut table = params.table().clone();
-        match numbers.as_deref() {
-            Some(&[x, y]) => {
-                table.insert("x_mm".into(), x.into());
-                table.insert("y_mm".into(), y.into());
-            }
-            Some(&[x, y, d]) if d > 0.0 => {
-                table.insert("x_mm".into(), x.into());
-                table.insert("y_mm".into(), y.into());
-                table.insert("diameter_mm".into(), d.into());
-            }
-            _ => return Ok(()),
+        for (key, value) in [("x_mm", x), ("y_mm", y), ("diameter_mm", d)] {
+            table.insert(key.into(), value.into());
         }
         let Some(factory) = self.lock_kinds().registry.get(&kind).cloned() else { return Ok(()) };
         self.check_swap(node, &factory, &kind, &Params::from_table(table))

@@ -223,8 +223,9 @@ impl Source for SerialLoadcell {
 
 const AT_USAGE: &str = "at X_MM Y_MM [DIAMETER_MM]";
 
-/// Parses the load cell's `at` command; the diameter stays `diameter_mm` when not given.
-fn parse_at(cmd: &str, diameter_mm: f64) -> Result<(f64, f64, f64), NodeError> {
+/// Parses the load cell's `at` command: (x, y, diameter) in mm, the diameter `diameter_mm`
+/// when not given. `skinflow run --control` checks a parsed `at` against the graph first.
+pub fn parse_at(cmd: &str, diameter_mm: f64) -> Result<(f64, f64, f64), NodeError> {
     let mut words = cmd.split_whitespace();
     if words.next() != Some("at") {
         return Err(NodeError::msg(format!("unknown control command \"{cmd}\" (known: {AT_USAGE})")));

@@ -45,7 +45,7 @@ use skinflow_core::{KindInfo, NodeImpl, ParamDoc, PortSpec, Registry, Role, type
 use crate::pace::ns;
 use crate::payload::{EitFrame, PressureSample, Truth};
 pub use eit::SerialEit;
-pub use loadcell::SerialLoadcell;
+pub use loadcell::{SerialLoadcell, parse_at};
 pub use params::{EitParams, FlowControlParam, LoadcellParams, ParityParam, PortParams, PressureParams};
 pub use pressure::SerialPressure;
 

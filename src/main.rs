@@ -96,7 +96,7 @@ enum Cmd {
         #[arg(long, default_value = "out/reproduce")]
         out: PathBuf,
         /// Directory of the scene files.
-        #[arg(long, default_value = "graphs/scenes")]
+        #[arg(long, default_value = cmd::reproduce::DEFAULT_SCENES)]
         scenes: PathBuf,
         #[arg(long, default_value_t = 1)]
         seed: u64,

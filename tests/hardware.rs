@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use super::support::{bin, ok, read_recording, root, skinflow, spawn, status, stderr, text};
+use super::support::{bin, ok, read_recording, root, skinflow, spawn, status, stderr, text, wait_for_file};
 
 /// A fresh work directory for one test of this module.
 fn workdir(test: &str) -> PathBuf {
@@ -419,11 +419,7 @@ fn a_logging_run_killed_with_sigkill_leaves_a_readable_file() {
                 .stdout(Stdio::null()),
         );
         // Wait until the logger announces the file, then past a few flush intervals.
-        let t0 = Instant::now();
-        while !d.join("crash.h5").exists() {
-            assert!(t0.elapsed() < Duration::from_secs(60), "the logger never created its file");
-            std::thread::sleep(Duration::from_millis(20));
-        }
+        wait_for_file(&d.join("crash.h5"), Duration::from_secs(60), "the logger never created its file");
         std::thread::sleep(Duration::from_millis(wait_ms));
         status(Command::new("kill").args(["-KILL", &child.id().to_string()]));
         let _ = child.wait_with_output();
@@ -575,6 +571,18 @@ fn check_holds_a_rigs_position_to_the_sensor_of_its_logger() {
     std::fs::write(d.join("on.toml"), graph(45.0)).unwrap();
     std::fs::write(d.join("off.toml"), graph(99.0)).unwrap();
     ok(&skinflow(&d, &["check", "on.toml"]));
+    // A 120 mm indenter on a 150 x 100 mm sensor: wider than its shorter side.
+    std::fs::write(d.join("wide.toml"), "[sensor]\nname = \"wide\"\nwidth_mm = 150.0\nheight_mm = 100.0\n").unwrap();
+    let wide = |diameter_mm: f64| {
+        graph(0.0)
+            .replace("y_mm = -10.0 }", &format!("y_mm = -10.0, diameter_mm = {diameter_mm:?} }}"))
+            .replace("path = \"rec.h5\" }", "path = \"rec.h5\", sensor = \"wide.toml\" }")
+    };
+    std::fs::write(d.join("wide-120.toml"), wide(120.0)).unwrap();
+    std::fs::write(d.join("wide-90.toml"), wide(90.0)).unwrap();
+    ok(&skinflow(&d, &["check", "wide-90.toml"]));
+    let err = stderr(&skinflow(&d, &["check", "wide-120.toml"]));
+    assert!(err.contains("whose indenter is 120 mm wide, wider than the sensor's shorter side (100 mm)"), "{err}");
     let out = skinflow(&d, &["check", "off.toml"]);
     let err = stderr(&out);
     assert_eq!(out.status.code(), Some(2), "{err}");
@@ -616,11 +624,7 @@ fn the_load_cells_at_command_is_held_to_the_sensor_of_its_logger() {
             .stdout(Stdio::null())
             .stderr(Stdio::null()),
     ));
-    let t0 = Instant::now();
-    while !d.join("c.sock").exists() {
-        assert!(t0.elapsed() < Duration::from_secs(20), "no control socket");
-        std::thread::sleep(Duration::from_millis(20));
-    }
+    wait_for_file(&d.join("c.sock"), Duration::from_secs(20), "no control socket");
     let at = |command: &str| {
         skinflow(&d, &["send", "c.sock", &format!(r#"{{"cmd":"control","node":"rig","command":"{command}"}}"#)])
     };

@@ -8,7 +8,7 @@ use std::path::Path;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use super::support::{bin, output, read_recording, skinflow, spawn, stderr, workdir};
+use super::support::{bin, output, read_recording, skinflow, spawn, stderr, wait_for_file, workdir};
 
 fn graph(scale_params: &str, out: &str) -> String {
     format!(
@@ -241,11 +241,7 @@ fn run_watched_with_stats(d: &Path, g: &Path, sock: &Path) -> Child {
             .stdout(Stdio::piped())
             .stderr(Stdio::piped()),
     );
-    let t0 = Instant::now();
-    while !sock.exists() {
-        assert!(t0.elapsed() < Duration::from_secs(20), "no control socket");
-        std::thread::sleep(Duration::from_millis(20));
-    }
+    wait_for_file(sock, Duration::from_secs(20), "no control socket");
     child
 }
 

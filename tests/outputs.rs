@@ -286,22 +286,29 @@ fn a_plugin_sink_over_the_recording_or_the_calibration_is_refused_and_both_are_k
     assert_eq!(std::fs::read(d.join("calib.toml")).unwrap(), calib, "the calibration is untouched");
 }
 
+/// The csv-pressure and csv-writers libraries, then `csv-pressure` "daq" (its `path` `source`)
+/// -> `pressure-csv` "out" (params `out_params`), lockstep; written as `d/g.toml`.
+fn csv_pass_through_graph(d: &Path, source: &str, out_params: &str) -> String {
+    let graph = format!(
+        "[graph]\nmode = \"lockstep\"\n\
+         [[plugin]]\npath = {}\n[[plugin]]\npath = {}\n\
+         [[node]]\nid = \"daq\"\nkind = \"csv-pressure\"\nparams = {{ path = \"{source}\", speed = 0.0 }}\n\
+         [[node]]\nid = \"out\"\nkind = \"pressure-csv\"\nparams = {{ {out_params} }}\n\
+         [[edge]]\nfrom = \"daq.pressure\"\nto = \"out.pressure\"\n",
+        quoted(&plugin("skinflow-plugin-csv-pressure")),
+        quoted(&plugin("skinflow-plugin-csv-writers"))
+    );
+    std::fs::write(d.join("g.toml"), &graph).unwrap();
+    graph
+}
+
 /// `csv-pressure`'s `path` is an `input-path`: a `pressure-csv` writing that file is refused
 /// (it would truncate the samples being replayed).
 #[test]
 fn a_plugin_sink_over_the_file_a_plugin_source_reads_is_refused() {
     let d = workdir("plugin-over-plugin-input");
     std::fs::write(d.join("p.csv"), "t_s,kpa\n0,101.25\n0.5,101.5\n").unwrap();
-    let graph = format!(
-        "[graph]\nmode = \"lockstep\"\n\
-         [[plugin]]\npath = {}\n[[plugin]]\npath = {}\n\
-         [[node]]\nid = \"daq\"\nkind = \"csv-pressure\"\nparams = {{ path = \"p.csv\", speed = 0.0 }}\n\
-         [[node]]\nid = \"out\"\nkind = \"pressure-csv\"\nparams = {{ path = \"p.csv\", append = true }}\n\
-         [[edge]]\nfrom = \"daq.pressure\"\nto = \"out.pressure\"\n",
-        quoted(&plugin("skinflow-plugin-csv-pressure")),
-        quoted(&plugin("skinflow-plugin-csv-writers"))
-    );
-    std::fs::write(d.join("g.toml"), &graph).unwrap();
+    let graph = csv_pass_through_graph(&d, "p.csv", "path = \"p.csv\", append = true");
     refused(
         &d,
         &format!(
@@ -313,9 +320,35 @@ fn a_plugin_sink_over_the_file_a_plugin_source_reads_is_refused() {
     );
     assert_eq!(std::fs::read_to_string(d.join("p.csv")).unwrap(), "t_s,kpa\n0,101.25\n0.5,101.5\n");
     // Another file: the samples are copied.
-    std::fs::write(d.join("g.toml"), graph.replace("path = \"p.csv\", append", "path = \"q.csv\", append")).unwrap();
+    csv_pass_through_graph(&d, "p.csv", "path = \"q.csv\", append = true");
     ok(&skinflow(&d, &["run", "g.toml"]));
     assert_eq!(std::fs::read_to_string(d.join("q.csv")).unwrap(), "t_s,kpa\n0,101.25\n0.5,101.5\n");
+}
+
+/// A plugin's `output-path` or `input-path` given as "" is refused at `check` and `run`,
+/// naming the param. Before, it passed `check`, and `run` exited 0 with the sink failing on
+/// every message ("pressure-csv: : No such file or directory").
+#[test]
+fn an_empty_plugin_file_param_is_refused() {
+    let d = workdir("plugin-empty-path");
+    std::fs::write(d.join("p.csv"), "t_s,kpa\n0,101.25\n").unwrap();
+    let graph = csv_pass_through_graph(&d, "p.csv", "path = \"\"");
+    let line = params_line(&graph, "out");
+    refused(&d, &format!("g.toml:{line}:12: node \"out\": param \"path\": is empty: give a file or device path"));
+    let graph = csv_pass_through_graph(&d, "", "path = \"q.csv\"");
+    let line = params_line(&graph, "daq");
+    refused(&d, &format!("g.toml:{line}:12: node \"daq\": param \"path\": is empty: give a file or device path"));
+    assert!(!d.join("q.csv").exists(), "nothing ran");
+    // A directory as the sink's file: refused by `check` too, not only when `run` builds it.
+    std::fs::create_dir_all(d.join("adir")).unwrap();
+    let graph = csv_pass_through_graph(&d, "p.csv", "path = \"adir\"");
+    let line = params_line(&graph, "out");
+    refused(
+        &d,
+        &format!(
+            "g.toml:{line}:12: node \"out\": param \"path\": writes adir, which is a directory; give `path` a file path"
+        ),
+    );
 }
 
 /// Two plugin sinks on files of their own pass `check` and each gets every row.

@@ -181,6 +181,65 @@ fn a_file_that_is_not_a_library_is_refused() {
     assert!(e.contains(&format!("dlopen failed: {}: ", bad.display())), "{e}");
 }
 
+/// A library cut short (a rebuild caught half way under `run --watch`) is refused with a
+/// line that says so. Before, `dlopen` mapped it and the process died of SIGBUS: `nodes`,
+/// `check`, and a watched run with all its outputs.
+#[test]
+fn a_library_cut_short_is_refused_not_a_crash() {
+    let d = workdir("cut-short");
+    let whole = std::fs::read(plugin("skinflow-plugin-fixture-faulty")).unwrap();
+    for (name, len) in [("head.so", 5000), ("half.so", whole.len() / 2)] {
+        let cut = d.join(name);
+        std::fs::write(&cut, &whole[..len]).unwrap();
+        let graph = toy_graph(&d, std::slice::from_ref(&cut), "", "never");
+        for args in [["nodes", "--plugin", cut.to_str().unwrap()].as_slice(), &["check", graph.to_str().unwrap()]] {
+            let o = skinflow(&d, args);
+            let e = stderr(&o);
+            assert!(matches!(o.status.code(), Some(1 | 2)), "{args:?}: not a crash: {:?} {e}", o.status);
+            assert!(
+                e.contains(&format!("plugin {}: not a loadable library: the file is incomplete: ", cut.display()))
+                    && e.contains(&format!("but it has {len} bytes; is it still being written")),
+                "{args:?}: {e}"
+            );
+        }
+    }
+}
+
+/// A library given twice is refused at the second entry, the one that repeats it, also when
+/// it is spelt otherwise (`dir/./lib.so`). Before, the error was placed at the first entry
+/// while quoting the second's text.
+#[test]
+fn a_library_given_twice_is_refused_at_the_repeat() {
+    let d = workdir("twice");
+    let lib = plugin("skinflow-plugin-fixture-faulty");
+    let dotted = lib.parent().unwrap().join(".").join(lib.file_name().unwrap());
+    for second in [lib.clone(), dotted] {
+        let graph = toy_graph(&d, &[lib.clone(), second.clone()], "", "never");
+        let o = skinflow(&d, &["check", graph.to_str().unwrap()]);
+        let e = stderr(&o);
+        assert_eq!(o.status.code(), Some(2), "{e}");
+        // Lines: [graph] 1-3, blank, [[plugin]] 5-6, blank, [[plugin]] 8, its path 9.
+        let want = format!("{}:9:8: plugin {}: given twice (also as ", graph.display(), second.display());
+        assert!(e.starts_with(&want), "{e}");
+    }
+}
+
+/// A plugin param of the wrong type is located at its key, as a built-in param is at its
+/// value, not at the `[[node]]` line.
+#[test]
+fn a_plugin_param_error_is_located_at_the_param() {
+    let d = workdir("param-at");
+    let graph = toy_graph(&d, &[plugin("skinflow-plugin-fixture-faulty")], "factor = \"two\"", "never");
+    let text = std::fs::read_to_string(&graph).unwrap();
+    let line = text.lines().position(|l| l.contains("factor = \"two\"")).unwrap() + 1;
+    let column = text.lines().nth(line - 1).unwrap().find("factor").unwrap() + 1;
+    let o = skinflow(&d, &["check", graph.to_str().unwrap()]);
+    let e = stderr(&o);
+    assert_eq!(o.status.code(), Some(2), "{e}");
+    let want = format!("{}:{line}:{column}: node \"scale\": factor: invalid type: string \"two\"", graph.display());
+    assert!(e.starts_with(&want), "{e}");
+}
+
 #[test]
 fn a_library_without_the_entry_point_is_not_a_plugin() {
     let d = workdir("not-a-plugin");
@@ -454,6 +513,48 @@ fn bench_workdir(test: &str) -> PathBuf {
 fn json_file(path: &Path) -> serde_json::Value {
     let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     serde_json::from_str(&text).unwrap()
+}
+
+/// A file bench writes or removes in `--out` (its own outputs, a variant's report, an earlier
+/// bench's leftovers) that is an input of the graph is refused before anything is removed.
+/// Before, a recording replayed from `out/pareto.png` or `out/variant-3.json` was deleted.
+#[test]
+fn bench_refuses_an_out_directory_holding_its_inputs_under_its_output_names() {
+    let d = bench_workdir("bench-out-inputs");
+    std::fs::create_dir_all(d.join("out")).unwrap();
+    let rec = std::fs::read(d.join("rec.h5")).unwrap();
+    let graph = root().join("graphs/ab-replay.toml");
+    for name in ["pareto.png", "variant-3.json", "bench.md"] {
+        let kept = d.join("out").join(name);
+        std::fs::write(&kept, &rec).unwrap();
+        let replay = format!("out/{name}");
+        let o = skinflow(
+            &d,
+            &["bench", graph.to_str().unwrap(), "--replay", &replay, "--vary", "recon.lambda=0.1", "--out", "out"],
+        );
+        let err = stderr(&o);
+        assert!(!o.status.success(), "{err}");
+        assert!(
+            err.contains(&format!(
+                "--out out: bench writes or removes {} there, and that file is the recording",
+                kept.display()
+            )),
+            "{err}"
+        );
+        assert_eq!(std::fs::read(&kept).unwrap(), rec, "{name} is kept");
+        std::fs::remove_file(&kept).unwrap();
+    }
+    assert_eq!(std::fs::read_dir(d.join("out")).unwrap().count(), 0, "nothing written");
+    // Not an input, but not bench's either: notes under bench.md are kept, and said.
+    std::fs::write(d.join("out/bench.md"), "my notes\n").unwrap();
+    let o = skinflow(
+        &d,
+        &["bench", graph.to_str().unwrap(), "--replay", "rec.h5", "--vary", "recon.lambda=0.1", "--out", "out"],
+    );
+    let err = stderr(&o);
+    assert!(!o.status.success(), "{err}");
+    assert!(err.contains("exists and is not a file this command wrote (it begins \"my notes\")"), "{err}");
+    assert_eq!(std::fs::read_to_string(d.join("out/bench.md")).unwrap(), "my notes\n");
 }
 
 #[test]

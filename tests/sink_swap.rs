@@ -15,7 +15,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
-use super::support::{bin, fixture, ok, read_recording, root, skinflow, spawn, stderr};
+use super::support::{bin, fixture, ok, read_recording, root, skinflow, spawn, stderr, wait_for_file};
 
 fn workdir(test: &str) -> PathBuf {
     super::support::workdir("sink-swap", test)
@@ -85,11 +85,7 @@ fn run_live(d: &Path) -> Child {
             .stdout(Stdio::piped())
             .stderr(Stdio::piped()),
     );
-    let t0 = Instant::now();
-    while !d.join("ctl.sock").exists() {
-        assert!(t0.elapsed() < Duration::from_secs(60), "no control socket");
-        std::thread::sleep(Duration::from_millis(20));
-    }
+    wait_for_file(&d.join("ctl.sock"), Duration::from_secs(60), "no control socket");
     child
 }
 

@@ -56,6 +56,16 @@ pub fn spawn(cmd: &mut Command) -> Child {
     cmd.spawn().unwrap_or_else(|e| panic!("cannot spawn {:?}: {e}", cmd.get_program()))
 }
 
+/// Waits until `path` exists (a spawned run's socket or file), polling every 20 ms; fails the
+/// test with `what` once `within` has passed.
+pub fn wait_for_file(path: &Path, within: std::time::Duration, what: &str) {
+    let t0 = std::time::Instant::now();
+    while !path.exists() {
+        assert!(t0.elapsed() < within, "{what}");
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+}
+
 /// `cmd` run to the end as [`Command::output`] does (stdin empty, stdout and stderr captured),
 /// spawned by [`spawn`].
 pub fn output(cmd: &mut Command) -> Output {

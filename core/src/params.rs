@@ -25,18 +25,20 @@ impl ParamError {
     }
 }
 
+pub use skinflow_toml::Num;
+
 /// Checks `x.is_finite() && x > 0.0` (so NaN fails) for a named parameter.
 pub fn positive(param: &str, x: f64) -> Result<(), ParamError> {
     if x.is_finite() && x > 0.0 {
         Ok(())
     } else {
-        Err(ParamError::new(param, format!("must be finite and > 0 (got {x})")))
+        Err(ParamError::new(param, format!("must be finite and > 0 (got {})", Num(x))))
     }
 }
 
 /// Checks `x.is_finite()` for a named parameter.
 pub fn finite(param: &str, x: f64) -> Result<(), ParamError> {
-    if x.is_finite() { Ok(()) } else { Err(ParamError::new(param, format!("must be finite (got {x})"))) }
+    if x.is_finite() { Ok(()) } else { Err(ParamError::new(param, format!("must be finite (got {})", Num(x)))) }
 }
 
 /// Checks `x.is_finite() && x >= 0.0` for a named parameter.
@@ -44,7 +46,7 @@ pub fn non_negative(param: &str, x: f64) -> Result<(), ParamError> {
     if x.is_finite() && x >= 0.0 {
         Ok(())
     } else {
-        Err(ParamError::new(param, format!("must be finite and >= 0 (got {x})")))
+        Err(ParamError::new(param, format!("must be finite and >= 0 (got {})", Num(x))))
     }
 }
 

@@ -94,6 +94,34 @@ impl KindInfo {
     pub fn output_index(&self, name: &str) -> Option<usize> {
         self.outputs.iter().position(|p| p.name == name)
     }
+
+    /// Refuses a param that names a file (`ParamDoc` type `path`, `input-path`, `output-path`
+    /// or `sensor`, or an array of one of them) given as an empty string, or an array holding
+    /// one: it would name the graph file's directory, or nothing, and fail only once the node
+    /// runs (a logger's first rows already taken) with a message that names no param. Run by
+    /// the graph checks and by a hot swap.
+    pub fn no_empty_paths(&self, params: &Params) -> Result<(), ParamError> {
+        const FILE_TYPES: [&str; 4] = ["path", "input-path", "output-path", "sensor"];
+        for doc in &self.params {
+            let scalar = doc.ty.strip_prefix('[').and_then(|t| t.strip_suffix(']')).unwrap_or(&doc.ty);
+            if !FILE_TYPES.contains(&scalar) {
+                continue;
+            }
+            // Blank counts as empty: " " is a slip, not a file name anyone means.
+            let blank = |s: &str| s.trim().is_empty();
+            let what = match params.table().get(doc.name.as_ref()) {
+                Some(toml::Value::String(s)) if blank(s) => Some("is empty"),
+                Some(toml::Value::Array(a)) if a.iter().any(|v| v.as_str().is_some_and(blank)) => {
+                    Some("holds an empty path")
+                }
+                _ => None,
+            };
+            if let Some(what) = what {
+                return Err(ParamError::new(&doc.name, format!("{what}: give a file or device path")));
+            }
+        }
+        Ok(())
+    }
 }
 
 /// What a factory may use while building a node.
@@ -347,5 +375,28 @@ mod tests {
         let params = Params::from_toml("path = \"no-such-dir/out.csv\"").unwrap();
         collect.check_files(&params, &ctx(env!("CARGO_MANIFEST_DIR"))).unwrap();
         assert!(!std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("no-such-dir").exists());
+    }
+
+    /// Every file type, and arrays of them, is checked; other types and absent params are not.
+    #[test]
+    fn an_empty_file_param_of_any_file_type_is_refused_naming_it() {
+        let info = KindInfo::new("k", Role::Sink, "files")
+            .param(ParamDoc::new("p", "path", "", ""))
+            .param(ParamDoc::new("i", "input-path", "", ""))
+            .param(ParamDoc::new("o", "output-path", "", ""))
+            .param(ParamDoc::new("s", "sensor", "none", ""))
+            .param(ParamDoc::new("a", "[output-path]", "[]", ""))
+            .param(ParamDoc::new("name", "string", "none", ""));
+        let check = |toml: &str| info.no_empty_paths(&Params::from_toml(toml).unwrap()).map_err(|e| e.to_string());
+        check("p = \"a\"\ni = \"b\"\no = \"c\"\ns = \"d\"\na = [\"e\", \"f\"]\nname = \"\"").unwrap();
+        check("").unwrap();
+        check("a = []").unwrap();
+        assert_eq!(check("p = \"  \"").unwrap_err(), "param \"p\": is empty: give a file or device path");
+        for key in ["p", "i", "o", "s"] {
+            let e = check(&format!("{key} = \"\"")).unwrap_err();
+            assert_eq!(e, format!("param \"{key}\": is empty: give a file or device path"));
+        }
+        let e = check("a = [\"e\", \"\"]").unwrap_err();
+        assert_eq!(e, "param \"a\": holds an empty path: give a file or device path");
     }
 }

@@ -52,7 +52,7 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 use skinflow_contact::eval::match_contacts;
-use skinflow_contact::eval::metrics::{MATCH_RADIUS_MM, percentile};
+use skinflow_contact::eval::metrics::{MATCH_RADIUS_MM, SumOfSquares, percentile};
 use skinflow_core::params::non_negative;
 use skinflow_core::{
     BuildContext, Context, Inputs, KindInfo, NodeError, NodeImpl, NodeParams, NodeState, ParamDoc, ParamError,
@@ -130,14 +130,15 @@ struct Lane {
     frames: u64,
     /// Per evaluated frame, us (exact percentiles; grows by amortized doubling only).
     latency_us: Vec<f64>,
-    sq_err_n2: f64,
+    /// Force errors of the matched contacts, N (their squares summed, scaled).
+    sq_err_n: SumOfSquares,
     rel_err_pct: f64,
     loc_mm: f64,
     matched: u64,
     missed: u64,
     spurious: u64,
     truth_frames: u64,
-    disagree_sq_n2: f64,
+    disagree_sq_n: SumOfSquares,
     disagree_matched: u64,
     /// Frames whose forces were placeholders for an unknown pressure change: not scored.
     no_pressure_frames: u64,
@@ -222,13 +223,13 @@ impl Lane {
             frames: self.frames,
             latency_us_p50: percentile(&self.latency_us, 50.0).unwrap_or(f64::NAN),
             latency_us_p99: percentile(&self.latency_us, 99.0).unwrap_or(f64::NAN),
-            rmse_n: ratio(self.sq_err_n2, self.matched).sqrt(),
+            rmse_n: self.sq_err_n.root_mean(self.matched),
             relative_error_pct: ratio(self.rel_err_pct, self.matched),
             localization_mean_mm: ratio(self.loc_mm, self.matched),
             matched: self.matched,
             missed: self.missed,
             spurious: self.spurious,
-            disagreement_rmse_n: ratio(self.disagree_sq_n2, self.disagree_matched).sqrt(),
+            disagreement_rmse_n: self.disagree_sq_n.root_mean(self.disagree_matched),
             no_pressure_frames: self.no_pressure_frames,
             unsettled_frames: self.unsettled_frames,
             no_load_frames: self.no_load_frames,
@@ -348,7 +349,7 @@ impl Compare {
         lane.spurious += (contacts.len() - pairs.len()) as u64;
         for p in &pairs {
             let (est, truth) = (f.forces[p.pred].force_n, t[p.truth].force_n);
-            lane.sq_err_n2 += (est - truth).powi(2);
+            lane.sq_err_n.push(est - truth);
             if truth > 0.0 {
                 lane.rel_err_pct += 100.0 * (est - truth).abs() / truth;
             }
@@ -366,7 +367,7 @@ impl Compare {
         let pairs = match_contacts(&self.pred_xy, &self.truth_xy, MATCH_RADIUS_MM);
         let lane = &mut self.st.lanes[i];
         for p in &pairs {
-            lane.disagree_sq_n2 += (f.forces[p.pred].force_n - reference.forces[p.truth].force_n).powi(2);
+            lane.disagree_sq_n.push(f.forces[p.pred].force_n - reference.forces[p.truth].force_n);
             lane.disagree_matched += 1;
         }
     }

@@ -349,6 +349,13 @@ pub fn check_files(spec: &GraphSpec) -> Result<(), GraphErrors> {
         let same = |f: &Named| {
             if f.resolved.as_os_str() == w.resolved.as_os_str() { "" } else { ", the same file" }
         };
+        // A directory takes no file of this name: the node would fail to start (a plugin sink
+        // only once `run` builds it, after `check` said ok).
+        if w.resolved.is_dir() {
+            let problem = format!("{writes}, which is a directory; give `{}` a file path", w.param);
+            errs.push(param_error_at(spec, n, &w.param, problem, &mut node_spans));
+            continue;
+        }
         for (fi, f) in files.iter().enumerate() {
             if fi == wi {
                 continue;
@@ -430,6 +437,21 @@ pub fn check_files(spec: &GraphSpec) -> Result<(), GraphErrors> {
 /// [`check_files`] (links followed, `.` and `..` normalized). A reconstructor's `cache_dir` is
 /// not compared.
 pub fn check_extra_output(spec: &GraphSpec, what: &str, path: &Path) -> Result<(), String> {
+    let found = output_clashes(spec, path);
+    if found.is_empty() {
+        return Ok(());
+    }
+    Err(format!(
+        "{what} {} is {}: writing it would replace that file, or the graph would write over it; give {what} \
+         another file",
+        path.display(),
+        found.join(", and ")
+    ))
+}
+
+/// What of `spec` the file `path` is (compared as [`check_extra_output`] does), each said as
+/// "the calibration correct \"c\" reads (its `calibration` c.toml)"; empty when none.
+pub fn output_clashes(spec: &GraphSpec, path: &Path) -> Vec<String> {
     let id = file_id(path);
     let same = |f: &Named| if f.resolved.as_os_str() == path.as_os_str() { "" } else { ", the same file" };
     let mut found = Vec::new();
@@ -466,15 +488,7 @@ pub fn check_extra_output(spec: &GraphSpec, what: &str, path: &Path) -> Result<(
             }
         });
     }
-    if found.is_empty() {
-        return Ok(());
-    }
-    Err(format!(
-        "{what} {} is {}: writing it would replace that file, or the graph would write over it; give {what} \
-         another file",
-        path.display(),
-        found.join(", and ")
-    ))
+    found
 }
 
 /// The strategy names that can arrive, each with the node that names it (`None`: not known

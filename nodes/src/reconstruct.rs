@@ -190,7 +190,7 @@ impl ReconstructorParams {
 }
 
 /// Reads a sensor file named by a node parameter, or the default sensor.
-pub(crate) fn load_sensor(path: Option<&std::path::Path>, ctx: &BuildContext) -> Result<Sensor, NodeError> {
+pub fn load_sensor(path: Option<&std::path::Path>, ctx: &BuildContext) -> Result<Sensor, NodeError> {
     match path {
         None => Ok(Sensor::paper_100mm()),
         Some(p) => {

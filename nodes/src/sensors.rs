@@ -137,11 +137,13 @@ pub fn check_graph(spec: &GraphSpec) -> Result<(), GraphErrors> {
                         own_sensor.width_mm, own_sensor.height_mm, -hw, -hh, spec.nodes[s].id, rig.x_mm, rig.y_mm
                     ));
                 }
-                let side = own_sensor.width_mm.max(own_sensor.height_mm);
+                // A disc wider than the shorter side cannot lie on the skin (as the simulator's scenes).
+                let side = own_sensor.width_mm.min(own_sensor.height_mm);
                 if rig.diameter_mm > side {
                     problems.push(format!(
                         "{does} {own_desc}, {} x {} mm, but its truth comes from serial_loadcell \"{}\", whose indenter \
-                         is {} mm wide, wider than the sensor: {spoils}; set the rig's `diameter_mm` in mm",
+                         is {} mm wide, wider than the sensor's shorter side ({side} mm): {spoils}; set the rig's \
+                         `diameter_mm` in mm",
                         own_sensor.width_mm, own_sensor.height_mm, spec.nodes[s].id, rig.diameter_mm
                     ));
                 }

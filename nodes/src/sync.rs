@@ -4,7 +4,8 @@
 //! Theory: a frame stamped `t` (middle of acquisition) with period `T` gets the mean of the
 //! pressure samples in `[t - T/2, t + T/2)` (CONTRACTS.md section 2). `T` is `frame_period_s`
 //! or the median of the last 15 frame intervals, each divided by its `seq` step (frames lost on
-//! the link widen a gap, not the window). A frame is emitted as soon as no later pressure
+//! the link widen a gap, not the window); back-to-back windows share their boundary exactly,
+//! whatever the nanosecond rounding of frame times (`Sync::window`). A frame is emitted as soon as no later pressure
 //! sample can fall into its window (the newest sample is within one pressure period of the
 //! window's end; that period is the median of the recent sample intervals, so a gap in the
 //! pressure stream does not stretch it), without waiting when no pressure is connected, and in
@@ -87,6 +88,11 @@ const P0_RECENT: usize = 64;
 /// Fewest samples a noise estimate needs before `settled` trusts it (an SD from fewer samples
 /// is too uncertain: with 5, pure noise would be flagged in about a fifth of the frames).
 const MIN_NOISE_SAMPLES: u64 = 10;
+/// How far apart (s) a frame window's start and the previous window's end may be and still
+/// be taken for one boundary: far above the nanosecond rounding of frame times, far below any
+/// sample period.
+const TILE_TOLERANCE_S: f64 = 1e-6;
+
 /// Frames waiting for their window to close before the oldest is emitted regardless.
 const MAX_PENDING: usize = 2;
 
@@ -222,6 +228,9 @@ struct SyncState {
     last_frame_s: Option<f64>,
     /// The time of the last frame emitted: an out-of-order frame older than it is dropped.
     last_emitted_s: Option<f64>,
+    /// The end (exclusive) of the last emitted frame's window: the next window starts there
+    /// when its own start is within [`TILE_TOLERANCE_S`] of it (see [`Sync::window`]).
+    last_window_end_s: Option<f64>,
     /// The last frame's `seq` (the board's frame number): intervals are divided by its steps.
     last_seq: Option<u64>,
     /// Recent frame intervals per frame period (over lost frames: divided by the `seq` step).
@@ -480,8 +489,7 @@ impl Sync {
         let (h, frame) = self.st.pending.pop_front().expect("called with a pending frame");
         let t = h.t_s();
         self.st.last_emitted_s = Some(t);
-        let half = 0.5 * self.st.period_s;
-        let (lo, hi) = (t - half, t + half);
+        let (lo, hi) = self.window(t);
         let (n, mean, sd) = mean_sd(
             self.st.pressure.iter().filter(|&&(tp, kpa)| tp >= lo && tp < hi && kpa.is_finite()).map(|&(_, k)| k),
         );
@@ -534,6 +542,25 @@ impl Sync {
             s.truth = truth;
         });
         out.send(0, Message::from_arc(Header { origin: ctx.index(), ..h }, payload))
+    }
+
+    /// The acquisition window `[t - T/2, t + T/2)` of the frame at `t` emitted next, s. Frame
+    /// times are whole nanoseconds and T a median of their intervals, so consecutive windows
+    /// can miss each other by a nanosecond (a 1.3 fps board: intervals of 769230769 and
+    /// 769230770 ns); a pressure sample in that gap (at 10 s exactly, every 10 s with 20 Hz
+    /// samples) fell in no window. A window that starts within [`TILE_TOLERANCE_S`] of the
+    /// previous one's end starts at that end instead, so back-to-back frames tile the time
+    /// axis as the contract's windows do; over lost frames the gap is real and stays.
+    fn window(&mut self, t: f64) -> (f64, f64) {
+        let half = 0.5 * self.st.period_s;
+        let (mut lo, hi) = (t - half, t + half);
+        if let Some(end) = self.st.last_window_end_s
+            && (lo - end).abs() <= TILE_TOLERANCE_S
+        {
+            lo = end;
+        }
+        self.st.last_window_end_s = Some(hi);
+        (lo, hi)
     }
 
     /// Re-tares P0 and the noise from the last `tare_window_s` seconds of pressure.
@@ -842,6 +869,29 @@ mod tests {
 
     fn frame(s: &mut Sync, seq: u64, t_s: f64) {
         s.on_frame(Header { seq, t_ns: (t_s * 1e9).round() as u64, origin: 0 }, Arc::new(EitFrame { v: vec![1.0] }));
+    }
+
+    /// A 1.3 fps board's frames at (k + 0.5) / 1.3 s, rounded to whole ns (as `Header::t_ns`
+    /// holds them), tile the time axis: every 20 Hz pressure sample falls in exactly one window,
+    /// including those on a window boundary (10 s, 20 s, ...), which a 1 ns gap between the
+    /// windows left out. Over a lost frame the gap stays.
+    #[test]
+    fn back_to_back_windows_tile_so_a_sample_on_a_boundary_is_in_exactly_one() {
+        let mut s = sync();
+        s.st.period_s = 1.0 / 1.3;
+        let t_ns = |k: u64| ((k as f64 + 0.5) / 1.3 * 1e9).round() as u64;
+        let windows: Vec<(f64, f64)> = (0..40).map(|k| s.window(t_ns(k) as f64 * 1e-9)).collect();
+        let samples: Vec<f64> = (0..600).map(|i| f64::from(i) * 0.05).collect();
+        let (first, last) = (windows[0].0, windows[39].1);
+        for &tp in samples.iter().filter(|&&tp| tp >= first && tp < last) {
+            let n = windows.iter().filter(|&&(lo, hi)| tp >= lo && tp < hi).count();
+            assert_eq!(n, 1, "sample at {tp} s is in {n} windows");
+        }
+        // The boundary at 10 s: frame 12's window ends there and frame 13's starts there.
+        assert!(windows[13].0 <= 10.0 && windows[12].1 <= 10.0 && 10.0 < windows[13].1);
+        // Frames 41-42 lost: frame 43's window starts where its own start is.
+        let (lo, _) = s.window(t_ns(43) as f64 * 1e-9);
+        assert!((lo - 43.0 / 1.3).abs() < 1e-9, "{lo}");
     }
 
     /// The reviewer's case: a frame that arrives after a newer one is put in its place while

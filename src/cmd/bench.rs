@@ -22,6 +22,7 @@ mod report;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
+use super::paths::Output;
 use anyhow::{Context as _, Result, anyhow, bail};
 use skinflow_core::graph::{GraphErrors, SourceFile, plugin_paths};
 use skinflow_core::{GraphSpec, Registry, RunOptions};
@@ -233,10 +234,17 @@ fn remove(path: &Path) -> Result<()> {
     }
 }
 
-/// Removes what an earlier bench left in `dir` (`bench.md`, `bench.json`, `pareto.png`,
-/// `variant-<k>.json`), so every output there is this run's.
-fn clear_outputs(dir: &Path) -> Result<()> {
-    let listing = std::fs::read_dir(dir).with_context(|| format!("{}: cannot list", dir.display()))?;
+/// The files bench writes in `dir` itself (each variant's report besides).
+const OWN_FILES: [&str; 3] = ["bench.md", "bench.json", "pareto.png"];
+
+/// What an earlier bench left in `dir` (`bench.md`, `bench.json`, `pareto.png`,
+/// `variant-<k>.json`); none when `dir` does not exist yet.
+fn stale_outputs(dir: &Path) -> Result<Vec<PathBuf>> {
+    let listing = match std::fs::read_dir(dir) {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
+        r => r.with_context(|| format!("{}: cannot list", dir.display()))?,
+    };
+    let mut stale = Vec::new();
     for entry in listing {
         let path = entry.with_context(|| format!("{}: cannot list", dir.display()))?.path();
         let name = path.file_name().and_then(|n| n.to_str()).unwrap_or_default();
@@ -244,8 +252,57 @@ fn clear_outputs(dir: &Path) -> Result<()> {
             .strip_prefix("variant-")
             .and_then(|r| r.strip_suffix(".json"))
             .is_some_and(|k| !k.is_empty() && k.bytes().all(|b| b.is_ascii_digit()));
-        if (variant || ["bench.md", "bench.json", "pareto.png"].contains(&name)) && path.is_file() {
-            remove(&path)?;
+        if (variant || OWN_FILES.contains(&name)) && path.is_file() {
+            stale.push(path);
+        }
+    }
+    Ok(stale)
+}
+
+/// Refuses an `--out` directory (`given`; `out_dir` absolute, as are `stale` and the reports'
+/// paths) where a file bench writes or removes (its own outputs, every
+/// variant's report, an earlier bench's leftovers) is one a variant's graph reads or writes:
+/// the recording replayed, a calibration, the graph file. Checked before anything is removed;
+/// a variant's own report is the file its compare node writes.
+fn check_out_dir(
+    given: &Path,
+    out_dir: &Path,
+    specs: &[(String, Overrides, GraphSpec, PathBuf)],
+    stale: &[PathBuf],
+) -> Result<()> {
+    let dir = given.display();
+    let own = OWN_FILES.iter().map(|n| out_dir.join(n));
+    let written = specs.iter().map(|(.., json)| json.clone());
+    let mut files: Vec<PathBuf> = own.chain(written).chain(stale.iter().cloned()).collect();
+    files.sort();
+    files.dedup();
+    for (_, _, spec, json) in specs {
+        for file in files.iter().filter(|f| *f != json) {
+            let clashes = skinflow_nodes::outputs::output_clashes(spec, file);
+            if let Some(first) = clashes.first() {
+                bail!(
+                    "--out {dir}: bench writes or removes {} there, and that file is {first}; give --out another \
+                     directory (or move the file out of it)",
+                    file.display()
+                );
+            }
+        }
+    }
+    // Not the graph's, but not bench's either: a file of another kind under one of its names.
+    for file in &files {
+        let name = file.file_name().and_then(|n| n.to_str()).unwrap_or_default();
+        let kind = match name {
+            "pareto.png" => Output::Png,
+            "bench.md" => Output::TextStarting(report::MD_TITLE),
+            "bench.json" => Output::JsonWith("points"),
+            _ => Output::JsonWith("lanes"),
+        };
+        if let Some(problem) = super::paths::replace_refusal(file, kind) {
+            bail!(
+                "--out {dir}: bench writes or removes {name} there, and {} {problem}; give --out another directory \
+                 (or move the file out of it)",
+                file.display()
+            );
         }
     }
     Ok(())
@@ -282,6 +339,8 @@ pub fn run(graph: &Path, replay: &Path, vary: &[String], out_dir: &Path) -> Resu
     if !replay.is_file() {
         bail!("{}: recording not found", replay.display());
     }
+    // A file, or a place no directory can be made, before any variant runs.
+    super::paths::check_output_dir("--out", out_dir)?;
     let out_abs = std::path::absolute(out_dir)?;
     // Every variant validates, and opens its input files, before any runs or anything is written.
     let mut specs: Vec<(String, Overrides, GraphSpec, PathBuf)> = Vec::new();
@@ -295,8 +354,12 @@ pub fn run(graph: &Path, replay: &Path, vary: &[String], out_dir: &Path) -> Resu
             .map_err(|e| invalid_variant(graph, &text, &reg, &label, e))?;
         specs.push((label, set, spec, json));
     }
+    let stale = stale_outputs(&out_abs)?;
+    check_out_dir(out_dir, &out_abs, &specs, &stale)?;
     std::fs::create_dir_all(out_dir).with_context(|| format!("{}: cannot create", out_dir.display()))?;
-    clear_outputs(out_dir)?;
+    for path in &stale {
+        remove(path)?;
+    }
     // The first variant once, unmeasured: the measured passes all start warm (caches, page
     // faults, allocator, lazily built tables). Its outcome is the measured pass's to report.
     if let Some((label, _, spec, json)) = specs.first() {
@@ -479,7 +542,7 @@ mod tests {
     }
 
     #[test]
-    fn an_earlier_runs_outputs_are_cleared_and_nothing_else() {
+    fn an_earlier_runs_outputs_are_found_and_nothing_else() {
         let dir = std::env::temp_dir().join(format!("skinflow-bench-clear-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(&dir).unwrap();
@@ -488,13 +551,16 @@ mod tests {
         for f in ours.iter().chain(&theirs) {
             std::fs::write(dir.join(f), "x").unwrap();
         }
-        clear_outputs(&dir).unwrap();
-        let mut left: Vec<String> =
-            std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
-        left.sort();
-        let mut want: Vec<String> = theirs.iter().map(|s| s.to_string()).collect();
+        let mut stale: Vec<String> = stale_outputs(&dir)
+            .unwrap()
+            .iter()
+            .map(|p| p.file_name().unwrap().to_string_lossy().into_owned())
+            .collect();
+        stale.sort();
+        let mut want: Vec<String> = ours.iter().map(|s| s.to_string()).collect();
         want.sort();
-        assert_eq!(left, want);
+        assert_eq!(stale, want);
         std::fs::remove_dir_all(&dir).unwrap();
+        assert!(stale_outputs(&dir).unwrap().is_empty(), "a directory not made yet holds none");
     }
 }

@@ -248,6 +248,7 @@ fn collect_one(recording: &Path, args: &PipelineArgs, first_hold: u64) -> Result
 pub fn run(recordings: &[PathBuf], out: &Path, fit_toml: &str, args: &PipelineArgs) -> Result<()> {
     let inputs: Vec<(&str, &Path)> = recordings.iter().map(|r| ("recording", r.as_path())).collect();
     super::paths::check_outputs(&inputs, &[("--out", out)])?;
+    super::paths::check_replaces("--out", out, super::paths::Output::Calibration)?;
     let params = fit_params(fit_toml)?;
     args.validate()?;
     let (samples, provenance) = collect(recordings, args)?;

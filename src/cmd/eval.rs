@@ -272,14 +272,66 @@ impl CsvFrame<'_> {
 /// frame's recording as given on the command line; `t_s` is the frame's time in it. One force
 /// column per lane (`names`, in order).
 pub fn contacts_csv_header(names: &[String]) -> String {
-    let mut h = String::from(
-        "eval_frame,t_s,kind,recording,truth_contacts,dp_kpa,true_x_mm,true_y_mm,true_force_n,true_diameter_mm,\
-         x_mm,y_mm,c_sum,area_mm2,peak",
-    );
+    debug_assert!(CONTACTS_CSV_HEADER.starts_with(CONTACTS_CSV_START));
+    let mut h = String::from(CONTACTS_CSV_HEADER);
     for name in names {
         h.push_str(&format!(",{name}_n"));
     }
     h
+}
+
+/// How every `--contacts-csv` table begins: an existing file that does not is not replaced.
+const CONTACTS_CSV_START: &str = "eval_frame,t_s,";
+
+/// The `--contacts-csv` columns before the lanes' forces.
+const CONTACTS_CSV_HEADER: &str = "eval_frame,t_s,kind,recording,truth_contacts,dp_kpa,true_x_mm,true_y_mm,\
+     true_force_n,true_diameter_mm,x_mm,y_mm,c_sum,area_mm2,peak";
+
+/// The figures `--plots DIR` writes into DIR.
+const PLOT_FILES: [&str; 4] = ["predicted_vs_true.png", "fields.png", "localization.png", "conductivity.png"];
+
+/// Refuses a `--plots` directory holding, under a figure's name, an input (the recording, the
+/// calibration), another output of this run, a FIFO or device, or a file that is no PNG image
+/// (an HDF5 recording, a calibration, notes): a figure would replace it, or wait on it.
+fn check_plot_files(dir: &Path, inputs: &[(&str, &Path)], outputs: &[(&str, &Path)]) -> Result<()> {
+    use super::paths::{Output, replace_refusal, same_path};
+    let d = dir.display();
+    for name in PLOT_FILES {
+        let file = dir.join(name);
+        let (file, f) = (file.as_path(), file.display());
+        if let Some((what, input)) = inputs.iter().find(|(_, p)| same_path(p, file)) {
+            bail!(
+                "--plots {d}: {f} is the {what} {}; a figure is written under that name, refusing to overwrite an \
+                 input (give --plots another directory)",
+                input.display()
+            );
+        }
+        if let Some((flag, out)) = outputs.iter().find(|(_, p)| same_path(p, file)) {
+            bail!("--plots {d} writes {f} and {flag} {} names the same file", out.display());
+        }
+        match std::fs::metadata(file) {
+            // Opening a FIFO waits for its other end; a device is no place for a figure.
+            Ok(m) if !m.is_file() && !m.is_dir() => {
+                bail!("--plots {d}: {f} is not a regular file (a FIFO or a device); a figure is written as a file")
+            }
+            Ok(m) if m.is_file() && skinflow_record::read::hdf5_signature(file) == Some(true) => {
+                bail!("--plots {d}: {f} is an HDF5 file (a recording?); refusing to replace it with a figure")
+            }
+            _ => {}
+        }
+    }
+    // Then files of another kind (notes, a calibration not given as --calib) under a figure's name.
+    for name in PLOT_FILES {
+        let file = dir.join(name);
+        if let Some(problem) = replace_refusal(&file, Output::Png) {
+            bail!(
+                "--plots {d}: {} {problem}; refusing to replace it with a figure: remove it, or give --plots \
+                 another directory",
+                file.display()
+            );
+        }
+    }
+    Ok(())
 }
 
 pub fn run(
@@ -300,6 +352,9 @@ pub fn run(
     let outputs: Vec<(&str, &Path)> =
         [("--json", json), ("--contacts-csv", contacts_csv)].into_iter().filter_map(|(f, p)| Some((f, p?))).collect();
     super::paths::check_outputs(&inputs, &outputs)?;
+    use super::paths::{Output, check_replaces};
+    json.map_or(Ok(()), |p| check_replaces("--json", p, Output::JsonWith("strategies")))?;
+    contacts_csv.map_or(Ok(()), |p| check_replaces("--contacts-csv", p, Output::TextStarting(CONTACTS_CSV_START)))?;
     if let Some(dir) = plots_dir {
         if inputs.iter().any(|(_, p)| super::paths::same_file(p, dir)) {
             bail!("--plots {}: is an input file, not a directory for the plots", dir.display());
@@ -309,6 +364,7 @@ pub fn run(
         }
         // Before the evaluation, not after the JSON and the table are written.
         super::paths::check_output_dir("--plots", dir)?;
+        check_plot_files(dir, &inputs, &outputs)?;
     }
     let cal = check_calibration(calib)?;
     args.validate_with(

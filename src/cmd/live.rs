@@ -702,14 +702,18 @@ fn check_request(req: &Value) -> Result<(), String> {
 }
 
 /// A swap request's `params` as the TOML table a node's params are: a JSON object (absent:
-/// none). What TOML cannot hold is named with where it is: a value that is not an object, or
-/// a `null` anywhere in it (TOML has no null: leave the key out for its default).
+/// none). What TOML cannot hold is named with where it is: a value that is not an object, a
+/// `null` anywhere in it (TOML has no null: leave the key out for its default), or an integer
+/// above TOML's largest (`i64::MAX`).
 fn swap_params(params: Option<&Value>) -> Result<toml::Table, String> {
-    fn find_null(v: &Value, path: &str) -> Option<String> {
+    fn unholdable(v: &Value, path: &str) -> Option<String> {
         match v {
-            Value::Null => Some(path.to_owned()),
-            Value::Array(a) => a.iter().enumerate().find_map(|(i, x)| find_null(x, &format!("{path}[{i}]"))),
-            Value::Object(o) => o.iter().find_map(|(k, x)| find_null(x, &format!("{path}.{k}"))),
+            Value::Null => Some(format!("{path} is null, which TOML cannot hold: leave the key out for its default")),
+            Value::Number(n) if n.as_u64().is_some_and(|u| u > i64::MAX as u64) => {
+                Some(format!("{path} is {n}, above the largest integer TOML holds ({})", i64::MAX))
+            }
+            Value::Array(a) => a.iter().enumerate().find_map(|(i, x)| unholdable(x, &format!("{path}[{i}]"))),
+            Value::Object(o) => o.iter().find_map(|(k, x)| unholdable(x, &format!("{path}.{k}"))),
             _ => None,
         }
     }
@@ -725,8 +729,8 @@ fn swap_params(params: Option<&Value>) -> Result<toml::Table, String> {
     if let Some(kind) = kind {
         return Err(format!("must be a JSON object of the kind's params, e.g. {{\"lambda\": 0.05}} (got {kind})"));
     }
-    if let Some(at) = find_null(params, "params") {
-        return Err(format!("{at} is null, which TOML cannot hold: leave the key out for its default"));
+    if let Some(problem) = unholdable(params, "params") {
+        return Err(problem);
     }
     toml::Table::try_from(params.clone()).map_err(|e| e.to_string())
 }
@@ -823,6 +827,10 @@ mod tests {
                 "params.mesh.elements is null, which TOML cannot hold: leave the key out for its default",
             ),
             (json!({"a": [1, null]}), "params.a[1] is null, which TOML cannot hold: leave the key out for its default"),
+            (
+                json!({"toy": {"by": u64::MAX}}),
+                "params.toy.by is 18446744073709551615, above the largest integer TOML holds (9223372036854775807)",
+            ),
         ] {
             assert_eq!(swap_params(Some(&v)).unwrap_err(), want, "{v}");
         }

@@ -15,6 +15,26 @@ pub fn same_file(a: &Path, b: &Path) -> bool {
     }
 }
 
+/// Whether `a` and `b` name one file: the same existing file (links followed), or, where
+/// either does not exist yet, the same absolute path once `.` and `..` are resolved
+/// lexically (`./plots/fields.png` and `plots/fields.png`).
+pub fn same_path(a: &Path, b: &Path) -> bool {
+    fn lexical(p: &Path) -> Option<PathBuf> {
+        let mut out = PathBuf::new();
+        for c in std::path::absolute(p).ok()?.components() {
+            match c {
+                std::path::Component::CurDir => {}
+                std::path::Component::ParentDir => {
+                    out.pop();
+                }
+                c => out.push(c),
+            }
+        }
+        Some(out)
+    }
+    a == b || same_file(a, b) || lexical(a).is_some_and(|x| Some(x) == lexical(b))
+}
+
 /// Refuses an output (`flag`, `out`) that is the same file as an input (`name`, path) or as
 /// another output, an output whose directory does not exist, and an output that would replace
 /// an existing HDF5 file (most likely a recording) with text: a mistyped `--out` or `--json`
@@ -87,7 +107,7 @@ fn check(inputs: &[(&str, &Path)], outputs: &[(&str, &Path)], streams: bool) -> 
             }
         }
         for &(other, path) in &outputs[..k] {
-            if out == path || same_file(out, path) {
+            if same_path(out, path) {
                 bail!("{flag} {} and {other} {} name the same file", out.display(), path.display());
             }
         }
@@ -155,6 +175,98 @@ pub fn check_output_dir(flag: &str, dir: &Path) -> Result<()> {
     }
     let _ = std::fs::remove_dir(&probe);
     Ok(())
+}
+
+/// What a command's output file is, so that an existing file at its path is replaced only
+/// when it is one of the same (an earlier run's), or empty.
+#[derive(Debug, Clone, Copy)]
+pub enum Output {
+    /// A TOML file whose `format` is `skinflow-calibration` (`calibrate --out`).
+    Calibration,
+    /// A JSON object holding this key (`eval --json`: `strategies`; a compare report: `lanes`).
+    JsonWith(&'static str),
+    /// Text whose first line begins so (`eval --contacts-csv`'s header, `bench.md`'s title).
+    TextStarting(&'static str),
+    /// A PNG image (`eval --plots`, bench's `pareto.png`).
+    Png,
+}
+
+impl Output {
+    fn what(self) -> String {
+        match self {
+            Output::Calibration => "a skinflow calibration".into(),
+            Output::JsonWith(key) => format!("a JSON object with `{key}` (an earlier output of this command)"),
+            Output::TextStarting(_) => "a file this command wrote".into(),
+            Output::Png => "a PNG image".into(),
+        }
+    }
+}
+
+/// Refuses an output `out` (`flag`) that exists as a non-empty regular file of another kind
+/// than `kind`: a scene, a graph, a calibration or notes named by a slip of `--out` or `--json`
+/// would be lost, while re-running a command over its own earlier output stays a plain
+/// replacement. Streams, missing files and directories pass (a directory cannot be replaced by
+/// a file: the write fails, naming the flag).
+pub fn check_replaces(flag: &str, out: &Path, kind: Output) -> Result<()> {
+    match replace_refusal(out, kind) {
+        None => Ok(()),
+        Some(problem) => {
+            bail!("{flag} {}: {problem}; refusing to replace it: remove it, or give {flag} another file", out.display())
+        }
+    }
+}
+
+/// Why `out` may not be replaced by an output of `kind` (see [`check_replaces`]), as "exists
+/// and is not a PNG image (it begins ...)"; `None` when it may.
+pub fn replace_refusal(out: &Path, kind: Output) -> Option<String> {
+    use std::io::Read;
+    let meta = std::fs::metadata(out).ok()?;
+    if !meta.is_file() || meta.len() == 0 || std_stream(out).is_some() {
+        return None;
+    }
+    let read = |limit: u64| -> Vec<u8> {
+        let mut bytes = Vec::new();
+        let _ = std::fs::File::open(out).and_then(|f| f.take(limit).read_to_end(&mut bytes));
+        bytes
+    };
+    // The start decides most cases without reading a large file whole.
+    let head = read(4096);
+    let text_head = !head.contains(&0) && utf8_or_cut(&head);
+    // Ours are small (a calibration, an eval report); a larger file is no earlier output.
+    const READ_LIMIT: u64 = 64 << 20;
+    let whole = || String::from_utf8(read(READ_LIMIT)).ok();
+    let ours = match kind {
+        Output::Png => head.starts_with(b"\x89PNG\r\n\x1a\n"),
+        _ if !text_head => false,
+        Output::Calibration => whole().and_then(|t| t.parse::<toml::Table>().ok()).is_some_and(|t| {
+            t.get("format").and_then(toml::Value::as_str) == Some(skinflow_contact::correct::calibration::FORMAT)
+        }),
+        Output::JsonWith(key) => whole()
+            .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
+            .is_some_and(|v| v.get(key).is_some()),
+        Output::TextStarting(start) => String::from_utf8_lossy(&head).starts_with(start),
+    };
+    if ours {
+        return None;
+    }
+    let first = text_head
+        .then(|| String::from_utf8_lossy(&head).into_owned())
+        .and_then(|t| t.lines().find(|l| !l.trim().is_empty()).map(|l| l.trim().chars().take(60).collect::<String>()));
+    let begins = match first {
+        Some(l) => format!("it begins {l:?}"),
+        None if text_head => "it holds only blank lines".to_owned(),
+        None => "it is not text".to_owned(),
+    };
+    Some(format!("exists and is not {} ({begins})", kind.what()))
+}
+
+/// Whether `bytes` (a file's first bytes) are UTF-8 text, but for a character the end of
+/// what was read cut in two.
+fn utf8_or_cut(bytes: &[u8]) -> bool {
+    match std::str::from_utf8(bytes) {
+        Ok(_) => true,
+        Err(e) => e.error_len().is_none() && e.valid_up_to() + 4 > bytes.len(),
+    }
 }
 
 /// Writes `bytes` to `path` (through a symbolic link to its target) under a hidden name in

@@ -193,7 +193,11 @@ impl PipelineArgs {
         use skinflow_nodes::sensors::sensor_ref;
         let params = parse_params::<skinflow_nodes::reconstruct::ReconstructorParams>("--recon", &self.recon)?;
         let default = sensor_ref(&skinflow_eit::Sensor::paper_100mm());
-        if params.sensor.is_some() || sensor_ref(&rec.sensor).same_geometry(&default) {
+        if let Some(path) = &params.sensor {
+            check_named_sensor(path, rec)?;
+            return Ok(self.recon.clone());
+        }
+        if sensor_ref(&rec.sensor).same_geometry(&default) {
             return Ok(self.recon.clone());
         }
         let hash: String =
@@ -241,6 +245,46 @@ impl PipelineArgs {
     }
 }
 
+/// Holds the sensor `--recon` names (`path`, relative to the current directory as the
+/// pipeline reads it) to the recording's: another size, electrode count or protocol is refused,
+/// naming both (the frames are the recording's electrodes' measurements); electrodes placed
+/// or sized otherwise (more than 1 µm) are allowed, as a corrected electrode model may be
+/// meant, but said. A file that does not load is left to the pipeline's own check.
+fn check_named_sensor(path: &Path, rec: &Recording) -> Result<()> {
+    use skinflow_nodes::sensors::sensor_ref;
+    // Resolved as the generated pipeline's reconstructor resolves it (its graph has no directory).
+    let ctx = skinflow_core::BuildContext::new("", skinflow_core::Mode::Lockstep, "recon");
+    let Ok(named) = skinflow_nodes::reconstruct::load_sensor(Some(path), &ctx) else { return Ok(()) };
+    let (ours, theirs) = (sensor_ref(&named), sensor_ref(&rec.sensor));
+    let flag = format!("--recon 'sensor = {:?}'", path.display().to_string());
+    if !ours.same_geometry(&theirs) {
+        bail!(
+            "{flag}: sensor {ours}, but {} was recorded on sensor {theirs} (its `sensor` attribute): its frames are \
+             that sensor's measurements; leave `sensor` out to image on it, or name a description of the same \
+             size, electrode count and protocol",
+            rec.path.display()
+        );
+    }
+    let moved = named
+        .electrodes
+        .iter()
+        .zip(&rec.sensor.electrodes)
+        .filter(|(a, b)| {
+            (0..2).any(|k| (a.start_mm[k] - b.start_mm[k]).abs() > 1e-3 || (a.end_mm[k] - b.end_mm[k]).abs() > 1e-3)
+        })
+        .count();
+    if moved > 0 {
+        eprintln!(
+            "warning: {flag}: {moved} of the {} electrodes lie or extend otherwise than in {}'s own sensor \
+             description: imaged on {} as asked",
+            named.electrodes.len(),
+            rec.path.display(),
+            path.display()
+        );
+    }
+    Ok(())
+}
+
 /// Refuses recordings the pipeline cannot evaluate against truth (no EIT frames, no
 /// pressure, no truth; the reader refuses bad times); returns the recording.
 pub fn require_truth(path: &Path) -> Result<Recording> {
@@ -268,7 +312,7 @@ const IMPLAUSIBLE_FORCE_N: f64 = 1000.0;
 
 /// Warns about true contacts no indenter on this sensor can make, which an external writer's
 /// unit error (cm or µm for mm, mN for N) gives: centred off the sensor by more than their
-/// radius, wider than the sensor, or above [`IMPLAUSIBLE_FORCE_N`]. They are kept (the reader
+/// radius, wider than the sensor's shorter side, or above [`IMPLAUSIBLE_FORCE_N`]. They are kept (the reader
 /// accepts any finite, positive values).
 fn warn_implausible_truth(path: &Path, rec: &Recording) {
     let (Some(truth), sensor) = (rec.truth.as_ref(), &rec.sensor) else { return };
@@ -279,7 +323,7 @@ fn warn_implausible_truth(path: &Path, rec: &Recording) {
             total += 1;
             let r = 0.5 * c.diameter_mm;
             off += usize::from(c.x_mm.abs() > hx + r || c.y_mm.abs() > hy + r);
-            wide += usize::from(c.diameter_mm > sensor.width_mm.max(sensor.height_mm));
+            wide += usize::from(c.diameter_mm > sensor.width_mm.min(sensor.height_mm));
             heavy += usize::from(c.force_n > IMPLAUSIBLE_FORCE_N);
         }
     }
@@ -291,7 +335,7 @@ fn warn_implausible_truth(path: &Path, rec: &Recording) {
                 sensor.width_mm, sensor.height_mm
             ),
         ),
-        (wide, "are wider than the sensor".to_owned()),
+        (wide, format!("are wider than the sensor's shorter side ({} mm)", sensor.width_mm.min(sensor.height_mm))),
         (heavy, format!("press harder than {IMPLAUSIBLE_FORCE_N} N")),
     ] {
         if n > 0 {

@@ -29,6 +29,9 @@ pub fn run(socket: &Path, requests: &[String]) -> Result<()> {
             Some(Err(e)) if matches!(e.kind(), std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut) => {
                 bail!("{s}: no reply to {line} within {} s", REPLY_TIMEOUT.as_secs())
             }
+            Some(Err(e)) if e.kind() == std::io::ErrorKind::InvalidData => {
+                bail!("{s}: the reply to {line} is not UTF-8 text ({e}): is this a skinflow control socket?")
+            }
             // A reset is the graph's end (or its socket's) while the request was in flight.
             Some(Err(e)) => bail!(
                 "{s}: the connection ended before a reply to {line} ({e}): the graph ended or closed its socket; \
@@ -56,4 +59,48 @@ pub fn run(socket: &Path, requests: &[String]) -> Result<()> {
         }
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use std::io::{Read, Write};
+    use std::os::unix::net::UnixListener;
+
+    use super::*;
+
+    /// A peer answering one request with `reply`, on a socket in a fresh directory.
+    fn peer(name: &str, reply: &'static [u8]) -> (std::path::PathBuf, std::thread::JoinHandle<()>) {
+        let dir = std::env::temp_dir().join(format!("skinflow-send-{}-{name}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("c.sock");
+        let listener = UnixListener::bind(&path).unwrap();
+        let server = std::thread::spawn(move || {
+            let (mut conn, _) = listener.accept().unwrap();
+            let mut byte = [0u8; 1];
+            while conn.read(&mut byte).unwrap() == 1 && byte[0] != b'\n' {}
+            conn.write_all(reply).unwrap();
+        });
+        (path, server)
+    }
+
+    #[test]
+    fn a_reply_that_is_not_utf8_is_said_so_not_taken_for_the_connection_ending() {
+        let (path, server) = peer("not-utf8", b"\xff\xfe ok\n");
+        let e = run(&path, &["{\"cmd\":\"stats\"}".into()]).unwrap_err().to_string();
+        server.join().unwrap();
+        assert!(e.contains("the reply to {\"cmd\":\"stats\"} is not UTF-8 text"), "{e}");
+        assert!(!e.contains("connection ended"), "{e}");
+    }
+
+    #[test]
+    fn an_ok_reply_passes_and_an_error_reply_fails_naming_it() {
+        let (path, server) = peer("ok", b"{\"ok\": true}\n");
+        run(&path, &["{\"cmd\":\"stats\"}".into()]).unwrap();
+        server.join().unwrap();
+        let (path, server) = peer("err", b"{\"ok\": false, \"error\": \"no node \\\"x\\\"\"}\n");
+        let e = run(&path, &["{\"cmd\":\"tare\"}".into()]).unwrap_err().to_string();
+        server.join().unwrap();
+        assert!(e.ends_with(": {\"cmd\":\"tare\"}: no node \"x\""), "{e}");
+    }
 }

@@ -169,9 +169,14 @@ pub fn plugin_paths(src: &SourceFile) -> Result<Vec<PathBuf>, GraphErrors> {
 /// ([`plugin_paths`]), `cause` the loader's whole message (which names the library). Located
 /// at the first entry of that path; at the file alone when none matches.
 pub fn plugin_error(src: &SourceFile, path: &Path, cause: String) -> GraphError {
-    let span = validate::plugin_entries(src)
-        .ok()
-        .and_then(|entries| entries.into_iter().find(|(p, _)| p == path).map(|(_, span)| span));
+    // Several entries naming the library (`lib.so` and `./lib.so`, or one text twice): the
+    // error is about the repetition, which the later entry makes; one spelt as `path` is is
+    // preferred.
+    let span = validate::plugin_entries(src).ok().and_then(|entries| {
+        let same: Vec<_> = entries.into_iter().filter(|(p, _)| p == path).collect();
+        let exact = same.iter().rev().find(|(p, _)| p.as_os_str() == path.as_os_str());
+        exact.or(same.last()).map(|(_, span)| span.clone())
+    });
     GraphError::at(src, span, None, GraphErrorKind::Plugin(cause))
 }
 

@@ -17,7 +17,7 @@ use super::file::{
 use super::source::SourceFile;
 use super::{DEFAULT_CAPACITY, EdgeSpec, GraphSpec, MAX_CAPACITY, MAX_WORKERS, NodeSpec, Trigger, connected_inputs};
 use crate::node::Mode;
-use crate::params::{ParamError, Params};
+use crate::params::Params;
 use crate::registry::Wiring;
 use crate::registry::{Registry, Role};
 
@@ -232,7 +232,7 @@ pub(super) fn validate(src: SourceFile, registry: &Registry) -> Result<GraphSpec
             continue;
         };
         let params = Params::in_graph(src.text.clone(), i, n.params.clone().unwrap_or_default());
-        let checked = factory.check(&params).and_then(|()| params.locate(no_empty_paths(factory.info(), &params)));
+        let checked = factory.check(&params).and_then(|()| params.locate(factory.info().no_empty_paths(&params)));
         if let Err(e) = &checked {
             err(e.span.clone().or(Some(entry.span())), Some(&id), K::Param(e.to_string()));
         }
@@ -686,16 +686,4 @@ pub(crate) fn topo_order(n: usize, edges: &[EdgeSpec]) -> Vec<usize> {
         }
     }
     out
-}
-
-/// Refuses a param documented as a path (`ParamDoc` type `path`) given as an empty string: it
-/// would name the graph file's directory, or nothing, and fail only once the graph runs
-/// (a logger's first rows already taken), with a message that names no param.
-fn no_empty_paths(info: &crate::KindInfo, params: &Params) -> Result<(), ParamError> {
-    for doc in info.params.iter().filter(|d| d.ty == "path") {
-        if params.table().get(doc.name.as_ref()).and_then(|v| v.as_str()).is_some_and(str::is_empty) {
-            return Err(ParamError::new(&doc.name, "is empty: give a file or device path"));
-        }
-    }
-    Ok(())
 }

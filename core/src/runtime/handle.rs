@@ -231,6 +231,7 @@ impl GraphHandle {
             )));
         }
         factory.check(&params).map_err(|e| swap_err(e.to_string()))?;
+        info.no_empty_paths(&params).map_err(|e| swap_err(e.to_string()))?;
         let wired: Vec<&str> = self.inner.wired[i].iter().map(String::as_str).collect();
         factory.check_wiring(&params, &Wiring::new(&wired)).map_err(|e| swap_err(e.to_string()))?;
         let text = self.inner.graph_text.lock().unwrap_or_else(std::sync::PoisonError::into_inner).clone();

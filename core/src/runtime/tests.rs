@@ -177,15 +177,17 @@ struct SlowParams {
 
 impl NodeParams for SlowParams {}
 
-/// A paced source that counts its instances' stops in the shared counter.
+/// A paced source that counts its instances' stops and its polls begun in shared counters.
 struct Slow {
     every_s: f64,
     next: u64,
     stops: Arc<AtomicU64>,
+    polls: Arc<AtomicU64>,
 }
 
 impl Source for Slow {
     fn poll(&mut self, ctx: &mut Context, out: &mut Outputs) -> Result<SourcePoll, NodeError> {
+        self.polls.fetch_add(1, SeqCst);
         if !ctx.sleep_until_ns((self.next as f64 * self.every_s * 1e9) as u64) {
             return Ok(SourcePoll::Finished);
         }
@@ -251,6 +253,11 @@ impl Source for Ends {
 /// The toy kinds, `hold`, `total`, `slow` / `slow2` (two kinds, one behaviour) and `ends`
 /// counting their stops in `stops`.
 fn registry(stops: &Arc<AtomicU64>) -> Registry {
+    registry_counting_polls(stops, &Arc::default())
+}
+
+/// [`registry`], with the polls the `slow` / `slow2` instances begin counted in `polls`.
+fn registry_counting_polls(stops: &Arc<AtomicU64>, polls: &Arc<AtomicU64>) -> Registry {
     let mut r = Registry::new();
     crate::toy::register(&mut r).unwrap();
     let count = || PortSpec::output::<Count>("out", "the value");
@@ -269,11 +276,12 @@ fn registry(stops: &Arc<AtomicU64>) -> Registry {
     ))
     .unwrap();
     for name in ["slow", "slow2"] {
-        let stops = stops.clone();
+        let (stops, polls) = (stops.clone(), polls.clone());
         r.register(typed(
             KindInfo::new(name, Role::Source, "test: a paced source").output(count()),
             move |p: SlowParams, _| {
-                Ok(NodeImpl::Source(Box::new(Slow { every_s: p.every_s, next: 0, stops: stops.clone() })))
+                let (stops, polls) = (stops.clone(), polls.clone());
+                Ok(NodeImpl::Source(Box::new(Slow { every_s: p.every_s, next: 0, stops, polls })))
             },
         ))
         .unwrap();
@@ -367,6 +375,41 @@ fn temp_dir(name: &str) -> std::path::PathBuf {
     d
 }
 
+/// A swap's params are held to the graph checks' rule on file params: `{"path": ""}` is
+/// refused before anything is built, naming the param, and the node writes on to its file.
+#[test]
+fn a_swap_to_an_empty_path_is_refused_and_the_node_goes_on() {
+    let reg = registry(&Arc::default());
+    let dir = temp_dir("empty-path");
+    let out = dir.join("rows.csv");
+    let g = spec(
+        &reg,
+        &format!(
+            "[[node]]\nid = \"src\"\nkind = \"slow\"\nparams = {{ every_s = 1000.0 }}\n\
+             [[node]]\nid = \"out\"\nkind = \"collect\"\nparams = {{ path = {out:?} }}\n\
+             [[edge]]\nfrom = \"src.out\"\nto = \"out.in\"\n"
+        ),
+    );
+    // The source's first message at once, the next in 1000 s: the sink runs until stopped.
+    let running = RunningGraph::start(&g).unwrap();
+    let h = running.handle();
+    wait_for("the first row", || h.stats().node("out").unwrap().msgs_in == 1);
+    let collect = reg.get("collect").unwrap().clone();
+    match h.swap("out", collect, Params::from_toml("path = \"\"").unwrap()) {
+        Err(RunError::Swap { node, problem }) => {
+            assert_eq!(
+                (node.as_str(), problem.as_str()),
+                ("out", "param \"path\": is empty: give a file or device path")
+            );
+        }
+        other => panic!("expected the swap refused, got {other:?}"),
+    }
+    let r = running.wait(&RunOptions { stop: Some(Arc::new(AtomicBool::new(true))), ..RunOptions::default() });
+    assert!(r.failures.is_empty(), "{:?}", r.failures);
+    assert_eq!(node(&r, "out").swaps, 0);
+    assert_eq!(rows(&out).len(), 1, "the running instance wrote its row");
+}
+
 #[test]
 fn a_swap_the_replacement_refuses_is_answered_and_the_node_goes_on_with_its_state() {
     let stops = Arc::default();
@@ -432,13 +475,16 @@ fn kind_of(h: &GraphHandle, id: &str) -> String {
 
 #[test]
 fn a_swap_its_node_never_gets_to_is_not_installed_and_its_replacement_is_stopped() {
-    let stops = Arc::new(AtomicU64::new(0));
-    let reg = registry(&stops);
+    let (stops, polls) = (Arc::new(AtomicU64::new(0)), Arc::new(AtomicU64::new(0)));
+    let reg = registry_counting_polls(&stops, &polls);
     // The source emits its first message at once and then waits 1000 s for the next: it is
     // not called again before the run is stopped.
     let running = slow_graph(&reg, 1000.0);
     let h = running.handle();
-    wait_for("the first message", || h.stats().node("s").unwrap().msgs_out == 1);
+    // In its second poll, the node waits out the 1000 s. (Its first message alone is not
+    // enough: a swap queued before that first poll returns is installed between the two.)
+    wait_for("the second poll", || polls.load(SeqCst) == 2);
+    assert_eq!(h.stats().node("s").unwrap().msgs_out, 1);
     let slow2 = reg.get("slow2").unwrap().clone();
     let params = || Params::from_toml("every_s = 0.001").unwrap();
     let timeout = Duration::from_millis(300);

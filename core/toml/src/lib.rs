@@ -63,6 +63,20 @@ use serde::de::{
     self, DeserializeSeed, Deserializer, EnumAccess, IgnoredAny, MapAccess, SeqAccess, VariantAccess, Visitor,
 };
 
+/// A number as the project's messages show it (a value out of range in a TOML file, a scene,
+/// a param): as Rust prints it (shortest round-trip) when that is short, for 0, NaN and
+/// infinities, and for magnitudes in [1e-5, 1e9); in scientific notation otherwise
+/// (`5e9`, `-1e308`, `2.5e-12`), where the plain form runs to ten or hundreds of digits.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Num(pub f64);
+
+impl fmt::Display for Num {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let x = self.0;
+        if x == 0.0 || !x.is_finite() || (1e-5..1e9).contains(&x.abs()) { write!(f, "{x}") } else { write!(f, "{x:e}") }
+    }
+}
+
 /// Deserializes a TOML document like `toml::from_str`, refusing arrays longer than the
 /// fixed-size arrays and tuples they fill. Errors keep toml's span and source text, and name
 /// the key path of the value they are about.

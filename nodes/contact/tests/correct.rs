@@ -264,11 +264,12 @@ fn calibration_file_with_too_many_field_coefficients_is_refused_at_the_key() {
     let err = Calibration::from_toml_str(&bad, "calib.toml").unwrap_err().to_string();
     assert!(err.starts_with("calib.toml:"), "{err}");
     assert!(err.contains("expected an array of 6 elements, found 8"), "{err}");
-    // The error shows the line of the key, by number.
+    // `file:line:col: key path: cause`, as graph and scene files are reported: the line of the
+    // key, the column of its value, and none of toml's snippet.
     let section = bad.find("[pneumatic.locaware]").unwrap();
     let key = section + bad[section..].find("gain = ").unwrap();
     let line = bad[..key].matches('\n').count() + 1;
-    assert!(err.contains(&format!("line {line}, column 8")) && err.contains("gain = ["), "{err}");
+    assert_eq!(err, format!("calib.toml:{line}:8: pneumatic.locaware.gain: expected an array of 6 elements, found 8"));
 }
 
 #[test]
@@ -290,6 +291,7 @@ fn calibration_file_round_trips_and_rejects_unknown_keys() {
     flat.region.x_max_mm = flat.region.x_min_mm;
     let err = Calibration::from_toml_str(&flat.to_toml_string().unwrap(), "calib.toml").unwrap_err().to_string();
     assert!(err.contains("region must be finite with positive width"), "{err}");
+    assert!(err.contains(&format!("x_min_mm = {0}, x_max_mm = {0}, ", flat.region.x_min_mm)), "no Debug text: {err}");
     // Non-finite or inverted values the per-frame math would turn into a silent floor, a
     // panic in a clamp, or nonsense forces.
     let mut nan_gain = cal.clone();

@@ -120,6 +120,47 @@ fn absent_quantities_are_null() {
     assert_eq!(r["strategies"]["a"]["latency_us_p50"], 5.0);
 }
 
+/// Truth in the wrong unit (1e300 N): the RMSE, whose squares overflow, is still reported
+/// (finite); an infinite force leaves `null` under its diameter's key, not a missing key.
+#[test]
+fn huge_errors_keep_their_rmse_and_a_non_finite_one_is_null_under_its_key() {
+    let mut e = Evaluator::new(&[("a", "A"), ("b", "B")]);
+    e.push(&FrameInput {
+        truth: &[truth(0.0, 3e300, 10.0)],
+        detected_mm: &[(0.0, 0.0)],
+        forces_n: &[&[1.0], &[f64::INFINITY]],
+        latency_us: &[5.0, 5.0],
+        resolution: None,
+    })
+    .unwrap();
+    let r: Value = serde_json::from_str(&e.report("x").to_json()).unwrap();
+    let a = &r["strategies"]["a"];
+    assert!((a["rmse_n"].as_f64().unwrap() / 3e300 - 1.0).abs() < 1e-12, "{a}");
+    assert!((a["per_diameter_rmse_n"]["10"].as_f64().unwrap() / 3e300 - 1.0).abs() < 1e-12, "{a}");
+    // The table shows that RMSE in scientific notation, not as 300 digits.
+    let table = e.report("x").to_string();
+    assert!(table.contains("3.00e300 ± 0.00"), "{table}");
+    assert!(table.lines().all(|l| l.len() < 200), "{table}");
+    let b = &r["strategies"]["b"];
+    assert!(b["rmse_n"].is_null(), "{b}");
+    assert!(b["per_diameter_rmse_n"].as_object().unwrap().contains_key("10"), "{b}");
+    assert!(b["per_diameter_rmse_n"]["10"].is_null(), "{b}");
+    // A true force of 1e-300 N makes a relative error of ~1e302 %: the table prints it in
+    // scientific notation, not as a 300-digit cell that breaks the row.
+    let mut e = Evaluator::new(&[("a", "A")]);
+    e.push(&FrameInput {
+        truth: &[truth(0.0, 1e-300, 10.0)],
+        detected_mm: &[(0.0, 0.0)],
+        forces_n: &[&[1.0]],
+        latency_us: &[5.0],
+        resolution: None,
+    })
+    .unwrap();
+    let table = e.report("x").to_string();
+    assert!(table.contains("1.00e302"), "{table}");
+    assert!(table.lines().all(|l| l.len() < 200), "{table}");
+}
+
 #[test]
 fn table_three_layout_lists_strategies_in_order() {
     let text = evaluator().report("rec.h5").to_string();

@@ -172,7 +172,7 @@ impl Sensor {
         let ok = |x: f64| x.is_finite() && x > 0.0;
         for (field, side) in [("width_mm", s.width_mm), ("height_mm", s.height_mm)] {
             if !ok(side) {
-                return Err(invalid(field, format!("must be finite and > 0 (got {side})")));
+                return Err(invalid(field, format!("must be finite and > 0 (got {})", skinflow_toml::Num(side))));
             }
             if side > MAX_SIDE_MM {
                 let max = format!("{MAX_SIDE_MM:e} mm (1 km; the mesher's range)");

@@ -43,6 +43,20 @@ pub enum SchemaProblem {
     NonFiniteTimeAt { row: usize, t_s: f64 },
     #[error("is not increasing at row {row} ({t_s} s after {previous_s} s)")]
     NotIncreasing { row: usize, t_s: f64, previous_s: f64 },
+    /// Every time from `row` on is NaN: rows allocated but never written.
+    #[error(
+        "rows {row} to {last} are not finite times (NaN): rows allocated but never written, as a write cut \
+         short leaves them (hint: `skinflow repair` copies the file with the rows all datasets hold)"
+    )]
+    UnwrittenTail { row: usize, last: usize },
+    /// Every time from `row` on is 0 s, after a later time: most likely rows a writer
+    /// allocated but never wrote (h5py and MATLAB fill them with 0).
+    #[error(
+        "rows {row} to {last} are all 0 s, after {previous_s} s: rows a writer allocated but never wrote? \
+         (h5py and MATLAB fill unwritten rows with 0, which `skinflow repair` cannot tell from times; cut the \
+         stream's datasets to their first {row} rows)"
+    )]
+    ZeroTail { row: usize, last: usize, previous_s: f64 },
     #[error("has element type {found}, expected a number")]
     NotNumericData { found: String },
     /// A time dataset stored as integers: most likely milliseconds or ticks, not seconds.

@@ -400,16 +400,23 @@ fn first_negative<'a>(
 /// the streams by time and the truth lookup searches them.
 fn check_times(fpath: &Path, path: &str, t: &[f64]) -> Result<(), RecordError> {
     let mut previous = f64::NEG_INFINITY;
+    let last = t.len().saturating_sub(1);
     for (row, &t_s) in t.iter().enumerate() {
         if !t_s.is_finite() {
-            return Err(RecordError::schema(fpath, path, SchemaProblem::NonFiniteTimeAt { row, t_s }));
+            let problem = if t[row..].iter().all(|v| v.is_nan()) {
+                SchemaProblem::UnwrittenTail { row, last }
+            } else {
+                SchemaProblem::NonFiniteTimeAt { row, t_s }
+            };
+            return Err(RecordError::schema(fpath, path, problem));
         }
         if t_s < previous {
-            return Err(RecordError::schema(
-                fpath,
-                path,
-                SchemaProblem::NotIncreasing { row, t_s, previous_s: previous },
-            ));
+            let problem = if t[row..].iter().all(|&v| v == 0.0) {
+                SchemaProblem::ZeroTail { row, last, previous_s: previous }
+            } else {
+                SchemaProblem::NotIncreasing { row, t_s, previous_s: previous }
+            };
+            return Err(RecordError::schema(fpath, path, problem));
         }
         previous = t_s;
     }

@@ -26,6 +26,29 @@ fn sync_and_forces_writer(dir: &Path, name: &str) -> (PathBuf, RecordingWriter) 
     (path, w)
 }
 
+/// [`sync_and_forces_writer`]'s file with 5 frames, each with a sync row and a force of
+/// strategy `s` carrying guard bits `flags`.
+fn sync_and_forces_file(dir: &Path, name: &str, flags: u32) -> PathBuf {
+    let (path, mut w) = sync_and_forces_writer(dir, name);
+    let sync = SyncRow {
+        dp_kpa: 1.0,
+        pressure_samples: 3,
+        pressure_sd_kpa: 0.01,
+        settled: true,
+        no_load: false,
+        p0_kpa: 0.0,
+        noise_kpa: 0.01,
+    };
+    for i in 0..5u64 {
+        let t = i as f64 * 0.1;
+        w.append_eit(t, i, &[1.0; 120]).unwrap();
+        w.append_sync(t, &sync).unwrap();
+        w.append_forces(0, t, &[ForceRow { force_n: 2.0, dp_kpa: 1.0, flags }]).unwrap();
+    }
+    w.close().unwrap();
+    path
+}
+
 fn valid_file(dir: &Path, name: &str) -> PathBuf {
     let path = dir.join(name);
     let mut opts = WriterOptions::new(PAPER_100MM_TOML);
@@ -186,9 +209,21 @@ fn every_violation_is_refused_with_file_path_and_problem() {
         ),
         (
             "truth/t steps back",
-            |f| replace_dataset(f, "/truth/t", &[0.5, 0.0], &[2]),
+            |f| replace_dataset(f, "/truth/t", &[0.5, 0.2], &[2]),
             "/truth/t",
-            SchemaProblem::NotIncreasing { row: 1, t_s: 0.0, previous_s: 0.5 },
+            SchemaProblem::NotIncreasing { row: 1, t_s: 0.2, previous_s: 0.5 },
+        ),
+        (
+            "eit/t ends in rows never written (NaN)",
+            |f| replace_dataset(f, "/eit/t", &[0.0, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, f64::NAN, f64::NAN, f64::NAN], &[10]),
+            "/eit/t",
+            SchemaProblem::UnwrittenTail { row: 7, last: 9 },
+        ),
+        (
+            "pressure/t ends in zeros (h5py's fill value)",
+            |f| replace_dataset(f, "/pressure/t", &[0.0, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.0, 0.0, 0.0], &[10]),
+            "/pressure/t",
+            SchemaProblem::ZeroTail { row: 7, last: 9, previous_s: 0.6 },
         ),
         (
             "eit/t holds strings",
@@ -304,23 +339,7 @@ fn extra_groups_and_attributes_are_ignored() {
 #[test]
 fn files_without_sync_or_force_flags_still_open() {
     let dir = fresh_dir("older");
-    let (path, mut w) = sync_and_forces_writer(&dir, "older.h5");
-    let sync = SyncRow {
-        dp_kpa: 1.0,
-        pressure_samples: 3,
-        pressure_sd_kpa: 0.01,
-        settled: true,
-        no_load: false,
-        p0_kpa: 0.0,
-        noise_kpa: 0.01,
-    };
-    for i in 0..5u64 {
-        let t = i as f64 * 0.1;
-        w.append_eit(t, i, &[1.0; 120]).unwrap();
-        w.append_sync(t, &sync).unwrap();
-        w.append_forces(0, t, &[ForceRow { force_n: 2.0, dp_kpa: 1.0, flags: 8 }]).unwrap();
-    }
-    w.close().unwrap();
+    let path = sync_and_forces_file(&dir, "older.h5", 8);
     let full = Recording::open(&path).unwrap();
     assert_eq!(full.derived.sync.as_ref().unwrap().t_s.len(), 5);
     assert_eq!(full.derived.forces[0].flags.as_ref().unwrap()[0], 8.0);
@@ -337,6 +356,30 @@ fn files_without_sync_or_force_flags_still_open() {
     let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
     assert_eq!(bits(&forces.force_n), bits(&full.derived.forces[0].force_n), "NaN padding included");
     assert_eq!(older.eit, full.eit);
+}
+
+/// A `/derived` time dataset (`sync/t`, `forces/NAME/t`) stored as integers is refused, naming
+/// it, as `/eit/t` is: before, integer milliseconds there were read as seconds.
+#[test]
+fn derived_integer_times_are_refused() {
+    let dir = fresh_dir("derived-integer-times");
+    for (name, t_path) in [("sync.h5", "/derived/sync/t"), ("forces.h5", "/derived/forces/s/t")] {
+        let path = sync_and_forces_file(&dir, name, 0);
+        Recording::open(&path).unwrap();
+        let f = hdf5::File::open_rw(&path).unwrap();
+        f.unlink(t_path).unwrap();
+        let t_ms: Vec<i64> = (0..5).map(|i| i * 100).collect();
+        f.new_dataset_builder().with_data(&t_ms[..]).create(t_path).unwrap();
+        drop(f);
+        let e = Recording::open(&path).unwrap_err();
+        match &e {
+            RecordError::Schema { path: at, problem, .. } => {
+                assert_eq!(at, t_path);
+                assert_eq!(problem, &SchemaProblem::IntegerTimes { found: "int64".into() });
+            }
+            other => panic!("{t_path}: expected a schema error, got {other}"),
+        }
+    }
 }
 
 /// `inspect` counts the settled frames, the frames without pressure and the forces each guard

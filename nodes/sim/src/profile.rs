@@ -6,6 +6,7 @@
 //! Units: conductivity S/m, contact impedance ohm mm^2, current uA, lengths mm, pressure kPa, force N, time s.
 
 use serde::{Deserialize, Serialize};
+use skinflow_toml::Num;
 
 /// Fewest elements of the simulation mesh (a coarser one would not resolve an indenter).
 pub const MIN_MESH_ELEMENTS: usize = 100;
@@ -199,16 +200,24 @@ impl Profile {
     /// Checks every constant's range; the error names the field.
     pub fn validate(&self) -> Result<(), (&'static str, String)> {
         let pos = |name: &'static str, x: f64| {
-            if x.is_finite() && x > 0.0 { Ok(()) } else { Err((name, format!("must be finite and > 0 (got {x})"))) }
+            if x.is_finite() && x > 0.0 {
+                Ok(())
+            } else {
+                Err((name, format!("must be finite and > 0 (got {})", Num(x))))
+            }
         };
         let nonneg = |name: &'static str, x: f64| {
-            if x.is_finite() && x >= 0.0 { Ok(()) } else { Err((name, format!("must be finite and >= 0 (got {x})"))) }
+            if x.is_finite() && x >= 0.0 {
+                Ok(())
+            } else {
+                Err((name, format!("must be finite and >= 0 (got {})", Num(x))))
+            }
         };
         let frac = |name: &'static str, x: f64| {
             if x.is_finite() && (0.0..1.0).contains(&x) {
                 Ok(())
             } else {
-                Err((name, format!("must be in [0, 1) (got {x})")))
+                Err((name, format!("must be in [0, 1) (got {})", Num(x))))
             }
         };
         nonneg("stage_offset_mm", self.stage_offset_mm)?;

@@ -19,7 +19,8 @@
 //! goes on appending after the rows already written, whatever its `append` says: the file
 //! holds every row once, before and after the swap. A replacement writing another file starts
 //! that file afresh at its first message (as a new node would), and the running instance's file
-//! keeps every row it wrote. A replacement that cannot read the state (another build's format)
+//! keeps every row it wrote; the hand-over lists the files the node wrote earlier in the run,
+//! so a swap back onto one of them appends to it instead. A replacement that cannot read the state (another build's format)
 //! refuses the swap, since starting afresh could truncate the file being written; the running
 //! instance goes on, and a refused replacement never touched any file. A swap with nothing
 //! written yet hands nothing over: the replacement starts as a new node. After a panic there is
@@ -63,7 +64,7 @@ fn file_id(_: &Metadata) -> Option<(u64, u64)> {
     None
 }
 
-/// What a sink hands to its replacement in a hot swap (format 1 of both kinds' `STATE_FORMAT`).
+/// What a sink hands to its replacement in a hot swap (format 2 of both kinds' `STATE_FORMAT`).
 #[derive(Debug, Clone, PartialEq)]
 struct Handover {
     /// The file, as the running instance named it (for messages and, without `id`, comparing).
@@ -76,12 +77,16 @@ struct Handover {
     /// Data rows and bytes (header included) in the file when it was handed over.
     rows: u64,
     bytes: u64,
+    /// The files this node wrote earlier in the run (before swaps onto other files), each as
+    /// its path and identity: a later swap back onto one appends to it rather than start it
+    /// afresh over those rows.
+    earlier: Vec<(String, Option<(u64, u64)>)>,
 }
 
 impl Handover {
     fn encode(&self) -> Vec<u8> {
         let (dev, ino) = self.id.unwrap_or((0, 0));
-        StateWriter::new()
+        let mut w = StateWriter::new()
             .str(&self.path)
             .bool(self.open)
             .bool(self.id.is_some())
@@ -89,7 +94,12 @@ impl Handover {
             .u64(ino)
             .u64(self.rows)
             .u64(self.bytes)
-            .finish()
+            .u64(self.earlier.len() as u64);
+        for (path, id) in &self.earlier {
+            let (dev, ino) = id.unwrap_or((0, 0));
+            w = w.str(path).bool(id.is_some()).u64(dev).u64(ino);
+        }
+        w.finish()
     }
 
     fn decode(bytes: &[u8]) -> Result<Handover, String> {
@@ -99,8 +109,15 @@ impl Handover {
         let has_id = r.bool()?;
         let id = (r.u64()?, r.u64()?);
         let (rows, bytes) = (r.u64()?, r.u64()?);
+        let mut earlier = Vec::new();
+        for _ in 0..r.u64()? {
+            let path = r.str()?.to_owned();
+            let has_id = r.bool()?;
+            let id = (r.u64()?, r.u64()?);
+            earlier.push((path, has_id.then_some(id)));
+        }
         r.finish()?;
-        Ok(Handover { path, open, id: has_id.then_some(id), rows, bytes })
+        Ok(Handover { path, open, id: has_id.then_some(id), rows, bytes, earlier })
     }
 }
 
@@ -126,6 +143,8 @@ struct CsvFile {
     phase: Phase,
     /// Data rows in the file written by this node (this instance and those it took over from).
     rows: u64,
+    /// Files this node wrote earlier in the run ([`Handover::earlier`]).
+    earlier: Vec<(String, Option<(u64, u64)>)>,
 }
 
 impl CsvFile {
@@ -152,7 +171,7 @@ impl CsvFile {
                 }
             }
         }
-        Ok(CsvFile { path, append: p.append, header, kind, phase: Phase::Fresh, rows: 0 })
+        Ok(CsvFile { path, append: p.append, header, kind, phase: Phase::Fresh, rows: 0, earlier: Vec::new() })
     }
 
     fn io(&self) -> impl Fn(std::io::Error) -> String + '_ {
@@ -167,7 +186,10 @@ impl CsvFile {
             std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
         }
         let file = OpenOptions::new().append(true).create(true).open(&self.path).map_err(self.io())?;
-        if !self.append {
+        // A file this node wrote earlier in the run (swapped away from and back) is appended
+        // to: its rows are this run's.
+        let wrote_before = self.earlier.iter().any(|(path, id)| self.names(path, *id));
+        if !self.append && !wrote_before {
             file.set_len(0).map_err(self.io())?;
         }
         let empty = file.metadata().map_err(self.io())?.len() == 0;
@@ -201,8 +223,14 @@ impl CsvFile {
     }
 
     fn handover(&self) -> Handover {
-        let mut h =
-            Handover { path: self.path.display().to_string(), open: false, id: None, rows: self.rows, bytes: 0 };
+        let mut h = Handover {
+            path: self.path.display().to_string(),
+            open: false,
+            id: None,
+            rows: self.rows,
+            bytes: 0,
+            earlier: self.earlier.clone(),
+        };
         if let Phase::Open(w) = &self.phase
             && let Ok(m) = w.get_ref().metadata()
         {
@@ -213,11 +241,16 @@ impl CsvFile {
 
     /// Whether `self.path` names the file `h` was written to.
     fn same_file(&self, h: &Handover) -> bool {
-        match (h.id, std::fs::metadata(&self.path).ok().as_ref().and_then(file_id)) {
+        self.names(&h.path, h.id)
+    }
+
+    /// Whether `self.path` names the file written as `path` with identity `id`.
+    fn names(&self, path: &str, id: Option<(u64, u64)>) -> bool {
+        match (id, std::fs::metadata(&self.path).ok().as_ref().and_then(file_id)) {
             (Some(a), Some(b)) => a == b,
-            _ => match (std::fs::canonicalize(&h.path), std::fs::canonicalize(&self.path)) {
+            _ => match (std::fs::canonicalize(path), std::fs::canonicalize(&self.path)) {
                 (Ok(a), Ok(b)) => a == b,
-                _ => Path::new(&h.path) == self.path,
+                _ => Path::new(path) == self.path,
             },
         }
     }
@@ -239,9 +272,15 @@ impl CsvFile {
         }
         if !h.open || !self.same_file(&h) {
             // Nothing written yet, or another file: this node starts its own file as a new
-            // node would; the running instance closes its file whole.
+            // node would (unless it wrote it earlier in the run); the running instance closes
+            // its file whole.
+            self.earlier = h.earlier;
+            if h.open {
+                self.earlier.push((h.path, h.id));
+            }
             return ImportOutcome::Accepted;
         }
+        self.earlier = h.earlier;
         // The same file: appended to, never truncated (whatever `append` says).
         let file = match OpenOptions::new().append(true).open(&self.path) {
             Ok(f) => f,
@@ -281,6 +320,9 @@ pub struct ForcesCsv {
 }
 
 impl PluginSink for ForcesCsv {
+    /// 2: the hand-over lists the files written earlier in the run (1 did not).
+    const STATE_FORMAT: u32 = 2;
+
     type Params = Params;
 
     fn spec() -> KindSpec {
@@ -336,6 +378,9 @@ pub struct PressureCsv {
 }
 
 impl PluginSink for PressureCsv {
+    /// 2: the hand-over lists the files written earlier in the run (1 did not).
+    const STATE_FORMAT: u32 = 2;
+
     type Params = Params;
 
     fn spec() -> KindSpec {
@@ -427,7 +472,14 @@ mod tests {
 
     #[test]
     fn a_handover_encodes_and_decodes_exactly() {
-        let h = Handover { path: "/d/p\u{e9}.csv".into(), open: true, id: Some((3, 4)), rows: 7, bytes: 99 };
+        let h = Handover {
+            path: "/d/p\u{e9}.csv".into(),
+            open: true,
+            id: Some((3, 4)),
+            rows: 7,
+            bytes: 99,
+            earlier: vec![("/d/a.csv".into(), Some((3, 5))), ("b.csv".into(), None)],
+        };
         assert_eq!(Handover::decode(&h.encode()).unwrap(), h);
         let h = Handover { id: None, open: false, ..h };
         assert_eq!(Handover::decode(&h.encode()).unwrap(), h);
@@ -506,6 +558,39 @@ mod tests {
         assert_eq!(read(&d, "q.csv"), want(5..9));
     }
 
+    /// The audit's case: A, then B, then back to A (`append = false` throughout). A's rows of
+    /// before the first swap are kept and the later ones appended; B keeps its own. Before, the
+    /// swap back started A afresh and its first rows were lost, with nothing counted.
+    #[test]
+    fn a_swap_back_onto_a_file_written_earlier_appends_to_it() {
+        let d = dir("back");
+        let mut a = file(&d, "a.csv", false);
+        write(&mut a, 0..4);
+        let mut b = file(&d, "b.csv", false);
+        assert_eq!(swap(&mut a, &mut b), ImportOutcome::Accepted);
+        write(&mut b, 4..6);
+        let mut a2 = file(&d, "./a.csv", false);
+        assert_eq!(swap(&mut b, &mut a2), ImportOutcome::Accepted);
+        write(&mut a2, 6..9);
+        // Once more away and back: both earlier files travel on.
+        let mut b2 = file(&d, "b.csv", false);
+        assert_eq!(swap(&mut a2, &mut b2), ImportOutcome::Accepted);
+        write(&mut b2, 9..10);
+        b2.close().unwrap();
+        let rows = |r: &[std::ops::Range<u64>]| -> String {
+            std::iter::once("t_s,kpa\n".to_owned())
+                .chain(r.iter().cloned().flatten().map(|i| format!("{i},{i}\n")))
+                .collect()
+        };
+        assert_eq!(read(&d, "a.csv"), rows(&[0..4, 6..9]));
+        assert_eq!(read(&d, "b.csv"), rows(&[4..6, 9..10]));
+        // A file of another run (not in the hand-over) is still started afresh.
+        let mut fresh = file(&d, "a.csv", false);
+        write(&mut fresh, 0..1);
+        fresh.close().unwrap();
+        assert_eq!(read(&d, "a.csv"), want(0..1));
+    }
+
     #[test]
     fn a_swap_before_anything_was_written_starts_the_file_as_a_new_node() {
         let d = dir("nothing-yet");
@@ -536,8 +621,8 @@ mod tests {
         assert_eq!(text, want(0..25), "nothing lost");
         // What the host does with a state of another build's format.
         let mut new = PressureCsv { file: file(&d, "p.csv", false) };
-        let ImportOutcome::RefuseSwap(why) = new.import_other_format(2, &[]) else { panic!("another format") };
-        assert!(why.contains("a state in format 2 (this build reads 1)"), "{why}");
+        let ImportOutcome::RefuseSwap(why) = new.import_other_format(1, &[]) else { panic!("another format") };
+        assert!(why.contains("a state in format 1 (this build reads 2)"), "{why}");
         new.stop().unwrap();
         assert_eq!(read(&d, "p.csv"), want(0..25));
     }

@@ -13,6 +13,10 @@ use skinflow_core::StatsReport;
 
 use super::Overrides;
 
+/// The first line of `bench.md` (an existing file under that name that does not start so is
+/// not bench's, and is not replaced).
+pub const MD_TITLE: &str = "# skinflow bench";
+
 /// What bench says about its latency figures, in `bench.md` (and the README).
 pub const TIMING_NOTE: &str = "Latency is wall time on this machine, one lockstep pass per variant, after a \
      discarded warm-up pass of the first variant (so it does not run cold). Identical \
@@ -255,7 +259,7 @@ fn file_name(p: &Path) -> String {
 }
 
 pub fn markdown(graph: &Path, replay: &Path, variants: &[Variant], points: &[Point], warnings: &[String]) -> String {
-    let mut s = format!("# skinflow bench\n\ngraph `{}`, recording `{}`\n\n", graph.display(), replay.display());
+    let mut s = format!("{MD_TITLE}\n\ngraph `{}`, recording `{}`\n\n", graph.display(), replay.display());
     s.push_str(
         "| variant | lane | frames | scored | unsettled | matched | p50 us | p99 us | RMSE N | loc. mm | Pareto |\n\
          |---|---|---|---|---|---|---|---|---|---|---|\n",

@@ -323,9 +323,9 @@ pub enum CalibrationFileError {
     /// File system error.
     #[error("{path}: {source}")]
     Io { path: String, source: std::io::Error },
-    /// Not valid TOML for a calibration.
-    #[error("{path}: {message}")]
-    Parse { path: String, message: String },
+    /// Not valid TOML for a calibration, at `line`:`column` when known.
+    #[error("{path}{}: {message}", at.map_or(String::new(), |(l, c)| format!(":{l}:{c}")))]
+    Parse { path: String, at: Option<(usize, usize)>, message: String },
     /// Wrong `format` or another `format_version`.
     #[error(
         "{path}: not a skinflow calibration this version reads (format \"{format}\", version {version}; expected \"{FORMAT}\" version {OLDEST_FORMAT_VERSION} to {FORMAT_VERSION}): re-run `skinflow calibrate` on the recording"
@@ -347,9 +347,18 @@ impl Calibration {
 
     /// Parses TOML text; `origin` names the source in errors (a path, or `<string>`).
     pub fn from_toml_str(text: &str, origin: &str) -> Result<Self, CalibrationFileError> {
-        let parse = |e: toml::de::Error| CalibrationFileError::Parse {
-            path: origin.to_string(),
-            message: e.to_string().replace('\n', " "),
+        // `file:line:col: key.path: cause`, as graph, scene and sensor files are reported (not
+        // toml's multi-line snippet squeezed onto one line).
+        let parse = |e: toml::de::Error| {
+            let at = e.span().map(|span| {
+                // At a character boundary whatever the span says (toml's fall on one).
+                let start = (0..=span.start.min(text.len())).rev().find(|&i| text.is_char_boundary(i)).unwrap_or(0);
+                let before = &text[..start];
+                let column = before.rsplit('\n').next().map_or(0, |l| l.chars().count()) + 1;
+                (before.matches('\n').count() + 1, column)
+            });
+            let message = e.message().trim_end().replace('\n', " ");
+            CalibrationFileError::Parse { path: origin.to_string(), at, message }
         };
         // The header first, so a file of another version is named as such, not as a parse error.
         #[derive(Deserialize)]
@@ -409,7 +418,12 @@ impl Calibration {
     pub fn validate(&self) -> Result<(), String> {
         let (w, h) = self.region.span_mm();
         if ![self.region.x_min_mm, self.region.y_min_mm, w, h].iter().all(|v| v.is_finite()) || w <= 0.0 || h <= 0.0 {
-            return Err(format!("region must be finite with positive width and height (got {:?})", self.region));
+            let r = &self.region;
+            return Err(format!(
+                "region must be finite with positive width and height (got x_min_mm = {}, x_max_mm = {}, \
+                 y_min_mm = {}, y_max_mm = {})",
+                r.x_min_mm, r.x_max_mm, r.y_min_mm, r.y_max_mm
+            ));
         }
         let kernel = |name: &str, k: &KernelField| -> Result<(), String> {
             // Fitted on the calibrated region; another one would clamp and normalize elsewhere.

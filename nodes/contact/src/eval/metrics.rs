@@ -167,14 +167,51 @@ impl Evaluator {
     }
 }
 
-/// Root mean square; `None` when empty.
+/// A running sum of squares kept scaled by the largest magnitude so far (as BLAS's `nrm2`),
+/// so values whose squares overflow f64 (errors of 1e200 N from truth in the wrong unit) still
+/// give their finite root mean square. For streaming reductions (the `compare` node's lanes).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct SumOfSquares {
+    scale: f64,
+    ssq: f64,
+    nan: bool,
+    inf: bool,
+}
+
+impl SumOfSquares {
+    pub fn push(&mut self, v: f64) {
+        let a = v.abs();
+        if a.is_nan() {
+            self.nan = true;
+        } else if a.is_infinite() {
+            self.inf = true;
+        } else if a > self.scale {
+            self.ssq = 1.0 + self.ssq * (self.scale / a) * (self.scale / a);
+            self.scale = a;
+        } else if a > 0.0 {
+            self.ssq += (a / self.scale) * (a / self.scale);
+        }
+    }
+
+    /// sqrt(sum / n): NaN if a value was NaN or `n` is 0, infinite if one was infinite.
+    pub fn root_mean(&self, n: u64) -> f64 {
+        match (self.nan || n == 0, self.inf) {
+            (true, _) => f64::NAN,
+            (false, true) => f64::INFINITY,
+            _ => self.scale * (self.ssq / n as f64).sqrt(),
+        }
+    }
+}
+
+/// Root mean square; `None` when empty. Through [`SumOfSquares`]: finite where the plain
+/// sum of squares would overflow; NaN if any value is NaN, else infinite if one is.
 pub fn rms(values: impl Iterator<Item = f64>) -> Option<f64> {
-    let (mut s, mut n) = (0.0, 0usize);
+    let (mut sum, mut n) = (SumOfSquares::default(), 0u64);
     for v in values {
-        s += v * v;
+        sum.push(v);
         n += 1;
     }
-    (n > 0).then(|| (s / n as f64).sqrt())
+    (n > 0).then(|| sum.root_mean(n))
 }
 
 /// Mean; `None` when empty.
@@ -193,7 +230,8 @@ pub fn sd(values: &[f64]) -> Option<f64> {
     if values.len() == 1 {
         return Some(0.0);
     }
-    Some((values.iter().map(|v| (v - m).powi(2)).sum::<f64>() / (values.len() - 1) as f64).sqrt())
+    let n = values.len() as f64;
+    rms(values.iter().map(|v| v - m)).map(|r| r * (n / (n - 1.0)).sqrt())
 }
 
 /// Percentile `q` in [0, 100] by linear interpolation of the sorted values; `None` when empty.
@@ -240,6 +278,25 @@ mod tests {
         assert_eq!(percentile(&[1.0, 2.0, 3.0, 4.0, 5.0], 99.0), Some(4.96));
         assert_eq!(rms(std::iter::empty()), None);
         assert_eq!(percentile(&[], 50.0), None);
+    }
+
+    /// The scaled sum agrees with the plain one where that does not overflow, and stays finite
+    /// (and exact in ratio) where the squares would overflow.
+    #[test]
+    fn rms_and_sd_do_not_overflow_and_agree_with_the_plain_sums() {
+        let v: Vec<f64> = (0..97).map(|i| ((i * 37 % 101) as f64 - 50.0) * 0.013).collect();
+        let plain = (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt();
+        let r = rms(v.iter().copied()).unwrap();
+        assert!((r - plain).abs() <= 1e-15 * plain, "{r} vs {plain}");
+        let big: Vec<f64> = v.iter().map(|x| x * 1e300).collect();
+        let rb = rms(big.iter().copied()).unwrap();
+        assert!(rb.is_finite() && (rb / 1e300 - r).abs() <= 1e-14 * r, "{rb}");
+        let (s, sb) = (sd(&v).unwrap(), sd(&big).unwrap());
+        assert!(sb.is_finite() && (sb / 1e300 - s).abs() <= 1e-14 * s, "{sb} vs {s}");
+        assert!(rms([1.0, f64::NAN, 2.0].into_iter()).unwrap().is_nan());
+        assert_eq!(rms([0.0, 0.0].into_iter()), Some(0.0));
+        assert_eq!(rms([f64::INFINITY, 1.0].into_iter()), Some(f64::INFINITY));
+        assert_eq!(rms([f64::INFINITY, f64::NEG_INFINITY].into_iter()), Some(f64::INFINITY));
     }
 
     #[test]

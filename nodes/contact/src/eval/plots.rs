@@ -70,7 +70,20 @@ pub fn predicted_vs_true(path: &Path, eval: &Evaluator) -> Result<(), PlotError>
             .y_label_area_size(40)
             .build_cartesian_2d(0.0..fmax, 0.0..fmax)
             .map_err(|x| e(&x))?;
-        chart.configure_mesh().x_desc("true force [N]").y_desc("predicted [N]").draw().map_err(|x| e(&x))?;
+        // plotters' own tick labels, but in scientific notation where the plain form runs long
+        // (truth in the wrong unit: ticks of hundreds of digits drawn over each other).
+        let tick = |v: &f64| {
+            plotters::data::float::FloatPrettyPrinter { allow_scientific: true, min_decimal: 1, max_decimal: 5 }
+                .print(*v)
+        };
+        chart
+            .configure_mesh()
+            .x_desc("true force [N]")
+            .y_desc("predicted [N]")
+            .x_label_formatter(&tick)
+            .y_label_formatter(&tick)
+            .draw()
+            .map_err(|x| e(&x))?;
         chart
             .draw_series(DashedLineSeries::new([(0.0, 0.0), (fmax, fmax)], 6, 4, BLACK.stroke_width(1)))
             .map_err(|x| e(&x))?;

@@ -18,7 +18,7 @@ pub struct StrategyReport {
     /// Standard deviation of the absolute errors, N.
     pub rmse_sd_n: Option<f64>,
     /// RMSE per indenter diameter (key: diameter in mm as written, "10" when whole), N.
-    pub per_diameter_rmse_n: BTreeMap<String, f64>,
+    pub per_diameter_rmse_n: BTreeMap<String, Option<f64>>,
     /// Mean of 100 |F_est - F_true| / F_true over matched contacts.
     pub relative_error_pct: Option<f64>,
     /// Median per-frame latency, us.
@@ -109,10 +109,11 @@ impl Evaluator {
                 self.records.iter().map(|r| r.truth.diameter_mm).filter(|d| d.is_finite()).collect();
             diameters.sort_by(f64::total_cmp);
             diameters.dedup();
+            // Every diameter keeps its key: `null` where the RMSE is not finite (CONTRACTS.md
+            // section 4), rather than the diameter vanishing from the report.
             for d in diameters {
-                if let Some(v) = finite(rms(self.records.iter().filter(|r| r.truth.diameter_mm == d).map(err))) {
-                    per_diameter.insert(diameter_key(d), v);
-                }
+                let v = finite(rms(self.records.iter().filter(|r| r.truth.diameter_mm == d).map(err)));
+                per_diameter.insert(diameter_key(d), v);
             }
             let rel = mean(
                 self.records.iter().filter(|r| r.truth.force_n > 0.0).map(|r| 100.0 * err(r).abs() / r.truth.force_n),
@@ -173,8 +174,11 @@ impl EvalReport {
     }
 }
 
+/// A table cell: `prec` decimals, or scientific notation for a magnitude of 1e9 or more (a
+/// unit error in the truth), which would otherwise print hundreds of digits and break the
+/// table.
 fn num(v: Option<f64>, prec: usize) -> String {
-    v.map_or_else(|| "-".to_string(), |v| format!("{v:.prec$}"))
+    v.map_or_else(|| "-".to_string(), |v| if v.abs() >= 1e9 { format!("{v:.2e}") } else { format!("{v:.prec$}") })
 }
 
 impl fmt::Display for EvalReport {
@@ -207,7 +211,7 @@ impl fmt::Display for EvalReport {
                 continue;
             };
             let rmse = match (s.rmse_n, s.rmse_sd_n) {
-                (Some(r), Some(d)) => format!("{r:.2} ± {d:.2}"),
+                (Some(r), Some(d)) => format!("{} ± {}", num(Some(r), 2), num(Some(d), 2)),
                 _ => "-".to_string(),
             };
             writeln!(
@@ -234,7 +238,7 @@ impl fmt::Display for EvalReport {
                 };
                 write!(f, "{label:<w$}")?;
                 for d in &diameters {
-                    write!(f, " {:>9}", num(s.per_diameter_rmse_n.get(*d).copied(), 2))?;
+                    write!(f, " {:>9}", num(s.per_diameter_rmse_n.get(*d).copied().flatten(), 2))?;
                 }
                 writeln!(f)?;
             }

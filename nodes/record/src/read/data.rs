@@ -52,7 +52,7 @@ pub fn read<T: H5Type>(file: &File, fpath: &Path, path: &str, rank: usize) -> Re
     Ok(Data { values, shape })
 }
 
-/// Opens a 1-D time dataset (`/eit/t`, `/pressure/t`, `/truth/t`), refusing one stored as
+/// Opens a 1-D time dataset (`/eit/t`, `/pressure/t`, `/truth/t`, `/derived/.../t`), refusing one stored as
 /// integers: the format's times are f64 seconds (CONTRACTS.md), and integer times are most
 /// likely milliseconds or device ticks, which read as seconds would be 1000x or more off
 /// without a word.

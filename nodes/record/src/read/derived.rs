@@ -77,13 +77,13 @@ pub fn read(file: &File, fpath: &Path) -> Result<Derived, RecordError> {
         return Ok(derived);
     }
     if file.link_exists(layout::DERIVED_IMAGE) {
-        let t = data::read::<f64>(file, fpath, layout::DERIVED_IMAGE_T, 1)?;
+        let t = data::read_times(file, fpath, layout::DERIVED_IMAGE_T)?;
         let img = data::read::<f64>(file, fpath, layout::DERIVED_IMAGE, 3)?;
         data::expect_rows(fpath, layout::DERIVED_IMAGE, &img, layout::DERIVED_IMAGE_T, t.rows())?;
         derived.image = Some(ImageStream { t_s: t.values, hw: [img.shape[1], img.shape[2]], pixels: img.values });
     }
     if file.link_exists("/derived/contacts") {
-        let t = data::read::<f64>(file, fpath, layout::CONTACTS_T, 1)?;
+        let t = data::read_times(file, fpath, layout::CONTACTS_T)?;
         let x = data::read::<f64>(file, fpath, layout::CONTACTS_X_MM, 2)?;
         data::expect_rows(fpath, layout::CONTACTS_X_MM, &x, layout::CONTACTS_T, t.rows())?;
         let column = |path: &str| -> Result<Vec<f64>, RecordError> {
@@ -102,7 +102,7 @@ pub fn read(file: &File, fpath: &Path) -> Result<Derived, RecordError> {
         });
     }
     if file.link_exists(layout::SYNC_GROUP) {
-        let t = data::read::<f64>(file, fpath, layout::SYNC_T, 1)?;
+        let t = data::read_times(file, fpath, layout::SYNC_T)?;
         let column = |path: &str| -> Result<Vec<f64>, RecordError> {
             let d = data::read::<f64>(file, fpath, path, 1)?;
             data::expect_rows(fpath, path, &d, layout::SYNC_T, t.rows())?;
@@ -127,7 +127,7 @@ pub fn read(file: &File, fpath: &Path) -> Result<Derived, RecordError> {
         let names = group.member_names().map_err(|e| RecordError::hdf5(fpath, layout::FORCES_GROUP, e))?;
         for name in names {
             let (t_path, f_path) = (layout::forces_t(&name), layout::forces_force_n(&name));
-            let t = data::read::<f64>(file, fpath, &t_path, 1)?;
+            let t = data::read_times(file, fpath, &t_path)?;
             let f = data::read::<f64>(file, fpath, &f_path, 2)?;
             data::expect_rows(fpath, &f_path, &f, &t_path, t.rows())?;
             let optional = |path: String| -> Result<Option<Vec<f64>>, RecordError> {

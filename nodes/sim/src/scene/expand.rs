@@ -15,6 +15,7 @@ use super::parse::{RawContact, RawGrid, RawStep};
 use super::validate::{ErrFn, MAX_FORCE_N, at_most, non_negative, positive};
 use crate::timeline::{Segment, SegmentContact};
 use skinflow_eit::Sensor;
+use skinflow_toml::Num;
 use std::collections::HashMap;
 use std::ops::Range;
 use toml::Spanned;
@@ -108,9 +109,11 @@ impl Builder {
             return Err(err(
                 step.span.clone(),
                 format!(
-                    "[[step]] {}: this step lasts {duration_s:.4e} s ({how}), which makes the scene \
-                     {total_s:.4e} s long, more than the {MAX_DURATION_S:e} s (11.6 days) a scene may last",
-                    step.number
+                    "[[step]] {}: this step lasts {} s ({how}), which makes the scene {} s long, more than the \
+                     {MAX_DURATION_S:e} s (11.6 days) a scene may last",
+                    step.number,
+                    Num(duration_s),
+                    Num(total_s)
                 ),
             ));
         }

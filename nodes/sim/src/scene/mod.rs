@@ -110,8 +110,14 @@ impl Scene {
     pub fn read(path: impl AsRef<Path>) -> Result<(Scene, String), SceneError> {
         let path = path.as_ref();
         let file = path.display().to_string();
-        let text =
-            std::fs::read_to_string(path).map_err(|e| SceneError::Read { file: file.clone(), cause: e.to_string() })?;
+        let text = std::fs::read_to_string(path).map_err(|e| {
+            let cause = if e.kind() == std::io::ErrorKind::InvalidData {
+                "not UTF-8 text (a scene is a TOML file; is this a recording or another binary file?)".to_owned()
+            } else {
+                e.to_string()
+            };
+            SceneError::Read { file: file.clone(), cause }
+        })?;
         let mut scene = Scene::from_str(&text, &file)?;
         if scene.name.is_empty() {
             scene.name = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();

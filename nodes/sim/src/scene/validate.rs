@@ -11,6 +11,7 @@ use super::{Channels, Fault, Locator, Pacing, Rates, Scene, SceneError};
 use crate::profile::Profile;
 use crate::timeline::Timeline;
 use skinflow_eit::{Sensor, SensorError};
+use skinflow_toml::Num;
 use std::sync::Arc;
 use toml::Spanned;
 
@@ -355,13 +356,17 @@ pub(super) fn positive(name: &str, v: &Spanned<f64>, err: &ErrFn<'_>) -> Result<
     if x.is_finite() && x > 0.0 {
         Ok(x)
     } else {
-        Err(err(v.span(), format!("\"{name}\": must be finite and > 0 (got {x})")))
+        Err(err(v.span(), format!("\"{name}\": must be finite and > 0 (got {})", Num(x))))
     }
 }
 
 /// `x` (the value of `v`, already checked otherwise) when it is at most `max`.
 pub(super) fn at_most(name: &str, v: &Spanned<f64>, x: f64, max: f64, err: &ErrFn<'_>) -> Result<f64, SceneError> {
-    if x <= max { Ok(x) } else { Err(err(v.span(), format!("\"{name}\": must be at most {max} (got {x})"))) }
+    if x <= max {
+        Ok(x)
+    } else {
+        Err(err(v.span(), format!("\"{name}\": must be at most {} (got {})", Num(max), Num(x))))
+    }
 }
 
 pub(super) fn non_negative(name: &str, v: &Spanned<f64>, err: &ErrFn<'_>) -> Result<f64, SceneError> {
@@ -369,7 +374,7 @@ pub(super) fn non_negative(name: &str, v: &Spanned<f64>, err: &ErrFn<'_>) -> Res
     if x.is_finite() && x >= 0.0 {
         Ok(x)
     } else {
-        Err(err(v.span(), format!("\"{name}\": must be finite and >= 0 (got {x})")))
+        Err(err(v.span(), format!("\"{name}\": must be finite and >= 0 (got {})", Num(x))))
     }
 }
 

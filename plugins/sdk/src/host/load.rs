@@ -102,8 +102,13 @@ fn open_copy(path: &Path) -> Result<libloading::Library, PluginError> {
         to: to.clone(),
         source,
     })?;
+    if let Err(problem) = check_complete(&to) {
+        let _ = std::fs::remove_file(&to);
+        return Err(PluginError::Open { path: path.to_path_buf(), cause: problem });
+    }
     // SAFETY: loading a library runs its initialisers; the user named this plugin in a graph or
-    // on the command line, which is the trust decision. The copy is ours alone.
+    // on the command line, which is the trust decision. The copy is ours alone, and
+    // `check_complete` found every segment the loader maps within it.
     let lib = unsafe { libloading::Library::new(&to) };
     // The mapping outlives the file: removing the copy now leaves nothing behind.
     let _ = std::fs::remove_file(&to);
@@ -119,6 +124,38 @@ fn open_copy(path: &Path) -> Result<libloading::Library, PluginError> {
             cause: cause.replace(&*to.to_string_lossy(), &path.to_string_lossy()),
         }
     })
+}
+
+/// Refuses a library file that is cut short: an ELF file whose headers, or a segment the
+/// loader maps, reach past its end. `dlopen` maps such a file and the process dies of SIGBUS
+/// when it touches the missing pages (a rebuild caught half way under `run --watch`). Files
+/// that are not 64-bit ELF are left to `dlopen`, which names what is wrong with them.
+fn check_complete(copy: &Path) -> Result<(), String> {
+    use object::read::elf::{ElfFile64, FileHeader, ProgramHeader};
+    let data = std::fs::read(copy).map_err(|e| format!("cannot read it: {e}"))?;
+    let incomplete = |what: &str| {
+        format!(
+            "the file is incomplete: {what}, but it has {} bytes; is it still being written (a build in progress)?",
+            data.len()
+        )
+    };
+    if !data.starts_with(b"\x7fELF") || data.get(4) != Some(&2) {
+        return Ok(());
+    }
+    let elf = match ElfFile64::<object::Endianness>::parse(&*data) {
+        Ok(elf) => elf,
+        Err(e) => return Err(incomplete(&format!("its ELF headers do not read ({e})"))),
+    };
+    let (header, endian) = (elf.elf_header(), elf.endian());
+    let segments =
+        header.program_headers(endian, &*data).map_err(|_| incomplete("its program headers reach past its end"))?;
+    for (k, segment) in segments.iter().enumerate() {
+        let (offset, size) = (segment.p_offset(endian), segment.p_filesz(endian));
+        if offset.checked_add(size).is_none_or(|end| end > data.len() as u64) {
+            return Err(incomplete(&format!("segment {k} ends at byte {}", offset.saturating_add(size))));
+        }
+    }
+    Ok(())
 }
 
 fn text(path: &Path, what: &str, s: SfStr) -> Result<String, PluginError> {

@@ -168,7 +168,20 @@ impl NodeFactory for PluginFactory {
         match status {
             SfStatus::OK => Ok(()),
             SfStatus::PANIC => Err(to_err(format!("plugin {}: checking params {err}", self.0.origin()))),
-            _ => Err(to_err(err)),
+            _ => {
+                // The plugin's message starts with the key path of the value (the SDK parses
+                // through skinflow_toml): located at that param's key, as a built-in kind's
+                // error is at its value, rather than at the node.
+                let mut e = to_err(err);
+                if let (Some(path), _) = skinflow_toml::split_path(&e.problem) {
+                    let key = path.split(['.', '[']).next().unwrap_or(path).trim_matches('"');
+                    if self.0.info.params.iter().any(|d| d.name == key) {
+                        let at = ParamError { param: Some(key.to_owned()), problem: String::new(), span: None };
+                        e.span = params.locate::<()>(Err(at)).err().and_then(|l| l.span);
+                    }
+                }
+                Err(e)
+            }
         }
     }
 

@@ -99,11 +99,21 @@ fn no_allocation_per_message_in_steady_state() {
 
     // Pooled: sources and workers on their own threads hand nodes to each other through
     // lock-free queues. Count every thread; stray allocations elsewhere in the process only
-    // ever add, so the smallest of a few runs of each size is the engine's own count.
-    let min_of = |count: u64| (0..3).map(|_| allocations(count, Mode::Realtime).1).min().unwrap();
-    min_of(1_000);
+    // ever add, so the smallest of a few runs of each size is the engine's own count. A few
+    // allocations per run still move between runs with thread timing: the work-stealing
+    // deques' epoch collector (crossbeam-epoch) registers each thread when it first steals,
+    // and frees exited threads' records in batches, allocating a batch node in whichever run
+    // fills one. A CI machine once saw 2 more in the large run. That cost is per run, not per
+    // message: one allocation per message would add 99,000, one per thousand messages 99.
+    const PER_RUN_SLACK: u64 = 8;
+    let min_of = |count: u64| (0..5).map(|_| allocations(count, Mode::Realtime).1).min().unwrap();
+    min_of(100_000);
     let small = min_of(1_000);
     let large = min_of(100_000);
     eprintln!("pooled: {small} allocations for 1,000 messages, {large} for 100,000");
-    assert!(large <= small, "pooled: {} allocations for 99,000 more messages", large as i64 - small as i64);
+    assert!(
+        large <= small + PER_RUN_SLACK,
+        "pooled: {} allocations for 99,000 more messages (at most {PER_RUN_SLACK} allowed, per run)",
+        large as i64 - small as i64
+    );
 }

@@ -169,6 +169,7 @@ impl Codec for SplitCodec {
             s.dp_kpa.clear();
             s.dp_kpa.extend_from_slice(dp);
             s.strategy = at.name;
+            s.plugin_kind = at.kind;
             s.compute_ns = at.compute_ns;
             s.contacts = contacts;
         });
@@ -235,6 +236,7 @@ impl Codec for ForcesCodec {
             }
             f.strategy.clear();
             f.strategy.push_str(at.name);
+            f.plugin_kind = at.kind;
             f.compute_ns = at.compute_ns;
             f.split = Arc::clone(&split);
         });
@@ -411,7 +413,15 @@ mod tests {
         // SAFETY: `raw` points into `buf`, alive and unchanged while `cols` is used.
         let cols = unsafe { Columns::from_raw(raw) };
         let inputs = skinflow_core::Inputs::default();
-        let at = Decode { header: msg.header, inputs: &inputs, n_inputs: 0, earlier: &[], name: "src", compute_ns: 0 };
+        let at = Decode {
+            header: msg.header,
+            inputs: &inputs,
+            n_inputs: 0,
+            earlier: &[],
+            name: "src",
+            kind: "src-kind",
+            compute_ns: 0,
+        };
         codec.decode(&cols, &at)
     }
 
@@ -486,7 +496,8 @@ mod tests {
     /// A built-in split of `contacts(seq, frame_dp, shares.len())` with these shares.
     fn split(seq: u64, frame_dp: f64, shares: &[f64]) -> Message {
         let c = contacts(seq, frame_dp, shares.len()).arc::<Contacts>().unwrap();
-        let s = Split { contacts: c, strategy: "proportional", dp_kpa: shares.to_vec(), compute_ns: 0 };
+        let s =
+            Split { contacts: c, strategy: "proportional", plugin_kind: "", dp_kpa: shares.to_vec(), compute_ns: 0 };
         Message::new(Header { seq, t_ns: seq * 10, origin: 2 }, s)
     }
 
@@ -509,7 +520,7 @@ mod tests {
         let cols = unsafe { Columns::from_raw(raw) };
         let inputs = skinflow_core::Inputs::default();
         let header = Header { seq, t_ns: seq * 10, origin: 3 };
-        let at = Decode { header, inputs: &inputs, n_inputs: 1, earlier, name, compute_ns: 0 };
+        let at = Decode { header, inputs: &inputs, n_inputs: 1, earlier, name, kind: "test-kind", compute_ns: 0 };
         codec.decode(&cols, &at)
     }
 
@@ -519,9 +530,11 @@ mod tests {
         let m = decode(Split::TYPE, 4, &[("dp_kpa", &[1.0, 2.0])], &[contacts(4, 3.0, 2)], name).unwrap();
         let s = m.get::<Split>().unwrap();
         assert!(std::ptr::eq(s.strategy, name), "the node's name, not a copy");
+        assert_eq!(s.plugin_kind, "test-kind");
         let name = "fused-b";
         let m = decode(Forces::TYPE, 4, &[("force_n", &[1.0, 2.0])], &[split(4, 3.0, &[1.0, 2.0])], name).unwrap();
         assert_eq!(m.get::<Forces>().unwrap().strategy, "fused-b");
+        assert_eq!(m.get::<Forces>().unwrap().plugin_kind, "test-kind");
     }
 
     #[test]

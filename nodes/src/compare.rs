@@ -34,9 +34,11 @@
 //! one becomes `proportional (to frame 411)`), so no figure blends two strategies. The live
 //! lines, the table and the JSON list every lane of an edge in order; the JSON adds each lane's
 //! edge (`input`), `segment`, `strategy`, `split`, `first_frame`, `last_frame` and `superseded`.
-//! A swap that keeps both names (a new `lambda` upstream, another calibration file) cannot be
-//! told apart here: no message says which instance or params made it, so such a lane's figures
-//! span both settings.
+//! A plugin node's names default to its node id, which a swap to another plugin kind keeps: the
+//! plugin kind that made the forces or the split changing starts a new lane too, named
+//! `<name> (<kind>)`. A swap that keeps the names and the kind (a new `lambda` upstream,
+//! another calibration file) cannot be told apart here: no message says which instance or
+//! params made it, so such a lane's figures span both settings.
 //!
 //! Hot swap of the node itself (e.g. a new `report_s`): the replacement takes over every lane
 //! with its figures and names, closed lanes included, so its report at stop covers the whole
@@ -110,6 +112,17 @@ impl NodeParams for CompareParams {
     }
 }
 
+/// The plugin kinds that made `f` and its split (empty for built-in nodes).
+fn plugin_kinds(f: &Forces) -> (&'static str, &'static str) {
+    (f.plugin_kind, f.split.plugin_kind)
+}
+
+/// A lane name for `name` made by plugin kind `kind` (`name (kind)`; `name` alone for a
+/// built-in node).
+fn with_kind(name: &str, kind: &str) -> String {
+    if kind.is_empty() { name.to_owned() } else { format!("{name} ({kind})") }
+}
+
 /// Accumulated results of one lane: one strategy on one input edge.
 #[derive(Default)]
 struct Lane {
@@ -122,6 +135,8 @@ struct Lane {
     /// The forces' strategy name and the split's strategy this lane stands for.
     strategy: String,
     split: &'static str,
+    /// The plugin kinds that made the forces and the split (empty for built-in nodes).
+    plugin_kinds: (&'static str, &'static str),
     /// Sequence numbers of the first and last frames received (`None` before any).
     first_frame: Option<u64>,
     last_frame: Option<u64>,
@@ -295,8 +310,10 @@ impl Compare {
             }
             lane.strategy.clone_from(&f.strategy);
             lane.split = f.split.strategy;
+            lane.plugin_kinds = plugin_kinds(f);
             lane.first_frame = Some(self.st.frame);
-        } else if lane.strategy != f.strategy || lane.split != f.split.strategy {
+        } else if lane.strategy != f.strategy || lane.split != f.split.strategy || lane.plugin_kinds != plugin_kinds(f)
+        {
             self.next_segment(i, f);
         }
         let lane = &mut self.st.lanes[i];
@@ -309,8 +326,18 @@ impl Compare {
     #[cold]
     fn next_segment(&mut self, i: usize, f: &Forces) {
         let old = &self.st.lanes[i];
-        let changed = if old.strategy != f.strategy { f.strategy.as_str() } else { f.split.strategy };
-        let changed = if changed.is_empty() { format!("lane{i}") } else { changed.to_owned() };
+        let (forces_kind, split_kind) = plugin_kinds(f);
+        let changed = if old.strategy != f.strategy {
+            f.strategy.clone()
+        } else if old.split != f.split.strategy {
+            f.split.strategy.to_owned()
+        } else if old.plugin_kinds.0 != forces_kind {
+            // Same names, another plugin kind (a plugin's name defaults to its node id).
+            with_kind(&f.strategy, forces_kind)
+        } else {
+            with_kind(f.split.strategy, split_kind)
+        };
+        let changed = if changed.is_empty() { format!("lane{i}") } else { changed };
         let name = match self.names.get(i).filter(|n| !n.is_empty()) {
             Some(n) => format!("{n}: {changed}"),
             None => changed,
@@ -319,6 +346,7 @@ impl Compare {
         new.segment = old.segment + 1;
         new.strategy.clone_from(&f.strategy);
         new.split = f.split.strategy;
+        new.plugin_kinds = plugin_kinds(f);
         new.first_frame = Some(self.st.frame);
         let mut old = std::mem::replace(&mut self.st.lanes[i], new);
         old.superseded = true;
@@ -721,6 +749,7 @@ mod tests {
         Forces {
             split,
             strategy: lane.into(),
+            plugin_kind: "",
             forces: det.iter().map(|&(_, _, force_n)| ForceEstimate { force_n, ..ForceEstimate::default() }).collect(),
             compute_ns: 1_000,
         }
@@ -1008,6 +1037,37 @@ mod tests {
         at(&mut c, 3, 0, &lost);
         let r = c.reports();
         assert_eq!((r[1].name.as_str(), r[1].frames, r[1].no_pressure_frames), ("eit-force (from frame 3)", 0, 1));
+    }
+
+    #[test]
+    fn a_swap_to_another_plugin_kind_under_the_same_name_starts_a_new_lane() {
+        let truth = [(0.0, 0.0, 2.0)];
+        // A plugin splitter "split-a" (names default to the node id) swapped from kind
+        // "weighted" to kind "area" at frame 2, then a plugin corrector "fuse" from kind "v1"
+        // to "v2" at frame 4: four lanes, none blending two algorithms.
+        let f = |split_kind, forces_kind| {
+            let mut f = split_by(forces("fuse", &[(0.0, 0.0, 2.0)], Some(&truth)), "split-a");
+            Arc::make_mut(&mut f.split).plugin_kind = split_kind;
+            f.plugin_kind = forces_kind;
+            f
+        };
+        let mut c = compare();
+        for seq in 0..6 {
+            let split_kind = if seq < 2 { "weighted" } else { "area" };
+            let forces_kind = if seq < 4 { "v1" } else { "v2" };
+            at(&mut c, seq, 0, &f(split_kind, forces_kind));
+        }
+        let r = c.reports();
+        let names: Vec<&str> = r.iter().map(|l| l.name.as_str()).collect();
+        assert_eq!(names, ["fuse (to frame 1)", "split-a (area) (frames 2-3)", "fuse (v2) (from frame 4)"]);
+        let frames: Vec<u64> = r.iter().map(|l| l.frames).collect();
+        assert_eq!(frames, [2, 2, 2]);
+        // Built-in nodes carry no kind: unchanged names and kinds keep one lane.
+        let mut c = compare();
+        for seq in 0..3 {
+            at(&mut c, seq, 0, &f("", ""));
+        }
+        assert_eq!(c.reports().len(), 1);
     }
 
     /// `f` with its synced frame changed by `edit`.

@@ -225,7 +225,7 @@ mod tests {
         let c = |x_mm| Contact { x_mm, y_mm: 0.0, sum: 40.0, area_mm2: 150.0, peak: 0.1, label: 1 };
         let contacts =
             Arc::new(Contacts { image, contacts: vec![c(-20.0), c(20.0)], dropped: 0, floor: 0.0, compute_ns: 0 });
-        Split { contacts, strategy: "proportional", dp_kpa: vec![0.5 * dp_kpa; 2], compute_ns: 0 }
+        Split { contacts, strategy: "proportional", plugin_kind: "", dp_kpa: vec![0.5 * dp_kpa; 2], compute_ns: 0 }
     }
 
     #[test]

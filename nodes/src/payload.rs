@@ -166,6 +166,10 @@ impl Payload for Contacts {
 pub struct Split {
     pub contacts: Arc<Contacts>,
     pub strategy: &'static str,
+    /// The plugin kind that made this split, empty for a built-in splitter (whose `strategy`
+    /// names its algorithm). A plugin's `strategy` defaults to its node id, which a hot swap to
+    /// another plugin kind keeps: this tells the two algorithms apart (`compare` lanes).
+    pub plugin_kind: &'static str,
     /// Per contact, kPa, same order as `contacts.contacts`.
     pub dp_kpa: Vec<f64>,
     pub compute_ns: u64,
@@ -181,6 +185,9 @@ pub struct Forces {
     pub split: Arc<Split>,
     /// Strategy name as in CONTRACTS.md section 4 (e.g. `pneumatic-locaware`), or the lane's.
     pub strategy: String,
+    /// The plugin kind that made these forces, empty for a built-in corrector (as
+    /// [`Split::plugin_kind`]).
+    pub plugin_kind: &'static str,
     pub forces: Vec<ForceEstimate>,
     pub compute_ns: u64,
 }

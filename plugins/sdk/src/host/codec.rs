@@ -54,6 +54,9 @@ pub struct Decode<'a> {
     /// `name` param when its kind declares one (a string), else the node id, unique in a graph.
     /// `'static` (interned once per distinct name at build), so naming a message allocates nothing.
     pub name: &'static str,
+    /// The plugin kind's name (interned): a derived payload's `plugin_kind`, which tells two
+    /// algorithms apart when a hot swap to another kind keeps the node's name.
+    pub kind: &'static str,
     /// Wall time of the call so far (encoding and the plugin), ns: the stage's `compute_ns`.
     pub compute_ns: u64,
 }

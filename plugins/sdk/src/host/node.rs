@@ -226,6 +226,7 @@ impl NodeFactory for PluginFactory {
         };
         let live = Live::new(raw, k.clone());
         let name = output_name(&k.info, params, &ctx.node_id);
+        let kind = intern(&k.info.name);
         let missing = |f: &str| NodeError::msg(k.fail("", &format!("its table has no {f} function")));
         let outs = || k.out_codecs.iter().map(|m| m()).collect::<Vec<_>>();
         Ok(match k.info.role {
@@ -241,6 +242,7 @@ impl NodeFactory for PluginFactory {
                     earlier: Retained::new(if derived { RETAINED_INPUTS } else { 0 }),
                     outs,
                     name,
+                    kind,
                     live,
                 }
             })),
@@ -256,6 +258,7 @@ impl NodeFactory for PluginFactory {
                 no_inputs: Inputs::default(),
                 wake_at: None,
                 name,
+                kind,
                 live,
             })),
         })
@@ -641,6 +644,7 @@ struct DecodeAt<'a> {
     /// The node's earlier inputs (empty for a source).
     earlier: &'a [Message],
     name: &'static str,
+    kind: &'static str,
     t0: Instant,
 }
 
@@ -682,6 +686,7 @@ fn decode_outputs(
                 n_inputs: kind.info.inputs.len(),
                 earlier: at.earlier,
                 name: at.name,
+                kind: at.kind,
                 compute_ns: at.t0.elapsed().as_nanos() as u64,
             };
             codec.decode(&cols, &d).map_err(|e| fail(&port.name, &e))
@@ -711,6 +716,8 @@ pub struct HostedNode {
     earlier: Retained,
     /// The strategy name of derived outputs ([`Decode::name`]).
     name: &'static str,
+    /// The kind's name, interned ([`Decode::kind`]).
+    kind: &'static str,
     live: Live,
 }
 
@@ -735,7 +742,7 @@ impl Processor for HostedNode {
         let t0 = Instant::now();
         self.out_raw.fill(SfMessage::ABSENT);
         let more = self.live.flush(flush, &mut self.out_raw)?;
-        let at = DecodeAt { ctx, inputs: None, earlier: &self.earlier.msgs, name: self.name, t0 };
+        let at = DecodeAt { ctx, inputs: None, earlier: &self.earlier.msgs, name: self.name, kind: self.kind, t0 };
         decode_outputs(&self.live.kind, &mut self.outs, &self.out_raw, at, out)?;
         if more {
             ctx.request_rerun();
@@ -771,7 +778,8 @@ impl HostedNode {
         self.ins.encode(&self.live.kind, inputs)?;
         self.out_raw.fill(SfMessage::ABSENT);
         self.live.process(self.process, &self.ins, &mut self.out_raw)?;
-        let at = DecodeAt { ctx, inputs: Some(inputs), earlier: &self.earlier.msgs, name: self.name, t0 };
+        let at =
+            DecodeAt { ctx, inputs: Some(inputs), earlier: &self.earlier.msgs, name: self.name, kind: self.kind, t0 };
         decode_outputs(&self.live.kind, &mut self.outs, &self.out_raw, at, out)
     }
 }
@@ -830,8 +838,10 @@ pub struct HostedSource {
     no_inputs: Inputs,
     /// Graph time before which the plugin need not be polled (from its last idle poll).
     wake_at: Option<u64>,
-    /// [`Decode::name`] (a source's outputs are not derived payloads; kept for the codecs).
+    /// [`Decode::name`] and [`Decode::kind`] (a source's outputs are not derived payloads;
+    /// kept for the codecs).
     name: &'static str,
+    kind: &'static str,
     live: Live,
 }
 
@@ -865,7 +875,7 @@ impl Source for HostedSource {
         let status =
             unsafe { (self.poll)(self.live.raw.as_ptr(), &mut p, self.out_raw.as_mut_ptr(), self.out_raw.len(), err) };
         self.live.status("", status)?;
-        let at = DecodeAt { ctx, inputs: Some(&self.no_inputs), earlier: &[], name: self.name, t0 };
+        let at = DecodeAt { ctx, inputs: Some(&self.no_inputs), earlier: &[], name: self.name, kind: self.kind, t0 };
         decode_outputs(&self.live.kind, &mut self.outs, &self.out_raw, at, out)?;
         match p.state {
             SfPollState::EMITTED => Ok(SourcePoll::Emitted),

@@ -80,6 +80,7 @@ fn blank_section_at(text: &str, at: usize) -> Option<String> {
 /// table names the node (or says why its id cannot) and the key whose value is wrong.
 fn schema_error(src: &SourceFile, e: &toml::de::Error) -> GraphError {
     let cause = e.message().trim().to_owned();
+    let cause = skinflow_toml::integer_out_of_range(&cause).unwrap_or(cause);
     let span = e.span();
     let Some(at) = span.as_ref().map(|s| s.start) else {
         return GraphError::at(src, span, None, K::Syntax(cause));
@@ -88,6 +89,10 @@ fn schema_error(src: &SourceFile, e: &toml::de::Error) -> GraphError {
         // Not TOML at all: name the `[[node]]` section the error is in from the text, and the
         // key a "duplicate key" error points at.
         let key = (cause == "duplicate key").then(|| key_at(&src.text, at)).flatten();
+        // A value the loose reading refuses too (an integer beyond 64 bits) still has its key
+        // path from the root: name it below the node.
+        let (cause, named) = within_node(&cause);
+        let key = if named { None } else { key };
         return match node_section_by_text(&src.text, at) {
             None => GraphError::at(src, span, None, K::Syntax(cause)),
             Some(Ok(id)) => GraphError::at(src, span, Some(&id), K::NodeField { key, cause }),
@@ -112,6 +117,8 @@ fn within_node(cause: &str) -> (String, bool) {
     match skinflow_toml::split_path(cause) {
         (Some(path), rest) if path.starts_with("node[") => {
             let below = path.split_once(']').map_or("", |(_, below)| below).trim_start_matches('.');
+            // A param is named by its key alone, as the node's own param errors name it.
+            let below = below.strip_prefix("params.").unwrap_or(below);
             if below.is_empty() { (rest.to_owned(), false) } else { (format!("{below}: {rest}"), true) }
         }
         _ => (cause.to_owned(), false),

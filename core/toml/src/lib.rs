@@ -207,11 +207,16 @@ impl<'a> Ctx<'a> {
     /// without a span) this level's path; leaves one that already passed through the wrapper.
     fn name<T, E: de::Error>(self, result: Result<T, E>) -> Result<T, E> {
         result.map_err(|e| {
-            if self.state.settled.replace(true) || matches!(self.path, Path::Root) {
+            if self.state.settled.replace(true) {
                 return e;
             }
             let message = e.to_string();
-            E::custom(format_args!("{}: {}", self.path, message.trim_end()))
+            let plain = integer_out_of_range(message.trim_end());
+            match (self.path, plain) {
+                (Path::Root, None) => e,
+                (Path::Root, Some(plain)) => E::custom(plain),
+                (path, plain) => E::custom(format_args!("{path}: {}", plain.as_deref().unwrap_or(message.trim_end()))),
+            }
         })
     }
 
@@ -230,6 +235,29 @@ impl<'a> Ctx<'a> {
             None => Path::Key(self.path, "?".to_owned()),
         }
     }
+}
+
+/// The range of a TOML integer (64-bit signed), as messages state it.
+const INTEGER_RANGE: &str = "TOML integers are 64-bit, -9223372036854775808 to 9223372036854775807";
+
+/// The user's words for toml's and serde's about an integer literal beyond 64 bits (which toml
+/// reads as an i128 no visitor takes, or as a u64 too large for its type):
+/// ``invalid type: integer `99999999999999999999` as i128, expected f64`` becomes
+/// `integer 99999999999999999999 is out of range (TOML integers are 64-bit, ...)`. `None` for
+/// any other message.
+pub fn integer_out_of_range(message: &str) -> Option<String> {
+    if let Some(rest) = message.strip_prefix("invalid type: integer `")
+        && let Some((digits, expected)) = rest.split_once("` as i128, expected ")
+    {
+        let float = if expected.contains("f64") || expected.contains("f32") || expected.contains("any valid") {
+            "; a float is written with a decimal point or an exponent (1e20)"
+        } else {
+            ""
+        };
+        return Some(format!("integer {digits} is out of range ({INTEGER_RANGE}){float}"));
+    }
+    matches!(message, "u64 value was too large" | "i64 value was too large")
+        .then(|| format!("integer out of range ({INTEGER_RANGE})"))
 }
 
 /// A level that names the same value as `path`.

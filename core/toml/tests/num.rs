@@ -26,3 +26,34 @@ fn plain_when_short_scientific_when_the_plain_form_runs_long() {
         assert_eq!(shown(x).parse::<f64>().unwrap(), x);
     }
 }
+
+#[derive(Debug, serde::Deserialize)]
+#[allow(dead_code)] // read only through Debug: the tests are about the errors
+struct Wide {
+    x: Option<f64>,
+    n: Option<u64>,
+    v: Option<toml::Value>,
+}
+
+/// An integer literal beyond 64 bits: toml's and serde's words (an i128 "invalid type", "u64
+/// value was too large") become the range of a TOML integer, with the key path and toml's span
+/// kept; a float field adds how to write a float.
+#[test]
+fn an_integer_beyond_64_bits_is_said_to_be_out_of_range_at_its_key() {
+    use crate::common::{fail, plain};
+    const RANGE: &str = "(TOML integers are 64-bit, -9223372036854775808 to 9223372036854775807)";
+    const FLOAT: &str = "; a float is written with a decimal point or an exponent (1e20)";
+    for (text, want) in [
+        ("x = 99999999999999999999", format!("x: integer 99999999999999999999 is out of range {RANGE}{FLOAT}")),
+        ("x = -99999999999999999999", format!("x: integer -99999999999999999999 is out of range {RANGE}{FLOAT}")),
+        ("v = 99999999999999999999", format!("v: integer 99999999999999999999 is out of range {RANGE}{FLOAT}")),
+        ("n = 99999999999999999999", format!("n: integer 99999999999999999999 is out of range {RANGE}")),
+        ("v = 18446744073709551615", format!("v: integer out of range {RANGE}")),
+    ] {
+        let (message, at) = fail::<Wide>(text);
+        assert_eq!(message, want, "{text}");
+        assert_eq!(at, plain::<Wide>(text).1, "toml's span: {text}");
+    }
+    // Other messages are left alone.
+    assert_eq!(skinflow_toml::integer_out_of_range("invalid type: string \"x\", expected u64"), None);
+}

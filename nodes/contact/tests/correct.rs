@@ -270,6 +270,12 @@ fn calibration_file_with_too_many_field_coefficients_is_refused_at_the_key() {
     let key = section + bad[section..].find("gain = ").unwrap();
     let line = bad[..key].matches('\n').count() + 1;
     assert_eq!(err, format!("calib.toml:{line}:8: pneumatic.locaware.gain: expected an array of 6 elements, found 8"));
+    // An integer beyond 64 bits, refused by toml's own reading of the file, is said to be
+    // out of range (not "u64 value was too large").
+    let version = text.lines().find(|l| l.starts_with("format_version = ")).unwrap();
+    let bad = text.replacen(version, "format_version = 18446744073709551615", 1);
+    let err = Calibration::from_toml_str(&bad, "calib.toml").unwrap_err().to_string();
+    assert!(err.contains(": integer out of range (TOML integers are 64-bit, "), "{err}");
 }
 
 #[test]

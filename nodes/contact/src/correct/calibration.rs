@@ -358,6 +358,7 @@ impl Calibration {
                 (before.matches('\n').count() + 1, column)
             });
             let message = e.message().trim_end().replace('\n', " ");
+            let message = skinflow_toml::integer_out_of_range(&message).unwrap_or(message);
             CalibrationFileError::Parse { path: origin.to_string(), at, message }
         };
         // The header first, so a file of another version is named as such, not as a parse error.

@@ -395,7 +395,7 @@ fn run(
     // The kinds live swaps can use: the graph's plugins loaded again (fresh copies, so a
     // rebuilt library is told apart later); they loaded a moment ago for validation.
     let kinds = if watch || control.is_some() {
-        Some(cmd::live::Kinds::load(&spec.plugins).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?)
+        Some(cmd::live::Kinds::load(&spec.plugins, &spec.source).map_err(|e| anyhow::anyhow!(e))?)
     } else {
         None
     };

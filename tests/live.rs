@@ -225,7 +225,15 @@ fn a_rebuilt_plugin_is_reloaded_and_its_nodes_swapped() {
     let stderr = stderr(&out);
     assert!(out.status.success(), "{stderr}");
     assert!(stderr.contains("plugin rebuilt and reloaded: swapped f"), "{stderr}");
-    assert!(stderr.contains("changed but was not reloaded (running nodes keep its previous code)"), "{stderr}");
+    // Located at the library's `[[plugin]]` entry, as `check` and `run` locate it at start.
+    let refused = stderr
+        .lines()
+        .find(|l| l.ends_with("(changed but was not reloaded: running nodes keep its previous code)"))
+        .unwrap_or_else(|| panic!("no refused reload: {stderr}"));
+    let at = refused.strip_prefix(&format!("{}:", g.display())).unwrap_or_else(|| panic!("{refused}"));
+    let (line_col, rest) = at.split_once(": ").unwrap();
+    assert!(line_col.split(':').all(|n| n.parse::<u32>().is_ok()), "file:line:col: {refused}");
+    assert!(rest.starts_with("plugin ") && rest.contains("lib.so"), "{refused}");
     let rows = std::fs::read_to_string(d.join("out.csv")).unwrap();
     assert_eq!(rows.lines().count(), 2000, "nothing lost across the swap");
 }

@@ -133,9 +133,12 @@ pub struct Kinds {
 }
 
 impl Kinds {
-    pub fn load(plugins: &[PathBuf]) -> Result<Kinds, String> {
+    /// Loads `plugins`, the `[[plugin]]` paths of graph file `src`: an error is located at the
+    /// failing library's entry there (`file:line:col: plugin PATH: cause`).
+    pub fn load(plugins: &[PathBuf], src: &SourceFile) -> Result<Kinds, String> {
         let mut registry = skinflow_nodes::registry();
-        let loaded = skinflow_nodes::codec::load_plugins(plugins, &mut registry).map_err(|e| e.to_string())?;
+        let loaded = skinflow_nodes::codec::load_plugins(plugins, &mut registry)
+            .map_err(|e| skinflow_core::graph::plugin_error(src, e.path(), e.to_string()).to_string())?;
         let libraries = plugins
             .iter()
             .zip(loaded)
@@ -347,7 +350,7 @@ impl Live {
             return None;
         }
         let names = changed.iter().map(|(p, _)| p.display().to_string()).collect::<Vec<_>>().join(", ");
-        let fresh = match Kinds::load(&kinds.paths()) {
+        let fresh = match Kinds::load(&kinds.paths(), &self.started.source) {
             Ok(k) => k,
             Err(e) => {
                 // Not swapped: the running nodes keep the old code. The file's time is taken as
@@ -355,11 +358,11 @@ impl Live {
                 for l in kinds.libraries.iter_mut() {
                     l.mtime = mtime(&l.path);
                 }
-                return Some(Err(format!(
-                    "plugin {names} changed but was not reloaded (running nodes keep its previous code): {e}"
-                )));
+                // `e` is located at the library's `[[plugin]]` entry (file:line:col).
+                return Some(Err(format!("{e} (changed but was not reloaded: running nodes keep its previous code)")));
             }
         };
+        let graph = self.started.source.path.display();
         let stale: Vec<&String> = changed.iter().flat_map(|(_, k)| k).collect();
         let now = self.lock_nodes().clone();
         // Checked as an edit's swaps are, before any node is swapped: the new code's kinds may
@@ -371,14 +374,14 @@ impl Live {
                 l.mtime = mtime(&l.path);
             }
             return Some(Err(format!(
-                "plugin {names} changed but was not reloaded (running nodes keep its previous code): {e}"
+                "{graph}: plugin {names} changed but was not reloaded (running nodes keep its previous code): {e}"
             )));
         }
         *kinds = fresh;
         let mut swapped: Vec<String> = Vec::new();
         let failed = |swapped: Vec<String>, error: String| {
             let e = EditError { done: Applied { policies: Vec::new(), swapped }, error };
-            Some(Err(format!("plugin {names} reloaded: {} (that node runs its previous code)", e.partly())))
+            Some(Err(format!("{graph}: plugin {names} reloaded: {} (that node runs its previous code)", e.partly())))
         };
         for (id, kind, params) in now.iter().filter(|n| stale.contains(&&n.1)) {
             // A node that runs no more (a source whose stream ended) has nothing to swap; the
@@ -417,7 +420,8 @@ pub fn watch(path: PathBuf, live: Arc<Live>, done: Arc<AtomicBool>) {
             Some(Ok(swapped)) => {
                 eprintln!("{}: plugin rebuilt and reloaded: swapped {}", path.display(), swapped.join(", "))
             }
-            Some(Err(e)) => eprintln!("{}: {e}", path.display()),
+            // Each names the graph file (and the `[[plugin]]` entry, when a library failed to load).
+            Some(Err(e)) => eprintln!("{e}"),
         }
         let now = mtime(&path);
         if now == seen {
@@ -444,10 +448,10 @@ pub fn watch(path: PathBuf, live: Arc<Live>, done: Arc<AtomicBool>) {
         let parsed = {
             let mut kinds = live.lock_kinds();
             if plugins != kinds.paths() {
-                match Kinds::load(&plugins) {
+                match Kinds::load(&plugins, &src) {
                     Ok(k) => *kinds = k,
                     Err(e) => {
-                        eprintln!("{}: edit rejected: {e}", path.display());
+                        eprintln!("edit rejected: {e}");
                         continue;
                     }
                 }

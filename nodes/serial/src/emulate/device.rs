@@ -114,8 +114,27 @@ pub(super) struct DeviceCounters {
     pub delivered: AtomicBool,
 }
 
+/// The clock every device of one emulator paces its samples by: a sample of feed time `t_s`
+/// goes out at `start + (t_s - t0_s)`, `t0_s` being the earliest first sample of all the
+/// streams, so the boards keep the feed's relative timing (an EIT frame, sent at the end of
+/// its acquisition window, goes out that long after the pressure sample at the window's start).
+#[derive(Debug, Clone, Copy)]
+pub(super) struct FeedClock {
+    pub start: Instant,
+    pub t0_s: f64,
+}
+
+impl FeedClock {
+    /// When a sample of feed time `t_s` is due.
+    fn due(&self, t_s: f64) -> Instant {
+        self.start + secs((t_s - self.t0_s).max(0.0))
+    }
+}
+
 pub(super) struct DeviceRun<T> {
     pub device: Device,
+    /// Real-time pacing's schedule, shared by the emulator's devices.
+    pub clock: FeedClock,
     pub pty: StablePty,
     pub samples: Samples<T>,
     /// Sorted by record index (stable, so same-index faults keep their order).
@@ -218,8 +237,10 @@ impl<T: Sample> DeviceRun<T> {
     }
 
     fn send_all(&mut self) -> Result<(), EmulateError> {
-        let start = Instant::now();
-        let mut t0_s = None;
+        // Only a restart delays the stream: the board does not measure while it boots, and
+        // picks up the feed where it left off. A stall or an unplug does not: the board keeps
+        // measuring on its clock, and what fell due meanwhile goes out at once when the link is
+        // back (a bridge's buffer), so device times and the feed stay in step.
         let mut paused = Duration::ZERO;
         let mut record = Vec::new();
         let mut next_fault = 0;
@@ -231,8 +252,7 @@ impl<T: Sample> DeviceRun<T> {
         let mut run = BoardRun::power_up(self.first_counter);
         while let Some(sample) = self.samples.next() {
             if let Pacing::RealTime | Pacing::Wire { .. } = self.pacing {
-                let t0_s = *t0_s.get_or_insert(sample.t_s());
-                if !sleep_until(start + secs(sample.t_s() - t0_s) + paused, &stop) {
+                if !sleep_until(self.clock.due(sample.t_s()) + paused, &stop) {
                     return Ok(());
                 }
             } else if stop.load(Ordering::Relaxed) {
@@ -248,7 +268,6 @@ impl<T: Sample> DeviceRun<T> {
                 c.faults_applied.fetch_add(1, Ordering::Relaxed);
                 match fault {
                     Fault::Unplug { down_s } => {
-                        let began = Instant::now();
                         self.pty.wait_drained(Some(DRAIN_TIMEOUT), &stop).map_err(|e| self.pty_error(e))?;
                         self.pty.unplug().map_err(|e| self.pty_error(e))?;
                         c.unplugs.fetch_add(1, Ordering::Relaxed);
@@ -256,15 +275,11 @@ impl<T: Sample> DeviceRun<T> {
                             return Ok(());
                         }
                         self.pty.replug().map_err(|e| self.pty_error(e))?;
-                        // The drain wait delays the stream too.
-                        paused += began.elapsed();
                     }
                     Fault::Stall { silent_s } => {
-                        let began = Instant::now();
-                        if !sleep_until(began + secs(*silent_s), &stop) {
+                        if !sleep_until(Instant::now() + secs(*silent_s), &stop) {
                             return Ok(());
                         }
-                        paused += began.elapsed();
                     }
                     Fault::Restart { down_s } => {
                         let began = Instant::now();
@@ -315,7 +330,23 @@ impl<T: Sample> DeviceRun<T> {
 
 #[cfg(test)]
 mod tests {
-    use super::BoardRun;
+    use std::time::{Duration, Instant};
+
+    use super::{BoardRun, FeedClock};
+
+    /// Every device paces by one clock: a sample is due its feed time after the earliest first
+    /// sample of all streams (an EIT frame at the end of its 0.769 s window goes out 0.769 s
+    /// after the pressure sample at the window's start, not at once).
+    #[test]
+    fn samples_are_due_at_their_feed_time_after_the_common_origin() {
+        let start = Instant::now();
+        let clock = FeedClock { start, t0_s: 0.0 };
+        assert_eq!(clock.due(0.0), start);
+        assert_eq!(clock.due(0.769), start + Duration::from_secs_f64(0.769));
+        let late = FeedClock { start, t0_s: 100.0 };
+        assert_eq!(late.due(100.5), start + Duration::from_secs_f64(0.5));
+        assert_eq!(late.due(99.0), start, "never before the start");
+    }
 
     /// Firmware after a reset: counter from 0, clock from the reset (the silence included).
     #[test]

@@ -24,8 +24,11 @@ pub enum Fault {
     Skip,
     /// Before the record, the device disappears for `down_s` seconds and then returns at the
     /// same path. Bytes already sent are given up to 2 s to be read before the link drops.
+    /// The board keeps measuring on its clock meanwhile: the records that fell due go out at
+    /// once when it returns (as from a bridge's buffer), and the stream is back on schedule.
     Unplug { down_s: f64 },
-    /// Before the record, the device is silent for `silent_s` seconds; the port stays.
+    /// Before the record, the device is silent for `silent_s` seconds; the port stays. As for
+    /// an unplug, the board keeps measuring, and what fell due goes out at once afterwards.
     Stall { silent_s: f64 },
     /// Boards with a frame counter or a clock (EIT, pressure): before the record, the board
     /// resets and is silent for `down_s` seconds while it boots (the port stays, as behind a

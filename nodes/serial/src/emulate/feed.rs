@@ -1,7 +1,8 @@
 //! What the emulated boards send: timed samples, one stream per device.
 //!
 //! Each stream is an iterator (finite or not) of samples with their send times `t_s` in
-//! seconds on the feed's own clock; only differences matter, the first sample goes out at once.
+//! seconds on the feed's clock, which all streams share: only differences matter, and the
+//! earliest first sample of all the streams goes out at once.
 //! An EIT frame's `t_s` is when the board finishes acquiring it and sends it.
 
 /// One EIT frame to send.

@@ -17,7 +17,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use device::{DeviceCounters, DeviceRun, Sample};
+use device::{DeviceCounters, DeviceRun, FeedClock, Sample};
 pub use fault::{Fault, FaultError, FaultPlan};
 pub use feed::{EmulatorFeed, Samples, TimedForce, TimedFrame, TimedPressure};
 use pty::StablePty;
@@ -128,6 +128,14 @@ struct DeviceHandle {
     thread: Option<JoinHandle<Result<(), EmulateError>>>,
 }
 
+/// The stream with its first sample's feed time (the sample is kept: put back in front).
+fn first_time<T: Sample + Send + 'static>(samples: Option<Samples<T>>) -> (Option<Samples<T>>, Option<f64>) {
+    let Some(mut samples) = samples else { return (None, None) };
+    let Some(first) = samples.next() else { return (Some(samples), None) };
+    let t = first.t_s();
+    (Some(Box::new(std::iter::once(first).chain(samples))), Some(t))
+}
+
 /// Running emulated boards; stops on drop.
 pub struct Emulator {
     dir: PathBuf,
@@ -166,14 +174,21 @@ impl Emulator {
             }
         };
         let mut emulator = Self { dir, owns_dir, stop: Arc::new(AtomicBool::new(false)), devices: Vec::new() };
-        if let Some(samples) = feed.eit {
-            emulator.start(Device::Eit, samples, eit_faults, &config)?;
+        // One clock for every device: the earliest first sample of all the streams goes out at
+        // once, and the others keep their feed times relative to it.
+        let (eit, t_eit) = first_time(feed.eit);
+        let (pressure, t_pressure) = first_time(feed.pressure);
+        let (loadcell, t_loadcell) = first_time(feed.loadcell);
+        let t0_s = [t_eit, t_pressure, t_loadcell].into_iter().flatten().fold(f64::INFINITY, f64::min);
+        let clock = FeedClock { start: Instant::now(), t0_s: if t0_s.is_finite() { t0_s } else { 0.0 } };
+        if let Some(samples) = eit {
+            emulator.start(Device::Eit, samples, eit_faults, &config, clock)?;
         }
-        if let Some(samples) = feed.pressure {
-            emulator.start(Device::Pressure, samples, pressure_faults, &config)?;
+        if let Some(samples) = pressure {
+            emulator.start(Device::Pressure, samples, pressure_faults, &config, clock)?;
         }
-        if let Some(samples) = feed.loadcell {
-            emulator.start(Device::Loadcell, samples, loadcell_faults, &config)?;
+        if let Some(samples) = loadcell {
+            emulator.start(Device::Loadcell, samples, loadcell_faults, &config, clock)?;
         }
         Ok(emulator)
     }
@@ -184,12 +199,14 @@ impl Emulator {
         samples: Samples<T>,
         faults: Vec<(usize, Fault)>,
         config: &EmulatorConfig,
+        clock: FeedClock,
     ) -> Result<(), EmulateError> {
         let path = self.dir.join(device.name());
         let pty = StablePty::create(path.clone()).map_err(|source| EmulateError::Pty { device, source })?;
         let counters = Arc::new(DeviceCounters::default());
         let run = DeviceRun {
             device,
+            clock,
             pty,
             samples,
             faults,
@@ -305,5 +322,24 @@ impl Drop for Emulator {
 impl std::fmt::Debug for Emulator {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("Emulator").field("dir", &self.dir).field("devices", &self.paths().collect::<Vec<_>>()).finish()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{Samples, TimedPressure, first_time};
+
+    /// The first sample's time is read without losing the sample; an empty or absent stream
+    /// has none.
+    #[test]
+    fn first_time_puts_the_first_sample_back() {
+        let p = |t_s| TimedPressure { t_s, kpa: 1.0 };
+        let stream: Samples<TimedPressure> = Box::new(vec![p(0.5), p(1.0)].into_iter());
+        let (back, t) = first_time(Some(stream));
+        assert_eq!(t, Some(0.5));
+        assert_eq!(back.unwrap().collect::<Vec<_>>(), [p(0.5), p(1.0)]);
+        let (_, t) = first_time(Some(Box::new(std::iter::empty::<TimedPressure>()) as Samples<TimedPressure>));
+        assert_eq!(t, None);
+        assert!(matches!(first_time::<TimedPressure>(None), (None, None)));
     }
 }

@@ -1807,4 +1807,20 @@ fn a_replay_of_an_empty_recording_warns_that_it_sends_nothing() {
         err.contains("the recording holds no EIT frame, pressure sample or truth row: the replay sends nothing"),
         "{err}"
     );
+    // Pressure rows but no /eit stream (a logger whose EIT input was not connected): it
+    // replays the pressure, and says that no frame will be imaged.
+    opts.streams = skinflow_record::write::Streams { eit: false, pressure: true, ..Default::default() };
+    hdf5_io(|| {
+        let mut w = skinflow_record::write::RecordingWriter::create(d.join("no-eit.h5"), &opts).unwrap();
+        w.append_pressure(0.0, 1.0).unwrap();
+        w.append_pressure(0.01, 1.0).unwrap();
+        w.close().unwrap()
+    });
+    let g = std::fs::read_to_string(d.join("g.toml")).unwrap().replace("empty.h5", "no-eit.h5");
+    std::fs::write(d.join("g.toml"), g).unwrap();
+    let out = skinflow(&d, &["run", "g.toml"]);
+    let err = stderr(&out);
+    assert!(out.status.success(), "{err}");
+    assert!(err.contains("the recording has no /eit stream: no EIT frame is sent, so nothing is imaged"), "{err}");
+    assert!(!err.contains("no /pressure stream"), "{err}");
 }

@@ -356,6 +356,16 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
                     "the recording holds no EIT frame, pressure sample or truth row: the replay sends nothing"
                 );
             }
+            // A recording without a stream (one a logger wrote with that input unconnected)
+            // replays, but what it lacks is said: without /eit the pipeline gets no frame.
+            for (absent, what) in [
+                (rec.eit.is_none(), "no /eit stream: no EIT frame is sent, so nothing is imaged"),
+                (rec.pressure.is_none(), "no /pressure stream: every frame is sent without pressure"),
+            ] {
+                if absent && rows > 0 {
+                    tracing::warn!(node = %ctx.node_id, path = %path.display(), "the recording has {what}");
+                }
+            }
             // Times before 0 are refused, naming the file as given.
             let replay = Replay::new(rec_path, rec, p.speed, p.repeat).map_err(NodeError::other)?;
             Ok(NodeImpl::Source(Box::new(replay)))

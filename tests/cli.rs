@@ -1783,6 +1783,46 @@ fn a_calibration_applied_on_another_image_scale_is_warned_about() {
     );
 }
 
+/// A looping replay goes on counting: each pass's EIT frame counters follow the last pass's
+/// (the recorded gaps kept), so a logger downstream records counters that never go back
+/// (they used to start again at every pass, which `inspect` read as board restarts).
+#[test]
+fn a_looping_replay_keeps_frame_counters_going_up() {
+    let d = workdir("replay-loop-seq");
+    let sensor = skinflow_eit::Sensor::paper_100mm();
+    let mut opts = skinflow_record::write::WriterOptions::new(sensor.toml.clone());
+    opts.streams = skinflow_record::write::Streams::default();
+    let v = vec![0.5; sensor.measurement_count()];
+    hdf5_io(|| {
+        let mut w = skinflow_record::write::RecordingWriter::create(d.join("in.h5"), &opts).unwrap();
+        // Frame 7 was lost on the link: a gap the replay keeps on every pass.
+        for (k, seq) in [5u64, 6, 8].into_iter().enumerate() {
+            w.append_eit(0.5 + k as f64, seq, &v).unwrap();
+            w.append_pressure(0.1 + k as f64, 1.0).unwrap();
+        }
+        w.close().unwrap()
+    });
+    std::fs::write(
+        d.join("g.toml"),
+        "[graph]\nmode = \"lockstep\"\n\
+         [[node]]\nid = \"replay\"\nkind = \"replay\"\nparams = { path = \"in.h5\", speed = 0.0, loop = true }\n\
+         [[node]]\nid = \"log\"\nkind = \"hdf5_logger\"\nparams = { path = \"out.h5\" }\n\
+         [[edge]]\nfrom = \"replay.eit\"\nto = \"log.eit\"\n\
+         [[edge]]\nfrom = \"replay.pressure\"\nto = \"log.pressure\"\n",
+    )
+    .unwrap();
+    let out = skinflow(&d, &["run", "g.toml", "--for", "0.5"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let rec = read_recording(d.join("out.h5"));
+    let seq = &rec.require_eit().unwrap().seq;
+    assert!(seq.len() >= 9, "three passes at least: {seq:?}");
+    for (pass, frames) in seq.chunks(3).enumerate() {
+        let base = 4 * pass as u64;
+        let want = [5 + base, 6 + base, 8 + base];
+        assert_eq!(frames, &want[..frames.len()], "pass {pass} (first passes: {:?})", &seq[..9]);
+    }
+}
+
 /// A replay of a recording that holds no rows at all (a logger that recorded nothing) runs,
 /// sends nothing, and says so instead of ending silently.
 #[test]

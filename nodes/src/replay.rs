@@ -120,6 +120,9 @@ struct Position {
     sent_reference: bool,
     pressure_seq: u64,
     truth_seq: u64,
+    /// Added to recorded EIT frame counters on the current pass, so a loop's counters go on
+    /// from the last pass's (its recorded gaps kept) rather than start again.
+    eit_seq_offset: u64,
 }
 
 /// Where a replay is, handed to its replacement in a hot swap.
@@ -208,6 +211,16 @@ impl Replay {
         self.pass_pace_step_s() + self.lead_s
     }
 
+    /// How much higher each pass's EIT frame counters are than the one before's: the
+    /// recording's counter span, so the next pass's first frame follows its last one.
+    fn pass_seq_step(&self) -> u64 {
+        let seq = self.rec.eit.as_ref().map_or(&[][..], |e| &e.seq[..]);
+        match (seq.first(), seq.last()) {
+            (Some(first), Some(last)) => last.saturating_sub(*first) + 1,
+            _ => 0,
+        }
+    }
+
     /// Why this instance cannot go on from `s`, if it cannot.
     fn cannot_continue(&self, s: &ReplayState) -> Option<String> {
         let tail = "it would start again at the recording's first row, and the times and sequence numbers it \
@@ -251,6 +264,7 @@ impl Source for Replay {
             self.pos.next = 0;
             self.pos.offset_s += self.pass_step_s();
             self.pos.pace_offset_s += self.pass_pace_step_s();
+            self.pos.eit_seq_offset += self.pass_seq_step();
         }
         let (avail, item) = self.order[self.pos.next];
         self.pos.next += 1;
@@ -267,7 +281,8 @@ impl Source for Replay {
                     f.v.clear();
                     f.v.extend_from_slice(v);
                 });
-                out.send(EIT, Message::from_arc(Header { seq: e.seq[i], t_ns: ns(e.t_s[i] + off), origin }, payload))?;
+                let seq = e.seq[i].wrapping_add(self.pos.eit_seq_offset);
+                out.send(EIT, Message::from_arc(Header { seq, t_ns: ns(e.t_s[i] + off), origin }, payload))?;
             }
             Item::Pressure(i) => {
                 let p = rec.pressure.as_ref().expect("indexed from the pressure stream");
@@ -341,7 +356,12 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
         .output(PortSpec::output::<EitFrame>("reference", "/eit/reference, once, when recorded"))
         .param(ParamDoc::new("path", "path", "", "recording file (relative to the graph file)"))
         .param(ParamDoc::new("speed", "f64", "1.0", "timing factor; 0 = as fast as possible"))
-        .param(ParamDoc::new("loop", "bool", "false", "start again at the end")),
+        .param(ParamDoc::new(
+            "loop",
+            "bool",
+            "false",
+            "start again at the end (times and EIT frame counters go on)",
+        )),
         |p: ReplayParams, ctx| {
             let path = ctx.resolve(&p.path);
             let rec = Recording::open(&path).map_err(NodeError::other)?; // names the file

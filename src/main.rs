@@ -239,7 +239,8 @@ fn dispatch(cmd: Cmd) -> Result<ExitCode> {
             cmd::simulate::run(&scene, &out, seed, overwrite).map(|()| ExitCode::SUCCESS)
         }
         Cmd::Emulate { scene, options } => {
-            cmd::emulate::run(&scene, options, interrupt_flag()?).map(|()| ExitCode::SUCCESS)
+            cmd::emulate::run(&scene, options, interrupt_flag("closing the emulated devices")?)
+                .map(|()| ExitCode::SUCCESS)
         }
         Cmd::Reproduce { out, scenes, seed, fit, pipeline } => {
             cmd::reproduce::run(&scenes, &out, seed, &fit.fit, &pipeline).map(|()| ExitCode::SUCCESS)
@@ -391,7 +392,7 @@ fn run(
         .into_iter()
         .filter_map(|(what, p)| Some((what, p?.to_path_buf())))
         .collect();
-    let stop = interrupt_flag()?;
+    let stop = interrupt_flag("stopping sources, draining queues")?;
     // The kinds live swaps can use: the graph's plugins loaded again (fresh copies, so a
     // rebuilt library is told apart later); they loaded a moment ago for validation.
     let kinds = if watch || control.is_some() {
@@ -443,8 +444,8 @@ fn run(
     }
 }
 
-/// A flag set by the first Ctrl-C (or SIGTERM); a second one exits at once.
-fn interrupt_flag() -> Result<Arc<AtomicBool>> {
+/// A flag set by the first Ctrl-C (or SIGTERM), which prints `doing`; a second one exits at once.
+fn interrupt_flag(doing: &'static str) -> Result<Arc<AtomicBool>> {
     let stop = Arc::new(AtomicBool::new(false));
     let flag = stop.clone();
     ctrlc::set_handler(move || {
@@ -452,7 +453,7 @@ fn interrupt_flag() -> Result<Arc<AtomicBool>> {
             eprintln!("second interrupt: exiting without draining");
             std::process::exit(130);
         }
-        eprintln!("interrupt: stopping sources, draining queues (Ctrl-C again to abort)");
+        eprintln!("interrupt: {doing} (Ctrl-C again to abort)");
     })
     .context("installing the Ctrl-C handler")?;
     Ok(stop)

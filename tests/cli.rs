@@ -868,6 +868,11 @@ fn outputs_and_inputs_are_checked_before_any_work() {
             "--fault \"pressure:1:crc\": device pressure is not served (see --devices)".into(),
         ),
         (
+            // Past the feed's end (checked once the scene is simulated): it would never apply.
+            vec!["emulate", scene.to_str().unwrap(), "--fault", "eit:100000:crc"],
+            "--fault eit:100000: the eit feed of ".into(),
+        ),
+        (
             vec!["emulate", scene.to_str().unwrap(), "--fault", "foo:1:crc"],
             "--fault \"foo:1:crc\": unknown device \"foo\" (devices: eit, pressure, loadcell)".into(),
         ),

@@ -168,6 +168,23 @@ pub fn run(scene: &Path, options: EmulateArgs, stop: Arc<AtomicBool>) -> Result<
             .fold(0.0f64, f64::max);
         force = stream_at(&force, hz, end_s);
     }
+    // A fault at a record the feed does not have would never be applied.
+    for (device, records, faults) in [
+        (Device::Eit, eit.len(), &plan.eit),
+        (Device::Pressure, pressure.len(), &plan.pressure),
+        (Device::Loadcell, force.len(), &plan.loadcell),
+    ] {
+        if let Some((index, _)) = faults.iter().find(|(index, _)| *index >= records) {
+            anyhow::bail!(
+                "--fault {}:{index}: the {} feed of {} has {records} records (indices 0 to {}): the fault would never \
+                 apply",
+                device.name(),
+                device.name(),
+                scene.display(),
+                records.saturating_sub(1)
+            );
+        }
+    }
     let serves = |d: Device| devices.contains(&d);
     let last_s = [
         eit.last().filter(|_| serves(Device::Eit)).map(|e| e.t_s),

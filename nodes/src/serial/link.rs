@@ -218,11 +218,41 @@ fn port_error(e: SerialError) -> NodeError {
         SerialError::PortNotFound { path } => {
             (path, "does not exist (hint: is the board plugged in? ls /dev/serial/by-id)".to_owned())
         }
-        SerialError::Open { path, source } => (path, format!("cannot open: {source}")),
+        SerialError::Open { path, source } => {
+            let problem = match not_a_tty(&path, &source.to_string()) {
+                Some(what) => format!(
+                    "is not a serial device: {what} (param `port` names the board's tty, e.g. /dev/ttyACM0 or \
+                     /dev/serial/by-id/...)"
+                ),
+                None => format!("cannot open: {source}"),
+            };
+            (path, problem)
+        }
         SerialError::Mismatch { path, mismatch } => (path, mismatch.to_string()),
         SerialError::Param { path, source } => (path, source.to_string()),
     };
     NodeError::Path { path, problem }
+}
+
+/// What `path` is instead of a terminal device, when opening it failed because it is none: a
+/// file of another type, or a character device that is no tty (`/dev/null`, whose open fails
+/// with ENOTTY, "Not a typewriter").
+fn not_a_tty(path: &std::path::Path, error: &str) -> Option<&'static str> {
+    use std::os::unix::fs::FileTypeExt;
+    let ty = std::fs::metadata(path).ok()?.file_type();
+    if ty.is_file() {
+        Some("a regular file")
+    } else if ty.is_fifo() {
+        Some("a FIFO")
+    } else if ty.is_socket() {
+        Some("a socket")
+    } else if ty.is_block_device() {
+        Some("a block device")
+    } else if ty.is_char_device() && (error.contains("Not a typewriter") || error.contains("Inappropriate ioctl")) {
+        Some("a character device that is no terminal")
+    } else {
+        None
+    }
 }
 
 /// What a link must match to be taken over: the replacement's port settings and decoder.
@@ -409,8 +439,28 @@ mod tests {
         TimedFrame,
     };
 
-    use super::{Hinted, Port, held};
+    use super::{Hinted, Port, held, not_a_tty};
     use crate::serial::{EitParams, LoadcellParams, PortParams};
+
+    /// A `port` that is no terminal is said to be what it is, not "Not a typewriter".
+    #[test]
+    fn a_port_that_is_no_terminal_is_named_for_what_it_is() {
+        let dir = std::env::temp_dir().join(format!("skinflow-notty-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        let file = dir.join("file");
+        std::fs::write(&file, b"").unwrap();
+        let fifo = dir.join("fifo");
+        assert!(std::process::Command::new("mkfifo").arg(&fifo).status().unwrap().success());
+        assert_eq!(not_a_tty(&file, "whatever"), Some("a regular file"));
+        assert_eq!(not_a_tty(&fifo, "whatever"), Some("a FIFO"));
+        let null = std::path::Path::new("/dev/null");
+        assert_eq!(not_a_tty(null, "Not a typewriter"), Some("a character device that is no terminal"));
+        // A character device refused for another reason (permissions, busy) keeps its cause.
+        assert_eq!(not_a_tty(null, "Permission denied"), None);
+        assert_eq!(not_a_tty(&dir.join("missing"), "No such file"), None);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 
     fn params(toml_text: &str) -> PortParams {
         skinflow_toml::from_str::<LoadcellParams>(toml_text).unwrap().port_params()

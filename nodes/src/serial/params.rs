@@ -229,7 +229,10 @@ fn serial_param_error(e: skinflow_serial::ParamError) -> ParamError {
         E::Seconds { param, rule, got } => {
             // The node's 0 is the reader's None (no stall detection).
             let never = if param == "stall_after_s" { "0 (never) or " } else { "" };
-            ParamError::new(param, format!("must be {never}a finite number of seconds {rule} (got {got})"))
+            ParamError::new(
+                param,
+                format!("must be {never}a finite number of seconds {rule} (got {})", skinflow_toml::Num(got)),
+            )
         }
         E::Positive { param, got } => ParamError::new(param, format!("must be > 0 (got {got})")),
     }
@@ -284,7 +287,8 @@ impl PortParams {
                 "backoff_initial_s",
                 format!(
                     "must be <= backoff_max_s (got backoff_initial_s = {}, backoff_max_s = {})",
-                    self.backoff_initial_s, self.backoff_max_s
+                    skinflow_toml::Num(self.backoff_initial_s),
+                    skinflow_toml::Num(self.backoff_max_s)
                 ),
             ));
         }

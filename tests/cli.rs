@@ -868,6 +868,15 @@ fn outputs_and_inputs_are_checked_before_any_work() {
             "--fault \"pressure:1:crc\": device pressure is not served (see --devices)".into(),
         ),
         (
+            // --overwrite replaces a recording, not notes named by a slip of the path.
+            vec!["simulate", scene.to_str().unwrap(), "--out", "other.toml", "--overwrite"],
+            "--out other.toml: exists and is not an HDF5 file: overwriting replaces only a recording".into(),
+        ),
+        (
+            vec!["repair", "rec.h5", "--out", "other.toml", "--overwrite"],
+            "--out other.toml: exists and is not an HDF5 file".into(),
+        ),
+        (
             // Past the feed's end (checked once the scene is simulated): it would never apply.
             vec!["emulate", scene.to_str().unwrap(), "--fault", "eit:100000:crc"],
             "--fault eit:100000: the eit feed of ".into(),
@@ -886,6 +895,7 @@ fn outputs_and_inputs_are_checked_before_any_work() {
     }
     assert_eq!(std::fs::read_to_string(d.join("rec.h5")).unwrap(), "recording bytes");
     assert_eq!(std::fs::read_to_string(d.join("c.toml")).unwrap(), "calibration bytes");
+    assert_eq!(std::fs::read_to_string(d.join("other.toml")).unwrap(), "x = 1\n");
     assert!(!d.join("rep").exists(), "reproduce created its output directory before failing");
     assert!(!d.join("nope").exists());
 }
@@ -1786,6 +1796,34 @@ fn a_calibration_applied_on_another_image_scale_is_warned_about() {
         ) && err.lines().count() == 1,
         "{err}"
     );
+}
+
+/// A logger's `overwrite = true` replaces an earlier recording, not a file of another kind
+/// (notes, a scene) that a slip of its path names: refused at start, the file kept.
+#[test]
+fn a_logger_overwrites_only_a_recording() {
+    let d = workdir("logger-overwrite");
+    let opts = skinflow_record::write::WriterOptions::new(skinflow_eit::Sensor::paper_100mm().toml.clone());
+    hdf5_io(|| skinflow_record::write::RecordingWriter::create(d.join("in.h5"), &opts).unwrap().close().unwrap());
+    std::fs::write(d.join("notes.txt"), "my notes\n").unwrap();
+    let graph = |out: &str| {
+        format!(
+            "[[node]]\nid = \"replay\"\nkind = \"replay\"\nparams = {{ path = \"in.h5\", speed = 0.0 }}\n\
+             [[node]]\nid = \"log\"\nkind = \"hdf5_logger\"\nparams = {{ path = \"{out}\", overwrite = true }}\n\
+             [[edge]]\nfrom = \"replay.eit\"\nto = \"log.eit\"\n"
+        )
+    };
+    std::fs::write(d.join("g.toml"), graph("notes.txt")).unwrap();
+    let out = skinflow(&d, &["run", "g.toml"]);
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("notes.txt: exists and is not an HDF5 file: overwriting replaces only a recording"), "{err}");
+    assert_eq!(std::fs::read_to_string(d.join("notes.txt")).unwrap(), "my notes\n");
+    // An earlier recording is replaced.
+    std::fs::copy(d.join("in.h5"), d.join("old.h5")).unwrap();
+    std::fs::write(d.join("g.toml"), graph("old.h5")).unwrap();
+    let out = skinflow(&d, &["run", "g.toml"]);
+    assert!(out.status.success(), "{}", stderr(&out));
 }
 
 /// A looping replay goes on counting: each pass's EIT frame counters follow the last pass's

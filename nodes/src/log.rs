@@ -560,6 +560,9 @@ impl Sink for Logger {
         if self.path.exists() && !overwrite {
             return Err(io(&self.path, "exists (set overwrite = true to replace it)"));
         }
+        if overwrite && let Some(why) = crate::output::not_a_recording(&self.path) {
+            return Err(io(&self.path, why));
+        }
         // Rotating: an earlier run's parts would be read as part of this recording (the writer
         // removes them with `overwrite`, see `RecordingWriter::create`).
         let part1 = skinflow_record::rotate::part_path(&self.path, 1);

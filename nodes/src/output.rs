@@ -38,9 +38,52 @@ pub fn not_a_file(path: &Path) -> Option<String> {
     ))
 }
 
+/// Why replacing the file at `path` with a recording (a logger's `overwrite = true`, or
+/// `--overwrite`) would lose something else: it is a non-empty regular file that is not HDF5
+/// (no HDF5 signature at byte 0 or at a user block's end, 512 bytes times a power of 2), so a
+/// slip of the path would replace notes, a scene or a graph. `None` when it may be replaced (a
+/// recording or any HDF5 file, an empty file, or nothing there).
+pub fn not_a_recording(path: &Path) -> Option<String> {
+    use std::io::{Read, Seek, SeekFrom};
+    const SIGNATURE: &[u8; 8] = b"\x89HDF\r\n\x1a\n";
+    let meta = std::fs::metadata(path).ok().filter(|m| m.is_file() && m.len() > 0)?;
+    let mut file = std::fs::File::open(path).ok()?;
+    let mut at = |offset: u64| -> bool {
+        let mut bytes = [0u8; 8];
+        file.seek(SeekFrom::Start(offset)).is_ok() && file.read_exact(&mut bytes).is_ok() && &bytes == SIGNATURE
+    };
+    let hdf5 = at(0) || (9..=20).map(|k| 1u64 << k).take_while(|&o| o + 8 <= meta.len()).any(&mut at);
+    (!hdf5).then(|| {
+        "exists and is not an HDF5 file: overwriting replaces only a recording (a slip of the path would lose \
+         this file); remove it, or choose another path"
+            .to_owned()
+    })
+}
+
 #[cfg(test)]
 mod tests {
-    use super::{not_a_file, unwritable};
+    use super::{not_a_file, not_a_recording, unwritable};
+
+    #[test]
+    fn only_an_hdf5_file_or_an_empty_one_is_replaced_by_a_recording() {
+        let d = std::env::temp_dir().join(format!("skinflow-output-overwrite-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        std::fs::create_dir_all(&d).unwrap();
+        let write = |name: &str, bytes: &[u8]| {
+            std::fs::write(d.join(name), bytes).unwrap();
+            d.join(name)
+        };
+        let notes = write("notes.txt", b"my notes");
+        assert!(not_a_recording(&notes).unwrap().starts_with("exists and is not an HDF5 file"));
+        assert_eq!(not_a_recording(&write("empty.h5", b"")), None);
+        assert_eq!(not_a_recording(&write("rec.h5", b"\x89HDF\r\n\x1a\n and the rest")), None);
+        let mut user_block = vec![b' '; 512];
+        user_block.extend_from_slice(b"\x89HDF\r\n\x1a\n");
+        assert_eq!(not_a_recording(&write("ub.h5", &user_block)), None, "after a 512-byte user block");
+        assert_eq!(not_a_recording(&d.join("missing.h5")), None);
+        assert_eq!(not_a_recording(&d), None, "a directory is unwritable's case");
+        let _ = std::fs::remove_dir_all(&d);
+    }
 
     #[test]
     fn a_device_is_not_a_file_to_replace() {

@@ -11,6 +11,9 @@ pub fn run(input: &Path, out: &Path, overwrite: bool) -> Result<()> {
     if !overwrite && std::fs::symlink_metadata(out).is_ok() {
         anyhow::bail!("--out {}: exists (pass --overwrite to replace it)", out.display());
     }
+    if overwrite && let Some(why) = skinflow_nodes::output::not_a_recording(out) {
+        anyhow::bail!("--out {}: {why}", out.display());
+    }
     let report = skinflow_record::repair(input, out, overwrite).map_err(anyhow::Error::msg)?;
     println!("{report}");
     Ok(())

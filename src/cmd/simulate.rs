@@ -22,6 +22,9 @@ pub fn run(scene_path: &Path, out: &Path, seed: u64, overwrite: bool) -> Result<
     if !overwrite && std::fs::symlink_metadata(out).is_ok() {
         anyhow::bail!("--out {}: exists (pass --overwrite to replace it)", out.display());
     }
+    if overwrite && let Some(why) = skinflow_nodes::output::not_a_recording(out) {
+        anyhow::bail!("--out {}: {why}", out.display());
+    }
     let t0 = Instant::now();
     let scene = Scene::from_file(scene_path).map_err(anyhow::Error::msg)?;
     let mut sim =

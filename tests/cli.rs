@@ -1814,16 +1814,60 @@ fn a_logger_overwrites_only_a_recording() {
         )
     };
     std::fs::write(d.join("g.toml"), graph("notes.txt")).unwrap();
+    // `check` says so, at the param, and so does `run` before any node starts.
+    for cmd in ["check", "run"] {
+        let out = skinflow(&d, &[cmd, "g.toml"]);
+        let err = stderr(&out);
+        assert_eq!(out.status.code(), Some(2), "{cmd}: {err}");
+        assert!(err.starts_with("g.toml:8:12: node \"log\": param \"path\": "), "{cmd}: at the logger's path: {err}");
+        assert!(
+            err.contains("notes.txt: exists and is not an HDF5 file: overwriting replaces only a recording"),
+            "{cmd}: {err}"
+        );
+    }
+    // Missing at `check` (the file may be moved by then), refused at start: one already there.
+    std::fs::write(d.join("g.toml"), graph("notes.txt").replace(", overwrite = true", "")).unwrap();
+    assert!(skinflow(&d, &["check", "g.toml"]).status.success());
     let out = skinflow(&d, &["run", "g.toml"]);
     let err = stderr(&out);
     assert_eq!(out.status.code(), Some(1), "{err}");
-    assert!(err.contains("notes.txt: exists and is not an HDF5 file: overwriting replaces only a recording"), "{err}");
+    assert!(err.contains("notes.txt: exists (set overwrite = true to replace it)"), "{err}");
     assert_eq!(std::fs::read_to_string(d.join("notes.txt")).unwrap(), "my notes\n");
     // An earlier recording is replaced.
     std::fs::copy(d.join("in.h5"), d.join("old.h5")).unwrap();
     std::fs::write(d.join("g.toml"), graph("old.h5")).unwrap();
     let out = skinflow(&d, &["run", "g.toml"]);
     assert!(out.status.success(), "{}", stderr(&out));
+}
+
+/// What would stop a node at start is reported by `check`, at the param: a logger's file in a
+/// directory that does not exist, and a second serial source on a port another one reads.
+#[test]
+fn check_reports_a_missing_output_directory_and_a_port_read_twice() {
+    let d = workdir("check-start");
+    let g = "[[node]]\nid = \"eit\"\nkind = \"serial_eit\"\nparams = { port = \"/dev/ttyACM7\" }\n\
+             [[node]]\nid = \"pressure\"\nkind = \"serial_pressure\"\nparams = { port = \"/dev/ttyACM7\" }\n\
+             [[node]]\nid = \"log\"\nkind = \"hdf5_logger\"\nparams = { path = \"nope/rec.h5\" }\n\
+             [[edge]]\nfrom = \"eit.eit\"\nto = \"log.eit\"\n\
+             [[edge]]\nfrom = \"pressure.pressure\"\nto = \"log.pressure\"\n";
+    std::fs::write(d.join("g.toml"), g).unwrap();
+    let out = skinflow(&d, &["check", "g.toml"]);
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    let lines: Vec<&str> = err.lines().filter(|l| l.starts_with("g.toml:")).collect();
+    assert_eq!(lines.len(), 2, "{err}");
+    assert!(
+        lines[0].starts_with("g.toml:8:")
+            && lines[0]
+                .contains("node \"pressure\": param \"port\": /dev/ttyACM7 is also the port of serial_eit \"eit\""),
+        "{err}"
+    );
+    assert!(
+        lines[1].starts_with("g.toml:12:")
+            && lines[1].contains("nope/rec.h5: directory ")
+            && lines[1].contains("does not exist"),
+        "{err}"
+    );
 }
 
 /// A looping replay goes on counting: each pass's EIT frame counters follow the last pass's

@@ -38,10 +38,15 @@ type Register = fn(&mut Registry) -> Result<(), DuplicateKind>;
 /// passes: the files its nodes read open as the nodes read them
 /// ([`GraphSpec::check_files`](skinflow_core::GraphSpec::check_files)), the sensors they name
 /// agree ([`sensors::check_graph`]), and no node writes over a file the graph reads or another
-/// node writes, and every strategy a logger lists arrives ([`outputs::check_graph`]). Used by
-/// `skinflow check`, `run` and each `bench` variant.
+/// node writes, and every strategy a logger lists arrives ([`outputs::check_graph`]); last,
+/// what would stop a node at start (a logger's file it may not replace, two serial sources on
+/// one port: [`outputs::check_start`]). Used by `skinflow check`, `run` and each `bench`
+/// variant.
 pub fn check_graph_files(spec: &skinflow_core::GraphSpec) -> Result<(), skinflow_core::graph::GraphErrors> {
-    spec.check_files().and_then(|()| sensors::check_graph(spec)).and_then(|()| outputs::check_graph(spec))
+    spec.check_files()
+        .and_then(|()| sensors::check_graph(spec))
+        .and_then(|()| outputs::check_graph(spec))
+        .and_then(|()| outputs::check_start(spec))
 }
 
 /// Every built-in node kind.

@@ -546,6 +546,28 @@ const REFERENCE_AFTER_SWMR: &str = "/eit/reference not stored: the reference arr
      recorded as without it, and readers use the recording's leading no-load frames; send the reference before \
      the first flush (a replay sends it first), or log with swmr = false";
 
+/// Why a logger writing `path` (with `overwrite`, rotating or not) may not start over what is
+/// there, with the file at fault: a file without `overwrite`, one that is not a recording with
+/// it ([`crate::output::not_a_recording`]), or, rotating, an earlier run's part 1 (it would be
+/// read as part of this recording; the writer removes the parts with `overwrite`, see
+/// `RecordingWriter::create`). Checked at start (`check` checks the not-a-recording case:
+/// `outputs::check_start`).
+pub(crate) fn existing_file_refusal(path: &Path, overwrite: bool, rotates: bool) -> Option<(PathBuf, String)> {
+    if path.exists() && !overwrite {
+        return Some((path.to_owned(), "exists (set overwrite = true to replace it)".into()));
+    }
+    if overwrite && let Some(why) = crate::output::not_a_recording(path) {
+        return Some((path.to_owned(), why));
+    }
+    let part1 = skinflow_record::rotate::part_path(path, 1);
+    if rotates && part1.exists() && !overwrite {
+        let why = "exists: part 1 of a rotated recording at this path (set overwrite = true to replace it with all its \
+                   parts)";
+        return Some((part1, why.into()));
+    }
+    None
+}
+
 impl Sink for Logger {
     fn start(&mut self, _ctx: &mut Context) -> Result<(), NodeError> {
         // Fail before any data flows when the file cannot be created.
@@ -557,22 +579,11 @@ impl Sink for Logger {
         }
         let opts = self.opts.as_ref();
         let overwrite = opts.is_some_and(|o| o.overwrite);
-        if self.path.exists() && !overwrite {
-            return Err(io(&self.path, "exists (set overwrite = true to replace it)"));
+        let rotates = opts.is_some_and(|o| o.rotate_mb.is_some() || o.rotate_s.is_some());
+        match existing_file_refusal(&self.path, overwrite, rotates) {
+            Some((path, why)) => Err(io(&path, why)),
+            None => Ok(()),
         }
-        if overwrite && let Some(why) = crate::output::not_a_recording(&self.path) {
-            return Err(io(&self.path, why));
-        }
-        // Rotating: an earlier run's parts would be read as part of this recording (the writer
-        // removes them with `overwrite`, see `RecordingWriter::create`).
-        let part1 = skinflow_record::rotate::part_path(&self.path, 1);
-        if opts.is_some_and(|o| o.rotate_mb.is_some() || o.rotate_s.is_some()) && part1.exists() && !overwrite {
-            return Err(io(
-                &part1,
-                "exists: part 1 of a rotated recording at this path (set overwrite = true to replace it with all its parts)",
-            ));
-        }
-        Ok(())
     }
 
     fn consume(&mut self, ctx: &mut Context, inputs: &Inputs) -> Result<(), NodeError> {

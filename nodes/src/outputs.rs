@@ -429,6 +429,63 @@ pub fn check_files(spec: &GraphSpec) -> Result<(), GraphErrors> {
     finish(errs)
 }
 
+/// Refuses what would stop a node at start and is known before any runs, so `check` reports
+/// it too (located at the param): a logger's file whose directory is missing, or that is no
+/// recording while `overwrite` is set ([`crate::output::not_a_recording`]); and two serial
+/// sources on one device (files compared as in [`check_files`]). A logger's existing file
+/// without `overwrite` is refused at start only ([`crate::log::existing_file_refusal`]): the
+/// file may be moved by then, and `check` of a session graph stays independent of the last
+/// session's output. Not part of [`check_files`], which a live edit's graph is checked with
+/// too: by then the running logger has made its file.
+pub fn check_start(spec: &GraphSpec) -> Result<(), GraphErrors> {
+    let base_dir = spec.source.base_dir();
+    let mut node_spans: Option<Vec<Range<usize>>> = None;
+    let mut errs = Vec::new();
+    let mut ports: Vec<(usize, PathBuf, FileId)> = Vec::new();
+    for (n, node) in spec.nodes.iter().enumerate() {
+        let ctx = BuildContext::new(base_dir.clone(), spec.mode, node.id.clone());
+        match node.kind.as_str() {
+            "hdf5_logger" => {
+                let Ok(p) = node.params.parse::<LoggerParams>() else { continue };
+                let path = ctx.resolve(&p.path);
+                // A directory there is `check_files`'s error.
+                if p.path.as_os_str().is_empty() || path.is_dir() {
+                    continue;
+                }
+                // An existing file without `overwrite` is left to the start: a session graph
+                // (`graphs/record-calibration.toml`) checks fine again once its file is moved.
+                let problem = crate::output::unwritable(&path)
+                    .or_else(|| crate::output::not_a_file(&path))
+                    .or_else(|| p.overwrite.then(|| crate::output::not_a_recording(&path)).flatten());
+                if let Some(why) = problem {
+                    let problem = format!("{}: {why}", path.display());
+                    errs.push(param_error_at(spec, n, "path", problem, &mut node_spans));
+                }
+            }
+            "serial_eit" | "serial_pressure" | "serial_loadcell" => {
+                let Some(port) = node.params.table().get("port").and_then(toml::Value::as_str) else { continue };
+                let resolved = ctx.resolve(Path::new(port));
+                let id = file_id(&resolved);
+                if let Some((o, other, _)) = ports.iter().find(|(_, _, i)| i.same(&id)) {
+                    let other_node = &spec.nodes[*o];
+                    let spelt = if other == &resolved { String::new() } else { format!(" ({})", other.display()) };
+                    let problem = format!(
+                        "{} is also the port of {} \"{}\"{spelt}: a device is read by one node, and this one \
+                         would fail to open it",
+                        resolved.display(),
+                        other_node.kind,
+                        other_node.id,
+                    );
+                    errs.push(param_error_at(spec, n, "port", problem, &mut node_spans));
+                }
+                ports.push((n, resolved, id));
+            }
+            _ => {}
+        }
+    }
+    finish(errs)
+}
+
 /// Refuses an output file given outside the graph, `path` (as given: relative to the current
 /// directory, not to the graph file), named `what` in the error (e.g. `--stats-json`), that is
 /// the same file as one the graph names: the graph file, a plugin library, a file a node reads

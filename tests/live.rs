@@ -228,7 +228,7 @@ fn a_rebuilt_plugin_is_reloaded_and_its_nodes_swapped() {
     // Located at the library's `[[plugin]]` entry, as `check` and `run` locate it at start.
     let refused = stderr
         .lines()
-        .find(|l| l.ends_with("(changed but was not reloaded: running nodes keep its previous code)"))
+        .find(|l| l.ends_with("; the library changed but was not reloaded (running nodes keep its previous code)"))
         .unwrap_or_else(|| panic!("no refused reload: {stderr}"));
     let at = refused.strip_prefix(&format!("{}:", g.display())).unwrap_or_else(|| panic!("{refused}"));
     let (line_col, rest) = at.split_once(": ").unwrap();

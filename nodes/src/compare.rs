@@ -33,7 +33,8 @@
 //! named after what changed and the frame it starts at (`eit-force (from frame 412)`; the closed
 //! one becomes `proportional (to frame 411)`), so no figure blends two strategies. The live
 //! lines, the table and the JSON list every lane of an edge in order; the JSON adds each lane's
-//! edge (`input`), `segment`, `strategy`, `split`, `first_frame`, `last_frame` and `superseded`.
+//! edge (`input`), `segment`, `strategy`, `split`, `forces_kind` and `split_kind` (the plugin
+//! kinds that made them, empty for built-in nodes), `first_frame`, `last_frame` and `superseded`.
 //! A plugin node's names default to its node id, which a swap to another plugin kind keeps: the
 //! plugin kind that made the forces or the split changing starts a new lane too, named
 //! `<name> (<kind>)`. A swap that keeps the names and the kind (a new `lambda` upstream,
@@ -67,7 +68,8 @@ use crate::payload::Forces;
 #[serde(deny_unknown_fields)]
 pub struct CompareParams {
     /// Lane names in edge order (default: each lane's strategy name, else `lane<i>`). A lane
-    /// whose strategy changes mid-run goes on as `NAME: <new strategy> (from frame N)`.
+    /// whose strategy changes mid-run goes on as `NAME: <new strategy> (from frame N)`, or
+    /// `NAME: <strategy> (<kind>)` when only the plugin kind making it changed.
     #[serde(default)]
     pub names: Vec<String>,
     /// Wall seconds between live report lines; 0 = none.
@@ -205,10 +207,14 @@ pub struct LaneReport {
     /// The forces' strategy name (a corrector's `name`) and the split's strategy.
     pub strategy: String,
     pub split: String,
+    /// The plugin kinds that made the forces and the split (empty for built-in nodes).
+    pub forces_kind: String,
+    pub split_kind: String,
     /// Sequence numbers of the first and last frames the lane received (null before any).
     pub first_frame: Option<u64>,
     pub last_frame: Option<u64>,
-    /// The strategy changed after `last_frame`: the lane with the next `segment` took over.
+    /// The strategy (or the plugin kind behind it) changed after `last_frame`: the lane with
+    /// the next `segment` took over.
     pub superseded: bool,
 }
 
@@ -253,6 +259,8 @@ impl Lane {
             segment: self.segment,
             strategy: self.strategy.clone(),
             split: self.split.to_owned(),
+            forces_kind: self.plugin_kinds.0.to_owned(),
+            split_kind: self.plugin_kinds.1.to_owned(),
             first_frame: self.first_frame,
             last_frame: self.last_frame,
             superseded: self.superseded,
@@ -356,7 +364,10 @@ impl Compare {
             next = %self.st.lanes[i].display_name(),
             strategy = %f.strategy,
             split = f.split.strategy,
-            "compare: the lane's strategy changed; its figures are closed and a new lane starts"
+            forces_kind = f.plugin_kind,
+            split_kind = f.split.plugin_kind,
+            "compare: the lane's strategy (or the plugin kind making it) changed; its figures are closed and a new \
+             lane starts"
         );
         self.st.closed.push(old);
     }
@@ -1062,6 +1073,8 @@ mod tests {
         assert_eq!(names, ["fuse (to frame 1)", "split-a (area) (frames 2-3)", "fuse (v2) (from frame 4)"]);
         let frames: Vec<u64> = r.iter().map(|l| l.frames).collect();
         assert_eq!(frames, [2, 2, 2]);
+        let kinds: Vec<(&str, &str)> = r.iter().map(|l| (l.forces_kind.as_str(), l.split_kind.as_str())).collect();
+        assert_eq!(kinds, [("v1", "weighted"), ("v1", "area"), ("v2", "area")]);
         // Built-in nodes carry no kind: unchanged names and kinds keep one lane.
         let mut c = compare();
         for seq in 0..3 {
@@ -1211,6 +1224,8 @@ mod tests {
             segment: 0,
             strategy: "a".into(),
             split: "proportional".into(),
+            forces_kind: String::new(),
+            split_kind: String::new(),
             first_frame: Some(4),
             last_frame: Some(9),
             superseded: false,
@@ -1226,6 +1241,6 @@ mod tests {
         assert_eq!(lane["no_pressure_frames"], 2);
         assert_eq!(lane["unsettled_frames"], 1);
         assert_eq!((&lane["no_load_frames"], &lane["scored_frames"]), (&4.into(), &0.into()));
-        assert_eq!(lane.as_object().unwrap().len(), 22, "{j}");
+        assert_eq!(lane.as_object().unwrap().len(), 24, "{j}");
     }
 }

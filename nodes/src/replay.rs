@@ -2,7 +2,8 @@
 //! emits its streams in availability order (see [`crate::order`]) at the recorded timing times
 //! `speed`, or as fast as possible (`speed = 0`, and always in lockstep). `/eit/reference`,
 //! when present, goes out first on `reference`. With `loop = true` the recording repeats,
-//! its times shifted so the clock keeps increasing.
+//! its times shifted so the clock keeps increasing, and its EIT frame counters shifted by
+//! their span so they keep increasing too (the recorded gaps kept).
 //!
 //! Times: messages are stamped with the recorded times, on the engine's clock, which starts at
 //! 0; a recording with a time before 0 in `/eit/t`, `/pressure/t` or `/truth/t` (the contract
@@ -215,8 +216,10 @@ impl Replay {
     /// recording's counter span, so the next pass's first frame follows its last one.
     fn pass_seq_step(&self) -> u64 {
         let seq = self.rec.eit.as_ref().map_or(&[][..], |e| &e.seq[..]);
-        match (seq.first(), seq.last()) {
-            (Some(first), Some(last)) => last.saturating_sub(*first) + 1,
+        // The span of all counters, not last - first: a recording whose counter restarted
+        // (a board reset) still goes on above every counter of the pass before.
+        match (seq.iter().min(), seq.iter().max()) {
+            (Some(min), Some(max)) => (max - min).wrapping_add(1),
             _ => 0,
         }
     }
@@ -264,7 +267,8 @@ impl Source for Replay {
             self.pos.next = 0;
             self.pos.offset_s += self.pass_step_s();
             self.pos.pace_offset_s += self.pass_pace_step_s();
-            self.pos.eit_seq_offset += self.pass_seq_step();
+            // Wrapping, as the counters it is added to: a u64 counter wraps after 2^64 frames.
+            self.pos.eit_seq_offset = self.pos.eit_seq_offset.wrapping_add(self.pass_seq_step());
         }
         let (avail, item) = self.order[self.pos.next];
         self.pos.next += 1;
@@ -379,7 +383,7 @@ pub fn register(r: &mut Registry) -> Result<(), skinflow_core::registry::Duplica
             // A recording without a stream (one a logger wrote with that input unconnected)
             // replays, but what it lacks is said: without /eit the pipeline gets no frame.
             for (absent, what) in [
-                (rec.eit.is_none(), "no /eit stream: no EIT frame is sent, so nothing is imaged"),
+                (rec.eit.as_ref().is_none_or(|e| e.is_empty()), "no EIT frame: nothing is imaged"),
                 (rec.pressure.is_none(), "no /pressure stream: every frame is sent without pressure"),
             ] {
                 if absent && rows > 0 {

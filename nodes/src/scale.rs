@@ -27,7 +27,8 @@ use crate::sensors::calibration_path;
 /// Parses a `--recon` / `--segment` body (`lambda = 0.05, image_nx = 48`) as a node's params.
 pub fn parse_body<T: DeserializeOwned>(text: &str) -> Result<T, String> {
     let doc = format!("params = {{ {text} }}");
-    let mut table: toml::Table = toml::from_str(&doc).map_err(|e| format!("not a TOML table body: {}", e.message()))?;
+    let mut table: toml::Table =
+        toml::from_str(&doc).map_err(|e| format!("not a TOML table body: {}", skinflow_toml::message(&e)))?;
     let params = table.remove("params").unwrap_or_else(|| toml::Value::Table(toml::Table::new()));
     skinflow_toml::deserialize::<T, _>(params).map_err(|e| e.message().to_owned())
 }

@@ -333,7 +333,8 @@ pub fn run(graph: &Path, replay: &Path, vary: &[String], out_dir: &Path) -> Resu
     let vary: Vec<Vary> = vary.iter().map(|s| s.parse()).collect::<Result<_>>()?;
     let text = std::fs::read_to_string(graph).with_context(|| format!("{}: cannot read", graph.display()))?;
     let reg = registry_for(&SourceFile::new(graph, text.clone()))?;
-    let base: toml::Table = toml::from_str(&text).map_err(|e| anyhow!("{}: {}", graph.display(), e.message()))?;
+    let base: toml::Table =
+        toml::from_str(&text).map_err(|e| anyhow!("{}: {}", graph.display(), skinflow_toml::message(&e)))?;
     check_vary(&base, &vary)?;
     let replay = std::path::absolute(replay).with_context(|| format!("{}: bad path", replay.display()))?;
     if !replay.is_file() {

@@ -143,8 +143,11 @@ pub fn run(scene: &Path, options: EmulateArgs, stop: Arc<AtomicBool>) -> Result<
         anyhow::bail!("--loadcell-hz {hz}: must be a rate in (0, 1000] Hz");
     }
     let mut plan = FaultPlan::default();
+    // Each fault's argument, device and record index: checked against the feeds once simulated.
+    let mut at: Vec<(&str, Device, usize)> = Vec::new();
     for f in &faults {
         let (device, index, fault) = parse_fault(f)?;
+        at.push((f, device, index));
         if !devices.contains(&device) {
             anyhow::bail!("--fault \"{f}\": device {} is not served (see --devices)", device.name());
         }
@@ -161,6 +164,10 @@ pub fn run(scene: &Path, options: EmulateArgs, stop: Arc<AtomicBool>) -> Result<
     let t0 = std::time::Instant::now();
     let (eit, pressure, mut force) = feed(scene, seed)?;
     eprintln!("simulated in {:.1} s", t0.elapsed().as_secs_f64());
+    // Ctrl-C during the simulation: no device was opened yet.
+    if stop.load(Ordering::SeqCst) {
+        return Ok(());
+    }
     if let Some(hz) = loadcell_hz {
         let end_s = [eit.last().map(|e| e.t_s), pressure.last().map(|p| p.t_s), force.last().map(|f| f.t_s)]
             .into_iter()
@@ -169,19 +176,22 @@ pub fn run(scene: &Path, options: EmulateArgs, stop: Arc<AtomicBool>) -> Result<
         force = stream_at(&force, hz, end_s);
     }
     // A fault at a record the feed does not have would never be applied.
-    for (device, records, faults) in [
-        (Device::Eit, eit.len(), &plan.eit),
-        (Device::Pressure, pressure.len(), &plan.pressure),
-        (Device::Loadcell, force.len(), &plan.loadcell),
-    ] {
-        if let Some((index, _)) = faults.iter().find(|(index, _)| *index >= records) {
+    for (f, device, index) in at {
+        let records = match device {
+            Device::Eit => eit.len(),
+            Device::Pressure => pressure.len(),
+            Device::Loadcell => force.len(),
+        };
+        if index >= records {
+            let holds = match records {
+                0 => "no record".to_owned(),
+                1 => "1 record (index 0)".to_owned(),
+                n => format!("{n} records (indices 0 to {})", n - 1),
+            };
             anyhow::bail!(
-                "--fault {}:{index}: the {} feed of {} has {records} records (indices 0 to {}): the fault would never \
-                 apply",
+                "--fault \"{f}\": the {} feed of {} holds {holds}: the fault would never apply",
                 device.name(),
-                device.name(),
-                scene.display(),
-                records.saturating_sub(1)
+                scene.display()
             );
         }
     }

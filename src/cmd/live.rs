@@ -130,6 +130,8 @@ struct Library {
 pub struct Kinds {
     registry: Registry,
     libraries: Vec<Library>,
+    /// The graph file text that named the libraries: a reload's error is located there.
+    source: SourceFile,
 }
 
 impl Kinds {
@@ -144,7 +146,7 @@ impl Kinds {
             .zip(loaded)
             .map(|(path, l)| Library { path: path.clone(), mtime: mtime(path), kinds: l.kinds })
             .collect();
-        Ok(Kinds { registry, libraries })
+        Ok(Kinds { registry, libraries, source: src.clone() })
     }
 
     /// The libraries whose file changed since they were loaded.
@@ -350,7 +352,9 @@ impl Live {
             return None;
         }
         let names = changed.iter().map(|(p, _)| p.display().to_string()).collect::<Vec<_>>().join(", ");
-        let fresh = match Kinds::load(&kinds.paths(), &self.started.source) {
+        // Located in the text that named the libraries (an edit may have changed them since
+        // the graph started).
+        let fresh = match Kinds::load(&kinds.paths(), &kinds.source) {
             Ok(k) => k,
             Err(e) => {
                 // Not swapped: the running nodes keep the old code. The file's time is taken as
@@ -359,7 +363,9 @@ impl Live {
                     l.mtime = mtime(&l.path);
                 }
                 // `e` is located at the library's `[[plugin]]` entry (file:line:col).
-                return Some(Err(format!("{e} (changed but was not reloaded: running nodes keep its previous code)")));
+                return Some(Err(format!(
+                    "{e}; the library changed but was not reloaded (running nodes keep its previous code)"
+                )));
             }
         };
         let graph = self.started.source.path.display();

@@ -79,8 +79,7 @@ fn blank_section_at(text: &str, at: usize) -> Option<String> {
 /// The error for a file that is not TOML or does not fit the schema. One inside a `[[node]]`
 /// table names the node (or says why its id cannot) and the key whose value is wrong.
 fn schema_error(src: &SourceFile, e: &toml::de::Error) -> GraphError {
-    let cause = e.message().trim().to_owned();
-    let cause = skinflow_toml::integer_out_of_range(&cause).unwrap_or(cause);
+    let cause = skinflow_toml::message(e).trim().to_owned();
     let span = e.span();
     let Some(at) = span.as_ref().map(|s| s.start) else {
         return GraphError::at(src, span, None, K::Syntax(cause));
@@ -111,8 +110,9 @@ fn schema_error(src: &SourceFile, e: &toml::de::Error) -> GraphError {
 }
 
 /// `cause` without the `node[N]` that begins skinflow-toml's key path of an error in a
-/// `[[node]]` table, and whether what is left of the path (`cpu: ...`, `trigger.kind: ...`)
-/// names the key.
+/// `[[node]]` table (and without `params.` before a param, named by its key alone as the
+/// node's own param errors name it), and whether what is left of the path (`cpu: ...`,
+/// `trigger.kind: ...`, `count: ...`) names the key.
 fn within_node(cause: &str) -> (String, bool) {
     match skinflow_toml::split_path(cause) {
         (Some(path), rest) if path.starts_with("node[") => {

@@ -260,6 +260,14 @@ pub fn integer_out_of_range(message: &str) -> Option<String> {
         .then(|| format!("integer out of range ({INTEGER_RANGE})"))
 }
 
+/// toml's message of `e`, with an integer beyond 64 bits said in the user's words
+/// ([`integer_out_of_range`]): for documents read with plain `toml::from_str` (a whole file
+/// into a table, a params body), where the wrapper does not see the value.
+pub fn message(e: &toml::de::Error) -> String {
+    let m = e.message().trim_end();
+    integer_out_of_range(m).unwrap_or_else(|| m.to_owned())
+}
+
 /// A level that names the same value as `path`.
 fn copy_path<'a>(path: &'a Path<'a>) -> Path<'a> {
     match path {

@@ -221,8 +221,8 @@ fn port_error(e: SerialError) -> NodeError {
         SerialError::Open { path, source } => {
             let problem = match not_a_tty(&path, &source.to_string()) {
                 Some(what) => format!(
-                    "is not a serial device: {what} (param `port` names the board's tty, e.g. /dev/ttyACM0 or \
-                     /dev/serial/by-id/...)"
+                    "is not a serial device: {what} (hint: param `port` names the board's tty, e.g. /dev/ttyACM0 \
+                     or /dev/serial/by-id/...)"
                 ),
                 None => format!("cannot open: {source}"),
             };
@@ -459,6 +459,13 @@ mod tests {
         // A character device refused for another reason (permissions, busy) keeps its cause.
         assert_eq!(not_a_tty(null, "Permission denied"), None);
         assert_eq!(not_a_tty(&dir.join("missing"), "No such file"), None);
+        // Through the real open: the serial library's own error for /dev/null and a file.
+        let ctx = Context::detached("lc", Mode::Lockstep);
+        for (port, what) in [(null, "a character device that is no terminal"), (file.as_path(), "a regular file")] {
+            let p = params(&format!("port = {port:?}"));
+            let e = Port::new(&p, ForceDecoder::new(), 0).start(&p, &ctx).unwrap_err().to_string();
+            assert!(e.contains(&format!("is not a serial device: {what} (hint: param `port`")), "{e}");
+        }
         let _ = std::fs::remove_dir_all(&dir);
     }
 

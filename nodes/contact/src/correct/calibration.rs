@@ -357,8 +357,7 @@ impl Calibration {
                 let column = before.rsplit('\n').next().map_or(0, |l| l.chars().count()) + 1;
                 (before.matches('\n').count() + 1, column)
             });
-            let message = e.message().trim_end().replace('\n', " ");
-            let message = skinflow_toml::integer_out_of_range(&message).unwrap_or(message);
+            let message = skinflow_toml::message(&e).replace('\n', " ");
             CalibrationFileError::Parse { path: origin.to_string(), at, message }
         };
         // The header first, so a file of another version is named as such, not as a parse error.

@@ -136,9 +136,10 @@ fn output_name(info: &KindInfo, params: &Params, node_id: &str) -> &'static str 
     }
 }
 
-/// `name` as a `&'static str` (payloads name their strategy so: `Split::strategy`), leaked
-/// once per distinct name for the life of the process: bounded by the node ids and `name`
-/// params of the graphs run, however often nodes are rebuilt (restart, hot swap).
+/// `name` as a `&'static str` (payloads name their strategy and plugin kind so:
+/// `Split::strategy`, `Split::plugin_kind`), leaked once per distinct name for the life of the
+/// process: bounded by the node ids, `name` params and plugin kind names of the graphs run,
+/// however often nodes are rebuilt (restart, hot swap).
 fn intern(name: &str) -> &'static str {
     static NAMES: Mutex<BTreeSet<&'static str>> = Mutex::new(BTreeSet::new());
     let mut names = NAMES.lock().unwrap_or_else(PoisonError::into_inner);

@@ -711,31 +711,42 @@ fn bench_reports_node_errors_and_a_failed_variant_after_the_others() {
     assert!(!err.contains("warm-up"), "nothing ran: {err}");
     assert_eq!(std::fs::read(d.join("out/bench.json")).unwrap(), before, "the last bench's report is kept");
 
-    // The shipped graph with a logger: a variant whose logger cannot create its file fails at
-    // start, after the variant before it ran.
+    // The shipped graph with a logger: a variant whose logger's directory does not exist is
+    // refused when the variants are checked (nothing runs) ...
     let graph = std::fs::read_to_string(root().join("graphs/ab-replay.toml")).unwrap()
-        + "\n[[node]]\nid = \"log\"\nkind = \"hdf5_logger\"\nparams = { path = \"log.h5\", overwrite = true }\n\
+        + "\n[[node]]\nid = \"log\"\nkind = \"hdf5_logger\"\nparams = { path = \"log.h5\" }\n\
            [[edge]]\nfrom = \"replay.eit\"\nto = \"log.eit\"\n";
     std::fs::create_dir_all(d.join("calib")).unwrap();
     std::fs::copy(root().join("graphs/calib/paper.toml"), d.join("calib/paper.toml")).unwrap();
     std::fs::write(d.join("logged.toml"), graph).unwrap();
     let vary = r#"log.path="log.h5","no/dir/log.h5""#;
     let o = skinflow(&d, &["bench", "logged.toml", "--replay", "rec.h5", "--out", "out", "--vary", vary]);
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains(r#"variant "log.path="no/dir/log.h5""#) && err.contains("directory no/dir does not exist"),
+        "{err}"
+    );
+    assert!(!d.join("log.h5").exists(), "nothing ran: {err}");
+    // ... and one whose logger may not replace its file (there, from the variant before,
+    // without `overwrite`) fails at start, after the variant before it ran.
+    let vary = "log.overwrite=true,false";
+    let o = skinflow(&d, &["bench", "logged.toml", "--replay", "rec.h5", "--out", "out", "--vary", vary]);
     assert!(!o.status.success(), "a variant that cannot start fails the bench");
     let err = stderr(&o);
     let last = err.trim().lines().last().unwrap();
-    assert!(last.starts_with(r#"error: variant "log.path="no/dir/log.h5"": "#), "{err}");
-    assert!(last.contains("no/dir/log.h5") && last.contains("1 of 2 variants failed"), "{last}");
+    assert!(last.starts_with(r#"error: variant "log.overwrite=false": "#), "{err}");
+    assert!(last.contains("log.h5: exists") && last.contains("1 of 2 variants failed"), "{last}");
     let bench_json = json_file(&d.join("out/bench.json"));
     let points = bench_json["points"].as_array().unwrap();
     assert_eq!(points.len(), 2, "the variant that ran: {bench_json}");
     assert!(points.iter().all(|p| p["variant_index"] == 0 && p["rmse_n"].as_f64().is_some()), "{bench_json}");
     let failed = &bench_json["variants"][1];
-    assert!(failed["error"].as_str().unwrap().contains("no/dir/log.h5"), "{failed}");
+    assert!(failed["error"].as_str().unwrap().contains("log.h5: exists"), "{failed}");
     assert!(failed["compare_json"].is_null(), "{failed}");
     let md = std::fs::read_to_string(d.join("out/bench.md")).unwrap();
-    assert!(md.contains(r#"| log.path="log.h5" | proportional |"#), "{md}");
-    assert!(md.contains(r#"- variant 1 `log.path="no/dir/log.h5"`: FAILED: "#), "{md}");
+    assert!(md.contains("| log.overwrite=true | proportional |"), "{md}");
+    assert!(md.contains("- variant 1 `log.overwrite=false`: FAILED: "), "{md}");
     assert!(d.join("out/pareto.png").is_file(), "the variants that ran are plotted");
     assert!(d.join("log.h5").is_file(), "the variant that ran logged");
 }

@@ -409,7 +409,11 @@ impl std::fmt::Display for RepairReport {
             writeln!(f)?;
         }
         if self.swmr_mark {
-            writeln!(f, "{input}: was marked open for SWMR writing; the copy is not")?;
+            writeln!(
+                f,
+                "{input}: was marked open for SWMR writing: its writer was killed, or is still running (then this \
+                 copy holds the rows written so far); the copy is not marked"
+            )?;
         }
         for what in &self.not_copied {
             writeln!(f, "{input}: {what}: neither a string, a number nor a group or dataset; not copied")?;

@@ -39,21 +39,14 @@ pub fn not_a_file(path: &Path) -> Option<String> {
 }
 
 /// Why replacing the file at `path` with a recording (a logger's `overwrite = true`, or
-/// `--overwrite`) would lose something else: it is a non-empty regular file that is not HDF5
-/// (no HDF5 signature at byte 0 or at a user block's end, 512 bytes times a power of 2), so a
+/// `--overwrite`) would lose something else: it is a non-empty regular file without the HDF5
+/// signature ([`skinflow_record::read::hdf5_signature`]: at byte 0 or after a user block), so a
 /// slip of the path would replace notes, a scene or a graph. `None` when it may be replaced (a
-/// recording or any HDF5 file, an empty file, or nothing there).
+/// recording or any HDF5 file, an empty file, nothing there, or a file that cannot be read,
+/// whose write then fails with its own error).
 pub fn not_a_recording(path: &Path) -> Option<String> {
-    use std::io::{Read, Seek, SeekFrom};
-    const SIGNATURE: &[u8; 8] = b"\x89HDF\r\n\x1a\n";
-    let meta = std::fs::metadata(path).ok().filter(|m| m.is_file() && m.len() > 0)?;
-    let mut file = std::fs::File::open(path).ok()?;
-    let mut at = |offset: u64| -> bool {
-        let mut bytes = [0u8; 8];
-        file.seek(SeekFrom::Start(offset)).is_ok() && file.read_exact(&mut bytes).is_ok() && &bytes == SIGNATURE
-    };
-    let hdf5 = at(0) || (9..=20).map(|k| 1u64 << k).take_while(|&o| o + 8 <= meta.len()).any(&mut at);
-    (!hdf5).then(|| {
+    std::fs::metadata(path).ok().filter(|m| m.is_file() && m.len() > 0)?;
+    (skinflow_record::read::hdf5_signature(path) == Some(false)).then(|| {
         "exists and is not an HDF5 file: overwriting replaces only a recording (a slip of the path would lose \
          this file); remove it, or choose another path"
             .to_owned()

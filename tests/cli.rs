@@ -1841,21 +1841,24 @@ fn a_logger_overwrites_only_a_recording() {
 }
 
 /// What would stop a node at start is reported by `check`, at the param: a logger's file in a
-/// directory that does not exist, and a second serial source on a port another one reads.
+/// directory that does not exist or takes no file (`/proc`, as a read-only mount would: found
+/// whoever runs it, root too), and a second serial source on a port another one reads.
 #[test]
 fn check_reports_a_missing_output_directory_and_a_port_read_twice() {
     let d = workdir("check-start");
     let g = "[[node]]\nid = \"eit\"\nkind = \"serial_eit\"\nparams = { port = \"/dev/ttyACM7\" }\n\
              [[node]]\nid = \"pressure\"\nkind = \"serial_pressure\"\nparams = { port = \"/dev/ttyACM7\" }\n\
              [[node]]\nid = \"log\"\nkind = \"hdf5_logger\"\nparams = { path = \"nope/rec.h5\" }\n\
+             [[node]]\nid = \"log2\"\nkind = \"hdf5_logger\"\nparams = { path = \"/proc/rec.h5\" }\n\
              [[edge]]\nfrom = \"eit.eit\"\nto = \"log.eit\"\n\
-             [[edge]]\nfrom = \"pressure.pressure\"\nto = \"log.pressure\"\n";
+             [[edge]]\nfrom = \"pressure.pressure\"\nto = \"log.pressure\"\n\
+             [[edge]]\nfrom = \"pressure.pressure\"\nto = \"log2.pressure\"\n";
     std::fs::write(d.join("g.toml"), g).unwrap();
     let out = skinflow(&d, &["check", "g.toml"]);
     let err = stderr(&out);
     assert_eq!(out.status.code(), Some(2), "{err}");
     let lines: Vec<&str> = err.lines().filter(|l| l.starts_with("g.toml:")).collect();
-    assert_eq!(lines.len(), 2, "{err}");
+    assert_eq!(lines.len(), 3, "{err}");
     assert!(
         lines[0].starts_with("g.toml:8:")
             && lines[0]
@@ -1867,6 +1870,19 @@ fn check_reports_a_missing_output_directory_and_a_port_read_twice() {
             && lines[1].contains("nope/rec.h5: directory ")
             && lines[1].contains("does not exist"),
         "{err}"
+    );
+    assert!(
+        lines[2].starts_with("g.toml:16:")
+            && lines[2].contains("node \"log2\": param \"path\": /proc/rec.h5: cannot create a file in /proc: "),
+        "{err}"
+    );
+    // `run` refuses it too, before any data flows (it used to fail at the first rows, with the
+    // HDF5 library's text about a hidden staging file).
+    let out = skinflow(&d, &["run", "g.toml", "--for", "1"]);
+    assert!(
+        !out.status.success() && stderr(&out).contains("/proc/rec.h5: cannot create a file in /proc"),
+        "{}",
+        stderr(&out)
     );
 }
 

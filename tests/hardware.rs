@@ -252,15 +252,16 @@ fn emulated(stderr: &str, what: &str) -> usize {
 }
 
 /// `skinflow emulate --fault eit:50:restart=0.3 --fault pressure:90:restart=0.3`, in real time:
-/// each board goes silent for 0.3 s, then sends on from counter 0 (EIT) and with its clock from
-/// 0 (both), as firmware after a reset, on the same port. A graph of the two serial sources and
-/// a logger reads them. The EIT source reports the restart (`counter_resets`), numbers the frames
-/// after it on from `/eit/seq` by the frames the outage held (estimated from the host-time
-/// gap: `round(gap / period) - 1`, here at least 2 as the silence alone is 3 periods) plus one,
-/// and counts those as `lost_at_restarts` and as its discarded messages: the recording's seq
-/// gap is exactly what was counted. Every frame sent is recorded, the new run's to the end. The
-/// pressure source reports its restart too; the new run's first line, held because its time
-/// went back, is counted as lost. Waits are for conditions, bounded; deterministic (fixed seed,
+/// each board goes silent for 0.3 s, making none of the records due meanwhile (3 EIT frames, 6
+/// pressure samples, counted as `records_unmeasured`), then sends on from counter 0 (EIT) and
+/// with its clock from the reset (both), as firmware after a reset, on the same port. A graph
+/// of the two serial sources and a logger reads them. The EIT source reports the restart
+/// (`counter_resets`), numbers the frames after it on from `/eit/seq` by the frames the outage
+/// hid (estimated from the host-time gap: `round(gap / period) - 1`, here at least 2 as the
+/// silence alone is 3 periods) plus one, and counts those as `lost_at_restarts` and as its
+/// discarded messages: the recording's seq gap is exactly what was counted. Every frame sent is
+/// recorded, the new run's to the end. The pressure source reports its restart too; the new
+/// run's first line, held because its time went back, is counted as lost. Waits are for conditions, bounded; deterministic (fixed seed,
 /// no assertion on speed).
 #[test]
 fn an_emulated_board_restart_is_reported_and_its_hidden_frames_counted() {
@@ -314,12 +315,17 @@ fn an_emulated_board_restart_is_reported_and_its_hidden_frames_counted() {
     let emu_out = emu.wait_with_output().unwrap();
     let emu_err = stderr(&emu_out);
     assert!(emu_out.status.success(), "{emu_err}");
-    let (frames, samples) = (emulated(&emu_err, "EIT frames"), emulated(&emu_err, "pressure samples"));
-    assert!(frames > EIT_AT + 5 && samples > PRESSURE_AT + 5, "{emu_err}");
-    for device in ["eit", "pressure"] {
+    let (fed_frames, fed_samples) = (emulated(&emu_err, "EIT frames"), emulated(&emu_err, "pressure samples"));
+    assert!(fed_frames > EIT_AT + 5 && fed_samples > PRESSURE_AT + 10, "{emu_err}");
+    // What each board sent: its feed less the records due while it booted (0.3 s: 3 frames of
+    // 0.1 s, 6 samples of 50 ms).
+    let mut sent = Vec::new();
+    for (device, booting) in [("eit", 3), ("pressure", 6)] {
         let line = emu_err.lines().find(|l| l.starts_with(&format!("{device}: DeviceStats"))).expect("device stats");
-        assert!(line.contains("restarts: 1,"), "{line}");
+        assert!(line.contains("restarts: 1,") && line.contains(&format!("records_unmeasured: {booting},")), "{line}");
+        sent.push(booting);
     }
+    let (frames, samples) = (fed_frames - sent[0], fed_samples - sent[1]);
     // Wait until the sources have put out every record they will (the pressure board's first
     // line after its restart is lost), then stop the graph.
     let out_of = |stats: &serde_json::Value, id: &str| {

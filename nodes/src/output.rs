@@ -3,8 +3,10 @@
 
 use std::path::Path;
 
-/// Why a file cannot be created at `path`: its directory does not exist, or `path` is a
-/// directory. `None` when it can (whether it exists already is the caller's question).
+/// Why a file cannot be created at `path`: its directory does not exist, `path` is a
+/// directory, or no file can be created in the directory (a read-only mount, no permission,
+/// `/proc`: found by creating and removing an empty hidden file there, [`probe_dir`]). `None`
+/// when it can (whether it exists already is the caller's question).
 pub fn unwritable(path: &Path) -> Option<String> {
     let dir = path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
     if !dir.is_dir() {
@@ -12,8 +14,18 @@ pub fn unwritable(path: &Path) -> Option<String> {
     } else if path.is_dir() {
         Some("is a directory".to_owned())
     } else {
-        None
+        probe_dir(dir).err().map(|e| format!("cannot create a file in {}: {e}", dir.display()))
     }
+}
+
+/// Creates and removes an empty hidden file in `dir` (`.skinflow-probe.PID.partial`): whether a
+/// file can be created there. Permissions alone do not say it (root passes them, a read-only
+/// mount or `/sys` still refuses).
+pub fn probe_dir(dir: &Path) -> std::io::Result<()> {
+    let probe = dir.join(format!(".skinflow-probe.{}.partial", std::process::id()));
+    std::fs::OpenOptions::new().write(true).create_new(true).open(&probe)?;
+    let _ = std::fs::remove_file(&probe);
+    Ok(())
 }
 
 /// Why a file written aside and renamed over `path` (a recording) cannot go there: `path`
@@ -98,5 +110,19 @@ mod tests {
         assert_eq!(unwritable(&tmp.join("skinflow-output-new.json")), None);
         // A bare file name is in the working directory, which exists.
         assert_eq!(unwritable(std::path::Path::new("a.json")), None);
+    }
+
+    /// A directory that exists but takes no file, whoever runs the test (root passes
+    /// permission checks, not `/proc`'s), is found before anything is written, and the probe
+    /// leaves nothing behind where it could create its file.
+    #[test]
+    fn a_directory_that_takes_no_file_is_unwritable() {
+        let e = unwritable(std::path::Path::new("/proc/skinflow-out.h5")).unwrap();
+        assert!(e.starts_with("cannot create a file in /proc: "), "{e}");
+        let tmp = std::env::temp_dir().join(format!("skinflow-output-probe-{}", std::process::id()));
+        std::fs::create_dir_all(&tmp).unwrap();
+        assert_eq!(unwritable(&tmp.join("a.h5")), None);
+        assert_eq!(std::fs::read_dir(&tmp).unwrap().count(), 0, "the probe file is removed");
+        std::fs::remove_dir(&tmp).unwrap();
     }
 }

@@ -430,8 +430,8 @@ pub fn check_files(spec: &GraphSpec) -> Result<(), GraphErrors> {
 }
 
 /// Refuses what would stop a node at start and is known before any runs, so `check` reports
-/// it too (located at the param): a logger's file whose directory is missing, or that is no
-/// recording while `overwrite` is set ([`crate::output::not_a_recording`]); and two serial
+/// it too (located at the param): a logger's file whose directory is missing or takes no file
+/// ([`crate::output::unwritable`]), or that is no recording while `overwrite` is set ([`crate::output::not_a_recording`]); and two serial
 /// sources on one device (files compared as in [`check_files`]). A logger's existing file
 /// without `overwrite` is refused at start only ([`crate::log::existing_file_refusal`]): the
 /// file may be moved by then, and `check` of a session graph stays independent of the last

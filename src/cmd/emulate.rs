@@ -28,9 +28,10 @@ pub struct EmulateArgs {
     pub dir: Option<PathBuf>,
     /// Inject a fault before the record at index (0-based, per device): device:index:kind[=S].
     /// Kinds: garbage, crc (eit), drop, truncate, skip, unplug=S (gone S seconds, back at the
-    /// same path), stall=S (silent S seconds), restart=S (eit, pressure: the board resets,
-    /// silent S seconds, then goes on with its frame counter and clock from 0, as firmware
-    /// after a reset). E.g. eit:10:crc, eit:20:unplug=0.5, eit:30:restart=2.
+    /// same path), stall=S (silent S seconds), restart=S (eit, pressure: the board resets and
+    /// boots for S seconds, making none of the records due meanwhile, then goes on with its
+    /// frame counter and clock from the reset, as firmware after a reset). E.g. eit:10:crc,
+    /// eit:20:unplug=0.5, eit:30:restart=2.
     #[arg(long = "fault")]
     pub faults: Vec<String>,
     /// The devices to serve, comma-separated (with --fast, only those a graph reads: an

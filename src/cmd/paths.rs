@@ -111,14 +111,10 @@ fn check(inputs: &[(&str, &Path)], outputs: &[(&str, &Path)], streams: bool) -> 
                 bail!("{flag} {} and {other} {} name the same file", out.display(), path.display());
             }
         }
+        // Also an existing directory that takes no file (/proc, a read-only mount, no
+        // permission), which would fail only when the result is written, after all the work.
         if let Some(why) = skinflow_nodes::output::unwritable(out) {
             bail!("{flag} {}: {why}", out.display());
-        }
-        // An existing directory that takes no file (/proc, a read-only mount, no permission)
-        // would fail only when the result is written, after all the work.
-        let dir = parent(out);
-        if let Err(e) = probe_file(dir) {
-            bail!("{flag} {}: cannot create a file in {}: {e}", out.display(), dir.display());
         }
     }
     Ok(())
@@ -134,14 +130,6 @@ fn hidden(dir: &Path, name: &str) -> PathBuf {
     dir.join(format!(".{name}.{}.partial", std::process::id()))
 }
 
-/// Creates and removes an empty hidden file in `dir`: whether a file can be created there.
-fn probe_file(dir: &Path) -> std::io::Result<()> {
-    let probe = hidden(dir, "skinflow-probe");
-    std::fs::OpenOptions::new().write(true).create_new(true).open(&probe)?;
-    let _ = std::fs::remove_file(&probe);
-    Ok(())
-}
-
 /// Refuses a directory a command is to write into (`flag`, `dir`: `--plots`, `reproduce
 /// --out`) that cannot be: an existing file, a path under a file, or a place where no file
 /// or directory can be created. Creates nothing.
@@ -150,7 +138,7 @@ pub fn check_output_dir(flag: &str, dir: &Path) -> Result<()> {
         if !meta.is_dir() {
             bail!("{flag} {}: is a file, not a directory", dir.display());
         }
-        if let Err(e) = probe_file(dir) {
+        if let Err(e) = skinflow_nodes::output::probe_dir(dir) {
             bail!("{flag} {}: cannot create files in it: {e}", dir.display());
         }
         return Ok(());

@@ -137,16 +137,20 @@ fn stalled_device_counts_a_stall_and_loses_nothing() {
 }
 
 /// A board restart (`Fault::Restart`): silent for `down_s` with the port open, then a new run,
-/// the EIT counter from 0 and both boards' clocks counted from the reset (`down_s` at the first
-/// record), as firmware after a reset. The decoders see a restart, not a gap: the EIT frame
-/// after it is flagged and nothing counts as lost; the pressure board's first line of the new
-/// run is held (its time went back) and, once the next confirms the restart, counted as lost.
+/// the EIT counter from 0 and both boards' clocks counted from the reset, as firmware after a
+/// reset. The records due while the board boots are never made (`records_unmeasured`): the
+/// first after the boot carries the content of its own feed record, not of the one the reset
+/// came before. The decoders see a restart, not a gap: the EIT frame after it is flagged and
+/// nothing counts as lost; the pressure board's first line of the new run is held (its time
+/// went back) and, once the next confirms the restart, counted as lost.
 #[test]
 fn a_board_restart_starts_counter_and_clock_again_after_a_silence() {
-    let (n, at, down_s) = (30usize, 12usize, 0.3);
+    // Feed spacing 256 µs (EIT) and 50 ms (pressure): each boot spans records 12, 13 and 14.
+    let (n, at, eit_down_s, pressure_down_s) = (30usize, 12usize, 0.0007, 0.12);
+    let booted = at + 3;
     let faults = FaultPlan {
-        eit: vec![(at, Fault::Restart { down_s })],
-        pressure: vec![(at, Fault::Restart { down_s })],
+        eit: vec![(at, Fault::Restart { down_s: eit_down_s })],
+        pressure: vec![(at, Fault::Restart { down_s: pressure_down_s })],
         ..Default::default()
     };
     let feed = EmulatorFeed::default().with_eit(feeds::plain_frames(M, n)).with_pressure(feeds::pressures(n, 0.05));
@@ -155,32 +159,37 @@ fn a_board_restart_starts_counter_and_clock_again_after_a_silence() {
 
     let mut eit =
         SerialReader::open(feeds::config(emulator.path(Device::Eit).unwrap()), EitDecoder::new(M), origin).unwrap();
-    // (counter, device time µs, restarted, first byte's read, completing read) of each frame.
-    // By count, not until idle: the pressure board, unread meanwhile, waits at its restart for
-    // its reader to take what it sent, so the emulator does not finish before both are read.
+    // (counter, device time µs, restarted, first byte's read, completing read, values) of each
+    // frame. By count, not until idle: the pressure board, unread meanwhile, waits at its
+    // restart for its reader to take what it sent, so the emulator does not finish before both
+    // are read.
     let mut frames = Vec::new();
-    feeds::read_n(&mut eit, n, LIMIT, |r| {
+    let sent = n - (booted - at);
+    feeds::read_n(&mut eit, sent, LIMIT, |r| {
         let f = r.record;
-        frames.push((f.counter, f.device_time_us, f.restarted, r.first_host_t_s, r.host_t_s));
+        frames.push((f.counter, f.device_time_us, f.restarted, r.first_host_t_s, r.host_t_s, f.volts.to_vec()));
     });
-    assert_eq!(frames.len(), n, "every frame arrives");
+    assert_eq!(frames.len(), sent, "every frame made arrives");
     let counters: Vec<u32> = frames.iter().map(|f| f.0).collect();
-    let want: Vec<u32> = (0..at as u32).chain(0..(n - at) as u32).collect();
+    let want: Vec<u32> = (0..at as u32).chain(0..(n - booted) as u32).collect();
     assert_eq!(counters, want, "the counter starts again from 0");
-    for (i, f) in frames.iter().enumerate() {
-        // plain_frames: frame i at i * 256 µs; after the reset, `down_s` then the same spacing.
-        let us = if i < at { 256 * i as u32 } else { 300_000 + 256 * (i - at) as u32 };
-        assert_eq!(f.1, us, "frame {i}: device time");
-        assert_eq!(f.2, i == at, "frame {i}: only the first of the new run is flagged restarted");
+    for (k, f) in frames.iter().enumerate() {
+        // The feed record this frame is: the boot's records are skipped, not delayed.
+        let i = if k < at { k } else { k + booted - at };
+        assert_eq!(f.5, feeds::plain_values(i, M), "frame {k}: feed record {i}'s values");
+        // plain_frames: frame i at i * 256 µs; after the reset, counted from the reset.
+        let us = if i < at { 256 * i as u32 } else { 256 * (i - at) as u32 };
+        assert_eq!(f.1, us, "frame {k}: device time");
+        assert_eq!(f.2, k == at, "frame {k}: only the first of the new run is flagged restarted");
     }
     let s = *eit.decode_stats();
-    assert_eq!((s.frames, s.counter_resets, s.lost_frames, s.discarded_bytes), (n as u64, 1, 0, 0));
+    assert_eq!((s.frames, s.counter_resets, s.lost_frames, s.discarded_bytes), (sent as u64, 1, 0, 0));
     assert_eq!(eit.link_stats().disconnects, 0, "the port stays open through a restart");
     // At fast pacing the board lets the reader take what it sent before the reset, so the
     // silence lies between the last frame's read and the next one's first byte (a lower bound
     // the fault guarantees, not a speed).
     let silent_s = frames[at].3 - frames[at - 1].4;
-    assert!(silent_s >= down_s, "silent {silent_s:.3} s, at least {down_s} s expected");
+    assert!(silent_s >= eit_down_s, "silent {silent_s:.4} s, at least {eit_down_s} s expected");
 
     let mut pressure = SerialReader::open(
         feeds::config(emulator.path(Device::Pressure).unwrap()),
@@ -189,16 +198,21 @@ fn a_board_restart_starts_counter_and_clock_again_after_a_silence() {
     )
     .unwrap();
     let mut times = Vec::new();
-    feeds::read_n(&mut pressure, n - 1, LIMIT, |r| times.push(r.record.device_time_ms));
-    // 0, 50, ... 550 ms, then millis() since the reset: 300 (held, then lost), 350, 400, ...
-    let want: Vec<u32> = (0..at as u32).map(|i| 50 * i).chain((1..(n - at) as u32).map(|k| 300 + 50 * k)).collect();
+    feeds::read_n(&mut pressure, sent - 1, LIMIT, |r| times.push(r.record.device_time_ms));
+    // 0, 50, ... 550 ms, then millis() since the reset from the first record after the boot:
+    // 150 (held, then lost), 200, 250, ...
+    let want: Vec<u32> = (0..at as u32).map(|i| 50 * i).chain((booted + 1..n).map(|i| 50 * (i - at) as u32)).collect();
     assert_eq!(times, want);
     let s = *pressure.decode_stats();
     assert_eq!((s.counter_resets, s.bad_lines, s.lost_frames), (1, 1, 1));
     assert!(emulator.wait_finished(LIMIT), "both feeds sent");
     for device in [Device::Eit, Device::Pressure] {
         let stats = emulator.stats(device).unwrap();
-        assert_eq!((stats.restarts, stats.records_sent, stats.faults_applied), (1, n as u64, 1), "{device}");
+        assert_eq!(
+            (stats.restarts, stats.records_sent, stats.records_unmeasured, stats.faults_applied),
+            (1, sent as u64, (booted - at) as u64, 1),
+            "{device}"
+        );
     }
 }
 

@@ -1,9 +1,10 @@
 //! One emulated board: a thread that paces its samples, applies its faults and writes its pty.
 //!
-//! Real-time pacing sends sample k at `start + (t_k - t_0) + pauses`, where pauses are the
-//! time spent unplugged, stalled or restarting so far (a pause delays the rest of the stream,
-//! drops nothing). A board numbers and times its records from its power-up (the feed's times)
-//! or, after a [`Fault::Restart`], from its last reset (see [`BoardRun`]).
+//! Real-time pacing sends sample k at `start + (t_k - t_0)` (the feed's clock, [`FeedClock`]):
+//! an unplug or a stall holds what falls due meanwhile and sends it when it ends; a restart
+//! makes no record while the board boots. A board numbers and times its records from its
+//! power-up (the feed's times) or, after a [`Fault::Restart`], from its last reset (see
+//! [`BoardRun`]).
 //! When the feed ends the pty stays open until the emulator stops, so readers can drain it.
 //! In real time, bytes a full pty (no reader) does not take are dropped and counted, as a
 //! board's transmit buffer would; fast pacing waits for the reader instead.
@@ -71,21 +72,21 @@ struct BoardRun {
     first_index: usize,
     /// Frame counter of that record.
     first_counter: u32,
-    /// Feed time and device time of that record, s; `None` since power-up, when the device
-    /// time is the feed time.
-    clock: Option<(f64, f64)>,
+    /// Feed time of the reset, s, when the device clock read 0; `None` since power-up, when
+    /// the device time is the feed time.
+    reset_t_s: Option<f64>,
 }
 
 impl BoardRun {
     /// From power-up: the configured first counter, device time = feed time.
     fn power_up(first_counter: u32) -> Self {
-        Self { first_index: 0, first_counter, clock: None }
+        Self { first_index: 0, first_counter, reset_t_s: None }
     }
 
-    /// After a reset that kept the board silent `down_s` before the record at `index`, sent at
-    /// feed time `t_s`: counter from 0, clock from the reset.
-    fn after_reset(index: usize, t_s: f64, down_s: f64) -> Self {
-        Self { first_index: index, first_counter: 0, clock: Some((t_s, down_s)) }
+    /// After a reset at feed time `reset_t_s`, the record at `index` the first measured after
+    /// the boot: counter from 0 there, clock from the reset.
+    fn after_reset(index: usize, reset_t_s: f64) -> Self {
+        Self { first_index: index, first_counter: 0, reset_t_s: Some(reset_t_s) }
     }
 
     /// The frame counter of the record at `index` (wrapping u32).
@@ -95,7 +96,7 @@ impl BoardRun {
 
     /// The device time of a record at feed time `t_s`, s.
     fn device_t_s(&self, t_s: f64) -> f64 {
-        self.clock.map_or(t_s, |(t0_s, d0_s)| d0_s + (t_s - t0_s))
+        self.reset_t_s.map_or(t_s, |t0_s| t_s - t0_s)
     }
 }
 
@@ -104,6 +105,7 @@ impl BoardRun {
 pub(super) struct DeviceCounters {
     pub records_sent: AtomicU64,
     pub records_skipped: AtomicU64,
+    pub records_unmeasured: AtomicU64,
     pub bytes_written: AtomicU64,
     pub bytes_dropped: AtomicU64,
     pub faults_applied: AtomicU64,
@@ -237,11 +239,12 @@ impl<T: Sample> DeviceRun<T> {
     }
 
     fn send_all(&mut self) -> Result<(), EmulateError> {
-        // Only a restart delays the stream: the board does not measure while it boots, and
-        // picks up the feed where it left off. A stall or an unplug does not: the board keeps
-        // measuring on its clock, and what fell due meanwhile goes out at once when the link is
-        // back (a bridge's buffer), so device times and the feed stay in step.
-        let mut paused = Duration::ZERO;
+        // The stream keeps the feed's schedule through every fault, as the world the board
+        // measures goes on. A stall or an unplug: the board keeps measuring on its clock, and
+        // what fell due meanwhile goes out at once when the link is back (a bridge's buffer). A
+        // restart: the board does not measure while it boots, so the records that fall due
+        // then are never made (`records_unmeasured`); the first one due after the boot starts
+        // the new run.
         let mut record = Vec::new();
         let mut next_fault = 0;
         let c = Arc::clone(&self.counters);
@@ -250,22 +253,25 @@ impl<T: Sample> DeviceRun<T> {
         let faults = std::mem::take(&mut self.faults);
         let mut index = 0usize;
         let mut run = BoardRun::power_up(self.first_counter);
+        // A restart's (feed time of the reset, feed time its boot ends) until the first record
+        // after the boot.
+        let mut booting: Option<(f64, f64)> = None;
         while let Some(sample) = self.samples.next() {
             if let Pacing::RealTime | Pacing::Wire { .. } = self.pacing {
-                if !sleep_until(self.clock.due(sample.t_s()) + paused, &stop) {
+                if !sleep_until(self.clock.due(sample.t_s()), &stop) {
                     return Ok(());
                 }
             } else if stop.load(Ordering::Relaxed) {
                 return Ok(());
             }
             // Sorted by index, so the faults of this record are next in line. Link faults and
-            // garbage happen first, in order (a restart decides the record's counter and time),
-            // then the record is encoded and its byte faults applied, in order.
+            // garbage happen first, in order (a restart decides whether the record is made, and
+            // its counter and time), then the record is encoded and its byte faults applied,
+            // in order.
             let here = next_fault
                 ..faults[next_fault..].iter().position(|(at, _)| *at != index).map_or(faults.len(), |p| next_fault + p);
             next_fault = here.end;
             for (_, fault) in &faults[here.clone()] {
-                c.faults_applied.fetch_add(1, Ordering::Relaxed);
                 match fault {
                     Fault::Unplug { down_s } => {
                         self.pty.wait_drained(Some(DRAIN_TIMEOUT), &stop).map_err(|e| self.pty_error(e))?;
@@ -282,18 +288,17 @@ impl<T: Sample> DeviceRun<T> {
                         }
                     }
                     Fault::Restart { down_s } => {
-                        let began = Instant::now();
-                        // Fast pacing waits for the reader throughout: let it take what was
-                        // sent, so the silence reaches it as one.
+                        c.restarts.fetch_add(1, Ordering::Relaxed);
+                        booting = Some((sample.t_s(), sample.t_s() + down_s));
+                        // In real time the boot is the wait for the first record due after
+                        // it. Fast pacing has no schedule: it lets the reader take what was
+                        // sent, then stays silent for the boot, so the silence reaches it.
                         if self.pacing == Pacing::AsFastAsPossible {
                             self.pty.wait_drained(None, &stop).map_err(|e| self.pty_error(e))?;
+                            if !sleep_until(Instant::now() + secs(*down_s), &stop) {
+                                return Ok(());
+                            }
                         }
-                        c.restarts.fetch_add(1, Ordering::Relaxed);
-                        if !sleep_until(Instant::now() + secs(*down_s), &stop) {
-                            return Ok(());
-                        }
-                        paused += began.elapsed();
-                        run = BoardRun::after_reset(index, sample.t_s(), *down_s);
                     }
                     Fault::Garbage(bytes) => {
                         if !self.send(bytes)? {
@@ -305,14 +310,29 @@ impl<T: Sample> DeviceRun<T> {
                     | Fault::CorruptCrc
                     | Fault::FlipBits { .. }
                     | Fault::Truncate { .. }
-                    | Fault::Skip => {}
+                    | Fault::Skip => continue,
                 }
+                c.faults_applied.fetch_add(1, Ordering::Relaxed);
+            }
+            if let Some((reset_t_s, ready_t_s)) = booting {
+                // Due before the boot ends (1 ns spares a record due at its end from rounding).
+                if sample.t_s() < ready_t_s - 1e-9 {
+                    // Not measured: there is no record for its byte faults to act on.
+                    c.records_unmeasured.fetch_add(1, Ordering::Relaxed);
+                    index += 1;
+                    continue;
+                }
+                run = BoardRun::after_reset(index, reset_t_s);
+                booting = None;
             }
             record.clear();
             sample.encode(run.counter(index), run.device_t_s(sample.t_s()), &mut record);
             let mut send = true;
             for (_, fault) in &faults[here] {
-                send &= corrupt(&mut record, fault);
+                if fault.is_byte_fault() {
+                    c.faults_applied.fetch_add(1, Ordering::Relaxed);
+                    send &= corrupt(&mut record, fault);
+                }
             }
             if send {
                 if !self.send_record(&record)? {
@@ -348,15 +368,17 @@ mod tests {
         assert_eq!(late.due(99.0), start, "never before the start");
     }
 
-    /// Firmware after a reset: counter from 0, clock from the reset (the silence included).
+    /// Firmware after a reset: counter from 0 at the first record measured after the boot,
+    /// clock from the reset (the boot included).
     #[test]
     fn a_reset_numbers_and_times_records_from_zero() {
         let up = BoardRun::power_up(0xFFFF_FFFE);
         assert_eq!((up.counter(0), up.counter(3)), (0xFFFF_FFFE, 1), "wraps as the u32 counter does");
         assert_eq!(up.device_t_s(12.5), 12.5, "since power-up the device time is the feed time");
-        let reset = BoardRun::after_reset(7, 5.0, 0.3);
+        // Reset at 4.7 s; the record at index 7, due at 5.0 s, is the first after the boot.
+        let reset = BoardRun::after_reset(7, 4.7);
         assert_eq!((reset.counter(7), reset.counter(9)), (0, 2));
-        assert_eq!(reset.device_t_s(5.0), 0.3);
+        assert!((reset.device_t_s(5.0) - 0.3).abs() < 1e-12);
         assert!((reset.device_t_s(5.769) - 1.069).abs() < 1e-12);
     }
 }

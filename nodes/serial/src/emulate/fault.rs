@@ -69,6 +69,18 @@ impl Fault {
             _ => Ok(()),
         }
     }
+    /// Whether the fault acts on its record's bytes (applied once the record is encoded, by
+    /// [`corrupt`]), rather than on the link or the board before it.
+    pub(super) fn is_byte_fault(&self) -> bool {
+        match self {
+            Fault::DropBytes { .. }
+            | Fault::CorruptCrc
+            | Fault::FlipBits { .. }
+            | Fault::Truncate { .. }
+            | Fault::Skip => true,
+            Fault::Garbage(_) | Fault::Unplug { .. } | Fault::Stall { .. } | Fault::Restart { .. } => false,
+        }
+    }
 }
 
 /// Faults per device, as `(record index, fault)`; several faults may share an index and are

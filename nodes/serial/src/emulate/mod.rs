@@ -104,11 +104,14 @@ pub struct DeviceStats {
     pub records_sent: u64,
     /// Records withheld by [`Fault::Skip`].
     pub records_skipped: u64,
+    /// Records never made: due while the board booted after a [`Fault::Restart`].
+    pub records_unmeasured: u64,
     /// Bytes written, garbage included.
     pub bytes_written: u64,
     /// Bytes dropped because the pty stayed full (real-time pacing with no or a slow reader).
     pub bytes_dropped: u64,
-    /// Faults carried out (faults at indices past the feed's end never are).
+    /// Faults carried out (faults at indices past the feed's end never are, nor byte faults at
+    /// records not measured).
     pub faults_applied: u64,
     /// Unplug and replug cycles.
     pub unplugs: u64,
@@ -249,6 +252,7 @@ impl Emulator {
         Some(DeviceStats {
             records_sent: c.records_sent.load(Ordering::Relaxed),
             records_skipped: c.records_skipped.load(Ordering::Relaxed),
+            records_unmeasured: c.records_unmeasured.load(Ordering::Relaxed),
             bytes_written: c.bytes_written.load(Ordering::Relaxed),
             bytes_dropped: c.bytes_dropped.load(Ordering::Relaxed),
             faults_applied: c.faults_applied.load(Ordering::Relaxed),

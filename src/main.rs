@@ -58,7 +58,7 @@ enum Cmd {
         replay: PathBuf,
         /// NODE.PARAM=V1,V2,... (repeatable; every combination runs).
         #[arg(long = "vary", value_name = "NODE.PARAM=V1,V2")]
-        vary: Vec<String>,
+        vary: Vec<cmd::bench::Vary>,
         /// Output directory (bench.md, bench.json, pareto.png).
         #[arg(long, default_value = "out/bench")]
         out: PathBuf,
@@ -182,7 +182,10 @@ fn main() -> ExitCode {
 
 impl Cmd {
     /// Commands whose only pipes are standard output and error: no user graph (whose nodes may
-    /// write to sockets or devices), no control socket, no emulated device.
+    /// write to sockets or devices), no control socket, no emulated device; and whose files, if
+    /// any (`simulate`, `repair`), are written before anything is printed. `calibrate`, `eval`
+    /// and `reproduce` print before or between their files: they print with
+    /// [`cmd::print_or_warn`], so a closed output (`| head`) loses only the printed text.
     fn only_prints(&self) -> bool {
         matches!(
             self,
@@ -192,9 +195,6 @@ impl Cmd {
                 | Cmd::Simulate { .. }
                 | Cmd::Inspect { .. }
                 | Cmd::Repair { .. }
-                | Cmd::Calibrate { .. }
-                | Cmd::Eval { .. }
-                | Cmd::Reproduce { .. }
         )
     }
 }
@@ -430,7 +430,7 @@ fn run(
     }
     // The file first: a closed standard output loses the printed table only.
     if let Some(p) = stats_json {
-        let json = serde_json::to_string_pretty(&report.stats)?;
+        let json = serde_json::to_string_pretty(&report.stats)? + "\n";
         std::fs::write(p, json).with_context(|| format!("writing {}", p.display()))?;
     }
     cmd::print_or_warn(&format!("{}\n", report.stats), "the statistics table");

@@ -900,8 +900,8 @@ fn outputs_and_inputs_are_checked_before_any_work() {
     assert!(!d.join("nope").exists());
 }
 
-/// Exit status 2 means an invalid graph for `bench` as for `check` and `run`; a command that
-/// only prints ends quietly when its reader goes away (`| head`), without a panic.
+/// Exit status 2 means an invalid graph for `bench` as for `check` and `run`, and a command
+/// line that does not parse; a command that only prints ends quietly when its reader goes away (`| head`), without a panic.
 #[test]
 fn bench_exits_2_on_an_invalid_graph_and_printing_commands_survive_a_closed_pipe() {
     let d = workdir("exit-codes");
@@ -914,6 +914,11 @@ fn bench_exits_2_on_an_invalid_graph_and_printing_commands_survive_a_closed_pipe
     let err = stderr(&out);
     assert_eq!(out.status.code(), Some(2), "{err}");
     assert!(err.contains("segmentor"), "{err}");
+    // A `--vary` that is not NODE.PARAM=V1,V2 is a command line that does not parse.
+    let out = skinflow(&d, &["bench", "bad.toml", "--replay", "rec.h5", "--vary", "recon.lambda"]);
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(err.contains("--vary") && err.contains("expected node.param=v1,v2,..."), "{err}");
 
     let mut child = spawn(
         std::process::Command::new(env!("CARGO_BIN_EXE_skinflow"))
@@ -960,6 +965,60 @@ fn run_with_its_output_closed_writes_its_files_and_names_what_it_did_not_print()
     assert!(compare["msgs_in"].as_u64().unwrap() > 0, "{compare}");
     let ab: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(d.join("ab.json")).unwrap()).unwrap();
     assert!(ab.to_string().contains("pneumatic-locaware"), "{ab}");
+}
+
+/// `calibrate` and `eval` print their tables before or between the files they write: with
+/// their standard output closed (`| true`, `| head -1`) they still write every file, exit 0,
+/// and name on stderr what they did not print (they used to die of SIGPIPE at the first table,
+/// leaving no calibration, or an older one, and an `eval` CSV without its JSON and plots).
+#[test]
+fn calibrate_and_eval_with_their_output_closed_write_every_file() {
+    let d = workdir("closed-pipe-files");
+    simulate(&d, "tiny-calibration.toml", "cal.h5");
+    simulate(&d, "tiny-eval.toml", "test.h5");
+    let closed = |args: &[&str]| {
+        let mut child = spawn(
+            std::process::Command::new(env!("CARGO_BIN_EXE_skinflow"))
+                .args(args)
+                .current_dir(&d)
+                .env("XDG_CACHE_HOME", d.join("cache"))
+                .env("RUST_LOG", "warn")
+                .stdout(std::process::Stdio::piped())
+                .stderr(std::process::Stdio::piped()),
+        );
+        drop(child.stdout.take()); // the reader goes away before the first line
+        let out = child.wait_with_output().unwrap();
+        let err = stderr(&out);
+        assert!(out.status.success() && !err.contains("panicked"), "{args:?}: {:?}: {err}", out.status);
+        err
+    };
+    let err = closed(&["calibrate", "cal.h5", "--out", "calib.toml", "--print-graph"]);
+    assert!(err.contains("warning: the calibration tables not printed: standard output: "), "{err}");
+    assert!(err.contains("warning: the pipeline graph (--print-graph) not printed"), "{err}");
+    let calib = std::fs::read_to_string(d.join("calib.toml")).unwrap();
+    assert!(calib.contains("cal.h5"), "{calib}");
+    let err = closed(&[
+        "eval",
+        "test.h5",
+        "--calib",
+        "calib.toml",
+        "--json",
+        "e.json",
+        "--contacts-csv",
+        "e.csv",
+        "--plots",
+        "plots",
+    ]);
+    assert!(err.contains("warning: the evaluation tables not printed: standard output: "), "{err}");
+    let json = std::fs::read_to_string(d.join("e.json")).unwrap();
+    assert!(json.ends_with("}\n"), "a text file ends in a newline");
+    let json: serde_json::Value = serde_json::from_str(&json).unwrap();
+    assert!(json["strategies"].is_object(), "{json}");
+    assert!(d.join("e.csv").is_file());
+    let pngs = std::fs::read_dir(d.join("plots"))
+        .unwrap()
+        .filter(|e| e.as_ref().is_ok_and(|e| e.path().extension().is_some_and(|x| x == "png")));
+    assert!(pngs.count() > 0, "the plots are written");
 }
 
 #[test]

@@ -93,6 +93,19 @@ const MIN_NOISE_SAMPLES: u64 = 10;
 /// sample period.
 const TILE_TOLERANCE_S: f64 = 1e-6;
 
+/// How far below a window boundary (s) a sample still counts as on it: half the nanosecond
+/// that frame times are whole in. Window edges computed in f64 seconds (`t - T/2`) land a few
+/// 1e-16 s either side of a boundary a sample sits on exactly (a 20 Hz pressure board beside a
+/// 20 fps EIT board: every sample on a boundary), which put the sample in the window before and
+/// left its own empty. Both edges of a window move by the same amount, so windows still tile.
+const ON_BOUNDARY_S: f64 = 0.5e-9;
+
+/// Whether a sample at `tp` s falls in the window `[lo, hi)`, a sample within
+/// [`ON_BOUNDARY_S`] below an edge counting as on it.
+fn in_window(tp: f64, (lo, hi): (f64, f64)) -> bool {
+    tp >= lo - ON_BOUNDARY_S && tp < hi - ON_BOUNDARY_S
+}
+
 /// Frames waiting for their window to close before the oldest is emitted regardless.
 const MAX_PENDING: usize = 2;
 
@@ -491,7 +504,7 @@ impl Sync {
         self.st.last_emitted_s = Some(t);
         let (lo, hi) = self.window(t);
         let (n, mean, sd) = mean_sd(
-            self.st.pressure.iter().filter(|&&(tp, kpa)| tp >= lo && tp < hi && kpa.is_finite()).map(|&(_, k)| k),
+            self.st.pressure.iter().filter(|&&(tp, kpa)| in_window(tp, (lo, hi)) && kpa.is_finite()).map(|&(_, k)| k),
         );
         let (p0, noise) = self.p0_noise_for(hi);
         let settled = noise.is_some_and(|noise| {
@@ -525,7 +538,9 @@ impl Sync {
                     tracing::warn!(
                         node = ctx.id(),
                         frame_t_s = t,
-                        "frames have pressure samples but no P0: no pressure sample arrived in the leading                          no-load period (did the pressure board start late?); their dP is unknown until a `tare`                          command is sent with the skin unloaded"
+                        "frames have pressure samples but no P0: no pressure sample arrived in the leading no-load period \
+                         (did the pressure board start late?); their dP is unknown until a `tare` command is sent \
+                         with the skin unloaded"
                     );
                 }
             }
@@ -884,7 +899,7 @@ mod tests {
         let samples: Vec<f64> = (0..600).map(|i| f64::from(i) * 0.05).collect();
         let (first, last) = (windows[0].0, windows[39].1);
         for &tp in samples.iter().filter(|&&tp| tp >= first && tp < last) {
-            let n = windows.iter().filter(|&&(lo, hi)| tp >= lo && tp < hi).count();
+            let n = windows.iter().filter(|&&w| in_window(tp, w)).count();
             assert_eq!(n, 1, "sample at {tp} s is in {n} windows");
         }
         // The boundary at 10 s: frame 12's window ends there and frame 13's starts there.
@@ -892,6 +907,20 @@ mod tests {
         // Frames 41-42 lost: frame 43's window starts where its own start is.
         let (lo, _) = s.window(t_ns(43) as f64 * 1e-9);
         assert!((lo - 43.0 / 1.3).abs() < 1e-9, "{lo}");
+    }
+
+    /// A 20 fps board beside a 20 Hz pressure board: frames at (k + 0.5) / 20 s, samples at
+    /// k / 20 s, each on its window's start. Every window holds exactly its own sample (the
+    /// edges' f64 rounding put 59 of 400 in the window before and left their own empty).
+    #[test]
+    fn equal_rates_put_each_sample_in_its_own_window() {
+        let mut s = sync();
+        s.st.period_s = 0.05;
+        for k in 0..400u64 {
+            let w = s.window((2 * k + 1) as f64 * 25_000_000.0 * 1e-9);
+            let inside: Vec<u64> = (0..401u64).filter(|&j| in_window(j as f64 * 0.05, w)).collect();
+            assert_eq!(inside, [k], "window {k}: {w:?}");
+        }
     }
 
     /// The reviewer's case: a frame that arrives after a newer one is put in its place while

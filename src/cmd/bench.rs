@@ -329,13 +329,12 @@ fn run_variant(spec: &GraphSpec, json: &Path, label: &str, index: usize, health:
 }
 
 /// Runs the variants and writes `bench.md`, `bench.json` and `pareto.png` into `out_dir`.
-pub fn run(graph: &Path, replay: &Path, vary: &[String], out_dir: &Path) -> Result<()> {
-    let vary: Vec<Vary> = vary.iter().map(|s| s.parse()).collect::<Result<_>>()?;
+pub fn run(graph: &Path, replay: &Path, vary: &[Vary], out_dir: &Path) -> Result<()> {
     let text = std::fs::read_to_string(graph).with_context(|| format!("{}: cannot read", graph.display()))?;
     let reg = registry_for(&SourceFile::new(graph, text.clone()))?;
     let base: toml::Table =
         toml::from_str(&text).map_err(|e| anyhow!("{}: {}", graph.display(), skinflow_toml::message(&e)))?;
-    check_vary(&base, &vary)?;
+    check_vary(&base, vary)?;
     let replay = std::path::absolute(replay).with_context(|| format!("{}: bad path", replay.display()))?;
     if !replay.is_file() {
         bail!("{}: recording not found", replay.display());
@@ -345,7 +344,7 @@ pub fn run(graph: &Path, replay: &Path, vary: &[String], out_dir: &Path) -> Resu
     let out_abs = std::path::absolute(out_dir)?;
     // Every variant validates, and opens its input files, before any runs or anything is written.
     let mut specs: Vec<(String, Overrides, GraphSpec, PathBuf)> = Vec::new();
-    for (k, (label, set)) in combinations(&vary).into_iter().enumerate() {
+    for (k, (label, set)) in combinations(vary).into_iter().enumerate() {
         let json = out_abs.join(format!("variant-{k}.json"));
         let src = SourceFile::new(graph, variant_text(&base, &replay, &set, &json)?);
         // As `run` does: the input files (the recording, scenes, calibrations) are opened too,

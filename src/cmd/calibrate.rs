@@ -4,6 +4,7 @@
 //! repaired recording and the one that finished the grid) are pooled: each is reconstructed
 //! against its own no-load reference, and their samples are fitted together.
 
+use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context as _, Result, bail};
@@ -255,7 +256,10 @@ pub fn run(recordings: &[PathBuf], out: &Path, fit_toml: &str, args: &PipelineAr
     // Its warnings are logged by `calibrate` itself (target skinflow::calibrate).
     let fitted = fit_samples(recordings, &samples, &params, provenance)?;
     let cal = &fitted.calibration;
-    println!("{}", cal.r2);
+    // The tables go out in one piece once made (`print_or_warn`): a closed output (`| head`)
+    // loses them, never the calibration file.
+    let mut tables = String::new();
+    let _ = writeln!(tables, "{}", cal.r2);
     let lam = |v: Option<f64>| v.map_or_else(|| "prior".to_string(), |v| format!("{v:.3e}"));
     let t = &cal.training;
     let why = if t.rejected_non_positive_dp + t.rejected_pressure_spikes > 0 {
@@ -263,7 +267,8 @@ pub fn run(recordings: &[PathBuf], out: &Path, fit_toml: &str, args: &PipelineAr
     } else {
         String::new()
     };
-    println!(
+    let _ = writeln!(
+        tables,
         "samples: {} frames -> {} used ({} rejected{why}) at {} locations, {} force levels; ridge lambda_g / lambda_b: \
          pneumatic {} / {}, EIT {} / {}",
         t.frames,
@@ -293,9 +298,13 @@ pub fn run(recordings: &[PathBuf], out: &Path, fit_toml: &str, args: &PipelineAr
             "offset field b(x, y) is held near 0"
         };
         if at(hi, v) {
-            println!("note: {name} {field} is the top of the grid ({v:.3e}): the {what}, the data do not support more");
+            let _ = writeln!(
+                tables,
+                "note: {name} {field} is the top of the grid ({v:.3e}): the {what}, the data do not support more"
+            );
         } else if at(lo, v) {
-            println!(
+            let _ = writeln!(
+                tables,
                 "note: {name} {field} is the bottom of the grid ({v:.3e}): a smaller weight may fit better \
                  (lambda_grid_rel in --fit)"
             );
@@ -308,7 +317,8 @@ pub fn run(recordings: &[PathBuf], out: &Path, fit_toml: &str, args: &PipelineAr
     };
     for (name, la) in [("pneumatic", &cal.pneumatic.locaware), ("EIT", &cal.eit.locaware)] {
         let q = la.map.quadratic;
-        println!(
+        let _ = writeln!(
+            tables,
             "{name} location-aware f ({}): {:.4} {} {:.4} s {} {:.4} s^2; CV RMSE {} N (the ridge weights' inner CV, \
              {folds} folds, f not held out: optimistic, see the held-out column below)",
             match la.f_fit {
@@ -325,21 +335,24 @@ pub fn run(recordings: &[PathBuf], out: &Path, fit_toml: &str, args: &PipelineAr
     }
     let t = &cal.training;
     if t.holdout_folds > 0 {
-        println!(
+        let _ = writeln!(
+            tables,
             "RMSE per strategy, N: on the training samples, and at held-out locations ({} folds of the {} locations, the whole fit repeated without each)",
             t.holdout_folds, t.locations
         );
     } else {
-        println!(
+        let _ = writeln!(
+            tables,
             "RMSE per strategy, N, on the training samples (no held-out figures: {})",
             if params.holdout_folds == 0 { "turned off with holdout_folds = 0" } else { "see the warnings above" }
         );
     }
-    println!("{:<34} {:>9} {:>9}", "strategy", "training", "held out");
+    let _ = writeln!(tables, "{:<34} {:>9} {:>9}", "strategy", "training", "held out");
     for (name, train) in &t.train_rmse_n {
         let held = t.holdout_rmse_n.get(name).map_or_else(|| "-".into(), |v| format!("{v:.3}"));
-        println!("{name:<34} {train:>9.3} {held:>9}");
+        let _ = writeln!(tables, "{name:<34} {train:>9.3} {held:>9}");
     }
+    super::print_or_warn(&tables, "the calibration tables");
     let text = cal.to_toml_string().map_err(anyhow::Error::msg)?;
     super::paths::write_file(&format!("--out {}", out.display()), out, text.as_bytes())?;
     eprintln!("calibration written to {}", out.display());

@@ -419,7 +419,7 @@ pub fn run(
     let mut names = recordings.iter().map(|r| r.display().to_string());
     let mut report = outcome.evaluator.report(&names.next().unwrap_or_default());
     report.more_recordings = names.collect();
-    println!("{report}");
+    super::print_or_warn(&format!("{report}\n"), "the evaluation tables");
     if let Some(p) = json {
         super::paths::write_file(&format!("--json {}", p.display()), p, report.to_json().as_bytes())?;
         eprintln!("JSON written to {}", p.display());

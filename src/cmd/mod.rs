@@ -27,7 +27,7 @@ impl std::fmt::Display for InvalidGraph {
 impl std::error::Error for InvalidGraph {}
 
 /// Prints `text` on standard output for a command that keeps SIGPIPE ignored (`run`, `bench`,
-/// `emulate`: see `default_sigpipe` in main.rs). A closed output (`| head`) is not a panic
+/// `emulate`, `calibrate`, `eval`, `reproduce`: see `default_sigpipe` in main.rs). A closed output (`| head`) is not a panic
 /// there: `what` is named on stderr as not printed, and the command goes on (its files are
 /// written either way).
 pub fn print_or_warn(text: &str, what: &str) {

@@ -157,7 +157,7 @@ impl PipelineArgs {
         spec.reconstructor = recon;
         configure(&mut spec);
         if self.print_graph {
-            println!("{}", spec.graph_toml());
+            super::print_or_warn(&format!("{}\n", spec.graph_toml()), "the pipeline graph (--print-graph)");
         }
         let rows = spec.run().map_err(|e| {
             // What each node had done when the run ended, before the error (calibrate, eval

@@ -120,7 +120,7 @@ pub fn run(scenes_dir: &Path, out: &Path, seed: u64, fit_toml: &str, args: &Pipe
         let r = report_of(s, &calib_path)?;
         let json = out.join(format!("{s}.json"));
         super::paths::write_file(&json.display().to_string(), &json, r.to_json().as_bytes())?;
-        println!("== {s}\n{r}");
+        super::print_or_warn(&format!("== {s}\n{r}\n"), &format!("the {s} tables (in {} too)", json.display()));
         reports.push((s, r));
     }
     let get = |name: &str| &reports.iter().find(|(n, _)| *n == name).expect("evaluated above").1;

@@ -292,6 +292,14 @@ fn calibration_file_round_trips_and_rejects_unknown_keys() {
     let bad = text.replacen("exponent = ", "exponent = -", 1);
     let err = Calibration::from_toml_str(&bad, "calib.toml").unwrap_err().to_string();
     assert!(err.starts_with("calib.toml:") && err.contains("sensitivity.exponent"), "{err}");
+    // A hand-edited coefficient that is not finite is named by its key.
+    let q = "[pneumatic.map.quadratic]\n";
+    let at = text.find(q).expect("the pneumatic map's coefficients") + q.len();
+    let line_end = at + text[at..].find('\n').unwrap();
+    let (key, _) = text[at..line_end].split_once(" = ").unwrap();
+    let bad = format!("{}{key} = nan{}", &text[..at], &text[line_end..]);
+    let err = Calibration::from_toml_str(&bad, "calib.toml").unwrap_err().to_string();
+    assert!(err.contains(&format!("pneumatic.map.quadratic.{key} = NaN: must be finite")), "{err}");
     // A region the fields divide by (zero width), or a field fitted on another region.
     let mut flat = cal.clone();
     flat.region.x_max_mm = flat.region.x_min_mm;
@@ -311,8 +319,8 @@ fn calibration_file_round_trips_and_rejects_unknown_keys() {
     let mut inverted_signal = cal.clone();
     std::mem::swap(&mut inverted_signal.pneumatic.map.signal_min, &mut inverted_signal.pneumatic.map.signal_max);
     for (c, want) in [
-        (nan_gain, "pneumatic.locaware: gain and offset coefficients must be finite"),
-        (nan_area, "relative area range must be finite"),
+        (nan_gain, "pneumatic.locaware.gain[0] = NaN: must be finite"),
+        (nan_area, "area_aware.rel_area_min = NaN: must be finite"),
         (inverted_area, "rel_area_min (0.5) must be <= rel_area_max (-0.5)"),
         (zero_ref, "area_aware.area_ref_mm2 must be finite and > 0"),
         (inverted_signal, "pneumatic.map: signal_min"),

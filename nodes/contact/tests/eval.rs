@@ -194,3 +194,30 @@ fn the_table_aligns_any_label() {
         }
     }
 }
+
+/// A diameter none of whose contacts was matched keeps its key, `null` (CONTRACTS.md section
+/// 4: keys whose value cannot be computed are `null`), and its column in the table shows "-".
+#[test]
+fn a_diameter_never_matched_is_null_not_absent() {
+    let mut e = evaluator();
+    e.push(&FrameInput {
+        truth: &[truth(0.0, 3.0, 25.0)],
+        detected_mm: &[],
+        forces_n: &[&[], &[]],
+        latency_us: &[100.0, 200.0],
+        resolution: None,
+    })
+    .unwrap();
+    let report = e.report("rec.h5");
+    let r: Value = serde_json::from_str(&report.to_json()).unwrap();
+    for s in ["a", "b"] {
+        let per = r["strategies"][s]["per_diameter_rmse_n"].as_object().unwrap();
+        assert_eq!(per.keys().cloned().collect::<Vec<_>>(), ["10", "12.5", "25"], "{s}");
+        assert!(per["25"].is_null() && per["10"].is_f64(), "{s}: {per:?}");
+    }
+    let table = report.to_string();
+    let header = table.lines().find(|l| l.starts_with("Per-diameter RMSE [N]")).unwrap_or_else(|| panic!("{table}"));
+    assert!(header.ends_with("25 mm"), "{header}");
+    let row = table.lines().skip_while(|l| *l != header).nth(1).unwrap();
+    assert!(row.ends_with(" -"), "no RMSE for 25 mm: {row}");
+}

@@ -339,6 +339,15 @@ pub enum CalibrationFileError {
     Serialize(String),
 }
 
+/// The first of `values` (each with its key path in the file) that is not finite, as the error
+/// `pneumatic.map.quadratic.a1 = NaN: must be finite`: a hand-edited file is told which key.
+fn finite(values: &[(String, f64)]) -> Result<(), String> {
+    match values.iter().find(|(_, v)| !v.is_finite()) {
+        Some((key, v)) => Err(format!("{key} = {v}: must be finite")),
+        None => Ok(()),
+    }
+}
+
 impl Calibration {
     /// TOML text of the calibration.
     pub fn to_toml_string(&self) -> Result<String, CalibrationFileError> {
@@ -433,8 +442,11 @@ impl Calibration {
             if !(k.length_mm.is_finite() && k.length_mm > 0.0) {
                 return Err(format!("{name}.length_mm must be finite and > 0 (got {})", k.length_mm));
             }
-            if !k.mean.is_finite() || k.sites.iter().flatten().any(|v| !v.is_finite()) {
-                return Err(format!("{name}: mean and sites must be finite"));
+            finite(&[(format!("{name}.mean"), k.mean)])?;
+            for (i, site) in k.sites.iter().enumerate() {
+                finite(
+                    &site.iter().enumerate().map(|(j, &v)| (format!("{name}.sites[{i}][{j}]"), v)).collect::<Vec<_>>(),
+                )?;
             }
             Ok(())
         };
@@ -446,9 +458,13 @@ impl Calibration {
             ("area_aware.fields.map", &self.area_aware.fields.map),
         ] {
             let q = &m.quadratic;
-            if ![q.a0, q.a1, q.a2, m.signal_min, m.signal_max].iter().all(|v| v.is_finite()) {
-                return Err(format!("{name}: coefficients and signal range must be finite"));
-            }
+            finite(&[
+                (format!("{name}.quadratic.a0"), q.a0),
+                (format!("{name}.quadratic.a1"), q.a1),
+                (format!("{name}.quadratic.a2"), q.a2),
+                (format!("{name}.signal_min"), m.signal_min),
+                (format!("{name}.signal_max"), m.signal_max),
+            ])?;
             if m.signal_min > m.signal_max {
                 return Err(format!("{name}: signal_min ({}) must be <= signal_max ({})", m.signal_min, m.signal_max));
             }
@@ -459,14 +475,20 @@ impl Calibration {
             ("eit.locaware", &self.eit.locaware),
             ("area_aware.fields", &self.area_aware.fields),
         ] {
-            if !l.gain.coeffs.iter().chain(&l.offset.coeffs).all(|v| v.is_finite()) {
-                return Err(format!("{name}: gain and offset coefficients must be finite"));
-            }
+            let (gain, offset) = (l.gain.coeffs.iter(), l.offset.coeffs.iter());
+            let named = gain
+                .enumerate()
+                .map(|(i, &v)| (format!("{name}.gain[{i}]"), v))
+                .chain(offset.enumerate().map(|(i, &v)| (format!("{name}.offset[{i}]"), v)));
+            finite(&named.collect::<Vec<_>>())?;
         }
         let a = &self.area_aware;
-        if ![a.area_gain, a.area_offset, a.rel_area_min, a.rel_area_max].iter().all(|v| v.is_finite()) {
-            return Err("area_aware: area_gain, area_offset and the relative area range must be finite".into());
-        }
+        finite(&[
+            ("area_aware.area_gain".into(), a.area_gain),
+            ("area_aware.area_offset".into(), a.area_offset),
+            ("area_aware.rel_area_min".into(), a.rel_area_min),
+            ("area_aware.rel_area_max".into(), a.rel_area_max),
+        ])?;
         if !(a.area_ref_mm2.is_finite() && a.area_ref_mm2 > 0.0) {
             return Err(format!("area_aware.area_ref_mm2 must be finite and > 0 (got {})", a.area_ref_mm2));
         }

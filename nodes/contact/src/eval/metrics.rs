@@ -83,6 +83,9 @@ pub struct Evaluator {
     pub(crate) frames: usize,
     pub(crate) records: Vec<MatchRecord>,
     pub(crate) missed: usize,
+    /// Every finite truth diameter seen (mm, sorted), matched or missed: each has its
+    /// per-diameter RMSE key, `null` when none of its contacts was matched.
+    pub(crate) diameters_mm: Vec<f64>,
     pub(crate) spurious: usize,
     pub(crate) multi_frames: usize,
     pub(crate) latencies_us: Vec<Vec<f64>>,
@@ -98,6 +101,7 @@ impl Evaluator {
             frames: 0,
             records: Vec::new(),
             missed: 0,
+            diameters_mm: Vec::new(),
             spurious: 0,
             multi_frames: 0,
             latencies_us: vec![Vec::new(); strategies.len()],
@@ -142,6 +146,11 @@ impl Evaluator {
         let pairs = match_contacts(f.detected_mm, &truth_xy, MATCH_RADIUS_MM);
         self.spurious += f.detected_mm.len() - pairs.len();
         self.missed += f.truth.len() - pairs.len();
+        for d in f.truth.iter().map(|t| t.diameter_mm).filter(|d| d.is_finite()) {
+            if let Err(at) = self.diameters_mm.binary_search_by(|x| x.total_cmp(&d)) {
+                self.diameters_mm.insert(at, d);
+            }
+        }
         if f.truth.len() >= 2 {
             self.multi_frames += 1;
         }

@@ -105,13 +105,10 @@ impl Evaluator {
             let err = |r: &super::metrics::MatchRecord| r.forces_n[s] - r.truth.force_n;
             let abs: Vec<f64> = self.records.iter().map(|r| err(r).abs()).collect();
             let mut per_diameter = BTreeMap::new();
-            let mut diameters: Vec<f64> =
-                self.records.iter().map(|r| r.truth.diameter_mm).filter(|d| d.is_finite()).collect();
-            diameters.sort_by(f64::total_cmp);
-            diameters.dedup();
-            // Every diameter keeps its key: `null` where the RMSE is not finite (CONTRACTS.md
-            // section 4), rather than the diameter vanishing from the report.
-            for d in diameters {
+            // Every diameter of the truth keeps its key: `null` where the RMSE is not finite or
+            // none of its contacts was matched (CONTRACTS.md section 4), rather than the
+            // diameter vanishing from the report.
+            for &d in &self.diameters_mm {
                 let v = finite(rms(self.records.iter().filter(|r| r.truth.diameter_mm == d).map(err)));
                 per_diameter.insert(diameter_key(d), v);
             }
@@ -170,7 +167,10 @@ impl EvalReport {
     /// The CONTRACTS.md §4 JSON text.
     pub fn to_json(&self) -> String {
         // Plain maps with string keys, strings and numbers cannot fail to serialize.
-        serde_json::to_string_pretty(self).expect("the eval report serializes")
+        let mut s = serde_json::to_string_pretty(self).expect("the eval report serializes");
+        // A text file ends in a newline (and `--json /dev/stdout` leaves the next line its own).
+        s.push('\n');
+        s
     }
 }
 

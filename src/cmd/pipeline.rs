@@ -475,14 +475,7 @@ impl Settled {
 /// 1.41 at n = 1 and 1.15 at 3 (1.08 with the shipped scenes' 5 s rest, 6 frames).
 pub const MIN_NO_LOAD_FRAMES: usize = 3;
 
-/// Two truth contacts this close (mm) are at the same place (the stage's repeatability is
-/// about 0.5 mm; the rig's grid steps are millimetres or more).
-pub const SAME_PLACE_MM: f64 = 0.5;
-/// Absolute part of the force tolerance of a repeated load (N): a few counts of a load cell's
-/// last digit (0.01 N).
-pub const SAME_FORCE_N: f64 = 0.05;
-/// Relative part of the force tolerance of a repeated load: a hold's creep.
-pub const SAME_FORCE_REL: f64 = 0.02;
+pub use skinflow_contact::correct::average::{SAME_FORCE_N, SAME_FORCE_REL, SAME_PLACE_MM};
 
 /// The times of the truth rows that change the load (see [`Settled`]); the first row always does.
 fn load_changes(truth: &skinflow_record::read::TruthStream) -> Vec<f64> {

@@ -61,6 +61,9 @@ pub fn gcv(dual: &DualSystem, dvs: &[&[f64]], lambdas: &[f64]) -> Result<LambdaC
             return Err(invalid("lambda sweep", format!("values must be finite and > 0 (got {lambda})")));
         }
         let l2 = lambda * lambda;
+        if l2 == 0.0 {
+            return Err(invalid("lambda sweep", format!("{lambda:e} is too small: its square underflows to 0")));
+        }
         // 1 - s w = l2 w for a kept mode (written so, it does not cancel when s >> l2), and 1
         // for a dropped one (w = 0).
         for (r, w) in one_minus_filter.iter_mut().zip(dual.mode_weights(l2)) {
@@ -72,6 +75,17 @@ pub fn gcv(dual: &DualSystem, dvs: &[&[f64]], lambdas: &[f64]) -> Result<LambdaC
             .map(|b| b.iter().zip(&one_minus_filter).map(|(bk, r)| (r * bk).powi(2)).sum::<f64>())
             .sum();
         curve.push((lambda, m as f64 * resid / (trace * trace)));
+    }
+    // Difference frames that are all zero (no-load frames against their own reference) score
+    // 0 at every lambda: the choice would be the sweep's first value, not the data's.
+    if projections.iter().flatten().all(|&b| b == 0.0) {
+        return Err(invalid(
+            "lambda sweep",
+            "every difference frame is zero (frames equal to the reference): GCV needs frames that differ from it",
+        ));
+    }
+    if let Some(&(lambda, score)) = curve.iter().find(|(_, score)| !score.is_finite()) {
+        return Err(invalid("lambda sweep", format!("the GCV score at lambda = {lambda} is {score}")));
     }
     let best = curve.iter().copied().min_by(|a, b| a.1.total_cmp(&b.1)).expect("non-empty sweep");
     Ok(LambdaChoice { lambda: best.0, method: LambdaMethod::Gcv, curve })

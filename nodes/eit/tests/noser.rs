@@ -107,6 +107,23 @@ fn clipped_modes_are_dropped_and_gcv_scores_the_matrix_estimator() {
     }
 }
 
+/// GCV refuses what it cannot choose from: difference frames that are all zero (frames equal
+/// to the reference score 0 at every lambda, so the "choice" was the sweep's first value) and
+/// a lambda whose square underflows (0 / 0 scores).
+#[test]
+fn gcv_refuses_zero_differences_and_an_underflowing_lambda() {
+    let model = small_model();
+    let j = model.jacobian.as_ref();
+    let dual = DualSystem::new(j, &Prior::default(), &model.mesh).unwrap();
+    let zero = vec![0.0; j.nrows()];
+    let e = gcv(&dual, &[&zero, &zero], &[1e-3, 0.1, 1.0]).unwrap_err().to_string();
+    assert!(e.contains("every difference frame is zero"), "{e}");
+    let dv: Vec<f64> = (0..j.nrows()).map(|k| ((k * 37 % 11) as f64 - 5.0) * 1e-3).collect();
+    let e = gcv(&dual, &[&dv], &[1e-170, 0.1]).unwrap_err().to_string();
+    assert!(e.contains("1e-170 is too small: its square underflows to 0"), "{e}");
+    assert!(gcv(&dual, &[&zero, &dv], &[1e-3, 0.1]).is_ok(), "one frame that differs is enough");
+}
+
 #[test]
 fn meshes_from_200_to_20000_elements_reconstruct() {
     let s = Sensor::paper_100mm();

@@ -1,13 +1,38 @@
 //! Averaging the frames of a hold (the paper's 6-frame means) and grouping true locations.
 //!
-//! A hold is a run of consecutive frames whose truth (x, y, force, diameter) and hold number
-//! ([`CalibSample::hold`]: the source breaks it where the load was released or changed) are
-//! identical; its frames are averaged into one [`CalibSample`] and their spread is reported. A frame with a
-//! non-finite measurement (centroid, dP, C, area) is left out of its hold's mean and counted, so
-//! one bad frame does not cost the whole hold. Locations are
-//! true positions clustered greedily within a tolerance (mm).
+//! A hold is a run of consecutive frames with one hold number ([`CalibSample::hold`]: the
+//! source breaks it where the load was released or changed) and the same load ([`same_load`]:
+//! the place within [`SAME_PLACE_MM`], the force within a load cell's jitter, the diameter
+//! equal, a missing (NaN) one included); its frames are averaged into one [`CalibSample`], the
+//! truth too, and their spread is reported. A frame with a non-finite measurement (centroid, dP,
+//! C, area) is left out of its hold's mean and counted, so one bad frame does not cost the whole
+//! hold. Locations are true positions clustered greedily within a tolerance (mm).
 
 use super::calibrate::CalibSample;
+
+/// Two truth contacts this close (mm) are at the same place (the stage's repeatability is
+/// about 0.5 mm; the rig's grid steps are millimetres or more).
+pub const SAME_PLACE_MM: f64 = 0.5;
+/// Absolute part of the force tolerance of a repeated load (N): a few counts of a load cell's
+/// last digit (0.01 N).
+pub const SAME_FORCE_N: f64 = 0.05;
+/// Relative part of the force tolerance of a repeated load: a hold's creep.
+pub const SAME_FORCE_REL: f64 = 0.02;
+
+/// Whether a contact at (`x`, `y`) mm of `force` N and `diameter` mm holds the same load as one
+/// at `a`: the place within [`SAME_PLACE_MM`], the force within [`SAME_FORCE_N`] plus
+/// [`SAME_FORCE_REL`] of `a`'s, the diameter equal (both NaN, unknown, counts as equal).
+pub fn same_load(a: [f64; 4], b: [f64; 4]) -> bool {
+    let [ax, ay, af, ad] = a;
+    let [bx, by, bf, bd] = b;
+    (ax - bx).hypot(ay - by) <= SAME_PLACE_MM
+        && (af - bf).abs() <= SAME_FORCE_N + SAME_FORCE_REL * af.abs()
+        && (ad == bd || (ad.is_nan() && bd.is_nan()))
+}
+
+fn load(s: &CalibSample) -> [f64; 4] {
+    [s.true_x_mm, s.true_y_mm, s.force_n, s.diameter_mm]
+}
 
 /// Averages of the holds and the mean within-hold spread.
 #[derive(Debug, Clone, PartialEq)]
@@ -26,15 +51,12 @@ fn finite(s: &CalibSample) -> bool {
     [s.x_mm, s.y_mm, s.dp_kpa, s.cond_sum, s.area_mm2].iter().all(|v| v.is_finite())
 }
 
-/// Averages runs of consecutive frames with identical truth (x, y, force, diameter) and hold.
+/// Averages runs of consecutive frames with one hold number and the same load ([`same_load`]
+/// with the run's first frame). Exact equality would split a hold read from a load cell that
+/// prints continuously (its force jitters in the last digit) or without a diameter (NaN) into
+/// one-frame "holds": no averaging, a zero spread, and more samples than holds.
 pub fn average_holds(frames: &[CalibSample]) -> Holds {
-    let same = |a: &CalibSample, b: &CalibSample| {
-        a.hold == b.hold
-            && a.true_x_mm == b.true_x_mm
-            && a.true_y_mm == b.true_y_mm
-            && a.force_n == b.force_n
-            && a.diameter_mm == b.diameter_mm
-    };
+    let same = |a: &CalibSample, b: &CalibSample| a.hold == b.hold && same_load(load(a), load(b));
     let (mut samples, mut sd_dp, mut sd_c, mut non_finite) = (Vec::new(), 0.0, 0.0, 0);
     let mut run: Vec<CalibSample> = Vec::new();
     let mut start = 0;
@@ -65,6 +87,9 @@ pub fn average_holds(frames: &[CalibSample]) -> Holds {
             dp_kpa: mean(|s| s.dp_kpa),
             cond_sum: mean(|s| s.cond_sum),
             area_mm2: mean(|s| s.area_mm2),
+            true_x_mm: mean(|s| s.true_x_mm),
+            true_y_mm: mean(|s| s.true_y_mm),
+            force_n: mean(|s| s.force_n),
             ..run[0]
         };
         sd_dp += sd(|s| s.dp_kpa, avg.dp_kpa);
@@ -106,6 +131,28 @@ mod tests {
             diameter_mm: 15.0,
             hold: 0,
         }
+    }
+
+    /// A load cell printing continuously: the force jitters in its last digits and the
+    /// position by a fraction of a millimetre within one hold, and an external writer may give
+    /// no diameter (NaN). Each hold is still one sample, with the mean truth; a real change of
+    /// load within one hold number still splits.
+    #[test]
+    fn a_jittering_or_diameterless_hold_is_one_sample() {
+        let mut frames: Vec<CalibSample> = [4.99, 5.01, 5.02, 4.98]
+            .iter()
+            .enumerate()
+            .map(|(i, &f)| CalibSample { diameter_mm: f64::NAN, ..frame(0.1 * i as f64, f, i as f64) })
+            .collect();
+        frames.push(CalibSample { diameter_mm: f64::NAN, ..frame(0.0, 6.0, 10.0) });
+        let h = average_holds(&frames);
+        assert_eq!(h.samples.len(), 2, "{:?}", h.samples);
+        let s = &h.samples[0];
+        assert!((s.force_n - 5.0).abs() < 1e-12 && (s.true_x_mm - 0.15).abs() < 1e-12, "{s:?}");
+        assert!((s.dp_kpa - 1.5).abs() < 1e-12, "{s:?}");
+        assert!(s.diameter_mm.is_nan());
+        assert_eq!(h.samples[1].force_n, 6.0, "1 N more is another load");
+        assert!(h.sd_dp_kpa > 0.0, "the hold's spread is measured, not 0");
     }
 
     #[test]

@@ -1019,6 +1019,26 @@ fn calibrate_and_eval_with_their_output_closed_write_every_file() {
         .unwrap()
         .filter(|e| e.as_ref().is_ok_and(|e| e.path().extension().is_some_and(|x| x == "png")));
     assert!(pngs.count() > 0, "the plots are written");
+    // `--json /dev/stdout` whose reader went away is named, and the plots after it are written.
+    let err = closed(&["eval", "test.h5", "--calib", "calib.toml", "--json", "/dev/stdout", "--plots", "plots2"]);
+    assert!(err.contains("warning: --json /dev/stdout not written: its reader went away"), "{err}");
+    assert!(std::fs::read_dir(d.join("plots2")).unwrap().count() > 0, "the plots are written");
+    // Standard error closed as well (`2>&1 | head`): no panic on the warning, the file is written.
+    std::fs::remove_file(d.join("calib.toml")).unwrap();
+    let mut child = spawn(
+        std::process::Command::new(env!("CARGO_BIN_EXE_skinflow"))
+            .args(["calibrate", "cal.h5", "--out", "calib.toml"])
+            .current_dir(&d)
+            .env("XDG_CACHE_HOME", d.join("cache"))
+            .env("RUST_LOG", "off")
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::piped()),
+    );
+    drop(child.stdout.take());
+    drop(child.stderr.take());
+    let status = child.wait().unwrap();
+    assert!(status.success(), "{status:?}");
+    assert!(std::fs::read_to_string(d.join("calib.toml")).unwrap().contains("cal.h5"));
 }
 
 #[test]

@@ -18,14 +18,27 @@ pub fn unwritable(path: &Path) -> Option<String> {
     }
 }
 
-/// Creates and removes an empty hidden file in `dir` (`.skinflow-probe.PID.partial`): whether a
+/// Creates and removes an empty hidden file in `dir` (`.skinflow-probe.PID.N.partial`): whether a
 /// file can be created there. Permissions alone do not say it (root passes them, a read-only
 /// mount or `/sys` still refuses).
 pub fn probe_dir(dir: &Path) -> std::io::Result<()> {
-    let probe = dir.join(format!(".skinflow-probe.{}.partial", std::process::id()));
-    std::fs::OpenOptions::new().write(true).create_new(true).open(&probe)?;
-    let _ = std::fs::remove_file(&probe);
-    Ok(())
+    // Unique per call: two probes of one directory may overlap (threads, a restarted node), and
+    // a probe a crash left behind may carry a reused process id.
+    static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+    let mut taken = None;
+    for _ in 0..64 {
+        let n = NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        let probe = dir.join(format!(".skinflow-probe.{}.{n}.partial", std::process::id()));
+        match std::fs::OpenOptions::new().write(true).create_new(true).open(&probe) {
+            Ok(_) => {
+                let _ = std::fs::remove_file(&probe);
+                return Ok(());
+            }
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => taken = Some(e),
+            Err(e) => return Err(e),
+        }
+    }
+    Err(taken.expect("the loop ran"))
 }
 
 /// Why a file written aside and renamed over `path` (a recording) cannot go there: `path`

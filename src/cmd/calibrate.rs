@@ -39,7 +39,9 @@ pub struct LeftOut {
 /// hold number ([`CalibSample::hold`], from `first_hold` on): a frame acquired while the load
 /// changed (not settled) or under another contact count (a release: none) ends the hold, so
 /// repeated indentations with the same truth are averaged one by one, never into one sample.
-/// A frame of a hold left out for its own reasons (no pressure sample, no detection) does not.
+/// A frame of a hold left out for its own reasons (no pressure sample, no detection) does not,
+/// but a change of the truth since the hold's last sample does (the one frame spanning it may
+/// have been left out so).
 pub fn samples(
     rows: &[Vec<skinflow_core::Message>],
     settled: &Settled,
@@ -50,6 +52,8 @@ pub fn samples(
     let mut hold = first_hold;
     // Whether the hold of the last sample goes on: a load change or release ends it.
     let mut in_hold = false;
+    // The frame time of the last sample, s.
+    let mut last_t = f64::NEG_INFINITY;
     for row in rows {
         let Some(m) = row.first() else { continue };
         let Some(c) = m.get::<Contacts>() else { continue };
@@ -73,10 +77,12 @@ pub fn samples(
         let t = truth.contacts[0];
         // The strongest detection is the indenter; weaker ones are artefacts.
         let Some(best) = c.contacts.iter().max_by(|a, b| a.sum.total_cmp(&b.sum)) else { continue };
-        if !in_hold {
+        let t_s = m.header.t_s();
+        if !in_hold || settled.load_changed_between(last_t, t_s) {
             hold += 1;
             in_hold = true;
         }
+        last_t = t_s;
         out.push(CalibSample {
             x_mm: best.x_mm,
             y_mm: best.y_mm,
@@ -352,9 +358,9 @@ pub fn run(recordings: &[PathBuf], out: &Path, fit_toml: &str, args: &PipelineAr
         let held = t.holdout_rmse_n.get(name).map_or_else(|| "-".into(), |v| format!("{v:.3}"));
         let _ = writeln!(tables, "{name:<34} {train:>9.3} {held:>9}");
     }
-    super::print_or_warn(&tables, "the calibration tables");
     let text = cal.to_toml_string().map_err(anyhow::Error::msg)?;
     super::paths::write_file(&format!("--out {}", out.display()), out, text.as_bytes())?;
-    eprintln!("calibration written to {}", out.display());
+    super::print_or_warn(&tables, "the calibration tables");
+    super::note(&format!("calibration written to {}", out.display()));
     Ok(())
 }

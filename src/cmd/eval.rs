@@ -414,7 +414,7 @@ pub fn run(
             text.push('\n');
         }
         super::paths::write_file(&format!("--contacts-csv {}", p.display()), p, text.as_bytes())?;
-        eprintln!("per-contact table written to {}", p.display());
+        super::note(&format!("per-contact table written to {}", p.display()));
     }
     let mut names = recordings.iter().map(|r| r.display().to_string());
     let mut report = outcome.evaluator.report(&names.next().unwrap_or_default());
@@ -422,7 +422,7 @@ pub fn run(
     super::print_or_warn(&format!("{report}\n"), "the evaluation tables");
     if let Some(p) = json {
         super::paths::write_file(&format!("--json {}", p.display()), p, report.to_json().as_bytes())?;
-        eprintln!("JSON written to {}", p.display());
+        super::note(&format!("JSON written to {}", p.display()));
     }
     if let Some(dir) = plots_dir {
         write_plots(dir, calib, &outcome, args)?;
@@ -478,7 +478,7 @@ fn write_plots(dir: &Path, calib: &Path, o: &EvalOutcome, args: &PipelineArgs) -
         let image = p("conductivity.png");
         drawn(image.clone(), plots::conductivity(&image, &img.pixels, &grid, seg.labels(), found.as_slice(), truth))?;
     }
-    eprintln!("plots written to {}", dir.display());
+    super::note(&format!("plots written to {}", dir.display()));
     Ok(())
 }
 

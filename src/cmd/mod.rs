@@ -34,6 +34,20 @@ pub fn print_or_warn(text: &str, what: &str) {
     use std::io::Write;
     let mut out = std::io::stdout().lock();
     if let Err(e) = out.write_all(text.as_bytes()).and_then(|()| out.flush()) {
-        eprintln!("warning: {what} not printed: standard output: {e}");
+        warn(&format!("{what} not printed: standard output: {e}"));
     }
+}
+
+/// `text` as a line on stderr, never a panic (see [`warn`]): for what a command says between
+/// the files it writes.
+pub fn note(text: &str) {
+    use std::io::Write;
+    let _ = writeln!(std::io::stderr().lock(), "{text}");
+}
+
+/// `warning: {text}` on stderr, never a panic: stderr may be the same closed pipe
+/// (`2>&1 | head`), and a command printing past it still has files to write.
+pub fn warn(text: &str) {
+    use std::io::Write;
+    let _ = writeln!(std::io::stderr().lock(), "warning: {text}");
 }

@@ -275,7 +275,16 @@ pub fn write_file(what: &str, path: &Path, bytes: &[u8]) -> Result<()> {
         None => None,
     };
     if let Some(written) = in_place {
-        return written.map_err(|e| anyhow::anyhow!("{what}: cannot write: {e}"));
+        return match written {
+            // A stream whose reader went away (`--json /dev/stdout | head`) holds nothing to
+            // keep: named on stderr, like a table `print_or_warn` could not print, and the
+            // command goes on to its other outputs.
+            Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => {
+                super::warn(&format!("{what} not written: its reader went away: {e}"));
+                Ok(())
+            }
+            w => w.map_err(|e| anyhow::anyhow!("{what}: cannot write: {e}")),
+        };
     }
     let is_link = std::fs::symlink_metadata(path).is_ok_and(|m| m.file_type().is_symlink());
     let target =

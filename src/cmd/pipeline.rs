@@ -463,6 +463,14 @@ impl Settled {
 
     /// Whether the true load did not change within the acquisition window of a frame stamped
     /// `t_s`.
+    /// Whether the load changed after `from_s` and by `to_s` (a truth row that changes it, as
+    /// [`Settled`] judges changes: exactly, or within a load cell's jitter when the truth
+    /// repeats its rows).
+    pub fn load_changed_between(&self, from_s: f64, to_s: f64) -> bool {
+        let i = self.change_t.partition_point(|&t| t <= from_s);
+        self.change_t.get(i).is_some_and(|&t| t <= to_s)
+    }
+
     pub fn by_truth(&self, t_s: f64) -> bool {
         let (lo, hi) = (t_s - self.half_period_s, t_s + self.half_period_s);
         let i = self.change_t.partition_point(|&t| t <= lo);
@@ -571,5 +579,9 @@ mod tests {
         assert_eq!(settled.change_t, vec![0.0, 2.0]);
         assert!(settled.by_truth(1.0) && settled.by_truth(3.0));
         assert!(!settled.by_truth(1.8) && !settled.by_truth(2.3));
+        // A hold's samples at 1.0 and 3.0 s straddle the change at 2.0 s (the frame spanning
+        // it may have been left out): another hold. Samples on one side do not.
+        assert!(settled.load_changed_between(1.0, 3.0) && settled.load_changed_between(1.0, 2.0));
+        assert!(!settled.load_changed_between(2.0, 3.0) && !settled.load_changed_between(0.5, 1.9));
     }
 }

@@ -302,7 +302,7 @@ pub fn run(scenes_dir: &Path, out: &Path, seed: u64, fit_toml: &str, args: &Pipe
     md.insert_str(0, &head);
     let report = out.join("report.md");
     std::fs::write(&report, &md).with_context(|| format!("{}: cannot write", report.display()))?;
-    eprintln!("report written to {}", report.display());
+    super::note(&format!("report written to {}", report.display()));
     Ok(())
 }
 

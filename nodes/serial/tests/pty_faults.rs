@@ -145,15 +145,17 @@ fn stalled_device_counts_a_stall_and_loses_nothing() {
 /// went back) and, once the next confirms the restart, counted as lost.
 #[test]
 fn a_board_restart_starts_counter_and_clock_again_after_a_silence() {
-    // Feed spacing 256 µs (EIT) and 50 ms (pressure): each boot spans records 12, 13 and 14.
-    let (n, at, eit_down_s, pressure_down_s) = (30usize, 12usize, 0.0007, 0.12);
+    // Feed spacing 100 ms (EIT) and 50 ms (pressure): each boot spans records 12, 13 and 14.
+    // The EIT boot is longer than the reader's drain wait (0.1 s), so the silence checks it.
+    let (n, at, eit_down_s, pressure_down_s) = (30usize, 12usize, 0.25, 0.12);
     let booted = at + 3;
     let faults = FaultPlan {
         eit: vec![(at, Fault::Restart { down_s: eit_down_s })],
         pressure: vec![(at, Fault::Restart { down_s: pressure_down_s })],
         ..Default::default()
     };
-    let feed = EmulatorFeed::default().with_eit(feeds::plain_frames(M, n)).with_pressure(feeds::pressures(n, 0.05));
+    let eit_feed = feeds::busy_frames(M, n, 0.1);
+    let feed = EmulatorFeed::default().with_eit(eit_feed.clone()).with_pressure(feeds::pressures(n, 0.05));
     let emulator = Emulator::spawn(fast(), feed, faults).unwrap();
     let origin = Instant::now();
 
@@ -176,9 +178,11 @@ fn a_board_restart_starts_counter_and_clock_again_after_a_silence() {
     for (k, f) in frames.iter().enumerate() {
         // The feed record this frame is: the boot's records are skipped, not delayed.
         let i = if k < at { k } else { k + booted - at };
-        assert_eq!(f.5, feeds::plain_values(i, M), "frame {k}: feed record {i}'s values");
-        // plain_frames: frame i at i * 256 µs; after the reset, counted from the reset.
-        let us = if i < at { 256 * i as u32 } else { 256 * (i - at) as u32 };
+        // As sent: f32 on the wire.
+        let sent: Vec<f64> = eit_feed[i].volts.iter().map(|&v| f64::from(v as f32)).collect();
+        assert_eq!(f.5, sent, "frame {k}: feed record {i}'s values");
+        // busy_frames: frame i at i * 100 ms; after the reset, counted from the reset.
+        let us = if i < at { 100_000 * i as u32 } else { 100_000 * (i - at) as u32 };
         assert_eq!(f.1, us, "frame {k}: device time");
         assert_eq!(f.2, k == at, "frame {k}: only the first of the new run is flagged restarted");
     }

@@ -56,9 +56,10 @@ pub struct CalibSample {
     /// Indenter diameter, mm.
     pub diameter_mm: f64,
     /// The hold the frame was acquired in, as its source numbers them (0 if it does not):
-    /// consecutive frames are averaged together only with identical truth and the same hold,
-    /// so two indentations with the same truth (a repeated protocol, the next recording) stay
-    /// two samples.
+    /// consecutive frames are averaged together only with the same hold and the same load
+    /// (within a load cell's jitter, [`crate::correct::average::same_load`]), so two
+    /// indentations with the same truth (a repeated protocol, the next recording) stay two
+    /// samples.
     pub hold: u64,
 }
 
@@ -72,7 +73,7 @@ impl CalibSample {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct CalibParams {
-    /// Average consecutive frames with identical truth before fitting.
+    /// Average the consecutive frames of each hold (same hold number and load) before fitting.
     pub average_holds: bool,
     /// Folds of the inner cross-validation of the ridge weights.
     pub folds: usize,

@@ -30,13 +30,16 @@ pub enum Fault {
     /// Before the record, the device is silent for `silent_s` seconds; the port stays. As for
     /// an unplug, the board keeps measuring, and what fell due goes out at once afterwards.
     Stall { silent_s: f64 },
-    /// Boards with a frame counter or a clock (EIT, pressure): before the record, the board
-    /// resets and is silent for `down_s` seconds while it boots (the port stays, as behind a
-    /// UART bridge); then it goes on with this record as the first of a new run, as firmware
-    /// does after a reset: EIT counter from 0, and device time (EIT µs, pressure `millis()`)
-    /// counted from the reset, so this record's is `down_s` and later ones advance with the
-    /// feed. At fast pacing the board first waits for the reader to take what it sent, so the
-    /// reader sees the silence (in real time a reader that keeps up does).
+    /// Boards with a frame counter or a clock (EIT, pressure): when the record is due, the
+    /// board resets and boots for `down_s` seconds, sending nothing (the port stays, as behind
+    /// a UART bridge). The records due while it boots, this one included unless `down_s` is 0,
+    /// are never made (`DeviceStats::records_unmeasured`); the first due after the boot starts
+    /// a new run, as firmware does after a reset: EIT counter from 0, and device time (EIT µs,
+    /// pressure `millis()`) counted from the reset. Other faults at a record inside the boot
+    /// still act on the link (unplug, stall, garbage: boot noise); byte faults there have no
+    /// record to act on and are not counted as applied. At fast pacing the board first waits
+    /// for the reader to take what it sent, then stays silent `down_s`, so the reader sees the
+    /// silence (in real time a reader that keeps up does).
     Restart { down_s: f64 },
 }
 

@@ -220,6 +220,52 @@ fn a_board_restart_starts_counter_and_clock_again_after_a_silence() {
     }
 }
 
+/// Restarts at the edges: `down_s = 0` makes the record at the fault the first of the new run
+/// (counter 0, device time 0); during a boot, garbage still goes out (boot noise) while a byte
+/// fault has no record to act on and is not counted as applied.
+#[test]
+fn a_zero_boot_starts_at_its_record_and_faults_inside_a_boot_act_on_the_link_only() {
+    let n = 20usize;
+    let faults = FaultPlan {
+        eit: vec![
+            (5, Fault::Restart { down_s: 0.0 }),
+            (10, Fault::Restart { down_s: 0.15 }),
+            (11, Fault::CorruptCrc),
+            (11, Fault::Garbage(vec![0x55; 3])),
+        ],
+        ..Default::default()
+    };
+    let feed = EmulatorFeed::default().with_eit(feeds::busy_frames(M, n, 0.1));
+    let emulator = Emulator::spawn(fast(), feed, faults).unwrap();
+    let mut eit =
+        SerialReader::open(feeds::config(emulator.path(Device::Eit).unwrap()), EitDecoder::new(M), Instant::now())
+            .unwrap();
+    let mut frames = Vec::new();
+    // Records 10 and 11 fall in the 0.15 s boot (feed spacing 0.1 s): 18 frames made.
+    let got = feeds::read_n(&mut eit, n - 2, LIMIT, |r| frames.push((r.record.counter, r.record.device_time_us)));
+    assert_eq!(got, n - 2);
+    // Feed index of each frame made, its counter and its device time (from the last reset).
+    let made: Vec<usize> = (0..n).filter(|i| !(10..12).contains(i)).collect();
+    let want: Vec<(u32, u32)> = made
+        .iter()
+        .map(|&i| match i {
+            0..5 => (i as u32, 100_000 * i as u32),
+            5..10 => ((i - 5) as u32, 100_000 * (i - 5) as u32),
+            _ => ((i - 12) as u32, 100_000 * (i - 10) as u32),
+        })
+        .collect();
+    assert_eq!(frames, want);
+    let s = *eit.decode_stats();
+    assert_eq!((s.counter_resets, s.crc_errors, s.lost_frames, s.discarded_bytes), (2, 0, 0, 3), "{s:?}");
+    assert!(emulator.wait_finished(LIMIT));
+    let stats = emulator.stats(Device::Eit).unwrap();
+    assert_eq!(
+        (stats.restarts, stats.records_sent, stats.records_unmeasured, stats.faults_applied),
+        (2, (n - 2) as u64, 2, 3),
+        "two restarts and the garbage; the CRC fault had no record"
+    );
+}
+
 #[test]
 fn line_faults_are_counted_and_resynced() {
     let n = 50;

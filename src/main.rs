@@ -164,6 +164,9 @@ fn main() -> ExitCode {
                 .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
         )
         .with_writer(std::io::stderr)
+        // A log line that cannot be written (stderr a closed pipe: `2>&1 | head`) is dropped;
+        // reporting that on the same stderr would panic, and the command has files to write.
+        .log_internal_errors(false)
         // Colour codes only for a terminal, not in redirected logs.
         .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
         .init();

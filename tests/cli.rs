@@ -920,17 +920,29 @@ fn bench_exits_2_on_an_invalid_graph_and_printing_commands_survive_a_closed_pipe
     assert_eq!(out.status.code(), Some(2), "{err}");
     assert!(err.contains("--vary") && err.contains("expected node.param=v1,v2,..."), "{err}");
 
+    let (status, err) = with_output_closed(&d, &["nodes"], false);
+    assert!(!err.contains("panicked") && status.code() != Some(101), "{status:?}: {err}");
+}
+
+/// Runs skinflow in `d` with its standard output closed before the first line (the reader
+/// goes away), and its standard error too when `close_stderr` (`2>&1 | head`); returns its
+/// status and what it wrote on standard error (nothing when closed).
+fn with_output_closed(d: &Path, args: &[&str], close_stderr: bool) -> (std::process::ExitStatus, String) {
     let mut child = spawn(
         std::process::Command::new(env!("CARGO_BIN_EXE_skinflow"))
-            .arg("nodes")
-            .current_dir(&d)
+            .args(args)
+            .current_dir(d)
+            .env("XDG_CACHE_HOME", d.join("cache"))
+            .env("RUST_LOG", "warn")
             .stdout(std::process::Stdio::piped())
             .stderr(std::process::Stdio::piped()),
     );
-    drop(child.stdout.take()); // the reader goes away before the first line
+    drop(child.stdout.take());
+    if close_stderr {
+        drop(child.stderr.take());
+    }
     let out = child.wait_with_output().unwrap();
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(!err.contains("panicked") && out.status.code() != Some(101), "{:?}: {err}", out.status);
+    (out.status, stderr(&out))
 }
 
 /// `run` keeps SIGPIPE ignored (its graph's nodes may write to sockets), so a closed standard
@@ -944,19 +956,8 @@ fn run_with_its_output_closed_writes_its_files_and_names_what_it_did_not_print()
     let compare = "[[node]]\nid = \"compare\"\nkind = \"compare\"\ntrigger = \"aligned\"\nparams = { json = \"ab.json\" }\n\
                    [[edge]]\nfrom = \"force.forces\"\nto = \"compare.forces\"\n";
     std::fs::write(d.join(&graph), std::fs::read_to_string(d.join(&graph)).unwrap() + compare).unwrap();
-    let mut child = spawn(
-        std::process::Command::new(env!("CARGO_BIN_EXE_skinflow"))
-            .args(["run", graph.as_str(), "--stats-json", "stats.json"])
-            .current_dir(&d)
-            .env("XDG_CACHE_HOME", d.join("cache"))
-            .env("RUST_LOG", "warn")
-            .stdout(std::process::Stdio::piped())
-            .stderr(std::process::Stdio::piped()),
-    );
-    drop(child.stdout.take()); // the reader goes away before the first line
-    let out = child.wait_with_output().unwrap();
-    let err = stderr(&out);
-    assert!(out.status.success() && !err.contains("panicked"), "{:?}: {err}", out.status);
+    let (status, err) = with_output_closed(&d, &["run", graph.as_str(), "--stats-json", "stats.json"], false);
+    assert!(status.success() && !err.contains("panicked"), "{status:?}: {err}");
     assert!(err.contains("the table was not printed: standard output"), "the compare node's table: {err}");
     assert!(err.contains("warning: the statistics table not printed: standard output: "), "{err}");
     let stats: serde_json::Value =
@@ -977,19 +978,8 @@ fn calibrate_and_eval_with_their_output_closed_write_every_file() {
     simulate(&d, "tiny-calibration.toml", "cal.h5");
     simulate(&d, "tiny-eval.toml", "test.h5");
     let closed = |args: &[&str]| {
-        let mut child = spawn(
-            std::process::Command::new(env!("CARGO_BIN_EXE_skinflow"))
-                .args(args)
-                .current_dir(&d)
-                .env("XDG_CACHE_HOME", d.join("cache"))
-                .env("RUST_LOG", "warn")
-                .stdout(std::process::Stdio::piped())
-                .stderr(std::process::Stdio::piped()),
-        );
-        drop(child.stdout.take()); // the reader goes away before the first line
-        let out = child.wait_with_output().unwrap();
-        let err = stderr(&out);
-        assert!(out.status.success() && !err.contains("panicked"), "{args:?}: {:?}: {err}", out.status);
+        let (status, err) = with_output_closed(&d, args, false);
+        assert!(status.success() && !err.contains("panicked"), "{args:?}: {status:?}: {err}");
         err
     };
     let err = closed(&["calibrate", "cal.h5", "--out", "calib.toml", "--print-graph"]);
@@ -1023,20 +1013,10 @@ fn calibrate_and_eval_with_their_output_closed_write_every_file() {
     let err = closed(&["eval", "test.h5", "--calib", "calib.toml", "--json", "/dev/stdout", "--plots", "plots2"]);
     assert!(err.contains("warning: --json /dev/stdout not written: its reader went away"), "{err}");
     assert!(std::fs::read_dir(d.join("plots2")).unwrap().count() > 0, "the plots are written");
-    // Standard error closed as well (`2>&1 | head`): no panic on the warning, the file is written.
+    // Standard error closed as well (`2>&1 | head`): no panic on a warning or a log line, the
+    // file is written.
     std::fs::remove_file(d.join("calib.toml")).unwrap();
-    let mut child = spawn(
-        std::process::Command::new(env!("CARGO_BIN_EXE_skinflow"))
-            .args(["calibrate", "cal.h5", "--out", "calib.toml"])
-            .current_dir(&d)
-            .env("XDG_CACHE_HOME", d.join("cache"))
-            .env("RUST_LOG", "off")
-            .stdout(std::process::Stdio::piped())
-            .stderr(std::process::Stdio::piped()),
-    );
-    drop(child.stdout.take());
-    drop(child.stderr.take());
-    let status = child.wait().unwrap();
+    let (status, _) = with_output_closed(&d, &["calibrate", "cal.h5", "--out", "calib.toml"], true);
     assert!(status.success(), "{status:?}");
     assert!(std::fs::read_to_string(d.join("calib.toml")).unwrap().contains("cal.h5"));
 }

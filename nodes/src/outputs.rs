@@ -431,11 +431,11 @@ pub fn check_files(spec: &GraphSpec) -> Result<(), GraphErrors> {
 
 /// Refuses what would stop a node at start and is known before any runs, so `check` reports
 /// it too (located at the param): a logger's file whose directory is missing or takes no file
-/// ([`crate::output::unwritable`]), or that is no recording while `overwrite` is set ([`crate::output::not_a_recording`]); and two serial
-/// sources on one device (files compared as in [`check_files`]). A logger's existing file
-/// without `overwrite` is refused at start only ([`crate::log::existing_file_refusal`]): the
-/// file may be moved by then, and `check` of a session graph stays independent of the last
-/// session's output. Not part of [`check_files`], which a live edit's graph is checked with
+/// ([`crate::output::unwritable`]), or that is no recording while `overwrite` is set
+/// ([`crate::output::not_a_recording`]); and two serial sources on one device (files compared
+/// as in [`check_files`]). A logger's existing file without `overwrite` is refused at start
+/// only ([`crate::log::existing_file_refusal`]): the file may be moved by then, and `check` of
+/// a session graph stays independent of the last session's output. Not part of [`check_files`], which a live edit's graph is checked with
 /// too: by then the running logger has made its file.
 pub fn check_start(spec: &GraphSpec) -> Result<(), GraphErrors> {
     let base_dir = spec.source.base_dir();

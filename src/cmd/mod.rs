@@ -27,9 +27,9 @@ impl std::fmt::Display for InvalidGraph {
 impl std::error::Error for InvalidGraph {}
 
 /// Prints `text` on standard output for a command that keeps SIGPIPE ignored (`run`, `bench`,
-/// `emulate`, `calibrate`, `eval`, `reproduce`: see `default_sigpipe` in main.rs). A closed output (`| head`) is not a panic
-/// there: `what` is named on stderr as not printed, and the command goes on (its files are
-/// written either way).
+/// `emulate`, `calibrate`, `eval`, `reproduce`: see `default_sigpipe` in main.rs). A closed
+/// output (`| head`) is not a panic there: `what` is named on stderr as not printed, and the
+/// command goes on (its files are written either way).
 pub fn print_or_warn(text: &str, what: &str) {
     use std::io::Write;
     let mut out = std::io::stdout().lock();
@@ -48,6 +48,5 @@ pub fn note(text: &str) {
 /// `warning: {text}` on stderr, never a panic: stderr may be the same closed pipe
 /// (`2>&1 | head`), and a command printing past it still has files to write.
 pub fn warn(text: &str) {
-    use std::io::Write;
-    let _ = writeln!(std::io::stderr().lock(), "warning: {text}");
+    note(&format!("warning: {text}"));
 }

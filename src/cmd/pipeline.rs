@@ -5,6 +5,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Result, bail};
 use clap::Args;
 use skinflow_contact::correct::PipelineSettings;
+use skinflow_contact::correct::average;
 use skinflow_core::Message;
 use skinflow_nodes::payload::SyncedFrame;
 use skinflow_nodes::pipeline::PipelineSpec;
@@ -357,10 +358,11 @@ fn warn_implausible_truth(path: &Path, rec: &Recording) {
 /// script) is taken exactly: every row is a change. A load cell that prints continuously (a row
 /// every 100 ms) repeats the load of a hold, and would leave no frame settled; it is recognized
 /// by rows identical to the one before, and then a row is a change only when it differs from
-/// the last change: another number of contacts, a contact moved by more than [`SAME_PLACE_MM`]
-/// or of another diameter, or a force off by more than [`SAME_FORCE_N`] plus [`SAME_FORCE_REL`]
-/// of it (its last digit's jitter). The last change, not the previous row, is the reference,
-/// so a slow drift is still a change once it adds up.
+/// the last change: another number of contacts, a contact moved by more than
+/// [`average::SAME_PLACE_MM`] or of another diameter, or a force off by more than
+/// [`average::SAME_FORCE_N`] plus [`average::SAME_FORCE_REL`] of it (its last digit's jitter).
+/// The last change, not the previous row, is the reference, so a slow drift is still a change
+/// once it adds up.
 pub struct Settled {
     change_t: Vec<f64>,
     half_period_s: f64,
@@ -483,8 +485,6 @@ impl Settled {
 /// 1.41 at n = 1 and 1.15 at 3 (1.08 with the shipped scenes' 5 s rest, 6 frames).
 pub const MIN_NO_LOAD_FRAMES: usize = 3;
 
-pub use skinflow_contact::correct::average::{SAME_FORCE_N, SAME_FORCE_REL, SAME_PLACE_MM};
-
 /// The times of the truth rows that change the load (see [`Settled`]); the first row always does.
 fn load_changes(truth: &skinflow_record::read::TruthStream) -> Vec<f64> {
     let repeats = (1..truth.len()).any(|i| same_load(truth.row(i - 1), truth.row(i), false));
@@ -500,17 +500,11 @@ fn load_changes(truth: &skinflow_record::read::TruthStream) -> Vec<f64> {
 }
 
 /// Whether two truth rows hold the same load, contact by contact in column order: exactly, or
-/// within a load cell's jitter (`tolerant`).
+/// within a load cell's jitter (`tolerant`), each as [`average::same_load`] compares them.
 fn same_load(a: skinflow_record::read::TruthRow<'_>, b: skinflow_record::read::TruthRow<'_>, tolerant: bool) -> bool {
-    let (place_mm, force_n, force_rel) =
-        if tolerant { (SAME_PLACE_MM, SAME_FORCE_N, SAME_FORCE_REL) } else { (0.0, 0.0, 0.0) };
-    let same = |p: f64, q: f64, tol: f64| (p - q).abs() <= tol || (p.is_nan() && q.is_nan());
+    let load = |c: skinflow_record::TruthContact| [c.x_mm, c.y_mm, c.force_n, c.diameter_mm];
     a.contact_count() == b.contact_count()
-        && a.contacts().zip(b.contacts()).all(|(p, q)| {
-            (p.x_mm - q.x_mm).hypot(p.y_mm - q.y_mm) <= place_mm
-                && same(p.diameter_mm, q.diameter_mm, 0.0)
-                && same(p.force_n, q.force_n, force_n + force_rel * p.force_n.abs())
-        })
+        && a.contacts().zip(b.contacts()).all(|(p, q)| average::same_load(load(p), load(q), tolerant))
 }
 
 #[cfg(test)]

@@ -19,15 +19,16 @@ pub const SAME_FORCE_N: f64 = 0.05;
 /// Relative part of the force tolerance of a repeated load: a hold's creep.
 pub const SAME_FORCE_REL: f64 = 0.02;
 
-/// Whether a contact at (`x`, `y`) mm of `force` N and `diameter` mm holds the same load as one
-/// at `a`: the place within [`SAME_PLACE_MM`], the force within [`SAME_FORCE_N`] plus
-/// [`SAME_FORCE_REL`] of `a`'s, the diameter equal (both NaN, unknown, counts as equal).
-pub fn same_load(a: [f64; 4], b: [f64; 4]) -> bool {
-    let [ax, ay, af, ad] = a;
-    let [bx, by, bf, bd] = b;
-    (ax - bx).hypot(ay - by) <= SAME_PLACE_MM
-        && (af - bf).abs() <= SAME_FORCE_N + SAME_FORCE_REL * af.abs()
-        && (ad == bd || (ad.is_nan() && bd.is_nan()))
+/// Whether a contact `b` = [x mm, y mm, force N, diameter mm] holds the same load as `a`:
+/// exactly, or within a load cell's jitter (`tolerant`: the place within [`SAME_PLACE_MM`], the
+/// force within [`SAME_FORCE_N`] plus [`SAME_FORCE_REL`] of `a`'s). The diameter is always
+/// compared exactly; two NaNs (unknown) count as equal.
+pub fn same_load(a: [f64; 4], b: [f64; 4], tolerant: bool) -> bool {
+    let (place_mm, force_n, force_rel) =
+        if tolerant { (SAME_PLACE_MM, SAME_FORCE_N, SAME_FORCE_REL) } else { (0.0, 0.0, 0.0) };
+    let same = |p: f64, q: f64, tol: f64| (p - q).abs() <= tol || (p.is_nan() && q.is_nan());
+    let ([ax, ay, af, ad], [bx, by, bf, bd]) = (a, b);
+    (ax - bx).hypot(ay - by) <= place_mm && same(ad, bd, 0.0) && same(af, bf, force_n + force_rel * af.abs())
 }
 
 fn load(s: &CalibSample) -> [f64; 4] {
@@ -56,7 +57,7 @@ fn finite(s: &CalibSample) -> bool {
 /// prints continuously (its force jitters in the last digit) or without a diameter (NaN) into
 /// one-frame "holds": no averaging, a zero spread, and more samples than holds.
 pub fn average_holds(frames: &[CalibSample]) -> Holds {
-    let same = |a: &CalibSample, b: &CalibSample| a.hold == b.hold && same_load(load(a), load(b));
+    let same = |a: &CalibSample, b: &CalibSample| a.hold == b.hold && same_load(load(a), load(b), true);
     let (mut samples, mut sd_dp, mut sd_c, mut non_finite) = (Vec::new(), 0.0, 0.0, 0);
     let mut run: Vec<CalibSample> = Vec::new();
     let mut start = 0;
